@@ -1,0 +1,21 @@
+"""imu_dcm: strapdown attitude from body angular rates by the direction-cosine-matrix recursion.
+
+Conventions (see README "Frames and units"): ``R_w_b`` / ``q_w_b`` map body to world (active);
+quaternions are Hamilton ``[x, y, z, w]``; ``omega_b`` is the body rate relative to the world in
+body axes, rad/s; increments multiply on the right, ``R_{i+1} = R_i · exp([φ_i×])``; time ``t_s``
+in seconds.
+"""
+
+from imu_dcm.errors import GapWarning, ImuDcmError, ImuDcmWarning, InputError, LogError
+from imu_dcm.integrate import METHODS, integrate
+
+__all__ = [
+    "METHODS",
+    "integrate",
+    "ImuDcmError",
+    "InputError",
+    "LogError",
+    "ImuDcmWarning",
+    "GapWarning",
+]
+__version__ = "0.1.0"

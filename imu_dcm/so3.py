@@ -1,0 +1,265 @@
+"""Rotation maths on SO(3): pure, vectorised functions over leading axes.
+
+Conventions (DESIGN.md §3), the same in every function here:
+
+* Rotations are **active**. ``R_w_b`` maps body coordinates to world, ``v_w = R_w_b @ v_b``;
+  its columns are the body axes expressed in world coordinates.
+* Quaternions are Hamilton, **scalar-last** ``[x, y, z, w]`` (the order of scipy ``Rotation``,
+  ROS messages and rerun). ``q`` and ``-q`` are the same rotation.
+* A rotation vector ``phi`` (rad) is axis times angle; ``exp(phi)`` rotates by ``|phi|`` about
+  ``phi / |phi|`` by the right-hand rule. Body increments multiply on the **right**:
+  ``R_{i+1} = R_i @ exp(phi_i)``, ``q_{i+1} = q_i ⊗ exp(phi_i)``.
+
+Arrays have shapes ``(..., 3)`` (vectors), ``(..., 4)`` (quaternions) and ``(..., 3, 3)``
+(matrices); every leading shape, including ``()``, is accepted and kept.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+from scipy.spatial.transform import Rotation
+
+from imu_dcm.errors import InputError
+
+__all__ = [
+    "hat",
+    "exp_quat",
+    "exp_matrix",
+    "log_quat",
+    "quat_multiply",
+    "quat_conjugate",
+    "quat_normalize",
+    "quat_rotate",
+    "quat_angle_rad",
+    "as_quat_xyzw",
+]
+
+# Below this angle (rad) the Taylor branches are used: their truncation error (theta^6/5040 for
+# sin(x/2)/x) is far below double precision there, and they avoid 0/0.
+_SMALL_ANGLE_RAD = 1e-3
+
+
+def hat(v: ArrayLike) -> NDArray[np.float64]:
+    """Skew-symmetric matrix ``[v×]`` with ``hat(v) @ u == cross(v, u)``.
+
+    Parameters
+    ----------
+    v : array_like, shape (..., 3)
+
+    Returns
+    -------
+    ndarray, shape (..., 3, 3)
+    """
+    v = np.asarray(v, dtype=float)
+    out = np.zeros(v.shape + (3,))
+    x, y, z = v[..., 0], v[..., 1], v[..., 2]
+    out[..., 0, 1], out[..., 0, 2] = -z, y
+    out[..., 1, 0], out[..., 1, 2] = z, -x
+    out[..., 2, 0], out[..., 2, 1] = -y, x
+    return out
+
+
+def _half_angle_terms(phi: NDArray[np.float64]) -> tuple[NDArray, NDArray]:
+    """Return ``sin(θ/2)/θ`` and ``cos(θ/2)`` for ``θ = |phi|``, exact near zero."""
+    theta2 = np.einsum("...i,...i->...", phi, phi)
+    theta = np.sqrt(theta2)
+    small = theta < _SMALL_ANGLE_RAD
+    safe = np.where(small, 1.0, theta)
+    sinc_half = np.where(small, 0.5 - theta2 / 48.0 + theta2 * theta2 / 3840.0,
+                         np.sin(0.5 * safe) / safe)
+    return sinc_half, np.cos(0.5 * theta)
+
+
+def exp_quat(phi: ArrayLike) -> NDArray[np.float64]:
+    """Quaternion ``exp(phi)`` of a rotation vector, exact (Taylor branch for tiny angles).
+
+    Parameters
+    ----------
+    phi : array_like, shape (..., 3)
+        Rotation vector, rad.
+
+    Returns
+    -------
+    ndarray, shape (..., 4)
+        Unit quaternion ``[x, y, z, w]`` with ``w >= 0`` for ``|phi| <= π``.
+    """
+    phi = np.asarray(phi, dtype=float)
+    s, c = _half_angle_terms(phi)
+    return np.concatenate([phi * s[..., None], c[..., None]], axis=-1)
+
+
+def exp_matrix(phi: ArrayLike) -> NDArray[np.float64]:
+    """Rotation matrix ``exp([phi×])`` by Rodrigues' formula (the reference document's ``CK``).
+
+    ``R = I + sin θ/θ [φ×] + (1 − cos θ)/θ² [φ×]²``, with Taylor branches for tiny ``θ``.
+
+    Parameters
+    ----------
+    phi : array_like, shape (..., 3)
+        Rotation vector, rad.
+
+    Returns
+    -------
+    ndarray, shape (..., 3, 3)
+    """
+    phi = np.asarray(phi, dtype=float)
+    theta2 = np.einsum("...i,...i->...", phi, phi)
+    theta = np.sqrt(theta2)
+    small = theta < _SMALL_ANGLE_RAD
+    safe = np.where(small, 1.0, theta)
+    a = np.where(small, 1.0 - theta2 / 6.0 + theta2 * theta2 / 120.0, np.sin(safe) / safe)
+    b = np.where(small, 0.5 - theta2 / 24.0 + theta2 * theta2 / 720.0,
+                 (1.0 - np.cos(safe)) / (safe * safe))
+    K = hat(phi)
+    return np.eye(3) + a[..., None, None] * K + b[..., None, None] * (K @ K)
+
+
+def log_quat(q: ArrayLike) -> NDArray[np.float64]:
+    """Rotation vector of a unit quaternion, the inverse of :func:`exp_quat`.
+
+    The result has angle in ``[0, π]`` (``q`` and ``-q`` give the same vector, except exactly
+    at ``π`` where both ``±axis·π`` are valid).
+
+    Parameters
+    ----------
+    q : array_like, shape (..., 4)
+        Quaternion ``[x, y, z, w]``; normalised internally.
+
+    Returns
+    -------
+    ndarray, shape (..., 3)
+        Rotation vector, rad.
+    """
+    q = quat_normalize(q)
+    q = np.where(q[..., 3:4] < 0.0, -q, q)
+    v, w = q[..., :3], q[..., 3]
+    s = np.linalg.norm(v, axis=-1)
+    theta = 2.0 * np.arctan2(s, w)
+    small = s < 0.5 * _SMALL_ANGLE_RAD
+    safe = np.where(small, 1.0, s)
+    # theta / sin(theta/2); near 0, 2/w * (1 + s²/(6 w²)) from the series of atan.
+    scale = np.where(small, 2.0 / w * (1.0 + s * s / (6.0 * w * w)), theta / safe)
+    return v * scale[..., None]
+
+
+def quat_multiply(p: ArrayLike, q: ArrayLike) -> NDArray[np.float64]:
+    """Hamilton product ``p ⊗ q`` of ``[x, y, z, w]`` quaternions (apply ``q`` first, then ``p``).
+
+    Parameters
+    ----------
+    p, q : array_like, shape (..., 4)
+        Broadcast against each other.
+
+    Returns
+    -------
+    ndarray, shape (..., 4)
+    """
+    p = np.asarray(p, dtype=float)
+    q = np.asarray(q, dtype=float)
+    px, py, pz, pw = p[..., 0], p[..., 1], p[..., 2], p[..., 3]
+    qx, qy, qz, qw = q[..., 0], q[..., 1], q[..., 2], q[..., 3]
+    return np.stack(
+        [
+            pw * qx + px * qw + py * qz - pz * qy,
+            pw * qy - px * qz + py * qw + pz * qx,
+            pw * qz + px * qy - py * qx + pz * qw,
+            pw * qw - px * qx - py * qy - pz * qz,
+        ],
+        axis=-1,
+    )
+
+
+def quat_conjugate(q: ArrayLike) -> NDArray[np.float64]:
+    """Conjugate ``[-x, -y, -z, w]``: the inverse rotation of a unit quaternion."""
+    q = np.asarray(q, dtype=float)
+    return np.concatenate([-q[..., :3], q[..., 3:]], axis=-1)
+
+
+def quat_normalize(q: ArrayLike) -> NDArray[np.float64]:
+    """Scale quaternions ``(..., 4)`` to unit norm.
+
+    Raises
+    ------
+    InputError
+        If a quaternion has zero or non-finite norm.
+    """
+    q = np.asarray(q, dtype=float)
+    n = np.linalg.norm(q, axis=-1, keepdims=True)
+    if not np.all(np.isfinite(n)) or np.any(n == 0.0):
+        raise InputError("Expected quaternions with finite non-zero norm, got a zero or NaN one")
+    return q / n
+
+
+def quat_rotate(q: ArrayLike, v: ArrayLike) -> NDArray[np.float64]:
+    """Rotate vectors by unit quaternions: ``v' = q ⊗ v ⊗ q*`` (body to world for ``q_w_b``).
+
+    Parameters
+    ----------
+    q : array_like, shape (..., 4)
+    v : array_like, shape (..., 3)
+
+    Returns
+    -------
+    ndarray, shape (..., 3)
+    """
+    q = np.asarray(q, dtype=float)
+    v = np.asarray(v, dtype=float)
+    u, w = q[..., :3], q[..., 3:4]
+    t = 2.0 * np.cross(u, v)
+    return v + w * t + np.cross(u, t)
+
+
+def quat_angle_rad(q_a: ArrayLike, q_b: ArrayLike) -> NDArray[np.float64]:
+    """Angle (rad, in ``[0, π]``) of the rotation between two attitudes, ``q_a* ⊗ q_b``.
+
+    Insensitive to the sign of either quaternion. Accurate for tiny angles (uses ``atan2``,
+    not ``acos``).
+    """
+    d = quat_multiply(quat_conjugate(quat_normalize(q_a)), quat_normalize(q_b))
+    return 2.0 * np.arctan2(np.linalg.norm(d[..., :3], axis=-1), np.abs(d[..., 3]))
+
+
+def as_quat_xyzw(attitude: ArrayLike | Rotation, name: str = "q0") -> NDArray[np.float64]:
+    """Coerce an attitude given as quaternion, matrix or ``Rotation`` to a unit ``[x, y, z, w]``.
+
+    Parameters
+    ----------
+    attitude : array_like of shape (4,) or (3, 3), or scipy ``Rotation`` (single)
+        ``[x, y, z, w]`` quaternion (normalised here), or a ``R_w_b`` matrix (must be a rotation
+        to 1e-6), or a single scipy ``Rotation``.
+    name : str
+        Argument name used in error messages.
+
+    Returns
+    -------
+    ndarray, shape (4,)
+
+    Raises
+    ------
+    InputError
+        For any other shape, non-finite values, a zero quaternion or a non-orthonormal matrix.
+    """
+    if isinstance(attitude, Rotation):
+        if not attitude.single:
+            raise InputError(f"Expected `{name}` a single Rotation, got {len(attitude)} rotations")
+        return attitude.as_quat()
+    a = np.asarray(attitude, dtype=float)
+    if not np.all(np.isfinite(a)):
+        raise InputError(f"Expected `{name}` finite, got {a.tolist()}")
+    if a.shape == (4,):
+        if np.linalg.norm(a) < 1e-6:
+            raise InputError(f"Expected `{name}` a unit quaternion [x, y, z, w], got zero norm")
+        return quat_normalize(a)
+    if a.shape == (3, 3):
+        err = np.abs(a.T @ a - np.eye(3)).max()
+        if err > 1e-6 or np.linalg.det(a) < 0:
+            raise InputError(
+                f"Expected `{name}` a rotation matrix (R^T R = I, det +1), "
+                f"got max |R^T R - I| = {err:.3g}, det = {np.linalg.det(a):.3g}"
+            )
+        return Rotation.from_matrix(a).as_quat()
+    raise InputError(
+        f"Expected `{name}` an [x, y, z, w] quaternion (4,), a 3x3 R_w_b or a Rotation, "
+        f"got shape {a.shape}"
+    )
