@@ -1,0 +1,1 @@
+"""Benchmarks and studies of imu_dcm: speed against accuracy, stability, noise (`python -m benchmarks`)."""
