@@ -1,0 +1,301 @@
+"""Closed-form motions: pure coning, the torque-free symmetric top, the torque-free box (Jacobi
+elliptic functions) and the heavy symmetric top (elliptic cos θ(t), steady precession).
+
+Conventions (DESIGN.md §3): ``q_w_b`` Hamilton ``[x, y, z, w]``, body to world; ``omega_b`` body
+rate relative to the world in body axes, rad/s; ``t_s`` seconds; world ENU, z up. Euler angles of
+the top are z-x-z, ``R_w_b = Rz(φ) Rx(θ) Rz(ψ)`` (φ precession, θ nutation from the vertical,
+ψ spin), so ``R_w_b(0) = Rx(tilt)`` is ``φ = ψ = 0, θ = tilt`` and (Goldstein 4-125)
+``ω1 = φ̇ sinθ sinψ + θ̇ cosψ``, ``ω2 = φ̇ sinθ cosψ − θ̇ sinψ``, ``ω3 = φ̇ cosθ + ψ̇``.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+from scipy.special import ellipj, ellipk, ellipkinc
+
+from data_synth.rigid_body import Trajectory
+from imu_dcm.errors import InputError
+from imu_dcm.so3 import exp_quat, quat_multiply, quat_rotate
+
+__all__ = [
+    "ConingTrajectory",
+    "HeavyTopInvariants",
+    "box_omega_elliptic",
+    "coning_attitude",
+    "coning_rates",
+    "heavy_top_cos_theta",
+    "heavy_top_invariants",
+    "steady_precession_rates",
+    "symmetric_free_top",
+]
+
+
+def _rot_quat(axis: int, angle_rad: ArrayLike) -> NDArray[np.float64]:
+    """Quaternions ``[x, y, z, w]`` of rotations by ``angle_rad`` (shape (N,)) about a world axis."""
+    a = np.asarray(angle_rad, dtype=float)
+    q = np.zeros(a.shape + (4,))
+    q[..., axis] = np.sin(0.5 * a)
+    q[..., 3] = np.cos(0.5 * a)
+    return q
+
+
+# --------------------------------------------------------------------------------------------
+# Pure coning
+# --------------------------------------------------------------------------------------------
+
+def coning_attitude(t_s: ArrayLike, half_angle_rad: float, freq_hz: float) -> NDArray[np.float64]:
+    """``q_w_b(t)`` of pure coning, ``R_w_b(t) = Rz(Ωt) Rx(β) Rz(−Ωt)``, ``Ω = 2π freq_hz``.
+
+    The body z axis sweeps a cone of half-angle ``β`` about world z at ``Ω``; shape (N, 4).
+    """
+    wt = 2.0 * math.pi * freq_hz * np.asarray(t_s, dtype=float)
+    qx = _rot_quat(0, np.full_like(wt, half_angle_rad))
+    return quat_multiply(quat_multiply(_rot_quat(2, wt), qx), _rot_quat(2, -wt))
+
+
+def coning_rates(t_s: ArrayLike, half_angle_rad: float, freq_hz: float) -> NDArray[np.float64]:
+    """Body rate of pure coning, ``ω_b = Ω (−sinβ sinΩt, sinβ cosΩt, cosβ − 1)``, rad/s, (N, 3)."""
+    om = 2.0 * math.pi * freq_hz
+    wt = om * np.asarray(t_s, dtype=float)
+    sb, cb = math.sin(half_angle_rad), math.cos(half_angle_rad)
+    return om * np.stack([-sb * np.sin(wt), sb * np.cos(wt), np.full_like(wt, cb - 1.0)], axis=-1)
+
+
+class ConingTrajectory(Trajectory):
+    """Pure coning with closed-form attitude, rate and delta angles (DESIGN.md §5).
+
+    Parameters
+    ----------
+    duration_s : float
+        Length, s.
+    half_angle_deg : float
+        Cone half-angle ``β``, deg.
+    freq_hz : float
+        Coning frequency ``Ω / 2π``, Hz (signed: negative cones the other way).
+    """
+
+    def __init__(self, duration_s: float, half_angle_deg: float = 10.0, freq_hz: float = 5.0):
+        for name, v in (("duration_s", duration_s), ("half_angle_deg", half_angle_deg),
+                        ("freq_hz", freq_hz)):
+            if not math.isfinite(v):
+                raise InputError(f"Expected finite `{name}`, got {v!r}")
+        if duration_s <= 0:
+            raise InputError(f"Expected `duration_s` > 0, got {duration_s!r}")
+        if not 0.0 <= half_angle_deg < 90.0:
+            raise InputError(f"Expected `half_angle_deg` in [0, 90), got {half_angle_deg!r}")
+        self.scene = "coning"
+        self.duration_s = float(duration_s)
+        self.half_angle_rad = math.radians(half_angle_deg)
+        self.freq_hz = float(freq_hz)
+        self.params: dict[str, Any] = {"half_angle_deg": float(half_angle_deg),
+                                       "freq_hz": float(freq_hz)}
+
+    def at(self, t_s: ArrayLike) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        t = self._check_times(t_s)
+        return (coning_attitude(t, self.half_angle_rad, self.freq_hz),
+                coning_rates(t, self.half_angle_rad, self.freq_hz))
+
+    def delta_angles(self, t_s: ArrayLike) -> NDArray[np.float64]:
+        t = self._check_times(t_s, increasing=True)
+        om = 2.0 * math.pi * self.freq_hz
+        a, b = om * t[:-1], om * t[1:]
+        sb, cb = math.sin(self.half_angle_rad), math.cos(self.half_angle_rad)
+        # ∫ -sinβ Ω sin(Ωt) = sinβ (cos b − cos a) = −2 sinβ sin((a+b)/2) sin((b−a)/2), written in
+        # product form so that short intervals do not lose digits to cancellation.
+        s_half = np.sin(0.5 * (b - a))
+        mid = 0.5 * (a + b)
+        return np.stack([-2.0 * sb * np.sin(mid) * s_half,
+                         2.0 * sb * np.cos(mid) * s_half,
+                         (cb - 1.0) * om * (t[1:] - t[:-1])], axis=-1)
+
+
+# --------------------------------------------------------------------------------------------
+# Torque-free symmetric top (I1 = I2)
+# --------------------------------------------------------------------------------------------
+
+def symmetric_free_top(
+    t_s: ArrayLike, i1_kg_m2: float, i3_kg_m2: float, omega0_b: ArrayLike, q0_w_b: ArrayLike
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Closed-form torque-free motion of a symmetric body (``I1 = I2``).
+
+    ``ω_b = L_b / I1 − Ω_b ẑ`` with ``Ω_b = (I3 − I1) ω3 / I1``: the body turns about the fixed
+    world angular momentum at ``|L| / I1`` and about its own symmetry axis at ``−Ω_b``, so
+    ``R_w_b(t) = exp(t |L|/I1 [n_w×]) R_w_b(0) Rz(−Ω_b t)`` with ``n_w = L_w / |L|``, and
+    ``ω_b(t) = Rz(Ω_b t) (ω1(0), ω2(0), ·) + ω3 ẑ``.
+
+    Parameters
+    ----------
+    t_s : array_like, shape (N,)
+    i1_kg_m2, i3_kg_m2 : float
+        Transverse and axial moments, kg·m².
+    omega0_b : array_like, shape (3,)
+        Initial body rate, rad/s.
+    q0_w_b : array_like, shape (4,)
+        Initial attitude ``[x, y, z, w]``.
+
+    Returns
+    -------
+    q_w_b : ndarray, shape (N, 4)
+    omega_b : ndarray, shape (N, 3)
+    """
+    t = np.asarray(t_s, dtype=float)
+    w0 = np.asarray(omega0_b, dtype=float)
+    q0 = np.asarray(q0_w_b, dtype=float)
+    l_b = np.array([i1_kg_m2 * w0[0], i1_kg_m2 * w0[1], i3_kg_m2 * w0[2]])
+    l_norm = float(np.linalg.norm(l_b))
+    n_w = quat_rotate(q0, l_b) / l_norm
+    rate_l = l_norm / i1_kg_m2
+    omega_body_axis = (i3_kg_m2 - i1_kg_m2) * w0[2] / i1_kg_m2
+    q_l = exp_quat(t[:, None] * rate_l * n_w[None, :])
+    q = quat_multiply(quat_multiply(q_l, q0), _rot_quat(2, -omega_body_axis * t))
+    c, s = np.cos(omega_body_axis * t), np.sin(omega_body_axis * t)
+    omega = np.stack([c * w0[0] - s * w0[1], s * w0[0] + c * w0[1], np.full_like(t, w0[2])],
+                     axis=-1)
+    return q, omega
+
+
+# --------------------------------------------------------------------------------------------
+# Torque-free asymmetric body: Jacobi elliptic rates
+# --------------------------------------------------------------------------------------------
+
+def box_omega_elliptic(t_s: ArrayLike, inertia_kg_m2: ArrayLike,
+                       omega0_b: ArrayLike) -> NDArray[np.float64]:
+    """Body rate of a torque-free body by Jacobi elliptic functions (DESIGN.md §5).
+
+    For ``I1 < I2 < I3`` and ``M² > 2 E I2`` (rotation about the major axis side of the
+    separatrix): ``ω = (s1 A1 cn, s2 A2 sn, s3 A3 dn)(λ t + τ0 | m)``, with the amplitudes,
+    ``λ`` and ``m`` of DESIGN.md §5 and the phase ``τ0`` and signs fitted to ``omega0_b``.
+
+    Parameters
+    ----------
+    t_s : array_like, shape (N,)
+    inertia_kg_m2 : array_like, shape (3,)
+        Principal moments, strictly increasing, kg·m².
+    omega0_b : array_like, shape (3,)
+        Initial body rate, rad/s, with ``ω3 ≠ 0``.
+
+    Returns
+    -------
+    ndarray, shape (N, 3), rad/s
+    """
+    i1, i2, i3 = (float(v) for v in np.asarray(inertia_kg_m2, dtype=float))
+    w = np.asarray(omega0_b, dtype=float)
+    if not i1 < i2 < i3:
+        raise InputError(f"Expected I1 < I2 < I3, got {[i1, i2, i3]}")
+    two_e = i1 * w[0] ** 2 + i2 * w[1] ** 2 + i3 * w[2] ** 2
+    m2 = (i1 * w[0]) ** 2 + (i2 * w[1]) ** 2 + (i3 * w[2]) ** 2
+    if not m2 > two_e * i2:
+        raise InputError(f"Expected M² > 2 E I2 (rotation on the I3 side), got M² = {m2}, "
+                         f"2 E I2 = {two_e * i2}")
+    a1 = math.sqrt((two_e * i3 - m2) / (i1 * (i3 - i1)))
+    a2 = math.sqrt((two_e * i3 - m2) / (i2 * (i3 - i2)))
+    a3 = math.sqrt((m2 - two_e * i1) / (i3 * (i3 - i1)))
+    lam = math.sqrt((i3 - i2) * (m2 - two_e * i1) / (i1 * i2 * i3))
+    m = (i2 - i1) * (two_e * i3 - m2) / ((i3 - i2) * (m2 - two_e * i1))
+    # Signs: dω1/dt = (I2−I3)/I1 ω2 ω3 with d cn/dτ = −sn dn needs s1 = s2 s3.
+    s3 = 1.0 if w[2] >= 0 else -1.0
+    s1 = 1.0
+    s2 = s1 * s3
+    # Amplitude φ0 with sin φ0 = sn(τ0), cos φ0 = cn(τ0); τ0 = F(φ0 | m), extended by 2K per π.
+    phi0 = math.atan2(w[1] / (s2 * a2), w[0] / (s1 * a1))
+    k = round(phi0 / math.pi)
+    tau0 = 2.0 * k * float(ellipk(m)) + float(ellipkinc(phi0 - k * math.pi, m))
+    sn, cn, dn, _ = ellipj(lam * np.asarray(t_s, dtype=float) + tau0, m)
+    return np.stack([s1 * a1 * cn, s2 * a2 * sn, s3 * a3 * dn], axis=-1)
+
+
+# --------------------------------------------------------------------------------------------
+# Heavy symmetric top
+# --------------------------------------------------------------------------------------------
+
+def steady_precession_rates(i1_kg_m2: float, i3_kg_m2: float, omega3_rad_s: float,
+                            mgl_n_m: float, tilt_rad: float) -> tuple[float, float]:
+    """Steady-precession rates ``φ̇`` (slow, fast), rad/s, of a heavy symmetric top.
+
+    Roots of ``I1 cosθ0 φ̇² − I3 ω3 φ̇ + M g l = 0``; real when
+    ``(I3 ω3)² ≥ 4 I1 M g l cosθ0``. For ``cosθ0 = 0`` only the slow root exists (``fast`` is
+    ``inf``).
+
+    Raises
+    ------
+    InputError
+        When no real root exists (the top is too slow for steady precession at this tilt).
+    """
+    c = math.cos(tilt_rad)
+    p = i3_kg_m2 * omega3_rad_s
+    if abs(c) < 1e-15:
+        return mgl_n_m / p, math.inf
+    disc = p * p - 4.0 * i1_kg_m2 * mgl_n_m * c
+    if disc < 0:
+        raise InputError(f"Expected (I3 ω3)² >= 4 I1 M g l cos(tilt) for steady precession, got "
+                         f"{p * p:.6g} < {4.0 * i1_kg_m2 * mgl_n_m * c:.6g}")
+    r = math.sqrt(disc)
+    # Numerically stable pair: the small root as 2c/(−b ± √disc).
+    big = (p + math.copysign(r, p)) / (2.0 * i1_kg_m2 * c)
+    small = mgl_n_m / (i1_kg_m2 * c * big)
+    return (small, big) if abs(small) <= abs(big) else (big, small)
+
+
+@dataclass(frozen=True)
+class HeavyTopInvariants:
+    """Goldstein's constants of a heavy symmetric top (all per unit ``I1``).
+
+    ``u = cos θ`` obeys ``u̇² = f(u) = (1 − u²)(α − β u) − (b − a u)²`` and
+    ``φ̇ = (b − a u)/(1 − u²)``.
+
+    Attributes
+    ----------
+    a : float
+        ``I3 ω3 / I1``, 1/s.
+    b : float
+        ``L_z / I1``, 1/s (world-vertical angular momentum).
+    alpha : float
+        ``2 E' / I1`` with ``E' = E − ½ I3 ω3²``, 1/s².
+    beta : float
+        ``2 M g l / I1``, 1/s².
+    roots : tuple of float
+        Roots ``u1 <= u2 <= u3`` of ``f`` (``u1, u2`` in [−1, 1] are the turning points).
+    """
+
+    a: float
+    b: float
+    alpha: float
+    beta: float
+    roots: tuple[float, float, float]
+
+
+def heavy_top_invariants(i1_kg_m2: float, i3_kg_m2: float, mgl_n_m: float, tilt_rad: float,
+                         omega3_rad_s: float, precession0_rad_s: float,
+                         nutation0_rad_s: float = 0.0) -> HeavyTopInvariants:
+    """Constants of motion and turning points from the initial Euler-angle state."""
+    u0 = math.cos(tilt_rad)
+    s2 = 1.0 - u0 * u0
+    a = i3_kg_m2 * omega3_rad_s / i1_kg_m2
+    beta = 2.0 * mgl_n_m / i1_kg_m2
+    b = precession0_rad_s * s2 + a * u0
+    alpha = nutation0_rad_s ** 2 + precession0_rad_s ** 2 * s2 + beta * u0
+    # f(u) = β u³ − (α + a²) u² + (2ab − β) u + (α − b²)
+    roots = np.sort(np.roots([beta, -(alpha + a * a), 2.0 * a * b - beta, alpha - b * b]).real)
+    return HeavyTopInvariants(a, b, alpha, beta, (float(roots[0]), float(roots[1]),
+                                                  float(roots[2])))
+
+
+def heavy_top_cos_theta(t_s: ArrayLike, inv: HeavyTopInvariants,
+                        start_at_upper: bool = True) -> NDArray[np.float64]:
+    """``cos θ(t)`` of the heavy top by Jacobi's ``sn``: ``u = u1 + (u2 − u1) sn²(λ(t−t0) | m)``.
+
+    ``λ = ½ √(β (u3 − u1))``, ``m = (u2 − u1)/(u3 − u1)``. The top starts at rest in ``θ``
+    (``θ̇(0) = 0``) at its upper turning point ``u2`` (``start_at_upper``, ``t0 = −K/λ``) or its
+    lower one ``u1`` (``t0 = 0``).
+    """
+    u1, u2, u3 = inv.roots
+    lam = 0.5 * math.sqrt(inv.beta * (u3 - u1))
+    m = (u2 - u1) / (u3 - u1)
+    shift = float(ellipk(m)) if start_at_upper else 0.0
+    sn, _, _, _ = ellipj(lam * np.asarray(t_s, dtype=float) + shift, m)
+    return u1 + (u2 - u1) * sn * sn
