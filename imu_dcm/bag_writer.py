@@ -1,0 +1,372 @@
+"""Write ROS 2 bags (MCAP storage) of IMU rates, quaternions and vectors, fast and atomically.
+
+The output is a rosbag2 folder in the layout of the real logs (DESIGN.md §7): ``metadata.yaml``
+(rosbag2 format version 9) and one ``<folder name>.mcap`` file with profile ``ros2``, CDR
+messages, their ``ros2msg`` definitions embedded as schemas, zstd chunks, and the rosbag2
+metadata record. Readable by ``mcap`` + ``mcap-ros2-support`` and by ``rosbags``.
+
+Message types and conventions:
+
+* IMU rates: ``sensor_msgs/msg/Imu``, ``angular_velocity`` = ``omega_b`` (rad/s, body axes);
+  ``orientation = (0, 0, 0, 1)`` with ``orientation_covariance[0] = -1`` (no orientation);
+  ``linear_acceleration_covariance[0] = -1`` unless an acceleration is given.
+* Quaternions: ``geometry_msgs/msg/QuaternionStamped``, ``[x, y, z, w]`` as given (``q_w_b``).
+* Vectors: ``geometry_msgs/msg/Vector3Stamped``.
+
+Header stamps come from ``t_ns`` (int64 ns since the Unix epoch); MCAP ``log_time`` and
+``publish_time`` equal the header stamp. Messages are written in stamp order across topics.
+
+The fixed-layout CDR payloads are built in bulk with numpy (one array per topic, sliced into
+messages), not one message at a time.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import re
+import shutil
+import uuid
+from collections.abc import Mapping
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from imu_dcm.errors import InputError, LogError
+
+__all__ = ["MSG_DEFINITIONS", "TYPE_HASHES", "StampedSeries", "write_bag"]
+
+_SEP = "=" * 80 + "\n"
+_HEADER_DEFS = (
+    _SEP + "MSG: std_msgs/Header\nbuiltin_interfaces/Time stamp\nstring frame_id\n"
+    + _SEP + "MSG: builtin_interfaces/Time\nint32 sec\nuint32 nanosec\n"
+)
+_QUAT_DEF = _SEP + "MSG: geometry_msgs/Quaternion\nfloat64 x\nfloat64 y\nfloat64 z\nfloat64 w\n"
+_VEC_DEF = _SEP + "MSG: geometry_msgs/Vector3\nfloat64 x\nfloat64 y\nfloat64 z\n"
+
+#: ``ros2msg`` schema text of each message type (the concatenated form rosbag2 and rosbags write).
+MSG_DEFINITIONS: dict[str, str] = {
+    "sensor_msgs/msg/Imu": (
+        "std_msgs/Header header\ngeometry_msgs/Quaternion orientation\n"
+        "float64[9] orientation_covariance\ngeometry_msgs/Vector3 angular_velocity\n"
+        "float64[9] angular_velocity_covariance\ngeometry_msgs/Vector3 linear_acceleration\n"
+        "float64[9] linear_acceleration_covariance\n" + _HEADER_DEFS + _QUAT_DEF + _VEC_DEF
+    ),
+    "geometry_msgs/msg/QuaternionStamped": (
+        "std_msgs/Header header\ngeometry_msgs/Quaternion quaternion\n" + _HEADER_DEFS + _QUAT_DEF
+    ),
+    "geometry_msgs/msg/Vector3Stamped": (
+        "std_msgs/Header header\ngeometry_msgs/Vector3 vector\n" + _HEADER_DEFS + _VEC_DEF
+    ),
+}
+
+#: REP 2011 type hashes (RIHS01) of the message types, as in rosbag2 metadata (Humble+ types).
+TYPE_HASHES: dict[str, str] = {
+    "sensor_msgs/msg/Imu":
+        "RIHS01_7d9a00ff131080897a5ec7e26e315954b8eae3353c3f995c55faf71574000b5b",
+    "geometry_msgs/msg/QuaternionStamped":
+        "RIHS01_381add86c6c3160644d228ca342182c7fd6c7fab11c7a85ad817a9cc22dbac6e",
+    "geometry_msgs/msg/Vector3Stamped":
+        "RIHS01_d4829622288cbb443886e7ea94ea5671a3b1be6bab4ad04224432a65f7d7887a",
+}
+
+_QOS_YAML = """- avoid_ros_namespace_conventions: false
+  deadline:
+    nsec: 854775807
+    sec: 9223372036
+  depth: 10
+  durability: volatile
+  history: keep_last
+  lifespan:
+    nsec: 854775807
+    sec: 9223372036
+  liveliness: automatic
+  liveliness_lease_duration:
+    nsec: 854775807
+    sec: 9223372036
+  reliability: reliable"""
+
+_MAX_T_NS = (2**31) * 10**9  # header.stamp.sec is an int32
+
+
+@dataclass(frozen=True)
+class StampedSeries:
+    """Stamped samples for one topic.
+
+    Attributes
+    ----------
+    t_ns : ndarray of int64, shape (N,)
+        Header stamps, ns since the Unix epoch (>= 0); also the MCAP log and publish times.
+    values : ndarray of float64, shape (N, k)
+        Samples: ``k = 3`` for rates (rad/s, body axes) and vectors, ``k = 4`` for quaternions
+        ``[x, y, z, w]``.
+    frame_id : str
+        ``header.frame_id`` (e.g. ``"imu"``, ``"world"``).
+    """
+
+    t_ns: NDArray[np.int64]
+    values: NDArray[np.float64]
+    frame_id: str
+
+    def __post_init__(self) -> None:
+        t = np.asarray(self.t_ns)
+        if t.ndim != 1 or not np.issubdtype(t.dtype, np.integer):
+            raise InputError(f"Expected `t_ns` an int64 array of shape (N,), got {t.dtype} "
+                             f"of shape {t.shape}")
+        v = np.asarray(self.values, dtype=np.float64)
+        if v.ndim != 2 or v.shape[0] != t.shape[0]:
+            raise InputError(f"Expected `values` of shape (N={t.shape[0]}, k), got {v.shape}")
+        if not isinstance(self.frame_id, str):
+            raise InputError(f"Expected `frame_id` a str, got {type(self.frame_id).__name__}")
+        object.__setattr__(self, "t_ns", t.astype(np.int64, copy=False))
+        object.__setattr__(self, "values", v)
+
+
+def _check_series(name: str, s: StampedSeries, k: int) -> None:
+    if not isinstance(s, StampedSeries):
+        raise InputError(f"Expected {name} a StampedSeries, got {type(s).__name__}")
+    if s.values.shape[1] != k:
+        raise InputError(f"Expected {name} values of shape (N, {k}), got {s.values.shape}")
+    if s.t_ns.size == 0:
+        raise InputError(f"Expected {name} to hold at least one sample, got none")
+    bad = np.flatnonzero((s.t_ns < 0) | (s.t_ns >= _MAX_T_NS))
+    if bad.size:
+        raise InputError(f"Expected {name} stamps in [0, 2^31 s) ns, got t_ns[{bad[0]}] = "
+                         f"{int(s.t_ns[bad[0]])}")
+    finite = np.isfinite(s.values).all(axis=1)
+    if not finite.all():
+        i = int(np.argmin(finite))
+        raise InputError(f"Expected {name} finite values, got row {i} = {s.values[i].tolist()}")
+
+
+def _cdr_messages(t_ns: NDArray[np.int64], frame_id: str, doubles: NDArray[np.float64]) -> list[bytes]:
+    """CDR (little-endian) payloads of ``Header`` + ``k`` float64, one per row, built in bulk."""
+    n, k = doubles.shape
+    frame = frame_id.encode("utf-8") + b"\0"
+    # Offsets are relative to the payload after the 4-byte encapsulation header (CDR alignment).
+    body_off = 8 + 4 + len(frame)  # stamp (sec, nanosec), string length, string + NUL
+    body_off += (-body_off) % 8  # float64 aligned to 8
+    size = 4 + body_off + 8 * k
+    buf = np.zeros((n, size), dtype=np.uint8)
+    buf[:, 1] = 1  # encapsulation CDR_LE: 00 01 00 00
+    sec = (t_ns // 1_000_000_000).astype("<i4")
+    nsec = (t_ns % 1_000_000_000).astype("<u4")
+    buf[:, 4:8] = sec.view(np.uint8).reshape(n, 4)
+    buf[:, 8:12] = nsec.view(np.uint8).reshape(n, 4)
+    buf[:, 12:16] = np.frombuffer(np.uint32(len(frame)).astype("<u4").tobytes(), np.uint8)
+    buf[:, 16:16 + len(frame)] = np.frombuffer(frame, np.uint8)
+    buf[:, 4 + body_off:] = np.ascontiguousarray(doubles, dtype="<f8").view(np.uint8).reshape(n, 8 * k)
+    raw = buf.tobytes()
+    return [raw[i:i + size] for i in range(0, n * size, size)]
+
+
+def _imu_doubles(rates: NDArray[np.float64], accel: NDArray[np.float64] | None,
+                 gyro_cov: NDArray[np.float64] | None) -> NDArray[np.float64]:
+    """The 37 float64 of ``sensor_msgs/Imu`` after its header, one row per sample."""
+    n = rates.shape[0]
+    d = np.zeros((n, 37))
+    d[:, 3] = 1.0  # orientation (0, 0, 0, 1), flagged unknown below
+    d[:, 4] = -1.0  # orientation_covariance[0] = -1: no orientation estimate
+    d[:, 13:16] = rates
+    if gyro_cov is not None:
+        d[:, 16:25] = gyro_cov.reshape(1, 9)
+    if accel is None:
+        d[:, 28] = -1.0  # linear_acceleration_covariance[0] = -1: no acceleration
+    else:
+        d[:, 25:28] = accel
+    return d
+
+
+def _yaml_str(s: str) -> str:
+    """A YAML double-quoted scalar (JSON string syntax is valid YAML)."""
+    return json.dumps(s)
+
+
+def _metadata_yaml(mcap_name: str, topics: list[tuple[str, str, int]], start_ns: int,
+                   end_ns: int, total: int, custom_data: Mapping[str, str]) -> str:
+    """The rosbag2 ``metadata.yaml`` body (format version 9), unindented."""
+    lines = ["compression_format: ''", "compression_mode: ''"]
+    if custom_data:
+        lines.append("custom_data:")
+        lines += [f"  {_yaml_str(k)}: {_yaml_str(v)}" for k, v in custom_data.items()]
+    else:
+        lines.append("custom_data: {}")
+    lines += [
+        "duration:", f"  nanoseconds: {end_ns - start_ns}",
+        "files:", "- duration:", f"    nanoseconds: {end_ns - start_ns}",
+        f"  message_count: {total}", f"  path: {mcap_name}",
+        "  starting_time:", f"    nanoseconds_since_epoch: {start_ns}",
+        f"message_count: {total}",
+        "relative_file_paths:", f"- {mcap_name}",
+        "ros_distro: rosbags",
+        "starting_time:", f"  nanoseconds_since_epoch: {start_ns}",
+        "storage_identifier: mcap",
+        "topics_with_message_count:",
+    ]
+    qos = "\n".join("    " + ln for ln in _QOS_YAML.splitlines())
+    for name, msgtype, count in topics:
+        lines += [
+            f"- message_count: {count}",
+            "  topic_metadata:",
+            f"    name: {name if re.fullmatch(r'[A-Za-z0-9_/~]+', name) else _yaml_str(name)}",
+            "    offered_qos_profiles:",
+            qos,
+            "    serialization_format: cdr",
+            f"    type: {msgtype}",
+            f"    type_description_hash: {TYPE_HASHES[msgtype]}",
+        ]
+    lines.append("version: 9")
+    return "\n".join(lines) + "\n"
+
+
+def write_bag(
+    out_dir: str | os.PathLike,
+    *,
+    imu: StampedSeries | None = None,
+    quaternions: Mapping[str, StampedSeries] | None = None,
+    vectors: Mapping[str, StampedSeries] | None = None,
+    imu_topic: str = "/imu/data",
+    imu_linear_acceleration: ArrayLike | None = None,
+    imu_angular_velocity_covariance: ArrayLike | None = None,
+    custom_data: Mapping[str, str] | None = None,
+    force: bool = False,
+) -> Path:
+    """Write a rosbag2 folder (MCAP storage) atomically.
+
+    Parameters
+    ----------
+    out_dir : path
+        Bag folder to create; it appears whole or not at all (written under a temporary sibling
+        name, renamed at the end).
+    imu : StampedSeries, optional
+        Gyro rates ``omega_b`` (N, 3), rad/s, body axes, on ``imu_topic`` as
+        ``sensor_msgs/msg/Imu``.
+    quaternions : dict of topic -> StampedSeries, optional
+        ``geometry_msgs/msg/QuaternionStamped`` topics, values (N, 4) ``[x, y, z, w]``.
+    vectors : dict of topic -> StampedSeries, optional
+        ``geometry_msgs/msg/Vector3Stamped`` topics, values (N, 3).
+    imu_topic : str
+        Topic of the IMU messages.
+    imu_linear_acceleration : array_like, shape (N, 3), optional
+        Specific force, m/s², body axes, aligned with ``imu``; ``None``: not measured
+        (``linear_acceleration_covariance[0] = -1``).
+    imu_angular_velocity_covariance : array_like, shape (3, 3), optional
+        ``angular_velocity_covariance``, (rad/s)²; ``None``: zeros (unknown).
+    custom_data : dict of str -> str, optional
+        Recorded in ``metadata.yaml`` ``custom_data`` (and in the MCAP's rosbag2 record).
+    force : bool
+        Replace an existing ``out_dir``.
+
+    Returns
+    -------
+    Path
+        ``out_dir``.
+
+    Raises
+    ------
+    LogError
+        If ``out_dir`` exists and ``force`` is false, or its parent folder is missing.
+    InputError
+        For a malformed series (shape, non-finite value, stamp out of range), no topics at all,
+        a duplicated topic, or a non-string ``custom_data`` entry.
+    """
+    from mcap.writer import CompressionType, Writer
+
+    out = Path(out_dir)
+    if (out.exists() or out.is_symlink()) and not force:
+        raise LogError(f"Expected output {str(out)!r} not to exist (use force), got an existing "
+                       f"{'folder' if out.is_dir() else 'file'}")
+    if not out.parent.is_dir():
+        raise LogError(f"Expected the parent folder of {str(out)!r} to exist, got none")
+    quaternions = dict(quaternions or {})
+    vectors = dict(vectors or {})
+    custom = dict(custom_data or {})
+    for k, v in custom.items():
+        if not isinstance(k, str) or not isinstance(v, str):
+            raise InputError(f"Expected custom_data str -> str, got {k!r}: {type(v).__name__}")
+
+    # (topic, type, series, doubles)
+    topics: list[tuple[str, str, StampedSeries, NDArray[np.float64]]] = []
+    if imu is not None:
+        _check_series(f"imu ({imu_topic})", imu, 3)
+        accel = None
+        if imu_linear_acceleration is not None:
+            accel = np.asarray(imu_linear_acceleration, dtype=float)
+            if accel.shape != imu.values.shape or not np.all(np.isfinite(accel)):
+                raise InputError(f"Expected finite imu_linear_acceleration of shape "
+                                 f"{imu.values.shape}, got {accel.shape}")
+        cov = None
+        if imu_angular_velocity_covariance is not None:
+            cov = np.asarray(imu_angular_velocity_covariance, dtype=float)
+            if cov.shape != (3, 3):
+                raise InputError(f"Expected imu_angular_velocity_covariance of shape (3, 3), "
+                                 f"got {cov.shape}")
+        topics.append((imu_topic, "sensor_msgs/msg/Imu", imu,
+                       _imu_doubles(imu.values, accel, cov)))
+    for name, s in quaternions.items():
+        _check_series(f"quaternions[{name!r}]", s, 4)
+        topics.append((name, "geometry_msgs/msg/QuaternionStamped", s, s.values))
+    for name, s in vectors.items():
+        _check_series(f"vectors[{name!r}]", s, 3)
+        topics.append((name, "geometry_msgs/msg/Vector3Stamped", s, s.values))
+    if not topics:
+        raise InputError("Expected at least one of imu, quaternions, vectors, got none")
+    names = [t[0] for t in topics]
+    dup = sorted({n for n in names if names.count(n) > 1})
+    if dup:
+        raise InputError(f"Expected distinct topic names, got {dup} more than once")
+    for name in names:
+        if not name.startswith("/"):
+            raise InputError(f"Expected topic names starting with '/', got {name!r}")
+
+    # Global write order: by stamp, ties in topic order (stable sort).
+    stamps = np.concatenate([t[2].t_ns for t in topics])
+    channel_of = np.concatenate([np.full(t[2].t_ns.size, i) for i, t in enumerate(topics)])
+    index_in = np.concatenate([np.arange(t[2].t_ns.size) for t in topics])
+    order = np.argsort(stamps, kind="stable")
+    start_ns, end_ns = int(stamps.min()), int(stamps.max())
+
+    tmp = out.parent / f".{out.name}.tmp-{os.getpid()}-{uuid.uuid4().hex[:8]}"
+    mcap_name = f"{out.name}.mcap"
+    tmp.mkdir()
+    try:
+        counts = [(t[0], t[1], int(t[2].t_ns.size)) for t in topics]
+        meta_body = _metadata_yaml(mcap_name, counts, start_ns, end_ns, int(stamps.size), custom)
+        payloads = [_cdr_messages(s.t_ns, s.frame_id, d) for _, _, s, d in topics]
+        with open(tmp / mcap_name, "wb") as f:
+            w = Writer(f, compression=CompressionType.ZSTD)
+            w.start(profile="ros2", library="imu_dcm.bag_writer")
+            schema_ids: dict[str, int] = {}
+            channel_ids = []
+            for name, msgtype, _, _ in topics:
+                if msgtype not in schema_ids:
+                    schema_ids[msgtype] = w.register_schema(
+                        name=msgtype, encoding="ros2msg",
+                        data=MSG_DEFINITIONS[msgtype].encode())
+                channel_ids.append(w.register_channel(
+                    topic=name, message_encoding="cdr", schema_id=schema_ids[msgtype],
+                    metadata={"offered_qos_profiles": _QOS_YAML}))
+            add = w.add_message
+            for c, i, t in zip(channel_of[order].tolist(), index_in[order].tolist(),
+                               stamps[order].tolist()):
+                add(channel_ids[c], log_time=t, data=payloads[c][i], publish_time=t)
+            w.add_metadata("rosbag2", {"serialized_metadata": meta_body})
+            w.finish()
+        indented = "".join("  " + ln + "\n" for ln in meta_body.splitlines())
+        (tmp / "metadata.yaml").write_text("rosbag2_bagfile_information:\n" + indented)
+        if out.exists() or out.is_symlink():  # force: swap in, then remove the old one
+            old = out.parent / f".{out.name}.old-{os.getpid()}-{uuid.uuid4().hex[:8]}"
+            os.rename(out, old)
+            os.rename(tmp, out)
+            if old.is_dir() and not old.is_symlink():
+                shutil.rmtree(old)
+            else:
+                old.unlink()
+        else:
+            os.rename(tmp, out)
+    except BaseException:
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise
+    return out
