@@ -10,6 +10,7 @@ z up, gravity ``(0, 0, −g)``.
 >>> dtheta_b = traj.delta_angles([0.0, 0.6, 1.2])   # (2, 3) exact ∫ omega_b dt, rad
 """
 
+from data_synth.gyro import GyroModel, GyroRecord, synthetic_gyro
 from data_synth.rigid_body import SolvedTrajectory, Trajectory, solve_rigid_body
 from data_synth.scenes import (
     BRANCHES,
@@ -28,6 +29,8 @@ __all__ = [
     "FREE_BODY_CASES",
     "MOTIONS",
     "SCENES",
+    "GyroModel",
+    "GyroRecord",
     "HeavyTopParams",
     "SolvedTrajectory",
     "Trajectory",
@@ -36,4 +39,5 @@ __all__ = [
     "heavy_top",
     "simulate",
     "solve_rigid_body",
+    "synthetic_gyro",
 ]
