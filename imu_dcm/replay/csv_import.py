@@ -1,0 +1,173 @@
+"""``convert-csv``: turn a CSV gyro log into a ROS 2 bag (MCAP) that the replay reads.
+
+Every choice that a CSV leaves ambiguous is named on the command line: the columns, the time
+unit (s, ms, us, ns), the gyro unit (rad/s, deg/s) and, for an optional truth quaternion, its
+component order (``xyzw`` or ``wxyz``; no default, because a wrong order raises nothing).
+
+Output topics: ``/imu/data`` (sensor_msgs/msg/Imu, rad/s, body axes) and, with truth,
+``/ground_truth/orientation`` (geometry_msgs/msg/QuaternionStamped, ``q_w_b`` ``[x, y, z, w]``).
+Rows with a non-finite quaternion get no truth message (as in the BROAD bags).
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+from numpy.typing import NDArray
+
+from imu_dcm.errors import InputError, LogError
+
+__all__ = ["TIME_UNITS_NS", "CsvColumns", "convert_csv", "convert_main", "read_csv_columns"]
+
+#: Nanoseconds per unit of the time column.
+TIME_UNITS_NS = {"s": 1_000_000_000, "ms": 1_000_000, "us": 1_000, "ns": 1}
+
+
+@dataclass(frozen=True)
+class CsvColumns:
+    """Columns read from the CSV: ``t_ns`` int64 (N,), ``omega_b`` rad/s (N, 3), truth or None."""
+
+    t_ns: NDArray[np.int64]
+    omega_b: NDArray[np.float64]
+    q_w_b: NDArray[np.float64] | None
+
+
+def _split(names: str, n: int, what: str) -> list[str]:
+    cols = [c.strip() for c in names.split(",")]
+    if len(cols) != n or not all(cols):
+        raise InputError(f"Expected {n} comma-separated column names for {what}, got {names!r}")
+    return cols
+
+
+def read_csv_columns(
+    path: str | Path,
+    *,
+    time_col: str,
+    time_unit: str,
+    gyro_cols: str,
+    gyro_units: str,
+    truth_cols: str | None = None,
+    truth_order: str | None = None,
+    delimiter: str = ",",
+) -> CsvColumns:
+    """Read the named columns of a CSV with a header row, converting to ns and rad/s.
+
+    Parameters
+    ----------
+    path : CSV file with a header row.
+    time_col, time_unit : time column and its unit, one of ``s, ms, us, ns``.
+    gyro_cols : "x,y,z" column names of the body rates; ``gyro_units`` "rad/s" or "deg/s".
+    truth_cols, truth_order : four quaternion column names and their order, "xyzw" or "wxyz"
+        (q_w_b, body to world). Both or neither.
+    delimiter : field separator.
+    """
+    p = Path(path)
+    if not p.is_file():
+        raise LogError(f"Expected an existing CSV file, got {str(path)!r}")
+    if time_unit not in TIME_UNITS_NS:
+        raise InputError(f"Expected time unit in {tuple(TIME_UNITS_NS)}, got {time_unit!r}")
+    if gyro_units not in ("rad/s", "deg/s"):
+        raise InputError(f"Expected gyro units 'rad/s' or 'deg/s', got {gyro_units!r}")
+    if (truth_cols is None) != (truth_order is None):
+        raise InputError("Expected --truth-cols and --truth-order together (order xyzw or wxyz), "
+                         f"got cols={truth_cols!r}, order={truth_order!r}")  # fmt: skip
+    if truth_order is not None and truth_order not in ("xyzw", "wxyz"):
+        raise InputError(f"Expected truth order 'xyzw' or 'wxyz', got {truth_order!r}")
+    with p.open(newline="") as f:
+        header = next(csv.reader(f, delimiter=delimiter), None)
+    if not header:
+        raise LogError(f"Expected a CSV header row in {p}, got an empty file")
+    header = [h.strip() for h in header]
+    wanted = [time_col, *_split(gyro_cols, 3, "--gyro-cols")]
+    if truth_cols is not None:
+        wanted += _split(truth_cols, 4, "--truth-cols")
+    missing = [c for c in wanted if c not in header]
+    if missing:
+        raise InputError(f"Expected columns {missing} in {p.name}, got {header}")
+    idx = [header.index(c) for c in wanted]
+    data = np.genfromtxt(p, delimiter=delimiter, skip_header=1, usecols=idx, dtype=float,
+                         filling_values=np.nan, ndmin=2)  # fmt: skip
+    if data.size == 0:
+        raise LogError(f"Expected data rows in {p.name}, got none")
+    t = data[:, 0]
+    if not np.all(np.isfinite(t)):
+        bad = int(np.flatnonzero(~np.isfinite(t))[0])
+        raise InputError(f"Expected finite times in column {time_col!r}, got {t[bad]} in data "
+                         f"row {bad}")  # fmt: skip
+    if np.any(t < 0):
+        raise InputError(f"Expected times >= 0 in column {time_col!r}, got {t.min()}")
+    t_ns = np.round(t * TIME_UNITS_NS[time_unit]).astype(np.int64)
+    omega = data[:, 1:4] * (np.pi / 180.0 if gyro_units == "deg/s" else 1.0)
+    q = None
+    if truth_cols is not None:
+        q = data[:, 4:8]
+        if truth_order == "wxyz":
+            q = q[:, [1, 2, 3, 0]]
+    return CsvColumns(t_ns, omega, q)
+
+
+def convert_csv(csv_path: str | Path, out_dir: str | Path, *, imu_topic: str = "/imu/data",
+                truth_topic: str = "/ground_truth/orientation", frame_id: str = "imu",
+                force: bool = False, **columns) -> Path:  # fmt: skip
+    """Read a CSV (see :func:`read_csv_columns` for ``columns``) and write a ROS 2 bag.
+
+    Returns the bag folder. The CSV is never modified; the bag appears whole or not at all.
+    """
+    from imu_dcm.bag_writer import StampedSeries, write_bag
+
+    cols = read_csv_columns(csv_path, **columns)
+    quats = {}
+    if cols.q_w_b is not None:
+        q = cols.q_w_b
+        norm = np.linalg.norm(q, axis=1)
+        ok = np.isfinite(norm) & (norm > 0.5)
+        quats[truth_topic] = StampedSeries(cols.t_ns[ok], q[ok] / norm[ok, None], "world")
+    custom = {
+        "imu_dcm.converted_from": Path(csv_path).name,
+        "imu_dcm.columns": ", ".join(f"{k}={v}" for k, v in sorted(columns.items())),
+    }
+    return write_bag(out_dir, imu=StampedSeries(cols.t_ns, cols.omega_b, frame_id),
+                     quaternions=quats, imu_topic=imu_topic, custom_data=custom,
+                     force=force)  # fmt: skip
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(
+        prog="imu-dcm-replay convert-csv",
+        description="Convert a CSV gyro log (with a header row) into a ROS 2 bag (MCAP).",
+    )
+    p.add_argument("csv", help="input CSV file (header row with column names)")
+    p.add_argument("out", help="output bag folder")
+    p.add_argument("--time-col", required=True, help="time column name")
+    p.add_argument("--time-unit", required=True, choices=tuple(TIME_UNITS_NS),
+                   help="unit of the time column")  # fmt: skip
+    p.add_argument("--gyro-cols", required=True, metavar="X,Y,Z",
+                   help="body-rate column names, x,y,z")  # fmt: skip
+    p.add_argument("--gyro-units", required=True, choices=("rad/s", "deg/s"))
+    p.add_argument("--truth-cols", metavar="A,B,C,D", help="truth quaternion column names")
+    p.add_argument("--truth-order", choices=("xyzw", "wxyz"),
+                   help="component order of --truth-cols (required with it)")  # fmt: skip
+    p.add_argument("--delimiter", default=",", help="field separator (default ,)")
+    p.add_argument("--imu-topic", default="/imu/data")
+    p.add_argument("--truth-topic", default="/ground_truth/orientation")
+    p.add_argument("--frame-id", default="imu", help="IMU header.frame_id (default imu)")
+    p.add_argument("--force", action="store_true", help="replace an existing output bag")
+    return p
+
+
+def convert_main(argv: list[str]) -> int:
+    """The ``convert-csv`` sub-command; returns 0 (errors raise project errors)."""
+    a = build_parser().parse_args(argv)
+    if Path(a.out).exists() and Path(a.out).resolve() == Path(a.csv).resolve():
+        raise InputError(f"Expected an output folder other than the input, got {a.out}")
+    out = convert_csv(a.csv, a.out, imu_topic=a.imu_topic, truth_topic=a.truth_topic,
+                      frame_id=a.frame_id, force=a.force, time_col=a.time_col,
+                      time_unit=a.time_unit, gyro_cols=a.gyro_cols, gyro_units=a.gyro_units,
+                      truth_cols=a.truth_cols, truth_order=a.truth_order,
+                      delimiter=a.delimiter)  # fmt: skip
+    print(f"wrote {out}")
+    return 0
