@@ -81,19 +81,19 @@ TIMELINE = "time"
 """Name of the rerun timeline (a duration in seconds from the log's time origin)."""
 
 ENTITY = {
-    "truth_axes": "world/truth/axes",
-    "estimate_axes": "world/estimate/axes",
-    "truth_trail": "world/truth/z_trail",
-    "estimate_trail": "world/estimate/z_trail",
-    "truth_trace": "world/truth/z_trace",
-    "estimate_trace": "world/estimate/z_trace",
-    "errors": "errors_deg",
-    "gyro_x": "gyro/x/omega_b",
-    "gyro_y": "gyro/y/omega_b",
-    "gyro_z": "gyro/z/omega_b",
-    "gyro_raw_x": "gyro/x/omega_raw_b",
-    "gyro_raw_y": "gyro/y/omega_raw_b",
-    "gyro_raw_z": "gyro/z/omega_raw_b",
+    "truth_axes": "/world/truth/axes",
+    "estimate_axes": "/world/estimate/axes",
+    "truth_trail": "/world/truth/z_trail",
+    "estimate_trail": "/world/estimate/z_trail",
+    "truth_trace": "/world/truth/z_trace",
+    "estimate_trace": "/world/estimate/z_trace",
+    "errors": "/errors_deg",
+    "gyro_x": "/gyro/x/omega_b",
+    "gyro_y": "/gyro/y/omega_b",
+    "gyro_z": "/gyro/z/omega_b",
+    "gyro_raw_x": "/gyro/x/omega_raw_b",
+    "gyro_raw_y": "/gyro/y/omega_raw_b",
+    "gyro_raw_z": "/gyro/z/omega_raw_b",
 }
 """Entity paths of the view (see the module docstring)."""
 
@@ -281,7 +281,7 @@ def make_blueprint(view: ViewData):
     if gyro_needs_split(view.omega_b):
         gyro_views = [
             rrb.TimeSeriesView(
-                origin=f"gyro/{axis}", name=f"gyro ω_{axis} [rad/s]{raw_note}", plot_legend=legend
+                origin=f"/gyro/{axis}", name=f"gyro ω_{axis} [rad/s]{raw_note}", plot_legend=legend
             )
             for axis in _AXES
         ]
@@ -298,13 +298,13 @@ def make_blueprint(view: ViewData):
                 origin=ENTITY["errors"], name="attitude error [deg]", plot_legend=legend
             ),
             rrb.TimeSeriesView(
-                origin="gyro", name=f"gyro ω_b [rad/s]{raw_note}", plot_legend=legend
+                origin="/gyro", name=f"gyro ω_b [rad/s]{raw_note}", plot_legend=legend
             ),
         )
     return rrb.Blueprint(
         rrb.Horizontal(
             rrb.Spatial3DView(
-                origin="world",
+                origin="/world",
                 name="body axes: truth solid, estimate light; z-axis tip: truth purple, estimate amber",
                 eye_controls=rrb.EyeControls3D(
                     kind=rrb.Eye3DKind.Orbital,
@@ -432,7 +432,7 @@ def _send_static(view: ViewData, rec) -> None:
     """View coordinates, series styles and the faint full z-tip traces (static, sent once)."""
     import rerun as rr
 
-    rec.log("world", rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
+    rec.log("/world", rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
     rec.log(
         ENTITY["errors"],
         rr.SeriesLines(
@@ -472,6 +472,13 @@ def _send_static(view: ViewData, rec) -> None:
             )
 
 
+def _time_column(t_rel_s: NDArray):
+    """The ``"time"`` timeline as a duration column, rounded to the nearest ns."""
+    import rerun as rr
+
+    return rr.TimeColumn(TIMELINE, duration=np.rint(t_rel_s * 1e9).astype("timedelta64[ns]"))
+
+
 def send_view(view: ViewData, rec, *, realtime: bool = False, chunk_s: float = 0.1) -> None:
     """Send the whole view to a rerun recording stream.
 
@@ -487,15 +494,12 @@ def send_view(view: ViewData, rec, *, realtime: bool = False, chunk_s: float = 0
     chunk_s : float
         Chunk length for ``realtime``, s.
     """
-    import rerun as rr
 
     _send_static(view, rec)
     entities = _entities(view)
     if not realtime:
         for e in entities:
-            rec.send_columns(
-                e.path, indexes=[rr.TimeColumn(TIMELINE, duration=e.t_rel_s)], columns=e.columns()
-            )
+            rec.send_columns(e.path, indexes=[_time_column(e.t_rel_s)], columns=e.columns())
         return
     if not chunk_s > 0:
         raise InputError(f"Expected `chunk_s` > 0, got {chunk_s!r}")
@@ -511,7 +515,7 @@ def send_view(view: ViewData, rec, *, realtime: bool = False, chunk_s: float = 0
             if b > prev[k]:
                 rec.send_columns(
                     e.path,
-                    indexes=[rr.TimeColumn(TIMELINE, duration=e.t_rel_s[prev[k] : b])],
+                    indexes=[_time_column(e.t_rel_s[prev[k] : b])],
                     columns=e.columns(prev[k], b),
                 )
                 prev[k] = b

@@ -1,0 +1,255 @@
+"""The rerun view: what lands in the .rrd (read back with rerun's own RrdReader), and the modes.
+
+Truth for the geometry is scipy's Rotation (an independent implementation): the arrows of a body
+axis must equal the columns of ``Rotation.from_quat(q_w_b).as_matrix()``.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from scipy.spatial.transform import Rotation
+
+from imu_dcm import viz
+from imu_dcm.errors import InputError
+from imu_dcm.viz import ENTITY, TIMELINE, ViewData, gyro_needs_split, save_rrd, show_replay
+
+RATE_HZ = 100.0
+N = 200  # 2 s at 100 Hz
+GAP = slice(50, 70)  # samples without truth
+
+# The boundary case every convention test carries: 90° about z, [x, y, z, w] = [0, 0, √½, √½];
+# body x must point along world y.
+Q_90Z = np.array([0.0, 0.0, math.sqrt(0.5), math.sqrt(0.5)])
+
+
+def _view(omega_raw: bool = False, n: int = N) -> ViewData:
+    """Constant-rate rotation about a tilted axis, truth exact, estimate off by a known 3° yaw."""
+    rng = np.random.default_rng(7)
+    t_s = 12.5 + np.arange(n) / RATE_HZ  # stamps need not start at 0
+    axis = np.array([0.3, -0.2, 0.93]) / np.linalg.norm([0.3, -0.2, 0.93])
+    rate_rad_s = 2.0
+    truth = Rotation.from_quat(Q_90Z) * Rotation.from_rotvec(
+        (t_s - t_s[0])[:, None] * rate_rad_s * axis
+    )
+    est = Rotation.from_euler("z", 3.0, degrees=True) * truth
+    q_truth = truth.as_quat()
+    q_truth[GAP] = np.nan
+    omega_b = np.tile(rate_rad_s * axis, (n, 1))
+    err = np.full(n, 3.0)
+    err[GAP] = np.nan
+    return ViewData(
+        t_s=t_s,
+        q_est=est.as_quat(),
+        q_truth=q_truth,
+        omega_b=omega_b,
+        error_total_deg=err,
+        error_inclination_deg=np.where(np.isnan(err), np.nan, 0.0),
+        error_heading_deg=err,
+        title="unit test/view",
+        omega_raw_b=omega_b + rng.normal(0.0, 0.01, (n, 3)) if omega_raw else None,
+    )
+
+
+def _read(path) -> dict[str, dict]:
+    """Every entity of the first recording: static columns, and time-indexed rows sorted by time."""
+    from rerun.chunk import RrdReader
+
+    out: dict[str, dict] = {}
+    for chunk in RrdReader(path).stream():
+        batch = chunk.to_record_batch()
+        entry = out.setdefault(chunk.entity_path, {"static": {}, "rows": {}})
+        if chunk.is_static:
+            for name in batch.schema.names:
+                entry["static"][name] = batch.column(name).to_pylist()
+            continue
+        for name in batch.schema.names:
+            col = batch.column(name)
+            if name == TIMELINE:
+                col = col.cast("int64")  # durations as integer ns
+            entry["rows"].setdefault(name, []).extend(col.to_pylist())
+    for entry in out.values():
+        rows = entry["rows"]
+        if TIMELINE in rows:
+            order = np.argsort(rows[TIMELINE], kind="stable")
+            for name in rows:
+                rows[name] = [rows[name][k] for k in order]
+    return out
+
+
+@pytest.fixture(scope="module")
+def saved(tmp_path_factory):
+    view = _view(omega_raw=True)
+    path = save_rrd(view, tmp_path_factory.mktemp("rrd") / "view.rrd")
+    return view, path, _read(path)
+
+
+def _time_ns(rows) -> np.ndarray:
+    return np.array(rows[TIMELINE], dtype=np.int64)
+
+
+def test_entity_paths_and_one_row_per_sample(saved):
+    view, path, data = saved
+    per_sample = [
+        ENTITY["truth_axes"],
+        ENTITY["estimate_axes"],
+        ENTITY["errors"],
+        *(ENTITY[f"gyro_{a}"] for a in "xyz"),
+        *(ENTITY[f"gyro_raw_{a}"] for a in "xyz"),
+    ]
+    for key in per_sample:
+        assert key in data, f"missing entity {key}; found {sorted(data)}"
+        t_ns = _time_ns(data[key]["rows"])
+        assert len(t_ns) == N, key
+        # Timeline = time since the first stamp, stored as integer ns (rounded).
+        expected = (view.t_s - view.t_s[0]) * 1e9
+        assert np.all(np.abs(t_ns - expected) <= 0.5 + 1e-6), key
+    for key in ("truth_trail", "estimate_trail", "truth_trace", "estimate_trace"):
+        assert ENTITY[key] in data
+    from rerun.chunk import RrdReader
+
+    assert RrdReader(path).blueprints(), "the layout (blueprint) must be saved with the data"
+
+
+def test_axes_are_the_columns_of_r_w_b(saved):
+    view, _, data = saved
+    rows = data[ENTITY["truth_axes"]]["rows"]
+    has_truth = np.ones(N, bool)
+    has_truth[GAP] = False
+    for k in range(N):
+        vectors = rows["Arrows3D:vectors"][k]
+        if not has_truth[k]:
+            # No truth: an empty row (clears the arrows), never a stale or invented attitude.
+            assert vectors == [], k
+            continue
+        R = Rotation.from_quat(view.q_truth[k]).as_matrix()
+        # float32 storage: 1e-6 relative is the rounding of unit vectors.
+        np.testing.assert_allclose(np.array(vectors), R.T, atol=2e-6)
+    # At t = 0 the truth is 90° about z: body x along world y, body y along world -x.
+    np.testing.assert_allclose(rows["Arrows3D:vectors"][0][0], [0, 1, 0], atol=2e-6)
+    np.testing.assert_allclose(rows["Arrows3D:vectors"][0][1], [-1, 0, 0], atol=2e-6)
+    est = data[ENTITY["estimate_axes"]]["rows"]["Arrows3D:vectors"]
+    for k in (0, 60, N - 1):
+        R = Rotation.from_quat(view.q_est[k]).as_matrix()
+        np.testing.assert_allclose(np.array(est[k]), R.T, atol=2e-6)
+
+
+def test_error_and_gyro_series_round_trip(saved):
+    view, _, data = saved
+    errors = np.array(data[ENTITY["errors"]]["rows"]["Scalars:scalars"], dtype=float)
+    assert errors.shape == (N, 3)
+    expected = np.stack(
+        [view.error_total_deg, view.error_inclination_deg, view.error_heading_deg], axis=1
+    )
+    np.testing.assert_array_equal(np.isnan(errors), np.isnan(expected))  # gaps stay gaps
+    np.testing.assert_allclose(errors[~np.isnan(errors)], expected[~np.isnan(expected)])
+    names = data[ENTITY["errors"]]["static"]["SeriesLines:names"][0]
+    assert names == ["total", "inclination", "heading"]
+    for k, a in enumerate("xyz"):
+        got = np.array(data[ENTITY[f"gyro_{a}"]]["rows"]["Scalars:scalars"], dtype=float)
+        np.testing.assert_allclose(got[:, 0], view.omega_b[:, k])
+        raw = np.array(data[ENTITY[f"gyro_raw_{a}"]]["rows"]["Scalars:scalars"], dtype=float)
+        np.testing.assert_allclose(raw[:, 0], view.omega_raw_b[:, k])
+
+
+def test_trailing_window_of_the_z_tip(saved):
+    view, _, data = saved
+    rows = data[ENTITY["estimate_trail"]]["rows"]
+    t_ns = _time_ns(rows)
+    # One frame per 1/30 s of log time over 1.99 s: frames at 0, 1/30, ..., 59/30 s.
+    span_s = view.t_s[-1] - view.t_s[0]
+    assert len(t_ns) == math.floor(span_s * viz.TRAIL_FPS) + 1
+    rel = view.t_s - view.t_s[0]
+    tip = Rotation.from_quat(view.q_est).apply([0.0, 0.0, 1.0])  # body z in world (oracle)
+    for k in (0, 10, len(t_ns) - 1):
+        strip = np.array(rows["LineStrips3D:strips"][k][0])
+        end = int(np.argmin(np.abs(rel * 1e9 - t_ns[k])))
+        start = int(np.searchsorted(rel, rel[end] - viz.TRAIL_S))
+        # The strip runs from the tip TRAIL_S before the frame to the tip at the frame.
+        np.testing.assert_allclose(strip[0], tip[start], atol=2e-6)
+        np.testing.assert_allclose(strip[-1], tip[end], atol=2e-6)
+        np.testing.assert_allclose(np.linalg.norm(strip, axis=1), 1.0, atol=2e-6)
+    # The truth trail leaves out the samples without truth (no NaN points reach the viewer).
+    for strip in data[ENTITY["truth_trail"]]["rows"]["LineStrips3D:strips"]:
+        for s in strip:
+            assert np.all(np.isfinite(np.array(s, dtype=float)))
+
+
+def test_realtime_sends_the_same_rows_in_chunks(tmp_path, monkeypatch):
+    import rerun as rr
+
+    sleeps: list[float] = []
+    monkeypatch.setattr(viz.time, "sleep", sleeps.append)  # pacing without waiting
+    view = _view()
+    rec = rr.RecordingStream("imu_dcm_test")
+    path = tmp_path / "rt.rrd"
+    rec.save(path)
+    viz.send_view(view, rec, realtime=True, chunk_s=0.25)
+    rec.flush()
+    rec.disconnect()
+    live = _read(path)
+    whole = _read(save_rrd(view, tmp_path / "whole.rrd"))
+    for key in (ENTITY["truth_axes"], ENTITY["errors"], ENTITY["gyro_z"], ENTITY["truth_trail"]):
+        assert _time_ns(live[key]["rows"]).tolist() == _time_ns(whole[key]["rows"]).tolist()
+        for name, col in whole[key]["rows"].items():
+            if name != "rerun.controls.RowId":
+                assert repr(live[key]["rows"][name]) == repr(col), (key, name)  # NaN-safe
+    # 1.99 s in 0.25 s chunks: 8 chunks, a sleep after each one that finished early.
+    assert 1 <= len(sleeps) <= 8
+
+
+def test_view_data_rejects_bad_input():
+    good = _view()
+    fields = dict(good.__dict__)
+    with pytest.raises(InputError, match=r"Expected `q_est` of shape \(200, 4\), got \(200, 3\)"):
+        ViewData(**{**fields, "q_est": good.q_est[:, :3]})
+    with pytest.raises(InputError, match="Expected `error_heading_deg` of shape"):
+        ViewData(**{**fields, "error_heading_deg": good.error_heading_deg[:-1]})
+    t = good.t_s.copy()
+    t[5] = t[4]
+    with pytest.raises(InputError, match=r"strictly increasing, got t_s\[5\]"):
+        ViewData(**{**fields, "t_s": t})
+    with pytest.raises(InputError, match="Expected `title` a non-empty str"):
+        ViewData(**{**fields, "title": ""})
+    q = good.q_est.copy()
+    q[3] = np.nan
+    with pytest.raises(InputError, match=r"Expected `q_est` finite, got q_est\[3\]"):
+        ViewData(**{**fields, "q_est": q})
+    # InputError is also a ValueError (callers may catch either).
+    with pytest.raises(ValueError):
+        ViewData(**{**fields, "omega_b": good.omega_b[:, :2]})
+
+
+def test_modes(tmp_path, monkeypatch):
+    view = _view(n=40)
+    monkeypatch.delenv("DISPLAY", raising=False)
+    monkeypatch.delenv("WAYLAND_DISPLAY", raising=False)
+    if viz.sys.platform.startswith("linux"):
+        # No display: the default saves next to the output and says how to open the file.
+        line = show_replay(view, None, tmp_path)
+        expected = tmp_path / "unit_test_view.rrd"
+        assert expected.is_file()
+        assert f"rerun {expected}" in line
+        with pytest.raises(InputError, match="Expected a display"):
+            show_replay(view, "spawn", tmp_path)
+    assert show_replay(view, "off", tmp_path) == ""
+    target = tmp_path / "sub" / "x.rrd"
+    line = show_replay(view, f"save:{target}", tmp_path)
+    assert target.is_file() and f"rerun {target}" in line
+    for bad in ("web", "save:", "save:out.txt", "SPAWN", 3):
+        with pytest.raises(InputError, match="Expected rerun mode"):
+            show_replay(view, bad, tmp_path)
+    assert not list(tmp_path.glob(".*.tmp")), "no temporary file left behind"
+
+
+def test_gyro_layout_splits_only_when_a_channel_would_be_squashed():
+    t = np.linspace(0.0, 5.0, 1000)
+    wobble = 7.0 * np.sin(2 * np.pi * 4.0 * t)
+    # A spinning top: ω_z ≈ 125 rad/s constant, ω_x,y ±7 rad/s (squashed on a shared axis).
+    top = np.stack([wobble, np.cos(2 * np.pi * 4.0 * t) * 7.0, 125.0 + 0.0 * t], axis=1)
+    assert gyro_needs_split(top)
+    # Three channels of the same amplitude around 0: one shared plot.
+    hand = np.stack([wobble, 0.8 * wobble[::-1], 8.0 * np.cos(3.0 * t)], axis=1)
+    assert not gyro_needs_split(hand)
