@@ -26,6 +26,7 @@ import json
 import re
 import struct
 import warnings
+import zlib
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -248,7 +249,7 @@ class _Corrupt(Exception):
 
 
 def _read_chunk(buf, pos: int, end: int, scan: _Scan) -> None:
-    _, _, size, _ = struct.unpack_from("<QQQI", buf, pos)
+    _, _, size, crc = struct.unpack_from("<QQQI", buf, pos)
     compression, p = _read_str(buf, pos + 28)
     (n,) = struct.unpack_from("<Q", buf, p)
     if p + 8 + n > end:
@@ -261,6 +262,8 @@ def _read_chunk(buf, pos: int, end: int, scan: _Scan) -> None:
         raise
     except (zstandard.ZstdError, RuntimeError, ValueError, MemoryError) as exc:
         raise _Corrupt(pos, f"a chunk does not decompress ({type(exc).__name__})") from None
+    if len(data) != size or (crc != 0 and zlib.crc32(data) != crc):
+        raise _Corrupt(pos, "a chunk fails its size or CRC check")
     scan.segments.append(data)
     _walk_records(memoryview(data), 0, len(data), scan, len(scan.segments) - 1, in_chunk=True)
 
