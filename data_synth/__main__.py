@@ -1,0 +1,8 @@
+"""``python -m data_synth SCENE [options] --rate HZ --duration S --out DIR`` (see data_synth.cli)."""
+
+import sys
+
+from data_synth.cli import main
+
+if __name__ == "__main__":
+    sys.exit(main())
