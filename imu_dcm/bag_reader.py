@@ -59,7 +59,7 @@ TRUTH_TYPES = {
 KNOWN_ENCODINGS = ("cdr", "json")
 
 _OP_SCHEMA, _OP_CHANNEL, _OP_MESSAGE, _OP_CHUNK = 0x03, 0x04, 0x05, 0x06
-_OP_DATA_END, _OP_FOOTER = 0x0F, 0x02
+_OP_DATA_END, _OP_FOOTER, _OP_MESSAGE_INDEX = 0x0F, 0x02, 0x07
 _REC = struct.Struct("<BQ")
 _MSG = struct.Struct("<BQHIQQ")  # opcode, length, channel_id, sequence, log_time, publish_time
 _MSG_HEADER = _MSG.size  # 31 bytes before the payload of a message record
@@ -146,6 +146,7 @@ class _Scan:
     # per channel: lists of (segment index, payload start, payload length, log_time) arrays
     spans: dict[int, list[tuple[int, NDArray, NDArray, NDArray]]] = field(default_factory=dict)
     stopped_at: str | None = None
+    joined: tuple | None = None  # (segments used, concatenated bytes, shift per segment)
 
 
 def _read_str(buf: bytes | memoryview, pos: int) -> tuple[str, int]:
@@ -198,6 +199,7 @@ def _walk_records(buf, start: int, end: int, scan: _Scan, seg: int, in_chunk: bo
     lens: dict[int, list[int]] = {}
     times: dict[int, list[int]] = {}
     pos = start
+    pending = None  # (segment, data, [message offsets]) of a chunk awaiting its indices
     try:
         while pos + 9 <= end:
             op, length = unpack_rec(buf, pos)
@@ -221,14 +223,26 @@ def _walk_records(buf, start: int, end: int, scan: _Scan, seg: int, in_chunk: bo
                 ch = _parse_channel(buf, pos + 9)
                 scan.channels[ch.id] = ch
             elif not in_chunk:
+                if op == _OP_MESSAGE_INDEX and pending is not None:
+                    cid, nbytes = struct.unpack_from("<HI", buf, pos + 9)
+                    if pos + 15 + nbytes <= rec_end:
+                        pairs = np.frombuffer(buf, "<u8", nbytes // 8, pos + 15)
+                        pending[2].append(pairs[1::2].astype(np.int64))
+                    pos = rec_end
+                    continue
+                if pending is not None:
+                    _finish_chunk(*pending, scan)
+                    pending = None
                 if op == _OP_CHUNK:
-                    _read_chunk(buf, pos + 9, rec_end, scan)
+                    pending = _read_chunk(buf, pos + 9, rec_end, scan)
                 elif op in (_OP_DATA_END, _OP_FOOTER):
                     return -1  # the data section ended properly
             pos = rec_end
         if pos < end and not in_chunk:
             raise _Corrupt(pos)
     finally:
+        if pending is not None:  # a chunk that decompressed is good even if what follows is not
+            _finish_chunk(*pending, scan)
         for cid, s in starts.items():
             scan.spans.setdefault(cid, []).append(
                 (
@@ -265,7 +279,42 @@ def _read_chunk(buf, pos: int, end: int, scan: _Scan) -> None:
     if len(data) != size or (crc != 0 and zlib.crc32(data) != crc):
         raise _Corrupt(pos, "a chunk fails its size or CRC check")
     scan.segments.append(data)
-    _walk_records(memoryview(data), 0, len(data), scan, len(scan.segments) - 1, in_chunk=True)
+    return len(scan.segments) - 1, data, []
+
+
+def _finish_chunk(seg: int, data: bytes, index: list[NDArray[np.int64]], scan: _Scan) -> None:
+    """Note the messages of a decompressed chunk, from its message indices when it has them.
+
+    The indices give every message record's offset, so records are located without a Python
+    loop; whatever lies between the indexed records (schemas, channels, unindexed messages) is
+    walked record by record. Without indices, or when they disagree with the data, the whole
+    chunk is walked.
+    """
+    size = len(data)
+    if index:
+        offs = np.unique(np.concatenate(index))
+        d = np.frombuffer(data, np.uint8)
+        if len(offs) and offs[0] >= 0 and offs[-1] + _MSG_HEADER <= size and np.all(
+            d[offs] == _OP_MESSAGE
+        ):
+            length = _gather(d, offs + 1, "u8").astype(np.int64)
+            ends = offs + 9 + length
+            if np.all(ends[:-1] <= offs[1:]) and ends[-1] <= size:
+                gap_starts = np.concatenate([[0], ends])
+                gap_ends = np.concatenate([offs, [size]])
+                view = memoryview(data)
+                has_gap = gap_ends > gap_starts
+                for a, b in zip(gap_starts[has_gap].tolist(), gap_ends[has_gap].tolist()):
+                    _walk_records(view, a, b, scan, seg, in_chunk=True)
+                cid = _gather(d, offs + 9, "u2").astype(np.int64)
+                log_time = _gather(d, offs + 15, "u8").astype(np.int64)
+                for c in np.unique(cid).tolist():
+                    m = cid == c
+                    scan.spans.setdefault(c, []).append(
+                        (seg, offs[m] + _MSG_HEADER, length[m] - 22, log_time[m])
+                    )
+                return
+    _walk_records(memoryview(data), 0, size, scan, seg, in_chunk=True)
 
 
 def _scan_file(path: Path) -> _Scan:
@@ -358,12 +407,19 @@ class _Unsupported(Exception):
 
 
 def _gather(buf: NDArray[np.uint8], pos: NDArray[np.int64], dtype: str, n: int = 1) -> NDArray:
-    """Read ``n`` consecutive little-endian ``dtype`` values at each byte position ``pos``."""
-    size = np.dtype(dtype).itemsize * n
-    idx = pos[:, None] + np.arange(size)
-    raw = np.ascontiguousarray(buf[idx])
-    out = raw.view("<" + dtype)
-    return out.reshape(len(pos), n) if n > 1 else out.reshape(len(pos))
+    """Read ``n`` consecutive little-endian ``dtype`` values at each byte position ``pos``.
+
+    A view of the byte buffer with a stride of one byte and the item size of ``dtype`` puts a
+    (possibly unaligned) value at every byte position, so one fancy index reads them all.
+    """
+    dt = np.dtype("<" + dtype)
+    count = len(buf) - dt.itemsize + 1
+    if count <= 0:
+        return np.zeros((len(pos), n) if n > 1 else len(pos), dtype=dt)
+    view = np.ndarray((count,), dtype=dt, buffer=buf, strides=(1,))
+    if n == 1:
+        return view[pos]
+    return view[pos[:, None] + dt.itemsize * np.arange(n)]
 
 
 def _walk_layout(
@@ -450,14 +506,17 @@ class _Raw:
 
 def _collect(scan: _Scan, cid: int) -> _Raw:
     spans = scan.spans.get(cid, [])
-    used = sorted({s[0] for s in spans})
-    # Concatenate only the segments holding this channel; payload positions shift accordingly.
-    shift, pieces, total = {}, [], 0
-    for seg in used:
-        shift[seg] = total
-        pieces.append(scan.segments[seg])
-        total += len(scan.segments[seg])
-    buf = np.frombuffer(b"".join(pieces), dtype=np.uint8) if pieces else np.zeros(0, np.uint8)
+    # Concatenate the decompressed chunks (and the file itself only when it holds messages
+    # outside chunks) once per scan; payload positions shift by each segment's place.
+    used = tuple(sorted({s[0] for s in spans} | set(range(1, len(scan.segments)))))
+    if scan.joined is None or scan.joined[0] != used:
+        shift, total = {}, 0
+        for seg in used:
+            shift[seg] = total
+            total += len(scan.segments[seg])
+        pieces = b"".join(scan.segments[seg] for seg in used)
+        scan.joined = (used, np.frombuffer(pieces, dtype=np.uint8), shift)
+    _, buf, shift = scan.joined
     if spans:
         start = np.concatenate([s[1] + shift[s[0]] for s in spans])
         length = np.concatenate([s[2] for s in spans])
