@@ -436,7 +436,7 @@ def _send_static(view: ViewData, rec) -> None:
     rec.log(
         ENTITY["errors"],
         rr.SeriesLines(
-            names=["total", "inclination", "heading"], colors=_ERROR_RGB, widths=[2.0, 1.5, 1.5]
+            names=["total", "inclination", "heading"], colors=_ERROR_RGB, widths=[3.5, 1.5, 1.5]
         ),
         static=True,
     )
@@ -619,11 +619,15 @@ class ServedViewer:
         The web viewer, already pointed at the recording.
     grpc_url : str
         The gRPC proxy (``rerun+http://127.0.0.1:PORT/proxy``) a native viewer or SDK can use.
+    grpc_port, web_port : int
+        The two ports, both on 127.0.0.1.
     """
 
     process: subprocess.Popen
     url: str
     grpc_url: str
+    grpc_port: int
+    web_port: int
 
     def stop(self, timeout_s: float = 5.0) -> None:
         """Terminate the server (and its process group) and wait for it."""
@@ -689,7 +693,13 @@ def serve_rrd(
             start_new_session=True,
         )
     grpc_url = f"rerun+http://127.0.0.1:{grpc_port}/proxy"
-    served = ServedViewer(proc, f"http://127.0.0.1:{web_port}/?url={_quote(grpc_url)}", grpc_url)
+    served = ServedViewer(
+        proc,
+        f"http://127.0.0.1:{web_port}/?url={_quote(grpc_url)}",
+        grpc_url,
+        grpc_port,
+        web_port,
+    )
     try:
         _wait_for_port(grpc_port, proc, timeout_s)
         _wait_for_port(web_port, proc, timeout_s)
