@@ -141,7 +141,8 @@ class ViewData:
     t_s : ndarray, shape (N,)
         Sample times, s, strictly increasing (shown on the timeline relative to ``t_s[0]``).
     q_est : ndarray, shape (N, 4)
-        Estimated attitude ``q_w_b`` (body to world), Hamilton ``[x, y, z, w]``.
+        Estimated attitude ``q_w_b`` (body to world), Hamilton ``[x, y, z, w]``; rows of NaN
+        where there is no estimate (e.g. before the estimate starts at the first truth sample).
     q_truth : ndarray, shape (N, 4)
         True attitude ``q_w_b``, ``[x, y, z, w]``; rows of NaN where there is no truth.
     omega_b : ndarray, shape (N, 3)
@@ -199,9 +200,6 @@ class ViewData:
         }
         if self.omega_raw_b is not None:
             fields["omega_raw_b"] = _as_array("omega_raw_b", self.omega_raw_b, (3,), n)
-        if not np.all(np.isfinite(fields["q_est"])):
-            k = int(np.flatnonzero(~np.all(np.isfinite(fields["q_est"]), axis=1))[0])
-            raise InputError(f"Expected `q_est` finite, got q_est[{k}] = {fields['q_est'][k]}")
         if not isinstance(self.title, str) or not self.title:
             raise InputError(f"Expected `title` a non-empty str, got {self.title!r}")
         for name, value in fields.items():
@@ -212,9 +210,21 @@ class ViewData:
 # geometry of the 3D view
 
 
-def _body_axes_w(q_w_b: NDArray) -> NDArray:
-    """Body x, y, z axes in world coordinates (columns of ``R_w_b``), shape (N, 3, 3) [n, axis, xyz]."""
-    return quat_rotate(q_w_b[:, None, :], np.eye(3)[None, :, :])
+def _body_axes_w(q_w_b: NDArray) -> tuple[NDArray, NDArray[np.bool_]]:
+    """Body x, y, z axes in world coordinates (the columns of ``R_w_b``) and the valid rows.
+
+    Returns
+    -------
+    axes_w : ndarray, shape (N, 3, 3)
+        ``axes_w[n, k]`` = body axis k in world coordinates; NaN rows where ``q_w_b`` is not
+        finite or zero.
+    valid : ndarray of bool, shape (N,)
+    """
+    norm = np.linalg.norm(q_w_b, axis=1)
+    valid = np.isfinite(norm) & (norm > 1e-9)
+    q = np.where(valid[:, None], q_w_b, [0.0, 0.0, 0.0, 1.0]) / np.where(valid, norm, 1.0)[:, None]
+    axes = quat_rotate(q[:, None, :], np.eye(3)[None, :, :])
+    return np.where(valid[:, None, None], axes, np.nan), valid
 
 
 def _trail_frames(t_s: NDArray) -> NDArray[np.intp]:
@@ -355,24 +365,22 @@ def _entities(view: ViewData) -> list[_Entity]:
     import rerun as rr
 
     t_rel = view.t_s - view.t_s[0]
-    n = len(t_rel)
-    est_axes = _body_axes_w(view.q_est)  # (N, 3 axes, 3)
-    has_truth = np.all(np.isfinite(view.q_truth), axis=1)
-    true_axes = _body_axes_w(np.where(has_truth[:, None], view.q_truth, [0.0, 0.0, 0.0, 1.0]))
-    m = int(has_truth.sum())
+    est_axes, has_est = _body_axes_w(view.q_est)  # (N, 3 axes, 3)
+    true_axes, has_truth = _body_axes_w(view.q_truth)
+    n_est, m = int(has_est.sum()), int(has_truth.sum())
+    # Rows without an attitude hold no arrows (an empty row clears the previous axes).
     out = [
         _Entity(
             ENTITY["estimate_axes"],
             t_rel,
             rr.Arrows3D,
             {
-                "vectors": est_axes.reshape(-1, 3),
-                "colors": np.tile(_EST_RGB, (n, 1)),
-                "radii": np.full(3 * n, 0.018, dtype=np.float32),
+                "vectors": est_axes[has_est].reshape(-1, 3),
+                "colors": np.tile(_EST_RGB, (n_est, 1)),
+                "radii": np.full(3 * n_est, 0.018, dtype=np.float32),
             },
-            np.full(n, 3, dtype=np.intp),
+            np.where(has_est, 3, 0).astype(np.intp),
         ),
-        # Rows without truth hold no arrows (an empty row clears the previous axes).
         _Entity(
             ENTITY["truth_axes"],
             t_rel,
@@ -388,7 +396,7 @@ def _entities(view: ViewData) -> list[_Entity]:
     ]
     frames = _trail_frames(view.t_s)
     tips = {
-        "truth_trail": np.where(has_truth[:, None], true_axes[:, 2], np.nan),
+        "truth_trail": true_axes[:, 2],
         "estimate_trail": est_axes[:, 2],
     }
     for key, tip in tips.items():
@@ -452,14 +460,9 @@ def _send_static(view: ViewData, rec) -> None:
                 rr.SeriesLines(names=[f"raw ω_{axis}"], colors=[_GYRO_RAW_RGB[k]], widths=[1.0]),
                 static=True,
             )
-    has_truth = np.all(np.isfinite(view.q_truth), axis=1)
     tips = {
-        "estimate_trace": quat_rotate(view.q_est, [0.0, 0.0, 1.0]),
-        "truth_trace": np.where(
-            has_truth[:, None],
-            quat_rotate(np.where(has_truth[:, None], view.q_truth, [0, 0, 0, 1.0]), [0, 0, 1.0]),
-            np.nan,
-        ),
+        "estimate_trace": _body_axes_w(view.q_est)[0][:, 2],
+        "truth_trace": _body_axes_w(view.q_truth)[0][:, 2],
     }
     for key, tip in tips.items():
         segments = _trace_segments(tip)

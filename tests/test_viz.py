@@ -19,6 +19,7 @@ from imu_dcm.viz import ENTITY, TIMELINE, ViewData, gyro_needs_split, save_rrd, 
 RATE_HZ = 100.0
 N = 200  # 2 s at 100 Hz
 GAP = slice(50, 70)  # samples without truth
+NO_EST = slice(0, 5)  # samples before the estimate starts (the replay starts it at the truth)
 
 # The boundary case every convention test carries: 90° about z, [x, y, z, w] = [0, 0, √½, √½];
 # body x must point along world y.
@@ -35,6 +36,8 @@ def _view(omega_raw: bool = False, n: int = N) -> ViewData:
         (t_s - t_s[0])[:, None] * rate_rad_s * axis
     )
     est = Rotation.from_euler("z", 3.0, degrees=True) * truth
+    q_est = est.as_quat()
+    q_est[NO_EST] = np.nan
     q_truth = truth.as_quat()
     q_truth[GAP] = np.nan
     omega_b = np.tile(rate_rad_s * axis, (n, 1))
@@ -42,7 +45,7 @@ def _view(omega_raw: bool = False, n: int = N) -> ViewData:
     err[GAP] = np.nan
     return ViewData(
         t_s=t_s,
-        q_est=est.as_quat(),
+        q_est=q_est,
         q_truth=q_truth,
         omega_b=omega_b,
         error_total_deg=err,
@@ -131,7 +134,8 @@ def test_axes_are_the_columns_of_r_w_b(saved):
     np.testing.assert_allclose(rows["Arrows3D:vectors"][0][0], [0, 1, 0], atol=2e-6)
     np.testing.assert_allclose(rows["Arrows3D:vectors"][0][1], [-1, 0, 0], atol=2e-6)
     est = data[ENTITY["estimate_axes"]]["rows"]["Arrows3D:vectors"]
-    for k in (0, 60, N - 1):
+    assert all(row == [] for row in est[NO_EST])  # no estimate yet: no arrows
+    for k in (NO_EST.stop, 60, N - 1):
         R = Rotation.from_quat(view.q_est[k]).as_matrix()
         np.testing.assert_allclose(np.array(est[k]), R.T, atol=2e-6)
 
@@ -162,19 +166,27 @@ def test_trailing_window_of_the_z_tip(saved):
     span_s = view.t_s[-1] - view.t_s[0]
     assert len(t_ns) == math.floor(span_s * viz.TRAIL_FPS) + 1
     rel = view.t_s - view.t_s[0]
-    tip = Rotation.from_quat(view.q_est).apply([0.0, 0.0, 1.0])  # body z in world (oracle)
-    for k in (0, 10, len(t_ns) - 1):
+    q_est = np.where(np.isnan(view.q_est), [0.0, 0.0, 0.0, 1.0], view.q_est)
+    tip = Rotation.from_quat(q_est).apply([0.0, 0.0, 1.0])  # body z in world (oracle)
+    for k in (10, 30, len(t_ns) - 1):
         strip = np.array(rows["LineStrips3D:strips"][k][0])
         end = int(np.argmin(np.abs(rel * 1e9 - t_ns[k])))
-        start = int(np.searchsorted(rel, rel[end] - viz.TRAIL_S))
-        # The strip runs from the tip TRAIL_S before the frame to the tip at the frame.
+        # The strip runs from the tip TRAIL_S before the frame (or the first estimate, if later)
+        # to the tip at the frame. Windows here span < TRAIL_POINTS samples: none is skipped.
+        start = max(int(np.searchsorted(rel, rel[end] - viz.TRAIL_S)), NO_EST.stop)
         np.testing.assert_allclose(strip[0], tip[start], atol=2e-6)
         np.testing.assert_allclose(strip[-1], tip[end], atol=2e-6)
         np.testing.assert_allclose(np.linalg.norm(strip, axis=1), 1.0, atol=2e-6)
-    # The truth trail leaves out the samples without truth (no NaN points reach the viewer).
-    for strip in data[ENTITY["truth_trail"]]["rows"]["LineStrips3D:strips"]:
-        for s in strip:
-            assert np.all(np.isfinite(np.array(s, dtype=float)))
+    # Trails leave out samples without an attitude (no NaN points reach the viewer): frames at
+    # 0 and 1/30 s end at samples 0 and 3, before the estimate starts (sample 5), so they are
+    # empty; the frame at 2/30 s (sample 6) starts at the first estimate.
+    assert rows["LineStrips3D:strips"][0] in ([], [[]])
+    assert rows["LineStrips3D:strips"][1] in ([], [[]])
+    np.testing.assert_allclose(rows["LineStrips3D:strips"][2][0][0], tip[NO_EST.stop], atol=2e-6)
+    for key in ("truth_trail", "estimate_trail"):
+        for strip in data[ENTITY[key]]["rows"]["LineStrips3D:strips"]:
+            for s in strip:
+                assert np.all(np.isfinite(np.array(s, dtype=float)))
 
 
 def test_realtime_sends_the_same_rows_in_chunks(tmp_path, monkeypatch):
@@ -213,10 +225,6 @@ def test_view_data_rejects_bad_input():
         ViewData(**{**fields, "t_s": t})
     with pytest.raises(InputError, match="Expected `title` a non-empty str"):
         ViewData(**{**fields, "title": ""})
-    q = good.q_est.copy()
-    q[3] = np.nan
-    with pytest.raises(InputError, match=r"Expected `q_est` finite, got q_est\[3\]"):
-        ViewData(**{**fields, "q_est": q})
     # InputError is also a ValueError (callers may catch either).
     with pytest.raises(ValueError):
         ViewData(**{**fields, "omega_b": good.omega_b[:, :2]})
