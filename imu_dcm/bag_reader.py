@@ -292,7 +292,7 @@ def _finish_chunk(seg: int, data: bytes, index: list[NDArray[np.int64]], scan: _
     """
     size = len(data)
     if index:
-        offs = np.unique(np.concatenate(index))
+        offs = np.sort(np.concatenate(index))  # channels never share an offset
         d = np.frombuffer(data, np.uint8)
         if len(offs) and offs[0] >= 0 and offs[-1] + _MSG_HEADER <= size and np.all(
             d[offs] == _OP_MESSAGE

@@ -3,7 +3,8 @@
 A gyro at rest measures its bias plus noise. A sample is *at rest* when it lies in a window of
 at least ``min_duration_s`` (0.5 s) whose mean rate magnitude is below ``max_rate_rad_s`` and
 whose per-axis standard deviation is below ``max_std_rad_s``. Consecutive rest samples form a
-rest segment; the bias of a segment is the mean rate over it. The bias applied to a sample is
+rest segment; the bias of a segment is the mean rate over it, leaving out one window next to
+each motion (windows that straddle a slow start of motion still pass the thresholds). The bias applied to a sample is
 that of the latest rest segment that began at or before it (so the estimate is *updated at each
 rest*); samples before the first rest use the first segment's bias.
 
@@ -151,10 +152,18 @@ def estimate_bias(
         return BiasEstimate(np.broadcast_to(b, (n, 3)).copy(), (), "fixed")
     if mode != "auto":
         raise InputError(f"Expected bias 'auto', 'none' or x,y,z in rad/s, got {mode!r}")
-    mask = detect_rest(w, t, config)
+    cfg = config or RestConfig()
+    mask = detect_rest(w, t, cfg)
+    trim = _window_samples(t, cfg.min_duration_s)
     segs = []
     for a, b in _segments(mask):
-        bias = w[a:b].mean(axis=0)
+        # Windows that straddle the start of a slow motion still pass the thresholds: leave
+        # out one window next to motion (not at the ends of the log) when enough remains.
+        lo = a + trim if a > 0 else a
+        hi = b - trim if b < n else b
+        if hi - lo < trim:
+            lo, hi = a + (b - a) // 4, b - (b - a) // 4
+        bias = w[lo:hi].mean(axis=0)
         segs.append(RestSegment(a, b, float(t[a]), float(t[b - 1]), tuple(bias.tolist())))
     bias_b = np.zeros((n, 3))
     if segs:
