@@ -1,4 +1,4 @@
-"""``python -m data_synth SCENE [options] --rate HZ --duration S --out DIR`` (see data_synth.cli)."""
+"""``python -m data_synth SCENE [options] --rate HZ --duration S --out DIR`` (data_synth.cli)."""
 
 import sys
 

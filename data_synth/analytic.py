@@ -16,15 +16,16 @@ from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
-from scipy.special import ellipj, ellipk, ellipkinc
+from scipy.special import ellipj, ellipk, ellipkinc, elliprf, elliprj
 
 from data_synth.rigid_body import Trajectory
 from imu_dcm.errors import InputError
-from imu_dcm.so3 import exp_quat, quat_multiply, quat_rotate
+from imu_dcm.so3 import exp_quat, quat_conjugate, quat_multiply, quat_rotate
 
 __all__ = [
     "ConingTrajectory",
     "HeavyTopInvariants",
+    "box_attitude_elliptic",
     "box_omega_elliptic",
     "coning_attitude",
     "coning_rates",
@@ -36,7 +37,7 @@ __all__ = [
 
 
 def _rot_quat(axis: int, angle_rad: ArrayLike) -> NDArray[np.float64]:
-    """Quaternions ``[x, y, z, w]`` of rotations by ``angle_rad`` (shape (N,)) about a world axis."""
+    """Quaternions ``[x, y, z, w]`` of rotations by ``angle_rad`` (N,) about a coordinate axis."""
     a = np.asarray(angle_rad, dtype=float)
     q = np.zeros(a.shape + (4,))
     q[..., axis] = np.sin(0.5 * a)
@@ -207,6 +208,89 @@ def box_omega_elliptic(t_s: ArrayLike, inertia_kg_m2: ArrayLike,
     tau0 = 2.0 * k * float(ellipk(m)) + float(ellipkinc(phi0 - k * math.pi, m))
     sn, cn, dn, _ = ellipj(lam * np.asarray(t_s, dtype=float) + tau0, m)
     return np.stack([s1 * a1 * cn, s2 * a2 * sn, s3 * a3 * dn], axis=-1)
+
+
+def _box_constants(inertia_kg_m2: ArrayLike, omega0_b: ArrayLike) -> dict[str, float]:
+    i1, i2, i3 = (float(v) for v in np.asarray(inertia_kg_m2, dtype=float))
+    w = np.asarray(omega0_b, dtype=float)
+    two_e = i1 * w[0] ** 2 + i2 * w[1] ** 2 + i3 * w[2] ** 2
+    m2 = (i1 * w[0]) ** 2 + (i2 * w[1]) ** 2 + (i3 * w[2]) ** 2
+    return {"i1": i1, "i2": i2, "i3": i3, "two_e": two_e, "m2": m2}
+
+
+def _legendre_pi(n: float, phi: NDArray, m: float) -> NDArray:
+    """Incomplete elliptic integral of the third kind ``Π(n; φ | m)`` for any real ``φ``.
+
+    ``Π = s R_F(c², 1 − m s², 1) + (n/3) s³ R_J(c², 1 − m s², 1, 1 − n s²)`` (Carlson forms,
+    ``s = sin φ``, ``c = cos φ``) on ``|φ| <= π/2``, extended by ``Π(φ + kπ) = Π(φ) + 2k Π(n|m)``.
+    """
+    k = np.round(phi / np.pi)
+    p = phi - k * np.pi
+    s, c = np.sin(p), np.cos(p)
+    a, b = c * c, 1.0 - m * s * s
+    inc = s * elliprf(a, b, 1.0) + n / 3.0 * s ** 3 * elliprj(a, b, 1.0, 1.0 - n * s * s)
+    complete = float(elliprf(0.0, 1.0 - m, 1.0) + n / 3.0 * elliprj(0.0, 1.0 - m, 1.0, 1.0 - n))
+    return inc + 2.0 * k * complete
+
+
+def box_attitude_elliptic(t_s: ArrayLike, inertia_kg_m2: ArrayLike, omega0_b: ArrayLike,
+                          q0_w_b: ArrayLike) -> NDArray[np.float64]:
+    """Attitude of a torque-free asymmetric body in closed form (elliptic integrals).
+
+    In a frame ``L`` with z along the angular momentum, the z-x-z Euler angles of the body are
+    ``cos θ = I3 ω3 / M``, ``ψ = atan2(I1 ω1, I2 ω2)`` (algebraic in the elliptic rates of
+    :func:`box_omega_elliptic`) and ``φ̇ = M (I1 ω1² + I2 ω2²)/(I1² ω1² + I2² ω2²)``. With
+    ``ω1 = A1 cn, ω2 = A2 sn`` this is ``M (a + b sn²)/(c + d sn²)``, whose integral is
+    ``M b/d t + M (a − b c/d)/(c λ) [Π(−d/c; am(λt + τ0)) − Π(−d/c; am(τ0))]`` (van Zon &
+    Schofield, J. Comput. Phys. 225, 2007), with Π in Carlson's forms. Then
+    ``R_w_b(t) = R_w_L Rz(φ) Rx(θ) Rz(ψ)``, ``R_w_L`` fixed by ``q0_w_b`` and ``φ(0) = 0``.
+
+    Parameters
+    ----------
+    t_s : array_like, shape (N,)
+    inertia_kg_m2 : array_like, shape (3,)
+        ``I1 < I2 < I3``, kg·m².
+    omega0_b : array_like, shape (3,)
+        Initial body rate, rad/s (``M² > 2 E I2``).
+    q0_w_b : array_like, shape (4,)
+        Initial attitude ``[x, y, z, w]``.
+
+    Returns
+    -------
+    ndarray, shape (N, 4)
+        ``q_w_b(t)``.
+    """
+    t = np.asarray(t_s, dtype=float)
+    k = _box_constants(inertia_kg_m2, omega0_b)
+    i1, i2, i3, two_e, m2 = k["i1"], k["i2"], k["i3"], k["two_e"], k["m2"]
+    big_m = math.sqrt(m2)
+    a1sq = (two_e * i3 - m2) / (i1 * (i3 - i1))
+    a2sq = (two_e * i3 - m2) / (i2 * (i3 - i2))
+    lam = math.sqrt((i3 - i2) * (m2 - two_e * i1) / (i1 * i2 * i3))
+    m = (i2 - i1) * (two_e * i3 - m2) / ((i3 - i2) * (m2 - two_e * i1))
+    a, b = i1 * a1sq, i2 * a2sq - i1 * a1sq
+    c, d = i1 * i1 * a1sq, i2 * i2 * a2sq - i1 * i1 * a1sq
+    w = box_omega_elliptic(np.concatenate([[0.0], t]), inertia_kg_m2, omega0_b)
+    # The phase τ0 of the rates at t = 0: recover am(τ0) from (sn, cn) = (ω2/A2, ω1/A1).
+    w0 = np.asarray(omega0_b, dtype=float)
+    s3 = 1.0 if w0[2] >= 0 else -1.0
+    am0 = math.atan2(w0[1] / (s3 * math.sqrt(a2sq)), w0[0] / math.sqrt(a1sq))
+    k_m = float(ellipk(m))
+    kk = round(am0 / math.pi)
+    tau0 = 2.0 * kk * k_m + float(ellipkinc(am0 - kk * math.pi, m))
+    _, _, _, am = ellipj(lam * t + tau0, m)
+    n = -d / c
+    phi = big_m * b / d * t + big_m * (a - b * c / d) / (c * lam) * (
+        _legendre_pi(n, am, m) - _legendre_pi(n, np.array([am0]), m)[0])
+    w1, w2, w3 = w[1:, 0], w[1:, 1], w[1:, 2]
+    theta = np.arccos(np.clip(i3 * w3 / big_m, -1.0, 1.0))
+    psi = np.arctan2(i1 * w1, i2 * w2)
+    q_l_b = quat_multiply(quat_multiply(_rot_quat(2, phi), _rot_quat(0, theta)), _rot_quat(2, psi))
+    th0 = math.acos(max(-1.0, min(1.0, i3 * w0[2] / big_m)))
+    ps0 = math.atan2(i1 * w0[0], i2 * w0[1])
+    q_l_b0 = quat_multiply(_rot_quat(0, th0), _rot_quat(2, ps0))
+    q_w_l = quat_multiply(np.asarray(q0_w_b, dtype=float), quat_conjugate(q_l_b0))
+    return quat_multiply(q_w_l, q_l_b)
 
 
 # --------------------------------------------------------------------------------------------

@@ -76,7 +76,8 @@ class GyroModel:
         if self.bias_rad_s is not None:
             b = tuple(float(x) for x in self.bias_rad_s)
             if len(b) != 3 or not all(math.isfinite(x) for x in b):
-                raise InputError(f"Expected `bias_rad_s` three finite rates, got {self.bias_rad_s!r}")
+                raise InputError(
+                    f"Expected `bias_rad_s` three finite rates, got {self.bias_rad_s!r}")
             object.__setattr__(self, "bias_rad_s", b)
 
     def as_dict(self) -> dict[str, Any]:

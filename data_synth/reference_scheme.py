@@ -259,7 +259,7 @@ class SampledTrajectory(Trajectory):
         if np.any(off > 1e-9):
             i = int(np.argmax(off))
             raise InputError(f"Expected times on the {self.rate_hz} Hz grid of the reference "
-                             f"scheme, got t_s[{i}] = {t[i]!r}")
+                             f"scheme, got t_s[{i}] = {float(t[i])!r}")
         return self._q[k].copy(), self._run.omega_b[k].copy()
 
     def delta_angles(self, t_s: ArrayLike) -> NDArray[np.float64]:
@@ -268,7 +268,7 @@ class SampledTrajectory(Trajectory):
 
 
 def main(argv: list[str] | None = None) -> int:
-    """Print the reference scheme's comparison numbers (``python -m data_synth.reference_scheme``)."""
+    """Print the comparison numbers: ``python -m data_synth.reference_scheme``."""
     ap = argparse.ArgumentParser(prog="python -m data_synth.reference_scheme",
                                  description=__doc__.splitlines()[0])
     ap.add_argument("--rate", type=float, nargs="+", default=[2500.0, 2000.0],
@@ -282,9 +282,10 @@ def main(argv: list[str] | None = None) -> int:
     print("Euler-angle solution vs exact:           axis")
     for r in args.rate:
         c = compare_reference(r, args.duration)
-        print(f"{c.rate_hz:6.0f} Hz  coupled {c.axis_vs_euler_deg:.4f} | {c.axis_vs_truth_deg:.4f} | "
-              f"{c.attitude_vs_truth_deg:.4f}   strapdown {c.strapdown_axis_deg:.4f} | "
-              f"{c.strapdown_attitude_deg:.4f}   Euler-angle {c.euler_vs_truth_axis_deg:.1e}")
+        print(f"{c.rate_hz:6.0f} Hz  coupled {c.axis_vs_euler_deg:.4f} | "
+              f"{c.axis_vs_truth_deg:.4f} | {c.attitude_vs_truth_deg:.4f}   "
+              f"strapdown {c.strapdown_axis_deg:.4f} | {c.strapdown_attitude_deg:.4f}   "
+              f"Euler-angle {c.euler_vs_truth_axis_deg:.1e}")
     return 0
 
 

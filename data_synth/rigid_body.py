@@ -92,13 +92,15 @@ class Trajectory:
         if t.ndim != 1:
             raise InputError(f"Expected `t_s` of shape (N,), got shape {t.shape}")
         if not np.all(np.isfinite(t)):
-            raise InputError(f"Expected finite `t_s`, got a NaN/Inf at index {int(np.argmin(np.isfinite(t)))}")
+            i = int(np.argmin(np.isfinite(t)))
+            raise InputError(f"Expected finite `t_s`, got t_s[{i}] = {float(t[i])!r}")
         # A few ulps of slack so that stamps rounded to integer nanoseconds still fit.
         slack = 1e-9
         bad = np.flatnonzero((t < -slack) | (t > self.duration_s + slack))
         if bad.size:
             raise InputError(
-                f"Expected `t_s` within [0, {self.duration_s}] s, got t_s[{bad[0]}] = {t[bad[0]]!r}"
+                f"Expected `t_s` within [0, {self.duration_s}] s, "
+                f"got t_s[{bad[0]}] = {float(t[bad[0]])!r}"
             )
         if increasing and t.size > 1:
             d = np.diff(t)
@@ -106,8 +108,8 @@ class Trajectory:
             if bad.size:
                 i = bad[0]
                 raise InputError(
-                    f"Expected `t_s` strictly increasing, got t_s[{i + 1}] = {t[i + 1]!r} "
-                    f"<= t_s[{i}] = {t[i]!r}"
+                    f"Expected `t_s` strictly increasing, got t_s[{i + 1}] = {float(t[i + 1])!r} "
+                    f"<= t_s[{i}] = {float(t[i])!r}"
                 )
         return np.clip(t, 0.0, self.duration_s)
 

@@ -267,7 +267,8 @@ def free_body(
                             rtol=rtol, atol=atol)
 
 
-def coning(duration_s: float, half_angle_deg: float = 10.0, freq_hz: float = 5.0) -> ConingTrajectory:
+def coning(duration_s: float, half_angle_deg: float = 10.0,
+           freq_hz: float = 5.0) -> ConingTrajectory:
     """Pure coning, ``R_w_b(t) = Rz(Ωt) Rx(β) Rz(−Ωt)`` (closed form, DESIGN.md §5)."""
     return ConingTrajectory(duration_s, half_angle_deg=half_angle_deg, freq_hz=freq_hz)
 

@@ -141,7 +141,8 @@ def _check_series(name: str, s: StampedSeries, k: int) -> None:
         raise InputError(f"Expected {name} finite values, got row {i} = {s.values[i].tolist()}")
 
 
-def _cdr_messages(t_ns: NDArray[np.int64], frame_id: str, doubles: NDArray[np.float64]) -> list[bytes]:
+def _cdr_messages(t_ns: NDArray[np.int64], frame_id: str,
+                  doubles: NDArray[np.float64]) -> list[bytes]:
     """CDR (little-endian) payloads of ``Header`` + ``k`` float64, one per row, built in bulk."""
     n, k = doubles.shape
     frame = frame_id.encode("utf-8") + b"\0"
@@ -157,7 +158,8 @@ def _cdr_messages(t_ns: NDArray[np.int64], frame_id: str, doubles: NDArray[np.fl
     buf[:, 8:12] = nsec.view(np.uint8).reshape(n, 4)
     buf[:, 12:16] = np.frombuffer(np.uint32(len(frame)).astype("<u4").tobytes(), np.uint8)
     buf[:, 16:16 + len(frame)] = np.frombuffer(frame, np.uint8)
-    buf[:, 4 + body_off:] = np.ascontiguousarray(doubles, dtype="<f8").view(np.uint8).reshape(n, 8 * k)
+    payload = np.ascontiguousarray(doubles, dtype="<f8").view(np.uint8)
+    buf[:, 4 + body_off:] = payload.reshape(n, 8 * k)
     raw = buf.tobytes()
     return [raw[i:i + size] for i in range(0, n * size, size)]
 
