@@ -1,0 +1,138 @@
+"""Regenerate every benchmark chart and table from scratch: ``python -m benchmarks [--quick] --out DIR``.
+
+Steps (a progress line each): the speed-against-accuracy measurement of every imu_dcm method and
+every peer (:mod:`benchmarks.pareto`) and its chart ``pareto.png``; the convergence chart
+``convergence.png``; the eight stability scenes (:mod:`benchmarks.stability`,
+``stability_*.png``); the noise study (``benchmarks.noise_study.run``) and the core speed study
+(``benchmarks.core_speed.run``) when those modules offer a ``run``; then ``results.md`` with every
+table. ``--quick`` measures fewer rates (100, 1000, 5000 Hz) in 3 rounds instead of 6 rates in
+5 rounds, and shortens the long stability runs; CI runs it as a smoke step.
+
+All timing runs on one BLAS thread (set before numpy is imported, and held by threadpoolctl).
+"""
+
+from __future__ import annotations
+
+from benchmarks.timing import limit_threads_env
+
+limit_threads_env()  # before numpy is imported anywhere below
+
+import argparse
+import importlib
+import inspect
+import sys
+import time
+from collections.abc import Callable
+from datetime import datetime, timezone
+from pathlib import Path
+
+from benchmarks.timing import single_thread
+
+
+def _progress_printer() -> Callable[[str], None]:
+    t0 = time.perf_counter()
+
+    def progress(msg: str) -> None:
+        print(f"[{time.perf_counter() - t0:7.1f} s] {msg}", flush=True)
+
+    return progress
+
+
+def _optional_run(module: str, out_dir: Path, quick: bool,
+                  progress: Callable[[str], None]) -> tuple[str, list[str]]:
+    """Call ``benchmarks.<module>.run`` if it exists; return (status, markdown lines)."""
+    try:
+        mod = importlib.import_module(f"benchmarks.{module}")
+    except ModuleNotFoundError as exc:
+        if exc.name == f"benchmarks.{module}":
+            return "absent", []
+        raise
+    run = getattr(mod, "run", None)
+    if not callable(run):
+        return "no run()", []
+    params = inspect.signature(run).parameters
+    kwargs = {}
+    if "quick" in params:
+        kwargs["quick"] = quick
+    if "progress" in params:
+        kwargs["progress"] = progress
+    first = next(iter(params), None)
+    if first in ("out_dir", "out", "output_dir", "out_path"):
+        result = run(out_dir, **kwargs)
+    else:
+        return "run() takes no output folder", []
+    if isinstance(result, str):
+        return "ran", result.splitlines()
+    if isinstance(result, (list, tuple)) and all(isinstance(x, str) for x in result):
+        return "ran", list(result)
+    return "ran", []
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(
+        prog="python -m benchmarks",
+        description="Regenerate the speed-vs-accuracy and stability charts and results.md.")
+    parser.add_argument("--out", required=True, type=Path, help="output folder (created)")
+    parser.add_argument("--quick", action="store_true",
+                        help="fewer rates and rounds, shorter long runs (CI smoke step)")
+    args = parser.parse_args(argv)
+    out: Path = args.out
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        print(f"benchmarks: Expected a writable output folder, got {out} ({exc.strerror})",
+              file=sys.stderr)
+        return 2
+
+    import numpy as np  # noqa: F401  (after the thread limit)
+
+    from benchmarks import pareto, stability
+
+    progress = _progress_printer()
+    t_start = time.perf_counter()
+    rates = pareto.QUICK_RATES_HZ if args.quick else pareto.FULL_RATES_HZ
+    rounds = 3 if args.quick else 5
+    conv_rates = (50.0, 200.0, 1000.0, 5000.0, 20000.0) if args.quick else \
+        pareto.CONVERGENCE_RATES_HZ
+    command = "python -m benchmarks" + (" --quick" if args.quick else "") + " --out DIR"
+    with single_thread():
+        cases = pareto.method_cases()
+        progress(f"pareto: {len(cases)} methods, {len(pareto.SCENES)} scenes, rates "
+                 f"{', '.join(f'{r:g}' for r in rates)} Hz, {rounds} rounds")
+        meas = pareto.measure(pareto.SCENES, rates, cases, rounds, progress)
+        pareto.plot_pareto(meas, cases, out / "pareto.png")
+        progress("pareto: wrote pareto.png")
+        conv = pareto.convergence(pareto.SCENES, conv_rates, progress=progress)
+        pareto.plot_convergence(conv, out / "convergence.png")
+        progress("convergence: wrote convergence.png")
+        stab_md = stability.run(out, quick=args.quick, progress=progress)
+        extra: list[str] = []
+        for module in ("noise_study", "core_speed"):
+            progress(f"{module}: running")
+            status, lines = _optional_run(module, out, args.quick, progress)
+            progress(f"{module}: {status}")
+            if lines:
+                extra += lines + [""]
+            elif status != "ran":
+                extra += [f"`benchmarks.{module}`: {status}; not part of this run.", ""]
+
+    elapsed = time.perf_counter() - t_start
+    md = [
+        "# imu_dcm benchmarks: speed against accuracy, and stability",
+        "",
+        (f"Generated by `{command}` on {datetime.now(timezone.utc):%Y-%m-%d %H:%M} UTC in "
+        f"{elapsed:.0f} s. Charts beside this file: `pareto.png`, `convergence.png`, "
+        "`stability_*.png`."),
+        "",
+    ]
+    md += pareto.summary_markdown(meas)
+    md += pareto.results_markdown(meas, cases, rounds, command)
+    md += stab_md
+    md += extra
+    (out / "results.md").write_text("\n".join(md) + "\n", encoding="utf-8")
+    progress(f"done: {out / 'results.md'} ({elapsed:.0f} s)")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,526 @@
+"""Speed against accuracy: every imu_dcm method and every peer, same run, same samples.
+
+For each scene and sample rate, every method integrates the exact body rates ``omega_b(t_k)`` of
+a ground-truth trajectory (``data_synth``) from the true initial attitude; its figure of merit is
+the **max total attitude error** against the truth over all samples (deg), and its cost is the
+**median wall time per gyro sample** (ns) over interleaved rounds after a warm-up, on one BLAS
+thread (:mod:`benchmarks.timing`). Speed ratios are against the reference document's loop
+(``reference_loop``) measured in the same rounds.
+
+Scenes (:data:`SCENES`): the reference document's heavy top (cusp motion) over 1.2 s and 10 s,
+pure coning (β = 10°, 5 Hz, closed form), and the free box near its intermediate axis
+(ω0 = (0.05, 3, 0.05) rad/s, one flip in 10 s).
+
+Methods (:func:`method_cases`): ``imu_dcm.integrate`` with every method (batch), the streaming
+``imu_dcm.DcmIntegrator`` per sample (``update``) and in blocks (``update_many``) when present,
+and the peers of :mod:`benchmarks.peers`.
+
+Conventions (DESIGN.md §3): quaternions ``q_w_b`` Hamilton ``[x, y, z, w]``, body to world;
+``omega_b`` body rate in body axes, rad/s; times ``t_s`` in seconds.
+"""
+
+from __future__ import annotations
+
+import platform
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from importlib import metadata
+from pathlib import Path
+
+import numpy as np
+from numpy.typing import NDArray
+
+import imu_dcm
+from benchmarks.peers import PEERS
+from benchmarks.timing import interleaved_medians
+from imu_dcm.metrics import attitude_error_deg
+
+__all__ = [
+    "FULL_RATES_HZ",
+    "QUICK_RATES_HZ",
+    "REFERENCE",
+    "SCENES",
+    "Case",
+    "Measurement",
+    "Scene",
+    "convergence",
+    "measure",
+    "method_cases",
+    "peer_versions",
+    "plot_convergence",
+    "plot_pareto",
+    "results_markdown",
+]
+
+FULL_RATES_HZ = (100.0, 200.0, 500.0, 1000.0, 2000.0, 5000.0)
+QUICK_RATES_HZ = (100.0, 1000.0, 5000.0)
+CONVERGENCE_RATES_HZ = (50.0, 100.0, 200.0, 500.0, 1000.0, 2000.0, 5000.0, 10000.0, 20000.0)
+
+#: Name of the case every speed ratio is taken against (measured in the same rounds).
+REFERENCE = "reference_loop"
+
+
+@dataclass(frozen=True)
+class Scene:
+    """A ground-truth scene: ``make()`` returns a ``data_synth`` trajectory of ``duration_s``."""
+
+    key: str
+    title: str
+    duration_s: float
+    make: Callable[[], object]
+
+
+def _heavy_top(duration_s: float) -> Callable[[], object]:
+    def make():
+        import data_synth
+
+        return data_synth.simulate("heavy-top", duration_s=duration_s, motion="cusp")
+
+    return make
+
+
+def _coning(duration_s: float) -> Callable[[], object]:
+    def make():
+        import data_synth
+
+        return data_synth.simulate("coning", duration_s=duration_s, half_angle_deg=10.0,
+                                   freq_hz=5.0)
+
+    return make
+
+
+def _free_box(duration_s: float) -> Callable[[], object]:
+    def make():
+        import data_synth
+
+        return data_synth.simulate("free-body", duration_s=duration_s, case="intermediate")
+
+    return make
+
+
+SCENES = (
+    Scene("heavy_top_1.2s", "heavy top, cusp, 1.2 s", 1.2, _heavy_top(1.2)),
+    Scene("heavy_top_10s", "heavy top, cusp, 10 s", 10.0, _heavy_top(10.0)),
+    Scene("coning", "pure coning, β = 10°, 5 Hz, 2 s", 2.0, _coning(2.0)),
+    Scene("free_box", "free box, intermediate axis, 10 s", 10.0, _free_box(10.0)),
+)
+
+
+# ----------------------------------------------------------------------------------------------
+# Methods
+# ----------------------------------------------------------------------------------------------
+
+@dataclass(frozen=True)
+class Case:
+    """One method under test: ``fn(omega_b (N, 3), t_s (N,), q0 (4,)) -> q_w_b (N, 4)`` xyzw.
+
+    ``family`` is ``"batch"``, ``"streaming"`` (imu_dcm) or ``"peer"``; ``order`` its accuracy
+    order as text.
+    """
+
+    name: str
+    fn: Callable[[NDArray, NDArray, NDArray], NDArray]
+    family: str
+    description: str
+    order: str
+
+
+_ORDER = {"start": "1", "end": "1", "trapezoid": "2", "coning": "2", "magnus4": "4",
+          "rotvec_sum": "none (eq. 13)"}
+
+
+def _batch(method: str) -> Callable:
+    def fn(omega_b, t_s, q0):
+        return imu_dcm.integrate(omega_b, t_s, q0, method).as_quat()
+
+    return fn
+
+
+def _streaming_per_sample(method: str) -> Callable:
+    """``DcmIntegrator.update`` once per sample, attitude read after each (a live filter)."""
+
+    def fn(omega_b, t_s, q0):
+        integ = imu_dcm.DcmIntegrator(q0, method)
+        out = []
+        for w, t in zip(omega_b, t_s.tolist()):
+            out.extend(_as_rows(integ.update(w, t)))
+        out.extend(_as_rows(_flush(integ)))
+        return _align(np.asarray(out, dtype=float).reshape(-1, 4), len(t_s), q0)
+
+    return fn
+
+
+def _streaming_blocks(method: str, block: int = 256) -> Callable:
+    """``DcmIntegrator.update_many`` on blocks of ``block`` samples (a driver reading buffers)."""
+
+    def fn(omega_b, t_s, q0):
+        integ = imu_dcm.DcmIntegrator(q0, method)
+        out = []
+        for s in range(0, len(t_s), block):
+            out.extend(_as_rows(integ.update_many(omega_b[s:s + block], t_s[s:s + block])))
+        out.extend(_as_rows(_flush(integ)))
+        return _align(np.asarray(out, dtype=float).reshape(-1, 4), len(t_s), q0)
+
+    return fn
+
+
+def _as_rows(res) -> list:
+    """Quaternion rows from whatever a streaming call returned (None, Rotation, array)."""
+    if res is None:
+        return []
+    if hasattr(res, "as_quat"):
+        q = res.as_quat()
+    elif hasattr(res, "q_w_b"):
+        q = np.asarray(res.q_w_b)
+    else:
+        q = np.asarray(res, dtype=float)
+    return list(np.atleast_2d(q))
+
+
+def _flush(integ):
+    f = getattr(integ, "flush", None)
+    return f() if callable(f) else None
+
+
+def _align(q: NDArray, n: int, q0: NDArray) -> NDArray:
+    """Streaming outputs as (n, 4): prepend ``q0`` when the first sample emits nothing."""
+    if len(q) == n - 1:
+        q = np.vstack([q0, q])
+    if len(q) != n:
+        raise RuntimeError(f"Expected {n} streaming attitudes, got {len(q)}")
+    return q
+
+
+def method_cases(streaming: bool = True) -> list[Case]:
+    """Every imu_dcm method (batch; streaming when ``imu_dcm.DcmIntegrator`` exists) and peer."""
+    cases = [Case(f"batch_{m}", _batch(m), "batch", f"imu_dcm.integrate(method={m!r})",
+                  _ORDER.get(m, "?")) for m in imu_dcm.METHODS]
+    if streaming and hasattr(imu_dcm, "DcmIntegrator"):
+        methods = _streaming_methods()
+        cases += [Case(f"stream_{m}", _streaming_per_sample(m), "streaming",
+                       f"DcmIntegrator({m!r}).update per sample", _ORDER.get(m, "?"))
+                  for m in methods]
+        if hasattr(imu_dcm.DcmIntegrator, "update_many"):
+            cases += [Case(f"stream_many_{m}", _streaming_blocks(m), "streaming",
+                           f"DcmIntegrator({m!r}).update_many, blocks of 256",
+                           _ORDER.get(m, "?")) for m in methods]
+    cases += [Case(name, p.fn, "peer", p.description, p.order) for name, p in PEERS.items()]
+    return cases
+
+
+def _streaming_methods() -> tuple[str, ...]:
+    names = getattr(imu_dcm.DcmIntegrator, "METHODS", None) or imu_dcm.METHODS
+    return tuple(m for m in names if m != "rotvec_sum")
+
+
+# ----------------------------------------------------------------------------------------------
+# Measurement
+# ----------------------------------------------------------------------------------------------
+
+@dataclass(frozen=True)
+class Measurement:
+    """One method on one scene at one rate.
+
+    Attributes
+    ----------
+    scene, rate_hz, case : scene key, sample rate (Hz), method name.
+    n_samples : samples integrated.
+    max_err_deg : max total attitude error against the truth over all samples, deg.
+    ns_per_sample : median wall time per sample over the timed rounds, ns (NaN if untimed).
+    ratio_vs_reference : reference ns/sample divided by this one (> 1: faster).
+    """
+
+    scene: str
+    rate_hz: float
+    case: str
+    n_samples: int
+    max_err_deg: float
+    ns_per_sample: float
+    ratio_vs_reference: float
+
+
+def _truth(traj, rate_hz: float, duration_s: float) -> tuple[NDArray, NDArray, NDArray]:
+    n = round(duration_s * rate_hz) + 1
+    t = np.arange(n) / rate_hz
+    q, w = traj.at(t)
+    return t, np.asarray(q, dtype=float), np.ascontiguousarray(w, dtype=float)
+
+
+def _max_err(q_est: NDArray, q_true: NDArray) -> float:
+    q_est = np.asarray(q_est, dtype=float)
+    if not np.all(np.isfinite(q_est)):
+        return 180.0
+    return float(np.max(attitude_error_deg(q_est, q_true).total_deg))
+
+
+def measure(scenes: Sequence[Scene], rates_hz: Sequence[float], cases: Sequence[Case],
+            rounds: int, progress: Callable[[str], None] = print) -> list[Measurement]:
+    """Time every case on every scene and rate (interleaved rounds, warm-up), and score it."""
+    out: list[Measurement] = []
+    for sc in scenes:
+        progress(f"pareto: truth for {sc.title}")
+        traj = sc.make()
+        for rate in rates_hz:
+            t, q_true, w = _truth(traj, rate, sc.duration_s)
+            q0 = q_true[0]
+            progress(f"pareto: {sc.title} at {rate:g} Hz ({len(t)} samples, {len(cases)} methods,"
+                     f" {rounds} rounds)")
+            errs = {c.name: _max_err(c.fn(w, t, q0), q_true) for c in cases}
+            timings = interleaved_medians(
+                {c.name: ((lambda f=c.fn, w=w, t=t, q0=q0: f(w, t, q0)), len(t)) for c in cases},
+                rounds=rounds, warmup=1)
+            ref = timings[REFERENCE].ns_per_item if REFERENCE in timings else float("nan")
+            for c in cases:
+                ns = timings[c.name].ns_per_item
+                out.append(Measurement(sc.key, rate, c.name, len(t), errs[c.name], ns, ref / ns))
+    return out
+
+
+def convergence(scenes: Sequence[Scene], rates_hz: Sequence[float] = CONVERGENCE_RATES_HZ,
+                methods: Sequence[str] = ("start", "end", "trapezoid", "coning", "magnus4"),
+                progress: Callable[[str], None] = print) -> dict[str, dict[str, NDArray]]:
+    """Max error (deg) of each batch method against dt, per scene (untimed)."""
+    res: dict[str, dict[str, NDArray]] = {}
+    for sc in scenes:
+        progress(f"convergence: {sc.title}, {len(rates_hz)} rates")
+        traj = sc.make()
+        errs = {m: np.empty(len(rates_hz)) for m in methods}
+        for k, rate in enumerate(rates_hz):
+            t, q_true, w = _truth(traj, rate, sc.duration_s)
+            for m in methods:
+                errs[m][k] = _max_err(imu_dcm.integrate(w, t, q_true[0], m).as_quat(), q_true)
+        res[sc.key] = {"dt_s": 1.0 / np.asarray(rates_hz, dtype=float), **errs}
+    return res
+
+
+# ----------------------------------------------------------------------------------------------
+# Charts
+# ----------------------------------------------------------------------------------------------
+
+_STYLE = {
+    # imu_dcm batch: filled markers, solid lines, cool colours
+    "batch_start": ("#9ecae1", "v", "-"), "batch_end": ("#6baed6", "^", "-"),
+    "batch_trapezoid": ("#2171b5", "s", "-"), "batch_coning": ("#08519c", "D", "-"),
+    "batch_magnus4": ("#08306b", "o", "-"), "batch_rotvec_sum": ("#41ab5d", "*", "-"),
+    # peers: warm colours, dashed
+    "reference_loop": ("#d62728", "X", "--"), "scipy_loop": ("#ff7f0e", "P", "--"),
+    "ahrs_angular_rate": ("#8c564b", "h", "--"), "imufusion_gain0": ("#e377c2", "<", "--"),
+    "vqf_batch": ("#bcbd22", ">", "--"), "vqf_update_gyr": ("#7f7f7f", "d", "--"),
+}
+_STREAM_COLOURS = {"start": "#c7e9c0", "end": "#a1d99b", "trapezoid": "#74c476",
+                   "coning": "#31a354", "magnus4": "#006d2c"}
+
+
+def _style(name: str) -> tuple[str, str, str, str]:
+    """(colour, marker, linestyle, marker face) of a case."""
+    if name in _STYLE:
+        c, m, ls = _STYLE[name]
+        return c, m, ls, c
+    for prefix, ls in (("stream_many_", "-."), ("stream_", ":")):
+        if name.startswith(prefix):
+            method = name[len(prefix):]
+            c = _STREAM_COLOURS.get(method, "#2ca02c")
+            return c, _STYLE.get(f"batch_{method}", (c, "o", "-"))[1], ls, "none"
+    return "#333333", "o", "-", "#333333"
+
+
+def _label(name: str, cases: dict[str, Case]) -> str:
+    c = cases.get(name)
+    if c is None:
+        return name
+    if c.family == "peer":
+        return f"{name} (peer, order {c.order})"
+    return f"{name} (order {c.order})"
+
+
+def plot_pareto(meas: Sequence[Measurement], cases: Sequence[Case], path: str | Path,
+                title_note: str = "") -> None:
+    """Write the 2x2 log-log Pareto chart: ns/sample against max error, a line per method."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    by_case = {c.name: c for c in cases}
+    scenes = list(dict.fromkeys(m.scene for m in meas))
+    titles = {s.key: s.title for s in SCENES}
+    fig, axes = plt.subplots(2, 2, figsize=(15, 10.5))
+    for ax, key in zip(axes.flat, scenes):
+        for c in cases:
+            pts = sorted((m for m in meas if m.scene == key and m.case == c.name),
+                         key=lambda m: m.rate_hz)
+            if not pts:
+                continue
+            colour, marker, ls, face = _style(c.name)
+            x = [m.ns_per_sample for m in pts]
+            y = [max(m.max_err_deg, 1e-12) for m in pts]
+            ax.loglog(x, y, ls, color=colour, marker=marker, mfc=face, ms=7, lw=1.4,
+                      label=_label(c.name, by_case))
+        rates = sorted({m.rate_hz for m in meas if m.scene == key})
+        ax.set_title(f"{titles.get(key, key)}  (points: {rates[0]:g}–{rates[-1]:g} Hz)")
+        ax.set_xlabel("wall time per gyro sample, ns (median, 1 thread)")
+        ax.set_ylabel("max attitude error vs truth, deg")
+        ax.grid(True, which="major", alpha=0.3)
+    for ax in axes.flat[len(scenes):]:
+        ax.set_visible(False)
+    handles, labels = axes.flat[0].get_legend_handles_labels()
+    fig.legend(handles, labels, loc="center right", fontsize=9, frameon=True,
+               title="method (higher rate → lower error)")
+    fig.suptitle("Speed against accuracy: lower-left is better" + title_note, fontsize=14)
+    fig.tight_layout(rect=(0, 0, 0.78, 0.97))
+    fig.savefig(path, dpi=100)
+    plt.close(fig)
+
+
+def plot_convergence(conv: dict[str, dict[str, NDArray]], path: str | Path) -> None:
+    """Write the convergence chart: max error against dt per method, with slope 1, 2, 4 guides."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    titles = {s.key: s.title for s in SCENES}
+    fig, axes = plt.subplots(2, 2, figsize=(14, 10))
+    for ax, (key, res) in zip(axes.flat, conv.items()):
+        dt = res["dt_s"]
+        for m, e in res.items():
+            if m == "dt_s":
+                continue
+            colour, marker, _ls, _f = _style(f"batch_{m}")
+            ax.loglog(dt, np.maximum(e, 1e-13), "-", color=colour, marker=marker, ms=6,
+                      label=f"imu_dcm {m} (order {_ORDER[m]})")
+        # Theoretical slopes C dt^p, drawn 3x above the method of that order and anchored at its
+        # coarsest step with an error below 1° (the asymptotic range), labelled at the finest dt.
+        for p, m in ((1, "end"), (2, "trapezoid"), (4, "magnus4")):
+            if m not in res:
+                continue
+            ok = np.flatnonzero(res[m] < 1.0)
+            if not len(ok):
+                continue
+            i = ok[np.argmax(dt[ok])]
+            guide = 3.0 * res[m][i] * (dt / dt[i]) ** p
+            ax.loglog(dt, guide, "k", ls=(0, (4, 3)), lw=0.9, alpha=0.7)
+            ax.annotate(f"slope {p}", (dt.min(), guide[np.argmin(dt)]), fontsize=9,
+                        ha="left", va="bottom")
+        lo = min(float(np.min(e)) for m, e in res.items() if m != "dt_s")
+        ax.set_title(titles.get(key, key))
+        ax.set_xlabel("dt = 1 / sample rate, s")
+        ax.set_ylabel("max attitude error vs truth, deg")
+        ax.set_ylim(bottom=max(lo / 5.0, 1e-13))
+        ax.grid(True, which="major", alpha=0.3)
+    for ax in axes.flat[len(conv):]:
+        ax.set_visible(False)
+    handles, labels = axes.flat[0].get_legend_handles_labels()
+    fig.legend(handles, labels, loc="lower center", ncol=5, fontsize=9)
+    fig.suptitle("Convergence: max error against step, with theoretical slopes (dashed)",
+                 fontsize=14)
+    fig.tight_layout(rect=(0, 0.05, 1, 0.97))
+    fig.savefig(path, dpi=100)
+    plt.close(fig)
+
+
+# ----------------------------------------------------------------------------------------------
+# Table
+# ----------------------------------------------------------------------------------------------
+
+def peer_versions() -> dict[str, str]:
+    """Installed versions of numpy, scipy and the peer libraries."""
+    out = {}
+    for pkg in ("numpy", "scipy", "ahrs", "imufusion", "vqf", "matplotlib", "threadpoolctl"):
+        try:
+            out[pkg] = metadata.version(pkg)
+        except metadata.PackageNotFoundError:
+            out[pkg] = "not installed"
+    return out
+
+
+def _g(x: float, digits: int = 2) -> str:
+    if not np.isfinite(x):
+        return "—"
+    if x == 0:
+        return "0"
+    if abs(x) >= 100 or abs(x) < 1e-2:
+        return f"{x:.{digits}g}" if abs(x) < 1e5 and abs(x) >= 1e-2 else f"{x:.{digits}e}"
+    return f"{x:.{digits + 1}g}"
+
+
+def results_markdown(meas: Sequence[Measurement], cases: Sequence[Case], rounds: int,
+                     command: str) -> list[str]:
+    """Markdown: versions, method list, then per scene a table (methods x rates)."""
+    vers = peer_versions()
+    titles = {s.key: s.title for s in SCENES}
+    md = [
+        "## Speed against accuracy",
+        "",
+        (f"Command: `{command}`. Machine: {platform.machine()}, {platform.python_implementation()} "
+        f"{platform.python_version()}, one BLAS thread; medians of {rounds} interleaved rounds "
+        "after one warm-up; every method integrates the same exact rate samples from the true "
+        "initial attitude. Error = max total attitude error against the truth over all samples; "
+        f"ratio = `{REFERENCE}` ns/sample ÷ the method's (same run; > 1 is faster). No peer is "
+        "timed on a prefix: every method runs every sample."),
+        "",
+        "Versions: " + ", ".join(f"{k} {v}" for k, v in vers.items()) + f", imu_dcm "
+        f"{imu_dcm.__version__}.",
+        "",
+        "| method | family | order | what it is |",
+        "|---|---|---|---|",
+    ]
+    md += [f"| `{c.name}` | {c.family} | {c.order} | {c.description} |" for c in cases]
+    md.append("")
+    for key in dict.fromkeys(m.scene for m in meas):
+        rates = sorted({m.rate_hz for m in meas if m.scene == key})
+        md += [f"### {titles.get(key, key)}", "",
+               "Cells: max error (deg) · ns/sample · speed ratio vs reference.", "",
+               "| method | " + " | ".join(f"{r:g} Hz" for r in rates) + " |",
+               "|---" * (len(rates) + 1) + "|"]
+        for c in cases:
+            cells = []
+            for r in rates:
+                m = next((m for m in meas if m.scene == key and m.case == c.name
+                          and m.rate_hz == r), None)
+                cells.append("—" if m is None else
+                             f"{_g(m.max_err_deg)}° · {m.ns_per_sample:,.0f} · "
+                             f"{_g(m.ratio_vs_reference)}×")
+            md.append(f"| `{c.name}` | " + " | ".join(cells) + " |")
+        md.append("")
+    return md
+
+
+def summary_rows(meas: Sequence[Measurement], scene: str, rate_hz: float) -> list[Measurement]:
+    """Measurements of one scene and rate, sorted by cost."""
+    return sorted((m for m in meas if m.scene == scene and m.rate_hz == rate_hz),
+                  key=lambda m: m.ns_per_sample)
+
+
+
+def pareto_front(rows: Sequence[Measurement]) -> list[str]:
+    """Names of the cases not dominated (no other is both cheaper and at most as wrong)."""
+    front = []
+    for a in rows:
+        dominated = any(b is not a and b.ns_per_sample <= a.ns_per_sample
+                        and b.max_err_deg <= a.max_err_deg
+                        and (b.ns_per_sample < a.ns_per_sample or b.max_err_deg < a.max_err_deg)
+                        for b in rows)
+        if not dominated:
+            front.append(a.case)
+    return front
+
+
+def summary_markdown(meas: Sequence[Measurement], scene: str = "heavy_top_1.2s",
+                     rates_hz: Sequence[float] = (2000.0, 200.0)) -> list[str]:
+    """Headline tables: one scene at the measured rates nearest ``rates_hz``, sorted by cost."""
+    have = sorted({m.rate_hz for m in meas if m.scene == scene})
+    if not have:
+        return []
+    titles = {s.key: s.title for s in SCENES}
+    md = []
+    for want in dict.fromkeys(min(have, key=lambda r: abs(np.log(r / w))) for w in rates_hz):
+        rows = summary_rows(meas, scene, want)
+        front = pareto_front(rows)
+        md += [f"## Headline: {titles.get(scene, scene)} at {want:g} Hz", "",
+               "| method | max error, deg | ns/sample | speed ratio vs reference | on the front |",
+               "|---|---|---|---|---|"]
+        md += [f"| `{m.case}` | {_g(m.max_err_deg)} | {m.ns_per_sample:,.0f} | "
+               f"{_g(m.ratio_vs_reference)}× | {'yes' if m.case in front else ''} |" for m in rows]
+        md.append("")
+    return md
