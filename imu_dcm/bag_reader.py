@@ -666,7 +666,8 @@ def read_custom_data(path: str | Path) -> dict[str, str]:
     except ImportError:  # custom data is optional; PyYAML is not a hard dependency
         return {}
     try:
-        doc = yaml.safe_load(meta.read_text())
+        loader = getattr(yaml, "CSafeLoader", yaml.SafeLoader)  # the C loader is ~10x faster
+        doc = yaml.load(meta.read_text(), Loader=loader)  # noqa: S506 - a safe loader
     except (OSError, yaml.YAMLError):
         return {}
     info = (doc or {}).get("rosbag2_bagfile_information", {}) or {}
