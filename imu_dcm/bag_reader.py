@@ -667,7 +667,7 @@ def read_custom_data(path: str | Path) -> dict[str, str]:
         return {}
     try:
         loader = getattr(yaml, "CSafeLoader", yaml.SafeLoader)  # the C loader is ~10x faster
-        doc = yaml.load(meta.read_text(), Loader=loader)  # noqa: S506 - a safe loader
+        doc = yaml.load(meta.read_text(), Loader=loader)  # a safe loader
     except (OSError, yaml.YAMLError):
         return {}
     info = (doc or {}).get("rosbag2_bagfile_information", {}) or {}
