@@ -204,7 +204,8 @@ def method_cases(streaming: bool = True) -> list[Case]:
             cases += [Case(f"stream_many_{m}", _streaming_blocks(m), "streaming",
                            f"DcmIntegrator({m!r}).update_many, blocks of 256",
                            _ORDER.get(m, "?")) for m in methods]
-    cases += [Case(name, p.fn, "peer", p.description, p.order) for name, p in PEERS.items()]
+    cases += [Case(name, p.fn, "peer", p.description, {"first": "1"}.get(p.order, p.order))
+              for name, p in PEERS.items()]
     return cases
 
 
@@ -493,8 +494,17 @@ def summary_rows(meas: Sequence[Measurement], scene: str, rate_hz: float) -> lis
 
 
 
+#: Errors at or above this (deg) are not estimates; such cases are left off the front.
+FRONT_MAX_ERR_DEG = 90.0
+
+
 def pareto_front(rows: Sequence[Measurement]) -> list[str]:
-    """Names of the cases not dominated (no other is both cheaper and at most as wrong)."""
+    """Names of the cases not dominated (no other is both cheaper and at most as wrong).
+
+    Cases with an error of ``FRONT_MAX_ERR_DEG`` or more are excluded (a 180° estimate is cheap
+    but is no estimate).
+    """
+    rows = [r for r in rows if r.max_err_deg < FRONT_MAX_ERR_DEG]
     front = []
     for a in rows:
         dominated = any(b is not a and b.ns_per_sample <= a.ns_per_sample
@@ -518,6 +528,8 @@ def summary_markdown(meas: Sequence[Measurement], scene: str = "heavy_top_1.2s",
         rows = summary_rows(meas, scene, want)
         front = pareto_front(rows)
         md += [f"## Headline: {titles.get(scene, scene)} at {want:g} Hz", "",
+               (f"On the front: no other method is both cheaper and more accurate (errors ≥ "
+               f"{FRONT_MAX_ERR_DEG:g}° excluded)."), "",
                "| method | max error, deg | ns/sample | speed ratio vs reference | on the front |",
                "|---|---|---|---|---|"]
         md += [f"| `{m.case}` | {_g(m.max_err_deg)} | {m.ns_per_sample:,.0f} | "
