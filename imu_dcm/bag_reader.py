@@ -27,6 +27,7 @@ import re
 import struct
 import warnings
 import zlib
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -147,6 +148,7 @@ class _Scan:
     spans: dict[int, list[tuple[int, NDArray, NDArray, NDArray]]] = field(default_factory=dict)
     stopped_at: str | None = None
     joined: tuple | None = None  # (segments used, concatenated bytes, shift per segment)
+    progress: Callable[[float], None] | None = None  # called with the fraction of bytes read
 
 
 def _read_str(buf: bytes | memoryview, pos: int) -> tuple[str, int]:
@@ -235,6 +237,8 @@ def _walk_records(buf, start: int, end: int, scan: _Scan, seg: int, in_chunk: bo
                     pending = None
                 if op == _OP_CHUNK:
                     pending = _read_chunk(buf, pos + 9, rec_end, scan)
+                    if scan.progress is not None:
+                        scan.progress(rec_end / end)
                 elif op in (_OP_DATA_END, _OP_FOOTER):
                     return -1  # the data section ended properly
             pos = rec_end
@@ -317,13 +321,13 @@ def _finish_chunk(seg: int, data: bytes, index: list[NDArray[np.int64]], scan: _
     _walk_records(memoryview(data), 0, size, scan, seg, in_chunk=True)
 
 
-def _scan_file(path: Path) -> _Scan:
+def _scan_file(path: Path, progress: Callable[[float], None] | None = None) -> _Scan:
     data = path.read_bytes()
     if len(data) == 0:
         raise LogError(f"Expected an MCAP file, got an empty file: {path}")
     if not data.startswith(MCAP_MAGIC):
         raise LogError(f"Expected an MCAP file (magic \\x89MCAP0), got {data[:8]!r} in {path}")
-    scan = _Scan()
+    scan = _Scan(progress=progress)
     scan.segments.append(data)
     try:
         stop = _walk_records(memoryview(data), len(MCAP_MAGIC), len(data), scan, 0, False)
@@ -839,6 +843,7 @@ def read_log(
     imu_topic: str | None = None,
     truth_topic: str | None = None,
     time: str = "header",
+    progress: Callable[[float], None] | None = None,
 ) -> LogData:
     """Read the gyro samples and the reference attitude of a ROS 2 bag or an MCAP file.
 
@@ -859,6 +864,8 @@ def read_log(
         ``"none"`` disables truth.
     time : {"header", "log"}
         Stamps from the messages' ``header.stamp`` (default) or the MCAP log time.
+    progress : callable(fraction), optional
+        Called after each chunk with the fraction of the file read (for a progress bar).
 
     Returns
     -------
@@ -880,7 +887,7 @@ def read_log(
     if time not in ("header", "log"):
         raise LogError(f"Expected time 'header' or 'log', got {time!r}")
     mcap_path = resolve_mcap_path(path)
-    scan = _scan_file(mcap_path)
+    scan = _scan_file(mcap_path, progress)
     channels = _channel_list(scan)
     if scan.stopped_at:
         total = sum(c.count for c in channels)

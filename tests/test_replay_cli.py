@@ -190,3 +190,26 @@ def test_subprocess_replays_shipped_trial(tmp_path):
     # within ~10° on undisturbed trials; an unremoved 0.3 °/s bias would give ~30°
     assert 0.5 < s["rms_error_deg"] < 10.0
     assert "imu        /imu/data (sensor_msgs/msg/Imu): 52518 samples" in proc.stdout
+
+
+def test_progress_bar_only_on_a_terminal():
+    import io
+
+    from imu_dcm.replay.__main__ import Progress
+
+    class Terminal(io.StringIO):
+        def isatty(self) -> bool:
+            return True
+
+    tty = Terminal()
+    bar = Progress(tty, delay_s=0.0)
+    bar("read", 0.5)
+    bar("read", 1.0)
+    bar.close()
+    assert "read       [###############...............]  50.0%" in tty.getvalue()
+    assert tty.getvalue().endswith("\r")  # the line is wiped at the end
+    pipe = io.StringIO()  # not a terminal: nothing at all
+    quiet = Progress(pipe, delay_s=0.0)
+    quiet("read", 0.5)
+    quiet.close()
+    assert pipe.getvalue() == ""

@@ -71,12 +71,15 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 class Progress:
-    """A plain-text progress line on stderr, drawn only when stderr is a terminal."""
+    """A plain-text progress line on stderr, drawn only when stderr is a terminal and only once
+    the replay has run for ``delay_s`` (short replays print nothing)."""
 
-    def __init__(self, stream=None, min_interval_s: float = 0.1):
+    def __init__(self, stream=None, min_interval_s: float = 0.1, delay_s: float = 0.5):
         self.stream = stream or sys.stderr
         self.enabled = bool(getattr(self.stream, "isatty", lambda: False)())
         self.min_interval_s = min_interval_s
+        self._start = time.monotonic()
+        self.delay_s = delay_s
         self._last = 0.0
         self._drawn = False
 
@@ -84,6 +87,8 @@ class Progress:
         if not self.enabled:
             return
         now = time.monotonic()
+        if now - self._start < self.delay_s:
+            return
         if fraction < 1.0 and now - self._last < self.min_interval_s:
             return
         self._last = now

@@ -291,7 +291,8 @@ def replay(
     report = progress or (lambda stage, frac: None)
 
     report("read", 0.0)
-    log: LogData = read_log(path, imu_topic=imu_topic, truth_topic=truth_topic, time=time)
+    log: LogData = read_log(path, imu_topic=imu_topic, truth_topic=truth_topic, time=time,
+                            progress=lambda frac: report("read", frac))  # fmt: skip
     report("read", 1.0)
     imu = log.imu
     clean = clean_imu(imu.t_ns, imu.omega_b, imu.topic)
