@@ -37,20 +37,22 @@ def movement_rms_deg(result, bag) -> float:
 
 
 def test_broad_movement_rms_with_bias_auto(broad_dir):
-    figures = {}
+    # Prints the README's table (run with -s). Both columns are measured here, in one run.
+    rows = []
     for trial in BROAD_TRIALS:
-        r = replay(broad_dir / trial, bias="auto")
-        figures[trial] = movement_rms_deg(r, broad_dir / trial)
+        auto = replay(broad_dir / trial, bias="auto")
+        none = replay(broad_dir / trial, bias="none")
         # every bag starts with seconds of rest before the truth appears: rest is found there
-        assert r.bias.segments and r.bias.segments[0].start_s == 0.0, trial
-    mean = float(np.mean(list(figures.values())))
-    print("BROAD movement-phase RMS (deg):", {k: round(v, 2) for k, v in figures.items()})
-    assert mean <= 6.0, figures
-
-
-def test_broad_bias_correction_is_what_matters(broad_dir):
-    # One trial without bias correction: the uncorrected 0.2–0.5 °/s bias dominates.
-    trial = broad_dir / "07_undisturbed_fast_rotation_B"
-    auto = movement_rms_deg(replay(trial, bias="auto"), trial)
-    none = movement_rms_deg(replay(trial, bias="none"), trial)
-    assert none > 3 * auto
+        assert auto.bias.segments and auto.bias.segments[0].start_s == 0.0, trial
+        rows.append((trial, len(auto.bias.segments), movement_rms_deg(auto, broad_dir / trial),
+                     movement_rms_deg(none, broad_dir / trial)))  # fmt: skip
+    mean_auto = float(np.mean([r[2] for r in rows]))
+    mean_none = float(np.mean([r[3] for r in rows]))
+    print("\n| trial | rest segments | RMS, --bias auto | RMS, --bias none |")
+    print("|---|---:|---:|---:|")
+    for trial, nseg, a, n in rows:
+        print(f"| {trial} | {nseg} | {a:.2f}° | {n:.2f}° |")
+    print(f"| **mean** | | **{mean_auto:.2f}°** | {mean_none:.2f}° |")
+    assert mean_auto <= 6.0, rows  # issue 4's target (the annotated-rest oracle: 5.6°)
+    # without correction the 0.1–0.5 °/s biases dominate (issue 4 quotes 32.9°)
+    assert mean_none > 3 * mean_auto, rows
