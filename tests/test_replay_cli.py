@@ -213,3 +213,18 @@ def test_progress_bar_only_on_a_terminal():
     quiet("read", 0.5)
     quiet.close()
     assert pipe.getvalue() == ""
+
+
+def test_prefilter_writes_filtered_rate_to_out_bag(coning_log, tmp_path, capsys):
+    out = tmp_path / "pf"
+    code = main([str(coning_log), "--rerun", "off", "--bias", "none", "--prefilter", "kalman",
+                 "--gyro-noise-density", "1e-4", "--angular-accel", "50", "--out", str(out),
+                 "--quiet"])  # fmt: skip
+    assert code == 0, capsys.readouterr().err
+    counts: dict[str, int] = {}
+    with open(resolve_mcap_path(out), "rb") as f:
+        for _, ch, _, _ in make_reader(f, decoder_factories=[DecoderFactory()]).iter_decoded_messages():
+            counts[ch.topic] = counts.get(ch.topic, 0) + 1
+    assert counts == {"/estimate/orientation": 800, "/estimate/angular_velocity": 800}
+    _assert_one_line_error(capsys, [str(coning_log), "--rerun", "off", "--angular-accel", "5"],
+                           "--prefilter kalman or rts")  # fmt: skip
