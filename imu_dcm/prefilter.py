@@ -12,13 +12,14 @@ world, in body axes, rad/s; ``v_k`` white, variance ``R_k = N² / dt_k`` for a g
 * ``estimate_bias=True`` appends a gyro bias ``b`` (random walk), measured as ``z = ω + b``; the
   bias is observable only at rest, where a zero-rate pseudo-measurement ``0 = ω`` is added.
 
-Every step is discretised with its own ``dt_k = t_k − t_{k−1}`` (the continuous white-noise model,
-``filterpy.common.Q_continuous_white_noise``). ``mode="kalman"`` is the causal filter (for live
-use); ``mode="rts"`` adds the backward RTS pass (no lag, for offline replay). The covariances do
-not depend on the data, so they are propagated once for all three axes, and with a uniform
-``dt`` the recursion stops as soon as it is stationary (steady-state gains); the filter is
-started at the stationary prior covariance so that a uniformly sampled log is filtered by one
-time-invariant filter from its first sample. ``engine="filterpy"`` runs the same model through
+Every step is discretised with its own ``dt_k = t_k − t_{k−1}`` (the continuous white-noise
+model, ``filterpy.common.Q_continuous_white_noise``). ``mode="kalman"`` is the causal filter
+(for live use); ``mode="rts"`` adds the backward RTS pass (no lag, for offline replay). The
+covariances do not depend on the data, so they are propagated once for all three axes, and with
+a uniform ``dt`` the recursion stops as soon as it is stationary (steady-state gains, applied
+by one first-order IIR filter per eigenmode). The filter starts from a nearly diffuse prior
+(100x what the first samples' finite differences tell), so a record that begins in motion
+is not pulled towards zero acceleration. ``engine="filterpy"`` runs the same model through
 ``filterpy.kalman.predict`` / ``update`` / ``rts_smoother`` per axis: the reference the fast
 path is tested against.
 
@@ -39,6 +40,7 @@ from scipy import linalg, optimize, signal
 
 from imu_dcm.allan import allan_deviation, noise_density_from_allan
 from imu_dcm.errors import InputError
+from imu_dcm.replay.bias import RestConfig, detect_rest
 
 __all__ = [
     "MODELS",
@@ -46,7 +48,6 @@ __all__ = [
     "NoiseEstimate",
     "PrefilterConfig",
     "PrefilterResult",
-    "detect_rest",
     "estimate_noise_from_rest",
     "prefilter",
 ]
@@ -62,6 +63,8 @@ _DT_REL_TOL = 1e-9
 # A covariance that moves by less than this (relative) in one step is stationary (the backward
 # smoother recursion settles at a round-off floor of about 1e-13).
 _STATIONARY_REL_TOL = 1e-11
+# Width of the initial prior, in units of what the first samples' finite differences tell.
+_PRIOR_SCALE = 100.0
 # Search range of the angular-acceleration scale for the likelihood fit, rad/s².
 _ACCEL_SEARCH_RAD_S2 = (1e-4, 1e6)
 # Bias allan-deviation minimum to bias instability (IEEE Std 952: flicker floor 0.664 B).
@@ -93,16 +96,17 @@ class PrefilterConfig:
         Standard deviation of the zero-rate pseudo-measurement at rest, rad/s.
     rest_interval_s : tuple of float or None
         ``(start, end)`` in the units of ``t_s``: the rest segment for the noise estimate. None:
-        the longest run found by :func:`detect_rest`.
+        the longest rest found by ``imu_dcm.replay.bias.detect_rest``.
     min_rest_s : float
         Shortest rest segment accepted for the noise estimate, s.
     rest_window_s : float
-        Window of the rest detector, s.
+        Window of the rest detector, s (``RestConfig.min_duration_s``).
     rest_max_rate_rad_s : float
-        Rest: every axis's window mean below this (plus the noise allowance), rad/s.
+        Rest: window-mean rate magnitude below this, rad/s (``RestConfig.max_rate_rad_s``).
     rest_max_std_rad_s : float or None
-        Rest: every axis's window standard deviation below this, rad/s. None: 0.01 rad/s, or
-        1.5 per-sample noise sigmas when the noise density is known, whichever is larger.
+        Rest: every axis's window standard deviation below this, rad/s. None: the larger of
+        0.01 rad/s and 1.5 per-sample noise sigmas (from the noise density when given, else the
+        quietest window of the log).
     """
 
     noise_density_rad_s_sqrt_hz: float | None = None
@@ -114,8 +118,8 @@ class PrefilterConfig:
     zero_rate_std_rad_s: float = 1e-3
     rest_interval_s: tuple[float, float] | None = None
     min_rest_s: float = 1.0
-    rest_window_s: float = 0.25
-    rest_max_rate_rad_s: float = 0.02
+    rest_window_s: float = 0.5
+    rest_max_rate_rad_s: float = 0.035
     rest_max_std_rad_s: float | None = None
 
 
@@ -227,7 +231,9 @@ def _check_positive(name: str, value: float | None, allow_none: bool = True) -> 
 
 def _check_config(config: PrefilterConfig) -> None:
     if not isinstance(config, PrefilterConfig):
-        raise InputError(f"Expected `config` a PrefilterConfig or None, got {type(config).__name__}")
+        raise InputError(
+            f"Expected `config` a PrefilterConfig or None, got {type(config).__name__}"
+        )
     _check_positive("noise_density_rad_s_sqrt_hz", config.noise_density_rad_s_sqrt_hz)
     _check_positive("angular_accel_rad_s2", config.angular_accel_rad_s2)
     if config.model not in MODELS:
@@ -247,58 +253,23 @@ def _check_config(config: PrefilterConfig) -> None:
     if config.rest_interval_s is not None:
         iv = config.rest_interval_s
         if len(iv) != 2 or not all(math.isfinite(v) for v in iv) or not iv[0] < iv[1]:
-            raise InputError(f"Expected `rest_interval_s` = (start, end) with start < end, got {iv!r}")
+            raise InputError(
+                f"Expected `rest_interval_s` = (start, end) with start < end, got {iv!r}"
+            )
 
 
 # ------------------------------------------------------------------------------------------------
 # rest detection and noise from the Allan deviation
 
 
-def detect_rest(
-    omega_b: ArrayLike,
-    t_s: ArrayLike,
-    window_s: float = 0.25,
-    max_rate_rad_s: float = 0.02,
-    max_std_rad_s: float = 0.01,
-    noise_std_rad_s: float | None = None,
-) -> NDArray[np.bool_]:
-    """Samples where the body is at rest, by windowed mean and spread of the rate.
-
-    A window of ``window_s`` (sliding by one sample) is at rest when on every axis the standard
-    deviation is below ``max_std_rad_s`` and the absolute mean below ``max_rate_rad_s`` (plus
-    ``4 σ / √m`` with ``σ = noise_std_rad_s`` and ``m`` samples, when given); a sample is at rest
-    when a rest window covers it. The mean threshold admits the gyro bias (BROAD: ≤ 0.01 rad/s).
-
-    Parameters
-    ----------
-    omega_b : array_like, shape (N, 3)
-        Measured body rate, rad/s.
-    t_s : array_like, shape (N,)
-        Sample times, s, strictly increasing.
-    window_s, max_rate_rad_s, max_std_rad_s, noise_std_rad_s : float
-        Window length (s) and thresholds (rad/s).
-
-    Returns
-    -------
-    ndarray of bool, shape (N,)
-    """
-    omega_b, t_s = _check_rates(omega_b, t_s)
-    n = len(t_s)
-    m = round(window_s / float(np.median(np.diff(t_s)))) + 1
-    m = max(3, min(m, n))
+def _quietest_std(omega_b: NDArray, t_s: NDArray, window_s: float) -> float:
+    """Smallest windowed rate spread (largest axis), rad/s: the noise floor when the log rests."""
+    m = max(3, min(len(t_s), round(window_s / float(np.median(np.diff(t_s))))))
     c1 = np.concatenate([np.zeros((1, 3)), np.cumsum(omega_b, axis=0)])
     c2 = np.concatenate([np.zeros((1, 3)), np.cumsum(omega_b * omega_b, axis=0)])
-    s1 = c1[m:] - c1[:-m]
-    s2 = c2[m:] - c2[:-m]
-    mean = s1 / m
-    var = np.maximum(s2 / m - mean * mean, 0.0) * m / (m - 1)
-    rate_lim = max_rate_rad_s + (4.0 * noise_std_rad_s / math.sqrt(m) if noise_std_rad_s else 0.0)
-    win = ((np.sqrt(var) < max_std_rad_s) & (np.abs(mean) < rate_lim)).all(axis=1)  # (n-m+1,)
-    # sample i is covered by windows j in [i-m+1, i]
-    cw = np.concatenate([[0], np.cumsum(win)])
-    lo = np.clip(np.arange(n) - m + 1, 0, len(win))
-    hi = np.clip(np.arange(n) + 1, 0, len(win))
-    return (cw[hi] - cw[lo]) > 0
+    mean = (c1[m:] - c1[:-m]) / m
+    var = np.maximum((c2[m:] - c2[:-m]) / m - mean * mean, 0.0)
+    return float(np.sqrt(var.max(axis=1).min()))
 
 
 def _longest_run(mask: NDArray[np.bool_]) -> tuple[int, int]:
@@ -445,7 +416,11 @@ def _build_model(
         H[0, -1] = 1.0
     rest = np.zeros(n, bool) if (rest is None or not bias) else rest
     P0 = np.zeros((d, d))
-    P0[:nm, :nm] = _stationary_prior(float(dt_full[0]), nm, q, float(r[0]))
+    # nearly diffuse prior: 100x the spread of the first samples' finite differences (rate
+    # sigma, two-point slope sqrt(2) sigma / dt, three-point curvature sqrt(6) sigma / dt^2)
+    sig, h = math.sqrt(float(r[0])), float(dt_full[0])
+    spread = [sig, math.sqrt(2.0) * sig / h, math.sqrt(6.0) * sig / h**2][:nm]
+    P0[np.arange(nm), np.arange(nm)] = (_PRIOR_SCALE * np.array(spread)) ** 2
     x0 = np.zeros((d, 3))
     x0[0] = z[0]
     if bias:
@@ -466,7 +441,9 @@ def _build_model(
 
 
 def _close(a: NDArray, b: NDArray) -> bool:
-    return float(np.max(np.abs(a - b))) <= _STATIONARY_REL_TOL * float(np.max(np.abs(a)))
+    """Covariances equal to ``_STATIONARY_REL_TOL``, entry by entry on the scale sqrt(P_ii P_jj)."""
+    d = np.sqrt(np.abs(np.diag(a)))
+    return bool(np.all(np.abs(a - b) <= _STATIONARY_REL_TOL * np.outer(d, d)))
 
 
 def _forward_covariances(m: _Model) -> tuple[NDArray, NDArray, NDArray, NDArray]:
@@ -543,7 +520,8 @@ def _modal_scan(A: NDArray, b: NDArray, x0: NDArray) -> NDArray | None:
     xi0 = Vi @ x0
     xi = np.empty_like(u)
     for i, li in enumerate(lam):
-        xi[:, i, :] = signal.lfilter([1.0], [1.0, -li], u[:, i, :], axis=0, zi=(li * xi0[i])[None])[0]
+        zi = (li * xi0[i])[None]
+        xi[:, i, :] = signal.lfilter([1.0], [1.0, -li], u[:, i, :], axis=0, zi=zi)[0]
     return (V @ xi).real
 
 
@@ -739,16 +717,19 @@ def prefilter(
     if cfg.noise_density_rad_s_sqrt_hz is None or cfg.estimate_bias:
         max_std = cfg.rest_max_std_rad_s
         if max_std is None:
-            max_std = max(0.01, 1.5 * noise_std) if noise_std is not None else 0.01
-        rest = detect_rest(omega_b, t_s, cfg.rest_window_s, cfg.rest_max_rate_rad_s, max_std,
-                           noise_std)
+            floor = noise_std if noise_std is not None else _quietest_std(omega_b, t_s,
+                                                                          cfg.rest_window_s)
+            max_std = max(0.01, 1.5 * floor)
+        rest = detect_rest(omega_b, t_s, RestConfig(cfg.rest_window_s, cfg.rest_max_rate_rad_s,
+                                                    max_std))
         summary["rest_samples"] = int(rest.sum())
 
     bias0 = None
     if cfg.noise_density_rad_s_sqrt_hz is None:
         if cfg.rest_interval_s is not None:
             sel = (t_s >= cfg.rest_interval_s[0]) & (t_s <= cfg.rest_interval_s[1])
-            i0, i1 = (int(np.argmax(sel)), int(len(sel) - np.argmax(sel[::-1]))) if sel.any() else (0, 0)
+            idx = np.flatnonzero(sel)
+            i0, i1 = (int(idx[0]), int(idx[-1]) + 1) if len(idx) else (0, 0)
             source = "rest_interval_s"
         else:
             i0, i1 = _longest_run(rest)
