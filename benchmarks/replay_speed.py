@@ -71,7 +71,9 @@ def main(argv: list[str] | None = None) -> int:
     with single_thread():
         res = interleaved_medians(cases, rounds=args.rounds, warmup=1)
     base = res["decode loop (mcap + mcap_ros2)"]
-    print(f"bag: {args.bag} ({n_msgs} messages, {mcap_path.stat().st_size / 1e6:.1f} MB); "
+    shown = args.bag.resolve()
+    shown = shown.relative_to(REPO) if shown.is_relative_to(REPO) else args.bag
+    print(f"bag: {shown} ({n_msgs} messages, {mcap_path.stat().st_size / 1e6:.1f} MB); "
           f"median of {args.rounds} interleaved rounds, 1 thread")  # fmt: skip
     print(f"{'case':<32} {'median s':>9} {'msgs/s':>12} {'vs loop':>8}")
     for name, t in res.items():
