@@ -322,7 +322,10 @@ def _finish_chunk(seg: int, data: bytes, index: list[NDArray[np.int64]], scan: _
 
 
 def _scan_file(path: Path, progress: Callable[[float], None] | None = None) -> _Scan:
-    data = path.read_bytes()
+    try:
+        data = path.read_bytes()
+    except OSError as exc:
+        raise LogError(f"Expected a readable MCAP file, got {path} ({exc.strerror})") from None
     if len(data) == 0:
         raise LogError(f"Expected an MCAP file, got an empty file: {path}")
     if not data.startswith(MCAP_MAGIC):
@@ -575,8 +578,8 @@ def _decode_slow(
     from mcap.records import Schema as McapSchema
     from mcap_ros2.decoder import DecoderFactory
 
-    decoder = DecoderFactory().decoder_for("cdr", McapSchema(0, schema.name, schema.encoding,
-                                                             schema.data))  # fmt: skip
+    mcap_schema = McapSchema(id=0, name=schema.name, encoding=schema.encoding, data=schema.data)
+    decoder = DecoderFactory().decoder_for("cdr", mcap_schema)
     if decoder is None:
         raise LogError(f"Expected a ros2msg schema for {topic}, got {schema.encoding!r}")
     n = len(raw.start)

@@ -120,7 +120,8 @@ def _samples(n: int = 50, seed: int = 0):
     return t_ns, rng.normal(0.0, 1.0, (n, 3))
 
 
-def write_imu_bag(path: Path, t_ns, omega, frames=None, extra=None, quats=None, cov0=-1.0):
+def write_imu_bag(path: Path, t_ns, omega, frames=None, extra=None, quats=None, cov0=-1.0,
+                  log_offset_ns: int = 0):  # fmt: skip
     """An MCAP with /imu/data (Imu); ``frames`` varies frame_id length per message."""
     with open(path, "wb") as f:
         w = Ros2Writer(f)
@@ -129,7 +130,7 @@ def write_imu_bag(path: Path, t_ns, omega, frames=None, extra=None, quats=None, 
             frame = frames[i % len(frames)] if frames else "imu"
             q = quats[i] if quats is not None else (0.0, 0.0, 0.0, 1.0)
             w.write_message("/imu/data", schema, _imu_msg(int(t), omega[i], frame, q, cov0),
-                            log_time=int(t), publish_time=int(t))  # fmt: skip
+                            log_time=int(t) + log_offset_ns, publish_time=int(t))  # fmt: skip
         if extra:
             extra(w)
         w.finish()
@@ -141,10 +142,11 @@ def test_variable_frame_id_lengths_decode_exactly(tmp_path):
     # the bulk decoder must reproduce the written float64 values bit for bit.
     t_ns, omega = _samples(60)
     frames = ["", "a", "ab", "abc", "/imu", "imu_l", "imu_li", "/imu_lin", "imu_link0", "x" * 9]
-    p = write_imu_bag(tmp_path / "f.mcap", t_ns, omega, frames)
+    p = write_imu_bag(tmp_path / "f.mcap", t_ns, omega, frames, log_offset_ns=-12_345)
     log = read_log(p)
     np.testing.assert_array_equal(log.imu.omega_b, omega)
     np.testing.assert_array_equal(log.imu.t_ns, t_ns)
+    np.testing.assert_array_equal(read_log(p, time="log").imu.t_ns, t_ns - 12_345)
     assert log.imu.topic == "/imu/data" and log.imu.type == "sensor_msgs/msg/Imu"
     assert log.truth is None  # covariance[0] == -1 everywhere: no orientation given
 
@@ -392,3 +394,21 @@ def test_bag_folder_and_file_give_the_same(tmp_path):
     shutil.copy(folder / "bag_0.mcap", folder / "bag_1.mcap")
     with pytest.raises(LogError, match="Expected one .mcap file"):
         read_log(folder)
+
+
+def test_layout_the_bulk_walker_cannot_follow_falls_back_to_the_decoder(tmp_path):
+    # A sequence of strings before the Imu: per-message offsets need every string's length, so
+    # the reader decodes these messages one by one with mcap_ros2 (same values, slower).
+    t_ns, omega = _samples(12)
+    definition = "string[] tags\nsensor_msgs/Imu imu\n" + IMU_SECTION + HEADER + QUAT + VEC3
+    p = tmp_path / "tags.mcap"
+    with open(p, "wb") as f:
+        w = Ros2Writer(f)
+        schema = w.register_msgdef("acme_msgs/msg/TaggedImu", definition)
+        for i, t in enumerate(t_ns):
+            msg = {"tags": ["a" * i, "bc"][: i % 3], "imu": _imu_msg(int(t), omega[i])}
+            w.write_message("/tagged", schema, msg, log_time=int(t), publish_time=int(t))
+        w.finish()
+    log = read_log(p)
+    np.testing.assert_array_equal(log.imu.omega_b, omega)
+    np.testing.assert_array_equal(log.imu.t_ns, t_ns)
