@@ -912,7 +912,10 @@ def read_log(
         raise LogError(f"Expected an IMU channel (sensor_msgs/msg/Imu or a type with an Imu "
                        f"field), got {_describe(channels)}")  # fmt: skip
     imu_cid = _pick(scan, imu_topic, candidates, "IMU", "--imu-topic")
-    imu, _ = _read_imu(scan, imu_cid, candidates[imu_cid], time)
+    imu, undecodable = _read_imu(scan, imu_cid, candidates[imu_cid], time)
+    if undecodable:
+        warnings.warn(f"{imu.topic}: dropped {undecodable} messages that do not decode",
+                      ImuDcmWarning, stacklevel=2)  # fmt: skip
     if len(imu.t_ns) == 0:
         raise LogError(f"Expected IMU samples on {imu.topic}, got none that decode")
     truth = None

@@ -412,3 +412,25 @@ def test_layout_the_bulk_walker_cannot_follow_falls_back_to_the_decoder(tmp_path
     log = read_log(p)
     np.testing.assert_array_equal(log.imu.omega_b, omega)
     np.testing.assert_array_equal(log.imu.t_ns, t_ns)
+
+
+def test_short_message_is_dropped_and_counted(tmp_path):
+    # Re-write a bag's raw payloads with one cut to 20 bytes (shorter than an Imu's layout).
+    t_ns, omega = _samples(15)
+    src = write_imu_bag(tmp_path / "ok.mcap", t_ns, omega)
+    with open(src, "rb") as f:
+        reader = make_reader(f)
+        schema_rec = next(iter(reader.get_summary().schemas.values()))
+        payloads = [(m.log_time, m.data) for _, _, m in reader.iter_messages()]
+    p = tmp_path / "short.mcap"
+    with open(p, "wb") as f:
+        w = McapWriter(f)
+        w.start("ros2", "test")
+        sid = w.register_schema(schema_rec.name, schema_rec.encoding, schema_rec.data)
+        cid = w.register_channel("/imu/data", "cdr", sid)
+        for i, (lt, data) in enumerate(payloads):
+            w.add_message(cid, log_time=lt, data=data[:20] if i == 7 else data, publish_time=lt)
+        w.finish()
+    with pytest.warns(ImuDcmWarning, match="/imu/data: dropped 1 messages that do not decode"):
+        log = read_log(p)
+    np.testing.assert_array_equal(log.imu.omega_b, np.delete(omega, 7, axis=0))
