@@ -863,8 +863,9 @@ def read_log(
         The reference attitude ``q_w_b``: ``geometry_msgs`` QuaternionStamped, PoseStamped,
         PoseWithCovarianceStamped, TransformStamped or ``nav_msgs`` Odometry; or the IMU topic
         itself for its own orientation. By default the one such channel not under
-        ``/estimate``; else the Imu's orientation where ``orientation_covariance[0] != -1``.
-        ``"none"`` disables truth.
+        ``/estimate``; else the Imu's orientation where ``orientation_covariance[0] != -1``
+        (unit norm, and not one constant value: devices leave the default ``0,0,0,1`` behind
+        a garbage covariance). ``"none"`` disables truth.
     time : {"header", "log"}
         Stamps from the messages' ``header.stamp`` (default) or the MCAP log time.
     progress : callable(fraction), optional
@@ -949,5 +950,9 @@ def _imu_truth(imu: ImuSeries, required: bool) -> TruthSeries | None:
     if not ok.any():
         if required:
             raise LogError(f"Expected unit orientation quaternions on {imu.topic}, got none")
+        return None
+    if not required and ok.sum() > 1 and np.all(q[ok] == q[ok][0]):
+        # A constant quaternion (typically the default 0,0,0,1 behind a garbage covariance
+        # instead of the -1 flag) is no estimate; it is used only when asked for by topic.
         return None
     return TruthSeries(imu.t_ns[ok], q[ok] / norm[ok, None], imu.topic, imu.type)

@@ -282,6 +282,16 @@ def test_all_zero_quaternion_without_flag_is_not_truth(tmp_path):
     assert read_log(p).truth is None
 
 
+def test_constant_default_orientation_behind_garbage_covariance_is_not_truth(tmp_path):
+    # DESIGN §8: covariance arrays holding 4e-322 instead of -1, with the default quaternion.
+    t_ns, omega = _samples(10)
+    ident = np.tile([0.0, 0.0, 0.0, 1.0], (10, 1))
+    p = write_imu_bag(tmp_path / "g.mcap", t_ns, omega, quats=ident, cov0=4e-322)
+    assert read_log(p).truth is None
+    asked = read_log(p, truth_topic="/imu/data").truth  # named explicitly: used as given
+    np.testing.assert_array_equal(asked.q_w_b, ident)
+
+
 def test_several_imu_channels_fail_listing_them_and_topic_chooses(tmp_path):
     t_ns, omega = _samples(10)
 
