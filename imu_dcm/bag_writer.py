@@ -26,9 +26,12 @@ import json
 import os
 import re
 import shutil
+import struct
 import uuid
+import zlib
 from collections.abc import Mapping
 from dataclasses import dataclass
+from itertools import pairwise
 from pathlib import Path
 
 import numpy as np
@@ -142,8 +145,8 @@ def _check_series(name: str, s: StampedSeries, k: int) -> None:
 
 
 def _cdr_messages(t_ns: NDArray[np.int64], frame_id: str,
-                  doubles: NDArray[np.float64]) -> list[bytes]:
-    """CDR (little-endian) payloads of ``Header`` + ``k`` float64, one per row, built in bulk."""
+                  doubles: NDArray[np.float64]) -> NDArray[np.uint8]:
+    """CDR (little-endian) payloads of ``Header`` + ``k`` float64, one row of bytes per message."""
     n, k = doubles.shape
     frame = frame_id.encode("utf-8") + b"\0"
     # Offsets are relative to the payload after the 4-byte encapsulation header (CDR alignment).
@@ -160,8 +163,7 @@ def _cdr_messages(t_ns: NDArray[np.int64], frame_id: str,
     buf[:, 16:16 + len(frame)] = np.frombuffer(frame, np.uint8)
     payload = np.ascontiguousarray(doubles, dtype="<f8").view(np.uint8)
     buf[:, 4 + body_off:] = payload.reshape(n, 8 * k)
-    raw = buf.tobytes()
-    return [raw[i:i + size] for i in range(0, n * size, size)]
+    return buf
 
 
 def _imu_doubles(rates: NDArray[np.float64], accel: NDArray[np.float64] | None,
@@ -179,6 +181,161 @@ def _imu_doubles(rates: NDArray[np.float64], accel: NDArray[np.float64] | None,
     else:
         d[:, 25:28] = accel
     return d
+
+
+def _u8le(values: NDArray, width: int) -> NDArray[np.uint8]:
+    """Little-endian bytes of unsigned integers, shape (n, width)."""
+    dt = {2: "<u2", 4: "<u4", 8: "<u8"}[width]
+    return np.ascontiguousarray(values, dtype=dt).view(np.uint8).reshape(-1, width)
+
+
+def _write_mcap(f, topics: list[tuple[str, str, NDArray[np.int64], NDArray[np.uint8]]],
+                metadata: dict[str, str], chunk_size: int = 1 << 20) -> None:
+    """Write an indexed MCAP file (profile ros2, zstd chunks) with all records built in bulk.
+
+    ``topics`` holds ``(topic, msgtype, t_ns, payloads)`` with ``payloads`` the (N, size) CDR
+    rows. Schemas and channels are written in the data section and repeated in the summary;
+    every chunk is followed by its message indexes; the summary has statistics, chunk and
+    metadata indexes and summary offsets (the layout of the mcap library's own writer).
+    """
+    import zstandard
+    from mcap.data_stream import RecordBuilder
+    from mcap.records import (
+        Channel,
+        Chunk,
+        ChunkIndex,
+        DataEnd,
+        Footer,
+        Header,
+        Metadata,
+        MetadataIndex,
+        Schema,
+        Statistics,
+        SummaryOffset,
+    )
+
+    magic = b"\x89MCAP0\r\n"
+    schemas: dict[str, Schema] = {}
+    channels: list[Channel] = []
+    for cid, (name, msgtype, _, _) in enumerate(topics, start=1):
+        if msgtype not in schemas:
+            schemas[msgtype] = Schema(id=len(schemas) + 1, name=msgtype, encoding="ros2msg",
+                                      data=MSG_DEFINITIONS[msgtype].encode())
+        channels.append(Channel(id=cid, topic=name, message_encoding="cdr",
+                                schema_id=schemas[msgtype].id,
+                                metadata={"offered_qos_profiles": _QOS_YAML}))
+
+    # All message records of the file, in (stamp, topic) order, as one byte array.
+    stamps = np.concatenate([t[2] for t in topics])
+    chan = np.concatenate([np.full(t[2].size, i) for i, t in enumerate(topics)])
+    row = np.concatenate([np.arange(t[2].size) for t in topics])
+    order = np.argsort(stamps, kind="stable")
+    stamps, chan, row = stamps[order], chan[order], row[order]
+    sizes = np.array([31 + t[3].shape[1] for t in topics], dtype=np.int64)[chan]
+    ends = np.cumsum(sizes)
+    starts = ends - sizes
+    records: list[list[bytes]] = []
+    for i, (_, _, t_ns, payload) in enumerate(topics):
+        n, size = payload.shape
+        rec = np.empty((n, 31 + size), dtype=np.uint8)
+        rec[:, 0] = 0x05  # opcode Message
+        rec[:, 1:9] = _u8le(np.full(n, 22 + size), 8)  # record length
+        rec[:, 9:11] = _u8le(np.full(n, i + 1), 2)  # channel id
+        rec[:, 11:15] = 0  # sequence
+        rec[:, 15:23] = _u8le(t_ns, 8)  # log time
+        rec[:, 23:31] = rec[:, 15:23]  # publish time
+        rec[:, 31:] = payload
+        flat = rec.tobytes()
+        step = 31 + size
+        records.append([flat[k:k + step] for k in range(0, n * step, step)])
+    body = b"".join([records[c][j] for c, j in zip(chan.tolist(), row.tolist())])
+
+    # Chunk boundaries: close a chunk once its records reach chunk_size bytes.
+    bounds = [0]
+    while bounds[-1] < stamps.size:
+        j = int(np.searchsorted(ends, starts[bounds[-1]] + chunk_size, side="left")) + 1
+        bounds.append(min(max(j, bounds[-1] + 1), stamps.size))
+
+    out = RecordBuilder()
+    Header(profile="ros2", library="imu_dcm.bag_writer").write(out)
+    for sc in schemas.values():
+        sc.write(out)
+    for ch in channels:
+        ch.write(out)
+    f.write(magic + out.end())
+    pos = f.tell()
+    compressor = zstandard.ZstdCompressor()
+    chunk_indexes: list[ChunkIndex] = []
+    for a, b in pairwise(bounds):
+        lo, hi = int(starts[a]), int(ends[b - 1])
+        raw = body[lo:hi]
+        data = compressor.compress(raw)
+        t0, t1 = int(stamps[a:b].min()), int(stamps[a:b].max())
+        Chunk(compression="zstd", data=data, message_start_time=t0, message_end_time=t1,
+              uncompressed_crc=zlib.crc32(raw), uncompressed_size=len(raw)).write(out)
+        chunk_bytes = out.end()
+        index = ChunkIndex(message_start_time=t0, message_end_time=t1, chunk_start_offset=pos,
+                           chunk_length=len(chunk_bytes), message_index_offsets={},
+                           message_index_length=0, compression="zstd",
+                           compressed_size=len(data), uncompressed_size=len(raw))
+        f.write(chunk_bytes)
+        pos += len(chunk_bytes)
+        idx_parts = []
+        sub_chan = chan[a:b]
+        for i in np.unique(sub_chan).tolist():
+            sel = np.flatnonzero(sub_chan == i)
+            pairs = np.empty((sel.size, 16), dtype=np.uint8)
+            pairs[:, :8] = _u8le(stamps[a:b][sel], 8)
+            pairs[:, 8:] = _u8le(starts[a:b][sel] - lo, 8)
+            head = struct.pack("<BQHI", 0x07, 2 + 4 + 16 * sel.size, i + 1, 16 * sel.size)
+            index.message_index_offsets[i + 1] = pos + sum(len(p) for p in idx_parts)
+            idx_parts.append(head + pairs.tobytes())
+        idx = b"".join(idx_parts)
+        index.message_index_length = len(idx)
+        f.write(idx)
+        pos += len(idx)
+        chunk_indexes.append(index)
+
+    meta_record = Metadata(name="rosbag2", metadata=metadata)
+    meta_record.write(out)
+    meta_bytes = out.end()
+    meta_index = MetadataIndex(offset=pos, length=len(meta_bytes), name="rosbag2")
+    f.write(meta_bytes)
+    pos += len(meta_bytes)
+    DataEnd(data_section_crc=0).write(out)
+    f.write(out.end())
+    summary_start = f.tell()
+
+    groups = []
+    summary = RecordBuilder()
+
+    def group(opcode: int, records: list) -> None:
+        start = summary.count
+        for r in records:
+            r.write(summary)
+        groups.append(SummaryOffset(group_opcode=opcode, group_start=summary_start + start,
+                                    group_length=summary.count - start))
+
+    group(0x03, list(schemas.values()))
+    group(0x04, channels)
+    counts = {i + 1: int(t[2].size) for i, t in enumerate(topics)}
+    group(0x0B, [Statistics(message_count=int(stamps.size), schema_count=len(schemas),
+                            channel_count=len(channels), attachment_count=0, metadata_count=1,
+                            chunk_count=len(chunk_indexes),
+                            message_start_time=int(stamps[0]), message_end_time=int(stamps[-1]),
+                            channel_message_counts=counts)])
+    group(0x08, chunk_indexes)
+    group(0x0D, [meta_index])
+    summary_offset_start = summary_start + summary.count
+    for g in groups:
+        g.write(summary)
+    summary_bytes = summary.end()
+    crc = zlib.crc32(summary_bytes)
+    crc = zlib.crc32(struct.pack("<BQQQ", 0x02, 20, summary_start, summary_offset_start), crc)
+    f.write(summary_bytes)
+    Footer(summary_start=summary_start, summary_offset_start=summary_offset_start,
+           summary_crc=crc).write(out)
+    f.write(out.end() + magic)
 
 
 def _yaml_str(s: str) -> str:
@@ -274,8 +431,6 @@ def write_bag(
         For a malformed series (shape, non-finite value, stamp out of range), no topics at all,
         a duplicated topic, or a non-string ``custom_data`` entry.
     """
-    from mcap.writer import CompressionType, Writer
-
     out = Path(out_dir)
     if (out.exists() or out.is_symlink()) and not force:
         raise LogError(f"Expected output {str(out)!r} not to exist (use force), got an existing "
@@ -323,11 +478,7 @@ def write_bag(
         if not name.startswith("/"):
             raise InputError(f"Expected topic names starting with '/', got {name!r}")
 
-    # Global write order: by stamp, ties in topic order (stable sort).
     stamps = np.concatenate([t[2].t_ns for t in topics])
-    channel_of = np.concatenate([np.full(t[2].t_ns.size, i) for i, t in enumerate(topics)])
-    index_in = np.concatenate([np.arange(t[2].t_ns.size) for t in topics])
-    order = np.argsort(stamps, kind="stable")
     start_ns, end_ns = int(stamps.min()), int(stamps.max())
 
     tmp = out.parent / f".{out.name}.tmp-{os.getpid()}-{uuid.uuid4().hex[:8]}"
@@ -336,26 +487,10 @@ def write_bag(
     try:
         counts = [(t[0], t[1], int(t[2].t_ns.size)) for t in topics]
         meta_body = _metadata_yaml(mcap_name, counts, start_ns, end_ns, int(stamps.size), custom)
-        payloads = [_cdr_messages(s.t_ns, s.frame_id, d) for _, _, s, d in topics]
+        encoded = [(name, msgtype, s.t_ns, _cdr_messages(s.t_ns, s.frame_id, d))
+                   for name, msgtype, s, d in topics]
         with open(tmp / mcap_name, "wb") as f:
-            w = Writer(f, compression=CompressionType.ZSTD)
-            w.start(profile="ros2", library="imu_dcm.bag_writer")
-            schema_ids: dict[str, int] = {}
-            channel_ids = []
-            for name, msgtype, _, _ in topics:
-                if msgtype not in schema_ids:
-                    schema_ids[msgtype] = w.register_schema(
-                        name=msgtype, encoding="ros2msg",
-                        data=MSG_DEFINITIONS[msgtype].encode())
-                channel_ids.append(w.register_channel(
-                    topic=name, message_encoding="cdr", schema_id=schema_ids[msgtype],
-                    metadata={"offered_qos_profiles": _QOS_YAML}))
-            add = w.add_message
-            for c, i, t in zip(channel_of[order].tolist(), index_in[order].tolist(),
-                               stamps[order].tolist()):
-                add(channel_ids[c], log_time=t, data=payloads[c][i], publish_time=t)
-            w.add_metadata("rosbag2", {"serialized_metadata": meta_body})
-            w.finish()
+            _write_mcap(f, encoded, {"serialized_metadata": meta_body})
         indented = "".join("  " + ln + "\n" for ln in meta_body.splitlines())
         (tmp / "metadata.yaml").write_text("rosbag2_bagfile_information:\n" + indented)
         if out.exists() or out.is_symlink():  # force: swap in, then remove the old one
