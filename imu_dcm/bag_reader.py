@@ -662,22 +662,35 @@ def resolve_mcap_path(path: str | Path) -> Path:
     return p
 
 
+def _load_yaml(text: str):
+    """Parse YAML with PyYAML (C loader when built) or, failing that, ruamel.yaml (a rosbags
+    dependency). Returns None when neither is installed or the text is not YAML."""
+    try:
+        import yaml
+    except ImportError:
+        try:
+            from ruamel.yaml import YAML, YAMLError
+        except ImportError:
+            return None
+        try:
+            return YAML(typ="safe", pure=True).load(text)
+        except YAMLError:
+            return None
+    try:
+        return yaml.load(text, Loader=getattr(yaml, "CSafeLoader", yaml.SafeLoader))  # safe
+    except yaml.YAMLError:
+        return None
+
+
 def read_custom_data(path: str | Path) -> dict[str, str]:
     """``custom_data`` of a rosbag2 folder's ``metadata.yaml`` (empty dict when absent)."""
     p = Path(path)
     meta = (p if p.is_dir() else p.parent) / "metadata.yaml"
-    if not meta.is_file():
-        return {}
     try:
-        import yaml
-    except ImportError:  # custom data is optional; PyYAML is not a hard dependency
-        return {}
-    try:
-        loader = getattr(yaml, "CSafeLoader", yaml.SafeLoader)  # the C loader is ~10x faster
-        doc = yaml.load(meta.read_text(), Loader=loader)  # a safe loader
-    except (OSError, yaml.YAMLError):
-        return {}
-    info = (doc or {}).get("rosbag2_bagfile_information", {}) or {}
+        doc = _load_yaml(meta.read_text()) if meta.is_file() else None
+    except OSError:
+        doc = None
+    info = (doc if isinstance(doc, dict) else {}).get("rosbag2_bagfile_information", {}) or {}
     return {str(k): str(v) for k, v in (info.get("custom_data") or {}).items()}
 
 
