@@ -126,6 +126,18 @@ def test_box_attitude_matches_elliptic_integral_solution(case):
     assert _deg(q, q_el).max() < 1e-6
 
 
+@pytest.mark.parametrize("omega0_b", [(-0.3, 0.5, -1.0), (-1.0, -1.0, 1.5)])
+def test_box_elliptic_solution_from_a_general_state(omega0_b):
+    # Any signs of the rates and any initial attitude (the phase τ0 and the frame of L).
+    inertia = np.array([0.27, 0.42, 0.52])
+    q0 = Rotation.from_euler("xyz", [0.3, 1.0, -2.0]).as_quat()
+    traj = data_synth.solve_rigid_body(inertia, q0, omega0_b, 15.0)
+    t = np.linspace(0.0, 15.0, 1501)
+    q, w = traj.at(t)
+    assert np.abs(box_omega_elliptic(t, inertia, omega0_b) - w).max() < 1e-8
+    assert _deg(box_attitude_elliptic(t, inertia, omega0_b, q0), q).max() < 1e-6
+
+
 def test_intermediate_axis_flips():
     traj = data_synth.free_body(30.0, "intermediate")
     _, w = traj.at(np.linspace(0.0, 30.0, 3001))
