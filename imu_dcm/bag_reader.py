@@ -266,7 +266,8 @@ class _Corrupt(Exception):
         self.why = why
 
 
-def _read_chunk(buf, pos: int, end: int, scan: _Scan) -> None:
+def _read_chunk(buf, pos: int, end: int, scan: _Scan) -> tuple[int, bytes, list]:
+    """Decompress and check one chunk; returns (segment index, data, empty index list)."""
     _, _, size, crc = struct.unpack_from("<QQQI", buf, pos)
     compression, p = _read_str(buf, pos + 28)
     (n,) = struct.unpack_from("<Q", buf, p)
