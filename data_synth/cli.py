@@ -196,11 +196,8 @@ def make_log(args: argparse.Namespace, argv: list[str]) -> Path:
                               "reference (it exists only on its own time grid), got "
                               f"--gyro-output {args.gyro_output}, --stamp-jitter "
                               f"{args.stamp_jitter}")
-        run = reference_top(args.duration, args.rate, args.motion, branch=args.branch,
-                            params=_top_params(args))
-        traj = SampledTrajectory(run, args.rate, "heavy-top",
-                                 {**simulate("heavy-top", 1e-3, **params).params,
-                                  "scheme": "reference"})
+        run = reference_top(args.duration, args.rate, **params)
+        traj = SampledTrajectory(run, args.rate)
     else:
         traj = simulate(args.scene, args.duration, **params)
     rec = synthetic_gyro(traj, args.rate, args.duration, model, output=args.gyro_output,
@@ -239,19 +236,6 @@ def make_log(args: argparse.Namespace, argv: list[str]) -> Path:
         custom_data=custom,
         force=args.force,
     )
-
-
-def _top_params(args: argparse.Namespace):
-    from dataclasses import replace
-
-    from data_synth.scenes import HeavyTopParams
-
-    p = HeavyTopParams()
-    if args.tilt_deg is not None:
-        p = replace(p, tilt_deg=args.tilt_deg)
-    if args.spin_hz is not None:
-        p = replace(p, spin_hz=args.spin_hz)
-    return p
 
 
 def main(argv: list[str] | None = None) -> int:

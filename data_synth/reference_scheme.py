@@ -36,7 +36,12 @@ from scipy.integrate import solve_ivp
 from scipy.spatial.transform import Rotation
 
 from data_synth.rigid_body import Trajectory
-from data_synth.scenes import HeavyTopParams, heavy_top, heavy_top_initial_rates
+from data_synth.scenes import (
+    HeavyTopParams,
+    heavy_top,
+    heavy_top_initial_rates,
+    heavy_top_initial_state,
+)
 from imu_dcm.errors import InputError
 from imu_dcm.so3 import exp_matrix, quat_angle_rad
 
@@ -62,15 +67,19 @@ class ReferenceRun:
         Tracked DCM (``TrackMat``), body to world.
     omega_b : ndarray, shape (N+1, 3)
         RK4 body rates, rad/s.
+    params : dict
+        The top's parameters and initial state (as ``heavy_top(...).params``) and the scheme.
     """
 
     t_s: NDArray[np.float64]
     R_w_b: NDArray[np.float64]
     omega_b: NDArray[np.float64]
+    params: dict
 
 
 def reference_top(duration_s: float, rate_hz: float, motion: str = "cusp", *,
-                  branch: str = "slow", params: HeavyTopParams | None = None) -> ReferenceRun:
+                  branch: str = "slow", params: HeavyTopParams | None = None,
+                  tilt_deg: float | None = None, spin_hz: float | None = None) -> ReferenceRun:
     """Run the reference document's coupled RK4 + DCM scheme for the heavy top.
 
     Parameters
@@ -79,17 +88,15 @@ def reference_top(duration_s: float, rate_hz: float, motion: str = "cusp", *,
         Length, s (``N = round(duration_s · rate_hz)`` steps).
     rate_hz : float
         ``samplerate``, Hz; ``h = 1 / rate_hz``.
-    motion, branch, params
+    motion, branch, params, tilt_deg, spin_hz
         As :func:`data_synth.scenes.heavy_top` (same initial state).
 
     Returns
     -------
     ReferenceRun
     """
-    p = params or HeavyTopParams()
-    if motion == "sleeping":
-        p = HeavyTopParams(**{**p.__dict__, "tilt_deg": 0.0})
-    p.validate()
+    p, q0, omega0, record = heavy_top_initial_state(motion, branch=branch, params=params,
+                                                    tilt_deg=tilt_deg, spin_hz=spin_hz)
     if not (math.isfinite(rate_hz) and rate_hz > 0):
         raise InputError(f"Expected `rate_hz` > 0, got {rate_hz!r}")
     if not (math.isfinite(duration_s) and duration_s > 0):
@@ -98,7 +105,6 @@ def reference_top(duration_s: float, rate_hz: float, motion: str = "cusp", *,
     if n < 1:
         raise InputError(f"Expected at least one step, got {duration_s} s at {rate_hz} Hz")
     h = 1.0 / rate_hz
-    precession0, tilt = heavy_top_initial_rates(p, motion, branch)
     i1 = i2 = p.i1_kg_m2
     i3 = p.i3_kg_m2
     k1, k2, k3 = (i2 - i3) / i1, (i3 - i1) / i2, (i1 - i2) / i3
@@ -110,9 +116,8 @@ def reference_top(duration_s: float, rate_hz: float, motion: str = "cusp", *,
 
     R = np.empty((n + 1, 3, 3))
     W = np.empty((n + 1, 3))
-    c, s = math.cos(tilt), math.sin(tilt)
-    R[0] = [[1.0, 0.0, 0.0], [0.0, c, -s], [0.0, s, c]]  # Rx(tilt)
-    W[0] = [0.0, precession0 * s, p.omega3_rad_s]
+    R[0] = Rotation.from_quat(q0).as_matrix()  # Rx(tilt), the document's CK(Ω0)
+    W[0] = omega0
     w1, w2, w3 = W[0]
     track = R[0].copy()
     for i in range(1, n + 1):
@@ -129,7 +134,8 @@ def reference_top(duration_s: float, rate_hz: float, motion: str = "cusp", *,
         track = track @ exp_matrix((w1 * h, w2 * h, w3 * h))  # CK(ω(t_{i+1}) h), eq. 19
         R[i] = track
         W[i] = (w1, w2, w3)
-    return ReferenceRun(np.arange(n + 1) * h, R, W)
+    return ReferenceRun(np.arange(n + 1) * h, R, W, {**record, "scheme": "reference",
+                                                      "scheme_rate_hz": float(rate_hz)})
 
 
 def euler_angle_top(t_s: ArrayLike, motion: str = "cusp", *, branch: str = "slow",
@@ -244,13 +250,14 @@ class SampledTrajectory(Trajectory):
     scheme has no dense solution).
     """
 
-    def __init__(self, run: ReferenceRun, rate_hz: float, scene: str, params: dict) -> None:
+    def __init__(self, run: ReferenceRun, rate_hz: float, scene: str = "heavy-top",
+                 params: dict | None = None) -> None:
         self._run = run
         self._q = Rotation.from_matrix(run.R_w_b).as_quat()
         self.rate_hz = float(rate_hz)
         self.duration_s = float(run.t_s[-1])
         self.scene = scene
-        self.params = params
+        self.params = dict(run.params if params is None else params)
 
     def at(self, t_s: ArrayLike) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
         t = self._check_times(t_s)

@@ -51,6 +51,7 @@ __all__ = [
     "free_body",
     "heavy_top",
     "heavy_top_initial_rates",
+    "heavy_top_initial_state",
     "heavy_top_torque",
     "simulate",
 ]
@@ -154,6 +155,42 @@ def heavy_top_torque(p: HeavyTopParams) -> TorqueFn:
     return torque
 
 
+def heavy_top_initial_state(
+    motion: str = "cusp",
+    *,
+    branch: str = "slow",
+    params: HeavyTopParams | None = None,
+    tilt_deg: float | None = None,
+    spin_hz: float | None = None,
+) -> tuple[HeavyTopParams, np.ndarray, np.ndarray, dict[str, Any]]:
+    """Parameters, initial ``q_w_b`` (4,), initial ``omega_b`` (3,, rad/s) and the metadata
+    record of a heavy-top motion (arguments as :func:`heavy_top`)."""
+    p = params or HeavyTopParams()
+    if motion == "sleeping":
+        if tilt_deg not in (None, 0.0):
+            raise InputError(f"Expected no tilt for a sleeping top, got tilt_deg = {tilt_deg!r}")
+        tilt_deg = 0.0
+    if tilt_deg is not None:
+        p = HeavyTopParams(**{**asdict(p), "tilt_deg": float(tilt_deg)})
+    if spin_hz is not None:
+        p = HeavyTopParams(**{**asdict(p), "spin_hz": float(spin_hz)})
+    p.validate()
+    precession0, tilt = heavy_top_initial_rates(p, motion, branch)
+    q0 = np.array([math.sin(0.5 * tilt), 0.0, 0.0, math.cos(0.5 * tilt)])
+    omega0 = np.array([0.0, precession0 * math.sin(tilt), p.omega3_rad_s])
+    record: dict[str, Any] = {
+        **asdict(p),
+        "tilt_deg": math.degrees(tilt),
+        "motion": motion,
+        "precession0_rad_s": precession0,
+        "q0_w_b": q0.tolist(),
+        "omega0_b_rad_s": omega0.tolist(),
+    }
+    if motion == "steady":
+        record["branch"] = branch
+    return p, q0, omega0, record
+
+
 def heavy_top(
     duration_s: float,
     motion: str = "cusp",
@@ -187,29 +224,8 @@ def heavy_top(
         ``scene = "heavy-top"``; ``params`` holds every physical parameter, the motion and the
         initial state.
     """
-    p = params or HeavyTopParams()
-    if motion == "sleeping":
-        if tilt_deg not in (None, 0.0):
-            raise InputError(f"Expected no tilt for a sleeping top, got tilt_deg = {tilt_deg!r}")
-        tilt_deg = 0.0
-    if tilt_deg is not None:
-        p = HeavyTopParams(**{**asdict(p), "tilt_deg": float(tilt_deg)})
-    if spin_hz is not None:
-        p = HeavyTopParams(**{**asdict(p), "spin_hz": float(spin_hz)})
-    p.validate()
-    precession0, tilt = heavy_top_initial_rates(p, motion, branch)
-    q0 = np.array([math.sin(0.5 * tilt), 0.0, 0.0, math.cos(0.5 * tilt)])
-    omega0 = np.array([0.0, precession0 * math.sin(tilt), p.omega3_rad_s])
-    record: dict[str, Any] = {
-        **asdict(p),
-        "tilt_deg": math.degrees(tilt),
-        "motion": motion,
-        "precession0_rad_s": precession0,
-        "q0_w_b": q0.tolist(),
-        "omega0_b_rad_s": omega0.tolist(),
-    }
-    if motion == "steady":
-        record["branch"] = branch
+    p, q0, omega0, record = heavy_top_initial_state(motion, branch=branch, params=params,
+                                                    tilt_deg=tilt_deg, spin_hz=spin_hz)
     inertia = (p.i1_kg_m2, p.i1_kg_m2, p.i3_kg_m2)
     return solve_rigid_body(inertia, q0, omega0, duration_s, torque=heavy_top_torque(p),
                             scene="heavy-top", params=record, rtol=rtol, atol=atol)
