@@ -111,7 +111,7 @@ def _add_common(p: argparse.ArgumentParser, scheme: bool) -> None:
     m.add_argument("--gyro-noise-density", type=_non_negative, metavar="RAD_S_SQRT_HZ",
                    help="white rate noise density, rad/s/sqrt(Hz)")
     m.add_argument("--gyro-bias", type=_vector3, metavar="X,Y,Z",
-                   help="constant bias, rad/s")
+                   help="constant bias, rad/s (write --gyro-bias=-x,y,z when x < 0)")
     m.add_argument("--gyro-bias-walk", type=_non_negative, metavar="RAD_S2_SQRT_HZ",
                    help="bias random walk density, rad/s^2/sqrt(Hz)")
     m.add_argument("--gyro-quantization", type=_positive, metavar="RAD_S",
@@ -145,7 +145,7 @@ def build_parser() -> argparse.ArgumentParser:
                     help="omega_b(0) = (1,1,1)/sqrt(3) rad/s (diagonal) or (0.05, 3, 0.05) "
                          "(intermediate: flips)")
     fb.add_argument("--omega", type=_vector3, metavar="X,Y,Z",
-                    help="initial body rate, rad/s (overrides --case)")
+                    help="initial body rate, rad/s (overrides --case; --omega=-x,y,z when x < 0)")
     _add_common(fb, scheme=False)
     co = sub.add_parser("coning", help="pure coning, closed form")
     co.add_argument("--half-angle-deg", type=_non_negative, default=10.0, metavar="DEG",
