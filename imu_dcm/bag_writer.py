@@ -124,8 +124,8 @@ class StampedSeries:
         v = np.asarray(self.values, dtype=np.float64)
         if v.ndim != 2 or v.shape[0] != t.shape[0]:
             raise InputError(f"Expected `values` of shape (N={t.shape[0]}, k), got {v.shape}")
-        if not isinstance(self.frame_id, str):
-            raise InputError(f"Expected `frame_id` a str, got {type(self.frame_id).__name__}")
+        if not isinstance(self.frame_id, str) or "\0" in self.frame_id:
+            raise InputError(f"Expected `frame_id` a str without NUL, got {self.frame_id!r}")
         object.__setattr__(self, "t_ns", t.astype(np.int64, copy=False))
         object.__setattr__(self, "values", v)
 

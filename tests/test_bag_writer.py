@@ -8,6 +8,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
 from mcap.reader import make_reader
 from mcap_ros2.decoder import DecoderFactory
 from rosbags.highlevel import AnyReader
@@ -271,6 +273,38 @@ def test_bad_input_raises_input_error(tmp_path, kwargs, match):
     assert not (tmp_path / "x").exists()
 
 
-def test_series_rejects_float_stamps():
+def test_series_rejects_float_stamps_and_nul_frames():
     with pytest.raises(InputError, match="int64"):
         StampedSeries(np.array([0.5, 1.5]), np.zeros((2, 3)), "imu")
+    with pytest.raises(InputError, match="frame_id"):
+        StampedSeries(np.array([1]), np.zeros((1, 3)), "im\0u")
+
+
+@settings(max_examples=25, deadline=None,
+          suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(frame=st.text(st.characters(blacklist_characters="\0"), min_size=0, max_size=12),
+       rows=st.lists(st.tuples(*[st.floats(allow_nan=False, allow_infinity=False)] * 4),
+                     min_size=1, max_size=6),
+       t0=st.integers(min_value=0, max_value=2**31 * 10**9 - 10**6))
+def test_any_frame_id_and_values_round_trip(tmp_path_factory, frame, rows, t0):
+    """Frame ids of every length shift the CDR alignment padding; any finite float (±0,
+    subnormals, ±1e308) and any stamp in range must come back bit-identical."""
+    vals = np.array(rows, dtype=float)
+    t_ns = t0 + np.arange(len(rows), dtype=np.int64)
+    out = write_bag(tmp_path_factory.mktemp("h") / "bag",
+                    imu=StampedSeries(t_ns, vals[:, :3], frame),
+                    quaternions={"/q": StampedSeries(t_ns, vals, frame)})
+    seen = {"/imu/data": [], "/q": []}
+    with open(out / "bag.mcap", "rb") as f:
+        for _, ch, _, m in make_reader(f, decoder_factories=[DecoderFactory()]) \
+                .iter_decoded_messages():
+            assert m.header.frame_id == frame
+            assert m.header.stamp.sec * 10**9 + m.header.stamp.nanosec in t_ns
+            if ch.topic == "/imu/data":
+                seen["/imu/data"].append([m.angular_velocity.x, m.angular_velocity.y,
+                                          m.angular_velocity.z])
+            else:
+                seen["/q"].append([m.quaternion.x, m.quaternion.y, m.quaternion.z,
+                                   m.quaternion.w])
+    assert np.array_equal(np.array(seen["/imu/data"]).view(np.int64), vals[:, :3].view(np.int64))
+    assert np.array_equal(np.array(seen["/q"]).view(np.int64), vals.view(np.int64))
