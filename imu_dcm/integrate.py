@@ -132,12 +132,12 @@ def check_samples(values: ArrayLike, t_s: ArrayLike, name: str = "omega_b",
         raise InputError(f"Expected finite `{name}`, got {v[i].tolist()} at row {i}")
     if not np.isfinite(t).all():
         i = _first_bad_row(np.isfinite(t))
-        raise InputError(f"Expected finite `t_s`, got t_s[{i}] = {t[i]}")
+        raise InputError(f"Expected finite `t_s`, got t_s[{i}] = {float(t[i])}")
     dt = np.diff(t)
     if not (dt > 0.0).all():
         i = int(np.flatnonzero(~(dt > 0.0))[0]) + 1
-        raise InputError(f"Expected `t_s` strictly increasing, got t_s[{i}] = {t[i]!r} s "
-                         f"after t_s[{i - 1}] = {t[i - 1]!r} s")
+        raise InputError(f"Expected `t_s` strictly increasing, got t_s[{i}] = {float(t[i])!r} s "
+                         f"after t_s[{i - 1}] = {float(t[i - 1])!r} s")
     _warn_gaps(t, dt)
     return np.ascontiguousarray(v), t, dt
 
@@ -220,7 +220,9 @@ def phi_parts(method: str, w_m: tuple, w_0: tuple, w_1: tuple, w_2: tuple,
         h6 = h_0 * (1.0 / 6.0)
         c_0 = h6 + p / (h_m * s_0p)
         c_1 = h6 + p / (h_p * s_m0)
-        phi = tuple(c_m * w_m[j] + c_0 * w_0[j] + c_1 * w_1[j] + c_2 * w_2[j] for j in range(3))
+        phi = (c_m * w_m[0] + c_0 * w_0[0] + c_1 * w_1[0] + c_2 * w_2[0],
+               c_m * w_m[1] + c_0 * w_0[1] + c_1 * w_1[1] + c_2 * w_2[1],
+               c_m * w_m[2] + c_0 * w_0[2] + c_1 * w_1[2] + c_2 * w_2[2])
         return _add_coning(phi, w_0, w_1, h_0)
     raise InputError(f"Expected method in {METHODS[:-1]}, got {method!r}")
 

@@ -34,7 +34,7 @@ __all__ = ["BLOCK", "blocked_prefix_product", "prefix_product", "quat_mul_parts"
 BLOCK = 8
 # Target number of samples per cache chunk of blocks (arrays of ~256 kB).
 _CHUNK_SAMPLES = 1 << 15
-# Below this many steps the product is a plain loop over Python floats.
+# At most this many steps: a plain loop over Python complex numbers (~0.2 µs per step).
 _SMALL = 64
 
 Parts = tuple  # 4 component arrays (or floats) x, y, z, w
@@ -64,15 +64,93 @@ def quat_mul_parts(a: Parts, b: Parts) -> Parts:
             aw * bw - ax * bx - ay * by - az * bz)
 
 
-def _sequential(q0: NDArray, dq: NDArray) -> NDArray:
-    """Plain loop over Python floats; ``dq`` (M, 4) -> (M + 1, 4)."""
-    out = np.empty((len(dq) + 1, 4))
-    q = tuple(float(v) for v in q0)
-    out[0] = q
-    for i, d in enumerate(dq.tolist(), start=1):
-        q = quat_mul_parts(q, d)
-        out[i] = q
-    return out
+# Internally a quaternion is a pair of complex numbers (Cayley-Dickson form with k as the
+# imaginary unit): q = (w + z k) + (x + y k) i  ->  a = w + 1j z, b = x + 1j y, and
+#     (a1, b1) ⊗ (a2, b2) = (a1 a2 - b1 conj(b2),  a1 b2 + b1 conj(a2)),
+# six complex operations instead of 28 real ones (fewer numpy calls, less memory traffic).
+
+def _to_pair(x, y, z, w) -> tuple[NDArray, NDArray]:
+    a = np.empty(np.shape(w), dtype=complex)
+    b = np.empty(np.shape(x), dtype=complex)
+    a.real, a.imag = w, z
+    b.real, b.imag = x, y
+    return a, b
+
+
+def _mul_into(a1, b1, a2, b2, ca2, cb2, out_a, out_b, tmp) -> None:
+    """``(out_a, out_b) = (a1, b1) ⊗ (a2, b2)``; ``ca2, cb2`` are ``conj(a2), conj(b2)``."""
+    np.multiply(a1, a2, out=out_a)
+    np.multiply(b1, cb2, out=tmp)
+    np.subtract(out_a, tmp, out=out_a)
+    np.multiply(a1, b2, out=out_b)
+    np.multiply(b1, ca2, out=tmp)
+    np.add(out_b, tmp, out=out_b)
+
+
+def _sequential_pair(a0: complex, b0: complex, da: NDArray, db: NDArray):
+    """Plain loop over Python complex numbers (short inputs); returns (M + 1,) arrays."""
+    n = len(da)
+    out_a = np.empty(n + 1, dtype=complex)
+    out_b = np.empty(n + 1, dtype=complex)
+    a, b = complex(a0), complex(b0)
+    out_a[0], out_b[0] = a, b
+    for i, (x, y) in enumerate(zip(da.tolist(), db.tolist()), start=1):
+        a, b = a * x - b * y.conjugate(), a * y + b * x.conjugate()
+        out_a[i], out_b[i] = a, b
+    return out_a, out_b
+
+
+def _local_scan(da: NDArray, db: NDArray, ra: NDArray, rb: NDArray) -> None:
+    """In-block inclusive prefix: ``r[k] = d[0] ⊗ ... ⊗ d[k]`` along rows of (K, nb) arrays."""
+    K, nb = da.shape
+    cda = np.conjugate(da)
+    cdb = np.conjugate(db)
+    tmp = np.empty(nb, dtype=complex)
+    ra[0] = da[0]
+    rb[0] = db[0]
+    for k in range(1, K):
+        _mul_into(ra[k - 1], rb[k - 1], da[k], db[k], cda[k], cdb[k], ra[k], rb[k], tmp)
+
+
+def _prefix_pair(a0: complex, b0: complex, da: NDArray, db: NDArray, K: int):
+    """Prefix product in pair form, natural order: (M,) increments -> (M + 1,) attitudes."""
+    M = len(da)
+    if M <= _SMALL:
+        return _sequential_pair(a0, b0, da, db)
+    nb = -(-M // K)
+    pa = np.ones(nb * K, dtype=complex)
+    pb = np.zeros(nb * K, dtype=complex)
+    pa[:M] = da
+    pb[:M] = db
+    bda = np.ascontiguousarray(pa.reshape(nb, K).T)
+    bdb = np.ascontiguousarray(pb.reshape(nb, K).T)
+    ra = np.empty((K, nb), dtype=complex)
+    rb = np.empty((K, nb), dtype=complex)
+    _local_scan(bda, bdb, ra, rb)
+    ea, eb = _prefix_pair(a0, b0, ra[K - 1], rb[K - 1], K)  # (nb + 1,): start of each block
+    oa = np.empty((K, nb), dtype=complex)
+    ob = np.empty((K, nb), dtype=complex)
+    _mul_into(ea[:nb], eb[:nb], ra, rb, np.conjugate(ra), np.conjugate(rb), oa, ob,
+              np.empty((K, nb), dtype=complex))
+    out_a = np.empty(M + 1, dtype=complex)
+    out_b = np.empty(M + 1, dtype=complex)
+    out_a[0], out_b[0] = a0, b0
+    out_a[1:] = oa.T.reshape(-1)[:M]
+    out_b[1:] = ob.T.reshape(-1)[:M]
+    return out_a, out_b
+
+
+def _write_xyzw(dst: NDArray, a: NDArray, b: NDArray, normalize: bool) -> None:
+    """Write pairs into ``[x, y, z, w]`` rows: dst[..., :] from ``a = w + 1j z, b = x + 1j y``."""
+    if normalize:
+        inv = 1.0 / np.sqrt(a.real * a.real + a.imag * a.imag + b.real * b.real
+                            + b.imag * b.imag)
+        a = a * inv
+        b = b * inv
+    dst[..., 0] = b.real
+    dst[..., 1] = b.imag
+    dst[..., 2] = a.imag
+    dst[..., 3] = a.real
 
 
 def blocked_prefix_product(q0: ArrayLike, n_steps: int, fill: FillFn, block: int = BLOCK,
@@ -104,43 +182,35 @@ def blocked_prefix_product(q0: ArrayLike, n_steps: int, fill: FillFn, block: int
         raise InputError(f"Expected block >= 2, got {block}")
     M = int(n_steps)
     q0 = np.asarray(q0, dtype=float)
+    a0 = complex(q0[3], q0[2])
+    b0 = complex(q0[0], q0[1])
     nb = -(-M // K)
     cb = max(1, _CHUNK_SAMPLES // K)  # blocks per cache chunk
-    R = np.empty((4, K, nb))
+    ra = np.empty((K, nb), dtype=complex)
+    rb = np.empty((K, nb), dtype=complex)
     # Pass 1: increments and local (in-block) inclusive prefix, chunk by chunk.
-    for b0 in range(0, nb, cb):
-        b1 = min(nb, b0 + cb)
-        d = fill(b0, b1)
-        if b1 == nb and nb * K > M:  # identity padding after the last real step
+    for b0_ in range(0, nb, cb):
+        b1_ = min(nb, b0_ + cb)
+        da, db = _to_pair(*fill(b0_, b1_))
+        if b1_ == nb and nb * K > M:  # identity padding after the last real step
             pad = M - (nb - 1) * K
-            d = [np.array(c, dtype=float, copy=True) for c in d]
-            for c in range(3):
-                d[c][pad:, -1] = 0.0
-            d[3][pad:, -1] = 1.0
-        Rc = R[:, :, b0:b1]
-        for c in range(4):
-            Rc[c, 0] = d[c][0]
-        for k in range(1, K):
-            x, y, z, w = quat_mul_parts((Rc[0, k - 1], Rc[1, k - 1], Rc[2, k - 1], Rc[3, k - 1]),
-                                        (d[0][k], d[1][k], d[2][k], d[3][k]))
-            Rc[0, k], Rc[1, k], Rc[2, k], Rc[3, k] = x, y, z, w
+            da[pad:, -1] = 1.0
+            db[pad:, -1] = 0.0
+        _local_scan(da, db, ra[:, b0_:b1_], rb[:, b0_:b1_])
     # Recursion: attitude at the start of every block.
-    totals = R[:, K - 1, :]  # (4, nb), block b's total product
-    E = prefix_product(q0, totals.T, block=K, normalize=False)  # (nb + 1, 4)
+    ea, eb = _prefix_pair(a0, b0, ra[K - 1], rb[K - 1], K)
     # Pass 2: apply each block's start attitude, normalise, write [x, y, z, w] rows.
     out = np.empty((nb * K + 1, 4))
     out[0] = q0
     body = out[1:].reshape(nb, K, 4)
-    for b0 in range(0, nb, cb):
-        b1 = min(nb, b0 + cb)
-        e = tuple(np.ascontiguousarray(E[b0:b1, c]) for c in range(4))  # contiguous: faster broadcast
-        r = R[:, :, b0:b1]
-        x, y, z, w = quat_mul_parts(e, (r[0], r[1], r[2], r[3]))
-        if normalize:
-            inv = 1.0 / np.sqrt(x * x + y * y + z * z + w * w)
-            x, y, z, w = x * inv, y * inv, z * inv, w * inv
-        dst = body[b0:b1]
-        dst[:, :, 0], dst[:, :, 1], dst[:, :, 2], dst[:, :, 3] = x.T, y.T, z.T, w.T
+    for b0_ in range(0, nb, cb):
+        b1_ = min(nb, b0_ + cb)
+        sa, sb = ra[:, b0_:b1_], rb[:, b0_:b1_]
+        oa = np.empty(sa.shape, dtype=complex)
+        ob = np.empty(sa.shape, dtype=complex)
+        _mul_into(ea[b0_:b1_], eb[b0_:b1_], sa, sb, np.conjugate(sa), np.conjugate(sb), oa, ob,
+                  np.empty(sa.shape, dtype=complex))
+        _write_xyzw(body[b0_:b1_].transpose(1, 0, 2), oa, ob, normalize)
     if normalize:
         out[0] = q0 / np.linalg.norm(q0)
     return out[:M + 1]
@@ -170,21 +240,8 @@ def prefix_product(q0: ArrayLike, dq: ArrayLike, block: int = BLOCK,
     dq = np.asarray(dq, dtype=float)
     if dq.ndim != 2 or dq.shape[1] != 4:
         raise InputError(f"Expected `dq` of shape (M, 4), got {dq.shape}")
-    M = len(dq)
-    if M <= max(_SMALL, block):
-        out = _sequential(q0, dq)
-        if normalize:
-            out /= np.linalg.norm(out, axis=1, keepdims=True)
-        return out
-    K = int(block)
-    nb = -(-M // K)
-    padded = np.empty((nb * K, 4))
-    padded[:M] = dq
-    padded[M:] = (0.0, 0.0, 0.0, 1.0)
-    blocks = padded.reshape(nb, K, 4)
-
-    def fill(b0: int, b1: int) -> Parts:
-        v = blocks[b0:b1]
-        return tuple(np.ascontiguousarray(v[:, :, c].T) for c in range(4))
-
-    return blocked_prefix_product(q0, M, fill, block=K, normalize=normalize)
+    da, db = _to_pair(dq[:, 0], dq[:, 1], dq[:, 2], dq[:, 3])
+    a, b = _prefix_pair(complex(q0[3], q0[2]), complex(q0[0], q0[1]), da, db, int(block))
+    out = np.empty((len(dq) + 1, 4))
+    _write_xyzw(out, a, b, normalize)
+    return out
