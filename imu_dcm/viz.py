@@ -19,17 +19,19 @@ entity                                content
 ``world/estimate/z_trail``            ``TRAIL_S`` seconds, one row per frame at ``TRAIL_FPS``
                                       frames per second of log time (not per sample)
 ``world/truth/z_trace``               static LineStrips3D, the whole z-tip trace, thin and faint
-``world/estimate/z_trace``            (at most ``TRACE_MAX_POINTS`` points, evenly decimated)
+``world/estimate/z_trace``            (at most ``TRACE_MAX_POINTS`` points, evenly decimated;
+                                      only for logs up to ``TRACE_MAX_S`` = 30 s)
 ``errors_deg``                        Scalars (3 per row): total, inclination, heading error, deg
 ``gyro/{x,y,z}/omega_b``              Scalars: each channel of the rate integrated, rad/s
-``gyro/{x,y,z}/omega_raw_b``          Scalars: the raw gyro (only when a pre-filter ran), rad/s
+``gyro/{x,y,z}/measured_omega_raw_b`` Scalars: the raw gyro (only when a pre-filter ran), rad/s
+                                      (named to sort, and so be drawn, before ``omega_b``)
 ====================================  ===========================================================
 
 The tip trace: a strip per sample holding the whole history would make the data quadratic in
-the log length. The view instead sends a static, decimated full trace (context) and a trailing
-window of the last 2 s (``TRAIL_S``) resampled to at most ``TRAIL_POINTS`` points, one strip per
-frame at 30 frames per second of log time: linear in the log duration (about 30 · 120 points per
-second of log per trace).
+the log length. The view instead sends a trailing window of the last 2 s (``TRAIL_S``) resampled
+to ``TRAIL_POINTS`` points, one strip per frame at 30 frames per second of log time: linear in the
+log duration (30 · 120 points per second of log per trace), and, for short logs, a static
+decimated full trace as context (on long logs it would be a tangle).
 
 The layout (blueprint) is declared in :func:`make_blueprint`: the 3D view on the left, the error
 and gyro time series stacked on the right.
@@ -91,9 +93,9 @@ ENTITY = {
     "gyro_x": "/gyro/x/omega_b",
     "gyro_y": "/gyro/y/omega_b",
     "gyro_z": "/gyro/z/omega_b",
-    "gyro_raw_x": "/gyro/x/omega_raw_b",
-    "gyro_raw_y": "/gyro/y/omega_raw_b",
-    "gyro_raw_z": "/gyro/z/omega_raw_b",
+    "gyro_raw_x": "/gyro/x/measured_omega_raw_b",
+    "gyro_raw_y": "/gyro/y/measured_omega_raw_b",
+    "gyro_raw_z": "/gyro/z/measured_omega_raw_b",
 }
 """Entity paths of the view (see the module docstring)."""
 
@@ -105,6 +107,8 @@ TRAIL_POINTS = 120
 """Points per trailing-window strip (the window is resampled to this many samples)."""
 TRACE_MAX_POINTS = 20_000
 """Upper bound on the points of the static full z-tip trace."""
+TRACE_MAX_S = 30.0
+"""Logs longer than this (s) get no static full trace: it would be an unreadable tangle."""
 
 # Truth: saturated RGB; estimate: the same hues, light. Error series: total dark, parts muted.
 _TRUTH_RGB = np.array([[220, 40, 40], [30, 170, 50], [40, 90, 235]], dtype=np.uint8)
@@ -288,16 +292,25 @@ def make_blueprint(view: ViewData):
 
     raw_note = " (grey: raw)" if view.omega_raw_b is not None else ""
     legend = rrb.PlotLegend(corner=rrb.Corner2D.LeftTop)
+    # Every plot shows the whole log (rerun would otherwise zoom long logs around the cursor).
+    whole = rrb.TimeRangeBoundary.infinite()
+    axis_x = rrb.TimeAxis(view_range=rrb.TimeRange(start=whole, end=whole))
     if gyro_needs_split(view.omega_b):
         gyro_views = [
             rrb.TimeSeriesView(
-                origin=f"/gyro/{axis}", name=f"gyro ω_{axis} [rad/s]{raw_note}", plot_legend=legend
+                origin=f"/gyro/{axis}",
+                name=f"gyro ω_{axis} [rad/s]{raw_note}",
+                plot_legend=legend,
+                axis_x=axis_x,
             )
             for axis in _AXES
         ]
         right = rrb.Vertical(
             rrb.TimeSeriesView(
-                origin=ENTITY["errors"], name="attitude error [deg]", plot_legend=legend
+                origin=ENTITY["errors"],
+                name="attitude error [deg]",
+                plot_legend=legend,
+                axis_x=axis_x,
             ),
             *gyro_views,
             row_shares=[2.0, 1.0, 1.0, 1.0],
@@ -305,10 +318,16 @@ def make_blueprint(view: ViewData):
     else:
         right = rrb.Vertical(
             rrb.TimeSeriesView(
-                origin=ENTITY["errors"], name="attitude error [deg]", plot_legend=legend
+                origin=ENTITY["errors"],
+                name="attitude error [deg]",
+                plot_legend=legend,
+                axis_x=axis_x,
             ),
             rrb.TimeSeriesView(
-                origin="/gyro", name=f"gyro ω_b [rad/s]{raw_note}", plot_legend=legend
+                origin="/gyro",
+                name=f"gyro ω_b [rad/s]{raw_note}",
+                plot_legend=legend,
+                axis_x=axis_x,
             ),
         )
     return rrb.Blueprint(
@@ -318,7 +337,7 @@ def make_blueprint(view: ViewData):
                 name="body axes: truth solid, estimate light; z-axis tip: truth purple, estimate amber",
                 eye_controls=rrb.EyeControls3D(
                     kind=rrb.Eye3DKind.Orbital,
-                    position=(1.7, -2.1, 1.4),
+                    position=(1.55, -1.9, 1.3),
                     look_target=(0.0, 0.0, 0.0),
                     eye_up=(0.0, 0.0, 1.0),
                 ),
@@ -402,7 +421,7 @@ def _entities(view: ViewData) -> list[_Entity]:
     for key, tip in tips.items():
         strips = _trail_strips(view.t_s, tip, frames)
         color = _EST_TRAIL_RGB if key == "estimate_trail" else _TRUTH_TRAIL_RGB
-        radius = 0.006 if key == "estimate_trail" else 0.01
+        radius = 0.004 if key == "estimate_trail" else 0.007
         out.append(
             _Entity(
                 ENTITY[key],
@@ -464,6 +483,8 @@ def _send_static(view: ViewData, rec) -> None:
         "estimate_trace": _body_axes_w(view.q_est)[0][:, 2],
         "truth_trace": _body_axes_w(view.q_truth)[0][:, 2],
     }
+    if view.t_s[-1] - view.t_s[0] > TRACE_MAX_S:
+        return
     for key, tip in tips.items():
         segments = _trace_segments(tip)
         if segments:

@@ -1,7 +1,7 @@
 // Load a rerun web viewer in headless Chromium, wait until the recording is drawn, screenshot it.
 //
 // usage: node screenshot.mjs URL OUT.png [--timeout-s 90] [--width 1600] [--height 900]
-//                            [--chromium /usr/bin/chromium] [--settle-s 3]
+//                            [--chromium /usr/bin/chromium] [--settle-s 3] [--seek-frac F]
 //
 // "Drawn" is decided from the pixels, not from a fixed sleep: every second the page is captured,
 // the capture is decoded inside the page (createImageBitmap on a 2D OffscreenCanvas) and the pixels
@@ -11,6 +11,10 @@
 // viewer has finished loading and laying out), a last screenshot is written to OUT.png and a
 // JSON line with the pixel statistics is printed on stdout. Exit code 0 on success, 1 on timeout
 // (with the last capture still written to OUT.png for diagnosis), 2 on bad usage.
+//
+// --seek-frac F (for README pictures, not used by the test): once drawn, click the time panel's
+// slider at the fraction F of its length (the slider is found as the longest dark horizontal run
+// in the bottom 40 pixel rows), then wait for the pixels to settle again before the screenshot.
 
 import { chromium } from "playwright-core";
 import fs from "node:fs";
@@ -18,7 +22,14 @@ import os from "node:os";
 import path from "node:path";
 
 function parseArgs(argv) {
-  const opts = { timeoutS: 90, width: 1600, height: 900, chromium: "/usr/bin/chromium", settleS: 3 };
+  const opts = {
+    timeoutS: 90,
+    width: 1600,
+    height: 900,
+    chromium: "/usr/bin/chromium",
+    settleS: 3,
+    seekFrac: null,
+  };
   const pos = [];
   for (let i = 0; i < argv.length; i++) {
     const a = argv[i];
@@ -28,6 +39,7 @@ function parseArgs(argv) {
     else if (a === "--height") opts.height = Number(next());
     else if (a === "--chromium") opts.chromium = next();
     else if (a === "--settle-s") opts.settleS = Number(next());
+    else if (a === "--seek-frac") opts.seekFrac = Number(next());
     else pos.push(a);
   }
   if (pos.length !== 2) {
@@ -60,7 +72,27 @@ async function pixelStats({ pngBase64, targets }) {
     }
   }
   const mean = sum / n;
-  return { width: bmp.width, height: bmp.height, counts, lumaStd: Math.sqrt(sum2 / n - mean * mean) };
+  // The time slider: the longest run of dark pixels in the bottom 40 rows.
+  let slider = { y: 0, x0: 0, x1: 0 };
+  for (let y = bmp.height - 40; y < bmp.height; y++) {
+    let start = -1;
+    for (let x = 0; x <= bmp.width; x++) {
+      const i = 4 * (y * bmp.width + x);
+      const dark = x < bmp.width && 0.299 * d[i] + 0.587 * d[i + 1] + 0.114 * d[i + 2] < 110;
+      if (dark && start < 0) start = x;
+      if (!dark && start >= 0) {
+        if (x - start > slider.x1 - slider.x0) slider = { y, x0: start, x1: x };
+        start = -1;
+      }
+    }
+  }
+  return {
+    width: bmp.width,
+    height: bmp.height,
+    counts,
+    lumaStd: Math.sqrt(sum2 / n - mean * mean),
+    slider,
+  };
 }
 
 const TARGETS = [
@@ -108,6 +140,7 @@ async function main() {
     await page.waitForSelector("canvas", { timeout: o.timeoutS * 1000 });
     let prev = null;
     let stableSince = null;
+    let seekedAt = null;
     while ((Date.now() - t0) / 1000 < o.timeoutS) {
       const png = await page.screenshot({ type: "png" });
       last = png;
@@ -116,10 +149,23 @@ async function main() {
         targets: TARGETS,
       });
       stats.elapsedS = (Date.now() - t0) / 1000;
-      const drawn = stats.counts.every((c) => c >= MIN_PIXELS);
+      if (process.env.SCREENSHOT_DEBUG) console.error(JSON.stringify(stats));
+      // Before a seek only the plots must be in (the truth may be absent at the log's end).
+      const needed = o.seekFrac !== null ? stats.counts.slice(2) : stats.counts;
+      const drawn = needed.every((c) => c >= MIN_PIXELS);
       const same = prev && prev.counts.every((c, k) => Math.abs(c - stats.counts[k]) <= 0.02 * c + 5);
       if (drawn && same) {
         stableSince ??= Date.now();
+        if (o.seekFrac !== null && (Date.now() - stableSince) / 1000 >= o.settleS) {
+          const { y, x0, x1 } = stats.slider;
+          await page.mouse.click(x0 + o.seekFrac * (x1 - x0), y);
+          o.seekFrac = null; // once; then settle again
+          seekedAt = Date.now();
+          stableSince = null;
+          prev = null;
+          await page.waitForTimeout(1000);
+          continue;
+        }
         if ((Date.now() - stableSince) / 1000 >= o.settleS) {
           fs.writeFileSync(o.out, png);
           console.log(JSON.stringify({ ok: true, ...stats }));
@@ -128,6 +174,11 @@ async function main() {
         }
       } else {
         stableSince = null;
+        // Still moving well after the seek: playback runs on; Space toggles play/pause.
+        if (seekedAt !== null && Date.now() - seekedAt > 6000) {
+          await page.keyboard.press("Space");
+          seekedAt = Date.now();
+        }
       }
       prev = stats;
       await page.waitForTimeout(1000);
