@@ -282,3 +282,16 @@ def test_params_record_the_scene():
     p = traj.params
     assert p["motion"] == "cusp" and p["tilt_deg"] == 54.57 and p["spin_hz"] == 20.0
     assert p["mass_kg"] == 1.0 and p["arm_m"] == 0.04 and p["precession0_rad_s"] == 0.0
+
+
+def test_checks_command_reports_figures_within_the_bounds(capsys):
+    from data_synth.checks import free_body_checks, heavy_top_checks, main
+
+    assert main(["--duration", "0.3"]) == 0
+    assert capsys.readouterr().out.count("\n") == 8  # header, five motions, two boxes
+    figs = heavy_top_checks("looping", 0.5, n=501)
+    # The same bounds as the tests above (conservation 1e-10, re-solve 1e-8°, elliptic 1e-8).
+    assert figs["energy"] < 1e-10 and figs["L_z/|L|"] < 1e-10 and figs["resolve_deg"] < 1e-8
+    assert figs["cos_theta_vs_elliptic"] < 1e-8
+    box = free_body_checks("intermediate", 2.0, n=201)
+    assert box["attitude_vs_elliptic_deg"] < 1e-6 and box["omega_vs_jacobi_rad_s"] < 1e-8
