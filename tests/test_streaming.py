@@ -1,0 +1,164 @@
+"""Streaming integrator: equals its batch twin for every method; state, lag and bad input."""
+
+from __future__ import annotations
+
+import warnings
+
+import numpy as np
+import pytest
+from scipy.spatial.transform import Rotation
+
+from imu_dcm import GapWarning, ImuDcmWarning, InputError
+from imu_dcm.integrate import METHODS, integrate
+from imu_dcm.streaming import DcmIntegrator
+
+Q0 = Rotation.from_euler("zyx", [1.0, -0.4, 0.3]).as_quat()
+# Streaming and batch run the same formulas in a different order (floats vs arrays, sequential
+# vs blocked product): they differ by rounding only, ~1e-13 deg after a few hundred steps.
+TOL_DEG = 1e-9
+
+
+def record(n: int, seed: int) -> tuple[np.ndarray, np.ndarray]:
+    rng = np.random.default_rng(seed)
+    t = 2.0 + np.cumsum(rng.uniform(0.5e-3, 1.5e-3, n))
+    omega = np.cumsum(rng.normal(scale=0.5, size=(n, 3)), axis=0)  # a wandering rate, rad/s
+    return omega, t
+
+
+def angle_deg(q_a, q_b) -> np.ndarray:
+    return np.degrees((Rotation.from_quat(q_a).inv() * Rotation.from_quat(q_b)).magnitude())
+
+
+def quiet(method: str):
+    if method == "rotvec_sum":
+        return pytest.warns(ImuDcmWarning)
+    return warnings.catch_warnings()
+
+
+def lagged_index(k: int, method: str) -> int:
+    """Sample whose attitude update() returns after sample k (see DcmIntegrator's doc)."""
+    if method != "magnus4":
+        return k
+    return k - 1 if k >= 3 else 0
+
+
+@pytest.mark.parametrize("method", METHODS)
+@pytest.mark.parametrize("n", [2, 3, 4, 5, 400])
+def test_update_equals_batch(method, n):
+    omega, t = record(n, seed=n)
+    with quiet(method):
+        batch = integrate(omega, t, Q0, method).as_quat()
+    with quiet(method):
+        integ = DcmIntegrator(Q0, method)
+    got = np.array([integ.update(omega[k], t[k]) for k in range(n)])
+    idx = [lagged_index(k, method) for k in range(n)]
+    assert angle_deg(got, batch[idx]).max() <= TOL_DEG
+    assert integ.t_s == t[idx[-1]]
+    final = integ.finish()
+    assert angle_deg(final, batch[-1]) <= TOL_DEG
+    assert integ.t_s == t[-1]
+
+
+@pytest.mark.parametrize("method", METHODS)
+@pytest.mark.parametrize("chunk", [1, 3, 7, 1000])
+def test_update_many_equals_batch(method, chunk):
+    n = 700
+    omega, t = record(n, seed=11)
+    with quiet(method):
+        batch = integrate(omega, t, Q0, method).as_quat()
+        integ = DcmIntegrator(Q0, method)
+    rows = [integ.update_many(omega[i:i + chunk], t[i:i + chunk]).as_quat()
+            for i in range(0, n, chunk)]
+    got = np.vstack(rows)
+    idx = [lagged_index(k, method) for k in range(n)]
+    assert got.shape == (n, 4)
+    assert angle_deg(got, batch[idx]).max() <= TOL_DEG
+    assert angle_deg(integ.finish(), batch[-1]) <= TOL_DEG
+
+
+def test_mixing_update_and_update_many():
+    omega, t = record(300, seed=12)
+    batch = integrate(omega, t, Q0).as_quat()
+    integ = DcmIntegrator(Q0)
+    integ.update_many(omega[:2], t[:2])
+    for k in range(2, 10):
+        integ.update(omega[k], t[k])
+    integ.update_many(omega[10:250], t[10:250])
+    integ.update(omega[250], t[250])
+    integ.update_many(omega[251:], t[251:])
+    assert angle_deg(integ.finish(), batch[-1]) <= TOL_DEG
+
+
+def test_t0_s_holds_the_first_rate_from_t0():
+    omega, t = record(50, seed=13)
+    t0 = t[0] - 0.002
+    integ = DcmIntegrator(Q0, "trapezoid", t0_s=t0)
+    assert integ.t_s == t0
+    for k in range(50):
+        q = integ.update(omega[k], t[k])
+    ref = integrate(np.vstack([omega[:1], omega]), np.concatenate([[t0], t]), Q0, "trapezoid")
+    assert angle_deg(q, ref.as_quat()[-1]) <= TOL_DEG
+
+
+def test_magnus4_lags_one_sample_and_names_the_stamp():
+    omega, t = record(6, seed=14)
+    integ = DcmIntegrator(Q0)
+    assert integ.t_s is None
+    integ.update(omega[0], t[0])
+    integ.update(omega[1], t[1])
+    np.testing.assert_allclose(integ.q_w_b, Q0, atol=1e-15)  # nothing final yet
+    assert integ.t_s == t[0]
+    integ.update(omega[2], t[2])
+    assert integ.t_s == t[0]  # the first step needs four samples (start ghost)
+    for k in range(3, 6):
+        integ.update(omega[k], t[k])
+        assert integ.t_s == t[k - 1]
+    assert integ.n_samples == 6
+
+
+def test_rotation_property_and_renormalisation():
+    # 20000 steps: the attitude stays unit (renormalised every 64 steps) to rounding.
+    rng = np.random.default_rng(15)
+    integ = DcmIntegrator(Q0, "coning")
+    for k in range(20000):
+        q = integ.update(rng.normal(scale=3.0, size=3), 1e-3 * k)
+    assert abs(np.linalg.norm(q) - 1.0) <= 1e-14
+    np.testing.assert_allclose(integ.rotation.as_quat(), q / np.linalg.norm(q), atol=1e-15)
+
+
+def test_rotvec_sum_warns_on_construction():
+    with pytest.warns(ImuDcmWarning, match="rotvec_sum"):
+        DcmIntegrator(Q0, "rotvec_sum")
+
+
+def test_bad_input():
+    integ = DcmIntegrator(Q0)
+    with pytest.raises(InputError, match="3 numbers"):
+        integ.update([1.0, 2.0], 0.0)
+    with pytest.raises(InputError, match="3 numbers"):
+        integ.update(["a", 1.0, 2.0], 0.0)
+    with pytest.raises(InputError, match="finite"):
+        integ.update([np.nan, 0.0, 0.0], 0.0)
+    integ.update([0.0, 0.0, 1.0], 0.0)
+    integ.update([0.0, 0.0, 1.0], 0.01)
+    with pytest.raises(InputError, match=r"t_s\[2\] = 0.01 s after t_s\[1\] = 0.01 s"):
+        integ.update([0.0, 0.0, 1.0], 0.01)
+    with pytest.raises(InputError, match=r"strictly increasing"):
+        integ.update_many(np.zeros((2, 3)), [0.02, 0.005])
+    with pytest.raises(InputError, match=r"\(n, 3\)"):
+        integ.update_many(np.zeros((2, 2)), [0.02, 0.03])
+    with pytest.raises(InputError, match="method"):
+        DcmIntegrator(Q0, "euler")
+    integ.finish()
+    with pytest.raises(InputError, match="finish"):
+        integ.update([0.0, 0.0, 1.0], 0.5)
+
+
+def test_gap_warns_in_streaming():
+    integ = DcmIntegrator(Q0, "trapezoid")
+    for k in range(10):
+        integ.update([0.0, 0.0, 1.0], 0.01 * k)
+    with pytest.warns(GapWarning, match=r"after t_s = 0.090000 s"):
+        integ.update([0.0, 0.0, 1.0], 0.5)
+    with pytest.warns(GapWarning, match="gap"):
+        integ.update_many(np.zeros((3, 3)), [0.51, 0.52, 1.5])
