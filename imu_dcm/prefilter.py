@@ -458,18 +458,24 @@ def _forward_covariances(m: _Model) -> tuple[NDArray, NDArray, NDArray, NDArray]
     ends = np.concatenate([starts[1:] - 1, [n - 1]])
     run_end[:] = ends[np.searchsorted(starts, np.arange(n), side="right") - 1]
     eye = np.eye(d)
+    h0 = m.H[0]
     k = 0
     while k < n:
         P = m.P0 if k == 0 else m.F[k] @ Pp[k - 1] @ m.F[k].T + m.Q[k]
-        rows = [0, 1] if m.rest[k] else [0]
-        H = m.H[rows]
-        R = np.diag([m.r[k], m.r_zero][: len(rows)])
-        S = H @ P @ H.T + R
-        Kk = P @ H.T @ np.linalg.inv(S)
-        IKH = eye - Kk @ H
-        Pk = IKH @ P @ IKH.T + Kk @ R @ Kk.T  # Joseph form, as filterpy.kalman.update
+        if m.rest[k]:
+            R = np.diag([m.r[k], m.r_zero])
+            Kk = P @ m.H.T @ np.linalg.inv(m.H @ P @ m.H.T + R)
+            IKH = eye - Kk @ m.H
+            Pk = IKH @ P @ IKH.T + Kk @ R @ Kk.T  # Joseph form, as filterpy.kalman.update
+            K[k] = Kk
+        else:
+            # one scalar measurement: K = P h / (h P h + r), P+ = P - K (P h)^T (equal to the
+            # Joseph form for this optimal gain; no matrix inverse)
+            Ph = P @ h0
+            Kk = Ph / (float(h0 @ Ph) + m.r[k])
+            Pk = P - np.outer(Kk, Ph)
+            K[k, :, 0] = Kk
         Pm[k], Pp[k] = P, 0.5 * (Pk + Pk.T)
-        K[k, :, rows] = Kk.T
         if k > 0 and m.run_start[k] == m.run_start[k - 1] and _close(Pm[k], Pm[k - 1]):
             e = run_end[k]
             Pm[k + 1 : e + 1], Pp[k + 1 : e + 1], K[k + 1 : e + 1] = Pm[k], Pp[k], K[k]
