@@ -164,13 +164,71 @@ def symmetric_free_top(
 # Torque-free asymmetric body: Jacobi elliptic rates
 # --------------------------------------------------------------------------------------------
 
+#: ``R_b_b'`` of the relabelled frame ``(x', y', z') = (z, −y, x)`` (180° about (1, 0, 1)/√2),
+#: used when the body rotates on the minor-axis side of the separatrix (``M² < 2 E I2``).
+_SWAP = np.array([[0.0, 0.0, 1.0], [0.0, -1.0, 0.0], [1.0, 0.0, 0.0]])
+_Q_SWAP = np.array([math.sqrt(0.5), 0.0, math.sqrt(0.5), 0.0])
+
+
+def _box_side(inertia_kg_m2: ArrayLike, omega0_b: ArrayLike) -> bool:
+    """Validate a torque-free asymmetric body; True when it turns on the ``I1`` side."""
+    inertia = np.asarray(inertia_kg_m2, dtype=float)
+    w = np.asarray(omega0_b, dtype=float)
+    if inertia.shape != (3,) or not inertia[0] < inertia[1] < inertia[2] or inertia[0] <= 0:
+        raise InputError(f"Expected 0 < I1 < I2 < I3, got {inertia.tolist()}")
+    if w.shape != (3,) or not np.all(np.isfinite(w)):
+        raise InputError(f"Expected `omega0_b` three finite rates, got {w.tolist()}")
+    two_e = float(np.sum(inertia * w * w))
+    m2 = float(np.sum((inertia * w) ** 2))
+    if abs(m2 - two_e * inertia[1]) <= 1e-12 * m2:
+        raise InputError(f"Expected M² != 2 E I2 (not on the separatrix), got M² = {m2}, "
+                         f"2 E I2 = {two_e * inertia[1]}")
+    return m2 < two_e * inertia[1]
+
+
+def _box_elements(inertia: NDArray, w: NDArray) -> dict[str, float]:
+    """Elliptic elements of ``ω = (s1 A1 cn, s2 A2 sn, s3 A3 dn)(λ t + τ0 | m)``.
+
+    Valid in a frame whose third axis is the one ω stays near: ``I1 < I2 < I3`` with
+    ``M² > 2 E I2``, or ``I1 > I2 > I3`` with ``M² < 2 E I2`` (all square-root arguments are
+    then positive). Signs from Euler's equations with ``d cn = −sn dn``, ``d sn = cn dn``:
+    ``s2 = s1 s3 sign(I3 − I1)``.
+    """
+    i1, i2, i3 = (float(v) for v in inertia)
+    two_e = i1 * w[0] ** 2 + i2 * w[1] ** 2 + i3 * w[2] ** 2
+    m2 = (i1 * w[0]) ** 2 + (i2 * w[1]) ** 2 + (i3 * w[2]) ** 2
+    a1sq = (two_e * i3 - m2) / (i1 * (i3 - i1))
+    a2sq = (two_e * i3 - m2) / (i2 * (i3 - i2))
+    a3sq = (m2 - two_e * i1) / (i3 * (i3 - i1))
+    lam = math.sqrt((i3 - i2) * (m2 - two_e * i1) / (i1 * i2 * i3))
+    m = (i2 - i1) * (two_e * i3 - m2) / ((i3 - i2) * (m2 - two_e * i1))
+    s3 = 1.0 if w[2] >= 0 else -1.0
+    s1 = 1.0
+    s2 = s1 * s3 * (1.0 if i3 > i1 else -1.0)
+    a1, a2 = math.sqrt(a1sq), math.sqrt(a2sq)
+    # Amplitude am(τ0): sin = sn(τ0), cos = cn(τ0); τ0 = F(am | m), extended by 2K per π.
+    am0 = math.atan2(w[1] / (s2 * a2), w[0] / (s1 * a1))
+    k = round(am0 / math.pi)
+    tau0 = 2.0 * k * float(ellipk(m)) + float(ellipkinc(am0 - k * math.pi, m))
+    return {"i1": i1, "i2": i2, "i3": i3, "m2": m2, "a1sq": a1sq, "a2sq": a2sq,
+            "a1": a1, "a2": a2, "a3": math.sqrt(a3sq), "lam": lam, "m": m,
+            "s1": s1, "s2": s2, "s3": s3, "am0": am0, "tau0": tau0}
+
+
+def _omega_core(t: NDArray, e: dict[str, float]) -> NDArray[np.float64]:
+    sn, cn, dn, _ = ellipj(e["lam"] * t + e["tau0"], e["m"])
+    return np.stack([e["s1"] * e["a1"] * cn, e["s2"] * e["a2"] * sn, e["s3"] * e["a3"] * dn],
+                    axis=-1)
+
+
 def box_omega_elliptic(t_s: ArrayLike, inertia_kg_m2: ArrayLike,
                        omega0_b: ArrayLike) -> NDArray[np.float64]:
-    """Body rate of a torque-free body by Jacobi elliptic functions (DESIGN.md §5).
+    """Body rate of a torque-free asymmetric body by Jacobi elliptic functions (DESIGN.md §5).
 
-    For ``I1 < I2 < I3`` and ``M² > 2 E I2`` (rotation about the major axis side of the
+    For ``I1 < I2 < I3`` and ``M² > 2 E I2`` (the body turns on the major-axis side of the
     separatrix): ``ω = (s1 A1 cn, s2 A2 sn, s3 A3 dn)(λ t + τ0 | m)``, with the amplitudes,
-    ``λ`` and ``m`` of DESIGN.md §5 and the phase ``τ0`` and signs fitted to ``omega0_b``.
+    ``λ`` and ``m`` of DESIGN.md §5 and the phase ``τ0`` and signs fitted to ``omega0_b``. For
+    ``M² < 2 E I2`` the same solution in the relabelled frame ``(z, −y, x)`` (``dn`` on x).
 
     Parameters
     ----------
@@ -178,44 +236,18 @@ def box_omega_elliptic(t_s: ArrayLike, inertia_kg_m2: ArrayLike,
     inertia_kg_m2 : array_like, shape (3,)
         Principal moments, strictly increasing, kg·m².
     omega0_b : array_like, shape (3,)
-        Initial body rate, rad/s, with ``ω3 ≠ 0``.
+        Initial body rate, rad/s, not on the separatrix (``M² ≠ 2 E I2``).
 
     Returns
     -------
     ndarray, shape (N, 3), rad/s
     """
-    i1, i2, i3 = (float(v) for v in np.asarray(inertia_kg_m2, dtype=float))
+    t = np.asarray(t_s, dtype=float)
+    inertia = np.asarray(inertia_kg_m2, dtype=float)
     w = np.asarray(omega0_b, dtype=float)
-    if not i1 < i2 < i3:
-        raise InputError(f"Expected I1 < I2 < I3, got {[i1, i2, i3]}")
-    two_e = i1 * w[0] ** 2 + i2 * w[1] ** 2 + i3 * w[2] ** 2
-    m2 = (i1 * w[0]) ** 2 + (i2 * w[1]) ** 2 + (i3 * w[2]) ** 2
-    if not m2 > two_e * i2:
-        raise InputError(f"Expected M² > 2 E I2 (rotation on the I3 side), got M² = {m2}, "
-                         f"2 E I2 = {two_e * i2}")
-    a1 = math.sqrt((two_e * i3 - m2) / (i1 * (i3 - i1)))
-    a2 = math.sqrt((two_e * i3 - m2) / (i2 * (i3 - i2)))
-    a3 = math.sqrt((m2 - two_e * i1) / (i3 * (i3 - i1)))
-    lam = math.sqrt((i3 - i2) * (m2 - two_e * i1) / (i1 * i2 * i3))
-    m = (i2 - i1) * (two_e * i3 - m2) / ((i3 - i2) * (m2 - two_e * i1))
-    # Signs: dω1/dt = (I2−I3)/I1 ω2 ω3 with d cn/dτ = −sn dn needs s1 = s2 s3.
-    s3 = 1.0 if w[2] >= 0 else -1.0
-    s1 = 1.0
-    s2 = s1 * s3
-    # Amplitude φ0 with sin φ0 = sn(τ0), cos φ0 = cn(τ0); τ0 = F(φ0 | m), extended by 2K per π.
-    phi0 = math.atan2(w[1] / (s2 * a2), w[0] / (s1 * a1))
-    k = round(phi0 / math.pi)
-    tau0 = 2.0 * k * float(ellipk(m)) + float(ellipkinc(phi0 - k * math.pi, m))
-    sn, cn, dn, _ = ellipj(lam * np.asarray(t_s, dtype=float) + tau0, m)
-    return np.stack([s1 * a1 * cn, s2 * a2 * sn, s3 * a3 * dn], axis=-1)
-
-
-def _box_constants(inertia_kg_m2: ArrayLike, omega0_b: ArrayLike) -> dict[str, float]:
-    i1, i2, i3 = (float(v) for v in np.asarray(inertia_kg_m2, dtype=float))
-    w = np.asarray(omega0_b, dtype=float)
-    two_e = i1 * w[0] ** 2 + i2 * w[1] ** 2 + i3 * w[2] ** 2
-    m2 = (i1 * w[0]) ** 2 + (i2 * w[1]) ** 2 + (i3 * w[2]) ** 2
-    return {"i1": i1, "i2": i2, "i3": i3, "two_e": two_e, "m2": m2}
+    if _box_side(inertia, w):
+        return _omega_core(t, _box_elements(inertia[::-1], _SWAP @ w)) @ _SWAP
+    return _omega_core(t, _box_elements(inertia, w))
 
 
 def _legendre_pi(n: float, phi: NDArray, m: float) -> NDArray:
@@ -233,6 +265,27 @@ def _legendre_pi(n: float, phi: NDArray, m: float) -> NDArray:
     return inc + 2.0 * k * complete
 
 
+def _attitude_core(t: NDArray, e: dict[str, float], w0: NDArray,
+                   q0: NDArray) -> NDArray[np.float64]:
+    i1, i2, i3 = e["i1"], e["i2"], e["i3"]
+    big_m = math.sqrt(e["m2"])
+    a, b = i1 * e["a1sq"], i2 * e["a2sq"] - i1 * e["a1sq"]
+    c, d = i1 * i1 * e["a1sq"], i2 * i2 * e["a2sq"] - i1 * i1 * e["a1sq"]
+    _, _, _, am = ellipj(e["lam"] * t + e["tau0"], e["m"])
+    n = -d / c  # c + d sn² > 0 everywhere, so 1 − n sn² > 0: Π has no pole on the path
+    phi = big_m * b / d * t + big_m * (a - b * c / d) / (c * e["lam"]) * (
+        _legendre_pi(n, am, e["m"]) - _legendre_pi(n, np.array([e["am0"]]), e["m"])[0])
+    w = _omega_core(t, e)
+    theta = np.arccos(np.clip(i3 * w[:, 2] / big_m, -1.0, 1.0))
+    psi = np.arctan2(i1 * w[:, 0], i2 * w[:, 1])
+    q_l_b = quat_multiply(quat_multiply(_rot_quat(2, phi), _rot_quat(0, theta)), _rot_quat(2, psi))
+    th0 = math.acos(max(-1.0, min(1.0, i3 * w0[2] / big_m)))
+    ps0 = math.atan2(i1 * w0[0], i2 * w0[1])
+    q_l_b0 = quat_multiply(_rot_quat(0, th0), _rot_quat(2, ps0))
+    q_w_l = quat_multiply(q0, quat_conjugate(q_l_b0))
+    return quat_multiply(q_w_l, q_l_b)
+
+
 def box_attitude_elliptic(t_s: ArrayLike, inertia_kg_m2: ArrayLike, omega0_b: ArrayLike,
                           q0_w_b: ArrayLike) -> NDArray[np.float64]:
     """Attitude of a torque-free asymmetric body in closed form (elliptic integrals).
@@ -244,6 +297,7 @@ def box_attitude_elliptic(t_s: ArrayLike, inertia_kg_m2: ArrayLike, omega0_b: Ar
     ``M b/d t + M (a − b c/d)/(c λ) [Π(−d/c; am(λt + τ0)) − Π(−d/c; am(τ0))]`` (van Zon &
     Schofield, J. Comput. Phys. 225, 2007), with Π in Carlson's forms. Then
     ``R_w_b(t) = R_w_L Rz(φ) Rx(θ) Rz(ψ)``, ``R_w_L`` fixed by ``q0_w_b`` and ``φ(0) = 0``.
+    On the minor-axis side (``M² < 2 E I2``) the same in the frame ``(z, −y, x)``.
 
     Parameters
     ----------
@@ -251,7 +305,7 @@ def box_attitude_elliptic(t_s: ArrayLike, inertia_kg_m2: ArrayLike, omega0_b: Ar
     inertia_kg_m2 : array_like, shape (3,)
         ``I1 < I2 < I3``, kg·m².
     omega0_b : array_like, shape (3,)
-        Initial body rate, rad/s (``M² > 2 E I2``).
+        Initial body rate, rad/s (``M² ≠ 2 E I2``).
     q0_w_b : array_like, shape (4,)
         Initial attitude ``[x, y, z, w]``.
 
@@ -261,36 +315,15 @@ def box_attitude_elliptic(t_s: ArrayLike, inertia_kg_m2: ArrayLike, omega0_b: Ar
         ``q_w_b(t)``.
     """
     t = np.asarray(t_s, dtype=float)
-    k = _box_constants(inertia_kg_m2, omega0_b)
-    i1, i2, i3, two_e, m2 = k["i1"], k["i2"], k["i3"], k["two_e"], k["m2"]
-    big_m = math.sqrt(m2)
-    a1sq = (two_e * i3 - m2) / (i1 * (i3 - i1))
-    a2sq = (two_e * i3 - m2) / (i2 * (i3 - i2))
-    lam = math.sqrt((i3 - i2) * (m2 - two_e * i1) / (i1 * i2 * i3))
-    m = (i2 - i1) * (two_e * i3 - m2) / ((i3 - i2) * (m2 - two_e * i1))
-    a, b = i1 * a1sq, i2 * a2sq - i1 * a1sq
-    c, d = i1 * i1 * a1sq, i2 * i2 * a2sq - i1 * i1 * a1sq
-    w = box_omega_elliptic(np.concatenate([[0.0], t]), inertia_kg_m2, omega0_b)
-    # The phase τ0 of the rates at t = 0: recover am(τ0) from (sn, cn) = (ω2/A2, ω1/A1).
-    w0 = np.asarray(omega0_b, dtype=float)
-    s3 = 1.0 if w0[2] >= 0 else -1.0
-    am0 = math.atan2(w0[1] / (s3 * math.sqrt(a2sq)), w0[0] / math.sqrt(a1sq))
-    k_m = float(ellipk(m))
-    kk = round(am0 / math.pi)
-    tau0 = 2.0 * kk * k_m + float(ellipkinc(am0 - kk * math.pi, m))
-    _, _, _, am = ellipj(lam * t + tau0, m)
-    n = -d / c
-    phi = big_m * b / d * t + big_m * (a - b * c / d) / (c * lam) * (
-        _legendre_pi(n, am, m) - _legendre_pi(n, np.array([am0]), m)[0])
-    w1, w2, w3 = w[1:, 0], w[1:, 1], w[1:, 2]
-    theta = np.arccos(np.clip(i3 * w3 / big_m, -1.0, 1.0))
-    psi = np.arctan2(i1 * w1, i2 * w2)
-    q_l_b = quat_multiply(quat_multiply(_rot_quat(2, phi), _rot_quat(0, theta)), _rot_quat(2, psi))
-    th0 = math.acos(max(-1.0, min(1.0, i3 * w0[2] / big_m)))
-    ps0 = math.atan2(i1 * w0[0], i2 * w0[1])
-    q_l_b0 = quat_multiply(_rot_quat(0, th0), _rot_quat(2, ps0))
-    q_w_l = quat_multiply(np.asarray(q0_w_b, dtype=float), quat_conjugate(q_l_b0))
-    return quat_multiply(q_w_l, q_l_b)
+    inertia = np.asarray(inertia_kg_m2, dtype=float)
+    w = np.asarray(omega0_b, dtype=float)
+    q0 = np.asarray(q0_w_b, dtype=float)
+    if _box_side(inertia, w):
+        w_p = _SWAP @ w  # body rates in the relabelled frame; q_w_b' = q_w_b ⊗ q_swap
+        q_p = _attitude_core(t, _box_elements(inertia[::-1], w_p), w_p,
+                             quat_multiply(q0, _Q_SWAP))
+        return quat_multiply(q_p, quat_conjugate(_Q_SWAP))
+    return _attitude_core(t, _box_elements(inertia, w), w, q0)
 
 
 # --------------------------------------------------------------------------------------------

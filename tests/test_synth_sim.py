@@ -126,9 +126,11 @@ def test_box_attitude_matches_elliptic_integral_solution(case):
     assert _deg(q, q_el).max() < 1e-6
 
 
-@pytest.mark.parametrize("omega0_b", [(-0.3, 0.5, -1.0), (-1.0, -1.0, 1.5)])
+@pytest.mark.parametrize("omega0_b", [(-0.3, 0.5, -1.0), (-1.0, -1.0, 1.5),  # M² > 2EI2
+                                      (0.4, -2.0, 0.3), (2.0, 0.1, 0.1), (-2.0, 0.5, -0.3)])
 def test_box_elliptic_solution_from_a_general_state(omega0_b):
-    # Any signs of the rates and any initial attitude (the phase τ0 and the frame of L).
+    # Any signs of the rates, any initial attitude (the phase τ0 and the frame of L), and both
+    # sides of the separatrix (the last three turn about the minor axis: M² < 2 E I2).
     inertia = np.array([0.27, 0.42, 0.52])
     q0 = Rotation.from_euler("xyz", [0.3, 1.0, -2.0]).as_quat()
     traj = data_synth.solve_rigid_body(inertia, q0, omega0_b, 15.0)
@@ -136,6 +138,15 @@ def test_box_elliptic_solution_from_a_general_state(omega0_b):
     q, w = traj.at(t)
     assert np.abs(box_omega_elliptic(t, inertia, omega0_b) - w).max() < 1e-8
     assert _deg(box_attitude_elliptic(t, inertia, omega0_b, q0), q).max() < 1e-6
+
+
+def test_box_elliptic_refuses_the_separatrix_and_bad_inertia():
+    inertia = np.array([1.0, 2.0, 3.0])
+    # ω = (√3, 0, 1): 2E = 3 + 3 = 6 and M² = 3 + 9 = 12 = 2 E I2, exactly on the separatrix.
+    with pytest.raises(InputError, match="separatrix"):
+        box_omega_elliptic([0.0], inertia, (math.sqrt(3.0), 0.0, 1.0))
+    with pytest.raises(InputError, match="I1 < I2 < I3"):
+        box_attitude_elliptic([0.0], (3.0, 2.0, 1.0), (0.0, 0.0, 1.0), (0.0, 0.0, 0.0, 1.0))
 
 
 def test_intermediate_axis_flips():
