@@ -8,6 +8,11 @@ z up, gravity ``(0, 0, −g)``.
 >>> traj = data_synth.simulate("heavy-top", duration_s=1.2, motion="cusp")
 >>> q_w_b, omega_b = traj.at([0.0, 0.6, 1.2])      # (3, 4) xyzw, (3, 3) rad/s body
 >>> dtheta_b = traj.delta_angles([0.0, 0.6, 1.2])   # (2, 3) exact ∫ omega_b dt, rad
+
+Modules: ``rigid_body`` (Euler's equations + attitude, DOP853 1e-12, dense), ``scenes`` (heavy
+top, free box, coning), ``analytic`` (closed forms used as independent checks), ``gyro`` (the
+synthetic gyro), ``reference_scheme`` (the reference document's coupled RK4 + DCM top and its
+comparison), ``checks`` (measured exactness of the truth), ``cli`` (``python -m data_synth``).
 """
 
 from data_synth.gyro import GyroModel, GyroRecord, synthetic_gyro
