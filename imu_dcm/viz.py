@@ -49,6 +49,7 @@ from __future__ import annotations
 import math
 import os
 import re
+import signal
 import socket
 import subprocess
 import sys
@@ -122,6 +123,7 @@ _GYRO_RAW_RGB = [(140, 110, 110), (110, 140, 115), (110, 120, 150)]
 _AXES = "xyz"
 
 _MODES = ("spawn", "serve", "save:PATH.rrd", "off", None)
+_FLUSH_TIMEOUT_S = 60.0  # a viewer that went away must not hang the replay
 
 
 def _as_array(name: str, x: object, shape_tail: tuple[int, ...], n: int | None) -> NDArray:
@@ -618,17 +620,70 @@ def _free_port() -> int:
         return int(s.getsockname()[1])
 
 
-def _wait_for_port(port: int, proc: subprocess.Popen, timeout_s: float) -> None:
+class _Child:
+    """A process started with ``os.posix_spawn`` in a new session: ``pid``, ``poll``, ``wait``.
+
+    Unlike ``subprocess.Popen`` it does not warn when dropped while running, which is what a
+    server left running for the user (``serve``/``spawn``) does on purpose.
+    """
+
+    def __init__(self, cmd: list[str], log_path: str | os.PathLike | None) -> None:
+        out = str(log_path) if log_path is not None else os.devnull
+        actions = [
+            (os.POSIX_SPAWN_OPEN, 0, os.devnull, os.O_RDONLY, 0),
+            (os.POSIX_SPAWN_OPEN, 1, out, os.O_WRONLY | os.O_CREAT | os.O_APPEND, 0o644),
+            (os.POSIX_SPAWN_DUP2, 1, 2),
+        ]
+        self.pid = os.posix_spawn(cmd[0], cmd, _rerun_env(), file_actions=actions, setsid=True)
+        self.returncode: int | None = None
+
+    def poll(self) -> int | None:
+        if self.returncode is None:
+            try:
+                pid, status = os.waitpid(self.pid, os.WNOHANG)
+            except ChildProcessError:  # reaped elsewhere
+                self.returncode = -1
+            else:
+                if pid:
+                    self.returncode = os.waitstatus_to_exitcode(status)
+        return self.returncode
+
+    def wait(self, timeout: float) -> int:
+        deadline = time.monotonic() + timeout
+        while self.poll() is None:
+            if time.monotonic() > deadline:
+                raise subprocess.TimeoutExpired(str(self.pid), timeout)
+            time.sleep(0.02)
+        return self.returncode
+
+
+def _start(cmd: list[str], log_path: str | os.PathLike | None):
+    """Start the rerun binary in its own session, output to ``log_path`` (or discarded)."""
+    if hasattr(os, "posix_spawn"):
+        return _Child(cmd, log_path)
+    with open(log_path or os.devnull, "ab") as log:  # pragma: no cover - Windows
+        return subprocess.Popen(
+            cmd, stdin=subprocess.DEVNULL, stdout=log, stderr=subprocess.STDOUT, env=_rerun_env()
+        )
+
+
+def _wait_for_port(
+    port: int, proc, timeout_s: float, log_path: str | os.PathLike | None = None
+) -> None:
+    """Wait until 127.0.0.1:port accepts connections; raise if the process exits first."""
     deadline = time.monotonic() + timeout_s
+    see = f" (its output: {log_path})" if log_path else ""
     while time.monotonic() < deadline:
         if proc.poll() is not None:
-            raise RuntimeError(f"rerun exited with code {proc.returncode} before listening")
+            raise RuntimeError(
+                f"Expected rerun to listen on 127.0.0.1:{port}, got exit code {proc.returncode}{see}"
+            )
         try:
             with socket.create_connection(("127.0.0.1", port), timeout=0.2):
                 return
         except OSError:
             time.sleep(0.05)
-    raise TimeoutError(f"rerun did not listen on 127.0.0.1:{port} within {timeout_s} s")
+    raise TimeoutError(f"Expected rerun to listen on 127.0.0.1:{port} within {timeout_s} s{see}")
 
 
 @dataclass(frozen=True)
@@ -637,8 +692,8 @@ class ServedViewer:
 
     Attributes
     ----------
-    process : subprocess.Popen
-        The server (leader of its own process group).
+    process
+        The server process (leader of its own session): ``pid``, ``poll()``, ``wait(timeout)``.
     url : str
         The web viewer, already pointed at the recording.
     grpc_url : str
@@ -647,7 +702,7 @@ class ServedViewer:
         The two ports, both on 127.0.0.1.
     """
 
-    process: subprocess.Popen
+    process: object
     url: str
     grpc_url: str
     grpc_port: int
@@ -656,15 +711,23 @@ class ServedViewer:
     def stop(self, timeout_s: float = 5.0) -> None:
         """Terminate the server (and its process group) and wait for it."""
         if self.process.poll() is None:
-            try:
-                os.killpg(self.process.pid, 15)
-            except ProcessLookupError:
-                pass
+            _signal_group(self.process.pid, signal.SIGTERM)
             try:
                 self.process.wait(timeout_s)
             except subprocess.TimeoutExpired:
-                os.killpg(self.process.pid, 9)
+                _signal_group(self.process.pid, signal.SIGKILL)
                 self.process.wait(timeout_s)
+
+
+def _signal_group(pid: int, sig: int) -> None:
+    """Signal the process group led by ``pid`` (POSIX), or the process itself."""
+    try:
+        if hasattr(os, "killpg"):
+            os.killpg(pid, sig)
+        else:  # pragma: no cover - Windows
+            os.kill(pid, sig)
+    except ProcessLookupError:
+        pass
 
 
 def serve_rrd(
@@ -707,15 +770,7 @@ def serve_rrd(
     ]
     if path is not None:
         cmd.append(str(path))
-    with open(log_path or os.devnull, "ab") as log:
-        proc = subprocess.Popen(
-            cmd,
-            stdin=subprocess.DEVNULL,
-            stdout=log,
-            stderr=subprocess.STDOUT,
-            env=_rerun_env(),
-            start_new_session=True,
-        )
+    proc = _start(cmd, log_path)
     grpc_url = f"rerun+http://127.0.0.1:{grpc_port}/proxy"
     served = ServedViewer(
         proc,
@@ -725,8 +780,8 @@ def serve_rrd(
         web_port,
     )
     try:
-        _wait_for_port(grpc_port, proc, timeout_s)
-        _wait_for_port(web_port, proc, timeout_s)
+        _wait_for_port(grpc_port, proc, timeout_s, log_path)
+        _wait_for_port(web_port, proc, timeout_s, log_path)
     except BaseException:
         served.stop()
         raise
@@ -749,20 +804,15 @@ def has_display() -> bool:
 def _spawn_viewer(view: ViewData, realtime: bool) -> str:
     """Start the native viewer on 127.0.0.1 (detached) and stream the view to it."""
     port = _free_port()
-    proc = subprocess.Popen(
-        [str(rerun_binary()), "--bind", "127.0.0.1", "--port", str(port), "--expect-data-soon"],
-        stdin=subprocess.DEVNULL,
-        stdout=subprocess.DEVNULL,
-        stderr=subprocess.DEVNULL,
-        env=_rerun_env(),
-        start_new_session=True,
-    )
-    _wait_for_port(port, proc, 20.0)
+    log_path = Path(tempfile.gettempdir()) / f"imu_dcm_rerun_viewer_{port}.log"
+    cmd = [str(rerun_binary()), "--bind", "127.0.0.1", "--port", str(port), "--expect-data-soon"]
+    proc = _start(cmd, log_path)
+    _wait_for_port(port, proc, 20.0, log_path)
     rec = _new_recording(view)
     rec.connect_grpc(f"rerun+http://127.0.0.1:{port}/proxy", default_blueprint=make_blueprint(view))
     rec.send_recording_name(view.title)
     send_view(view, rec, realtime=realtime)
-    rec.flush()
+    rec.flush(timeout_sec=_FLUSH_TIMEOUT_S)
     rec.disconnect()
     return f"rerun: viewer started (pid {proc.pid}, listening on 127.0.0.1:{port})"
 
@@ -830,7 +880,7 @@ def show_replay(
             rec.connect_grpc(served.grpc_url, default_blueprint=make_blueprint(view))
             rec.send_recording_name(view.title)
             send_view(view, rec, realtime=True)
-            rec.flush()
+            rec.flush(timeout_sec=_FLUSH_TIMEOUT_S)
             rec.disconnect()
         else:
             folder = Path(tempfile.mkdtemp(prefix="imu_dcm_rerun_"))

@@ -261,3 +261,24 @@ def test_gyro_layout_splits_only_when_a_channel_would_be_squashed():
     # Three channels of the same amplitude around 0: one shared plot.
     hand = np.stack([wobble, 0.8 * wobble[::-1], 8.0 * np.cos(3.0 * t)], axis=1)
     assert not gyro_needs_split(hand)
+
+
+def test_serve_mode_serves_the_web_viewer_on_loopback(tmp_path):
+    import os
+    import re
+    import signal
+    import urllib.request
+
+    line = show_replay(_view(n=40), "serve", tmp_path)
+    m = re.search(r"web viewer at (http://127\.0\.0\.1:(\d+)/\?url=\S+) .*kill (\d+)\)", line)
+    assert m, line
+    url, pid = m.group(1), int(m.group(3))
+    try:
+        # The page is the viewer, pointed at the gRPC proxy on 127.0.0.1 too.
+        assert "rerun%2Bhttp%3A%2F%2F127.0.0.1%3A" in url
+        with urllib.request.urlopen(f"http://127.0.0.1:{m.group(2)}/", timeout=10) as page:
+            assert page.status == 200
+            assert b"<html" in page.read(4096).lower()
+    finally:
+        os.killpg(pid, signal.SIGTERM)  # the server runs in its own process group
+        os.waitpid(pid, 0)
