@@ -24,7 +24,7 @@ BROAD_TRIALS = (
 def broad_dir() -> Path:
     """Folder holding the six BROAD bags; skips the test when it is not beside the repository."""
     if not all((BROAD_DIR / t / "metadata.yaml").is_file() for t in BROAD_TRIALS):
-        pytest.skip(f"BROAD bags not found under ../shared/data/broad (set IMU_DCM_BROAD_DIR)")
+        pytest.skip("BROAD bags not found under ../shared/data/broad (set IMU_DCM_BROAD_DIR)")
     return BROAD_DIR
 
 
