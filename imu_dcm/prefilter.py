@@ -804,8 +804,11 @@ def prefilter(
 
 
 def _euler_rates_dot(w: NDArray, inertia: NDArray, torque_b: NDArray | None) -> NDArray:
-    """``ω̇ = I⁻¹ (τ − ω × I ω)`` for principal inertias ``inertia`` (3,), rows of ``w`` (..., 3)."""
-    acc = -np.cross(w, w * inertia)
+    """``ω̇ = I⁻¹ (τ − ω × I ω)``, principal inertias ``inertia`` (3,), rates ``w`` (..., 3)."""
+    h = w * inertia  # angular momentum, body axes
+    x, y, z = w[..., 0], w[..., 1], w[..., 2]
+    acc = -np.stack([y * h[..., 2] - z * h[..., 1], z * h[..., 0] - x * h[..., 2],
+                     x * h[..., 1] - y * h[..., 0]], axis=-1)  # -(ω × I ω), np.cross is slow
     if torque_b is not None:
         acc = acc + torque_b
     return acc / inertia
