@@ -41,9 +41,13 @@ from numpy.typing import NDArray
 
 from imu_dcm.integrate import integrate
 from imu_dcm.metrics import attitude_error_deg
-from imu_dcm.prefilter import PrefilterConfig, prefilter
+from imu_dcm.prefilter import PrefilterConfig, euler_prefilter, prefilter
 
 MODES = ("none", "kalman", "rts")
+#: model-based modes (``euler_prefilter``), run on the free box only (its inertia is known)
+EULER_MODES = ("euler-kalman", "euler-rts")
+#: unmodelled-torque density told to the model-based filter, N·m/√Hz (the box is torque-free)
+EULER_TORQUE_NOISE = 1e-4
 #: scene label -> (data_synth scene, parameters, duration s, quick duration s)
 SCENES: dict[str, tuple[str, dict, float, float]] = {
     "heavy top, cusp": ("heavy-top", {"motion": "cusp"}, 4.0, 2.0),
@@ -55,7 +59,8 @@ DENSITIES = (1e-4, 1e-3, 1e-2)
 RATES_HZ = (200.0, 1000.0)
 QUANT_STEP_RAD_S = math.radians(0.061)
 BROAD_DIR = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "broad"
-COLORS = {"none": "#444444", "kalman": "#d95f02", "rts": "#1b9e77"}
+COLORS = {"none": "#444444", "kalman": "#d95f02", "rts": "#1b9e77", "euler-kalman": "#e7298a",
+          "euler-rts": "#7570b3"}
 
 
 @dataclass(frozen=True)
@@ -99,8 +104,10 @@ def synthetic_condition(label: str, density: float, rate_hz: float, seeds: int,
     traj = data_synth.simulate(scene, duration_s=dur_quick if quick else dur, **params)
     model = (data_synth.GyroModel(quantization_rad_s=QUANT_STEP_RAD_S) if quantize
              else data_synth.GyroModel(noise_density_rad_s_sqrt_hz=density))
+    euler = scene == "free-body" and not quantize and (rate_hz <= 200.0 or not quick)
+    modes_here = MODES + (EULER_MODES if euler else ())
     acc: dict[str, dict[str, list[float]]] = {m: {k: [] for k in ModeStats.__dataclass_fields__}
-                                             for m in MODES}
+                                             for m in modes_here}
     accels = []
     for seed in range(seeds):
         rec = data_synth.synthetic_gyro(traj, rate_hz, model=model, seed=seed)
@@ -116,18 +123,27 @@ def synthetic_condition(label: str, density: float, rate_hz: float, seeds: int,
                 "rts": prefilter(rec.values, t, "rts", cfg).omega_b}
         clean = {"none": w_true, "kalman": prefilter(w_true, t, "kalman", cfg).omega_b,
                  "rts": prefilter(w_true, t, "rts", cfg).omega_b}
-        for m in MODES:
+        if euler:
+            inertia = traj.params["inertia_kg_m2"]
+            for m in EULER_MODES:
+                outs[m] = euler_prefilter(rec.values, t, inertia, m.split("-")[1],
+                                          noise_density_rad_s_sqrt_hz=density,
+                                          torque_noise_n_m_sqrt_hz=EULER_TORQUE_NOISE).omega_b
+                clean[m] = None  # not run on exact rates (costly); reported as "–"
+        for m in modes_here:
             e = outs[m] - w_true
             a = _att_err_deg(outs[m], t, q_true)
-            d = _att_err_deg(clean[m], t, q_true) if m != "none" else att_ref
+            d = (att_ref if m == "none" else
+                 _att_err_deg(clean[m], t, q_true) if clean[m] is not None else np.nan)
             acc[m]["rate_rms_rad_s"].append(float(np.mean(e * e)))
             acc[m]["att_rms_deg"].append(float(np.mean(a * a)))
             acc[m]["att_max_deg"].append(float(a.max()))
             acc[m]["lag_samples"].append(_lag_samples(e, w_dot, rate_hz))
-            acc[m]["distortion_rate_rms_rad_s"].append(float(np.mean((clean[m] - w_true) ** 2)))
+            acc[m]["distortion_rate_rms_rad_s"].append(
+                float(np.mean((clean[m] - w_true) ** 2)) if clean[m] is not None else np.nan)
             acc[m]["distortion_att_rms_deg"].append(float(np.mean(d * d)))
     modes = {}
-    for m in MODES:
+    for m in modes_here:
         v = acc[m]
         modes[m] = ModeStats(
             rate_rms_rad_s=math.sqrt(np.mean(v["rate_rms_rad_s"])),
@@ -271,7 +287,7 @@ def plot(conds: list[Condition], quant: list[Condition], broad: list[BroadResult
     markers = dict(zip(SCENES, ["o", "s", "^", "D"]))
     for c in conds + quant:
         raw = c.modes["none"]
-        for m in ("kalman", "rts"):
+        for m in [k for k in c.modes if k != "none"]:
             s = c.modes[m]
             ax.scatter(raw.rate_rms_rad_s / s.rate_rms_rad_s, s.att_rms_deg / raw.att_rms_deg,
                        marker=markers[c.scene], s=30 + 25 * math.log10(c.density / 1e-5),
@@ -289,11 +305,11 @@ def plot(conds: list[Condition], quant: list[Condition], broad: list[BroadResult
     ax.tick_params(axis="y", which="minor", labelsize=7)
     ax.set_xlabel("rate error cut: raw RMS / filtered RMS  (higher = better rate)")
     ax.set_ylabel("attitude error RMS, filtered / none  (lower = better attitude)")
-    ax.set_title("(a) synthetic: rate gained vs attitude paid\n"
-                 "colour = mode, marker = scene, size = noise density, hollow = quantized gyro")
+    ax.set_title("(a) synthetic: rate gained vs attitude paid; colour = mode (euler = model-\n"
+                 "based, free box), marker = scene, size = noise density, hollow = quantized")
     from matplotlib.lines import Line2D
     handles = [Line2D([], [], ls="", marker="o", color=COLORS[m], label=m)
-               for m in ("kalman", "rts")]
+               for m in ("kalman", "rts") + EULER_MODES]
     handles += [Line2D([], [], ls="", marker=markers[s], color="gray", label=s) for s in SCENES]
     ax.legend(handles=handles, fontsize=8, loc="upper right")
     ax.grid(True, which="both", alpha=0.3)
@@ -383,6 +399,21 @@ def markdown(conds: list[Condition], quant: list[Condition], broad: list[BroadRe
             + " / ".join(_fmt(s[m].att_max_deg) for m in MODES) + " | "
             + " / ".join(_fmt(s[m].distortion_att_rms_deg) for m in MODES) + " |")
     md.append("")
+    with_euler = [c for c in conds if all(m in c.modes for m in EULER_MODES)]
+    if with_euler:
+        md += [("Model-based (stretch): `euler_prefilter`, filterpy UKF / unscented RTS with "
+                "Euler's equations and the box's inertia, told an unmodelled torque of "
+                f"{EULER_TORQUE_NOISE:g} N·m/√Hz (the box is torque-free), same data as above:"),
+               "",
+               ("| scene | N rad/s/√Hz | Hz | rate RMS none / rts / euler-kalman / euler-rts "
+                "(rad/s) | attitude RMS none / rts / euler-kalman / euler-rts (°) |"),
+               "|---|---|---|---|---|"]
+        order = ("none", "rts") + EULER_MODES
+        for c in with_euler:
+            md.append(f"| {c.scene} | {_fmt(c.density)} | {c.rate_hz:g} | "
+                      + " / ".join(_fmt(c.modes[m].rate_rms_rad_s) for m in order) + " | "
+                      + " / ".join(_fmt(c.modes[m].att_rms_deg) for m in order) + " |")
+        md.append("")
     if broad:
         md += [("BROAD bags (rest bias removed; noise density from the Allan deviation of the "
                "first rest, process noise by maximum likelihood; attitude error over the movement "
