@@ -98,17 +98,18 @@ class Timing:
         return self.n_items / self.median_s
 
 
-def time_once(fn: Callable[[], object]) -> float:
-    """Wall time of one call of ``fn`` (``time.perf_counter``), seconds."""
-    t0 = time.perf_counter()
+def time_once(fn: Callable[[], object], clock: Callable[[], float] = time.perf_counter) -> float:
+    """Time of one call of ``fn`` on ``clock`` (default wall time, ``time.perf_counter``), s."""
+    t0 = clock()
     fn()
-    return time.perf_counter() - t0
+    return clock() - t0
 
 
 def interleaved_medians(
     cases: Mapping[str, tuple[Callable[[], object], int]],
     rounds: int = 5,
     warmup: int = 1,
+    clock: Callable[[], float] = time.perf_counter,
 ) -> dict[str, Timing]:
     """Time several cases in interleaved rounds after a warm-up.
 
@@ -121,6 +122,10 @@ def interleaved_medians(
         Timed rounds (>= 1); each runs every case once, in the mapping's order.
     warmup : int
         Untimed calls of every case before the first round.
+    clock : callable
+        ``time.perf_counter`` (wall time, default) or ``time.process_time`` (CPU time of this
+        process: on a shared, loaded machine it leaves out the time other processes hold the
+        CPU; for single-threaded cases it equals wall time on an idle machine).
 
     Returns
     -------
@@ -134,5 +139,5 @@ def interleaved_medians(
     times: dict[str, list[float]] = {name: [] for name in cases}
     for _ in range(rounds):
         for name, (fn, _n) in cases.items():
-            times[name].append(time_once(fn))
+            times[name].append(time_once(fn, clock))
     return {name: Timing(name, int(n), tuple(times[name])) for name, (_fn, n) in cases.items()}

@@ -37,12 +37,19 @@ import math
 import warnings
 
 import numpy as np
-from numpy.lib.stride_tricks import sliding_window_view
+from numpy.lib.stride_tricks import as_strided
 from numpy.typing import ArrayLike, NDArray
 from scipy.spatial.transform import Rotation
 
 from imu_dcm.errors import GapWarning, ImuDcmWarning, InputError
-from imu_dcm.scan import BLOCK, blocked_prefix_product, prefix_product, quat_mul_parts
+from imu_dcm.scan import (
+    BLOCK,
+    CHUNK_SAMPLES,
+    blocked_prefix_product,
+    prefix_product,
+    prefix_product_parts,
+    quat_mul_parts,
+)
 from imu_dcm.so3 import as_quat_xyzw
 
 __all__ = [
@@ -165,12 +172,6 @@ def _check_method(method: str, allowed: tuple[str, ...]) -> None:
 # The formulas (shape-agnostic: floats for streaming, arrays for batch)
 # ----------------------------------------------------------------------------------------------
 
-def _cross(a: tuple, b: tuple) -> tuple:
-    ax, ay, az = a
-    bx, by, bz = b
-    return (ay * bz - az * by, az * bx - ax * bz, ax * by - ay * bx)
-
-
 def phi_parts(method: str, w_m: tuple, w_0: tuple, w_1: tuple, w_2: tuple,
               h_m, h_0, h_p) -> tuple:
     """Rotation-vector increment ``φ_i`` (rad, body frame) of one step, component-wise.
@@ -193,45 +194,51 @@ def phi_parts(method: str, w_m: tuple, w_0: tuple, w_1: tuple, w_2: tuple,
     tuple of 3
         ``φ_i`` components, rad.
     """
-    if method == "start":
-        return (h_0 * w_0[0], h_0 * w_0[1], h_0 * w_0[2])
-    if method == "end":
-        return (h_0 * w_1[0], h_0 * w_1[1], h_0 * w_1[2])
-    if method == "trapezoid" or method == "coning":
-        half = 0.5 * h_0
-        phi = (half * (w_0[0] + w_1[0]), half * (w_0[1] + w_1[1]), half * (w_0[2] + w_1[2]))
-        if method == "trapezoid":
-            return phi
-        return _add_coning(phi, w_0, w_1, h_0)
+    # Dispatch in order of use (magnus4 is the default); all products written out, no helpers:
+    # the streaming integrator calls this with floats once per sample.
+    x0, y0, z0 = w_0
+    x1, y1, z1 = w_1
     if method == "magnus4":
         # Simpson with the cubic mid-step rate, written as weights on the four samples:
-        # φ = c_m ω_{i-1} + c_0 ω_i + c_1 ω_{i+1} + c_2 ω_{i+2} + h²/12 ω_i × ω_{i+1}.
-        # Uniform steps give (-1, 13, 13, -1) h / 24. Sum of the weights = h.
+        # φ = -c_m ω_{i-1} + c_0 ω_i + c_1 ω_{i+1} - c_2 ω_{i+2} + h²/12 ω_i × ω_{i+1}.
+        # Uniform steps give (-1, 13, 13, -1) h / 24; the weights sum to h.
+        xm, ym, zm = w_m
+        x2, y2, z2 = w_2
         u = 0.5 * h_0
         a_m = u + h_m
         a_p = u + h_p
         s_m0 = h_m + h_0
         s_0p = h_0 + h_p
         s_all = s_m0 + h_p
-        h3 = h_0 * h_0 * h_0 * (1.0 / 6.0)
-        c_m = -h3 * a_p / (h_m * s_m0 * s_all)
-        c_2 = -h3 * a_m / (h_p * s_0p * s_all)
-        p = h_0 * a_m * a_p * (1.0 / 3.0)
+        h2 = h_0 * h_0
         h6 = h_0 * (1.0 / 6.0)
+        g = h2 * h6
+        c_m = g * a_p / (h_m * s_m0 * s_all)
+        c_2 = g * a_m / (h_p * s_0p * s_all)
+        p = h_0 * a_m * a_p * (1.0 / 3.0)
         c_0 = h6 + p / (h_m * s_0p)
         c_1 = h6 + p / (h_p * s_m0)
-        phi = (c_m * w_m[0] + c_0 * w_0[0] + c_1 * w_1[0] + c_2 * w_2[0],
-               c_m * w_m[1] + c_0 * w_0[1] + c_1 * w_1[1] + c_2 * w_2[1],
-               c_m * w_m[2] + c_0 * w_0[2] + c_1 * w_1[2] + c_2 * w_2[2])
-        return _add_coning(phi, w_0, w_1, h_0)
+        k = h2 * (1.0 / 12.0)
+        kx, ky, kz = k * x0, k * y0, k * z0
+        return (c_0 * x0 + c_1 * x1 - c_m * xm - c_2 * x2 + (ky * z1 - kz * y1),
+                c_0 * y0 + c_1 * y1 - c_m * ym - c_2 * y2 + (kz * x1 - kx * z1),
+                c_0 * z0 + c_1 * z1 - c_m * zm - c_2 * z2 + (kx * y1 - ky * x1))
+    if method == "trapezoid":
+        half = 0.5 * h_0
+        return (half * (x0 + x1), half * (y0 + y1), half * (z0 + z1))
+    if method == "coning":
+        # Trapezoid plus the second Magnus term for rates linear over the step.
+        half = 0.5 * h_0
+        k = h_0 * h_0 * (1.0 / 12.0)
+        kx, ky, kz = k * x0, k * y0, k * z0
+        return (half * (x0 + x1) + (ky * z1 - kz * y1),
+                half * (y0 + y1) + (kz * x1 - kx * z1),
+                half * (z0 + z1) + (kx * y1 - ky * x1))
+    if method == "start":
+        return (h_0 * x0, h_0 * y0, h_0 * z0)
+    if method == "end":
+        return (h_0 * x1, h_0 * y1, h_0 * z1)
     raise InputError(f"Expected method in {METHODS[:-1]}, got {method!r}")
-
-
-def _add_coning(phi: tuple, w_0: tuple, w_1: tuple, h_0) -> tuple:
-    """``φ + h²/12 ω_0 × ω_1``: the coning (second Magnus) term for rates linear over the step."""
-    s = h_0 * h_0 * (1.0 / 12.0)
-    cx, cy, cz = _cross((s * w_0[0], s * w_0[1], s * w_0[2]), w_1)
-    return (phi[0] + cx, phi[1] + cy, phi[2] + cz)
 
 
 def _horner(t2, coefs: tuple):
@@ -285,14 +292,15 @@ def exp_parts(px, py, pz) -> tuple:
 
 def _extrapolate(t_nodes: NDArray, w_nodes: NDArray, t: float) -> NDArray:
     """Value at ``t`` of the polynomial through ``(t_nodes, w_nodes)`` (Lagrange form)."""
-    out = np.zeros(3)
-    for j in range(len(t_nodes)):
+    tn = t_nodes.tolist()
+    weights = []
+    for j, tj in enumerate(tn):
         lj = 1.0
-        for m in range(len(t_nodes)):
-            if m != j:
-                lj *= (t - t_nodes[m]) / (t_nodes[j] - t_nodes[m])
-        out += lj * w_nodes[j]
-    return out
+        for i, ti in enumerate(tn):
+            if i != j:
+                lj *= (t - ti) / (tj - ti)
+        weights.append(lj)
+    return np.asarray(weights) @ w_nodes
 
 
 def ghost_start(omega: NDArray, t: NDArray) -> tuple[NDArray, float]:
@@ -339,36 +347,43 @@ def rate_quats(omega: NDArray, t: NDArray, dt: NDArray, q_first: NDArray, method
     if m <= 0:
         return np.asarray(q_first, dtype=float)[None, :].copy()
     K = int(block)
+    small = m <= CHUNK_SAMPLES  # fits in cache: natural order, no block layout needed
     nb = -(-m // K)
-    # Padded stencil arrays: wpad[j] = ω_{lo-1+j}, hpad[j] = dt_{lo-1+j}.
-    wpad = np.empty((nb * K + 3, 3))
-    hpad = np.empty(nb * K + 2)
+    length = m if small else nb * K  # steps in the padded layout
+    # Padded stencil arrays, struct-of-arrays: wpad[:, j] = ω_{lo-1+j}, hpad[j] = dt_{lo-1+j}.
+    wpad = np.empty((3, length + 3))
+    hpad = np.empty(length + 2)
     j0 = max(lo - 1, 0)
     j1 = min(hi + 2, n)  # samples lo-1 .. hi+1 that exist
     off = j0 - (lo - 1)
-    wpad[off:off + j1 - j0] = omega[j0:j1]
+    wpad[:, off:off + j1 - j0] = omega[j0:j1].T
     hj1 = min(hi + 1, n - 1)
     hpad[off:off + hj1 - j0] = dt[j0:hj1]
     if lo == 0:
-        g, gh = ghost_start(omega, t)
-        wpad[0] = g
-        hpad[0] = gh
+        wpad[:, 0], hpad[0] = ghost_start(omega, t)
     tail_w = off + j1 - j0
     tail_h = off + hj1 - j0
-    if tail_w < len(wpad):
-        g, gh = ghost_end(omega, t)
-        wpad[tail_w:] = g
-        hpad[tail_h:] = gh
-
-    win_w = [sliding_window_view(wpad[:, c], K + 3) for c in range(3)]
-    win_h = sliding_window_view(hpad, K + 2)
+    if hi == n - 1:
+        wpad[:, tail_w], hpad[tail_h] = ghost_end(omega, t)
+        tail_w += 1
+        tail_h += 1
+    # Padding of the last block (its steps are replaced by the identity): any finite value.
+    wpad[:, tail_w:] = wpad[:, tail_w - 1:tail_w]
+    hpad[tail_h:] = hpad[tail_h - 1]
+    if small:
+        rows = [tuple(wpad[c, r:r + m] for c in range(3)) for r in range(4)]
+        phi = phi_parts(method, *rows, hpad[0:m], hpad[1:m + 1], hpad[2:m + 2])
+        return prefix_product_parts(q_first, exp_parts(*phi))
 
     def fill(b0: int, b1: int) -> tuple:
-        W = [np.ascontiguousarray(v[b0 * K:b1 * K:K].T) for v in win_w]  # (K + 3, nb_chunk)
-        H = np.ascontiguousarray(win_h[b0 * K:b1 * K:K].T)  # (K + 2, nb_chunk)
-        rows = [tuple(W[c][r:r + K] for c in range(3)) for r in range(4)]
-        phi = phi_parts(method, rows[0], rows[1], rows[2], rows[3], H[0:K], H[1:K + 1],
-                        H[2:K + 2])
+        # Gather blocks b0..b1 with their stencil halo: W[c, r, b] = wpad[c, b K + r].
+        nbc = b1 - b0
+        W = np.array(as_strided(wpad[:, b0 * K:], shape=(3, K + 3, nbc),
+                                strides=(wpad.strides[0], 8, 8 * K), writeable=False))
+        H = np.array(as_strided(hpad[b0 * K:], shape=(K + 2, nbc), strides=(8, 8 * K),
+                                writeable=False))
+        rows = [(W[0, r:r + K], W[1, r:r + K], W[2, r:r + K]) for r in range(4)]
+        phi = phi_parts(method, *rows, H[0:K], H[1:K + 1], H[2:K + 2])
         return exp_parts(*phi)
 
     return blocked_prefix_product(q_first, m, fill, block=K)

@@ -49,8 +49,9 @@ from imu_dcm.so3 import as_quat_xyzw
 
 __all__ = ["RENORMALIZE_EVERY", "DcmIntegrator"]
 
-#: The attitude quaternion is renormalised after this many single-sample steps.
+#: The attitude quaternion is renormalised every this many samples (a power of two).
 RENORMALIZE_EVERY = 64
+_RENORM_MASK = RENORMALIZE_EVERY - 1
 
 
 class DcmIntegrator:
@@ -95,12 +96,12 @@ class DcmIntegrator:
             raise InputError(f"Expected `t0_s` finite or None, got {t0_s}")
         self._t0_s = None if t0_s is None else float(t0_s)
         self._lag = 1 if method == "magnus4" else 0
-        self._ws: list[list[float]] = []  # last (up to) 4 rate samples, oldest first
+        self._ws: list[tuple] = []  # last (up to) 4 rate samples (x, y, z), oldest first
         self._ts: list[float] = []  # their stamps
         self._n = 0  # samples received
-        self._done = 0  # index of the sample whose attitude self._q is
-        self._since_norm = 0
-        self._last_dt = math.inf
+        self._pending = 0  # samples received after the one whose attitude self._q is
+        self._gap_dt = math.inf  # GAP_FACTOR x the last step
+        self._steady = False
         self._finished = False
         self._phi_sum = (0.0, 0.0, 0.0)
         if method == "rotvec_sum":
@@ -128,7 +129,7 @@ class DcmIntegrator:
         """Stamp (s) of the current attitude; ``None`` before the first sample (unless ``t0_s``)."""
         if self._n == 0:
             return self._t0_s
-        return self._ts[len(self._ts) - 1 - (self._n - 1 - self._done)]
+        return self._ts[len(self._ts) - 1 - self._pending]
 
     @property
     def n_samples(self) -> int:
@@ -161,33 +162,74 @@ class DcmIntegrator:
             after :meth:`finish`.
         """
         try:
-            x, y, z = omega_b.tolist() if isinstance(omega_b, np.ndarray) else omega_b
-            w = [float(x), float(y), float(z)]
+            if type(omega_b) is np.ndarray:
+                x, y, z = omega_b.tolist()  # Python numbers already (fast arithmetic)
+            else:
+                x, y, z = omega_b
+                x, y, z = float(x), float(y), float(z)
             t = float(t_s)
+            bad = x - x or y - y or z - z or t - t  # nan (also inf - inf) is truthy
         except (TypeError, ValueError):
             raise InputError(f"Expected `omega_b` 3 numbers (rad/s) and `t_s` a number, got "
                              f"{omega_b!r} and {t_s!r} (sample {self._n})") from None
-        if not (math.isfinite(w[0]) and math.isfinite(w[1]) and math.isfinite(w[2])
-                and math.isfinite(t)):
-            raise InputError(f"Expected finite `omega_b` and `t_s`, got {w} at t_s = {t} "
-                             f"(sample {self._n})")
+        if bad:
+            raise InputError(f"Expected finite `omega_b` and `t_s`, got {[x, y, z]} at "
+                             f"t_s = {t} (sample {self._n})")
+        ts = self._ts
+        if self._steady:
+            # Steady state (buffers full, not finished): one step, formulas from integrate.py.
+            h = t - ts[-1]
+            if not h > 0.0:
+                self._raise_order(t)
+            if h > self._gap_dt:
+                self._check_gap(h, t)
+            self._gap_dt = GAP_FACTOR * h
+            ws = self._ws
+            ws.append((x, y, z))
+            ts.append(t)
+            del ws[0], ts[0]
+            self._n += 1
+            if self._lag:
+                phi = phi_parts("magnus4", ws[0], ws[1], ws[2], ws[3], ts[1] - ts[0],
+                                ts[2] - ts[1], h)
+            else:
+                phi = phi_parts(self._method, ws[2], ws[2], ws[3], ws[3], h, h, h)
+            q = quat_mul_parts(self._q, exp_parts(*phi))  # _step, inlined on the hot path
+            if not self._n & _RENORM_MASK:
+                inv = 1.0 / math.sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3])
+                q = (q[0] * inv, q[1] * inv, q[2] * inv, q[3] * inv)
+            self._q = q
+            return np.array(q)
         if self._n == 0 and self._t0_s is not None:
-            self._push(w, self._t0_s)
-        self._push(w, t)
+            self._push((x, y, z), self._t0_s)
+        self._push((x, y, z), t)
         return np.array(self._q)
 
-    def _push(self, w: list[float], t: float) -> None:
+    def _step(self, phi: tuple) -> None:
+        """Commit one step ``q <- q ⊗ exp(φ)``, renormalising every RENORMALIZE_EVERY steps."""
+        q = quat_mul_parts(self._q, exp_parts(*phi))
+        if not self._n & _RENORM_MASK:
+            inv = 1.0 / math.sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3])
+            q = (q[0] * inv, q[1] * inv, q[2] * inv, q[3] * inv)
+        self._q = q
+        self._pending -= 1
+
+    def _raise_order(self, t: float) -> None:
+        raise InputError(f"Expected `t_s` strictly increasing, got t_s[{self._n}] = "
+                         f"{t!r} s after t_s[{self._n - 1}] = {self._ts[-1]!r} s")
+
+    def _push(self, w: tuple, t: float) -> None:
+        """General (warm-up and rotvec_sum) path of :meth:`update`."""
         if self._finished:
             raise InputError("Expected no samples after finish(), got one")
         ts = self._ts
         if ts:
             h = t - ts[-1]
             if not h > 0.0:
-                raise InputError(f"Expected `t_s` strictly increasing, got t_s[{self._n}] = "
-                                 f"{t!r} s after t_s[{self._n - 1}] = {ts[-1]!r} s")
-            if h > GAP_FACTOR * self._last_dt:
+                self._raise_order(t)
+            if h > self._gap_dt:
                 self._check_gap(h, t)
-            self._last_dt = h
+            self._gap_dt = GAP_FACTOR * h
         ws = self._ws
         ws.append(w)
         ts.append(t)
@@ -196,16 +238,17 @@ class DcmIntegrator:
         self._n += 1
         n = self._n
         method = self._method
+        self._steady = method != "rotvec_sum" and n >= (4 if self._lag else 2) and len(ws) == 4
         if n == 1:
             return
+        self._pending += 1
         if method == "magnus4":
             if n < 4:
                 return
             if n == 4:  # first commit: steps 0 and 1 (step 0 with the start ghost)
                 self._commit_window(lo=0, hi=2)
                 return
-            w_m, w_0, w_1, w_2 = ws
-            phi = phi_parts(method, w_m, w_0, w_1, w_2, ts[1] - ts[0], ts[2] - ts[1],
+            phi = phi_parts(method, ws[0], ws[1], ws[2], ws[3], ts[1] - ts[0], ts[2] - ts[1],
                             ts[3] - ts[2])
         elif method == "rotvec_sum":
             w_0 = ws[-2]
@@ -214,20 +257,12 @@ class DcmIntegrator:
             s = (s[0] + w_0[0] * h, s[1] + w_0[1] * h, s[2] + w_0[2] * h)
             self._phi_sum = s
             self._q = quat_mul_parts(self._q0, exp_parts(*s))
-            self._done = n - 1
+            self._pending = 0
             return
         else:
-            w_0, w_1 = ws[-2], ws[-1]
             h = ts[-1] - ts[-2]
-            phi = phi_parts(method, w_0, w_0, w_1, w_1, h, h, h)
-        q = quat_mul_parts(self._q, exp_parts(*phi))
-        self._since_norm += 1
-        if self._since_norm >= RENORMALIZE_EVERY:
-            inv = 1.0 / math.sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3])
-            q = (q[0] * inv, q[1] * inv, q[2] * inv, q[3] * inv)
-            self._since_norm = 0
-        self._q = q
-        self._done += 1
+            phi = phi_parts(method, ws[-2], ws[-2], ws[-1], ws[-1], h, h, h)
+        self._step(phi)
 
     def _check_gap(self, h: float, t: float) -> None:
         ts = self._ts
@@ -245,8 +280,7 @@ class DcmIntegrator:
         w, t = self._window()
         q = rate_quats(w, t, np.diff(t), np.array(self._q), self._method, lo=lo, hi=hi)
         self._q = tuple(q[-1].tolist())
-        self._done += hi - lo
-        self._since_norm = 0
+        self._pending -= hi - lo
 
     def finish(self) -> NDArray[np.float64]:
         """Close the record: for ``magnus4`` commit the last step (one-sided end stencil, as the
@@ -256,10 +290,11 @@ class DcmIntegrator:
         """
         if not self._finished and self._method == "magnus4" and self._n >= 2:
             n_buf = len(self._ws)
-            pending = self._n - 1 - self._done
+            pending = self._pending
             if pending:
                 self._commit_window(lo=n_buf - 1 - pending, hi=n_buf - 1)
         self._finished = True
+        self._steady = False
         return np.array(self._q)
 
     def update_many(self, omega_b: ArrayLike, t_s: ArrayLike) -> Rotation:
@@ -331,11 +366,11 @@ class DcmIntegrator:
             hi = len(t) - 1 - self._lag
             q = rate_quats(w, t, dt, np.array(self._q), self._method, lo=lo, hi=hi)[1:]
         self._q = tuple(q[-1].tolist())
-        self._since_norm = 0
         n_new = len(w_new)
         self._n += n_new
-        self._done += n_new
-        self._ws = w[-4:].tolist()
+        self._ws = [tuple(r) for r in w[-4:].tolist()]
         self._ts = t[-4:].tolist()
-        self._last_dt = float(dt[-1])
+        self._gap_dt = GAP_FACTOR * float(dt[-1])
+        self._steady = (self._method != "rotvec_sum" and len(self._ws) == 4
+                        and self._n >= (4 if self._lag else 2))
         return q
