@@ -51,7 +51,7 @@ def _optional_run(module: str, out_dir: Path, quick: bool,
         raise
     run = getattr(mod, "run", None)
     if not callable(run):
-        return "no run()", []
+        return f"no run(); a separate command (python -m benchmarks.{module})", []
     params = inspect.signature(run).parameters
     kwargs = {}
     if "quick" in params:
@@ -111,9 +111,14 @@ def main(argv: list[str] | None = None) -> int:
         progress("convergence: wrote convergence.png")
         stab_md = stability.run(out, quick=args.quick, progress=progress)
         extra: list[str] = []
+        failed = []
         for module in ("noise_study", "core_speed"):
             progress(f"{module}: running")
-            status, lines = _optional_run(module, out, args.quick, progress)
+            try:
+                status, lines = _optional_run(module, out, args.quick, progress)
+            except Exception as exc:  # noqa: BLE001 - another study's failure must not lose this run's tables
+                status, lines = f"FAILED ({type(exc).__name__}: {exc})", []
+                failed.append(module)
             progress(f"{module}: {status}")
             if lines:
                 extra += lines + [""]
@@ -138,6 +143,10 @@ def main(argv: list[str] | None = None) -> int:
     (out / "pareto.json").write_text(
         json.dumps([dataclasses.asdict(m) for m in meas], indent=0) + "\n", encoding="utf-8")
     progress(f"done: {out / 'results.md'} ({elapsed:.0f} s)")
+    if failed:
+        print(f"benchmarks: Expected every study to run, got failures in {', '.join(failed)}",
+              file=sys.stderr)
+        return 1
     return 0
 
 

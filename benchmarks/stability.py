@@ -861,7 +861,7 @@ def run(out_dir: str | Path, quick: bool = False,
     progress(f"stability 4/8: long run, {n_long:.0e} steps (batch, chunked)")
     lr = long_run(n_long, method="magnus4", chunk=n_long // 10)
     lr2 = long_run(n_long, method="trapezoid", chunk=n_long // 10)
-    n_naive = 100_000 if quick else 2_000_000
+    n_naive = 100_000 if quick else n_long
     progress(f"stability 4/8: reference document's un-normalised 3x3 loop, {n_naive:.0e} steps")
     nd = naive_dcm_drift(n_naive)
     fig, (a1, a2) = plt.subplots(1, 2, figsize=(12, 4.6))
