@@ -36,7 +36,7 @@ from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
-from scipy import linalg, optimize, signal
+from scipy import linalg
 
 from imu_dcm.allan import allan_deviation, noise_density_from_allan
 from imu_dcm.errors import InputError
@@ -519,6 +519,8 @@ def _modal_scan(A: NDArray, b: NDArray, x0: NDArray) -> NDArray | None:
     ``A = V Λ V⁻¹``; each mode ``ξ_k = λ ξ_{k-1} + (V⁻¹ b_k)`` runs in ``scipy.signal.lfilter``.
     Returns None when ``V`` is too ill-conditioned for that to be accurate.
     """
+    from scipy import signal  # imported here: slow to import, needed only for long runs
+
     lam, V = np.linalg.eig(A)
     if np.linalg.cond(V) > 1e6:
         return None
@@ -624,6 +626,8 @@ def _innovation_nll(z: NDArray, dt: float, nm: int, q: float, r: float, burn: in
     H[0, 0] = 1.0
     S = float(P[0, 0] + r)
     K = P[:, :1] / S
+    from scipy import signal
+
     # predicted measurement: s_{k+1} = F (I - K H) s_k + F K z_k, y_k = H s_k, from s_0 = z_0;
     # in the eigenbasis of F (I - K H) = V Λ V⁻¹ it is a sum of first-order IIR filters
     lam, V = np.linalg.eig(F @ (np.eye(nm) - K @ H))
@@ -640,6 +644,8 @@ def _innovation_nll(z: NDArray, dt: float, nm: int, q: float, r: float, burn: in
 
 def _fit_accel(z: NDArray, t_s: NDArray, model: str, density: float) -> dict[str, Any]:
     """Maximum-likelihood ``σ_α`` (rad/s²) of the stationary filter at the median step."""
+    from scipy import optimize
+
     dt = float(np.median(np.diff(t_s)))
     nm = _n_motion(model)
     r = density**2 / dt
