@@ -68,10 +68,9 @@ DELTA_METHODS = ("plain", "one_plus_previous", "two_sample", "three_sample")
 #: A step longer than this many median steps is reported as a gap (GapWarning).
 GAP_FACTOR = 5.0
 
-# exp(φ) by series in θ² = |φ|² up to this bound (θ <= 0.5 rad): the first omitted terms are
-# θ¹⁴/(4⁷ 14!) < 5e-20 and θ¹⁴/(2 4⁷ 15!), far below double precision.
+# exp(φ) by the series of sin(θ/2)/θ in θ² = |φ|² up to this bound (θ <= 0.5 rad), where seven
+# terms leave out θ¹⁴/(2 4⁷ 15!) < 3e-21, far below double precision.
 _POLY_THETA2_MAX = 0.25
-_COS_HALF = tuple((-1) ** k / (4 ** k * math.factorial(2 * k)) for k in range(7))
 _SINC_HALF = tuple((-1) ** k / (2 * 4 ** k * math.factorial(2 * k + 1)) for k in range(7))
 # Below this θ the float (streaming) path uses the 3-term series (error θ⁶/... < 1e-25).
 _TINY_THETA = 1e-4
@@ -274,9 +273,14 @@ def exp_parts(px, py, pz) -> tuple:
             c = math.cos(0.5 * theta)
         return (px * s, py * s, pz * s, c)
     t2 = np.asarray(t2)
-    s = _horner(t2, _SINC_HALF)
-    c = _horner(t2, _COS_HALF)
-    if t2.size and t2.max() > _POLY_THETA2_MAX:
+    t2_max = float(t2.max()) if t2.size else 0.0
+    # As many series terms as the largest angle needs: the first one left out is < 1e-17.
+    n_terms = next((n for n in range(1, len(_SINC_HALF))
+                    if abs(_SINC_HALF[n]) * t2_max ** n < 1e-17), len(_SINC_HALF))
+    s = _horner(t2, _SINC_HALF[:n_terms])
+    # cos(θ/2) = sqrt(1 - sin²(θ/2)) for θ <= 0.5: exact to rounding, and makes |q| = 1.
+    c = np.sqrt(1.0 - t2 * s * s)
+    if t2_max > _POLY_THETA2_MAX:
         big = t2 > _POLY_THETA2_MAX
         theta = np.sqrt(t2[big])
         s = np.array(s, copy=True)

@@ -135,16 +135,25 @@ def _sequential_pair(a0: complex, b0: complex, da: NDArray, db: NDArray):
     return out_a, out_b
 
 
-def _local_scan(da: NDArray, db: NDArray, ra: NDArray, rb: NDArray) -> None:
-    """In-block inclusive prefix: ``r[k] = d[0] ⊗ ... ⊗ d[k]`` along rows of (K, nb) arrays."""
+def _local_scan(da: NDArray, db: NDArray, r: NDArray) -> None:
+    """In-block inclusive prefix ``r[k] = d[0] ⊗ ... ⊗ d[k]`` along rows of (K, nb) arrays.
+
+    ``r`` has shape (K, 2, nb): ``r[k, 0]`` = a, ``r[k, 1]`` = b. Each step is the row vector
+    ``(a, b)`` of the running product times the SU(2) matrix ``[[a2, b2], [-conj(b2), conj(a2)]]``
+    of the increment: two numpy calls (a broadcast product and a sum) per step.
+    """
     K, nb = da.shape
-    cda = np.conjugate(da)
-    cdb = np.conjugate(db)
-    tmp = np.empty(nb, dtype=complex)
-    ra[0] = da[0]
-    rb[0] = db[0]
+    m = np.empty((K, 2, 2, nb), dtype=complex)
+    m[:, 0, 0] = da
+    m[:, 0, 1] = db
+    np.negative(db.conj(), out=m[:, 1, 0])
+    np.conjugate(da, out=m[:, 1, 1])
+    r[0, 0] = da[0]
+    r[0, 1] = db[0]
+    prod = np.empty((2, 2, nb), dtype=complex)
     for k in range(1, K):
-        _mul_into(ra[k - 1], rb[k - 1], da[k], db[k], cda[k], cdb[k], ra[k], rb[k], tmp)
+        np.multiply(r[k - 1][:, None, :], m[k], out=prod)
+        np.add(prod[0], prod[1], out=r[k])
 
 
 def _prefix_pair(a0: complex, b0: complex, da: NDArray, db: NDArray, K: int):
@@ -159,9 +168,9 @@ def _prefix_pair(a0: complex, b0: complex, da: NDArray, db: NDArray, K: int):
     pb[:M] = db
     bda = np.ascontiguousarray(pa.reshape(nb, K).T)
     bdb = np.ascontiguousarray(pb.reshape(nb, K).T)
-    ra = np.empty((K, nb), dtype=complex)
-    rb = np.empty((K, nb), dtype=complex)
-    _local_scan(bda, bdb, ra, rb)
+    r = np.empty((K, 2, nb), dtype=complex)
+    _local_scan(bda, bdb, r)
+    ra, rb = r[:, 0], r[:, 1]
     ea, eb = _prefix_pair(a0, b0, ra[K - 1], rb[K - 1], K)  # (nb + 1,): start of each block
     oa = np.empty((K, nb), dtype=complex)
     ob = np.empty((K, nb), dtype=complex)
@@ -221,8 +230,8 @@ def blocked_prefix_product(q0: ArrayLike, n_steps: int, fill: FillFn, block: int
     b0 = complex(q0[0], q0[1])
     nb = -(-M // K)
     cb = max(1, CHUNK_SAMPLES // K)  # blocks per cache chunk
-    ra = np.empty((K, nb), dtype=complex)
-    rb = np.empty((K, nb), dtype=complex)
+    r = np.empty((K, 2, nb), dtype=complex)
+    ra, rb = r[:, 0], r[:, 1]
     # Pass 1: increments and local (in-block) inclusive prefix, chunk by chunk.
     for b0_ in range(0, nb, cb):
         b1_ = min(nb, b0_ + cb)
@@ -231,7 +240,7 @@ def blocked_prefix_product(q0: ArrayLike, n_steps: int, fill: FillFn, block: int
             pad = M - (nb - 1) * K
             da[pad:, -1] = 1.0
             db[pad:, -1] = 0.0
-        _local_scan(da, db, ra[:, b0_:b1_], rb[:, b0_:b1_])
+        _local_scan(da, db, r[:, :, b0_:b1_])
     # Recursion: attitude at the start of every block.
     ea, eb = _prefix_pair(a0, b0, ra[K - 1], rb[K - 1], K)
     # Pass 2: apply each block's start attitude, normalise, write [x, y, z, w] rows.
