@@ -7,11 +7,15 @@ in seconds.
 """
 
 from imu_dcm.errors import GapWarning, ImuDcmError, ImuDcmWarning, InputError, LogError
-from imu_dcm.integrate import METHODS, integrate
+from imu_dcm.integrate import DELTA_METHODS, METHODS, integrate, integrate_delta
+from imu_dcm.streaming import DcmIntegrator
 
 __all__ = [
     "METHODS",
+    "DELTA_METHODS",
     "integrate",
+    "integrate_delta",
+    "DcmIntegrator",
     "ImuDcmError",
     "InputError",
     "LogError",
