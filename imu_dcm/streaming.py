@@ -36,6 +36,7 @@ from imu_dcm.errors import GapWarning, InputError
 from imu_dcm.integrate import (
     GAP_FACTOR,
     METHODS,
+    _as_float_array,
     _check_method,
     _to_rotation,
     _warn_rotvec_sum,
@@ -322,39 +323,35 @@ class DcmIntegrator:
             raise InputError("Expected at least one sample, got 0")
         if self._finished:
             raise InputError("Expected no samples after finish(), got some")
-        # Validate the chunk together with the last buffered sample (order, gaps, finiteness).
-        if self._ts:
-            w_chk = np.vstack([self._ws[-1], w])
-            t_chk = np.concatenate([[self._ts[-1]], t])
-        elif self._t0_s is not None:
-            w_chk = np.vstack([w[:1], w])
-            t_chk = np.concatenate([[self._t0_s], t])
-        else:
-            w_chk, t_chk = w, t
-        if len(t_chk) >= 2:
-            check_samples(w_chk, t_chk)
-        else:
-            check_samples(np.vstack([w_chk, w_chk]), np.array([t_chk[0], t_chk[0] + 1.0]))
-        w = np.ascontiguousarray(w, dtype=float)
-        t = np.asarray(t, dtype=float)
+        w = _as_float_array(w, "omega_b")
+        t = _as_float_array(t, "t_s")
         out = np.empty((len(w), 4))
-        # Warm-up samples one at a time, until the stencil buffer is full.
+        # Warm-up samples one at a time (checked by update), until the stencil buffer is full.
         need = 4 if self._method == "magnus4" else 1
         j = 0
         while j < len(w) and self._n < need:
             out[j] = self.update(w[j], t[j])
             j += 1
         if j < len(w):
-            out[j:] = self._batch(w[j:], t[j:])
+            # Steady state: the chunk with the buffered samples its first stencils need, checked
+            # as one record (finite, increasing across the junction, gaps).
+            keep = 3 if self._method == "magnus4" else 1
+            r = len(w) - j
+            W = np.empty((keep + r, 3))
+            T = np.empty(keep + r)
+            W[:keep] = self._ws[-keep:]
+            W[keep:] = w[j:]
+            T[:keep] = self._ts[-keep:]
+            T[keep:] = t[j:]
+            W, T, dt = check_samples(W, T)
+            out[j:] = self._batch(W, T, dt, keep)
         return _to_rotation(out)
 
-    def _batch(self, w_new: NDArray, t_new: NDArray) -> NDArray:
-        """Process a chunk in steady state with the batch code; update the state."""
-        keep = 3 if self._method == "magnus4" else 1
-        w_buf, t_buf = self._window()
-        w = np.vstack([w_buf[-keep:], w_new])
-        t = np.concatenate([t_buf[-keep:], t_new])
-        dt = np.diff(t)
+    def _batch(self, w: NDArray, t: NDArray, dt: NDArray, keep: int) -> NDArray:
+        """Process checked samples in steady state with the batch code; update the state.
+
+        ``w``, ``t`` start with the ``keep`` newest buffered samples, then the new ones.
+        """
         if self._method == "rotvec_sum":
             inc = np.vstack([self._phi_sum, w[:-1] * dt[:, None]])
             phi = np.cumsum(inc, axis=0)[1:]
@@ -366,10 +363,10 @@ class DcmIntegrator:
             hi = len(t) - 1 - self._lag
             q = rate_quats(w, t, dt, np.array(self._q), self._method, lo=lo, hi=hi)[1:]
         self._q = tuple(q[-1].tolist())
-        n_new = len(w_new)
+        n_new = len(t) - keep
         self._n += n_new
-        self._ws = [tuple(r) for r in w[-4:].tolist()]
-        self._ts = t[-4:].tolist()
+        self._ws = (self._ws[:-keep] + [tuple(r) for r in w[-4:].tolist()])[-4:]
+        self._ts = (self._ts[:-keep] + t[-4:].tolist())[-4:]
         self._gap_dt = GAP_FACTOR * float(dt[-1])
         self._steady = (self._method != "rotvec_sum" and len(self._ws) == 4
                         and self._n >= (4 if self._lag else 2))
