@@ -409,7 +409,7 @@ def plot_pareto(meas: Sequence[Measurement], cases: Sequence[Case], path: str | 
                         continue
                     last_y = max(m.max_err_deg, 1e-12)
                     ax.annotate(f"{m.rate_hz:g} Hz", (m.ns_per_sample, max(m.max_err_deg, 1e-12)),
-                                textcoords="offset points", xytext=(-8, 0), ha="right",
+                                textcoords="offset points", xytext=(8, 0), ha="left",
                                 va="center", fontsize=8, color=colour)
         rates = sorted({m.rate_hz for m in meas if m.scene == key})
         ax.set_title(f"{titles.get(key, key)}  (points: {rates[0]:g}–{rates[-1]:g} Hz)")
