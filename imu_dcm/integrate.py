@@ -363,11 +363,12 @@ def rate_quats(omega: NDArray, t: NDArray, dt: NDArray, q_first: NDArray, method
     wpad[:, off:off + j1 - j0] = omega[j0:j1].T
     hj1 = min(hi + 1, n - 1)
     hpad[off:off + hj1 - j0] = dt[j0:hj1]
+    ghosts = method == "magnus4"  # only its stencil reaches beyond the step
     if lo == 0:
-        wpad[:, 0], hpad[0] = ghost_start(omega, t)
+        wpad[:, 0], hpad[0] = ghost_start(omega, t) if ghosts else (omega[0], dt[0])
     tail_w = off + j1 - j0
     tail_h = off + hj1 - j0
-    if hi == n - 1:
+    if hi == n - 1 and ghosts:
         wpad[:, tail_w], hpad[tail_h] = ghost_end(omega, t)
         tail_w += 1
         tail_h += 1

@@ -21,6 +21,7 @@ The result agrees with the sequential loop to rounding (~1e-15 per element, test
 from __future__ import annotations
 
 import ctypes
+import math
 import os
 import sys
 from collections.abc import Callable
@@ -66,9 +67,9 @@ __all__ = [
 #: Default block length K (steps per block). Measured on 10^6 steps (benchmarks/core_speed.py):
 #: short blocks keep the rows long, the number of numpy calls per sample low.
 BLOCK = 8
-#: Samples per cache chunk of blocks (complex arrays of 512 kB); shorter inputs are not blocked
+#: Samples per cache chunk of blocks (complex arrays of 256 kB); shorter inputs are not split
 #: into chunks.
-CHUNK_SAMPLES = 32768
+CHUNK_SAMPLES = 1 << 14
 # At most this many steps: a plain loop over Python complex numbers (~0.2 µs per step, fewer
 # numpy calls than one more blocked level).
 _SMALL = 128
@@ -162,6 +163,10 @@ def _prefix_pair(a0: complex, b0: complex, da: NDArray, db: NDArray, K: int):
     M = len(da)
     if M <= _SMALL:
         return _sequential_pair(a0, b0, da, db)
+    if M <= _SMALL * K:
+        # The totals will be multiplied in a plain loop (~0.2 µs each) and each in-block step
+        # costs ~1 µs of numpy calls: balance the two with K ~ sqrt(M / 5).
+        K = max(K, int(math.sqrt(M / 5.0)))
     nb = -(-M // K)
     pa = np.ones(nb * K, dtype=complex)
     pb = np.zeros(nb * K, dtype=complex)
