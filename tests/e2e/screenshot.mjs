@@ -14,7 +14,8 @@
 //
 // --seek-frac F (for README pictures, not used by the test): once drawn, click the time panel's
 // slider at the fraction F of its length (the slider is found as the longest dark horizontal run
-// in the bottom 40 pixel rows), then wait for the pixels to settle again before the screenshot.
+// in the bottom 40 pixel rows), pause the playback if it runs (its button is blue while playing)
+// and wait for the pixels to settle again before the screenshot.
 
 import { chromium } from "playwright-core";
 import fs from "node:fs";
@@ -86,12 +87,24 @@ async function pixelStats({ pngBase64, targets }) {
       }
     }
   }
+  // The play/pause button (bottom-left) is drawn on a blue square while playing.
+  let play = { n: 0, x: 0, y: 0 };
+  for (let y = bmp.height - 30; y < bmp.height; y++) {
+    for (let x = 0; x < 60; x++) {
+      const i = 4 * (y * bmp.width + x);
+      if (d[i + 2] > 180 && d[i] < 120 && d[i + 2] - d[i + 1] > 60) {
+        play = { n: play.n + 1, x: play.x + x, y: play.y + y };
+      }
+    }
+  }
+  const playing = play.n > 20 ? { x: play.x / play.n, y: play.y / play.n } : null;
   return {
     width: bmp.width,
     height: bmp.height,
     counts,
     lumaStd: Math.sqrt(sum2 / n - mean * mean),
     slider,
+    playing,
   };
 }
 
@@ -140,7 +153,7 @@ async function main() {
     await page.waitForSelector("canvas", { timeout: o.timeoutS * 1000 });
     let prev = null;
     let stableSince = null;
-    let seekedAt = null;
+    let seeked = false;
     while ((Date.now() - t0) / 1000 < o.timeoutS) {
       const png = await page.screenshot({ type: "png" });
       last = png;
@@ -160,7 +173,7 @@ async function main() {
           const { y, x0, x1 } = stats.slider;
           await page.mouse.click(x0 + o.seekFrac * (x1 - x0), y);
           o.seekFrac = null; // once; then settle again
-          seekedAt = Date.now();
+          seeked = true;
           stableSince = null;
           prev = null;
           await page.waitForTimeout(1000);
@@ -174,10 +187,9 @@ async function main() {
         }
       } else {
         stableSince = null;
-        // Still moving well after the seek: playback runs on; Space toggles play/pause.
-        if (seekedAt !== null && Date.now() - seekedAt > 6000) {
-          await page.keyboard.press("Space");
-          seekedAt = Date.now();
+        // After the seek the playback may run on: pause it with its button.
+        if (seeked && stats.playing) {
+          await page.mouse.click(stats.playing.x, stats.playing.y);
         }
       }
       prev = stats;
