@@ -274,17 +274,19 @@ def exp_parts(px, py, pz) -> tuple:
         return (px * s, py * s, pz * s, c)
     t2 = np.asarray(t2)
     t2_max = float(t2.max()) if t2.size else 0.0
+    big = None
+    if t2_max > _POLY_THETA2_MAX:  # some steps above 0.5 rad: series on the others only
+        big = t2 > _POLY_THETA2_MAX
+        t2 = np.where(big, 0.0, t2)
+        t2_max = _POLY_THETA2_MAX
     # As many series terms as the largest angle needs: the first one left out is < 1e-17.
     n_terms = next((n for n in range(1, len(_SINC_HALF))
                     if abs(_SINC_HALF[n]) * t2_max ** n < 1e-17), len(_SINC_HALF))
     s = _horner(t2, _SINC_HALF[:n_terms])
     # cos(θ/2) = sqrt(1 - sin²(θ/2)) for θ <= 0.5: exact to rounding, and makes |q| = 1.
     c = np.sqrt(1.0 - t2 * s * s)
-    if t2_max > _POLY_THETA2_MAX:
-        big = t2 > _POLY_THETA2_MAX
-        theta = np.sqrt(t2[big])
-        s = np.array(s, copy=True)
-        c = np.array(c, copy=True)
+    if big is not None:
+        theta = np.sqrt(px[big] ** 2 + py[big] ** 2 + pz[big] ** 2)
         s[big] = np.sin(0.5 * theta) / theta
         c[big] = np.cos(0.5 * theta)
     return (px * s, py * s, pz * s, c)
