@@ -9,23 +9,25 @@ timeline ``"time"`` (a duration timeline).
 What is sent (every time-varying entity in ONE ``send_columns`` call, one row per sample unless
 stated):
 
-====================================  ===========================================================
-entity                                content
-====================================  ===========================================================
-``world/truth/axes``                  Arrows3D, true body x/y/z axes, solid red/green/blue;
-                                      an empty row where there is no truth
-``world/estimate/axes``               Arrows3D, estimated body axes, light (pastel) red/green/blue
-``world/truth/z_trail``               LineStrips3D, tip of the true body z axis over the last
-``world/estimate/z_trail``            ``TRAIL_S`` seconds, one row per frame at ``TRAIL_FPS``
-                                      frames per second of log time (not per sample)
-``world/truth/z_trace``               static LineStrips3D, the whole z-tip trace, thin and faint
-``world/estimate/z_trace``            (at most ``TRACE_MAX_POINTS`` points, evenly decimated;
-                                      only for logs up to ``TRACE_MAX_S`` = 30 s)
-``errors_deg``                        Scalars (3 per row): total, inclination, heading error, deg
-``gyro/{x,y,z}/omega_b``              Scalars: each channel of the rate integrated, rad/s
-``gyro/{x,y,z}/measured_omega_raw_b`` Scalars: the raw gyro (only when a pre-filter ran), rad/s
-                                      (named to sort, and so be drawn, before ``omega_b``)
-====================================  ===========================================================
+=====================================  ==========================================================
+entity                                 content
+=====================================  ==========================================================
+``/world/truth/axes``                  Arrows3D, true body x/y/z axes, solid red/green/blue;
+                                       an empty row where there is no truth
+``/world/estimate/axes``               Arrows3D, estimated body axes, light red/green/blue;
+                                       an empty row where there is no estimate
+``/world/truth/z_trail``               LineStrips3D, tip of the body z axis over the last
+``/world/estimate/z_trail``            ``TRAIL_S`` seconds (truth purple, estimate amber), one
+                                       row per frame at ``TRAIL_FPS`` frames per second of log
+                                       time (not per sample)
+``/world/truth/z_trace``               static LineStrips3D, the whole z-tip trace, thin and faint
+``/world/estimate/z_trace``            (at most ``TRACE_MAX_POINTS`` points, evenly decimated;
+                                       only for logs up to ``TRACE_MAX_S`` = 30 s)
+``/errors_deg``                        Scalars (3 per row): total, inclination, heading error, deg
+``/gyro/{x,y,z}/omega_b``              Scalars: each channel of the rate integrated, rad/s
+``/gyro/{x,y,z}/measured_omega_raw_b`` Scalars: the raw gyro (only when a pre-filter ran), rad/s
+                                       (named to sort, and so be drawn, before ``omega_b``)
+=====================================  ==========================================================
 
 The tip trace: a strip per sample holding the whole history would make the data quadratic in
 the log length. The view instead sends a trailing window of the last 2 s (``TRAIL_S``) resampled
@@ -111,7 +113,7 @@ TRACE_MAX_POINTS = 20_000
 TRACE_MAX_S = 30.0
 """Logs longer than this (s) get no static full trace: it would be an unreadable tangle."""
 
-# Truth: saturated RGB; estimate: the same hues, light. Error series: total dark, parts muted.
+# Truth: saturated RGB; estimate: the same hues, light.
 _TRUTH_RGB = np.array([[220, 40, 40], [30, 170, 50], [40, 90, 235]], dtype=np.uint8)
 _EST_RGB = np.array([[255, 165, 150], [150, 235, 140], [150, 195, 255]], dtype=np.uint8)
 # Colours readable on the viewer's light and dark themes.
@@ -127,7 +129,11 @@ _FLUSH_TIMEOUT_S = 60.0  # a viewer that went away must not hang the replay
 
 
 def _as_array(name: str, x: object, shape_tail: tuple[int, ...], n: int | None) -> NDArray:
-    a = np.asarray(x, dtype=np.float64)
+    """``x`` as float64 of shape ``(n, *shape_tail)`` (any length when ``n`` is None)."""
+    try:
+        a = np.asarray(x, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise InputError(f"Expected `{name}` a numeric array, got {type(x).__name__}") from None
     if (
         a.ndim != 1 + len(shape_tail)
         or a.shape[1:] != shape_tail
@@ -481,12 +487,12 @@ def _send_static(view: ViewData, rec) -> None:
                 rr.SeriesLines(names=[f"raw ω_{axis}"], colors=[_GYRO_RAW_RGB[k]], widths=[1.0]),
                 static=True,
             )
+    if view.t_s[-1] - view.t_s[0] > TRACE_MAX_S:
+        return
     tips = {
         "estimate_trace": _body_axes_w(view.q_est)[0][:, 2],
         "truth_trace": _body_axes_w(view.q_truth)[0][:, 2],
     }
-    if view.t_s[-1] - view.t_s[0] > TRACE_MAX_S:
-        return
     for key, tip in tips.items():
         segments = _trace_segments(tip)
         if segments:
@@ -520,15 +526,14 @@ def send_view(view: ViewData, rec, *, realtime: bool = False, chunk_s: float = 0
     chunk_s : float
         Chunk length for ``realtime``, s.
     """
-
+    if realtime and not chunk_s > 0:
+        raise InputError(f"Expected `chunk_s` > 0, got {chunk_s!r}")
     _send_static(view, rec)
     entities = _entities(view)
     if not realtime:
         for e in entities:
             rec.send_columns(e.path, indexes=[_time_column(e.t_rel_s)], columns=e.columns())
         return
-    if not chunk_s > 0:
-        raise InputError(f"Expected `chunk_s` > 0, got {chunk_s!r}")
     # Rows of each entity per chunk of log time; one send_columns per entity and chunk.
     span = view.t_s[-1] - view.t_s[0]
     ends = np.arange(1, math.floor(span / chunk_s) + 2) * chunk_s
