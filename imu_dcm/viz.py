@@ -64,7 +64,7 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import NDArray
 
-from imu_dcm.errors import InputError
+from imu_dcm.errors import ImuDcmError, InputError
 from imu_dcm.so3 import quat_rotate
 
 __all__ = [
@@ -608,7 +608,7 @@ def rerun_binary() -> Path:
 
     exe = Path(rerun_cli.__file__).with_name("rerun.exe" if sys.platform == "win32" else "rerun")
     if not exe.is_file():
-        raise InputError(f"Expected the rerun binary at {exe}, got no such file")
+        raise ImuDcmError(f"Expected the rerun binary at {exe}, got no such file")
     return exe
 
 
