@@ -178,29 +178,23 @@ def _prefix_pair(a0: complex, b0: complex, da: NDArray, db: NDArray, K: int):
     _local_scan(bda, bdb, r)
     ra, rb = r[:, 0], r[:, 1]
     ea, eb = _prefix_pair(a0, b0, ra[K - 1], rb[K - 1], K)  # (nb + 1,): start of each block
-    oa = np.empty((K, nb), dtype=complex)
-    ob = np.empty((K, nb), dtype=complex)
-    _mul_into(ea[:nb], eb[:nb], ra, rb, np.conjugate(ra), np.conjugate(rb), oa, ob,
-              np.empty((K, nb), dtype=complex))
-    out_a = np.empty(M + 1, dtype=complex)
-    out_b = np.empty(M + 1, dtype=complex)
+    out_a = np.empty(nb * K + 1, dtype=complex)
+    out_b = np.empty(nb * K + 1, dtype=complex)
     out_a[0], out_b[0] = a0, b0
-    out_a[1:] = oa.T.reshape(-1)[:M]
-    out_b[1:] = ob.T.reshape(-1)[:M]
-    return out_a, out_b
+    # Written straight into natural order through transposed (K, nb) views.
+    _mul_into(ea[:nb], eb[:nb], ra, rb, np.conjugate(ra), np.conjugate(rb),
+              out_a[1:].reshape(nb, K).T, out_b[1:].reshape(nb, K).T,
+              np.empty((K, nb), dtype=complex))
+    return out_a[:M + 1], out_b[:M + 1]
 
 
 def _write_xyzw(dst: NDArray, a: NDArray, b: NDArray, normalize: bool) -> None:
     """Write pairs into ``[x, y, z, w]`` rows: dst[..., :] from ``a = w + 1j z, b = x + 1j y``."""
+    pairs = dst.view(complex)  # (..., 2): [x + 1j y, z + 1j w]
+    pairs[..., 0] = b
+    np.multiply(np.conjugate(a), 1j, out=pairs[..., 1])  # z + 1j w = 1j conj(w + 1j z)
     if normalize:
-        inv = 1.0 / np.sqrt(a.real * a.real + a.imag * a.imag + b.real * b.real
-                            + b.imag * b.imag)
-        a = a * inv
-        b = b * inv
-    dst[..., 0] = b.real
-    dst[..., 1] = b.imag
-    dst[..., 2] = a.imag
-    dst[..., 3] = a.real
+        dst /= np.sqrt(np.einsum("...i,...i->...", dst, dst))[..., None]
 
 
 def blocked_prefix_product(q0: ArrayLike, n_steps: int, fill: FillFn, block: int = BLOCK,
