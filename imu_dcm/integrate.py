@@ -72,8 +72,9 @@ GAP_FACTOR = 5.0
 # terms leave out θ¹⁴/(2 4⁷ 15!) < 3e-21, far below double precision.
 _POLY_THETA2_MAX = 0.25
 _SINC_HALF = tuple((-1) ** k / (2 * 4 ** k * math.factorial(2 * k + 1)) for k in range(7))
-# Below this θ the float (streaming) path uses the 3-term series (error θ⁶/... < 1e-25).
-_TINY_THETA = 1e-4
+# Below this θ² (θ < 0.05 rad) the float (streaming) path uses four series terms instead of
+# sqrt/sin/cos: the first terms left out, θ⁸/(4⁴ 8!) < 4e-18 and θ⁸/(2 4⁴ 9!), are below rounding.
+_SERIES_THETA2_FLOAT = 2.5e-3
 
 
 # ----------------------------------------------------------------------------------------------
@@ -250,7 +251,7 @@ def _horner(t2, coefs: tuple):
 def exp_parts(px, py, pz) -> tuple:
     """Quaternion ``exp(φ) = [φ sin(θ/2)/θ, cos(θ/2)]`` component-wise, exact.
 
-    Floats use ``math.sin``/``math.cos`` (series below 1e-4 rad); arrays use the Taylor series
+    Floats use ``math.sin``/``math.cos`` (series below 0.05 rad); arrays use the Taylor series
     to full precision when every ``θ <= 0.5`` rad and ``np.sin``/``np.cos`` otherwise.
 
     Parameters
@@ -264,9 +265,9 @@ def exp_parts(px, py, pz) -> tuple:
     """
     t2 = px * px + py * py + pz * pz
     if isinstance(t2, float):
-        if t2 < _TINY_THETA * _TINY_THETA:
-            s = 0.5 - t2 / 48.0 + t2 * t2 / 3840.0
-            c = 1.0 - t2 / 8.0 + t2 * t2 / 384.0
+        if t2 < _SERIES_THETA2_FLOAT:
+            s = 0.5 + t2 * (-1.0 / 48.0 + t2 * (1.0 / 3840.0 + t2 * (-1.0 / 645120.0)))
+            c = 1.0 + t2 * (-0.125 + t2 * (1.0 / 384.0 + t2 * (-1.0 / 46080.0)))
         else:
             theta = math.sqrt(t2)
             s = math.sin(0.5 * theta) / theta
