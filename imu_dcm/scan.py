@@ -4,18 +4,22 @@ per-sample Python loop (DESIGN.md §4, "Speed").
 The product is sequential, so it is reorganised for numpy:
 
 1. The ``M`` increments are laid out as ``nb`` blocks of ``K`` consecutive steps, in
-   struct-of-arrays form: 4 component arrays of shape ``(K, nb)``, row ``k`` holding step
-   ``b K + k`` of every block ``b``. Step ``i = b K + k``.
+   struct-of-arrays form: component arrays of shape ``(K, nb)``, row ``k`` holding step
+   ``i = b K + k`` of every block ``b``. Inside, a quaternion is a pair of complex numbers
+   ``a = w + 1j z``, ``b = x + 1j y`` (its SU(2) form), which halves the arithmetic calls.
 2. **Local scan**: ``K - 1`` vectorised products along the rows give every block's inclusive
    prefix ``R[k, b] = dq_{bK} ⊗ … ⊗ dq_{bK+k}`` (all blocks side by side).
 3. **Recursion** on the block totals ``R[K-1, :]`` gives the attitude ``E[b]`` at the start of each
    block (the same algorithm on ``nb`` elements, down to a short plain loop).
-4. **Apply**: ``q_{bK+k+1} = E[b] ⊗ R[k, b]`` in one vectorised product, then every quaternion is
-   normalised once.
+4. **Apply**: ``q_{bK+k+1} = E[b] ⊗ R[k, b]`` in one vectorised product, written as
+   ``[x, y, z, w]`` rows, then every quaternion is normalised once.
 
 Steps 1-2 and 4 run over chunks of blocks whose arrays fit in the CPU cache. Every product is the
 Hamilton product of scalar-last ``[x, y, z, w]`` quaternions; increments multiply on the right.
-The result agrees with the sequential loop to rounding (~1e-15 per element, tested).
+The result agrees with the sequential loop to rounding (1e-14 over 5000 steps, tested).
+
+Importing this module raises glibc's malloc trim threshold (see ``_keep_freed_heap``; opt out
+with ``IMU_DCM_KEEP_MALLOC=1``).
 """
 
 from __future__ import annotations
