@@ -8,18 +8,20 @@ increments on the right, ``t_s`` seconds.
 
 **The look-ahead of magnus4.** The mid-step rate of step ``[t_i, t_{i+1}]`` comes from the cubic
 through ``ω_{i-1..i+2}``, so step ``i`` is final only once sample ``i+2`` has arrived. Two ways
-to stream it were measured (``benchmarks/core_speed.py``, section "look-ahead"):
+to stream it were measured (``python -m benchmarks.core_speed``, look-ahead table; pure coning,
+half-angle 0.3 rad at 2 Hz, max error over 1 s):
 
-* *lag one sample*: after sample ``k`` the attitude at ``t_{k-1}`` is returned; it is the batch
-  result at that stamp (to rounding), and :meth:`DcmIntegrator.finish` closes the last step with
-  the same one-sided end stencil as the batch.
-* *causal*: close every step at once with the one-sided cubic through ``ω_{i-2..i+1}``; fourth
-  order too, but it is a different integrator from the batch one (the error constant of the
-  one-sided mid-point is 5/3 of the centred one), so streaming would not equal batch.
+* *lag one sample*: after sample ``k`` return the attitude at ``t_{k-1}``: the batch result at
+  that stamp (to rounding); :meth:`DcmIntegrator.finish` closes the last step with the batch's
+  one-sided end stencil. Error 3.8e-4 deg at 100 Hz, 3.9e-8 deg at 1 kHz.
+* *causal*: close step ``i`` at once with the one-sided cubic through ``ω_{i-2..i+1}``: also
+  fourth order and as accurate (3.0e-4 / 3.0e-8 deg), but a different integrator from the batch
+  one, so streaming would no longer equal batch.
 
-``magnus4`` streams with the one-sample lag: streaming equals batch for every method (tested to
-1e-9 deg), and :attr:`DcmIntegrator.t_s` always names the stamp of the returned attitude. The
-other methods have no look-ahead and no lag.
+``magnus4`` streams with the one-sample lag: streaming then equals batch for every method
+(tested to 1e-9 deg) and :attr:`DcmIntegrator.t_s` names the stamp of the returned attitude.
+Reading the lagged attitude as if it were at ``t_k`` costs one sample of motion (2.2 deg at
+100 Hz in the same test). The other methods have no look-ahead and no lag.
 """
 
 from __future__ import annotations
