@@ -130,15 +130,14 @@ def _mul_into(a1, b1, a2, b2, ca2, cb2, out_a, out_b, tmp) -> None:
 
 def _sequential_pair(a0: complex, b0: complex, da: NDArray, db: NDArray):
     """Plain loop over Python complex numbers (short inputs); returns (M + 1,) arrays."""
-    n = len(da)
-    out_a = np.empty(n + 1, dtype=complex)
-    out_b = np.empty(n + 1, dtype=complex)
     a, b = complex(a0), complex(b0)
-    out_a[0], out_b[0] = a, b
-    for i, (x, y) in enumerate(zip(da.tolist(), db.tolist()), start=1):
+    out_a = [a]
+    out_b = [b]
+    for x, y in zip(da.tolist(), db.tolist()):
         a, b = a * x - b * y.conjugate(), a * y + b * x.conjugate()
-        out_a[i], out_b[i] = a, b
-    return out_a, out_b
+        out_a.append(a)
+        out_b.append(b)
+    return np.array(out_a), np.array(out_b)
 
 
 def _local_scan(da: NDArray, db: NDArray, r: NDArray) -> None:
