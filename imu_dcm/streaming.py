@@ -95,9 +95,12 @@ class DcmIntegrator:
         self._method = method
         self._q0 = tuple(float(v) for v in as_quat_xyzw(q0))
         self._q = self._q0
-        if t0_s is not None and not math.isfinite(float(t0_s)):
+        try:
+            self._t0_s = None if t0_s is None else float(t0_s)
+        except (TypeError, ValueError):
+            raise InputError(f"Expected `t0_s` a number (s) or None, got {t0_s!r}") from None
+        if self._t0_s is not None and not math.isfinite(self._t0_s):
             raise InputError(f"Expected `t0_s` finite or None, got {t0_s}")
-        self._t0_s = None if t0_s is None else float(t0_s)
         self._lag = 1 if method == "magnus4" else 0
         self._ws: list[tuple] = []  # last (up to) 4 rate samples (x, y, z), oldest first
         self._ts: list[float] = []  # their stamps

@@ -149,6 +149,10 @@ def test_bad_input():
         integ.update_many(np.zeros((2, 2)), [0.02, 0.03])
     with pytest.raises(InputError, match="method"):
         DcmIntegrator(Q0, "euler")
+    with pytest.raises(InputError, match="t0_s"):
+        DcmIntegrator(Q0, t0_s="soon")
+    with pytest.raises(InputError, match="t0_s"):
+        DcmIntegrator(Q0, t0_s=np.nan)
     integ.finish()
     with pytest.raises(InputError, match="finish"):
         integ.update([0.0, 0.0, 1.0], 0.5)
