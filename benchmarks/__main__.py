@@ -143,6 +143,7 @@ def main(argv: list[str] | None = None) -> int:
     ]
     md += pareto.summary_markdown(meas)
     md += pareto.results_markdown(meas, cases, rounds, command, clock=args.clock)
+    md += pareto.convergence_markdown(conv)
     md += stab_md
     md += extra
     (out / "results.md").write_text("\n".join(md) + "\n", encoding="utf-8")

@@ -126,6 +126,10 @@ class Case:
     family: str
     description: str
     order: str
+    #: ``"rate"``: fed ``omega_b (N, 3)``; ``"delta"``: fed delta angles ``(N - 1, 3)``, rad.
+    input: str = "rate"
+    #: Stamps the case reports: every ``stride``-th (delta-angle sets of 2 or 3 intervals).
+    stride: int = 1
 
 
 _ORDER = {"start": "1", "end": "1", "trapezoid": "2", "coning": "2", "magnus4": "4",
@@ -209,6 +213,25 @@ def _streaming_blocks(method: str, block: int = 256) -> Callable:
     return fn
 
 
+def _delta(method: str) -> Callable:
+    """``imu_dcm.integrate_delta`` on exact delta angles; rows at stamps it does not report are
+    NaN (two- and three-sample sets report every 2nd / 3rd stamp; three-sample runs on the
+    longest prefix with a multiple of 3 intervals)."""
+    m = _DELTA_STRIDE.get(method, 1)
+
+    def fn(dtheta_b, t_s, q0):
+        n = len(dtheta_b) - len(dtheta_b) % m
+        q = imu_dcm.integrate_delta(dtheta_b[:n], t_s[:n + 1], q0, method).as_quat()
+        out = np.full((len(t_s), 4), np.nan)
+        out[:n + 1:m] = q
+        return out
+
+    return fn
+
+
+_DELTA_STRIDE = {"two_sample": 2, "three_sample": 3}
+
+
 def method_cases(streaming: bool = True) -> list[Case]:
     """Every imu_dcm method (batch; streaming when ``imu_dcm.DcmIntegrator`` exists) and peer."""
     cases = [Case(f"batch_{m}", _batch(m), "batch", f"imu_dcm.integrate(method={m!r})",
@@ -222,6 +245,10 @@ def method_cases(streaming: bool = True) -> list[Case]:
             cases += [Case(f"stream_many_{m}", _streaming_blocks(m), "streaming",
                            f"DcmIntegrator({m!r}).update_many, blocks of 256",
                            _ORDER.get(m, "?")) for m in methods]
+    for m in getattr(imu_dcm, "DELTA_METHODS", ()):
+        cases.append(Case(f"delta_{m}", _delta(m), "delta",
+                          f"imu_dcm.integrate_delta(method={m!r}) on exact delta angles",
+                          "see convergence", input="delta", stride=_DELTA_STRIDE.get(m, 1)))
     cases += [Case(name, p.fn, "peer", p.description, {"first": "1"}.get(p.order, p.order))
               for name, p in PEERS.items()]
     return cases
@@ -265,12 +292,13 @@ def _truth(traj, rate_hz: float, duration_s: float) -> tuple[NDArray, NDArray, N
     return t, np.asarray(q, dtype=float), np.ascontiguousarray(w, dtype=float)
 
 
-def _max_err(q_est: NDArray, q_true: NDArray) -> float:
-    """Max total error (deg) over the stamps the method reported (streaming magnus4 skips one
-    warm-up stamp: NaN rows); 180 if it reported fewer than all but 3 stamps."""
+def _max_err(q_est: NDArray, q_true: NDArray, stride: int = 1) -> float:
+    """Max total error (deg) over the stamps the method reported (NaN rows: streaming magnus4
+    skips warm-up stamps, delta-angle sets report every ``stride``-th stamp); 180 if it
+    reported fewer than all but 3 of the stamps it should."""
     q_est = np.asarray(q_est, dtype=float)
     ok = np.all(np.isfinite(q_est), axis=1)
-    if np.count_nonzero(ok) < len(q_est) - 3:
+    if np.count_nonzero(ok) < (len(q_est) - 1) // stride + 1 - 3:
         return 180.0
     return float(np.max(attitude_error_deg(q_est[ok], q_true[ok]).total_deg))
 
@@ -298,9 +326,14 @@ def measure(scenes: Sequence[Scene], rates_hz: Sequence[float], cases: Sequence[
             q0 = q_true[0]
             progress(f"pareto: {sc.title} at {rate:g} Hz ({len(t)} samples, {len(cases)} methods,"
                      f" {rounds} rounds)")
-            errs = {c.name: _max_err(c.fn(w, t, q0), q_true) for c in cases}
+            feed = {"rate": w}
+            if any(c.input == "delta" for c in cases):
+                feed["delta"] = np.ascontiguousarray(traj.delta_angles(t), dtype=float)
+            errs = {c.name: _max_err(c.fn(feed[c.input], t, q0), q_true, c.stride)
+                    for c in cases}
             timings = interleaved_medians(
-                {c.name: ((lambda f=c.fn, w=w, t=t, q0=q0: f(w, t, q0)), len(t)) for c in cases},
+                {c.name: ((lambda f=c.fn, x=feed[c.input], t=t, q0=q0: f(x, t, q0)), len(t))
+                 for c in cases},
                 rounds=rounds, warmup=1, clock=CLOCKS[clock])
             ref = timings[REFERENCE].ns_per_item if REFERENCE in timings else float("nan")
             for c in cases:
@@ -312,18 +345,67 @@ def measure(scenes: Sequence[Scene], rates_hz: Sequence[float], cases: Sequence[
 def convergence(scenes: Sequence[Scene], rates_hz: Sequence[float] = CONVERGENCE_RATES_HZ,
                 methods: Sequence[str] = ("start", "end", "trapezoid", "coning", "magnus4"),
                 progress: Callable[[str], None] = print) -> dict[str, dict[str, NDArray]]:
-    """Max error (deg) of each batch method against dt, per scene (untimed)."""
+    """Max error (deg) of each batch method against dt, per scene (untimed).
+
+    Keys of each scene's dict: ``dt_s``, the rate methods, and ``delta_<m>`` for every
+    delta-angle method of ``imu_dcm.integrate_delta`` (fed exact delta angles).
+    """
+    delta = tuple(getattr(imu_dcm, "DELTA_METHODS", ()))
     res: dict[str, dict[str, NDArray]] = {}
     for sc in scenes:
         progress(f"convergence: {sc.title}, {len(rates_hz)} rates")
         traj = sc.make()
-        errs = {m: np.empty(len(rates_hz)) for m in methods}
+        keys = list(methods) + [f"delta_{m}" for m in delta]
+        errs = {m: np.empty(len(rates_hz)) for m in keys}
         for k, rate in enumerate(rates_hz):
             t, q_true, w = _truth(traj, rate, sc.duration_s)
             for m in methods:
                 errs[m][k] = _max_err(imu_dcm.integrate(w, t, q_true[0], m).as_quat(), q_true)
+            if delta:
+                dth = np.ascontiguousarray(traj.delta_angles(t), dtype=float)
+                for m in delta:
+                    errs[f"delta_{m}"][k] = _max_err(_delta(m)(dth, t, q_true[0]), q_true,
+                                                     _DELTA_STRIDE.get(m, 1))
         res[sc.key] = {"dt_s": 1.0 / np.asarray(rates_hz, dtype=float), **errs}
     return res
+
+
+def observed_orders(conv: dict[str, dict[str, NDArray]], lo_deg: float = 1e-7,
+                    hi_deg: float = 1.0) -> dict[str, dict[str, float]]:
+    """Least-squares slope of log error against log dt per scene and method, over the points
+    with ``lo_deg < error < hi_deg`` (above the truth's accuracy floor, in the asymptotic range);
+    NaN with fewer than 3 such points."""
+    out: dict[str, dict[str, float]] = {}
+    for key, res in conv.items():
+        dt = res["dt_s"]
+        out[key] = {}
+        for m, e in res.items():
+            if m == "dt_s":
+                continue
+            ok = (e > lo_deg) & (e < hi_deg)
+            out[key][m] = (float(np.polyfit(np.log(dt[ok]), np.log(e[ok]), 1)[0])
+                           if np.count_nonzero(ok) >= 3 else float("nan"))
+    return out
+
+
+def convergence_markdown(conv: dict[str, dict[str, NDArray]]) -> list[str]:
+    """Markdown table of observed orders (scene x method)."""
+    orders = observed_orders(conv)
+    titles = {s.key: s.title for s in SCENES}
+    methods = [m for m in next(iter(conv.values())) if m != "dt_s"]
+    md = ["## Convergence (chart `convergence.png`)", "",
+          "Observed order: least-squares slope of log(max error) against log(dt) over the rates "
+          "whose error lies between 1e-7° (above the truth's accuracy) and 1° (asymptotic range); "
+          "— where fewer than 3 rates qualify. Rates: "
+          + ", ".join(f"{1 / d:g}" for d in next(iter(conv.values()))["dt_s"]) + " Hz.", "",
+          "| scene | " + " | ".join(f"`{m}`" for m in methods) + " |",
+          "|---" * (len(methods) + 1) + "|"]
+    for key, row in orders.items():
+        md.append(f"| {titles.get(key, key)} | "
+                  + " | ".join("—" if not np.isfinite(row[m]) else f"{row[m]:.2f}"
+                               for m in methods) + " |")
+    md.append("")
+    return md
 
 
 # ----------------------------------------------------------------------------------------------
@@ -339,6 +421,9 @@ _STYLE = {
     "reference_loop": ("#d62728", "X", "--"), "scipy_loop": ("#ff7f0e", "P", "--"),
     "ahrs_angular_rate": ("#8c564b", "h", "--"), "imufusion_gain0": ("#e377c2", "<", "--"),
     "vqf_batch": ("#bcbd22", ">", "--"), "vqf_update_gyr": ("#7f7f7f", "d", "--"),
+    # imu_dcm on delta angles: purples, solid, half-filled look via small markers
+    "delta_plain": ("#9e9ac8", "$1$", "-"), "delta_one_plus_previous": ("#807dba", "p", "-"),
+    "delta_two_sample": ("#6a51a3", "$2$", "-"), "delta_three_sample": ("#3f007d", "$3$", "-"),
 }
 _STREAM_COLOURS = {"start": "#c7e9c0", "end": "#a1d99b", "trapezoid": "#74c476",
                    "coning": "#31a354", "magnus4": "#006d2c"}
@@ -363,13 +448,17 @@ def _label(name: str, cases: dict[str, Case]) -> str:
         return name
     if c.family == "peer":
         return f"{name} (peer, order {c.order})"
+    if c.family == "delta":
+        return f"{name} (Δθ input)"
     return f"{name} (order {c.order})"
 
 
-#: Streaming cases left off the main chart (their cost and error equal the streaming trapezoid's
-#: to within the noise; ``pareto_all.png`` and ``results.md`` have them).
+#: Cases left off the main chart to keep it readable: streaming start/end/coning (cost as the
+#: streaming trapezoid, errors as their batch twins) and two of the four delta-angle rules;
+#: ``pareto_all.png`` and ``results.md`` have them.
 MAIN_CHART_SKIP = tuple(f"{p}{m}" for p in ("stream_", "stream_many_")
-                        for m in ("start", "end", "coning"))
+                        for m in ("start", "end", "coning")) + ("delta_plain",
+                                                                "delta_three_sample")
 
 
 def plot_pareto(meas: Sequence[Measurement], cases: Sequence[Case], path: str | Path,
@@ -441,9 +530,14 @@ def plot_convergence(conv: dict[str, dict[str, NDArray]], path: str | Path) -> N
         for m, e in res.items():
             if m == "dt_s":
                 continue
-            colour, marker, _ls, _f = _style(f"batch_{m}")
+            if m.startswith("delta_"):
+                colour, marker, _ls, _f = _style(m)
+                label = f"{m} (Δθ input)"
+            else:
+                colour, marker, _ls, _f = _style(f"batch_{m}")
+                label = f"{m} (order {_ORDER[m]})"
             ax.loglog(dt, np.maximum(e, 1e-13), "-", color=colour, marker=marker, ms=6,
-                      label=f"imu_dcm {m} (order {_ORDER[m]})")
+                      label=label)
         # Theoretical slopes C dt^p, drawn 3x above the method of that order and anchored at its
         # coarsest step with an error below 1° (the asymptotic range), labelled at the finest dt.
         for p, m in ((1, "end"), (2, "trapezoid"), (4, "magnus4")):
@@ -466,10 +560,11 @@ def plot_convergence(conv: dict[str, dict[str, NDArray]], path: str | Path) -> N
     for ax in axes.flat[len(conv):]:
         ax.set_visible(False)
     handles, labels = axes.flat[0].get_legend_handles_labels()
-    fig.legend(handles, labels, loc="lower center", ncol=5, fontsize=9)
+    fig.legend(handles, labels, loc="lower center", ncol=5, fontsize=9,
+               title="imu_dcm method (rate input: integrate; Δθ input: integrate_delta)")
     fig.suptitle("Convergence: max error against step, with theoretical slopes (dashed)",
                  fontsize=14)
-    fig.tight_layout(rect=(0, 0.05, 1, 0.97))
+    fig.tight_layout(rect=(0, 0.08, 1, 0.97))
     fig.savefig(path, dpi=100)
     plt.close(fig)
 
