@@ -330,7 +330,7 @@ class DcmIntegrator:
             raise InputError("Expected no samples after finish(), got some")
         w = _as_float_array(w, "omega_b")
         t = _as_float_array(t, "t_s")
-        out = np.empty((len(w), 4))
+        out = np.empty((len(w), 4)) if self._n < 4 else None
         # Warm-up samples one at a time (checked by update), until the stencil buffer is full.
         need = 4 if self._method == "magnus4" else 1
         j = 0
@@ -349,7 +349,10 @@ class DcmIntegrator:
             T[:keep] = self._ts[-keep:]
             T[keep:] = t[j:]
             W, T, dt = check_samples(W, T)
-            out[j:] = self._batch(W, T, dt, keep)
+            q = self._batch(W, T, dt, keep)
+            if j == 0:  # the usual case: no warm-up sample, no copy
+                return _to_rotation(q)
+            out[j:] = q
         return _to_rotation(out)
 
     def _batch(self, w: NDArray, t: NDArray, dt: NDArray, keep: int) -> NDArray:
