@@ -194,7 +194,7 @@ def main(argv: list[str] | None = None) -> None:
                     help="time with the wall clock (default: CPU time of this process, which "
                          "leaves out the time other processes hold the CPU)")
     args = ap.parse_args(argv)
-    n_batch, n_loop, n_many = (100_000, 2_000, 20_000) if args.quick else (1_000_000, 20_000,
+    n_batch, n_loop, n_many = (100_000, 2_000, 20_000) if args.quick else (1_000_000, 50_000,
                                                                           200_000)
     rounds = 3 if args.quick else max(5, args.rounds)
     clock = "wall time" if args.wall else "CPU time"
