@@ -133,8 +133,9 @@ class NoiseEstimate:
     noise_density_rad_s_sqrt_hz : ndarray, shape (3,)
         Angle random walk per body axis, rad/s/√Hz (= rad/√s).
     bias_instability_rad_s : ndarray, shape (3,)
-        Flicker floor per axis, ``min σ_Allan / 0.664``, rad/s (a lower bound of the floor when
-        the minimum sits at the longest cluster time, see ``bias_instability_tau_s``).
+        Flicker floor per axis, ``min σ_Allan / 0.664``, rad/s (only an upper bound when the
+        minimum sits at the longest cluster time, where the deviation may still be falling; see
+        ``bias_instability_tau_s``).
     bias_instability_tau_s : ndarray, shape (3,)
         Cluster time of that minimum, s.
     mean_rate_rad_s : ndarray, shape (3,)
@@ -750,7 +751,7 @@ def prefilter(
         if i1 - i0 < 2:
             raise InputError(
                 f"Expected a rest segment ({source}) to estimate the gyro noise density, got none; "
-                "pass noise_density_rad_s_sqrt_hz"
+                "pass noise_density_rad_s_sqrt_hz (replay: --gyro-noise-density)"
             )
         est = estimate_noise_from_rest(omega_b[i0:i1], t_s[i0:i1], cfg.min_rest_s)
         density = float(np.sqrt(np.mean(est.noise_density_rad_s_sqrt_hz**2)))
