@@ -563,6 +563,13 @@ def integrate_delta(dtheta_b: ArrayLike, t_s: ArrayLike, q0: ArrayLike | Rotatio
     if len(dtheta) % m:
         raise InputError(f"Expected the number of intervals to be a multiple of {m} for "
                          f"method {method!r}, got {len(dtheta)}")
+    if method == "three_sample":
+        sets = dt.reshape(-1, 3)
+        spread = float(np.max(np.ptp(sets, axis=1) / sets.mean(axis=1)))
+        if spread > 0.01:
+            warnings.warn(f"method 'three_sample' assumes equal intervals within a set; they "
+                          f"differ by up to {100 * spread:.3g} % here", ImuDcmWarning,
+                          stacklevel=2)
     phi = delta_rotvecs(dtheta, dt, method)
     dq = np.stack(exp_parts(phi[:, 0], phi[:, 1], phi[:, 2]), axis=-1)
     return _to_rotation(prefix_product(as_quat_xyzw(q0), dq))
