@@ -16,6 +16,7 @@ from filterpy.common import Q_continuous_white_noise
 from imu_dcm.errors import InputError
 from imu_dcm.prefilter import (
     PrefilterConfig,
+    StreamingRateFilter,
     estimate_noise_from_rest,
     euler_prefilter,
     prefilter,
@@ -92,6 +93,30 @@ def test_fast_engine_matches_filterpy_on_long_uniform_runs(mode):
     # IIR modes are exact to round-off times the eigenvector condition (< 1e3 here).
     np.testing.assert_allclose(fast.omega_b, ref.omega_b, rtol=0, atol=1e-9)
     np.testing.assert_allclose(fast.rate_std_rad_s, ref.rate_std_rad_s, rtol=1e-8)
+
+
+@pytest.mark.parametrize("model", ["rate-accel", "rate-accel-jerk"])
+def test_streaming_filter_is_the_batch_kalman(model):
+    # The streaming twin fed sample by sample (uneven stamps) must reproduce the batch causal
+    # filter to round-off, rate and std (the std from the second sample: the first sample's dt,
+    # hence its noise, is unknown to a stream).
+    rng = np.random.default_rng(12)
+    n = 400
+    t = np.cumsum(rng.uniform(0.004, 0.006, n))
+    z = np.stack([np.sin(t), np.cos(2 * t), t], axis=1) + 0.01 * rng.standard_normal((n, 3))
+    cfg = PrefilterConfig(noise_density_rad_s_sqrt_hz=7e-4, angular_accel_rad_s2=3.0,
+                          model=model)
+    batch = prefilter(z, t, "kalman", cfg)
+    stream = StreamingRateFilter(cfg)
+    out = [stream.update(z[k], t[k]) for k in range(n)]
+    rates = np.array([o[0] for o in out])
+    std = np.array([o[1] for o in out])
+    np.testing.assert_allclose(rates, batch.omega_b, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(std[1:], batch.rate_std_rad_s[1:, 0], rtol=1e-10)
+    with pytest.raises(InputError, match=r"^Expected `t_s` finite and >"):
+        stream.update(z[0], t[-1])
+    with pytest.raises(InputError, match=r"given for streaming"):
+        StreamingRateFilter(PrefilterConfig(noise_density_rad_s_sqrt_hz=1e-3))
 
 
 # ------------------------------------------------------------------------------------------------
