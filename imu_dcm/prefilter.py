@@ -23,9 +23,18 @@ is not pulled towards zero acceleration. ``engine="filterpy"`` runs the same mod
 ``filterpy.kalman.predict`` / ``update`` / ``rts_smoother`` per axis: the reference the fast
 path is tested against.
 
+:class:`StreamingRateFilter` is the per-sample twin of ``mode="kalman"``, and
+:func:`euler_prefilter` a model-based variant (Euler's equations with a known inertia, filterpy's
+unscented filter).
+
 Parameters not given are estimated: the noise density from the Allan deviation of a rest segment
 (``imu_dcm.allan``; its angle random walk and bias instability are reported), and ``σ_α`` by
 maximum likelihood of the stationary filter's innovations.
+
+Which to use (``python -m benchmarks.noise_study``; README "Noise"): smoothing cuts the *rate*
+error when the noise lies above the motion's band, but no unity-gain low-pass removes the
+attitude random walk, and the causal filter's lag makes the attitude worse; integrate the
+unfiltered rates for attitude.
 """
 
 from __future__ import annotations
