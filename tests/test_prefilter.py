@@ -128,10 +128,10 @@ def test_steady_state_error_matches_predicted_covariance(mode):
     # A constant rate plus the motion the model's prior allows (a Wiener angular acceleration of
     # the configured sigma): that is what the filter's covariance describes, so the steady-state
     # error RMS must match the reported std. Sample size: 100 000 samples x 3 axes; the error is
-    # correlated over ~1/bandwidth (~25 samples at 200 Hz here), i.e. ~12 000 independent
-    # samples, a standard error of ~1.3 % on the mean square (checked below by batch means). The
-    # 10 % bound on the RMS (21 % on the mean square) is > 10 standard errors: it cannot pass by
-    # luck, nor fail by it.
+    # correlated over a few 1/bandwidth (bandwidth (σ_α / N)^½ ≈ 14 rad/s, 1/bandwidth ≈ 14
+    # samples at 200 Hz), i.e. some 10 000 independent samples, a standard error of ~1-1.5 % on
+    # the mean square (checked below by batch means: < 2.5 %). The 10 % bound on the RMS (21 %
+    # on the mean square) is > 8 standard errors: it cannot pass by luck, nor fail by it.
     rng = np.random.default_rng(3)
     rate_hz, n, density, accel = 200.0, 100_000, 1e-2, 2.0
     t = np.arange(n) / rate_hz
