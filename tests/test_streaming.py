@@ -166,3 +166,12 @@ def test_gap_warns_in_streaming():
         integ.update([0.0, 0.0, 1.0], 0.5)
     with pytest.warns(GapWarning, match="gap"):
         integ.update_many(np.zeros((3, 3)), [0.51, 0.52, 1.5])
+
+
+def test_readme_usage_example_runs(repo_root, capsys):
+    # The README's usage block must run as printed and show 90 deg about z twice.
+    text = (repo_root / "README.md").read_text(encoding="utf-8")
+    section = text.split("<!-- section: usage -->", 1)[1].split("<!-- end: usage -->", 1)[0]
+    code = section.split("```python", 1)[1].split("```", 1)[0]
+    exec(compile(code, "README usage", "exec"), {})  # noqa: S102 (our own README)
+    assert capsys.readouterr().out.count("0.7071 0.7071]") == 2
