@@ -50,8 +50,10 @@ __all__ = [
     "TOP",
     "coning_truth",
     "euler_zxz_integrate",
+    "free_body_rates",
     "free_box",
     "gimbal_lock",
+    "gimbal_motion",
     "large_steps",
     "long_run",
     "naive_dcm_drift",
@@ -60,7 +62,9 @@ __all__ = [
     "run",
     "steady_precession_rates",
     "steady_top",
+    "truncated_first_order",
     "truncated_update",
+    "zxz_quat",
     "zxz_truth",
 ]
 
