@@ -11,15 +11,15 @@ from imu_dcm.integrate import DELTA_METHODS, METHODS, integrate, integrate_delta
 from imu_dcm.streaming import DcmIntegrator
 
 __all__ = [
-    "METHODS",
     "DELTA_METHODS",
-    "integrate",
-    "integrate_delta",
+    "METHODS",
     "DcmIntegrator",
+    "GapWarning",
     "ImuDcmError",
+    "ImuDcmWarning",
     "InputError",
     "LogError",
-    "ImuDcmWarning",
-    "GapWarning",
+    "integrate",
+    "integrate_delta",
 ]
 __version__ = "0.1.0"

@@ -23,16 +23,16 @@ from scipy.spatial.transform import Rotation
 from imu_dcm.errors import InputError
 
 __all__ = [
-    "hat",
-    "exp_quat",
+    "as_quat_xyzw",
     "exp_matrix",
+    "exp_quat",
+    "hat",
     "log_quat",
-    "quat_multiply",
+    "quat_angle_rad",
     "quat_conjugate",
+    "quat_multiply",
     "quat_normalize",
     "quat_rotate",
-    "quat_angle_rad",
-    "as_quat_xyzw",
 ]
 
 # Below this angle (rad) the Taylor branches are used: their truncation error (theta^6/5040 for
