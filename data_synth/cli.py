@@ -27,25 +27,18 @@ import math
 import shlex
 import sys
 from pathlib import Path
-from typing import NoReturn
 
 import numpy as np
 
 from data_synth.gyro import DEFAULT_EPOCH_NS, OUTPUTS, GyroModel, synthetic_gyro
 from data_synth.scenes import BRANCHES, FREE_BODY_CASES, MOTIONS, simulate
 from imu_dcm.bag_writer import StampedSeries, write_bag
+from imu_dcm.cli import OneLineArgumentParser
 from imu_dcm.errors import ImuDcmError, InputError, LogError
 
 __all__ = ["build_parser", "main", "make_log"]
 
 PROG = "python -m data_synth"
-
-
-class _OneLineParser(argparse.ArgumentParser):
-    """argparse that reports a bad option in one line (no usage dump) and exits with 2."""
-
-    def error(self, message: str) -> NoReturn:
-        self.exit(2, f"{PROG}: error: {message}\n")
 
 
 def _number(bound: str):
@@ -114,10 +107,10 @@ def _add_common(p: argparse.ArgumentParser, scheme: bool) -> None:
 
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser (sub-commands ``heavy-top``, ``free-body``, ``coning``)."""
-    ap = _OneLineParser(prog=PROG, description="Simulate a rigid body, sample it with a "
+    ap = OneLineArgumentParser(prog=PROG, description="Simulate a rigid body, sample it with a "
                         "synthetic gyro and write a ROS 2 bag (MCAP) with its ground truth.")
     sub = ap.add_subparsers(dest="scene", required=True, metavar="SCENE",
-                            parser_class=_OneLineParser)
+                            parser_class=OneLineArgumentParser)
     top = sub.add_parser("heavy-top", help="the reference document's heavy symmetric top")
     top.add_argument("--motion", choices=MOTIONS, default="cusp",
                      help="initial precession rate: cusp (0), wavy (+1/2 slow steady), looping "

@@ -22,6 +22,7 @@ from pathlib import Path
 
 import numpy as np
 
+from imu_dcm.cli import OneLineArgumentParser
 from imu_dcm.errors import ImuDcmError
 from imu_dcm.integrate import METHODS
 
@@ -30,7 +31,7 @@ PROG = "imu-dcm-replay"
 
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser of the replay command (options are checked before any I/O)."""
-    p = argparse.ArgumentParser(
+    p = OneLineArgumentParser(
         prog=PROG,
         description="Replay a recorded gyro log (ROS 2 bag folder or .mcap) through the DCM "
         "integrator and compare the estimate with the log's truth. "
@@ -105,8 +106,11 @@ class Progress:
             self.stream.flush()
 
 
-def _fmt(x: float | None, unit: str = "°", digits: int = 2) -> str:
-    return "n/a" if x is None else f"{x:.{digits}f}{unit}"
+def _fmt(x: float | None, unit: str = "°") -> str:
+    """Two decimals, or two significant digits below 0.01 (so 1.2e-05° does not read as 0.00°)."""
+    if x is None:
+        return "n/a"
+    return f"{x:.2f}{unit}" if x == 0.0 or abs(x) >= 0.01 else f"{x:.2g}{unit}"
 
 
 def format_summary(s: dict) -> str:
@@ -129,7 +133,9 @@ def format_summary(s: dict) -> str:
     b = np.asarray(s["bias_rad_s"])
     bias = f"({b[0]:+.5f}, {b[1]:+.5f}, {b[2]:+.5f}) rad/s"
     bdeg = np.degrees(b)
-    if s["bias_mode"] == "auto":
+    if s["bias_mode"] == "auto" and not s["bias_segments"]:
+        lines.append("bias       auto: no rest segment found, no bias removed")
+    elif s["bias_mode"] == "auto":
         nseg = len(s["bias_segments"])
         lines.append(f"bias       auto: {nseg} rest segment{'s' if nseg != 1 else ''}, mean "
                      f"{bias} = ({bdeg[0]:+.3f}, {bdeg[1]:+.3f}, {bdeg[2]:+.3f}) °/s")  # fmt: skip

@@ -19,6 +19,7 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import NDArray
 
+from imu_dcm.cli import OneLineArgumentParser
 from imu_dcm.errors import InputError, LogError
 
 __all__ = ["TIME_UNITS_NS", "CsvColumns", "convert_csv", "convert_main", "read_csv_columns"]
@@ -136,7 +137,7 @@ def convert_csv(csv_path: str | Path, out_dir: str | Path, *, imu_topic: str = "
 
 
 def build_parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(
+    p = OneLineArgumentParser(
         prog="imu-dcm-replay convert-csv",
         description="Convert a CSV gyro log (with a header row) into a ROS 2 bag (MCAP).",
     )
