@@ -228,3 +228,22 @@ def test_prefilter_writes_filtered_rate_to_out_bag(coning_log, tmp_path, capsys)
     assert counts == {"/estimate/orientation": 800, "/estimate/angular_velocity": 800}
     _assert_one_line_error(capsys, [str(coning_log), "--rerun", "off", "--angular-accel", "5"],
                            "--prefilter kalman or rts")  # fmt: skip
+
+
+def test_bad_option_is_one_line_without_usage_dump(coning_log, capsys):
+    # argparse's own errors (unknown choice) follow the same one-line rule as ours.
+    assert main([str(coning_log), "--method", "euler"]) == 2
+    lines = _error_lines(capsys.readouterr().err)
+    assert len(lines) == 1 and lines[0].startswith("imu-dcm-replay: error: argument --method")
+
+
+def test_summary_keeps_small_errors_visible_and_says_when_no_rest(coning_log, capsys):
+    # Pure coning with exact rates at this log's rate: magnus4 is accurate to far below 0.01 deg,
+    # and the cone never rests. The summary must not round the error to "0.00°" nor print a zero
+    # vector as if a bias had been measured.
+    assert main([str(coning_log), "--rerun", "off"]) == 0
+    text = capsys.readouterr().out
+    assert "no rest segment found, no bias removed" in text
+    line = next(x for x in text.splitlines() if x.startswith("error"))
+    rms = float(line.split("total RMS ")[1].split("°")[0])
+    assert 0.0 < rms < 0.01, line
