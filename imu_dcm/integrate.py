@@ -176,8 +176,9 @@ def phi_parts(method: str, w_m: tuple, w_0: tuple, w_1: tuple, w_2: tuple,
               h_m, h_0, h_p) -> tuple:
     """Rotation-vector increment ``φ_i`` (rad, body frame) of one step, component-wise.
 
-    Shape-agnostic (floats or equal-shape arrays): the one place the increment formulas live,
-    used by the batch integrator and by :class:`imu_dcm.streaming.DcmIntegrator`.
+    Shape-agnostic (floats or equal-shape arrays): the one place the increment formulas live
+    (with ``magnus4_weights`` and ``magnus4_phi`` next to it), used by the batch integrator and
+    by :class:`imu_dcm.streaming.DcmIntegrator`.
 
     Parameters
     ----------
@@ -194,35 +195,12 @@ def phi_parts(method: str, w_m: tuple, w_0: tuple, w_1: tuple, w_2: tuple,
     tuple of 3
         ``φ_i`` components, rad.
     """
-    # Dispatch in order of use (magnus4 is the default); all products written out, no helpers:
-    # the streaming integrator calls this with floats once per sample.
+    # Dispatch in order of use (magnus4 is the default); products written out: the streaming
+    # integrator calls this with floats once per sample (magnus4: its two halves, below).
+    if method == "magnus4":
+        return magnus4_phi(magnus4_weights(h_m, h_0, h_p), w_m, w_0, w_1, w_2)
     x0, y0, z0 = w_0
     x1, y1, z1 = w_1
-    if method == "magnus4":
-        # Simpson with the cubic mid-step rate, written as weights on the four samples:
-        # φ = -c_m ω_{i-1} + c_0 ω_i + c_1 ω_{i+1} - c_2 ω_{i+2} + h²/12 ω_i × ω_{i+1}.
-        # Uniform steps give (-1, 13, 13, -1) h / 24; the weights sum to h.
-        xm, ym, zm = w_m
-        x2, y2, z2 = w_2
-        u = 0.5 * h_0
-        a_m = u + h_m
-        a_p = u + h_p
-        s_m0 = h_m + h_0
-        s_0p = h_0 + h_p
-        s_all = s_m0 + h_p
-        h2 = h_0 * h_0
-        h6 = h_0 * (1.0 / 6.0)
-        g = h2 * h6
-        c_m = g * a_p / (h_m * s_m0 * s_all)
-        c_2 = g * a_m / (h_p * s_0p * s_all)
-        p = h_0 * a_m * a_p * (1.0 / 3.0)
-        c_0 = h6 + p / (h_m * s_0p)
-        c_1 = h6 + p / (h_p * s_m0)
-        k = h2 * (1.0 / 12.0)
-        kx, ky, kz = k * x0, k * y0, k * z0
-        return (c_0 * x0 + c_1 * x1 - c_m * xm - c_2 * x2 + (ky * z1 - kz * y1),
-                c_0 * y0 + c_1 * y1 - c_m * ym - c_2 * y2 + (kz * x1 - kx * z1),
-                c_0 * z0 + c_1 * z1 - c_m * zm - c_2 * z2 + (kx * y1 - ky * x1))
     if method == "trapezoid":
         half = 0.5 * h_0
         return (half * (x0 + x1), half * (y0 + y1), half * (z0 + z1))
@@ -239,6 +217,46 @@ def phi_parts(method: str, w_m: tuple, w_0: tuple, w_1: tuple, w_2: tuple,
     if method == "end":
         return (h_0 * x1, h_0 * y1, h_0 * z1)
     raise InputError(f"Expected method in {METHODS[:-1]}, got {method!r}")
+
+
+# magnus4 in two halves, so the streaming integrator can memoise the weights (they depend on
+# the three step lengths only, and float stamps from a uniform clock repeat a few triples).
+# Simpson with the cubic mid-step rate, written as weights on the four samples:
+# φ = -c_m ω_{i-1} + c_0 ω_i + c_1 ω_{i+1} - c_2 ω_{i+2} + k ω_i × ω_{i+1},  k = h²/12.
+# Uniform steps give (-1, 13, 13, -1) h / 24; the weights sum to h.
+
+def magnus4_weights(h_m, h_0, h_p) -> tuple:
+    """Weights ``(c_m, c_0, c_1, c_2, k)`` of the ``magnus4`` increment for the steps
+    ``dt_{i-1}, dt_i, dt_{i+1}`` (floats or arrays); see :func:`magnus4_phi`."""
+    u = 0.5 * h_0
+    a_m = u + h_m
+    a_p = u + h_p
+    s_m0 = h_m + h_0
+    s_0p = h_0 + h_p
+    s_all = s_m0 + h_p
+    h2 = h_0 * h_0
+    h6 = h_0 * (1.0 / 6.0)
+    g = h2 * h6
+    c_m = g * a_p / (h_m * s_m0 * s_all)
+    c_2 = g * a_m / (h_p * s_0p * s_all)
+    p = h_0 * a_m * a_p * (1.0 / 3.0)
+    c_0 = h6 + p / (h_m * s_0p)
+    c_1 = h6 + p / (h_p * s_m0)
+    return (c_m, c_0, c_1, c_2, h2 * (1.0 / 12.0))
+
+
+def magnus4_phi(weights: tuple, w_m: tuple, w_0: tuple, w_1: tuple, w_2: tuple) -> tuple:
+    """``magnus4`` increment ``φ_i`` from :func:`magnus4_weights` and the rates
+    ``ω_{i-1}, ω_i, ω_{i+1}, ω_{i+2}`` (component tuples of floats or arrays)."""
+    c_m, c_0, c_1, c_2, k = weights
+    xm, ym, zm = w_m
+    x0, y0, z0 = w_0
+    x1, y1, z1 = w_1
+    x2, y2, z2 = w_2
+    kx, ky, kz = k * x0, k * y0, k * z0
+    return (c_0 * x0 + c_1 * x1 - c_m * xm - c_2 * x2 + (ky * z1 - kz * y1),
+            c_0 * y0 + c_1 * y1 - c_m * ym - c_2 * y2 + (kz * x1 - kx * z1),
+            c_0 * z0 + c_1 * z1 - c_m * zm - c_2 * z2 + (kx * y1 - ky * x1))
 
 
 def _horner(t2, coefs: tuple):
@@ -264,7 +282,7 @@ def exp_parts(px, py, pz) -> tuple:
     tuple (x, y, z, w)
     """
     t2 = px * px + py * py + pz * pz
-    if isinstance(t2, float):
+    if type(t2) is float or isinstance(t2, float):  # the first test: fast path for streaming
         if t2 < _SERIES_THETA2_FLOAT:
             s = 0.5 + t2 * (-1.0 / 48.0 + t2 * (1.0 / 3840.0 + t2 * (-1.0 / 645120.0)))
             c = 1.0 + t2 * (-0.125 + t2 * (1.0 / 384.0 + t2 * (-1.0 / 46080.0)))
