@@ -10,11 +10,15 @@ The product is sequential, so it is reorganised for numpy:
 2. **Local scan**: ``K - 1`` vectorised products along the rows give every block's inclusive
    prefix ``R[k, b] = dq_{bK} ⊗ … ⊗ dq_{bK+k}`` (all blocks side by side).
 3. **Recursion** on the block totals ``R[K-1, :]`` gives the attitude ``E[b]`` at the start of each
-   block (the same algorithm on ``nb`` elements, down to a short plain loop).
+   block (the same algorithm on ``nb`` elements, down to a short input, below).
 4. **Apply**: ``q_{bK+k+1} = E[b] ⊗ R[k, b]`` in one vectorised product, written as
    ``[x, y, z, w]`` rows, then every quaternion is normalised once.
 
-Steps 1-2 and 4 run over chunks of blocks whose arrays fit in the CPU cache. Every product is the
+Short inputs (up to 8192 steps: streaming chunks, the recursion's last level) skip the blocks:
+in pair form the recursion is a unit lower-triangular banded linear system, solved by LAPACK's
+banded forward substitution (``ztbtrs``), which runs the plain loop's products in compiled code
+(1000 steps: 25 µs, against 65 µs blocked and 200 µs as a Python loop); up to 16 steps, the
+Python loop. Steps 1-2 and 4 run over chunks of blocks whose arrays fit in the CPU cache. Every product is the
 Hamilton product of scalar-last ``[x, y, z, w]`` quaternions; increments multiply on the right.
 The result agrees with the sequential loop to rounding (1e-14 over 5000 steps, tested).
 
@@ -25,13 +29,13 @@ with ``IMU_DCM_KEEP_MALLOC=1``).
 from __future__ import annotations
 
 import ctypes
-import math
 import os
 import sys
 from collections.abc import Callable
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
+from scipy.linalg.lapack import ztbtrs as _ztbtrs
 
 from imu_dcm.errors import InputError
 
@@ -74,9 +78,13 @@ BLOCK = 8
 #: Samples per cache chunk of blocks (complex arrays of 256 kB); shorter inputs are not split
 #: into chunks.
 CHUNK_SAMPLES = 1 << 14
-# At most this many steps: a plain loop over Python complex numbers (~0.2 µs per step, fewer
-# numpy calls than one more blocked level).
-_SMALL = 128
+# Prefix products of at most this many steps: a plain loop over Python complex numbers (~0.2 µs
+# per step); up to _BANDED steps: banded forward substitution in LAPACK (~5 µs + 23 ns per step);
+# longer: the blocked scan. Crossovers measured (25 µs for 1000 steps: 200 µs loop, 65 µs blocked).
+_SEQUENTIAL = 16
+_BANDED = 8192
+
+_ONES4 = np.ones(4)
 
 Parts = tuple  # 4 component arrays (or floats) x, y, z, w
 FillFn = Callable[[int, int], Parts]
@@ -161,15 +169,42 @@ def _local_scan(da: NDArray, db: NDArray, r: NDArray) -> None:
         np.add(prod[0], prod[1], out=r[k])
 
 
+def _banded_pair(a0: complex, b0: complex, da: NDArray, db: NDArray):
+    """The prefix product solved as the linear system it is (short inputs); returns (M + 1,).
+
+    With the unknowns ``u = [a_0, b_0, a_1, b_1, ..., a_M, b_M]`` the recursion
+    ``a_{i+1} = a_i da_i - b_i conj(db_i)``, ``b_{i+1} = a_i db_i + b_i conj(da_i)`` is
+    ``L u = [a0, b0, 0, ...]`` with ``L`` unit lower triangular of bandwidth 3. LAPACK's banded
+    forward substitution (``ztbtrs``) runs the same products in the same order as the plain loop
+    (bit for bit here), in compiled code: ~6 ns per unknown plus ~10 numpy calls to build ``L``.
+    """
+    M = len(da)
+    # LAPACK band storage ab[d, j] = L[j + d, j], in Fortran order: ab = abt.reshape(-1, 4).T,
+    # abt[i, c, d] = L[2 i + c + d, 2 i + c] (column of a_i: c = 0, of b_i: c = 1).
+    abt = np.empty((M + 1, 2, 4), dtype=complex)
+    abt[:, :, 0] = 1.0  # the unit diagonal (not read: diag="U")
+    abt[:, 0, 1] = 0.0  # b_i does not depend on a_i
+    np.negative(da, out=abt[:M, 0, 2])  # a_{i+1} -= a_i da_i
+    np.negative(db, out=abt[:M, 0, 3])  # b_{i+1} -= a_i db_i
+    np.conjugate(db, out=abt[:M, 1, 1])  # a_{i+1} -= b_i (-conj(db_i))
+    np.conjugate(da, out=abt[:M, 1, 2])
+    np.negative(abt[:M, 1, 2], out=abt[:M, 1, 2])  # b_{i+1} -= b_i conj(da_i)
+    abt[:, 1, 3] = 0.0  # a_{i+2} does not depend on b_i
+    abt[M, 0, 2:] = 0.0  # outside the matrix (not read)
+    rhs = np.zeros(2 * M + 2, dtype=complex)
+    rhs[0], rhs[1] = a0, b0
+    u = _ztbtrs(abt.reshape(2 * M + 2, 4).T, rhs, uplo="L", trans="N", diag="U",
+                overwrite_b=1)[0]
+    return u[0::2], u[1::2]
+
+
 def _prefix_pair(a0: complex, b0: complex, da: NDArray, db: NDArray, K: int):
     """Prefix product in pair form, natural order: (M,) increments -> (M + 1,) attitudes."""
     M = len(da)
-    if M <= _SMALL:
+    if M <= _SEQUENTIAL:
         return _sequential_pair(a0, b0, da, db)
-    if M <= _SMALL * K:
-        # The totals will be multiplied in a plain loop (~0.2 µs each) and each in-block step
-        # costs ~1 µs of numpy calls: balance the two with K ~ sqrt(M / 5).
-        K = max(K, int(math.sqrt(M / 5.0)))
+    if M <= _BANDED:
+        return _banded_pair(a0, b0, da, db)
     nb = -(-M // K)
     pa = np.ones(nb * K, dtype=complex)
     pb = np.zeros(nb * K, dtype=complex)
@@ -193,11 +228,13 @@ def _prefix_pair(a0: complex, b0: complex, da: NDArray, db: NDArray, K: int):
 
 def _write_xyzw(dst: NDArray, a: NDArray, b: NDArray, normalize: bool) -> None:
     """Write pairs into ``[x, y, z, w]`` rows: dst[..., :] from ``a = w + 1j z, b = x + 1j y``."""
-    pairs = dst.view(complex)  # (..., 2): [x + 1j y, z + 1j w]
-    pairs[..., 0] = b
-    np.multiply(np.conjugate(a), 1j, out=pairs[..., 1])  # z + 1j w = 1j conj(w + 1j z)
+    dst.view(complex)[..., 0] = b  # x + 1j y
+    dst[..., 2] = a.imag
+    dst[..., 3] = a.real
     if normalize:
-        dst /= np.sqrt(np.einsum("...i,...i->...", dst, dst))[..., None]
+        # Squared norms as a product with ones: fewer passes than einsum (2.5 vs 6.5 µs per
+        # 1000 rows).
+        dst /= np.sqrt(np.square(dst) @ _ONES4)[..., None]
 
 
 def blocked_prefix_product(q0: ArrayLike, n_steps: int, fill: FillFn, block: int = BLOCK,

@@ -180,7 +180,7 @@ def test_magnus4_interior_weights_are_classic():
 
 # -- the blocked scan -------------------------------------------------------------------------
 
-@pytest.mark.parametrize("m", [1, 7, 64, 65, 1000, 5003])
+@pytest.mark.parametrize("m", [1, 7, 64, 65, 1000, 5003, 9001])
 @pytest.mark.parametrize("block", [2, 8, 32])
 def test_blocked_scan_equals_sequential_loop(m, block):
     # The blocked prefix product re-associates the product; in exact arithmetic it is the same.
