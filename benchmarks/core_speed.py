@@ -34,6 +34,7 @@ from scipy.spatial.transform import Rotation
 
 from benchmarks.peers import reference_loop
 from benchmarks.timing import interleaved_medians, single_thread
+from data_synth.analytic import coning_attitude, coning_rates
 from imu_dcm.integrate import exp_parts, integrate, phi_parts
 from imu_dcm.scan import prefix_product_parts
 from imu_dcm.streaming import DcmIntegrator
@@ -144,12 +145,10 @@ def report_speed(res: dict) -> list[tuple[str, float, float, bool]]:
 
 # -- look-ahead: lag one sample vs causal --------------------------------------------------------
 
-def coning(t: np.ndarray, beta: float = 0.3, om: float = 2 * np.pi * 2.0):
-    rz = Rotation.from_rotvec(np.outer(om * t, [0.0, 0.0, 1.0]))
-    truth = rz * Rotation.from_rotvec([beta, 0.0, 0.0]) * rz.inv()
-    omega = om * np.column_stack([-np.sin(beta) * np.sin(om * t), np.sin(beta) * np.cos(om * t),
-                                  np.full_like(t, np.cos(beta) - 1.0)])
-    return truth, omega
+def coning(t: np.ndarray, beta: float = 0.3, freq_hz: float = 2.0):
+    """Pure coning truth (``Rotation``) and body rates from data_synth's closed form."""
+    return (Rotation.from_quat(coning_attitude(t, beta, freq_hz)),
+            coning_rates(t, beta, freq_hz))
 
 
 def causal_magnus4(omega: np.ndarray, t: np.ndarray, q0: np.ndarray) -> np.ndarray:

@@ -37,20 +37,18 @@ from pathlib import Path
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.integrate import solve_ivp
 from scipy.spatial.transform import Rotation
 
 import imu_dcm
+from data_synth.analytic import coning_attitude, coning_rates, steady_precession_rates
+from data_synth.scenes import HeavyTopParams, box_inertia, free_body
 from imu_dcm.metrics import attitude_error_deg
 from imu_dcm.so3 import exp_matrix, quat_multiply
 
 __all__ = [
-    "BOX_INERTIA",
     "DCM_METHODS",
-    "TOP",
     "coning_truth",
     "euler_zxz_integrate",
-    "free_body_rates",
     "free_box",
     "gimbal_lock",
     "gimbal_motion",
@@ -60,7 +58,6 @@ __all__ = [
     "noise_growth",
     "rotvec_sum_shortcut",
     "run",
-    "steady_precession_rates",
     "steady_top",
     "truncated_first_order",
     "truncated_update",
@@ -71,12 +68,11 @@ __all__ = [
 #: The imu_dcm methods compared in the scenes (``rotvec_sum`` has its own scene).
 DCM_METHODS = ("start", "end", "trapezoid", "coning", "magnus4")
 
-#: The reference document's heavy top (DESIGN.md §5): mass kg, arm m, I1 = I2, I3 kg m², g m/s².
-TOP = {"mass_kg": 1.0, "arm_m": 0.04, "i1": 0.002, "i3": 0.0008, "g": 9.8, "tilt_deg": 54.57}
+#: The reference document's heavy top (DESIGN.md §5), as data_synth defines it.
+TOP = HeavyTopParams()
 
 #: Principal inertias (kg m²) of the free box, edges 2.0, 1.5, 1.0 m, 1 kg (DESIGN.md §5).
-BOX_INERTIA = np.array([(1.5**2 + 1.0**2) / 12.0, (2.0**2 + 1.0**2) / 12.0,
-                        (2.0**2 + 1.5**2) / 12.0])
+BOX_INERTIA = box_inertia((2.0, 1.5, 1.0), 1.0)
 
 _EPS = float(np.finfo(float).eps)
 
@@ -130,28 +126,10 @@ def zxz_truth(phi: NDArray, theta: NDArray, psi: NDArray, dphi: NDArray, dtheta:
 def coning_truth(t_s: NDArray, half_angle_rad: float, freq_rad_s: float) -> tuple[NDArray, NDArray]:
     """Pure coning ``R_w_b(t) = Rz(Ωt) Rx(β) Rz(−Ωt)``: ``(q_w_b (N, 4), omega_b (N, 3) rad/s)``.
 
-    ``ω_b = Ω (−sin β sin Ωt, sin β cos Ωt, cos β − 1)`` (DESIGN.md §5).
+    The closed form of :mod:`data_synth.analytic` (DESIGN.md §5), with ``Ω`` in rad/s.
     """
-    t_s = np.asarray(t_s, dtype=float)
-    w = freq_rad_s
-    return zxz_truth(w * t_s, np.full_like(t_s, half_angle_rad), -w * t_s,
-                     np.full_like(t_s, w), np.zeros_like(t_s), np.full_like(t_s, -w))
-
-
-def steady_precession_rates(spin_rad_s: float, tilt_rad: float, root: str) -> float:
-    """Precession rate φ̇ (rad/s) of the heavy top's steady precession, fast or slow root.
-
-    Solves ``I1 cos θ0 φ̇² − I3 ω3 φ̇ + M g l = 0`` (DESIGN.md §5) with ``ω3`` the body spin rate.
-    """
-    a = TOP["i1"] * math.cos(tilt_rad)
-    b = TOP["i3"] * spin_rad_s
-    mgl = TOP["mass_kg"] * TOP["g"] * TOP["arm_m"]
-    disc = b * b - 4.0 * a * mgl
-    if disc < 0:
-        raise ValueError(f"Expected a spin fast enough for steady precession, got {spin_rad_s} rad/s")
-    sq = math.sqrt(disc)
-    # Stable roots of a x² − b x + c = 0: x_fast = (b + sq) / 2a, x_slow = 2c / (b + sq).
-    return (b + sq) / (2.0 * a) if root == "fast" else 2.0 * mgl / (b + sq)
+    freq_hz = freq_rad_s / (2.0 * math.pi)
+    return coning_attitude(t_s, half_angle_rad, freq_hz), coning_rates(t_s, half_angle_rad, freq_hz)
 
 
 def _uniform_t(rate_hz: float, duration_s: float) -> NDArray:
@@ -548,24 +526,6 @@ def naive_dcm_drift(n_steps: int, rate_hz: float = 1000.0, n_checkpoints: int = 
 # 5. Free box, intermediate axis
 # ----------------------------------------------------------------------------------------------
 
-def free_body_rates(t_s: NDArray, omega0: Sequence[float],
-                    inertia: NDArray = BOX_INERTIA) -> NDArray:
-    """Torque-free body rates ``ω_b(t)`` (rad/s, (N, 3)) from Euler's equations.
-
-    ``I1 ω̇1 = (I2 − I3) ω2 ω3`` and cyclic; scipy ``solve_ivp`` DOP853, rtol = atol = 1e-12
-    (DESIGN.md §5's truth tolerance), dense output sampled at ``t_s``.
-    """
-    i1, i2, i3 = inertia
-
-    def rhs(_t, w):
-        return [(i2 - i3) * w[1] * w[2] / i1, (i3 - i1) * w[2] * w[0] / i2,
-                (i1 - i2) * w[0] * w[1] / i3]
-
-    sol = solve_ivp(rhs, (t_s[0], t_s[-1]), list(omega0), method="DOP853", rtol=1e-12,
-                    atol=1e-12, dense_output=True)
-    return sol.sol(t_s).T
-
-
 @dataclass(frozen=True)
 class FreeBoxResult:
     """Scene 5. Dzhanibekov flips of the free box; attitude checked by conservation of ``L_w``.
@@ -597,7 +557,7 @@ def free_box(rate_hz: float, duration_s: float = 30.0,
              methods: Sequence[str] = DCM_METHODS) -> FreeBoxResult:
     """Scene 5: integrate the flipping box's rates; L_w must stay fixed, flips must match ω2."""
     t = _uniform_t(rate_hz, duration_s)
-    w = free_body_rates(t, FREE_BOX_OMEGA0)
+    _q, w = free_body(duration_s, "intermediate", omega0_b=FREE_BOX_OMEGA0).at(t)
     l_b = w * BOX_INERTIA
     l_norm = np.linalg.norm(l_b, axis=1)
     q0 = np.array([0.0, 0.0, 0.0, 1.0])
@@ -647,8 +607,9 @@ def steady_top(kind: str, spin_hz: float, rates_hz: Sequence[float], duration_s:
     if kind == "sleeping":
         tilt, dphi = 0.0, 0.0
     else:
-        tilt = math.radians(TOP["tilt_deg"])
-        dphi = steady_precession_rates(w3, tilt, kind)
+        tilt = math.radians(TOP.tilt_deg)
+        slow, fast = steady_precession_rates(TOP.i1_kg_m2, TOP.i3_kg_m2, w3, TOP.mgl_n_m, tilt)
+        dphi = fast if kind == "fast" else slow
     dpsi = w3 - dphi * math.cos(tilt)
     err = {m: np.empty(len(rates_hz)) for m in methods}
     for k, rate in enumerate(rates_hz):
