@@ -49,6 +49,7 @@ from scipy import linalg
 
 from imu_dcm.allan import allan_deviation, noise_density_from_allan
 from imu_dcm.errors import InputError
+from imu_dcm.integrate import check_samples
 from imu_dcm.replay.bias import RestConfig, detect_rest
 
 __all__ = [
@@ -207,28 +208,11 @@ class PrefilterResult:
 
 
 def _check_rates(omega_b: ArrayLike, t_s: ArrayLike) -> tuple[NDArray, NDArray]:
-    omega_b = np.asarray(omega_b, dtype=float)
-    t_s = np.asarray(t_s, dtype=float)
-    if omega_b.ndim != 2 or omega_b.shape[1] != 3:
-        raise InputError(f"Expected `omega_b` of shape (N, 3), got {omega_b.shape}")
-    if t_s.shape != (omega_b.shape[0],):
-        raise InputError(f"Expected `t_s` of shape ({omega_b.shape[0]},), got {t_s.shape}")
+    """The integrator's sample checks (shape, finite, strictly increasing stamps, gaps warned),
+    plus the three samples a rate-and-acceleration model needs."""
+    omega_b, t_s, _dt = check_samples(omega_b, t_s)
     if omega_b.shape[0] < 3:
         raise InputError(f"Expected at least 3 samples, got {omega_b.shape[0]}")
-    bad = ~np.isfinite(omega_b).all(axis=1)
-    if bad.any():
-        i = int(np.argmax(bad))
-        raise InputError(f"Expected finite `omega_b`, got {omega_b[i].tolist()} at index {i}")
-    if not np.isfinite(t_s).all():
-        i = int(np.argmax(~np.isfinite(t_s)))
-        raise InputError(f"Expected finite `t_s`, got t[{i}] = {t_s[i]}")
-    dt = np.diff(t_s)
-    if (dt <= 0).any():
-        i = int(np.argmax(dt <= 0))
-        raise InputError(
-            f"Expected `t_s` strictly increasing, got t[{i + 1}] = {t_s[i + 1]!r} "
-            f"<= t[{i}] = {t_s[i]!r} s"
-        )
     return omega_b, t_s
 
 

@@ -247,3 +247,15 @@ def test_summary_keeps_small_errors_visible_and_says_when_no_rest(coning_log, ca
     line = next(x for x in text.splitlines() if x.startswith("error"))
     rms = float(line.split("total RMS ")[1].split("°")[0])
     assert 0.0 < rms < 0.01, line
+
+
+def test_a_gap_is_reported_once(tmp_path, capsys):
+    # clean_imu names the gap; the integrator must not report the same gap a second time.
+    t = np.arange(0.0, 2.0, 0.01)
+    t = t[(t < 0.9) | (t > 1.3)]
+    t_ns = (1_700_000_000_000_000_000 + np.round(t * 1e9)).astype(np.int64)
+    log = write_bag(tmp_path / "gappy", imu=StampedSeries(t_ns, np.tile([0.1, 0.2, 0.3], (len(t), 1)),
+                                                          "imu"))
+    assert main([str(log), "--rerun", "off"]) == 0
+    err = capsys.readouterr().err
+    assert err.count("gap") == 1 and "0.890 s (+0.420 s)" in err, err

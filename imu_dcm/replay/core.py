@@ -25,7 +25,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from imu_dcm.bag_reader import LogData, TruthSeries, read_log
 from imu_dcm.errors import GapWarning, ImuDcmWarning, InputError, LogError
-from imu_dcm.integrate import METHODS, integrate
+from imu_dcm.integrate import GAP_FACTOR, METHODS, integrate
 from imu_dcm.metrics import AttitudeError, attitude_error_deg, rms
 from imu_dcm.replay.bias import BiasEstimate, RestConfig, estimate_bias
 from imu_dcm.so3 import as_quat_xyzw, exp_quat, log_quat, quat_conjugate, quat_multiply
@@ -118,7 +118,7 @@ def clean_imu(t_ns: ArrayLike, omega_b: ArrayLike, topic: str = "IMU") -> Cleane
     gaps: list[tuple[float, float]] = []
     if len(tk) > 2:
         dt = np.diff(tk)
-        big = np.flatnonzero(dt > 5 * np.median(dt))
+        big = np.flatnonzero(dt > GAP_FACTOR * np.median(dt))
         gaps = [(float((tk[i] - tk[0]) * 1e-9), float(dt[i] * 1e-9)) for i in big]
         if gaps:
             listed = ", ".join(f"{a:.3f} s (+{d:.3f} s)" for a, d in gaps[:5])
@@ -336,14 +336,18 @@ def replay(
             from imu_dcm.prefilter import prefilter as run_prefilter
         except ImportError as exc:
             raise InputError(f"Expected the pre-filter module imu_dcm.prefilter, got {exc}")
-        pf = run_prefilter(omega, t_s, prefilter, prefilter_config)
+        with warnings.catch_warnings():  # gaps were reported once, by clean_imu
+            warnings.simplefilter("ignore", GapWarning)
+            pf = run_prefilter(omega, t_s, prefilter, prefilter_config)
         omega = np.asarray(pf.omega_b, dtype=float)
         pf_summary = pf.summary
 
     report("integrate", 0.0)
     q_est = np.full((n, 4), np.nan)
     if n - start >= 2:
-        q_est[start:] = integrate(omega[start:], t_s[start:], q0, method).as_quat()
+        with warnings.catch_warnings():  # gaps were reported once, by clean_imu
+            warnings.simplefilter("ignore", GapWarning)
+            q_est[start:] = integrate(omega[start:], t_s[start:], q0, method).as_quat()
     else:
         q_est[start:] = q0
     report("integrate", 1.0)
