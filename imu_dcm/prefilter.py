@@ -983,7 +983,6 @@ class StreamingRateFilter:
         self._x: NDArray | None = None  # (d, 3)
         self._P: NDArray | None = None  # (d, d)
         self._t: float | None = None
-        self._dt_prev: float | None = None
 
     def update(self, omega_b: ArrayLike, t_s: float) -> tuple[NDArray, float]:
         """Add one sample; return the filtered rate (3,) rad/s and its std, rad/s.
