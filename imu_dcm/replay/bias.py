@@ -1,12 +1,11 @@
-"""Gyro bias from rest: find the still segments of a log and estimate the bias in each.
+"""Gyro bias from rest: the bias of each still segment of a log, applied sample by sample.
 
-A gyro at rest measures its bias plus noise. A sample is *at rest* when it lies in a window of
-at least ``min_duration_s`` (0.5 s) whose mean rate magnitude is below ``max_rate_rad_s`` and
-whose per-axis standard deviation is below ``max_std_rad_s``. Consecutive rest samples form a
-rest segment; the bias of a segment is the mean rate over it, leaving out one window next to
-each motion (windows that straddle a slow start of motion still pass the thresholds). The bias applied to a sample is
-that of the latest rest segment that began at or before it (so the estimate is *updated at each
-rest*); samples before the first rest use the first segment's bias.
+Rest segments come from :func:`imu_dcm.rest.detect_rest` (re-exported here with
+:class:`~imu_dcm.rest.RestConfig`). The bias of a segment is the mean rate over it, leaving out
+one window next to each motion (windows that straddle a slow start of motion still pass the
+thresholds). The bias applied to a sample is that of the latest rest segment that began at or
+before it (so the estimate is *updated at each rest*); samples before the first rest use the
+first segment's bias.
 
 Conventions: ``omega_b`` (N, 3) body rate in body axes, rad/s; ``t_s`` (N,) seconds,
 increasing. Bias vectors are in the same frame and unit.
@@ -20,26 +19,9 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from imu_dcm.errors import InputError
+from imu_dcm.rest import RestConfig, detect_rest, runs, window_samples
 
 __all__ = ["BiasEstimate", "RestConfig", "RestSegment", "detect_rest", "estimate_bias"]
-
-
-@dataclass(frozen=True)
-class RestConfig:
-    """Thresholds of the rest detector.
-
-    Attributes
-    ----------
-    min_duration_s : shortest rest that counts, s (default 0.5).
-    max_rate_rad_s : largest magnitude of the window-mean rate, rad/s (default 0.035 ≈ 2 °/s;
-        above the largest MEMS biases seen, far below deliberate motion).
-    max_std_rad_s : largest per-axis standard deviation in the window, rad/s (default 0.01 ≈
-        0.6 °/s; 2–5x the noise of a consumer gyro at a few hundred Hz).
-    """
-
-    min_duration_s: float = 0.5
-    max_rate_rad_s: float = 0.035
-    max_std_rad_s: float = 0.01
 
 
 @dataclass(frozen=True)
@@ -67,53 +49,6 @@ class BiasEstimate:
     bias_b: NDArray[np.float64]
     segments: tuple[RestSegment, ...]
     mode: str
-
-
-def _window_samples(t_s: NDArray, duration_s: float) -> int:
-    dt = float(np.median(np.diff(t_s))) if len(t_s) > 1 else 1.0
-    return max(2, int(np.ceil(duration_s / dt)))
-
-
-def detect_rest(omega_b: ArrayLike, t_s: ArrayLike, config: RestConfig | None = None) -> NDArray:
-    """Boolean mask (N,) of samples at rest (see the module docstring for the rule).
-
-    Parameters
-    ----------
-    omega_b : array_like, shape (N, 3)
-        Body rates, rad/s.
-    t_s : array_like, shape (N,)
-        Sample times, s, increasing.
-    config : RestConfig, optional
-    """
-    cfg = config or RestConfig()
-    w = np.asarray(omega_b, dtype=float)
-    t = np.asarray(t_s, dtype=float)
-    if w.ndim != 2 or w.shape[1] != 3 or len(t) != len(w):
-        raise InputError(f"Expected omega_b (N, 3) and t_s (N,), got {w.shape} and {t.shape}")
-    n = len(w)
-    win = _window_samples(t, cfg.min_duration_s)
-    rest = np.zeros(n, dtype=bool)
-    if n < win:
-        return rest
-    c1 = np.concatenate([np.zeros((1, 3)), np.cumsum(w, axis=0)])
-    c2 = np.concatenate([np.zeros((1, 3)), np.cumsum(w * w, axis=0)])
-    mean = (c1[win:] - c1[:-win]) / win  # window starting at i: samples [i, i + win)
-    var = np.maximum((c2[win:] - c2[:-win]) / win - mean * mean, 0.0)
-    still = (np.linalg.norm(mean, axis=1) < cfg.max_rate_rad_s) & np.all(
-        var < cfg.max_std_rad_s**2, axis=1
-    )
-    # a sample is at rest when any still window covers it: spread each still start over win
-    cover = np.zeros(n + 1, dtype=np.int64)
-    starts = np.flatnonzero(still)
-    np.add.at(cover, starts, 1)
-    np.add.at(cover, starts + win, -1)
-    rest[:] = np.cumsum(cover[:-1]) > 0
-    return rest
-
-
-def _segments(mask: NDArray[np.bool_]) -> list[tuple[int, int]]:
-    edges = np.diff(np.concatenate([[0], mask.astype(np.int8), [0]]))
-    return list(zip(np.flatnonzero(edges == 1).tolist(), np.flatnonzero(edges == -1).tolist()))
 
 
 def estimate_bias(
@@ -154,9 +89,9 @@ def estimate_bias(
         raise InputError(f"Expected bias 'auto', 'none' or x,y,z in rad/s, got {mode!r}")
     cfg = config or RestConfig()
     mask = detect_rest(w, t, cfg)
-    trim = _window_samples(t, cfg.min_duration_s)
+    trim = window_samples(t, cfg.min_duration_s)
     segs = []
-    for a, b in _segments(mask):
+    for a, b in runs(mask):
         # Windows that straddle the start of a slow motion still pass the thresholds: leave
         # out one window next to motion (not at the ends of the log) when enough remains.
         lo = a + trim if a > 0 else a
