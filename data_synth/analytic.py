@@ -36,13 +36,19 @@ __all__ = [
 ]
 
 
-def _rot_quat(axis: int, angle_rad: ArrayLike) -> NDArray[np.float64]:
-    """Quaternions ``[x, y, z, w]`` of rotations by ``angle_rad`` (N,) about a coordinate axis."""
+def axis_quat(axis: int, angle_rad: ArrayLike) -> NDArray[np.float64]:
+    """Quaternions ``[x, y, z, w]`` of rotations by ``angle_rad`` (shape (N,)) about a coordinate
+    axis (0 = x, 1 = y, 2 = z); shape (N, 4)."""
     a = np.asarray(angle_rad, dtype=float)
     q = np.zeros(a.shape + (4,))
     q[..., axis] = np.sin(0.5 * a)
     q[..., 3] = np.cos(0.5 * a)
     return q
+
+
+def zxz_quat(phi: ArrayLike, theta: ArrayLike, psi: ArrayLike) -> NDArray[np.float64]:
+    """``q_w_b`` of intrinsic ZXZ Euler angles, ``Rz(φ) · Rx(θ) · Rz(ψ)``, shape (N, 4) xyzw."""
+    return quat_multiply(quat_multiply(axis_quat(2, phi), axis_quat(0, theta)), axis_quat(2, psi))
 
 
 # --------------------------------------------------------------------------------------------
@@ -55,8 +61,8 @@ def coning_attitude(t_s: ArrayLike, half_angle_rad: float, freq_hz: float) -> ND
     The body z axis sweeps a cone of half-angle ``β`` about world z at ``Ω``; shape (N, 4).
     """
     wt = 2.0 * math.pi * freq_hz * np.asarray(t_s, dtype=float)
-    qx = _rot_quat(0, np.full_like(wt, half_angle_rad))
-    return quat_multiply(quat_multiply(_rot_quat(2, wt), qx), _rot_quat(2, -wt))
+    qx = axis_quat(0, np.full_like(wt, half_angle_rad))
+    return quat_multiply(quat_multiply(axis_quat(2, wt), qx), axis_quat(2, -wt))
 
 
 def coning_rates(t_s: ArrayLike, half_angle_rad: float, freq_hz: float) -> NDArray[np.float64]:
@@ -153,7 +159,7 @@ def symmetric_free_top(
     rate_l = l_norm / i1_kg_m2
     omega_body_axis = (i3_kg_m2 - i1_kg_m2) * w0[2] / i1_kg_m2
     q_l = exp_quat(t[:, None] * rate_l * n_w[None, :])
-    q = quat_multiply(quat_multiply(q_l, q0), _rot_quat(2, -omega_body_axis * t))
+    q = quat_multiply(quat_multiply(q_l, q0), axis_quat(2, -omega_body_axis * t))
     c, s = np.cos(omega_body_axis * t), np.sin(omega_body_axis * t)
     omega = np.stack([c * w0[0] - s * w0[1], s * w0[0] + c * w0[1], np.full_like(t, w0[2])],
                      axis=-1)
@@ -278,10 +284,10 @@ def _attitude_core(t: NDArray, e: dict[str, float], w0: NDArray,
     w = _omega_core(t, e)
     theta = np.arccos(np.clip(i3 * w[:, 2] / big_m, -1.0, 1.0))
     psi = np.arctan2(i1 * w[:, 0], i2 * w[:, 1])
-    q_l_b = quat_multiply(quat_multiply(_rot_quat(2, phi), _rot_quat(0, theta)), _rot_quat(2, psi))
+    q_l_b = zxz_quat(phi, theta, psi)
     th0 = math.acos(max(-1.0, min(1.0, i3 * w0[2] / big_m)))
     ps0 = math.atan2(i1 * w0[0], i2 * w0[1])
-    q_l_b0 = quat_multiply(_rot_quat(0, th0), _rot_quat(2, ps0))
+    q_l_b0 = quat_multiply(axis_quat(0, th0), axis_quat(2, ps0))
     q_w_l = quat_multiply(q0, quat_conjugate(q_l_b0))
     return quat_multiply(q_w_l, q_l_b)
 

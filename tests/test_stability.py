@@ -1,4 +1,4 @@
-"""Stability scenes of ``benchmarks.stability``: each asserts the behaviour its chart shows.
+"""Stability scenes of ``data_synth.stability``: each asserts the behaviour its chart shows.
 
 Truths are closed forms (coning, steady precession, fixed-axis rotation, composed axis rotations)
 or conservation laws, independent of the integrators. Bounds come from the methods' theory
@@ -12,7 +12,7 @@ import math
 import numpy as np
 import pytest
 
-from benchmarks import stability as st
+from data_synth import stability as st
 
 EPS = float(np.finfo(float).eps)
 
@@ -138,7 +138,17 @@ def test_fast_top_at_high_spin_converges_at_each_methods_order():
     # Fast steady precession at 20 Hz spin: φ̇ = 82.6 rad/s; ω_b cones at ψ̇ = 78 rad/s.
     res = st.steady_top("fast", 20.0, (2000.0, 4000.0), duration_s=0.5,
                         methods=st.DCM_METHODS + ("euler_zxz",))
-    assert res.precession_rad_s == pytest.approx(82.6, abs=0.1)  # root of the DESIGN quadratic
+    # Steady precession of the heavy top (Goldstein, Classical Mechanics, 2nd ed., §5-7; θ̇ = 0): the torque M g l sin θ must
+    # equal the rate of change of the angular momentum, which gives the quadratic
+    #     I1 cos θ φ̇² − I3 ω3 φ̇ + M g l = 0,
+    # with ω3 = φ̇ cos θ + ψ̇ the body spin. The top: M = 1 kg, l = 0.04 m, g = 9.8 m/s²,
+    # I1 = 0.002 kg m², I3 = 0.0008 kg m², θ = 54.57°, ω3 = 2π · 20 rad/s. The fast top is the
+    # larger root, (I3 ω3 + √((I3 ω3)² − 4 I1 cos θ M g l)) / (2 I1 cos θ) = 82.6 rad/s.
+    i1, i3, mgl = 0.002, 0.0008, 1.0 * 9.8 * 0.04
+    cos_t, w3 = math.cos(math.radians(54.57)), 2.0 * math.pi * 20.0
+    fast = (i3 * w3 + math.sqrt((i3 * w3) ** 2 - 4.0 * i1 * cos_t * mgl)) / (2.0 * i1 * cos_t)
+    assert res.precession_rad_s == pytest.approx(fast, rel=1e-12)
+    assert res.precession_rad_s == pytest.approx(82.6, abs=0.1)
     expected = {"start": 1, "end": 1, "trapezoid": 2, "coning": 2, "magnus4": 4}
     for m, p in expected.items():
         assert abs(_order(res.err_deg[m][0], res.err_deg[m][1], 2.0) - p) < 0.15, m
