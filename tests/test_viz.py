@@ -7,6 +7,7 @@ axis must equal the columns of ``Rotation.from_quat(q_w_b).as_matrix()``.
 from __future__ import annotations
 
 import math
+import sys
 
 import numpy as np
 import pytest
@@ -193,7 +194,7 @@ def test_realtime_sends_the_same_rows_in_chunks(tmp_path, monkeypatch):
     import rerun as rr
 
     sleeps: list[float] = []
-    monkeypatch.setattr(viz.time, "sleep", sleeps.append)  # pacing without waiting
+    monkeypatch.setattr("imu_dcm.viz.log.time.sleep", sleeps.append)  # pacing without waiting
     view = _view()
     rec = rr.RecordingStream("imu_dcm_test")
     path = tmp_path / "rt.rrd"
@@ -234,7 +235,7 @@ def test_modes(tmp_path, monkeypatch):
     view = _view(n=40)
     monkeypatch.delenv("DISPLAY", raising=False)
     monkeypatch.delenv("WAYLAND_DISPLAY", raising=False)
-    if viz.sys.platform.startswith("linux"):
+    if sys.platform.startswith("linux"):
         # No display: the default saves next to the output and says how to open the file.
         line = show_replay(view, None, tmp_path)
         expected = tmp_path / "unit_test_view.rrd"
