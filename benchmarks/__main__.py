@@ -1,4 +1,4 @@
-"""Regenerate every benchmark chart and table from scratch: ``python -m benchmarks [--quick] --out DIR``.
+"""Regenerate every benchmark chart and table: ``python -m benchmarks [--quick] --out DIR``.
 
 Steps (a progress line each): the speed-against-accuracy measurement of every imu_dcm method and
 every peer (:mod:`benchmarks.pareto`) and its chart ``pareto.png``; the convergence chart
@@ -40,8 +40,9 @@ def _progress_printer() -> Callable[[str], None]:
     return progress
 
 
-def _optional_run(module: str, out_dir: Path, quick: bool,
-                  progress: Callable[[str], None]) -> tuple[str, list[str]]:
+def _optional_run(
+    module: str, out_dir: Path, quick: bool, progress: Callable[[str], None]
+) -> tuple[str, list[str]]:
     """Call ``benchmarks.<module>.run`` if it exists; return (status, markdown lines)."""
     try:
         mod = importlib.import_module(f"benchmarks.{module}")
@@ -73,21 +74,31 @@ def _optional_run(module: str, out_dir: Path, quick: bool,
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(
         prog="python -m benchmarks",
-        description="Regenerate the speed-vs-accuracy and stability charts and results.md.")
+        description="Regenerate the speed-vs-accuracy and stability charts and results.md.",
+    )
     parser.add_argument("--out", required=True, type=Path, help="output folder (created)")
-    parser.add_argument("--quick", action="store_true",
-                        help="fewer rates and rounds, shorter long runs (CI smoke step)")
-    parser.add_argument("--clock", choices=("wall", "cpu"), default="wall",
-                        help="timer: wall time (default) or this process's CPU time, which "
-                             "leaves out the time other processes hold the CPU on a shared "
-                             "machine")
+    parser.add_argument(
+        "--quick",
+        action="store_true",
+        help="fewer rates and rounds, shorter long runs (CI smoke step)",
+    )
+    parser.add_argument(
+        "--clock",
+        choices=("wall", "cpu"),
+        default="wall",
+        help="timer: wall time (default) or this process's CPU time, which "
+        "leaves out the time other processes hold the CPU on a shared "
+        "machine",
+    )
     args = parser.parse_args(argv)
     out: Path = args.out
     try:
         out.mkdir(parents=True, exist_ok=True)
     except OSError as exc:
-        print(f"benchmarks: Expected a writable output folder, got {out} ({exc.strerror})",
-              file=sys.stderr)
+        print(
+            f"benchmarks: Expected a writable output folder, got {out} ({exc.strerror})",
+            file=sys.stderr,
+        )
         return 2
 
     import numpy as np  # noqa: F401  (after the thread limit)
@@ -98,19 +109,32 @@ def main(argv: list[str] | None = None) -> int:
     t_start = time.perf_counter()
     rates = pareto.QUICK_RATES_HZ if args.quick else pareto.FULL_RATES_HZ
     rounds = 3 if args.quick else 5
-    conv_rates = (50.0, 200.0, 1000.0, 5000.0, 20000.0) if args.quick else \
-        pareto.CONVERGENCE_RATES_HZ
-    command = ("python -m benchmarks" + (" --quick" if args.quick else "")
-               + (f" --clock {args.clock}" if args.clock != "wall" else "") + " --out DIR")
+    conv_rates = (
+        (50.0, 200.0, 1000.0, 5000.0, 20000.0) if args.quick else pareto.CONVERGENCE_RATES_HZ
+    )
+    command = (
+        "python -m benchmarks"
+        + (" --quick" if args.quick else "")
+        + (f" --clock {args.clock}" if args.clock != "wall" else "")
+        + " --out DIR"
+    )
     with single_thread():
         cases = pareto.method_cases()
-        progress(f"pareto: {len(cases)} methods, {len(pareto.SCENES)} scenes, rates "
-                 f"{', '.join(f'{r:g}' for r in rates)} Hz, {rounds} rounds")
+        progress(
+            f"pareto: {len(cases)} methods, {len(pareto.SCENES)} scenes, rates "
+            f"{', '.join(f'{r:g}' for r in rates)} Hz, {rounds} rounds"
+        )
         meas = pareto.measure(pareto.SCENES, rates, cases, rounds, progress, clock=args.clock)
-        pareto.plot_pareto(meas, cases, out / "pareto.png", skip=pareto.MAIN_CHART_SKIP,
-                           clock=args.clock)
-        pareto.plot_pareto(meas, cases, out / "pareto_all.png", clock=args.clock,
-                           title_note=" (every case, incl. all streaming methods)")
+        pareto.plot_pareto(
+            meas, cases, out / "pareto.png", skip=pareto.MAIN_CHART_SKIP, clock=args.clock
+        )
+        pareto.plot_pareto(
+            meas,
+            cases,
+            out / "pareto_all.png",
+            clock=args.clock,
+            title_note=" (every case, incl. all streaming methods)",
+        )
         progress("pareto: wrote pareto.png, pareto_all.png")
         conv = pareto.convergence(pareto.SCENES, conv_rates, progress=progress)
         pareto.plot_convergence(conv, out / "convergence.png")
@@ -122,7 +146,7 @@ def main(argv: list[str] | None = None) -> int:
             progress(f"{module}: running")
             try:
                 status, lines = _optional_run(module, out, args.quick, progress)
-            except Exception as exc:  # noqa: BLE001 - another study's failure must not lose this run's tables
+            except Exception as exc:
                 status, lines = f"FAILED ({type(exc).__name__}: {exc})", []
                 failed.append(module)
             progress(f"{module}: {status}")
@@ -135,10 +159,13 @@ def main(argv: list[str] | None = None) -> int:
     md = [
         "# imu_dcm benchmarks: speed against accuracy, and stability",
         "",
-        (f"Generated by `{command}` on {datetime.now(timezone.utc):%Y-%m-%d %H:%M} UTC in "
-        f"{elapsed:.0f} s. Charts beside this file: `pareto.png` (`pareto_all.png`: every case), "
-        "`convergence.png`, "
-        "`stability_*.png`."),
+        (
+            f"Generated by `{command}` on {datetime.now(timezone.utc):%Y-%m-%d %H:%M} UTC in "
+            f"{elapsed:.0f} s. Charts beside this file: `pareto.png` "
+            "(`pareto_all.png`: every case), "
+            "`convergence.png`, "
+            "`stability_*.png`."
+        ),
         "",
     ]
     md += pareto.summary_markdown(meas)
@@ -148,11 +175,14 @@ def main(argv: list[str] | None = None) -> int:
     md += extra
     (out / "results.md").write_text("\n".join(md) + "\n", encoding="utf-8")
     (out / "pareto.json").write_text(
-        json.dumps([dataclasses.asdict(m) for m in meas], indent=0) + "\n", encoding="utf-8")
+        json.dumps([dataclasses.asdict(m) for m in meas], indent=0) + "\n", encoding="utf-8"
+    )
     progress(f"done: {out / 'results.md'} ({elapsed:.0f} s)")
     if failed:
-        print(f"benchmarks: Expected every study to run, got failures in {', '.join(failed)}",
-              file=sys.stderr)
+        print(
+            f"benchmarks: Expected every study to run, got failures in {', '.join(failed)}",
+            file=sys.stderr,
+        )
         return 1
     return 0
 

@@ -45,9 +45,14 @@ def allan_deviation(
     if n < 9:
         raise InputError(f"Expected at least 9 samples for an Allan deviation, got {n}")
     if not np.all(np.isfinite(y)):
-        raise InputError(f"Expected finite samples, got a NaN/Inf at index {int(np.argmin(np.isfinite(y).all(axis=tuple(range(1, y.ndim)))))}")
+        row_ok = np.isfinite(y).all(axis=tuple(range(1, y.ndim)))
+        raise InputError(
+            f"Expected finite samples, got a NaN/Inf at index {int(np.argmin(row_ok))}"
+        )
     if m is None:
-        m = np.unique(np.logspace(0, np.log10(n // 9), 10 * max(1, int(np.log10(n // 9)) + 1)).astype(int))
+        m = np.unique(
+            np.logspace(0, np.log10(n // 9), 10 * max(1, int(np.log10(n // 9)) + 1)).astype(int)
+        )
     m = np.asarray(m, dtype=int)
     if np.any(m < 1) or np.any(2 * m >= n):
         raise InputError(f"Expected cluster sizes 1 <= m < N/2 = {n / 2}, got {m.min()}..{m.max()}")
@@ -55,7 +60,7 @@ def allan_deviation(
     theta = np.concatenate([np.zeros((1,) + y.shape[1:]), np.cumsum(y, axis=0) * dt])
     adev = []
     for mi in m:
-        d = theta[2 * mi:] - 2.0 * theta[mi:-mi] + theta[: -2 * mi]
+        d = theta[2 * mi :] - 2.0 * theta[mi:-mi] + theta[: -2 * mi]
         tau = mi * dt
         adev.append(np.sqrt(np.sum(d * d, axis=0) / (2.0 * tau * tau * (n + 1 - 2 * mi))))
     return m * dt, np.asarray(adev)

@@ -78,6 +78,7 @@ def _is_uniform(t_s: NDArray) -> bool:
 # Library peers
 # ----------------------------------------------------------------------------------------------
 
+
 def ahrs_angular_rate(omega_b: NDArray, t_s: NDArray, q0: NDArray) -> NDArray:
     """ahrs ``AngularRate.update`` per sample, closed form (exact exponential of ``ω_{i+1} dt``).
 
@@ -115,8 +116,9 @@ def imufusion_gain0(omega_b: NDArray, t_s: NDArray, q0: NDArray) -> NDArray:
     gyr_dps = np.degrees(omega_b)
     zeros = np.zeros(3)
     ahrs = imufusion.Ahrs()
-    ahrs.set_settings(imufusion.AhrsSettings(sample_rate=1.0 / _median_dt(t_s), gain=0.0,
-                                             gyroscope_range=0.0))
+    ahrs.set_settings(
+        imufusion.AhrsSettings(sample_rate=1.0 / _median_dt(t_s), gain=0.0, gyroscope_range=0.0)
+    )
     ahrs.set_sample_period(_median_dt(t_s))
     ahrs.skip_startup()
     ahrs.set_quaternion(_xyzw_to_wxyz(q0))
@@ -139,8 +141,9 @@ def _gyro_only_vqf(ts_s: float):
 
     # Bias estimation and magnetic rejection off; zero accelerometer samples are ignored by
     # vqf's updateAcc, so only the gyro strapdown quaternion (exact step of ω Ts) acts.
-    return vqf.VQF(ts_s, restBiasEstEnabled=False, motionBiasEstEnabled=False,
-                   magDistRejectionEnabled=False)
+    return vqf.VQF(
+        ts_s, restBiasEstEnabled=False, motionBiasEstEnabled=False, magDistRejectionEnabled=False
+    )
 
 
 def vqf_batch(omega_b: NDArray, t_s: NDArray, q0: NDArray) -> NDArray:
@@ -184,12 +187,12 @@ class Peer(NamedTuple):
 
 
 PEERS: dict[str, Peer] = {
-    "reference_loop": Peer(reference_loop,
-                           "plain DCM loop, numpy 3x3 CK per step, end-of-step rate", "first"),
+    "reference_loop": Peer(
+        reference_loop, "plain DCM loop, numpy 3x3 CK per step, end-of-step rate", "first"
+    ),
     "scipy_loop": Peer(scipy_loop, "scipy Rotation composed per sample", "first"),
     "ahrs_angular_rate": Peer(ahrs_angular_rate, "ahrs AngularRate.update, closed form", "first"),
-    "imufusion_gain0": Peer(imufusion_gain0, "imufusion Ahrs, gain 0, float32 q-dot step",
-                            "first"),
+    "imufusion_gain0": Peer(imufusion_gain0, "imufusion Ahrs, gain 0, float32 q-dot step", "first"),
     "vqf_batch": Peer(vqf_batch, "vqf updateBatch (C++), gyro only, median Ts", "first"),
     "vqf_update_gyr": Peer(vqf_update_gyr, "vqf updateGyr per sample, median Ts", "first"),
 }

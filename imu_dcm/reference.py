@@ -41,8 +41,8 @@ def reference_ck(omega_dt: NDArray) -> NDArray:
     """The step matrix ``CK(dΩ)`` of the plain DCM loop (right-handed, active), one 3x3 matrix.
 
     ``a = cos(|dΩ|/2)`` and ``(b, c, d) = axis · sin(|dΩ|/2)`` (the Cayley–Klein / Euler
-    parameters), laid out as the rotation matrix in Euler parameters (Goldstein, *Classical Mechanics*, §4-5);
-    equal to Rodrigues ``exp([dΩ×])``.
+    parameters), laid out as the rotation matrix in Euler parameters (Goldstein, *Classical
+    Mechanics*, 2nd ed., §4-5); equal to Rodrigues ``exp([dΩ×])``.
 
     Parameters
     ----------
@@ -58,11 +58,13 @@ def reference_ck(omega_dt: NDArray) -> NDArray:
         return np.eye(3)
     a = np.cos(angle / 2.0)
     b, c, d = omega_dt / angle * np.sin(angle / 2.0)
-    return np.array([
-        [a * a + b * b - c * c - d * d, 2 * (b * c - a * d), 2 * (b * d + a * c)],
-        [2 * (b * c + a * d), a * a + c * c - b * b - d * d, 2 * (c * d - a * b)],
-        [2 * (b * d - a * c), 2 * (c * d + a * b), a * a + d * d - b * b - c * c],
-    ])
+    return np.array(
+        [
+            [a * a + b * b - c * c - d * d, 2 * (b * c - a * d), 2 * (b * d + a * c)],
+            [2 * (b * c + a * d), a * a + c * c - b * b - d * d, 2 * (c * d - a * b)],
+            [2 * (b * d - a * c), 2 * (c * d + a * b), a * a + d * d - b * b - c * c],
+        ]
+    )
 
 
 def reference_loop(omega_b: NDArray, t_s: NDArray, q0: NDArray) -> NDArray:
@@ -97,8 +99,9 @@ def scipy_loop(omega_b: NDArray, t_s: NDArray, q0: NDArray) -> NDArray:
     return out
 
 
-def truncated_first_order(omega_b: NDArray, t_s: NDArray, q0: NDArray,
-                          normalise: bool = True) -> NDArray:
+def truncated_first_order(
+    omega_b: NDArray, t_s: NDArray, q0: NDArray, normalise: bool = True
+) -> NDArray:
     """First-order truncated quaternion update, per sample (how imufusion-style filters step).
 
     ``q_{i+1} = q_i + ½ q_i ⊗ [ω_{i+1} dt, 0]``, then normalised (unless ``normalise=False``):
@@ -119,8 +122,12 @@ def truncated_first_order(omega_b: NDArray, t_s: NDArray, q0: NDArray,
         h = 0.5 * (t[i] - t[i - 1])
         a, b, c = w[i][0] * h, w[i][1] * h, w[i][2] * h
         # q ⊗ [a, b, c, 0] (Hamilton, scalar last)
-        x, y, z, s = (x + s * a + y * c - z * b, y + s * b + z * a - x * c,
-                      z + s * c + x * b - y * a, s - x * a - y * b - z * c)
+        x, y, z, s = (
+            x + s * a + y * c - z * b,
+            y + s * b + z * a - x * c,
+            z + s * c + x * b - y * a,
+            s - x * a - y * b - z * c,
+        )
         if normalise:
             n = math.sqrt(x * x + y * y + z * z + s * s)
             x, y, z, s = x / n, y / n, z / n, s / n

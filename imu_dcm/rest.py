@@ -80,7 +80,8 @@ def windowed_mean_var(x: NDArray, m: int) -> tuple[NDArray, NDArray]:
 def runs(mask: NDArray[np.bool_]) -> list[tuple[int, int]]:
     """``[start, stop)`` of every run of True in a boolean mask, in order."""
     edges = np.diff(np.concatenate([[0], np.asarray(mask).astype(np.int8), [0]]))
-    return list(zip(np.flatnonzero(edges == 1).tolist(), np.flatnonzero(edges == -1).tolist()))
+    starts, stops = np.flatnonzero(edges == 1), np.flatnonzero(edges == -1)
+    return list(zip(starts.tolist(), stops.tolist(), strict=True))
 
 
 def longest_run(mask: NDArray[np.bool_]) -> tuple[int, int]:

@@ -56,11 +56,18 @@ def test_peer_90_deg_about_z_is_scalar_last(name):
     omega_b = np.tile([0.0, 0.0, 0.5 * np.pi], (n, 1))
     q = PEERS[name].fn(omega_b, t_s, np.array([0.0, 0.0, 0.0, 1.0]))
     tol = 1e-4 if name == "imufusion_gain0" else 1e-12
-    np.testing.assert_allclose(np.sign(q[-1, 3]) * q[-1], [0, 0, np.sqrt(0.5), np.sqrt(0.5)],
-                               atol=tol)
+    np.testing.assert_allclose(
+        np.sign(q[-1, 3]) * q[-1], [0, 0, np.sqrt(0.5), np.sqrt(0.5)], atol=tol
+    )
 
 
 def test_peers_table_is_complete():
-    assert set(PEERS) == {"reference_loop", "scipy_loop", "ahrs_angular_rate", "imufusion_gain0",
-                          "vqf_batch", "vqf_update_gyr"}
+    assert set(PEERS) == {
+        "reference_loop",
+        "scipy_loop",
+        "ahrs_angular_rate",
+        "imufusion_gain0",
+        "vqf_batch",
+        "vqf_update_gyr",
+    }
     assert all(p.order == "first" and p.description for p in PEERS.values())

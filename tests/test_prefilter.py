@@ -62,8 +62,12 @@ def test_fast_engine_matches_filterpy_on_uneven_stamps(mode, model, bias):
     w = np.stack([np.sin(3 * t), 0.5 * np.cos(2 * t), 0.1 * t], axis=1)
     w[:300] = 0.0
     z = w + np.array([0.004, -0.002, 0.003]) + 2e-3 * rng.standard_normal((n, 3))
-    cfg = PrefilterConfig(noise_density_rad_s_sqrt_hz=1.5e-4, angular_accel_rad_s2=8.0,
-                          model=model, estimate_bias=bias)
+    cfg = PrefilterConfig(
+        noise_density_rad_s_sqrt_hz=1.5e-4,
+        angular_accel_rad_s2=8.0,
+        model=model,
+        estimate_bias=bias,
+    )
     fast = prefilter(z, t, mode, cfg)
     ref = prefilter(z, t, mode, cfg, engine="filterpy")
     if bias:
@@ -107,8 +111,7 @@ def test_streaming_filter_is_the_batch_kalman(model):
     n = 400
     t = np.cumsum(rng.uniform(0.004, 0.006, n))
     z = np.stack([np.sin(t), np.cos(2 * t), t], axis=1) + 0.01 * rng.standard_normal((n, 3))
-    cfg = PrefilterConfig(noise_density_rad_s_sqrt_hz=7e-4, angular_accel_rad_s2=3.0,
-                          model=model)
+    cfg = PrefilterConfig(noise_density_rad_s_sqrt_hz=7e-4, angular_accel_rad_s2=3.0, model=model)
     batch = prefilter(z, t, "kalman", cfg)
     stream = StreamingRateFilter(cfg)
     out = [stream.update(z[k], t[k]) for k in range(n)]
@@ -230,8 +233,15 @@ def test_ml_accel_scale_recovers_the_model_that_made_the_data():
     assert abs(res.config.angular_accel_rad_s2 / 2.0 - 1.0) < 0.15
 
 
-def _rest_then_motion(rng, rate_hz=500.0, rest_s=12.0, motion_s=8.0, density=2e-3,
-                      bias=(0.004, -0.006, 0.002), rest_after_s=0.0):
+def _rest_then_motion(
+    rng,
+    rate_hz=500.0,
+    rest_s=12.0,
+    motion_s=8.0,
+    density=2e-3,
+    bias=(0.004, -0.006, 0.002),
+    rest_after_s=0.0,
+):
     """Rest, a smooth burst of motion, optional rest; constant bias and white noise added."""
     n_rest, n_mot, n_after = (int(d * rate_hz) for d in (rest_s, motion_s, rest_after_s))
     n = n_rest + n_mot + n_after
@@ -240,7 +250,8 @@ def _rest_then_motion(rng, rate_hz=500.0, rest_s=12.0, motion_s=8.0, density=2e-
     tm = t[n_rest : n_rest + n_mot] - t[n_rest]
     env = np.sin(np.pi * tm / motion_s) ** 2  # starts and ends at rest smoothly
     w[n_rest : n_rest + n_mot] = env[:, None] * np.stack(
-        [2 * np.sin(2 * tm), 1.5 * np.cos(3 * tm), np.sin(tm)], axis=1)
+        [2 * np.sin(2 * tm), 1.5 * np.cos(3 * tm), np.sin(tm)], axis=1
+    )
     z = w + np.array(bias) + rng.standard_normal((n, 3)) * density * math.sqrt(rate_hz)
     return t, w, z
 
@@ -306,13 +317,16 @@ def test_rts_cuts_rate_noise_without_worsening_attitude(scene, params):
     raw_rate, rts_rate, raw_att, rts_att = [], [], [], []
     for seed in range(4):
         rec = data_synth.synthetic_gyro(
-            traj, 1000.0, model=data_synth.GyroModel(noise_density_rad_s_sqrt_hz=density),
-            seed=seed)
+            traj, 1000.0, model=data_synth.GyroModel(noise_density_rad_s_sqrt_hz=density), seed=seed
+        )
         q_true, w_true = traj.at(rec.t_s)
-        res = prefilter(rec.values, rec.t_s, "rts",
-                        PrefilterConfig(noise_density_rad_s_sqrt_hz=density))
-        for rates, r_out, a_out in ((rec.values, raw_rate, raw_att),
-                                    (res.omega_b, rts_rate, rts_att)):
+        res = prefilter(
+            rec.values, rec.t_s, "rts", PrefilterConfig(noise_density_rad_s_sqrt_hz=density)
+        )
+        for rates, r_out, a_out in (
+            (rec.values, raw_rate, raw_att),
+            (res.omega_b, rts_rate, rts_att),
+        ):
             r_out.append(np.mean((rates - w_true) ** 2))
             q_est = integrate(rates, rec.t_s, q_true[0], "magnus4").as_quat()
             a_out.append(np.mean(attitude_error_deg(q_est, q_true).total_deg ** 2))
@@ -344,16 +358,20 @@ def test_noise_density_of_a_log_without_rest_comes_from_its_spectrum(label):
     for rate_hz in (200.0, 1000.0):
         for density in (1e-4, 1e-3, 1e-2):
             rec = data_synth.synthetic_gyro(
-                traj, rate_hz, model=data_synth.GyroModel(noise_density_rad_s_sqrt_hz=density),
-                seed=3)
+                traj,
+                rate_hz,
+                model=data_synth.GyroModel(noise_density_rad_s_sqrt_hz=density),
+                seed=3,
+            )
             res = prefilter(rec.values, rec.t_s, "kalman")
             s = res.summary
             assert s["noise_source"].startswith("spectrum"), s["noise_source"]
             assert "rest_interval_s" not in s
             got = res.config.noise_density_rad_s_sqrt_hz
             assert abs(got / density - 1.0) <= 0.25, (rate_hz, density, got)
-            np.testing.assert_allclose(s["spectrum_noise_density_rad_s_sqrt_hz"], density,
-                                       rtol=0.25)
+            np.testing.assert_allclose(
+                s["spectrum_noise_density_rad_s_sqrt_hz"], density, rtol=0.25
+            )
             est = estimate_noise_from_spectrum(rec.values, rec.t_s)
             assert est.band_hz[1] < 0.5 * rate_hz
 
@@ -374,13 +392,18 @@ def test_rts_with_the_estimated_density_cuts_rate_noise_without_worsening_attitu
     raw_rate, rts_rate, raw_att, rts_att = [], [], [], []
     for seed in range(4):
         rec = data_synth.synthetic_gyro(
-            traj, rate_hz, model=data_synth.GyroModel(noise_density_rad_s_sqrt_hz=density),
-            seed=seed)
+            traj,
+            rate_hz,
+            model=data_synth.GyroModel(noise_density_rad_s_sqrt_hz=density),
+            seed=seed,
+        )
         q_true, w_true = traj.at(rec.t_s)
         res = prefilter(rec.values, rec.t_s, "rts")
         assert res.summary["noise_source"].startswith("spectrum")
-        for rates, r_out, a_out in ((rec.values, raw_rate, raw_att),
-                                    (res.omega_b, rts_rate, rts_att)):
+        for rates, r_out, a_out in (
+            (rec.values, raw_rate, raw_att),
+            (res.omega_b, rts_rate, rts_att),
+        ):
             r_out.append(np.mean((rates - w_true) ** 2))
             q_est = integrate(rates, rec.t_s, q_true[0], "magnus4").as_quat()
             a_out.append(np.mean(attitude_error_deg(q_est, q_true).total_deg ** 2))
@@ -419,10 +442,12 @@ def test_causal_filter_lag_worsens_the_attitude_in_fast_motion():
     traj = data_synth.simulate("heavy-top", duration_s=2.0, motion="cusp")
     density = 1e-3
     rec = data_synth.synthetic_gyro(
-        traj, 1000.0, model=data_synth.GyroModel(noise_density_rad_s_sqrt_hz=density), seed=0)
+        traj, 1000.0, model=data_synth.GyroModel(noise_density_rad_s_sqrt_hz=density), seed=0
+    )
     q_true, _ = traj.at(rec.t_s)
-    kal = prefilter(rec.values, rec.t_s, "kalman",
-                    PrefilterConfig(noise_density_rad_s_sqrt_hz=density))
+    kal = prefilter(
+        rec.values, rec.t_s, "kalman", PrefilterConfig(noise_density_rad_s_sqrt_hz=density)
+    )
     rts = prefilter(rec.values, rec.t_s, "rts", kal.config)
     att = {}
     for name, rates in (("none", rec.values), ("kalman", kal.omega_b), ("rts", rts.omega_b)):
@@ -449,16 +474,21 @@ def test_model_based_smoother_beats_the_generic_one_and_the_random_walk():
     sq = {k: [] for k in ("raw", "rts", "euler", "att_raw", "att_euler")}
     for seed in range(2):
         rec = data_synth.synthetic_gyro(
-            traj, 200.0, model=data_synth.GyroModel(noise_density_rad_s_sqrt_hz=density),
-            seed=seed)
+            traj, 200.0, model=data_synth.GyroModel(noise_density_rad_s_sqrt_hz=density), seed=seed
+        )
         q_true, w_true = traj.at(rec.t_s)
-        generic = prefilter(rec.values, rec.t_s, "rts",
-                            PrefilterConfig(noise_density_rad_s_sqrt_hz=density))
-        model = euler_prefilter(rec.values, rec.t_s, inertia, "rts",
-                                noise_density_rad_s_sqrt_hz=density,
-                                torque_noise_n_m_sqrt_hz=1e-4)
-        for key, rates in (("raw", rec.values), ("rts", generic.omega_b),
-                           ("euler", model.omega_b)):
+        generic = prefilter(
+            rec.values, rec.t_s, "rts", PrefilterConfig(noise_density_rad_s_sqrt_hz=density)
+        )
+        model = euler_prefilter(
+            rec.values,
+            rec.t_s,
+            inertia,
+            "rts",
+            noise_density_rad_s_sqrt_hz=density,
+            torque_noise_n_m_sqrt_hz=1e-4,
+        )
+        for key, rates in (("raw", rec.values), ("rts", generic.omega_b), ("euler", model.omega_b)):
             sq[key].append(np.mean((rates - w_true) ** 2))
         for key, rates in (("att_raw", rec.values), ("att_euler", model.omega_b)):
             q_est = integrate(rates, rec.t_s, q_true[0], "magnus4").as_quat()
@@ -471,11 +501,23 @@ def test_model_based_smoother_beats_the_generic_one_and_the_random_walk():
 def test_model_based_smoother_rejects_bad_inertia():
     t = np.arange(50) * 0.01
     with pytest.raises(InputError, match=r"^Expected `inertia_kg_m2`"):
-        euler_prefilter(np.zeros((50, 3)), t, [1.0, -2.0, 3.0], "rts",
-                        noise_density_rad_s_sqrt_hz=1e-3, torque_noise_n_m_sqrt_hz=1e-3)
+        euler_prefilter(
+            np.zeros((50, 3)),
+            t,
+            [1.0, -2.0, 3.0],
+            "rts",
+            noise_density_rad_s_sqrt_hz=1e-3,
+            torque_noise_n_m_sqrt_hz=1e-3,
+        )
     with pytest.raises(InputError, match=r"^Expected `torque_noise_n_m_sqrt_hz`"):
-        euler_prefilter(np.zeros((50, 3)), t, [1.0, 2.0, 3.0], "rts",
-                        noise_density_rad_s_sqrt_hz=1e-3, torque_noise_n_m_sqrt_hz=float("nan"))
+        euler_prefilter(
+            np.zeros((50, 3)),
+            t,
+            [1.0, 2.0, 3.0],
+            "rts",
+            noise_density_rad_s_sqrt_hz=1e-3,
+            torque_noise_n_m_sqrt_hz=float("nan"),
+        )
 
 
 # ------------------------------------------------------------------------------------------------
@@ -487,10 +529,14 @@ def test_model_based_smoother_rejects_bad_inertia():
     [
         (PrefilterConfig(noise_density_rad_s_sqrt_hz=-1e-3), "noise_density_rad_s_sqrt_hz"),
         (PrefilterConfig(noise_density_rad_s_sqrt_hz=float("nan")), "noise_density_rad_s_sqrt_hz"),
-        (PrefilterConfig(noise_density_rad_s_sqrt_hz=1e-3, angular_accel_rad_s2=0.0),
-         "angular_accel_rad_s2"),
-        (PrefilterConfig(noise_density_rad_s_sqrt_hz=1e-3, angular_accel_rad_s2=float("inf")),
-         "angular_accel_rad_s2"),
+        (
+            PrefilterConfig(noise_density_rad_s_sqrt_hz=1e-3, angular_accel_rad_s2=0.0),
+            "angular_accel_rad_s2",
+        ),
+        (
+            PrefilterConfig(noise_density_rad_s_sqrt_hz=1e-3, angular_accel_rad_s2=float("inf")),
+            "angular_accel_rad_s2",
+        ),
         (PrefilterConfig(model="rate-only"), "model"),
         (PrefilterConfig(rest_interval_s=(3.0, 1.0)), "rest_interval_s"),
     ],

@@ -24,6 +24,7 @@ def _order(err_coarse: float, err_fine: float, refine: float) -> float:
 
 # 1. Gimbal lock ---------------------------------------------------------------------------------
 
+
 def test_gimbal_lock_euler_angles_fail_at_the_pole_where_the_dcm_keeps_its_order():
     # DCM trapezoid: per step the increment misses the Magnus vector by at most
     # dt³/12 (|ω̈| + |ω × ω̇|); with ω = (c sin st, c cos st, s): |ω̇| = cs, |ω̈| = cs²,
@@ -47,6 +48,7 @@ def test_gimbal_lock_euler_angles_fail_at_the_pole_where_the_dcm_keeps_its_order
 
 # 2. Rotation-vector sum (eq. 13) ---------------------------------------------------------------
 
+
 def test_rotvec_sum_error_is_the_analytic_coning_drift_and_zero_for_a_fixed_axis():
     res = st.rotvec_sum_shortcut(half_angle_deg=30.0, freq_hz=1.0, rate_hz=1000.0, duration_s=5.0)
     whole = np.isclose(res.t_s, np.round(res.t_s))
@@ -63,6 +65,7 @@ def test_rotvec_sum_error_is_the_analytic_coning_drift_and_zero_for_a_fixed_axis
 
 
 # 3. Large steps --------------------------------------------------------------------------------
+
 
 def test_large_steps_stay_on_so3_and_keep_their_orders():
     steps = (0.01, 0.02, 3.0)
@@ -82,6 +85,7 @@ def test_large_steps_stay_on_so3_and_keep_their_orders():
 
 
 # 4. Long runs ----------------------------------------------------------------------------------
+
 
 def test_ten_million_steps_error_is_roundoff_bounded():
     n = 10_000_000
@@ -107,6 +111,7 @@ def test_unnormalised_dcm_product_leaves_so3_no_faster_than_linear_roundoff():
 
 # 5. Free box, intermediate axis -----------------------------------------------------------------
 
+
 def test_free_box_flips_are_tracked_and_angular_momentum_converges_at_each_order():
     coarse, fine = st.free_box(100.0), st.free_box(200.0)
     # Euler's equations flip ω2 twice in 30 s from ω0 = (0.05, 3, 0.05) rad/s (period of the
@@ -124,6 +129,7 @@ def test_free_box_flips_are_tracked_and_angular_momentum_converges_at_each_order
 
 # 6. Sleeping top, fast top ---------------------------------------------------------------------
 
+
 def test_sleeping_top_is_exact_for_the_dcm_and_singular_for_euler_angles():
     # Spin 100 Hz sampled at 200 Hz: |ω| dt = π per step. A fixed axis makes every exact-exp
     # method exact (roundoff: 400 products, 1e-9 deg ≈ 2e-11 rad).
@@ -136,10 +142,11 @@ def test_sleeping_top_is_exact_for_the_dcm_and_singular_for_euler_angles():
 
 def test_fast_top_at_high_spin_converges_at_each_methods_order():
     # Fast steady precession at 20 Hz spin: φ̇ = 82.6 rad/s; ω_b cones at ψ̇ = 78 rad/s.
-    res = st.steady_top("fast", 20.0, (2000.0, 4000.0), duration_s=0.5,
-                        methods=st.DCM_METHODS + ("euler_zxz",))
-    # Steady precession of the heavy top (Goldstein, Classical Mechanics, 2nd ed., §5-7; θ̇ = 0): the torque M g l sin θ must
-    # equal the rate of change of the angular momentum, which gives the quadratic
+    res = st.steady_top(
+        "fast", 20.0, (2000.0, 4000.0), duration_s=0.5, methods=st.DCM_METHODS + ("euler_zxz",)
+    )
+    # Steady precession of the heavy top (Goldstein, Classical Mechanics, 2nd ed., §5-7; θ̇ = 0):
+    # the gravity torque M g l sin θ equals the rate of change of the angular momentum, giving
     #     I1 cos θ φ̇² − I3 ω3 φ̇ + M g l = 0,
     # with ω3 = φ̇ cos θ + ψ̇ the body spin. The top: M = 1 kg, l = 0.04 m, g = 9.8 m/s²,
     # I1 = 0.002 kg m², I3 = 0.0008 kg m², θ = 54.57°, ω3 = 2π · 20 rad/s. The fast top is the
@@ -159,10 +166,17 @@ def test_fast_top_at_high_spin_converges_at_each_methods_order():
 
 # 7. Noise and bias -----------------------------------------------------------------------------
 
+
 def test_noise_and_bias_error_growth_laws():
     n_seeds = 200
-    res = st.noise_growth(density_rad_s_sqrt_hz=1e-3, bias_rad_s=(2e-4, -1e-4, 2e-4),
-                          rate_hz=100.0, duration_s=100.0, n_seeds=n_seeds, seed=11)
+    res = st.noise_growth(
+        density_rad_s_sqrt_hz=1e-3,
+        bias_rad_s=(2e-4, -1e-4, 2e-4),
+        rate_hz=100.0,
+        duration_s=100.0,
+        n_seeds=n_seeds,
+        seed=11,
+    )
     # White noise: θ² / (N² T) is chi-square with 3 dof (mean 3, var 6); the mean of 200 seeds has
     # relative std sqrt(6/200)/3 = 5.8 %, so the RMS ~2.9 %. 4 sigma: 12 % at every checkpoint
     # (each is a sum of Gaussian steps, chi-square 3 from the first sample on).
@@ -176,6 +190,7 @@ def test_noise_and_bias_error_growth_laws():
 
 
 # 8. Truncated first-order update ----------------------------------------------------------------
+
 
 def test_truncated_update_matches_its_analytic_angle_deficit():
     res = st.truncated_update(steps_rad=(0.001, 0.01, 0.1, 0.5, 2.0), n_steps=1000)

@@ -27,7 +27,8 @@ pytestmark = pytest.mark.slow
 
 
 def _decode_png(data: bytes) -> np.ndarray:
-    """Pixels of an 8-bit, non-interlaced RGB or RGBA PNG as (H, W, C) uint8 (no imaging library)."""
+    """Pixels of an 8-bit, non-interlaced RGB or RGBA PNG, (H, W, C) uint8, without an imaging
+    library."""
     if data[:8] != b"\x89PNG\r\n\x1a\n":
         raise ValueError("not a PNG")
     pos, idat, header = 8, [], None
@@ -122,9 +123,15 @@ def _demo_view() -> ViewData:
     omega_b[:, 2] = w * (np.cos(beta) - 1.0)
     e = attitude_error_deg(est.as_quat(), truth.as_quat())
     return ViewData(
-        t_s, est.as_quat(), truth.as_quat(), omega_b, e.total_deg, e.inclination_deg,
-        e.heading_deg, "browser_e2e",
-    )  # fmt: skip
+        t_s=t_s,
+        q_est=est.as_quat(),
+        q_truth=truth.as_quat(),
+        omega_b=omega_b,
+        error_total_deg=e.total_deg,
+        error_inclination_deg=e.inclination_deg,
+        error_heading_deg=e.heading_deg,
+        title="browser_e2e",
+    )
 
 
 def _listening_addresses(port: int) -> set[str]:
@@ -163,11 +170,9 @@ def test_web_viewer_shows_the_recording(served, tmp_path):
         for port in (served.grpc_port, served.web_port):
             assert _listening_addresses(port) == {"0100007F"}, port
     out = tmp_path / "shot.png"
-    proc = subprocess.run(
-        ["node", str(E2E / "screenshot.mjs"), served.url, str(out), "--timeout-s", "120",
-         "--chromium", str(CHROMIUM)],
-        check=False, capture_output=True, text=True, timeout=240, cwd=E2E,
-    )  # fmt: skip
+    cmd = ["node", str(E2E / "screenshot.mjs"), served.url, str(out)]
+    cmd += ["--timeout-s", "120", "--chromium", str(CHROMIUM)]
+    proc = subprocess.run(cmd, check=False, capture_output=True, text=True, timeout=240, cwd=E2E)
     report = json.loads(proc.stdout.strip().splitlines()[-1]) if proc.stdout.strip() else {}
     assert proc.returncode == 0, f"screenshot failed: {report} {proc.stderr[-2000:]}"
     img = _decode_png(out.read_bytes())[..., :3].astype(float)

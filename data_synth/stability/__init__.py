@@ -6,7 +6,8 @@ Eight scenes, each a pure function returning a frozen result that both the chart
 1. :func:`gimbal_lock` — integrating ZXZ Euler angles (a common textbook
    comparison) past ``θ = 0`` against the DCM recursion, as the body's z axis passes the vertical.
 2. :func:`rotvec_sum_shortcut` — the rotation-vector-sum shortcut ``R0 · exp(Σ ω dt)``
-   (exact only when the rotations commute) under coning, against its analytic error ``(1 − cos β) Ω t``.
+   (exact only when the rotations commute) under coning, against its analytic error
+   ``(1 − cos β) Ω t``.
 3. :func:`large_steps` — steps with ``|ω| dt`` from 0.01 to 3 rad.
 4. :func:`long_run` and :func:`naive_dcm_drift` — 10⁷ steps: error against truth, and how far the
    plain, never re-orthonormalised 3x3 product ``R ← R · CK(ω dt)`` leaves SO(3).

@@ -27,6 +27,7 @@ from imu_dcm.reference import euler_zxz_integrate, truncated_first_order
 # 5. Free box, intermediate axis
 # ----------------------------------------------------------------------------------------------
 
+
 @dataclass(frozen=True)
 class FreeBoxResult:
     """Scene 5. Dzhanibekov flips of the free box; attitude checked by conservation of ``L_w``.
@@ -54,8 +55,9 @@ class FreeBoxResult:
 FREE_BOX_OMEGA0 = (0.05, 3.0, 0.05)
 
 
-def free_box(rate_hz: float, duration_s: float = 30.0,
-             methods: Sequence[str] = DCM_METHODS) -> FreeBoxResult:
+def free_box(
+    rate_hz: float, duration_s: float = 30.0, methods: Sequence[str] = DCM_METHODS
+) -> FreeBoxResult:
     """Scene 5: integrate the flipping box's rates; L_w must stay fixed, flips must match ω2."""
     t = _uniform_t(rate_hz, duration_s)
     _q, w = free_body(duration_s, "intermediate", omega0_b=FREE_BOX_OMEGA0).at(t)
@@ -79,6 +81,7 @@ def free_box(rate_hz: float, duration_s: float = 30.0,
 # 6. Sleeping top and fast top at high spin
 # ----------------------------------------------------------------------------------------------
 
+
 @dataclass(frozen=True)
 class SteadyTopResult:
     """Scene 6. The heavy top in steady precession (or sleeping), closed-form truth.
@@ -100,9 +103,13 @@ class SteadyTopResult:
     err_deg: dict[str, NDArray]
 
 
-def steady_top(kind: str, spin_hz: float, rates_hz: Sequence[float], duration_s: float = 1.0,
-               methods: Sequence[str] = DCM_METHODS + ("truncated", "euler_zxz")
-               ) -> SteadyTopResult:
+def steady_top(
+    kind: str,
+    spin_hz: float,
+    rates_hz: Sequence[float],
+    duration_s: float = 1.0,
+    methods: Sequence[str] = DCM_METHODS + ("truncated", "euler_zxz"),
+) -> SteadyTopResult:
     """Scene 6: the top spinning at ``spin_hz`` (body z), sleeping or in steady precession."""
     w3 = 2.0 * math.pi * spin_hz
     if kind == "sleeping":
@@ -116,8 +123,9 @@ def steady_top(kind: str, spin_hz: float, rates_hz: Sequence[float], duration_s:
     for k, rate in enumerate(rates_hz):
         t = _uniform_t(rate, duration_s)
         n = len(t)
-        q_true, w = zxz_truth(dphi * t, np.full(n, tilt), dpsi * t, np.full(n, dphi),
-                              np.zeros(n), np.full(n, dpsi))
+        q_true, w = zxz_truth(
+            dphi * t, np.full(n, tilt), dpsi * t, np.full(n, dphi), np.zeros(n), np.full(n, dpsi)
+        )
         for m in methods:
             if m == "truncated":
                 q = truncated_first_order(w, t, q_true[0])
@@ -134,6 +142,7 @@ def steady_top(kind: str, spin_hz: float, rates_hz: Sequence[float], duration_s:
 # ----------------------------------------------------------------------------------------------
 # 7. Noise and bias
 # ----------------------------------------------------------------------------------------------
+
 
 @dataclass(frozen=True)
 class NoiseGrowthResult:
@@ -160,9 +169,15 @@ class NoiseGrowthResult:
     n_seeds: int
 
 
-def noise_growth(density_rad_s_sqrt_hz: float = 1e-3, bias_rad_s: Sequence[float] = (2e-4, -1e-4, 2e-4),
-                 rate_hz: float = 100.0, duration_s: float = 100.0, n_seeds: int = 200,
-                 seed: int = 7, method: str = "end") -> NoiseGrowthResult:
+def noise_growth(
+    density_rad_s_sqrt_hz: float = 1e-3,
+    bias_rad_s: Sequence[float] = (2e-4, -1e-4, 2e-4),
+    rate_hz: float = 100.0,
+    duration_s: float = 100.0,
+    n_seeds: int = 200,
+    seed: int = 7,
+    method: str = "end",
+) -> NoiseGrowthResult:
     """Scene 7: a gyro at rest (true ``ω_b = 0``, attitude identity) with noise, then with bias.
 
     White noise of density ``N`` (rad/s/√Hz) has per-sample σ = ``N √rate``; the attitude error is

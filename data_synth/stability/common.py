@@ -19,7 +19,7 @@ DCM_METHODS = ("start", "end", "trapezoid", "coning", "magnus4")
 #: The heavy top of :class:`data_synth.scenes.HeavyTopParams` (20 Hz spin, 54.57° tilt).
 TOP = HeavyTopParams()
 
-#: Principal inertias (kg m²) of the free box, edges 2.0, 1.5, 1.0 m, 1 kg (docs/design.md, free bodies).
+#: Principal inertias (kg m²) of the free box, edges 2.0, 1.5, 1.0 m, 1 kg (docs/design.md).
 BOX_INERTIA = box_inertia((2.0, 1.5, 1.0), 1.0)
 
 _EPS = float(np.finfo(float).eps)
@@ -29,8 +29,10 @@ _EPS = float(np.finfo(float).eps)
 # Closed-form motions
 # ----------------------------------------------------------------------------------------------
 
-def zxz_truth(phi: NDArray, theta: NDArray, psi: NDArray, dphi: NDArray, dtheta: NDArray,
-              dpsi: NDArray) -> tuple[NDArray, NDArray]:
+
+def zxz_truth(
+    phi: NDArray, theta: NDArray, psi: NDArray, dphi: NDArray, dtheta: NDArray, dpsi: NDArray
+) -> tuple[NDArray, NDArray]:
     """Attitude and body rate of a motion given by ZXZ Euler angles and their rates.
 
     Parameters
@@ -50,9 +52,14 @@ def zxz_truth(phi: NDArray, theta: NDArray, psi: NDArray, dphi: NDArray, dtheta:
     """
     phi, theta, psi, dphi, dtheta, dpsi = np.broadcast_arrays(phi, theta, psi, dphi, dtheta, dpsi)
     s, c = np.sin(psi), np.cos(psi)
-    omega_b = np.stack([dphi * np.sin(theta) * s + dtheta * c,
-                        dphi * np.sin(theta) * c - dtheta * s,
-                        dphi * np.cos(theta) + dpsi], axis=-1)
+    omega_b = np.stack(
+        [
+            dphi * np.sin(theta) * s + dtheta * c,
+            dphi * np.sin(theta) * c - dtheta * s,
+            dphi * np.cos(theta) + dpsi,
+        ],
+        axis=-1,
+    )
     return zxz_quat(phi, theta, psi), omega_b
 
 

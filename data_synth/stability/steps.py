@@ -28,6 +28,7 @@ from imu_dcm.so3 import exp_matrix, quat_multiply
 # 1. Gimbal lock: ZXZ Euler angles past θ = 0
 # ----------------------------------------------------------------------------------------------
 
+
 @dataclass(frozen=True)
 class GimbalLockResult:
     """Scene 1. Errors (deg) of Euler-angle and DCM integration of the same samples.
@@ -73,8 +74,10 @@ def gimbal_motion(t_s: NDArray, closest_rad: float) -> tuple[NDArray, NDArray]:
     c, s = GIMBAL_TILT_RATE, GIMBAL_SPIN_RATE
     a = c * (t_s - 0.5 * GIMBAL_DURATION_S)
     b = s * t_s
-    q = quat_multiply(quat_multiply(axis_quat(0, np.full_like(t_s, closest_rad)),
-                                    axis_quat(1, a)), axis_quat(2, b))
+    q = quat_multiply(
+        quat_multiply(axis_quat(0, np.full_like(t_s, closest_rad)), axis_quat(1, a)),
+        axis_quat(2, b),
+    )
     w = np.stack([c * np.sin(b), c * np.cos(b), np.full_like(t_s, s)], axis=-1)
     return q, w
 
@@ -88,13 +91,20 @@ def gimbal_lock(closest_deg: float, rate_hz: float) -> GimbalLockResult:
     with np.errstate(invalid="ignore", over="ignore"):
         q_euler = zxz_quat(ang[:, 0], ang[:, 1], ang[:, 2])
     theta = np.degrees(np.arccos(np.clip(Rotation.from_quat(q_true).as_matrix()[:, 2, 2], -1, 1)))
-    return GimbalLockResult(closest_deg, rate_hz, t, theta, _err_deg(q_euler, q_true),
-                            _err_deg(_integrate_q(w, t, q_true[0], "trapezoid"), q_true))
+    return GimbalLockResult(
+        closest_deg,
+        rate_hz,
+        t,
+        theta,
+        _err_deg(q_euler, q_true),
+        _err_deg(_integrate_q(w, t, q_true[0], "trapezoid"), q_true),
+    )
 
 
 # ----------------------------------------------------------------------------------------------
 # 2. The rotation-vector-sum shortcut R0 · exp(Σ ω dt)
 # ----------------------------------------------------------------------------------------------
+
 
 @dataclass(frozen=True)
 class RotvecSumResult:
@@ -103,10 +113,13 @@ class RotvecSumResult:
     Attributes
     ----------
     t_s : (N,) times, s.
-    rotvec_sum_err_deg, magnus4_err_deg : (N,) total error of the rotation-vector sum and of ``magnus4``, deg.
-    predicted_deg : (N,) analytic error of the rotation-vector sum at whole cone cycles, ``(1 − cos β) Ω t``
-        wrapped to [0, 180] deg (valid where ``t`` is a whole number of cycles).
-    fixed_axis_err_deg : max error of the rotation-vector sum for a fixed-axis rotation (commuting), deg.
+    rotvec_sum_err_deg, magnus4_err_deg : (N,) total error of the rotation-vector sum and of
+        ``magnus4``, deg.
+    predicted_deg : (N,) analytic error of the rotation-vector sum at whole cone cycles,
+        ``(1 − cos β) Ω t`` wrapped to [0, 180] deg (valid where ``t`` is a whole number of
+        cycles).
+    fixed_axis_err_deg : max error of the rotation-vector sum for a fixed-axis rotation
+        (commuting), deg.
     """
 
     t_s: NDArray
@@ -116,9 +129,13 @@ class RotvecSumResult:
     fixed_axis_err_deg: float
 
 
-def rotvec_sum_shortcut(half_angle_deg: float = 30.0, freq_hz: float = 1.0,
-                        rate_hz: float = 1000.0, duration_s: float = 5.0) -> RotvecSumResult:
-    """Scene 2: the shortcut ``R = R0 · exp(Σ ω dt)`` under coning and under a fixed-axis rotation."""
+def rotvec_sum_shortcut(
+    half_angle_deg: float = 30.0,
+    freq_hz: float = 1.0,
+    rate_hz: float = 1000.0,
+    duration_s: float = 5.0,
+) -> RotvecSumResult:
+    """Scene 2: the shortcut ``R = R0 · exp(Σ ω dt)`` under coning and about a fixed axis."""
     t = _uniform_t(rate_hz, duration_s)
     beta, big_w = math.radians(half_angle_deg), 2.0 * math.pi * freq_hz
     q_true, w = coning_truth(t, beta, big_w)
@@ -138,13 +155,24 @@ def rotvec_sum_shortcut(half_angle_deg: float = 30.0, freq_hz: float = 1.0,
 # ----------------------------------------------------------------------------------------------
 
 #: Large-step scene motion (steady precession): φ̇ rad/s, θ rad, ψ̇ rad/s; duration s.
-LARGE_PHI_RATE, LARGE_TILT, LARGE_PSI_RATE, LARGE_DURATION_S = 2 * np.pi, np.radians(30), 0.2 * np.pi, 5.0
+LARGE_PHI_RATE, LARGE_TILT, LARGE_PSI_RATE, LARGE_DURATION_S = (
+    2 * np.pi,
+    np.radians(30),
+    0.2 * np.pi,
+    5.0,
+)
 
 
 def _large_step_motion(t_s: NDArray) -> tuple[NDArray, NDArray]:
     n = len(t_s)
-    return zxz_truth(LARGE_PHI_RATE * t_s, np.full(n, LARGE_TILT), LARGE_PSI_RATE * t_s,
-                     np.full(n, LARGE_PHI_RATE), np.zeros(n), np.full(n, LARGE_PSI_RATE))
+    return zxz_truth(
+        LARGE_PHI_RATE * t_s,
+        np.full(n, LARGE_TILT),
+        LARGE_PSI_RATE * t_s,
+        np.full(n, LARGE_PHI_RATE),
+        np.zeros(n),
+        np.full(n, LARGE_PSI_RATE),
+    )
 
 
 @dataclass(frozen=True)
@@ -164,7 +192,9 @@ class LargeStepsResult:
     max_norm_dev: dict[str, NDArray]
 
 
-def large_steps(steps_rad: Sequence[float] = tuple(np.geomspace(0.01, 3.0, 13))) -> LargeStepsResult:
+def large_steps(
+    steps_rad: Sequence[float] = tuple(np.geomspace(0.01, 3.0, 13)),
+) -> LargeStepsResult:
     """Scene 3: steady precession (|ω| constant, ω turning in the body at ψ̇ = |φ̇|/10)."""
     w_norm = float(np.linalg.norm(_large_step_motion(np.zeros(1))[1][0]))
     names = DCM_METHODS + ("truncated",)
@@ -209,8 +239,9 @@ class TruncatedResult:
     n_steps: int
 
 
-def truncated_update(steps_rad: Sequence[float] = tuple(np.geomspace(0.001, 1.0, 10)),
-                     n_steps: int = 1000) -> TruncatedResult:
+def truncated_update(
+    steps_rad: Sequence[float] = tuple(np.geomspace(0.001, 1.0, 10)), n_steps: int = 1000
+) -> TruncatedResult:
     """Scene 8: the truncated step against the exact exponential on a fixed-axis spin."""
     axis = np.array([2.0, -1.0, 2.0]) / 3.0
     rate_rad_s = 10.0
@@ -231,6 +262,7 @@ def truncated_update(steps_rad: Sequence[float] = tuple(np.geomspace(0.001, 1.0,
 # ----------------------------------------------------------------------------------------------
 # 4. Long runs
 # ----------------------------------------------------------------------------------------------
+
 
 @dataclass(frozen=True)
 class LongRunResult:
@@ -256,8 +288,12 @@ class LongRunResult:
 LONG_BETA, LONG_OMEGA = math.radians(1.0), 2.0 * math.pi * 0.5
 
 
-def long_run(n_steps: int = 10_000_000, rate_hz: float = 1000.0, method: str = "coning",
-             chunk: int = 1_000_000) -> LongRunResult:
+def long_run(
+    n_steps: int = 10_000_000,
+    rate_hz: float = 1000.0,
+    method: str = "coning",
+    chunk: int = 1_000_000,
+) -> LongRunResult:
     """Scene 4: integrate ``n_steps`` coning steps chunk by chunk (each chunk starts where the last
     ended, its first sample shared), comparing with the closed form at every chunk end."""
     q = coning_truth(np.zeros(1), LONG_BETA, LONG_OMEGA)[0][0]
@@ -293,8 +329,9 @@ class NaiveDcmResult:
     err_deg: NDArray
 
 
-def naive_dcm_drift(n_steps: int, rate_hz: float = 1000.0, n_checkpoints: int = 12,
-                    chunk: int = 100_000) -> NaiveDcmResult:
+def naive_dcm_drift(
+    n_steps: int, rate_hz: float = 1000.0, n_checkpoints: int = 12, chunk: int = 100_000
+) -> NaiveDcmResult:
     """Scene 4b: sequential 3x3 products of Rodrigues matrices (``end`` rule), no correction."""
     checks = np.unique(np.geomspace(10, n_steps, n_checkpoints).astype(int))
     r = Rotation.from_quat(coning_truth(np.zeros(1), LONG_BETA, LONG_OMEGA)[0][0]).as_matrix()
@@ -310,7 +347,7 @@ def naive_dcm_drift(n_steps: int, rate_hz: float = 1000.0, n_checkpoints: int = 
             if ci < len(checks) and start + j + 1 == checks[ci]:
                 orth.append(float(np.max(np.abs(r.T @ r - np.eye(3)))))
                 u, _s, vt = np.linalg.svd(r)
-                q_true = coning_truth(t[j + 1:j + 2], LONG_BETA, LONG_OMEGA)[0]
+                q_true = coning_truth(t[j + 1 : j + 2], LONG_BETA, LONG_OMEGA)[0]
                 errs.append(float(_err_deg(Rotation.from_matrix(u @ vt).as_quat(), q_true[0])))
                 ci += 1
     return NaiveDcmResult(checks, np.array(orth), np.array(errs))

@@ -77,8 +77,12 @@ def prefilter(
         raise InputError(f"Expected `engine` in ('numpy', 'filterpy'), got {engine!r}")
     cfg = PrefilterConfig() if config is None else config
     _check_config(cfg)
-    summary: dict[str, Any] = {"mode": mode, "model": cfg.model, "engine": engine,
-                               "n_samples": len(t_s)}
+    summary: dict[str, Any] = {
+        "mode": mode,
+        "model": cfg.model,
+        "engine": engine,
+        "n_samples": len(t_s),
+    }
     dt_med = float(np.median(np.diff(t_s)))
     summary["rate_hz"] = 1.0 / dt_med
 
@@ -91,11 +95,15 @@ def prefilter(
     if cfg.noise_density_rad_s_sqrt_hz is None or cfg.estimate_bias:
         max_std = cfg.rest_max_std_rad_s
         if max_std is None:
-            floor = noise_std if noise_std is not None else quietest_std(omega_b, t_s,
-                                                                          cfg.rest_window_s)
+            floor = (
+                noise_std
+                if noise_std is not None
+                else quietest_std(omega_b, t_s, cfg.rest_window_s)
+            )
             max_std = max(0.01, 1.5 * floor)
-        rest = detect_rest(omega_b, t_s, RestConfig(cfg.rest_window_s, cfg.rest_max_rate_rad_s,
-                                                    max_std))
+        rest = detect_rest(
+            omega_b, t_s, RestConfig(cfg.rest_window_s, cfg.rest_max_rate_rad_s, max_std)
+        )
         summary["rest_samples"] = int(rest.sum())
 
     bias0 = None
@@ -158,8 +166,6 @@ def prefilter(
         config=cfg,
         summary=summary,
     )
-
-
 
 
 def _noise_from_rest(

@@ -198,8 +198,10 @@ def _check_rates(omega_b: ArrayLike, t_s: ArrayLike) -> tuple[NDArray, NDArray]:
 def _check_positive(name: str, value: float | None, allow_none: bool = True) -> None:
     if value is None and allow_none:
         return
-    if value is None or not isinstance(value, (int, float, np.floating, np.integer)) or not (
-        math.isfinite(value) and value > 0
+    if (
+        value is None
+        or not isinstance(value, (int, float, np.floating, np.integer))
+        or not (math.isfinite(value) and value > 0)
     ):
         raise InputError(f"Expected `{name}` finite and > 0, got {value!r}")
 
@@ -231,5 +233,3 @@ def _check_config(config: PrefilterConfig) -> None:
             raise InputError(
                 f"Expected `rest_interval_s` = (start, end) with start < end, got {iv!r}"
             )
-
-

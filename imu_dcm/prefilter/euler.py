@@ -20,8 +20,14 @@ def _euler_rates_dot(w: NDArray, inertia: NDArray, torque_b: NDArray | None) -> 
     """``ω̇ = I⁻¹ (τ − ω × I ω)``, principal inertias ``inertia`` (3,), rates ``w`` (..., 3)."""
     h = w * inertia  # angular momentum, body axes
     x, y, z = w[..., 0], w[..., 1], w[..., 2]
-    acc = -np.stack([y * h[..., 2] - z * h[..., 1], z * h[..., 0] - x * h[..., 2],
-                     x * h[..., 1] - y * h[..., 0]], axis=-1)  # -(ω × I ω), np.cross is slow
+    acc = -np.stack(
+        [
+            y * h[..., 2] - z * h[..., 1],
+            z * h[..., 0] - x * h[..., 2],
+            x * h[..., 1] - y * h[..., 0],
+        ],
+        axis=-1,
+    )  # -(ω × I ω), np.cross is slow
     if torque_b is not None:
         acc = acc + torque_b
     return acc / inertia
@@ -110,8 +116,14 @@ def euler_prefilter(
             self.sigmas_f = self.sig_out.copy()
 
     points = MerweScaledSigmaPoints(3, alpha=0.1, beta=2.0, kappa=0.0)
-    ukf = _UKF(dim_x=3, dim_z=3, dt=float(np.median(dt)), hx=lambda x: x,
-               fx=lambda x, h: _euler_step(x, h, inertia, tau), points=points)
+    ukf = _UKF(
+        dim_x=3,
+        dim_z=3,
+        dt=float(np.median(dt)),
+        hx=lambda x: x,
+        fx=lambda x, h: _euler_step(x, h, inertia, tau),
+        points=points,
+    )
     r0 = noise_density_rad_s_sqrt_hz**2 / float(dt[0])
     ukf.x = omega_b[0].copy()
     ukf.P = np.eye(3) * r0 * _PRIOR_SCALE**2
@@ -136,11 +148,16 @@ def euler_prefilter(
             G = C[k + 1] @ np.linalg.inv(Pm[k + 1])
             X[k] = X[k] + G @ (X[k + 1] - Xm[k + 1])
             P[k] = P[k] + G @ (P[k + 1] - Pm[k + 1]) @ G.T
-    summary = {"mode": mode, "model": "euler", "engine": "filterpy UKF", "n_samples": n,
-               "inertia_kg_m2": inertia.tolist(),
-               "torque_noise_n_m_sqrt_hz": float(torque_noise_n_m_sqrt_hz),
-               "noise_density_rad_s_sqrt_hz": float(noise_density_rad_s_sqrt_hz),
-               "noise_source": "given"}
+    summary = {
+        "mode": mode,
+        "model": "euler",
+        "engine": "filterpy UKF",
+        "n_samples": n,
+        "inertia_kg_m2": inertia.tolist(),
+        "torque_noise_n_m_sqrt_hz": float(torque_noise_n_m_sqrt_hz),
+        "noise_density_rad_s_sqrt_hz": float(noise_density_rad_s_sqrt_hz),
+        "noise_source": "given",
+    }
     return PrefilterResult(
         omega_b=X,
         rate_std_rad_s=np.sqrt(np.diagonal(P, axis1=1, axis2=2)).copy(),
@@ -151,5 +168,3 @@ def euler_prefilter(
         config=PrefilterConfig(noise_density_rad_s_sqrt_hz=float(noise_density_rad_s_sqrt_hz)),
         summary=summary,
     )
-
-

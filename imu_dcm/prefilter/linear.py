@@ -23,6 +23,7 @@ from imu_dcm.prefilter.config import (
     PrefilterConfig,
 )
 
+
 def _n_motion(model: str) -> int:
     return 2 if model == "rate-accel" else 3
 
@@ -238,7 +239,7 @@ def _affine_scan(A: NDArray, b: NDArray, x0: NDArray, same: NDArray | None = Non
     starts = np.flatnonzero(~same[:n] | (np.arange(n) == 0))
     ends = np.concatenate([starts[1:], [n]])
     x = x0
-    for s, e in zip(starts, ends):
+    for s, e in zip(starts, ends, strict=True):
         # the run's first sample may have its own A (start of the run of equal values)
         if e - s >= 256:
             out[s] = x = A[s] @ x + b[s]
@@ -303,5 +304,3 @@ def _run_filterpy(z: NDArray, m: _Model, smooth: bool) -> tuple[NDArray, NDArray
         X[:, :, axis] = Xs_f
         Pout = Ps_f
     return X, Pout
-
-

@@ -95,4 +95,3 @@ class StreamingRateFilter:
         self._P = 0.5 * (P + P.T)
         self._t = t
         return self._x[0].copy(), math.sqrt(self._P[0, 0])
-

@@ -31,6 +31,7 @@ from imu_dcm.prefilter.config import (
 )
 from imu_dcm.prefilter.linear import _n_motion, _q_scale, _stationary_prior, _transition
 
+
 def estimate_noise_from_rest(
     omega_b: ArrayLike, t_s: ArrayLike, min_rest_s: float = 1.0
 ) -> NoiseEstimate:
@@ -74,8 +75,6 @@ def estimate_noise_from_rest(
         interval_s=(float(t_s[0]), float(t_s[-1])),
         n_samples=n,
     )
-
-
 
 
 # Differences taken before the periodogram: they flatten the motion's low-frequency power, so
@@ -187,7 +186,7 @@ def _innovation_nll(z: NDArray, dt: float, nm: int, q: float, r: float, burn: in
     g = np.linalg.solve(V, F @ K)[:, 0] * V[0, :]
     zc = z - z[0]
     y = np.zeros(zc.shape)
-    for li, gi in zip(lam, g):
+    for li, gi in zip(lam, g, strict=True):
         y += (gi * signal.lfilter([0.0, 1.0], [1.0, -li], zc, axis=0)).real
     e = (zc - y)[burn:]
     return 0.5 * float(np.sum(e * e) / S + e.size * math.log(S))
@@ -218,5 +217,3 @@ def _fit_accel(z: NDArray, t_s: NDArray, model: str, density: float) -> dict[str
         "neg_log_likelihood": float(res.fun),
         "dt_s": dt,
     }
-
-

@@ -1,4 +1,4 @@
-"""Rerun view of a replay: the true and estimated body axes in 3D, attitude error and gyro over time.
+"""Rerun view of a replay: true and estimated body axes in 3D, attitude error and gyro over time.
 
 Conventions (see README "Frames and units"): quaternions are Hamilton ``[x, y, z, w]`` (scalar
 last, the order rerun uses), ``q_w_b`` maps body to world, so the body axes drawn in the world are

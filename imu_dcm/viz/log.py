@@ -113,7 +113,10 @@ def make_blueprint(view: ViewData):
         rrb.Horizontal(
             rrb.Spatial3DView(
                 origin="/world",
-                name="body axes: truth solid, estimate light; z-axis tip: truth purple, estimate amber",
+                name=(
+                    "body axes: truth solid, estimate light; "
+                    "z-axis tip: truth purple, estimate amber"
+                ),
                 eye_controls=rrb.EyeControls3D(
                     kind=rrb.Eye3DKind.Orbital,
                     position=(1.55, -1.9, 1.3),

@@ -157,7 +157,7 @@ def _trail_strips(t_s: NDArray, tip_w: NDArray, frames: NDArray[np.intp]) -> lis
     ok = np.all(np.isfinite(pts), axis=2)
     if ok.all():
         return list(pts)
-    return [p[m] for p, m in zip(pts, ok)]
+    return [p[m] for p, m in zip(pts, ok, strict=True)]
 
 
 def _trace_segments(tip_w: NDArray) -> list[NDArray]:
@@ -166,7 +166,7 @@ def _trace_segments(tip_w: NDArray) -> list[NDArray]:
     pts = tip_w[::step]
     ok = np.all(np.isfinite(pts), axis=1)
     edges = np.flatnonzero(np.diff(np.concatenate([[0], ok.astype(np.int8), [0]])))
-    return [pts[a:b] for a, b in zip(edges[0::2], edges[1::2]) if b - a >= 2]
+    return [pts[a:b] for a, b in zip(edges[0::2], edges[1::2], strict=True) if b - a >= 2]
 
 
 def gyro_needs_split(omega_b: NDArray) -> bool:

@@ -143,7 +143,8 @@ def _wait_for_port(
     while time.monotonic() < deadline:
         if proc.poll() is not None:
             raise RuntimeError(
-                f"Expected rerun to listen on 127.0.0.1:{port}, got exit code {proc.returncode}{see}"
+                f"Expected rerun to listen on 127.0.0.1:{port}, "
+                f"got exit code {proc.returncode}{see}"
             )
         try:
             with socket.create_connection(("127.0.0.1", port), timeout=0.2):
