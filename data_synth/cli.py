@@ -16,7 +16,9 @@ SCENE is ``heavy-top``, ``free-body`` or ``coning`` (see :mod:`data_synth.scenes
 Stamps are ``--epoch-ns + round(t_s · 1e9)``. The scene, every parameter, the gyro model and the
 command line are recorded in ``metadata.yaml`` ``custom_data`` under keys ``data_synth.*``. A bad
 option or value prints one line and exits with status 2; the output folder appears whole or not
-at all and is not overwritten without ``--force``.
+at all and is not overwritten without ``--force`` (which replaces only a bag data_synth wrote).
+A job estimated to need more than ``--max-memory-gib`` (2) or ``--max-minutes`` (30) is refused
+before it starts, with the estimate (:mod:`data_synth.budget`).
 """
 
 from __future__ import annotations
@@ -30,7 +32,8 @@ from pathlib import Path
 
 import numpy as np
 
-from data_synth.gyro import DEFAULT_EPOCH_NS, OUTPUTS, GyroModel, synthetic_gyro
+from data_synth import budget
+from data_synth.gyro import DEFAULT_EPOCH_NS, MAX_STAMP_NS, OUTPUTS, GyroModel, synthetic_gyro
 from data_synth.scenes import BRANCHES, FREE_BODY_CASES, MOTIONS, simulate
 from imu_dcm.bag_writer import StampedSeries, write_bag
 from imu_dcm.cli import OneLineArgumentParser
@@ -60,6 +63,21 @@ def _number(bound: str):
 _positive, _non_negative, _finite = _number("> 0"), _number(">= 0"), _number("")
 
 
+def _integer(lo: int, hi: int | None = None):
+    """argparse type: an integer in ``[lo, hi)`` (``hi`` None: no upper bound)."""
+    def parse(text: str) -> int:
+        try:
+            v = int(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"expected an integer, got {text!r}") from None
+        if v < lo or (hi is not None and v >= hi):
+            span = f">= {lo}" if hi is None else f"in [{lo}, {hi})"
+            raise argparse.ArgumentTypeError(f"expected an integer {span}, got {text!r}")
+        return v
+
+    return parse
+
+
 def _vector3(text: str) -> tuple[float, float, float]:
     parts = text.split(",")
     try:
@@ -80,8 +98,13 @@ def _add_common(p: argparse.ArgumentParser, scheme: bool) -> None:
     g.add_argument("--out", type=Path, required=True, metavar="DIR",
                    help="bag folder to create (rosbag2, MCAP storage)")
     g.add_argument("--force", action="store_true", help="replace an existing DIR")
-    g.add_argument("--epoch-ns", type=int, default=DEFAULT_EPOCH_NS, metavar="NS",
-                   help=f"stamp of t = 0, ns since the Unix epoch (default {DEFAULT_EPOCH_NS})")
+    g.add_argument("--epoch-ns", type=_integer(0, MAX_STAMP_NS), default=DEFAULT_EPOCH_NS,
+                   metavar="NS", help=f"stamp of t = 0, ns since the Unix epoch (default "
+                   f"{DEFAULT_EPOCH_NS}; stamps must stay below 2^31 s: header.stamp.sec is int32)")
+    g.add_argument("--max-memory-gib", type=_positive, default=2.0, metavar="GIB",
+                   help="refuse a job estimated to need more memory, GiB (default 2)")
+    g.add_argument("--max-minutes", type=_positive, default=30.0, metavar="MIN",
+                   help="refuse a job estimated to run longer, minutes (default 30)")
     if scheme:
         g.add_argument("--scheme", choices=("exact", "reference"), default="exact",
                        help="truth: exact (DOP853 1e-12, default) or the reference document's "
@@ -102,7 +125,8 @@ def _add_common(p: argparse.ArgumentParser, scheme: bool) -> None:
                    help="full-scale range, rad/s (saturates)")
     m.add_argument("--stamp-jitter", type=_non_negative, metavar="S",
                    help="standard deviation of the sample instants about the grid, s")
-    m.add_argument("--seed", type=int, default=0, help="seed of the random terms (default 0)")
+    m.add_argument("--seed", type=_integer(0), default=0,
+                   help="seed of the random terms, an integer >= 0 (default 0)")
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -154,12 +178,76 @@ def _scene_params(args: argparse.Namespace) -> dict:
     return {"half_angle_deg": args.half_angle_deg, "freq_hz": args.freq_hz}
 
 
-def make_log(args: argparse.Namespace, argv: list[str]) -> Path:
-    """Simulate, sample and write the bag described by parsed ``args``; return its folder."""
-    out = Path(args.out)
-    if out.exists() and not args.force:  # fail before simulating
+def _check_output(out: Path, force: bool) -> None:
+    """Refuse an output that exists (without ``force``), that is not a folder, or a folder that
+    is not a bag this tool wrote: ``--force`` replaces only data_synth's own bags."""
+    # The shared output-safety rules (never an input, never a special file) belong in one helper
+    # of imu_dcm; data_synth has no input, so only its own output is checked here.
+    if not (out.exists() or out.is_symlink()):
+        return
+    if not force:
         raise LogError(f"Expected output {str(out)!r} not to exist (use --force), got an "
-                          f"existing {'folder' if out.is_dir() else 'file'}")
+                       f"existing {'folder' if out.is_dir() else 'file'}")
+    if out.is_symlink() or not out.is_dir():
+        kind = "symlink" if out.is_symlink() else "file" if out.is_file() else "special file"
+        raise LogError(f"Expected --out to be a bag folder written by {PROG} (to replace with "
+                       f"--force), got a {kind}: {str(out)!r}")
+    names = sorted(p.name for p in out.iterdir())
+    meta = out / "metadata.yaml"
+    ours = (names == sorted(["metadata.yaml", f"{out.name}.mcap"]) and meta.is_file()
+            and not meta.is_symlink() and "data_synth.command" in meta.read_text(errors="replace"))
+    if not ours:
+        raise LogError(f"Expected --out to be a bag folder written by {PROG} (metadata.yaml and "
+                       f"{out.name}.mcap only) to replace with --force, got {str(out)!r} holding "
+                       f"{names[:3]}{' ...' if len(names) > 3 else ''}")
+
+
+def _refuse(args: argparse.Namespace, est: budget.JobEstimate, what: str) -> budget.JobTooLarge:
+    return budget.JobTooLarge(
+        f"Expected a job within {args.max_memory_gib:g} GiB and {args.max_minutes:g} min "
+        f"(--max-memory-gib, --max-minutes), got an estimated "
+        f"{budget.format_bytes(est.memory_bytes)} and {budget.format_seconds(est.seconds)} for "
+        f"{what}")
+
+
+def _budget_steps(args: argparse.Namespace, est: budget.JobEstimate, per_step_s: float) -> float:
+    """ODE steps left in the budget after the samples."""
+    mem = (args.max_memory_gib * 2.0**30 - est.memory_bytes) / budget.BYTES_PER_STEP
+    return max(0.0, min(mem, (args.max_minutes * 60.0 - est.seconds) / per_step_s))
+
+
+def _sample_cost(args: argparse.Namespace) -> budget.JobEstimate:
+    """Cost of the samples alone (refused before anything is simulated)."""
+    n = math.floor(args.duration * args.rate * (1.0 + 1e-12)) + 1
+    est = budget.JobEstimate(n, 0.0, n * budget.BYTES_PER_SAMPLE, n * budget.SECONDS_PER_SAMPLE)
+    if getattr(args, "scheme", "exact") == "reference":  # a Python RK4 step per sample
+        est = budget.JobEstimate(n, n, est.memory_bytes,
+                                 est.seconds + n * budget.SECONDS_PER_REFERENCE_STEP)
+    if est.memory_bytes > args.max_memory_gib * 2.0**30 or est.seconds > args.max_minutes * 60:
+        raise _refuse(args, est, f"{n:.3g} samples (--rate {args.rate:g} Hz x --duration "
+                                 f"{args.duration:g} s)")
+    return est
+
+
+def _check_values(args: argparse.Namespace) -> None:
+    """Checks that need two options together (each option alone is checked by argparse)."""
+    last_s = args.epoch_ns * 1e-9 + args.duration
+    if last_s >= MAX_STAMP_NS * 1e-9 or args.epoch_ns + math.ceil(args.duration * 1e9) \
+            >= MAX_STAMP_NS:
+        raise InputError(f"Expected --epoch-ns + --duration below 2^31 s (header.stamp.sec is an "
+                         f"int32), got stamps up to {last_s:.10g} s")
+
+
+def make_log(args: argparse.Namespace, argv: list[str]) -> Path:
+    """Simulate, sample and write the bag described by parsed ``args``; return its folder.
+
+    Every check runs before the simulation (options, output, estimated memory and time), and
+    nothing is written before the bag is complete.
+    """
+    out = Path(args.out)
+    _check_values(args)
+    _check_output(out, args.force)  # fail before simulating
+    est = _sample_cost(args)
     model = GyroModel(
         noise_density_rad_s_sqrt_hz=args.gyro_noise_density,
         bias_rad_s=args.gyro_bias,
@@ -180,8 +268,20 @@ def make_log(args: argparse.Namespace, argv: list[str]) -> Path:
                               f"{args.stamp_jitter}")
         run = reference_top(args.duration, args.rate, **params)
         traj = SampledTrajectory(run, args.rate)
-    else:
+    elif args.scene == "coning":  # closed form: the samples are the whole cost
         traj = simulate(args.scene, args.duration, **params)
+    else:
+        max_steps = _budget_steps(args, est, budget.SECONDS_PER_STEP)
+        try:
+            traj = simulate(args.scene, args.duration, max_steps=max_steps, **params)
+        except budget.JobTooLarge as exc:
+            steps = getattr(exc, "steps", math.inf)
+            total = budget.JobEstimate(est.samples, steps,
+                                       est.memory_bytes + steps * budget.BYTES_PER_STEP,
+                                       est.seconds + steps * budget.SECONDS_PER_STEP)
+            raise _refuse(args, total, f"{steps:.3g} ODE steps (the motion over --duration "
+                                       f"{args.duration:g} s) and {est.samples:.3g} "
+                                       f"samples") from None
     rec = synthetic_gyro(traj, args.rate, args.duration, model, output=args.gyro_output,
                          seed=args.seed, epoch_ns=args.epoch_ns)
     if args.gyro_output == "rate":
@@ -221,7 +321,8 @@ def make_log(args: argparse.Namespace, argv: list[str]) -> Path:
 
 
 def main(argv: list[str] | None = None) -> int:
-    """Entry point; returns the exit status (0 ok, 2 bad option, value or existing output)."""
+    """Entry point; returns the exit status (0 ok; 2 bad option or value, a job too large,
+    an existing output or a file-system error)."""
     argv = list(sys.argv[1:] if argv is None else argv)
     args = build_parser().parse_args(argv)
     try:
@@ -230,8 +331,8 @@ def main(argv: list[str] | None = None) -> int:
         msg = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
         print(f"{PROG}: error: {msg}", file=sys.stderr)
         return 2
-    except OSError as exc:  # the file system refused: one line, status 1
-        print(f"{PROG}: error: {exc}", file=sys.stderr)
-        return 1
+    except OSError as exc:  # the file system refused: one line, status 2
+        print(f"{PROG}: error: {exc}".splitlines()[0], file=sys.stderr)
+        return 2
     print(out)
     return 0

@@ -13,6 +13,7 @@ jitter, white noise, bias walk), so the same seed gives the same samples, bit fo
 from __future__ import annotations
 
 import math
+import sys
 from dataclasses import asdict, dataclass
 from typing import Any
 
@@ -22,10 +23,19 @@ from numpy.typing import NDArray
 from data_synth.rigid_body import Trajectory
 from imu_dcm.errors import InputError
 
-__all__ = ["DEFAULT_EPOCH_NS", "OUTPUTS", "GyroModel", "GyroRecord", "synthetic_gyro"]
+__all__ = [
+    "DEFAULT_EPOCH_NS",
+    "MAX_STAMP_NS",
+    "OUTPUTS",
+    "GyroModel",
+    "GyroRecord",
+    "synthetic_gyro",
+]
 
 #: Default stamp of ``t_s = 0``: 2023-11-14T22:13:20Z, the epoch of the BROAD bags.
 DEFAULT_EPOCH_NS = 1_700_000_000_000_000_000
+#: Stamps stay below this: ROS 2 ``header.stamp.sec`` is an int32.
+MAX_STAMP_NS = 2**31 * 10**9
 OUTPUTS = ("rate", "delta-angle")
 
 
@@ -71,8 +81,10 @@ class GyroModel:
                 raise InputError(f"Expected `{name}` >= 0 or None, got {v!r}")
         for name in ("quantization_rad_s", "range_rad_s"):
             v = getattr(self, name)
-            if v is not None and not (math.isfinite(v) and v > 0):
-                raise InputError(f"Expected `{name}` > 0 or None, got {v!r}")
+            # > the smallest normal float: 1 / step of a subnormal step overflows
+            if v is not None and not (math.isfinite(v) and v >= sys.float_info.min):
+                raise InputError(f"Expected `{name}` >= {sys.float_info.min:.4g} (a normal "
+                                 f"positive float) or None, got {v!r}")
         if self.bias_rad_s is not None:
             b = tuple(float(x) for x in self.bias_rad_s)
             if len(b) != 3 or not all(math.isfinite(x) for x in b):
@@ -203,8 +215,12 @@ def synthetic_gyro(
     if duration_s * rate_hz < 1:
         raise InputError(f"Expected at least two samples, got duration {duration_s} s at "
                          f"{rate_hz} Hz")
-    if int(epoch_ns) < 0:
-        raise InputError(f"Expected `epoch_ns` >= 0, got {epoch_ns!r}")
+    if not 0 <= int(epoch_ns) <= MAX_STAMP_NS - math.ceil(duration_s * 1e9):
+        raise InputError(f"Expected `epoch_ns` in [0, {MAX_STAMP_NS - math.ceil(duration_s * 1e9)}]"
+                         f" (stamps end before header.stamp.sec, an int32, overflows), got "
+                         f"{epoch_ns!r}")
+    if not (isinstance(seed, (int, np.integer)) and seed >= 0):
+        raise InputError(f"Expected `seed` an integer >= 0, got {seed!r}")
     rng = np.random.default_rng(seed)
     t_s, t_ns = _sample_times(rate_hz, duration_s, model.stamp_jitter_s, rng, int(epoch_ns))
 
@@ -243,12 +259,21 @@ def synthetic_gyro(
     if lim is not None:
         values = np.clip(values, -lim, lim)
     if step is not None:
+        with np.errstate(over="ignore"):  # a step far below the rates: refused just below
+            counts = (values if dt_scale is None else np.cumsum(values, axis=0)) / step
+        if not np.all(np.isfinite(counts)):
+            raise InputError(f"Expected `quantization_rad_s` large enough that rate / step is "
+                             f"finite, got {model.quantization_rad_s!r} for rates up to "
+                             f"{float(np.max(np.abs(values))):.3g}")
         if dt_scale is None:
-            values = np.round(values / step) * step
+            values = np.round(counts) * step
         else:
             # Like a delta-angle IMU: quantize the accumulated angle, so that the rounding
             # residual is carried to the next sample instead of accumulating.
-            total = np.round(np.cumsum(values, axis=0) / step)
+            total = np.round(counts)
             values = np.diff(np.concatenate([np.zeros((1, 3)), total]), axis=0) * step
+    if not np.all(np.isfinite(values)):
+        raise InputError(f"Expected a finite gyro output, got {np.count_nonzero(~np.isfinite(values))}"
+                         f" non-finite values from the model {model.as_dict()}")
     return GyroRecord(t_s=t_s, t_ns=t_ns, values=values, output=output, rate_hz=float(rate_hz),
                       epoch_ns=int(epoch_ns), model=model, seed=int(seed), bias_b_rad_s=bias)

@@ -181,6 +181,7 @@ def solve_rigid_body(
     params: dict[str, Any] | None = None,
     rtol: float = DEFAULT_TOL,
     atol: float = DEFAULT_TOL,
+    max_steps: float | None = None,
 ) -> SolvedTrajectory:
     """Solve Euler's equations coupled with the attitude (DOP853, dense output).
 
@@ -202,6 +203,10 @@ def solve_rigid_body(
         Recorded on the result.
     rtol, atol : float
         Tolerances of ``solve_ivp``.
+    max_steps : float, optional
+        Refuse (:class:`data_synth.budget.JobTooLarge`, before solving) when the solve is
+        estimated to take more steps than this; its ``steps`` attribute holds the estimate.
+        ``None``: no limit.
 
     Returns
     -------
@@ -221,6 +226,17 @@ def solve_rigid_body(
         raise InputError(f"Expected `duration_s` > 0, got {duration_s!r}")
     y0 = np.concatenate([q0, w0, np.zeros(3)])
     rhs = _rhs_factory(tuple(float(v) for v in inertia), torque)
+    if max_steps is not None:
+        from data_synth.budget import BYTES_PER_STEP, JobTooLarge, estimate_ode_steps, format_bytes
+
+        steps = estimate_ode_steps(rhs, y0, duration_s, rtol, atol)
+        if steps > max_steps:
+            exc = JobTooLarge(f"Expected at most {max_steps:.3g} ODE steps, got an estimated "
+                              f"{steps:.3g} (~{format_bytes(steps * BYTES_PER_STEP)}) over "
+                              f"{duration_s:g} s from |omega_b(0)| = "
+                              f"{float(np.linalg.norm(w0)):.3g} rad/s")
+            exc.steps = steps
+            raise exc
     sol = solve_ivp(rhs, (0.0, float(duration_s)), y0, method="DOP853", rtol=rtol, atol=atol,
                     dense_output=True)
     if not sol.success:

@@ -201,6 +201,7 @@ def heavy_top(
     spin_hz: float | None = None,
     rtol: float = 1e-12,
     atol: float = 1e-12,
+    max_steps: float | None = None,
 ) -> SolvedTrajectory:
     """Simulate the heavy symmetric top (see the module docstring).
 
@@ -217,6 +218,8 @@ def heavy_top(
         Override ``params``. A non-zero tilt is refused for ``sleeping``.
     rtol, atol : float
         ODE tolerances (default 1e-12).
+    max_steps : float, optional
+        Refuse a solve estimated to need more ODE steps (see :func:`solve_rigid_body`).
 
     Returns
     -------
@@ -228,7 +231,8 @@ def heavy_top(
                                                     tilt_deg=tilt_deg, spin_hz=spin_hz)
     inertia = (p.i1_kg_m2, p.i1_kg_m2, p.i3_kg_m2)
     return solve_rigid_body(inertia, q0, omega0, duration_s, torque=heavy_top_torque(p),
-                            scene="heavy-top", params=record, rtol=rtol, atol=atol)
+                            scene="heavy-top", params=record, rtol=rtol, atol=atol,
+                            max_steps=max_steps)
 
 
 def box_inertia(edges_m: ArrayLike, mass_kg: float) -> np.ndarray:
@@ -246,6 +250,7 @@ def free_body(
     mass_kg: float = 1.0,
     rtol: float = 1e-12,
     atol: float = 1e-12,
+    max_steps: float | None = None,
 ) -> SolvedTrajectory:
     """Simulate the torque-free box of the second reference document.
 
@@ -262,6 +267,10 @@ def free_body(
         Box edges along body x, y, z, m.
     mass_kg : float
         Mass, kg.
+    rtol, atol : float
+        ODE tolerances (default 1e-12).
+    max_steps : float, optional
+        Refuse a solve estimated to need more ODE steps (see :func:`solve_rigid_body`).
     """
     if case not in FREE_BODY_CASES:
         raise InputError(f"Expected case in {FREE_BODY_CASES}, got {case!r}")
@@ -280,7 +289,7 @@ def free_body(
               "inertia_kg_m2": inertia.tolist(), "q0_w_b": q0.tolist(),
               "omega0_b_rad_s": np.asarray(w0, dtype=float).tolist()}
     return solve_rigid_body(inertia, q0, w0, duration_s, scene="free-body", params=record,
-                            rtol=rtol, atol=atol)
+                            rtol=rtol, atol=atol, max_steps=max_steps)
 
 
 def coning(duration_s: float, half_angle_deg: float = 10.0,

@@ -5,8 +5,11 @@ from __future__ import annotations
 
 import hashlib
 import json
+import os
+import stat
 import subprocess
 import sys
+import warnings
 
 import numpy as np
 import pytest
@@ -193,3 +196,74 @@ def test_python_dash_m_entry_point(tmp_path):
                          check=False, capture_output=True, text=True, timeout=120)
     assert bad.returncode == 2
     assert bad.stderr.count("\n") == 1 and "--rate" in bad.stderr
+
+
+# Jobs that cannot finish, bad integers, file-system errors: refused up front, one line, exit 2.
+@pytest.mark.parametrize("argv, needles", [
+    # 1e9 samples: ~3 kB each while the bag is written (data_synth.budget) -> TiB
+    (["coning", "--rate", "1e9", "--duration", "1"], ["1e+09 samples", "TiB"]),
+    (["coning", "--rate", "1e6", "--duration", "100"], ["1e+08 samples", "GiB"]),
+    (["heavy-top", "--scheme", "reference", "--rate", "1e6", "--duration", "100"], ["h for"]),
+    # the ODE would need ~1e10 (spin) and ~1e30 (|omega|) steps: measured by a 200-step probe
+    (["heavy-top", "--spin-hz", "1e9", "--rate", "100", "--duration", "1"], ["ODE steps", "days"]),
+    (["free-body", "--omega=1e30,0,0", "--rate", "100", "--duration", "1"], ["ODE steps"]),
+    (["free-body", "--omega=1e300,0,0", "--rate", "100", "--duration", "1"], ["ODE"]),
+    (["heavy-top", "--rate", "100", "--duration", "1e9"], ["2^31 s"]),
+    (["coning", "--rate", "1e-300", "--duration", "1e300"], ["2^31 s"]),
+    (["coning", "--rate", "100", "--duration", "1", "--epoch-ns", "2147483647500000000"],
+     ["2^31 s"]),
+    (["coning", "--rate", "100", "--duration", "1", "--gyro-quantization", "3e-308"],
+     ["quantization_rad_s"]),
+    (["coning", "--rate", "100", "--duration", "1", "--gyro-quantization", "5e-324"],
+     ["quantization_rad_s"]),
+    (["coning", "--rate", "100", "--duration", "1", "--gyro-noise-density", "1e308"],
+     ["finite gyro output"]),
+    (["coning", "--rate", "100", "--duration", "1", "--max-memory-gib", "1e-6"], ["samples"]),
+])
+def test_impossible_job_refused_up_front_one_line_exit_2(tmp_path, capsys, argv, needles):
+    out = tmp_path / "never"
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # no raw RuntimeWarning reaches the user
+        assert main([*argv, "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and all(n in err for n in needles), err
+    assert list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.parametrize("flag, value", [("--seed", "-1"), ("--epoch-ns", str(2**63)),
+                                         ("--epoch-ns", "-1"), ("--seed", "1.5")])
+def test_bad_integer_option_one_line_exit_2(tmp_path, capsys, flag, value):
+    with pytest.raises(SystemExit) as exc:
+        main(["coning", "--rate", "10", "--duration", "1", flag, value,
+              "--out", str(tmp_path / "x")])
+    assert exc.value.code == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and flag in err and "Traceback" not in err
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_file_system_error_one_line_exit_2(tmp_path, capsys):
+    (tmp_path / "file").write_bytes(b"not a folder")
+    argv = ["coning", "--rate", "10", "--duration", "0.5", "--out", str(tmp_path / "file" / "x")]
+    assert main(argv) == 2
+    assert capsys.readouterr().err.count("\n") == 1
+    assert (tmp_path / "file").read_bytes() == b"not a folder"
+
+
+def test_force_replaces_only_a_bag_data_synth_wrote(tmp_path, capsys):
+    argv = ["coning", "--rate", "10", "--duration", "0.5", "--force", "--out"]
+    precious = tmp_path / "precious"  # a user's folder: never deleted by --force
+    precious.mkdir()
+    (precious / "notes.txt").write_text("keep me")
+    plain = tmp_path / "plain.txt"
+    plain.write_text("keep me too")
+    fifo = tmp_path / "fifo"
+    os.mkfifo(fifo)
+    for target in (precious, plain, fifo):
+        assert main([*argv, str(target)]) == 2
+        assert "written by python -m data_synth" in capsys.readouterr().err
+    assert (precious / "notes.txt").read_text() == "keep me"
+    assert plain.read_text() == "keep me too" and stat.S_ISFIFO(fifo.lstat().st_mode)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["fifo", "plain.txt", "precious"]
+    ours = tmp_path / "ours"
+    assert main([*argv, str(ours)]) == 0 and main([*argv, str(ours)]) == 0  # its own bag: ok

@@ -1,0 +1,525 @@
+"""A seeded, bounded fuzz campaign: nothing a user feeds in crashes, hangs, destroys or loses more
+than it must.
+
+Inputs: an 8 s slice of the shipped trial ``replay/broad_07_undisturbed_fast_rotation_B``
+re-written as a small bag (zstd chunks of ~160 kB, so damage can hit one chunk of several) and a
+``data_synth`` coning log (lz4 chunks). Damage classes, one test each: truncation at every
+record boundary and at random offsets; byte flips in the file; byte flips inside decompressed
+chunks re-packed with a valid CRC; lying length and size fields (and decompression bombs);
+corrupt schemas; corrupt ``metadata.yaml`` (alias bomb, non-mapping, non-UTF-8); special files as
+input; hostile output paths (inside the input, FIFOs, device nodes made in a temporary folder,
+read-only folders).
+
+Every case runs through the command line (``python -m imu_dcm.replay LOG --rerun off``, called
+in-process in a long-lived worker) and, for damaged logs, through the library (the log reader
+and :func:`imu_dcm.replay.replay`). For every case (:func:`fuzzlib.judge`):
+
+* exit 0 (stderr: warnings only) or exit 2 with exactly one error line; the library raises only
+  :class:`imu_dcm.errors.ImuDcmError` subclasses; no traceback;
+* no hang (``fuzzlib.CASE_TIMEOUT_S``); peak memory below ``fuzzlib.MEMORY_LIMIT_BYTES``;
+* input bytes unchanged (hashed before and after); on exit 2 no output left behind;
+* no more IMU samples lost than the damaged chunks held (a log with intact chunks is not
+  refused), and a loss is warned about.
+
+The random offsets and bytes come from ``numpy.random.default_rng(SEED)``.
+"""
+
+from __future__ import annotations
+
+import os
+import shutil
+import stat
+import struct
+from collections import defaultdict
+from pathlib import Path
+
+import fuzzlib
+import numpy as np
+import pytest
+from conftest import REPO_ROOT
+from fuzzlib import OP, Base, Case, chunk_record, without_summary
+
+pytestmark = pytest.mark.slow
+
+SEED = 20261201
+BROAD = REPO_ROOT / "replay" / "broad_07_undisturbed_fast_rotation_B"
+SLICE_S = 8.0
+RANDOM_TRUNCATIONS = 8
+RANDOM_FLIPS = 16
+CLASSES = ("truncation", "flip", "repacked_flip", "lying_size", "schema", "metadata",
+           "special_input", "output_path")  # fmt: skip
+
+
+# ------------------------------------------------------------------------------- inputs
+def _bag(d: Path, base: Base, mcap: bytes | None = None, meta: bytes | None = None) -> Path:
+    """A copy of ``base`` under ``d/in/bag``, with its .mcap or metadata.yaml replaced."""
+    bag = d / "in" / base.folder.name
+    shutil.copytree(base.folder, bag)
+    if mcap is not None:
+        (bag / base.mcap.name).write_bytes(mcap)
+    if meta is not None:
+        (bag / "metadata.yaml").write_bytes(meta)
+    return bag
+
+
+def _with(base: Base, mcap: bytes | None = None, meta: bytes | None = None):
+    def make(d: Path):
+        return _bag(d, base, mcap, meta), []
+
+    return make
+
+
+def _patch(buf: bytes, at: int, new: bytes) -> bytes:
+    return buf[:at] + new + buf[at + len(new):]
+
+
+def _lost_after(base: Base, offset: int) -> int:
+    """IMU samples in chunks not wholly before ``offset`` (a truncation there loses them)."""
+    return sum(c.count(base.imu_channel) for c in base.chunks if c.rec.end > offset)
+
+
+# -------------------------------------------------------------------------------- classes
+def truncation_cases(base: Base, rng: np.random.Generator) -> list[Case]:
+    buf = base.bytes
+    cuts = {r.start for r in base.records} | {len(buf) - 8, 4}
+    cuts |= {int(x) for x in rng.integers(9, len(buf) - 1, RANDOM_TRUNCATIONS)}
+    out = []
+    for x in sorted(cuts):
+        rec = next((r.name for r in base.records if r.start == x), "random")
+        out.append(Case("truncation", f"at{x}-{rec}", base.name, _with(base, buf[:x]),
+                        lost=_lost_after(base, x), fix="reader: keep whole chunks before the cut"))
+    return out
+
+
+def flip_cases(base: Base, rng: np.random.Generator) -> list[Case]:
+    buf = base.bytes
+    first_data = next(r.start for r in base.records if r.op not in (OP["header"],))
+    targets = {int(x): "random" for x in rng.integers(0, len(buf), RANDOM_FLIPS)}
+    for k, c in enumerate(base.chunks):  # one flip in every chunk's compressed bytes
+        targets[c.data_at + int(rng.integers(0, c.data_len))] = f"chunk{k}-data"
+    c = base.chunks[len(base.chunks) // 2]
+    targets[c.size_at + 8] = "chunk-crc"
+    targets[c.size_at + 12] = "chunk-compression"
+    for r in base.records:
+        if r.op in (OP["chunk_index"], OP["statistics"], OP["data_end"], OP["footer"]):
+            targets.setdefault(r.body + 1, r.name)
+    out = []
+    for x, what in sorted(targets.items()):
+        k = base.chunk_at(x)
+        lost = (None if x < first_data else base.lost_in(k) if k is not None else 0)
+        flipped = _patch(buf, x, bytes([buf[x] ^ int(rng.integers(1, 256))]))
+        out.append(Case("flip", f"at{x}-{what}", base.name, _with(base, flipped), lost=lost,
+                        fix="reader: skip the damaged chunk, go on with the next"))
+    return out
+
+
+def _repack(base: Base, k: int, raw: bytes, **kw) -> bytes:
+    c = base.chunks[k]
+    t0, t1 = struct.unpack_from("<QQ", base.bytes, c.rec.body)
+    idx = base.records.index(c.rec)
+    return without_summary(base.bytes, {idx: chunk_record(t0, t1, raw, c.compression, **kw)})
+
+
+def repacked_flip_cases(base: Base, rng: np.random.Generator) -> list[Case]:
+    out = [Case("repacked_flip", "no-summary-undamaged", base.name,
+                _with(base, without_summary(base.bytes)), lost=0, fix="reader: summary-less MCAP")]
+    for k in range(len(base.chunks)):
+        c = base.chunks[k]
+        imu = [(s, e) for ch, s, e in c.messages if ch == base.imu_channel]
+        s, e = imu[int(rng.integers(0, len(imu)))]
+        # message record: op u8, len u64, channel u16, seq u32, log u64, pub u64, then CDR:
+        # encapsulation 4, stamp sec 4 + nanosec 4, frame_id ...; angular_velocity near the end
+        spots = {"msg-length": s + 8, "msg-channel": s + 9, "log-time": s + 22,
+                 "stamp-sec": s + 31 + 7, "payload": int(rng.integers(s + 35, e)),
+                 "rate-exponent": e - 48 - 72 - 8 * int(rng.integers(0, 3)) - 1}
+        what = list(spots)[k % len(spots)]
+        at = spots[what]
+        raw = bytearray(c.raw)
+        raw[at] ^= 0x7F if what == "rate-exponent" else int(rng.integers(1, 256))
+        out.append(Case("repacked_flip", f"chunk{k}-{what}", base.name,
+                        _with(base, _repack(base, k, bytes(raw))), lost=base.lost_in(k),
+                        fix="replay: implausible samples/stamps cost one sample (issue §5)"))
+    return out
+
+
+def _bomb(compression: str, size: int) -> bytes:
+    """``size`` zero bytes compressed (streamed: never held whole here)."""
+    if compression == "zstd":
+        import zstandard
+
+        cobj = zstandard.ZstdCompressor(level=1).compressobj()
+        block = bytes(1 << 20)
+        parts = [cobj.compress(block) for _ in range(size >> 20)]
+        return b"".join(parts) + cobj.flush()
+    import lz4.frame
+
+    with lz4.frame.LZ4FrameCompressor() as comp:
+        block = bytes(1 << 20)
+        parts = [comp.begin()] + [comp.compress(block) for _ in range(size >> 20)]
+        return b"".join(parts) + comp.flush()
+
+
+def lying_size_cases(base: Base, rng: np.random.Generator) -> list[Case]:
+    buf = base.bytes
+    out = []
+    k = len(base.chunks) // 2
+    c = base.chunks[k]
+    lost = base.lost_in(k)
+    u64 = lambda v: struct.pack("<Q", v)
+    lies = {
+        "record-length-max": (c.rec.start + 1, u64(2**64 - 1)),
+        "record-length-2^63": (c.rec.start + 1, u64(2**63)),
+        "record-length-0": (c.rec.start + 1, u64(0)),
+        "record-length-short": (c.rec.start + 1, u64(c.rec.end - c.rec.body - 1)),
+        "uncompressed-size-0": (c.size_at, u64(0)),
+        "uncompressed-size-short": (c.size_at, u64(len(c.raw) - 1)),
+        "uncompressed-size-long": (c.size_at, u64(len(c.raw) + 1)),
+        "uncompressed-size-2.2GB": (c.size_at, u64(2_200_000_000)),
+        "uncompressed-size-2^63": (c.size_at, u64(2**63)),
+        "uncompressed-size-max": (c.size_at, u64(2**64 - 1)),
+        "data-length-max": (c.data_at - 8, u64(2**64 - 1)),
+        "data-length-short": (c.data_at - 8, u64(c.data_len - 1)),
+        "compression-length-max": (c.size_at + 12, struct.pack("<I", 2**32 - 1)),
+    }
+    for r in base.records:
+        if r.op == OP["chunk_index"] and struct.unpack_from("<Q", buf, r.body + 16)[0] == \
+                c.rec.start:
+            lies["index-chunk-offset-past-end"] = (r.body + 16, u64(len(buf) * 2))
+            lies["index-chunk-length-max"] = (r.body + 24, u64(2**64 - 1))
+        if r.op == OP["message_index"] and "message-index-length-max" not in lies:
+            lies["message-index-length-max"] = (r.start + 1, u64(2**63 - 1))
+        if r.op == OP["footer"]:
+            lies["footer-summary-start-past-end"] = (r.body, u64(len(buf) * 3))
+            lies["footer-summary-start-in-header"] = (r.body, u64(9))
+        if r.op == OP["statistics"]:
+            lies["statistics-message-count-max"] = (r.body, u64(2**64 - 1))
+    index_lies = ("index-", "message-index", "footer-", "statistics-")
+    for name, (at, new) in lies.items():
+        out.append(Case("lying_size", name, base.name, _with(base, _patch(buf, at, new)),
+                        lost=0 if name.startswith(index_lies) else lost,
+                        fix="reader: bound sizes by the file, skip the chunk"))
+    # A message record inside a chunk claiming to run past the chunk (re-packed, valid CRC).
+    s = next(s for ch, s, e in c.messages if ch == base.imu_channel)
+    raw = _patch(c.raw, s + 1, u64(2**63 - 1))
+    out.append(Case("lying_size", "inner-message-length", base.name,
+                    _with(base, _repack(base, k, raw)), lost=lost, fix="reader: bound records"))
+    # Decompression bombs on the last chunk's place: 1 GiB of zeros claiming 1000 bytes, and the
+    # same truthfully declared (nothing of it is replayed: it holds no IMU message).
+    t0, t1 = struct.unpack_from("<QQ", buf, base.chunks[-1].rec.body)
+    data = _bomb(c.compression or "zstd", 1 << 30)
+    for name, declared in (("bomb-declared-1000", 1000), ("bomb-declared-truthfully", 1 << 30)):
+        rec = chunk_record(t0, t1, b"", c.compression or "zstd", declared_size=declared, crc=0,
+                           data=data)
+        out.append(Case("lying_size", name, base.name,
+                        _with(base, without_summary(buf, insert=rec)), lost=0,
+                        fix="reader: never inflate past the declared size; bound it by the file"))
+    return out
+
+
+def _schema_variant(base: Base, hook):
+    """The base with ``hook(name, encoding, data)`` applied to the schema records inside its
+    chunks (re-packed with a valid CRC; summary dropped, so the chunks' copies are the only)."""
+    buf = base.bytes
+    replace = {}
+    for k, c in enumerate(base.chunks):
+        parts, changed = [], False
+        for op, s, e in fuzzlib.inner_records(c.raw):
+            rec = c.raw[s:e]
+            if op == OP["schema"]:
+                sid, = struct.unpack_from("<H", rec, 9)
+                fields, p = [], 11
+                for width in ("<I", "<I", "<I"):
+                    (n,) = struct.unpack_from(width, rec, p)
+                    fields.append(rec[p + 4 : p + 4 + n])
+                    p += 4 + n
+                name, enc, data = hook(fields[0].decode(), fields[1].decode(), fields[2])
+                if (name, enc, data) != (fields[0].decode(), fields[1].decode(), fields[2]):
+                    changed = True
+                    body = struct.pack("<H", sid) + b"".join(
+                        struct.pack("<I", len(x)) + x for x in (name.encode(), enc.encode(), data))
+                    rec = struct.pack("<BQ", OP["schema"], len(body)) + body
+            parts.append(rec)
+        if changed:
+            t0, t1 = struct.unpack_from("<QQ", buf, c.rec.body)
+            replace[base.records.index(c.rec)] = chunk_record(t0, t1, b"".join(parts),
+                                                              c.compression)
+    return _with(base, without_summary(buf, replace))
+
+
+def schema_cases(base: Base, rng: np.random.Generator) -> list[Case]:
+    imu = "sensor_msgs/msg/Imu"
+
+    def nested(depth):
+        lines = [f"pkg/msg/T{i} a" for i in range(1, 2)]
+        for i in range(1, depth):
+            lines.append("=" * 80 + f"\nMSG: pkg/msg/T{i}\npkg/msg/T{i + 1} a")
+        lines.append("=" * 80 + f"\nMSG: pkg/msg/T{depth}\nfloat64 x")
+        return "\n".join(lines).encode()
+
+    variants = {
+        "non-utf8": lambda n, e, d: (n, e, b"\xff\xfe\xfd" + d),
+        "empty": lambda n, e, d: (n, e, b""),
+        "garbage": lambda n, e, d: (n, e, b"%% not a message definition {[(\n" * 3),
+        "bad-field-type": lambda n, e, d: (n, e, d.replace(b"float64[9]", b"float64[9", 1)),
+        "bad-resource-name": lambda n, e, d: (n, e, d.replace(b"MSG: std_msgs/Header",
+                                                              b"MSG: 9bad-name//Header", 1)),
+        "self-recursive": lambda n, e, d: (n, e, d.replace(
+            b"MSG: geometry_msgs/Vector3\n", b"MSG: geometry_msgs/Vector3\n"
+            b"geometry_msgs/Vector3 again\n", 1)),
+        "nested-3000": lambda n, e, d: (n, e, nested(3000)),
+        "unbounded-covariance": lambda n, e, d: (n, e, d.replace(
+            b"float64[9] orientation_covariance", b"float64[] orientation_covariance", 1)),
+        "encoding-unknown": lambda n, e, d: (n, "no-such-encoding", d),
+        "encoding-ros1msg": lambda n, e, d: (n, "ros1msg", d),
+        "name-empty": lambda n, e, d: ("", e, d),
+        "name-long": lambda n, e, d: ("x/msg/" + "y" * 100_000, e, d),
+    }
+    out = []
+    for name, fn in variants.items():
+        def hook(n, e, d, fn=fn):
+            return fn(n, e, d) if n == imu else (n, e, d)
+
+        out.append(Case("schema", name, base.name, _schema_variant(base, hook), lost=None,
+                        fix="reader: schema errors are LogError (decode, parse, depth)"))
+    return out
+
+
+def metadata_cases(base: Base, rng: np.random.Generator) -> list[Case]:
+    laughs = ["a0: &a0 [lol, lol, lol, lol, lol, lol, lol, lol, lol, lol]"]
+    for i in range(1, 10):
+        laughs.append(f"a{i}: &a{i} [" + ", ".join([f"*a{i - 1}"] * 10) + "]")
+    good = base.folder.joinpath("metadata.yaml").read_bytes()
+    variants = {
+        "alias-bomb": ("rosbag2_bagfile_information:\n  custom_data:\n"
+                       + "".join(f"    {ln}\n" for ln in laughs)).encode(),
+        "alias-bomb-top": "\n".join(laughs).encode() + b"\n",
+        "list": b"- 1\n- 2\n",
+        "scalar": b"just a string\n",
+        "null": b"~\n",
+        "empty": b"",
+        "non-utf8": b"rosbag2_bagfile_information:\n  custom_data:\n    k: \xff\xfe\xfa\n",
+        "binary": bytes(rng.integers(0, 256, 4096, dtype=np.uint8)),
+        "info-list": b"rosbag2_bagfile_information: [1, 2]\n",
+        "custom-data-list": b"rosbag2_bagfile_information:\n  custom_data: [a, b]\n",
+        "custom-data-nested": b"rosbag2_bagfile_information:\n  custom_data:\n    k: {a: [1]}\n",
+        "deep-nesting": b"[" * 100_000 + b"]" * 100_000,
+        "bad-yaml": b"rosbag2_bagfile_information:\n\t- : :\n  ][\n",
+        "missing-file": good.replace(base.mcap.name.encode(), b"missing.mcap"),
+        "large": b"# pad\n" * 2_000_000 + good,
+    }
+    return [Case("metadata", name, base.name, _with(base, meta=text), lost=None,
+                 fix="reader: bounded YAML parse, mapping check, UTF-8 errors as LogError")
+            for name, text in variants.items()]
+
+
+def _mknod(path: Path, minor: int) -> bool:
+    """A character device like /dev/null (3), /dev/zero (5), /dev/full (7), made in a temporary
+    folder (never a real /dev node); False where the system does not allow it."""
+    try:
+        os.mknod(path, 0o666 | stat.S_IFCHR, os.makedev(1, minor))
+        return True
+    except OSError:
+        return False
+
+
+def special_input_cases(base: Base) -> list[Case]:
+    def fifo_log(d):
+        os.mkfifo(d / "in" / "log.mcap")
+        return d / "in" / "log.mcap", []
+
+    def fifo_in_bag(d):
+        bag = _bag(d, base)
+        (bag / base.mcap.name).unlink()
+        os.mkfifo(bag / base.mcap.name)
+        return bag, []
+
+    def zero_log(d):
+        p = d / "in" / "zero.mcap"
+        if not _mknod(p, 5):
+            p.write_bytes(b"")
+        return p, []
+
+    def zero_in_bag(d):
+        bag = _bag(d, base)
+        (bag / base.mcap.name).unlink()
+        if not _mknod(bag / base.mcap.name, 5):
+            (bag / base.mcap.name).write_bytes(b"")
+        return bag, []
+
+    def empty_dir(d):
+        (d / "in" / "empty").mkdir()
+        return d / "in" / "empty", []
+
+    def missing(d):
+        return d / "in" / "nothing-here", []
+
+    def link_loop(d):
+        (d / "in" / "a").symlink_to(d / "in" / "b")
+        (d / "in" / "b").symlink_to(d / "in" / "a")
+        return d / "in" / "a", []
+
+    def metadata_fifo(d):
+        bag = _bag(d, base)
+        (bag / "metadata.yaml").unlink()
+        os.mkfifo(bag / "metadata.yaml")
+        return bag, []
+
+    makers = {"fifo-log": fifo_log, "fifo-in-bag": fifo_in_bag, "zero-device-log": zero_log,
+              "zero-device-in-bag": zero_in_bag, "empty-folder": empty_dir, "missing": missing,
+              "symlink-loop": link_loop, "metadata-fifo": metadata_fifo}
+    return [Case("special_input", name, base.name, make, lost=None,
+                 fix="reader: regular files and folders only")
+            for name, make in makers.items()]
+
+
+def output_path_cases(base: Base) -> list[Case]:
+    """Hostile outputs for the CLI; every one must be refused (exit 2) and change nothing."""
+    def case(name, extra, refuse=True, fix="replay CLI: shared output-safety helper"):
+        def make(d):
+            bag = _bag(d, base)
+            return bag, extra(d, bag)
+
+        return Case("output_path", name, base.name, make, lost=None, kinds=("cli",),
+                    refuse=refuse, fix=fix)
+
+    def dev(minor):
+        def extra(d, bag):
+            p = d / "out" / f"dev{minor}"
+            if not _mknod(p, minor):
+                os.mkfifo(p)
+            return ["--summary-json", str(p)]
+
+        return extra
+
+    def fifo(flag, force=False):
+        def extra(d, bag):
+            os.mkfifo(d / "out" / "fifo")
+            return [flag, str(d / "out" / "fifo"), *(["--force"] if force else [])]
+
+        return extra
+
+    def readonly(d, bag):
+        (d / "out" / "ro").mkdir()
+        os.chmod(d / "out" / "ro", 0o555)
+        return ["--summary-json", str(d / "out" / "ro" / "s.json")]
+
+    def link_to_input(d, bag):
+        (d / "out" / "link.json").symlink_to(bag / base.mcap.name)
+        return ["--summary-json", str(d / "out" / "link.json")]
+
+    def link_dir_to_input(d, bag):
+        (d / "out" / "est").symlink_to(bag)
+        return ["--out", str(d / "out" / "est"), "--force"]
+
+    def parent_is_file(d, bag):
+        (d / "out" / "file").write_bytes(b"x")
+        return ["--summary-json", str(d / "out" / "file" / "s.json")]
+
+    return [
+        case("summary-json-is-input-mcap", lambda d, b: ["--summary-json",
+                                                         str(b / base.mcap.name)]),
+        case("summary-json-is-metadata", lambda d, b: ["--summary-json",
+                                                       str(b / "metadata.yaml")]),
+        case("summary-json-is-input-folder", lambda d, b: ["--summary-json", str(b)]),
+        case("summary-json-symlink-to-input", link_to_input),
+        case("out-is-input", lambda d, b: ["--out", str(b), "--force"]),
+        case("out-holds-input", lambda d, b: ["--out", str(b.parent), "--force"]),
+        case("out-symlink-to-input", link_dir_to_input),
+        case("summary-json-fifo", fifo("--summary-json")),
+        case("out-fifo-force", fifo("--out", force=True)),
+        case("summary-json-null-device", dev(3)),
+        case("summary-json-full-device", dev(7)),
+        case("summary-json-folder", lambda d, b: ["--summary-json", str(d / "out")]),
+        case("summary-json-parent-is-file", parent_is_file),
+        # root writes into a read-only folder: then exit 0 is right too
+        case("summary-json-read-only-folder", readonly, refuse=os.geteuid() != 0),
+        case("rerun-bad-with-outputs", lambda d, b: ["--rerun", "bogus", "--out",
+                                                     str(d / "out" / "est")],
+             fix="replay CLI: validate every option before any output"),
+        case("rerun-save-unwritable", lambda d, b: [
+            "--rerun", f"save:{d / 'out' / 'nofolder' / 'x' / 'v.rrd'}"],
+            fix="replay CLI: check --rerun save: before any output"),
+    ]
+
+
+# -------------------------------------------------------------------------------- campaign
+def _bases(tmp: Path) -> dict[str, Base]:
+    from data_synth.cli import main as synth_main
+
+    start = 1_700_000_000_000_000_000
+    (mcap,) = BROAD.glob("*.mcap")
+    broad = fuzzlib.rewrite_bag(mcap, tmp / "broad07", t_end_ns=start + int(SLICE_S * 1e9),
+                                chunk_size=160_000, compression="zstd", source="broad 07 slice")
+    assert synth_main(["coning", "--rate", "200", "--duration", "3", "--gyro-noise-density",
+                       "1e-3", "--gyro-bias=0.01,-0.02,0.005", "--out",
+                       str(tmp / "synth-src")]) == 0
+    (src,) = (tmp / "synth-src").glob("*.mcap")
+    synth = fuzzlib.rewrite_bag(src, tmp / "coning", t_end_ns=None, chunk_size=48_000,
+                                compression="lz4", source="data_synth coning")
+    return {"broad07": fuzzlib.load_base("broad07", broad),
+            "coning": fuzzlib.load_base("coning", synth)}
+
+
+class Campaign:
+    """Runs each class's cases once, on first request, in a pool of two warm workers."""
+
+    def __init__(self, tmp: Path):
+        self.tmp = tmp
+        self.bases = _bases(tmp / "bases")
+        rng = np.random.default_rng(SEED)
+        self.cases: dict[str, list[Case]] = defaultdict(list)
+        for base in self.bases.values():
+            for gen in (truncation_cases, flip_cases, repacked_flip_cases, lying_size_cases,
+                        schema_cases, metadata_cases):
+                for c in gen(base, rng):
+                    self.cases[c.cls].append(c)
+        self.cases["special_input"] = special_input_cases(self.bases["broad07"])
+        self.cases["output_path"] = output_path_cases(self.bases["broad07"])
+        broad = self.bases["broad07"]
+        self.pool = fuzzlib.Pool(REPO_ROOT, n=2, warmup={"kind": "replay",
+                                                         "path": str(broad.folder)})
+        clean = [Case("clean", "clean", b.name, _with(b), lost=None) for b in self.bases.values()]
+        self.clean = self.pool.run([(c, k) for c in clean for k in c.kinds], tmp / "clean",
+                                   self.bases)
+        for v in self.clean:
+            self.bases[v.case.base].clean[v.kind] = v.result.get("samples") if v.kind != "cli" \
+                else None
+        # The CLI's count is the replay's (its summary 'samples' is the cleaned count).
+        for b in self.bases.values():
+            b.clean["cli"] = b.clean.get("replay")
+        self._done: dict[str, list[fuzzlib.Verdict]] = {}
+
+    def verdicts(self, cls: str) -> list[fuzzlib.Verdict]:
+        if cls not in self._done:
+            jobs = [(c, k) for c in self.cases[cls] for k in c.kinds]
+            self._done[cls] = self.pool.run(jobs, self.tmp / cls, self.bases)
+        return self._done[cls]
+
+    def close(self) -> None:
+        self.pool.close()
+
+
+@pytest.fixture(scope="module")
+def campaign(tmp_path_factory):
+    c = Campaign(tmp_path_factory.mktemp("fuzz"))
+    yield c
+    c.close()
+
+
+def test_clean_logs_replay_with_all_samples(campaign):
+    # The harness's own baseline: undamaged inputs pass every rule and keep every sample.
+    bad = [v.line() for v in campaign.clean if v.violations]
+    assert not bad, "\n".join(bad)
+    for b in campaign.bases.values():
+        assert b.clean["read_log"] == b.imu_total, b.name
+        assert len(b.chunks) >= 5, b.name  # damage can hit one chunk of several
+        assert b.clean["replay"] > 0.99 * b.imu_total, b.name
+
+
+@pytest.mark.parametrize("cls", CLASSES)
+def test_fuzz_class(campaign, cls):
+    verdicts = campaign.verdicts(cls)
+    assert len(verdicts) >= 8, f"{cls}: only {len(verdicts)} cases ran"
+    bad = [v for v in verdicts if v.violations]
+    report = "\n".join(v.line() for v in bad)
+    assert not bad, f"{len(bad)} of {len(verdicts)} {cls} cases broke a rule:\n{report}"
