@@ -1,6 +1,6 @@
 """Write ROS 2 bags (MCAP storage) of IMU rates, quaternions and vectors, fast and atomically.
 
-The output is a rosbag2 folder in the layout of the real logs (DESIGN.md §7): ``metadata.yaml``
+The output is a rosbag2 folder in the layout of recorded ROS 2 logs: ``metadata.yaml``
 (rosbag2 format version 9) and one ``<folder name>.mcap`` file with profile ``ros2``, CDR
 messages, their ``ros2msg`` definitions embedded as schemas, zstd chunks, and the rosbag2
 metadata record. Readable by ``mcap`` + ``mcap-ros2-support`` and by ``rosbags``.
@@ -32,7 +32,7 @@ import shutil
 import struct
 import uuid
 import zlib
-from collections.abc import Mapping
+from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
 from itertools import pairwise
 from pathlib import Path
@@ -40,7 +40,8 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from imu_dcm.errors import InputError, LogError
+from imu_dcm.errors import InputError
+from imu_dcm.outputs import OutputError, check_output_dir
 
 __all__ = ["MSG_DEFINITIONS", "TYPE_HASHES", "StampedSeries", "write_bag"]
 
@@ -394,6 +395,7 @@ def write_bag(
     imu_angular_velocity_covariance: ArrayLike | None = None,
     custom_data: Mapping[str, str] | None = None,
     force: bool = False,
+    inputs: Iterable[str | os.PathLike] = (),
 ) -> Path:
     """Write a rosbag2 folder (MCAP storage) atomically.
 
@@ -419,7 +421,10 @@ def write_bag(
     custom_data : dict of str -> str, optional
         Recorded in ``metadata.yaml`` ``custom_data`` (and in the MCAP's rosbag2 record).
     force : bool
-        Replace an existing ``out_dir``.
+        Replace an existing ``out_dir``, only if it is a bag this function wrote
+        (:func:`imu_dcm.outputs.is_own_bag`).
+    inputs : iterable of path
+        Paths that must survive: ``out_dir`` may not be, hold or lie inside any of them.
 
     Returns
     -------
@@ -429,17 +434,15 @@ def write_bag(
     Raises
     ------
     LogError
-        If ``out_dir`` exists and ``force`` is false, or its parent folder is missing.
+        (:class:`imu_dcm.outputs.OutputError`) If ``out_dir`` exists and ``force`` is false,
+        exists and is not a bag written here, is or holds an input, is a special file, its
+        parent folder is missing or read-only, or writing fails.
     InputError
         For a malformed series (shape, non-finite value, stamp out of range), no topics at all,
         a duplicated topic, or a non-string ``custom_data`` entry.
     """
-    out = Path(out_dir)
-    if (out.exists() or out.is_symlink()) and not force:
-        raise LogError(f"Expected output {str(out)!r} not to exist (use force), got an existing "
-                       f"{'folder' if out.is_dir() else 'file'}")
-    if not out.parent.is_dir():
-        raise LogError(f"Expected the parent folder of {str(out)!r} to exist, got none")
+    inputs = tuple(inputs)
+    out = check_output_dir(out_dir, inputs, force=force, what="output bag")
     quaternions = dict(quaternions or {})
     vectors = dict(vectors or {})
     custom = dict(custom_data or {})
@@ -486,7 +489,11 @@ def write_bag(
 
     tmp = out.parent / f".{out.name}.tmp-{os.getpid()}-{uuid.uuid4().hex[:8]}"
     mcap_name = f"{out.name}.mcap"
-    tmp.mkdir()
+    try:
+        tmp.mkdir()
+    except OSError as exc:
+        raise OutputError(f"Expected to create the output bag {str(out)!r}, got "
+                          f"{type(exc).__name__}: {exc.strerror}") from None
     try:
         counts = [(t[0], t[1], int(t[2].t_ns.size)) for t in topics]
         meta_body = _metadata_yaml(mcap_name, counts, start_ns, end_ns, int(stamps.size), custom)
@@ -496,16 +503,18 @@ def write_bag(
             _write_mcap(f, encoded, {"serialized_metadata": meta_body})
         indented = "".join("  " + ln + "\n" for ln in meta_body.splitlines())
         (tmp / "metadata.yaml").write_text("rosbag2_bagfile_information:\n" + indented)
-        if out.exists() or out.is_symlink():  # force: swap in, then remove the old one
+        check_output_dir(out, inputs, force=force, what="output bag")  # unchanged meanwhile
+        if out.exists():  # force, and it is our own bag: swap in, then remove the old one
             old = out.parent / f".{out.name}.old-{os.getpid()}-{uuid.uuid4().hex[:8]}"
             os.rename(out, old)
             os.rename(tmp, out)
-            if old.is_dir() and not old.is_symlink():
-                shutil.rmtree(old)
-            else:
-                old.unlink()
+            shutil.rmtree(old)
         else:
             os.rename(tmp, out)
+    except OSError as exc:
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise OutputError(f"Expected to write the output bag {str(out)!r}, got "
+                          f"{type(exc).__name__}: {exc.strerror or exc}") from None
     except BaseException:
         shutil.rmtree(tmp, ignore_errors=True)
         raise
