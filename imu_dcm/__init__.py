@@ -7,8 +7,23 @@ in seconds.
 """
 
 from imu_dcm.errors import GapWarning, ImuDcmError, ImuDcmWarning, InputError, LogError
-from imu_dcm.integrate import DELTA_METHODS, METHODS, integrate, integrate_delta
-from imu_dcm.streaming import DcmIntegrator
+
+_LAZY = {  # loaded on first use, so a command's --help does not import the numerical stack
+    "DELTA_METHODS": "imu_dcm.integrate",
+    "METHODS": "imu_dcm.integrate",
+    "integrate": "imu_dcm.integrate",
+    "integrate_delta": "imu_dcm.integrate",
+    "DcmIntegrator": "imu_dcm.streaming",
+}
+
+
+def __getattr__(name: str):
+    if name in _LAZY:
+        import importlib
+
+        return getattr(importlib.import_module(_LAZY[name]), name)
+    raise AttributeError(f"module 'imu_dcm' has no attribute {name!r}")
+
 
 __all__ = [
     "DELTA_METHODS",

@@ -28,6 +28,7 @@ from imu_dcm.errors import LogError
 __all__ = [
     "OutputError",
     "check_output_dir",
+    "check_not_input",
     "check_output_file",
     "is_own_bag",
     "write_text_atomic",
@@ -46,7 +47,8 @@ def _resolved(path: str | os.PathLike) -> Path:
     return Path(os.path.abspath(os.path.realpath(os.fspath(path))))
 
 
-def _check_inputs(out: Path, inputs: Iterable[str | os.PathLike], what: str) -> None:
+def check_not_input(out: Path, inputs: Iterable[str | os.PathLike], what: str) -> None:
+    """Refuse ``out`` (resolved) when it is an input, holds one, or lies inside an input folder."""
     for item in inputs:
         src = _resolved(item)
         if out == src:
@@ -85,7 +87,7 @@ def check_output_file(path: str | os.PathLike, inputs: Iterable[str | os.PathLik
     FIFO or socket is refused, as is any path that is, holds or lies inside an input.
     """
     out = _resolved(path)
-    _check_inputs(out, inputs, what)
+    check_not_input(out, inputs, what)
     try:
         st = os.stat(out)
     except FileNotFoundError:
@@ -125,7 +127,7 @@ def check_output_dir(path: str | os.PathLike, inputs: Iterable[str | os.PathLike
     ``force`` and must be a bag folder this project wrote (:func:`is_own_bag`).
     """
     out = _resolved(path)
-    _check_inputs(out, inputs, what)
+    check_not_input(out, inputs, what)
     raw = Path(os.path.abspath(os.fspath(path)))
     if raw.is_symlink():
         raise OutputError(f"Expected {what} that is not a symbolic link, got {str(raw)!r}")
