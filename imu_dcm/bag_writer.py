@@ -111,11 +111,15 @@ class StampedSeries:
         ``[x, y, z, w]``.
     frame_id : str
         ``header.frame_id`` (e.g. ``"imu"``, ``"world"``).
+    log_t_ns : ndarray of int64, shape (N,), optional
+        MCAP log (receive) times when they differ from the header stamps (default: equal).
+        Messages are written in log-time order, so header stamps may then be out of file order.
     """
 
     t_ns: NDArray[np.int64]
     values: NDArray[np.float64]
     frame_id: str
+    log_t_ns: NDArray[np.int64] | None = None
 
     def __post_init__(self) -> None:
         t = np.asarray(self.t_ns)
@@ -129,6 +133,17 @@ class StampedSeries:
             raise InputError(f"Expected `frame_id` a str without NUL, got {self.frame_id!r}")
         object.__setattr__(self, "t_ns", t.astype(np.int64, copy=False))
         object.__setattr__(self, "values", v)
+        if self.log_t_ns is not None:
+            lt = np.asarray(self.log_t_ns)
+            if lt.shape != t.shape or not np.issubdtype(lt.dtype, np.integer):
+                raise InputError(f"Expected `log_t_ns` an int64 array of shape {t.shape}, got "
+                                 f"{lt.dtype} of shape {lt.shape}")
+            object.__setattr__(self, "log_t_ns", lt.astype(np.int64, copy=False))
+
+    @property
+    def file_t_ns(self) -> NDArray[np.int64]:
+        """The MCAP log times: ``log_t_ns`` when given, else the header stamps."""
+        return self.t_ns if self.log_t_ns is None else self.log_t_ns
 
 
 def _check_series(name: str, s: StampedSeries, k: int) -> None:
@@ -138,10 +153,11 @@ def _check_series(name: str, s: StampedSeries, k: int) -> None:
         raise InputError(f"Expected {name} values of shape (N, {k}), got {s.values.shape}")
     if s.t_ns.size == 0:
         raise InputError(f"Expected {name} to hold at least one sample, got none")
-    bad = np.flatnonzero((s.t_ns < 0) | (s.t_ns >= _MAX_T_NS))
-    if bad.size:
-        raise InputError(f"Expected {name} stamps in [0, 2^31 s) ns, got t_ns[{bad[0]}] = "
-                         f"{int(s.t_ns[bad[0]])}")
+    for label, t in (("t_ns", s.t_ns), ("log_t_ns", s.file_t_ns)):
+        bad = np.flatnonzero((t < 0) | (t >= _MAX_T_NS))
+        if bad.size:
+            raise InputError(f"Expected {name} stamps in [0, 2^31 s) ns, got {label}[{bad[0]}] "
+                             f"= {int(t[bad[0]])}")
     finite = np.isfinite(s.values).all(axis=1)
     if not finite.all():
         i = int(np.argmin(finite))
@@ -484,7 +500,7 @@ def write_bag(
         if not name.startswith("/"):
             raise InputError(f"Expected topic names starting with '/', got {name!r}")
 
-    stamps = np.concatenate([t[2].t_ns for t in topics])
+    stamps = np.concatenate([t[2].file_t_ns for t in topics])
     start_ns, end_ns = int(stamps.min()), int(stamps.max())
 
     tmp = out.parent / f".{out.name}.tmp-{os.getpid()}-{uuid.uuid4().hex[:8]}"
@@ -497,7 +513,7 @@ def write_bag(
     try:
         counts = [(t[0], t[1], int(t[2].t_ns.size)) for t in topics]
         meta_body = _metadata_yaml(mcap_name, counts, start_ns, end_ns, int(stamps.size), custom)
-        encoded = [(name, msgtype, s.t_ns, _cdr_messages(s.t_ns, s.frame_id, d))
+        encoded = [(name, msgtype, s.file_t_ns, _cdr_messages(s.t_ns, s.frame_id, d))
                    for name, msgtype, s, d in topics]
         with open(tmp / mcap_name, "wb") as f:
             _write_mcap(f, encoded, {"serialized_metadata": meta_body})

@@ -13,7 +13,9 @@ Rules, in order (all on the rates in rad/s, in file order until the sort):
 3. **Wild stamps** are dropped: a stamp further than :data:`WILD_STAMP_STEPS` median steps from
    the median of its :data:`WILD_STAMP_WINDOW` file-order neighbours (one stamp glitched a day
    ahead costs that sample, not every later one). A monotone sequence, gaps included, is never
-   affected: the median of a sorted window is its centre.
+   affected: the median of a sorted window is its centre. At either end of the file the window
+   is the nearest full one, so fewer than 5 samples cut off by a gap of that size there count
+   as wild too.
 4. The rest is **sorted by stamp** (stable): messages slightly out of file order keep their
    place in time.
 5. **Exact duplicates** (same stamp, same rate) are dropped; a repeated stamp with a different
@@ -92,13 +94,14 @@ def _wild_stamps(t: NDArray[np.int64]) -> NDArray[np.bool_]:
     if n < WILD_STAMP_WINDOW:
         return np.zeros(n, dtype=bool)
     half = WILD_STAMP_WINDOW // 2
-    padded = np.concatenate([np.full(half, t[0]), t, np.full(half, t[-1])])
     med = np.empty(n, dtype=np.int64)
+    med[:half] = np.median(t[:WILD_STAMP_WINDOW])  # the ends: the nearest full window
+    med[n - half:] = np.median(t[n - WILD_STAMP_WINDOW:])
     block = 1 << 16
-    for s in range(0, n, block):  # bounded memory: 9 stamps per sample, a block at a time
-        view = np.lib.stride_tricks.sliding_window_view(padded[s:s + block + 2 * half],
+    for s in range(0, n - 2 * half, block):  # bounded memory: a block of windows at a time
+        view = np.lib.stride_tricks.sliding_window_view(t[s:s + block + 2 * half],
                                                         WILD_STAMP_WINDOW)
-        med[s:s + len(view)] = np.median(view, axis=1).astype(np.int64)
+        med[half + s:half + s + len(view)] = np.median(view, axis=1).astype(np.int64)
     step = np.abs(np.diff(np.sort(t)))
     step = step[step > 0]
     if len(step) == 0:
