@@ -27,8 +27,8 @@ from imu_dcm.errors import LogError
 
 __all__ = [
     "OutputError",
-    "check_output_dir",
     "check_not_input",
+    "check_output_dir",
     "check_output_file",
     "is_own_bag",
     "write_text_atomic",
@@ -54,17 +54,24 @@ def check_not_input(out: Path, inputs: Iterable[str | os.PathLike], what: str) -
         if out == src:
             raise OutputError(f"Expected {what} other than the input, got {str(out)!r}")
         if src.is_relative_to(out):
-            raise OutputError(f"Expected {what} that does not contain the input {str(src)!r}, "
-                              f"got {str(out)!r}")
+            raise OutputError(
+                f"Expected {what} that does not contain the input {str(src)!r}, got {str(out)!r}"
+            )
         if src.is_dir() and out.is_relative_to(src):
-            raise OutputError(f"Expected {what} outside the input folder {str(src)!r}, "
-                              f"got {str(out)!r}")
+            raise OutputError(
+                f"Expected {what} outside the input folder {str(src)!r}, got {str(out)!r}"
+            )
 
 
 def _kind(mode: int) -> str:
-    for test, name in ((stat.S_ISCHR, "character device"), (stat.S_ISBLK, "block device"),
-                       (stat.S_ISFIFO, "FIFO"), (stat.S_ISSOCK, "socket"),
-                       (stat.S_ISDIR, "folder"), (stat.S_ISREG, "regular file")):
+    for test, name in (
+        (stat.S_ISCHR, "character device"),
+        (stat.S_ISBLK, "block device"),
+        (stat.S_ISFIFO, "FIFO"),
+        (stat.S_ISSOCK, "socket"),
+        (stat.S_ISDIR, "folder"),
+        (stat.S_ISREG, "regular file"),
+    ):
         if test(mode):
             return name
     return "special file"
@@ -73,14 +80,14 @@ def _kind(mode: int) -> str:
 def _parent_writable(out: Path, what: str) -> None:
     parent = out.parent
     if not parent.is_dir():
-        raise OutputError(f"Expected an existing folder for {what}, got no folder "
-                          f"{str(parent)!r}")
+        raise OutputError(f"Expected an existing folder for {what}, got no folder {str(parent)!r}")
     if not os.access(parent, os.W_OK | os.X_OK):
         raise OutputError(f"Expected a writable folder for {what}, got read-only {str(parent)!r}")
 
 
-def check_output_file(path: str | os.PathLike, inputs: Iterable[str | os.PathLike] = (),
-                      what: str = "output file") -> Path:
+def check_output_file(
+    path: str | os.PathLike, inputs: Iterable[str | os.PathLike] = (), what: str = "output file"
+) -> Path:
     """Check a file output before anything is written; returns the resolved path.
 
     An existing regular file may be replaced (it is only swapped in whole); a folder, device,
@@ -95,8 +102,9 @@ def check_output_file(path: str | os.PathLike, inputs: Iterable[str | os.PathLik
     except OSError as exc:
         raise OutputError(f"Expected a usable path for {what}, got {exc.strerror}: {str(out)!r}")
     if st is not None and not stat.S_ISREG(st.st_mode):
-        raise OutputError(f"Expected {what} to be a regular file or new, got a "
-                          f"{_kind(st.st_mode)} {str(out)!r}")
+        raise OutputError(
+            f"Expected {what} to be a regular file or new, got a {_kind(st.st_mode)} {str(out)!r}"
+        )
     _parent_writable(out, what)
     return out
 
@@ -119,8 +127,13 @@ def is_own_bag(path: str | os.PathLike) -> bool:
     return head.startswith(_MCAP_MAGIC) and _OWN_LIBRARY in head
 
 
-def check_output_dir(path: str | os.PathLike, inputs: Iterable[str | os.PathLike] = (), *,
-                     force: bool = False, what: str = "output folder") -> Path:
+def check_output_dir(
+    path: str | os.PathLike,
+    inputs: Iterable[str | os.PathLike] = (),
+    *,
+    force: bool = False,
+    what: str = "output folder",
+) -> Path:
     """Check a bag-folder output before anything is written; returns the resolved path.
 
     A missing path is fine (its parent must be a writable folder). An existing one needs
@@ -139,17 +152,22 @@ def check_output_dir(path: str | os.PathLike, inputs: Iterable[str | os.PathLike
         raise OutputError(f"Expected a usable path for {what}, got {exc.strerror}: {str(out)!r}")
     if st is not None:
         if not force:
-            raise OutputError(f"Expected {what} {str(out)!r} not to exist (use --force), got an "
-                              f"existing {_kind(st.st_mode)}")
+            raise OutputError(
+                f"Expected {what} {str(out)!r} not to exist (use --force), got an "
+                f"existing {_kind(st.st_mode)}"
+            )
         if not is_own_bag(out):
-            raise OutputError(f"Expected --force to replace only a bag this tool wrote, got "
-                              f"{_kind(st.st_mode)} {str(out)!r} (remove it yourself)")
+            raise OutputError(
+                f"Expected --force to replace only a bag this tool wrote, got "
+                f"{_kind(st.st_mode)} {str(out)!r} (remove it yourself)"
+            )
     _parent_writable(out, what)
     return out
 
 
-def write_text_atomic(path: str | os.PathLike, text: str,
-                      inputs: Iterable[str | os.PathLike] = ()) -> Path:
+def write_text_atomic(
+    path: str | os.PathLike, text: str, inputs: Iterable[str | os.PathLike] = ()
+) -> Path:
     """Write ``text`` to ``path`` whole or not at all (temporary sibling, then ``os.replace``).
 
     Re-checks the target with :func:`check_output_file` first. Raises :class:`OutputError` for
@@ -163,8 +181,9 @@ def write_text_atomic(path: str | os.PathLike, text: str,
         os.replace(tmp, out)
     except OSError as exc:
         Path(tmp).unlink(missing_ok=True)
-        raise OutputError(f"Expected to write {str(out)!r}, got {type(exc).__name__}: "
-                          f"{exc.strerror or exc}") from None
+        raise OutputError(
+            f"Expected to write {str(out)!r}, got {type(exc).__name__}: {exc.strerror or exc}"
+        ) from None
     except BaseException:
         Path(tmp).unlink(missing_ok=True)
         raise

@@ -32,13 +32,18 @@ def trial():
     return log.imu, log.truth, replay(SHIPPED)
 
 
-def _bag(path, imu, truth, *, t=None, w=None, log_t=None, tt=None, q=None, tlog=None,
-         topic=TRUTH):
-    return write_bag(path, imu=StampedSeries(imu.t_ns if t is None else t,
-                                             imu.omega_b if w is None else w, "imu", log_t),
-                     quaternions={topic: StampedSeries(truth.t_ns if tt is None else tt,
-                                                       truth.q_w_b if q is None else q, "world",
-                                                       tlog)})
+def _bag(path, imu, truth, *, t=None, w=None, log_t=None, tt=None, q=None, tlog=None, topic=TRUTH):
+    return write_bag(
+        path,
+        imu=StampedSeries(
+            imu.t_ns if t is None else t, imu.omega_b if w is None else w, "imu", log_t
+        ),
+        quaternions={
+            topic: StampedSeries(
+                truth.t_ns if tt is None else tt, truth.q_w_b if q is None else q, "world", tlog
+            )
+        },
+    )
 
 
 def _run(path, **kw):
@@ -57,8 +62,9 @@ def _assert_untouched(t_ns, omega, name):
     assert len(c.t_ns) == len(t_ns), name
 
 
-@pytest.mark.parametrize("name", sorted(p.name for p in (REPO / "replay").iterdir()
-                                        if (p / "metadata.yaml").is_file()))
+@pytest.mark.parametrize(
+    "name", sorted(p.name for p in (REPO / "replay").iterdir() if (p / "metadata.yaml").is_file())
+)
 def test_cleaning_leaves_shipped_logs_untouched(name):
     log = read_log(REPO / "replay" / name)
     _assert_untouched(log.imu.t_ns, log.imu.omega_b, name)
@@ -73,11 +79,30 @@ def test_cleaning_leaves_every_broad_trial_untouched(broad_dir):
 def test_cleaning_leaves_synthetic_scenes_untouched(tmp_path):
     from data_synth.cli import main as synth_main
 
-    for scene in (["heavy-top", "--motion", "wavy"], ["free-body", "--case", "intermediate"],
-                  ["coning"]):
+    for scene in (
+        ["heavy-top", "--motion", "wavy"],
+        ["free-body", "--case", "intermediate"],
+        ["coning"],
+    ):
         out = tmp_path / scene[0]
-        assert synth_main([*scene, "--rate", "400", "--duration", "5", "--gyro-noise-density",
-                           "1e-2", "--seed", "3", "--out", str(out)]) == 0
+        assert (
+            synth_main(
+                [
+                    *scene,
+                    "--rate",
+                    "400",
+                    "--duration",
+                    "5",
+                    "--gyro-noise-density",
+                    "1e-2",
+                    "--seed",
+                    "3",
+                    "--out",
+                    str(out),
+                ]
+            )
+            == 0
+        )
         log = read_log(out)
         _assert_untouched(log.imu.t_ns, log.imu.omega_b, scene[0])
 
@@ -92,7 +117,8 @@ def test_implausible_samples_cost_one_sample_each(trial, tmp_path):
     w[bad[2], 2] = -1.9e72  # one flipped exponent byte
     w[bad[3]] *= 256.0  # a flipped low exponent bit: 256x, below the hard limit
     assert 8 * np.percentile(np.linalg.norm(imu.omega_b, axis=1), 99.9) < np.linalg.norm(
-        w[bad[3]])  # the last is an isolated spike by the log's own statistics
+        w[bad[3]]
+    )  # the last is an isolated spike by the log's own statistics
     r, said = _run(_bag(tmp_path / "spikes", imu, truth, w=w))
     s = r.summary
     assert s.dropped_implausible == 4 and s.samples == ref.summary.samples - 4
@@ -112,7 +138,7 @@ def test_a_log_of_only_implausible_rates_is_an_error(tmp_path):
 
 
 def test_a_non_finite_estimate_is_an_error_never_a_score(trial, tmp_path, monkeypatch):
-    import imu_dcm.replay.core as core
+    from imu_dcm.replay import core
 
     class Broken:
         def __init__(self, n):
@@ -152,8 +178,11 @@ def test_out_of_file_order_messages_are_sorted_and_duplicates_dropped(trial, tmp
     where = np.argsort(rows)[dup] + 1
     rows = np.insert(rows, where, dup)  # each duplicate right after its original
     arrival = np.sort(imu.t_ns[rows])  # log times increase in file order
-    r, said = _run(_bag(tmp_path / "shuffled", imu, truth, t=imu.t_ns[rows],
-                        w=imu.omega_b[rows], log_t=arrival))
+    r, _said = _run(
+        _bag(
+            tmp_path / "shuffled", imu, truth, t=imu.t_ns[rows], w=imu.omega_b[rows], log_t=arrival
+        )
+    )
     s = r.summary
     assert s.time == "header" and s.samples == ref.summary.samples
     assert s.dropped_duplicate == 200 and s.sorted_out_of_order == len(swap)
@@ -164,11 +193,25 @@ def test_out_of_file_order_messages_are_sorted_and_duplicates_dropped(trial, tmp
 
 def test_zero_header_stamps_use_log_time_and_say_why(trial, tmp_path):
     imu, truth, ref = trial
-    r, said = _run(_bag(tmp_path / "zero", imu, truth, t=np.zeros_like(imu.t_ns),
-                        log_t=imu.t_ns, tt=np.zeros_like(truth.t_ns), tlog=truth.t_ns))
+    r, said = _run(
+        _bag(
+            tmp_path / "zero",
+            imu,
+            truth,
+            t=np.zeros_like(imu.t_ns),
+            log_t=imu.t_ns,
+            tt=np.zeros_like(truth.t_ns),
+            tlog=truth.t_ns,
+        )
+    )
     assert r.summary.time == "log" and r.summary.samples == ref.summary.samples
-    assert sum("using log time, not header stamps: the IMU header stamps are all equal" in x
-               for x in said) == 1
+    assert (
+        sum(
+            "using log time, not header stamps: the IMU header stamps are all equal" in x
+            for x in said
+        )
+        == 1
+    )
     assert abs(r.summary.rms_error_deg - ref.summary.rms_error_deg) < 1e-6
     with pytest.raises(LogError, match="Expected at least 2 valid gyro samples"):
         _run(tmp_path / "zero", time="header")  # as asked: every stamp equal
@@ -178,8 +221,9 @@ def test_device_clock_imu_against_wall_clock_truth_uses_log_time(trial, tmp_path
     imu, truth, ref = trial
     device = imu.t_ns - imu.t_ns[0] + 5 * 10**9  # the IMU's own clock, from 5 s
     r, said = _run(_bag(tmp_path / "device", imu, truth, t=device, log_t=imu.t_ns))
-    assert r.summary.time == "log" and any("never overlap while their log times do" in x
-                                           for x in said)
+    assert r.summary.time == "log" and any(
+        "never overlap while their log times do" in x for x in said
+    )
     assert abs(r.summary.rms_error_deg - ref.summary.rms_error_deg) < 1e-6
 
 
@@ -188,8 +232,9 @@ def test_truth_that_does_not_follow_the_gyro(trial, tmp_path):
     # Wheel-odometry-like truth: yaw only, unrelated to the IMU's motion.
     imu, truth, ref = trial
     t = (truth.t_ns - truth.t_ns[0]) * 1e-9
-    yaw = Rotation.from_rotvec(np.outer(0.8 * np.sin(0.3 * t) + 0.5 * np.sin(1.1 * t),
-                                        [0, 0, 1])).as_quat()
+    yaw = Rotation.from_rotvec(
+        np.outer(0.8 * np.sin(0.3 * t) + 0.5 * np.sin(1.1 * t), [0, 0, 1])
+    ).as_quat()
     bag = _bag(tmp_path / "odom", imu, truth, q=yaw, topic="/odom")
     r, said = _run(bag)  # auto-picked: not scored, and said so in one line
     assert r.summary.truth_topic is None and r.summary.rms_error_deg is None
@@ -214,8 +259,9 @@ def test_truth_offset_is_measured_and_auto_applies_it(trial, tmp_path):
     assert r.summary.truth_offset_s == 0.0 and r.summary.rms_error_deg > ref.summary.rms_error_deg
     auto, _ = _run(late, truth_offset_s="auto")
     own, _ = _run(SHIPPED, truth_offset_s="auto")
-    assert auto.summary.truth_offset_s == pytest.approx(own.summary.truth_offset_s - 0.030,
-                                                        abs=0.002)
+    assert auto.summary.truth_offset_s == pytest.approx(
+        own.summary.truth_offset_s - 0.030, abs=0.002
+    )
     assert abs(auto.summary.rms_error_deg - own.summary.rms_error_deg) < 0.02
     fixed, _ = _run(late, truth_offset_s=-0.030)  # seconds: exactly undoes the shift
     assert abs(fixed.summary.rms_error_deg - ref.summary.rms_error_deg) < 1e-6

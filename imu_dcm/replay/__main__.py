@@ -15,11 +15,10 @@ from __future__ import annotations
 
 import argparse
 import sys
-import time
 import warnings
 from pathlib import Path
 
-from imu_dcm.cli import OneLineArgumentParser
+from imu_dcm.cli import OneLineArgumentParser, Progress
 
 PROG = "imu-dcm-replay"
 TIME_BASES = ("auto", "header", "log")
@@ -38,44 +37,94 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.add_argument("log", help="ROS 2 bag folder (metadata.yaml + .mcap) or a .mcap file")
     p.add_argument("--imu-topic", help="IMU channel (default: the one Imu-typed channel)")
-    p.add_argument("--truth-topic",
-                   help="truth channel (QuaternionStamped, PoseStamped, ...; the IMU topic for "
-                   "its own orientation; 'none' to ignore truth). Named here, it is scored even "
-                   "when its rate does not follow the gyro")
-    p.add_argument("--truth-frame", metavar="CHILD",
-                   help="child frame of a /tf truth, where several frames move")
-    p.add_argument("--truth-offset", default="0", metavar="auto|SECONDS",
-                   help="shift added to the truth stamps: seconds (default 0) or auto (the "
-                   "shift that best aligns the truth's rotation rate with the gyro's)")
-    p.add_argument("--time", choices=TIME_BASES, default="auto",
-                   help="stamps: auto (default: header stamps unless they are all equal, not "
-                   "increasing or miss the truth while log times overlap it), header, or log")
-    p.add_argument("--method", default="magnus4", metavar="METHOD",
-                   help="integrator increment (default magnus4; one of imu_dcm.METHODS)")
-    p.add_argument("--bias", default="auto",
-                   help="gyro bias: auto (from rest segments, default), none, or x,y,z in rad/s")
-    p.add_argument("--gyro-units", choices=("rad/s", "deg/s"), default="rad/s",
-                   help="unit of the log's angular velocity (default rad/s)")
-    p.add_argument("--init-quat", metavar="X,Y,Z,W",
-                   help="initial q_world_body (scalar last) when the log has no truth")
-    p.add_argument("--prefilter", choices=("none", "kalman", "rts"), default="none",
-                   help="gyro pre-filter: Kalman filter or RTS smoother (default none)")
-    p.add_argument("--gyro-noise-density", type=float, metavar="RAD_S_SQRT_HZ",
-                   help="pre-filter: gyro white-noise density, rad/s/√Hz (default: from rest)")
-    p.add_argument("--angular-accel", type=float, metavar="RAD_S2",
-                   help="pre-filter: angular-acceleration scale, rad/s² (default: fitted)")
+    p.add_argument(
+        "--truth-topic",
+        help="truth channel (QuaternionStamped, PoseStamped, ...; the IMU topic for "
+        "its own orientation; 'none' to ignore truth). Named here, it is scored even "
+        "when its rate does not follow the gyro",
+    )
+    p.add_argument(
+        "--truth-frame",
+        metavar="CHILD",
+        help="child frame of a /tf truth, where several frames move",
+    )
+    p.add_argument(
+        "--truth-offset",
+        default="0",
+        metavar="auto|SECONDS",
+        help="shift added to the truth stamps: seconds (default 0) or auto (the "
+        "shift that best aligns the truth's rotation rate with the gyro's)",
+    )
+    p.add_argument(
+        "--time",
+        choices=TIME_BASES,
+        default="auto",
+        help="stamps: auto (default: header stamps unless they are all equal, not "
+        "increasing or miss the truth while log times overlap it), header, or log",
+    )
+    p.add_argument(
+        "--method",
+        default="magnus4",
+        metavar="METHOD",
+        help="integrator increment (default magnus4; one of imu_dcm.METHODS)",
+    )
+    p.add_argument(
+        "--bias",
+        default="auto",
+        help="gyro bias: auto (from rest segments, default), none, or x,y,z in rad/s",
+    )
+    p.add_argument(
+        "--gyro-units",
+        choices=("rad/s", "deg/s"),
+        default="rad/s",
+        help="unit of the log's angular velocity (default rad/s)",
+    )
+    p.add_argument(
+        "--init-quat",
+        metavar="X,Y,Z,W",
+        help="initial q_world_body (scalar last) when the log has no truth",
+    )
+    p.add_argument(
+        "--prefilter",
+        choices=("none", "kalman", "rts"),
+        default="none",
+        help="gyro pre-filter: Kalman filter or RTS smoother (default none)",
+    )
+    p.add_argument(
+        "--gyro-noise-density",
+        type=float,
+        metavar="RAD_S_SQRT_HZ",
+        help="pre-filter: gyro white-noise density, rad/s/√Hz (default: from rest)",
+    )
+    p.add_argument(
+        "--angular-accel",
+        type=float,
+        metavar="RAD_S2",
+        help="pre-filter: angular-acceleration scale, rad/s² (default: fitted)",
+    )
     p.add_argument("--summary-json", metavar="PATH", help="write the summary as JSON")
-    p.add_argument("--out", metavar="DIR",
-                   help="write the estimate as a ROS 2 bag (/estimate/orientation)")
-    p.add_argument("--export-tum", metavar="DIR",
-                   help="write DIR/estimate.tum and DIR/truth.tum (t x y z qx qy qz qw) for evo")
-    p.add_argument("--force", action="store_true",
-                   help="replace an existing --out bag (only one this tool wrote)")
-    p.add_argument("--rerun", metavar="MODE",
-                   help="spawn | serve | save:PATH.rrd | off (default: spawn with a display, "
-                   "else save next to the output)")
-    p.add_argument("--realtime", action="store_true",
-                   help="pace the rerun view at the recorded speed")
+    p.add_argument(
+        "--out", metavar="DIR", help="write the estimate as a ROS 2 bag (/estimate/orientation)"
+    )
+    p.add_argument(
+        "--export-tum",
+        metavar="DIR",
+        help="write DIR/estimate.tum and DIR/truth.tum (t x y z qx qy qz qw) for evo",
+    )
+    p.add_argument(
+        "--force",
+        action="store_true",
+        help="replace an existing --out bag (only one this tool wrote)",
+    )
+    p.add_argument(
+        "--rerun",
+        metavar="MODE",
+        help="spawn | serve | save:PATH.rrd | off (default: spawn with a display, "
+        "else save next to the output)",
+    )
+    p.add_argument(
+        "--realtime", action="store_true", help="pace the rerun view at the recorded speed"
+    )
     p.add_argument("--quiet", action="store_true", help="print only warnings and errors")
     return p
 
@@ -93,41 +142,6 @@ def parse_numbers(text: str, n: int, name: str) -> list[float]:
     return values
 
 
-class Progress:
-    """A plain-text progress line on stderr, drawn only when stderr is a terminal and only once
-    the replay has run for ``delay_s`` (short replays print nothing)."""
-
-    def __init__(self, stream=None, min_interval_s: float = 0.1, delay_s: float = 0.5):
-        self.stream = stream or sys.stderr
-        self.enabled = bool(getattr(self.stream, "isatty", lambda: False)())
-        self.min_interval_s = min_interval_s
-        self._start = time.monotonic()
-        self.delay_s = delay_s
-        self._last = 0.0
-        self._drawn = False
-
-    def __call__(self, stage: str, fraction: float) -> None:
-        if not self.enabled:
-            return
-        now = time.monotonic()
-        if now - self._start < self.delay_s:
-            return
-        if fraction < 1.0 and now - self._last < self.min_interval_s:
-            return
-        self._last = now
-        width = 30
-        filled = round(width * min(max(fraction, 0.0), 1.0))
-        self.stream.write(f"\r{stage:<10} [{'#' * filled}{'.' * (width - filled)}] "
-                          f"{100 * fraction:5.1f}%")  # fmt: skip
-        self.stream.flush()
-        self._drawn = True
-
-    def close(self) -> None:
-        if self._drawn:
-            self.stream.write("\r" + " " * 60 + "\r")
-            self.stream.flush()
-
-
 def _write_out(out: Path, result, force: bool, inputs: tuple) -> Path:
     from imu_dcm.bag_writer import StampedSeries, write_bag
 
@@ -135,16 +149,18 @@ def _write_out(out: Path, result, force: bool, inputs: tuple) -> Path:
     quats = {"/estimate/orientation": StampedSeries(result.t_ns[k], result.q_est[k], "world")}
     vectors = {}
     if result.summary.prefilter is not None:
-        vectors["/estimate/angular_velocity"] = StampedSeries(result.t_ns[k], result.omega_b[k],
-                                                              "imu")
+        vectors["/estimate/angular_velocity"] = StampedSeries(
+            result.t_ns[k], result.omega_b[k], "imu"
+        )
     custom = {
         "imu_dcm.source_log": str(result.summary.path),
         "imu_dcm.method": result.summary.method,
         "imu_dcm.bias_mode": result.summary.bias_mode,
         "imu_dcm.prefilter": result.summary.prefilter or "none",
     }
-    return write_bag(out, quaternions=quats, vectors=vectors, custom_data=custom, force=force,
-                     inputs=inputs)
+    return write_bag(
+        out, quaternions=quats, vectors=vectors, custom_data=custom, force=force, inputs=inputs
+    )
 
 
 def _show(result, mode: str | None, realtime: bool, save_dir: Path) -> str:
@@ -176,11 +192,13 @@ def _check_rerun(mode: str | None, inputs: tuple) -> None:
         from imu_dcm.viz import has_display
 
         if not has_display():
-            raise InputError("Expected a display (DISPLAY or WAYLAND_DISPLAY) for --rerun spawn, "
-                             "got none; use --rerun save:PATH.rrd or serve")
+            raise InputError(
+                "Expected a display (DISPLAY or WAYLAND_DISPLAY) for --rerun spawn, "
+                "got none; use --rerun save:PATH.rrd or serve"
+            )
         return
     if mode.startswith("save:"):
-        target = mode[len("save:"):]
+        target = mode[len("save:") :]
         if not target.endswith(".rrd") or len(target) <= len(".rrd"):
             raise InputError(f"Expected --rerun save:PATH.rrd, got {mode!r}")
         check_output_file(target, inputs, "--rerun save: file")
@@ -195,8 +213,9 @@ def _options(args) -> dict:
     from imu_dcm.outputs import check_output_dir, check_output_file
 
     if args.method not in METHODS:
-        build_parser().error(f"argument --method: invalid choice: {args.method!r} (choose "
-                             f"from {', '.join(METHODS)})")
+        build_parser().error(
+            f"argument --method: invalid choice: {args.method!r} (choose from {', '.join(METHODS)})"
+        )
     bias = args.bias
     if bias not in ("auto", "none"):
         bias = parse_numbers(bias, 3, "bias (rad/s)")
@@ -212,11 +231,15 @@ def _options(args) -> dict:
     if args.prefilter != "none":
         from imu_dcm.prefilter import PrefilterConfig
 
-        config = PrefilterConfig(noise_density_rad_s_sqrt_hz=args.gyro_noise_density,
-                                 angular_accel_rad_s2=args.angular_accel)
+        config = PrefilterConfig(
+            noise_density_rad_s_sqrt_hz=args.gyro_noise_density,
+            angular_accel_rad_s2=args.angular_accel,
+        )
     elif args.gyro_noise_density is not None or args.angular_accel is not None:
-        raise InputError("Expected --prefilter kalman or rts with --gyro-noise-density / "
-                         "--angular-accel, got --prefilter none")
+        raise InputError(
+            "Expected --prefilter kalman or rts with --gyro-noise-density / "
+            "--angular-accel, got --prefilter none"
+        )
     inputs = (args.log,)
     if args.out:
         check_output_dir(args.out, inputs, force=args.force, what="--out bag")
@@ -227,11 +250,19 @@ def _options(args) -> dict:
 
         check_export_dir(args.export_tum, inputs)
     _check_rerun(args.rerun, inputs)
-    return dict(imu_topic=args.imu_topic, truth_topic=args.truth_topic,
-                truth_frame=args.truth_frame, time=args.time, method=args.method, bias=bias,
-                gyro_units=args.gyro_units, init_q_w_b=init,
-                prefilter=None if args.prefilter == "none" else args.prefilter,
-                prefilter_config=config, truth_offset_s=offset)
+    return {
+        "imu_topic": args.imu_topic,
+        "truth_topic": args.truth_topic,
+        "truth_frame": args.truth_frame,
+        "time": args.time,
+        "method": args.method,
+        "bias": bias,
+        "gyro_units": args.gyro_units,
+        "init_q_w_b": init,
+        "prefilter": None if args.prefilter == "none" else args.prefilter,
+        "prefilter_config": config,
+        "truth_offset_s": offset,
+    }
 
 
 def _replay_main(argv: list[str]) -> int:
@@ -258,8 +289,13 @@ def _replay_main(argv: list[str]) -> int:
         from imu_dcm.replay.export import export_tum
 
         k = slice(result.start_index, None)
-        files = export_tum(args.export_tum, result.t_ns[k], result.q_est[k],
-                           result.q_truth[k] if result.summary.truth_topic else None, inputs)
+        files = export_tum(
+            args.export_tum,
+            result.t_ns[k],
+            result.q_est[k],
+            result.q_truth[k] if result.summary.truth_topic else None,
+            inputs,
+        )
         lines.append(f"tum        {', '.join(str(f) for f in files)}")
     if args.summary_json:
         text = json.dumps(result.summary.to_dict(), indent=2, allow_nan=False) + "\n"
@@ -272,13 +308,15 @@ def _replay_main(argv: list[str]) -> int:
         save_dir = Path(args.out).resolve().parent if args.out else Path.cwd()
         try:
             line = _show(result, args.rerun, args.realtime, save_dir)
-        except Exception as exc:  # noqa: BLE001 - the default view never breaks the replay
+        except Exception as exc:
             if isinstance(exc, (ImuDcmError, OSError)) and args.rerun is not None:
                 raise  # asked for: a failure is an error (exit 2, one line)
             first = str(exc).splitlines()[0] if str(exc) else ""
             if args.rerun is not None:
-                raise ImuDcmError(f"Expected the rerun view {args.rerun!r} to work, got "
-                                  f"{type(exc).__name__}: {first}") from None
+                raise ImuDcmError(
+                    f"Expected the rerun view {args.rerun!r} to work, got "
+                    f"{type(exc).__name__}: {first}"
+                ) from None
             warnings.warn(f"rerun view skipped: {type(exc).__name__}: {first}", stacklevel=1)
             line = ""
         if line:
@@ -290,8 +328,10 @@ def _message(exc: BaseException) -> str:
     text = str(exc).splitlines()[0] if str(exc) else ""
     if isinstance(exc, OSError):
         where = f" {exc.filename!r}" if exc.filename else ""
-        return f"Expected a readable input and writable outputs, got {type(exc).__name__}: " \
-               f"{exc.strerror or text}{where}"
+        return (
+            f"Expected a readable input and writable outputs, got {type(exc).__name__}: "
+            f"{exc.strerror or text}{where}"
+        )
     return text or type(exc).__name__
 
 

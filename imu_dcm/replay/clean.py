@@ -33,9 +33,12 @@ from numpy.typing import ArrayLike, NDArray
 
 from imu_dcm.errors import GapWarning, ImuDcmWarning
 from imu_dcm.integrate import GAP_FACTOR
+from imu_dcm.so3 import quat_conjugate, quat_multiply
 
 __all__ = ["MAX_RATE_RAD_S", "SPIKE_RATIO", "CleanedImu", "clean_imu", "find_gaps"]
 
+#: Full scale of common MEMS gyros (±2000 °/s): rates above it suggest a deg/s log.
+FULL_SCALE_RAD_S = 2000.0 * np.pi / 180.0
 #: Rates above this are no gyro's (rad/s): 10⁴ rad/s = 5.7e5 °/s.
 MAX_RATE_RAD_S = 1.0e4
 #: An isolated sample this many times above the log's 99.9th percentile and its neighbours is a spike.
@@ -78,8 +81,9 @@ class CleanedImu:
         return self.dropped_wild_stamp + self.dropped_duplicate + self.dropped_stamp_conflict
 
 
-def find_gaps(t_ns: NDArray[np.int64], factor: float = GAP_FACTOR
-              ) -> tuple[tuple[float, float], ...]:
+def find_gaps(
+    t_ns: NDArray[np.int64], factor: float = GAP_FACTOR
+) -> tuple[tuple[float, float], ...]:
     """Steps longer than ``factor`` median steps: ((start s since t_ns[0], length s), ...)."""
     if len(t_ns) <= 2:
         return ()
@@ -96,12 +100,13 @@ def _wild_stamps(t: NDArray[np.int64]) -> NDArray[np.bool_]:
     half = WILD_STAMP_WINDOW // 2
     med = np.empty(n, dtype=np.int64)
     med[:half] = np.median(t[:WILD_STAMP_WINDOW])  # the ends: the nearest full window
-    med[n - half:] = np.median(t[n - WILD_STAMP_WINDOW:])
+    med[n - half :] = np.median(t[n - WILD_STAMP_WINDOW :])
     block = 1 << 16
     for s in range(0, n - 2 * half, block):  # bounded memory: a block of windows at a time
-        view = np.lib.stride_tricks.sliding_window_view(t[s:s + block + 2 * half],
-                                                        WILD_STAMP_WINDOW)
-        med[half + s:half + s + len(view)] = np.median(view, axis=1).astype(np.int64)
+        view = np.lib.stride_tricks.sliding_window_view(
+            t[s : s + block + 2 * half], WILD_STAMP_WINDOW
+        )
+        med[half + s : half + s + len(view)] = np.median(view, axis=1).astype(np.int64)
     step = np.abs(np.diff(np.sort(t)))
     step = step[step > 0]
     if len(step) == 0:
@@ -121,7 +126,7 @@ def _spikes(w: NDArray[np.float64]) -> NDArray[np.bool_]:
     padded = np.concatenate([np.zeros(k), norm, np.zeros(k)])
     near = np.zeros(n)
     for s in [*range(-k, 0), *range(1, k + 1)]:
-        near = np.maximum(near, padded[k + s:k + s + n])
+        near = np.maximum(near, padded[k + s : k + s + n])
     return norm > np.maximum(SPIKE_RATIO * np.maximum(p999, near), SPIKE_FLOOR_RAD_S)
 
 
@@ -194,9 +199,11 @@ def clean_imu(t_ns: ArrayLike, omega_b: ArrayLike, topic: str = "IMU") -> Cleane
     if n_bad:
         warn(f"dropped {n_bad} samples with NaN/Inf rates")
     if len(bad):
-        warn(f"dropped {len(bad)} implausible samples (|ω| over {MAX_RATE_RAD_S:.0e} rad/s or "
-             f"an isolated spike over {SPIKE_RATIO:.0f}x the log's 99.9th percentile) at "
-             f"{_times(bad, t0)}")
+        warn(
+            f"dropped {len(bad)} implausible samples (|ω| over {MAX_RATE_RAD_S:.0e} rad/s or "
+            f"an isolated spike over {SPIKE_RATIO:.0f}x the log's 99.9th percentile) at "
+            f"{_times(bad, t0)}"
+        )
     n_dup, n_conf = int(dup.sum()), int(conflict.sum())
     if n_wild or n_dup or n_conf:
         parts = []
@@ -206,8 +213,10 @@ def clean_imu(t_ns: ArrayLike, omega_b: ArrayLike, topic: str = "IMU") -> Cleane
             parts.append(f"{n_conf} repeated stamps with another rate")
         if n_wild:
             parts.append(f"{n_wild} wild stamps far from their neighbours at {_times(wild_t, t0)}")
-        warn(f"dropped {n_wild + n_dup + n_conf} samples with duplicate or backward stamps "
-             f"({'; '.join(parts)})")
+        warn(
+            f"dropped {n_wild + n_dup + n_conf} samples with duplicate or backward stamps "
+            f"({'; '.join(parts)})"
+        )
     if n_sorted:
         warn(f"sorted {n_sorted} samples that were out of file order by their stamps")
     gaps = find_gaps(t)
@@ -215,7 +224,49 @@ def clean_imu(t_ns: ArrayLike, omega_b: ArrayLike, topic: str = "IMU") -> Cleane
         dt = np.diff(t)
         listed = ", ".join(f"{a:.3f} s (+{d:.3f} s)" for a, d in gaps[:5])
         more = f" and {len(gaps) - 5} more" if len(gaps) > 5 else ""
-        warn(f"{len(gaps)} gaps over {GAP_FACTOR:g}x the median step ({np.median(dt) * 1e-9 * 1e3:.3f} ms) "
-             f"at {listed}{more}", GapWarning)
-    return CleanedImu(t, w, index, n_bad, int(len(bad)), n_wild, n_dup, n_conf, n_sorted, gaps,
-                      tuple(float((x - t0) * 1e-9) for x in bad))
+        warn(
+            f"{len(gaps)} gaps over {GAP_FACTOR:g}x the median step ({np.median(dt) * 1e-9 * 1e3:.3f} ms) "
+            f"at {listed}{more}",
+            GapWarning,
+        )
+    return CleanedImu(
+        t,
+        w,
+        index,
+        n_bad,
+        len(bad),
+        n_wild,
+        n_dup,
+        n_conf,
+        n_sorted,
+        gaps,
+        tuple(float((x - t0) * 1e-9) for x in bad),
+    )
+
+
+def _deg_evidence(omega_b: NDArray, t_s: NDArray, q_truth: NDArray) -> str | None:
+    """Evidence that rates are in deg/s, or None. Compares with the truth's rate if possible."""
+    ok = np.all(np.isfinite(q_truth), axis=1)
+    pair = ok[:-1] & ok[1:]
+    if pair.sum() > 10:
+        i = np.flatnonzero(pair)
+        rel = quat_multiply(quat_conjugate(q_truth[i]), q_truth[i + 1])
+        ang = 2 * np.arctan2(np.linalg.norm(rel[:, :3], axis=1), np.abs(rel[:, 3]))
+        truth_rate = ang / np.diff(t_s)[i]
+        gyro_rate = np.linalg.norm(0.5 * (omega_b[i] + omega_b[i + 1]), axis=1)
+        moving = truth_rate > 0.2  # rad/s: motion well above noise
+        if moving.sum() > 10:
+            ratio = float(np.median(gyro_rate[moving] / truth_rate[moving]))
+            if abs(ratio / (180 / np.pi) - 1) < 0.2:
+                return (
+                    f"the gyro rate is {ratio:.1f}x the truth's rotation rate "
+                    f"(180/π = 57.3 for deg/s)"
+                )
+            return None
+    p99 = float(np.percentile(np.linalg.norm(omega_b, axis=1), 99)) if len(omega_b) else 0.0
+    if p99 > FULL_SCALE_RAD_S:
+        return (
+            f"99 % of |omega| are below {p99:.0f}, above the ±2000 °/s = "
+            f"{FULL_SCALE_RAD_S:.1f} rad/s full scale of common gyros"
+        )
+    return None

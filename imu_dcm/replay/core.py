@@ -32,47 +32,22 @@ from imu_dcm.errors import GapWarning, ImuDcmWarning, InputError, LogError
 from imu_dcm.integrate import METHODS, integrate
 from imu_dcm.metrics import AttitudeError, attitude_error_deg, rms
 from imu_dcm.replay.bias import RestConfig, estimate_bias
-from imu_dcm.replay.clean import CleanedImu, clean_imu
+from imu_dcm.replay.clean import CleanedImu, _deg_evidence, clean_imu
 from imu_dcm.replay.summary import ReplayResult, ReplaySummary
 from imu_dcm.replay.truth import TruthCheck, check_truth, choose_time, slerp_truth
-from imu_dcm.so3 import as_quat_xyzw, quat_conjugate, quat_multiply
+from imu_dcm.so3 import as_quat_xyzw
 
 __all__ = ["CleanedImu", "ReplayResult", "ReplaySummary", "clean_imu", "replay", "slerp_truth"]
 
 DEG = np.pi / 180.0
-#: Full scale of common MEMS gyros (±2000 °/s): rates above it suggest a deg/s log.
-FULL_SCALE_RAD_S = 2000.0 * DEG
 TIME_BASES = ("auto", "header", "log")
 GYRO_UNITS = ("rad/s", "deg/s")
 PREFILTERS = ("kalman", "rts")
 
 
-def _deg_evidence(omega_b: NDArray, t_s: NDArray, q_truth: NDArray) -> str | None:
-    """Evidence that rates are in deg/s, or None. Compares with the truth's rate if possible."""
-    ok = np.all(np.isfinite(q_truth), axis=1)
-    pair = ok[:-1] & ok[1:]
-    if pair.sum() > 10:
-        i = np.flatnonzero(pair)
-        rel = quat_multiply(quat_conjugate(q_truth[i]), q_truth[i + 1])
-        ang = 2 * np.arctan2(np.linalg.norm(rel[:, :3], axis=1), np.abs(rel[:, 3]))
-        truth_rate = ang / np.diff(t_s)[i]
-        gyro_rate = np.linalg.norm(0.5 * (omega_b[i] + omega_b[i + 1]), axis=1)
-        moving = truth_rate > 0.2  # rad/s: motion well above noise
-        if moving.sum() > 10:
-            ratio = float(np.median(gyro_rate[moving] / truth_rate[moving]))
-            if abs(ratio / (180 / np.pi) - 1) < 0.2:
-                return (f"the gyro rate is {ratio:.1f}x the truth's rotation rate "
-                        f"(180/π = 57.3 for deg/s)")
-            return None
-    p99 = float(np.percentile(np.linalg.norm(omega_b, axis=1), 99)) if len(omega_b) else 0.0
-    if p99 > FULL_SCALE_RAD_S:
-        return (f"99 % of |omega| are below {p99:.0f}, above the ±2000 °/s = "
-                f"{FULL_SCALE_RAD_S:.1f} rad/s full scale of common gyros")
-    return None
-
-
-def _check_options(path, time, method, bias, gyro_units, init_q_w_b, prefilter,
-                   truth_offset_s) -> tuple:
+def _check_options(
+    path, time, method, bias, gyro_units, init_q_w_b, prefilter, truth_offset_s
+) -> tuple:
     """Validate every option once; returns (bias, q_init, offset) in their typed forms."""
     if time not in TIME_BASES:
         raise InputError(f"Expected time in {TIME_BASES}, got {time!r}")
@@ -96,10 +71,14 @@ def _check_options(path, time, method, bias, gyro_units, init_q_w_b, prefilter,
     if isinstance(truth_offset_s, str):
         if truth_offset_s != "auto":
             raise InputError(f"Expected truth offset 'auto' or seconds, got {truth_offset_s!r}")
-    elif not isinstance(truth_offset_s, (int, float)) or not math.isfinite(truth_offset_s) \
-            or abs(truth_offset_s) > 1e6:
-        raise InputError(f"Expected a finite truth offset in s (|x| <= 1e6), got "
-                         f"{truth_offset_s!r}")
+    elif (
+        not isinstance(truth_offset_s, (int, float))
+        or not math.isfinite(truth_offset_s)
+        or abs(truth_offset_s) > 1e6
+    ):
+        raise InputError(
+            f"Expected a finite truth offset in s (|x| <= 1e6), got {truth_offset_s!r}"
+        )
     try:
         mode = os.stat(path).st_mode
     except (OSError, TypeError, ValueError):
@@ -174,21 +153,36 @@ def replay(
         A bad option value.
     """
     t0 = _time.perf_counter()
-    bias, q_init, offset = _check_options(path, time, method, bias, gyro_units, init_q_w_b,
-                                          prefilter, truth_offset_s)
+    bias, q_init, offset = _check_options(
+        path, time, method, bias, gyro_units, init_q_w_b, prefilter, truth_offset_s
+    )
     caught: list[warnings.WarningMessage] = []
     try:
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always")
-            result = _replay(path, imu_topic, truth_topic, truth_frame, time, method, bias,
-                             gyro_units or "rad/s", q_init, prefilter, prefilter_config, offset,
-                             rest_config, progress or (lambda stage, frac: None))
+            result = _replay(
+                path,
+                imu_topic,
+                truth_topic,
+                truth_frame,
+                time,
+                method,
+                bias,
+                gyro_units or "rad/s",
+                q_init,
+                prefilter,
+                prefilter_config,
+                offset,
+                rest_config,
+                progress or (lambda stage, frac: None),
+            )
     finally:
         for w in caught:  # passed on to the caller's filters, once each
             warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
     lines = tuple(str(w.message).splitlines()[0] for w in caught)
-    summary = dataclasses.replace(result.summary, warnings=lines,
-                                  elapsed_s=_time.perf_counter() - t0)
+    summary = dataclasses.replace(
+        result.summary, warnings=lines, elapsed_s=_time.perf_counter() - t0
+    )
     return dataclasses.replace(result, summary=summary)
 
 
@@ -196,16 +190,39 @@ def _warn(msg: str) -> None:
     warnings.warn(msg, ImuDcmWarning, stacklevel=3)
 
 
-def _replay(path, imu_topic, truth_topic, truth_frame, time, method, bias, gyro_units, q_init,
-            prefilter, prefilter_config, offset, rest_config, report) -> ReplayResult:
+def _replay(
+    path,
+    imu_topic,
+    truth_topic,
+    truth_frame,
+    time,
+    method,
+    bias,
+    gyro_units,
+    q_init,
+    prefilter,
+    prefilter_config,
+    offset,
+    rest_config,
+    report,
+) -> ReplayResult:
     report("read", 0.0)
-    log = read_log(path, imu_topic=imu_topic, truth_topic=truth_topic, truth_frame=truth_frame,
-                   progress=lambda frac: report("read", frac))
+    log = read_log(
+        path,
+        imu_topic=imu_topic,
+        truth_topic=truth_topic,
+        truth_frame=truth_frame,
+        progress=lambda frac: report("read", frac),
+    )
     report("read", 1.0)
     imu, truth = log.imu, log.truth
-    base, why = choose_time(time, imu.t_ns, imu.log_t_ns,
-                            truth.t_ns if truth is not None else None,
-                            truth.log_t_ns if truth is not None else None)
+    base, why = choose_time(
+        time,
+        imu.t_ns,
+        imu.log_t_ns,
+        truth.t_ns if truth is not None else None,
+        truth.log_t_ns if truth is not None else None,
+    )
     if why:
         _warn(f"time: using log time, not header stamps: {why}")
     imu_t = imu.t_ns if base == "header" else imu.log_t_ns
@@ -228,31 +245,45 @@ def _replay(path, imu_topic, truth_topic, truth_frame, time, method, bias, gyro_
         tt = tt + np.int64(round(applied_offset * 1e9))
         q_truth = slerp_truth(tt, truth.q_w_b, t_ns)
         if not np.isfinite(q_truth[:, 3]).any():
-            span = (f"{(tt.min() - t_ns[0]) * 1e-9:.3f}..{(tt.max() - t_ns[0]) * 1e-9:.3f} s"
-                    if len(tt) else "no samples")
-            raise LogError(f"Expected the truth {truth.topic} to overlap the gyro "
-                           f"(0..{t_s[-1]:.3f} s), got {span}")
+            span = (
+                f"{(tt.min() - t_ns[0]) * 1e-9:.3f}..{(tt.max() - t_ns[0]) * 1e-9:.3f} s"
+                if len(tt)
+                else "no samples"
+            )
+            raise LogError(
+                f"Expected the truth {truth.topic} to overlap the gyro "
+                f"(0..{t_s[-1]:.3f} s), got {span}"
+            )
         check = check_truth(t_ns, omega_raw, tt, truth.q_w_b)
         if offset == "auto" and check.checked:
             applied_offset = float(check.shift_s)
             tt = tt + np.int64(round(applied_offset * 1e9))
             q_truth = slerp_truth(tt, truth.q_w_b, t_ns)
-        frames = f", frame {truth.child_frame_id or truth.frame_id}" if (
-            truth.child_frame_id or truth.frame_id) else ""
+        frames = (
+            f", frame {truth.child_frame_id or truth.frame_id}"
+            if (truth.child_frame_id or truth.frame_id)
+            else ""
+        )
         if not check.follows and truth.auto:
-            _warn(f"truth {truth.topic} ({truth.type}{frames}) does not follow the gyro "
-                  f"({check.describe()}): replaying without truth; name it with --truth-topic "
-                  f"to score it anyway")
+            _warn(
+                f"truth {truth.topic} ({truth.type}{frames}) does not follow the gyro "
+                f"({check.describe()}): replaying without truth; name it with --truth-topic "
+                f"to score it anyway"
+            )
             q_truth = np.full((n, 4), np.nan)
             truth = None
         elif not check.follows:
-            _warn(f"truth {truth.topic} ({truth.type}{frames}) does not follow the gyro "
-                  f"({check.describe()}); scored anyway, as asked")
+            _warn(
+                f"truth {truth.topic} ({truth.type}{frames}) does not follow the gyro "
+                f"({check.describe()}); scored anyway, as asked"
+            )
     if gyro_units == "rad/s":
         evidence = _deg_evidence(omega_raw, t_s, q_truth)
         if evidence:
-            _warn(f"{imu.topic}: the rates look like deg/s: {evidence}; pass "
-                  f"--gyro-units deg/s to convert")
+            _warn(
+                f"{imu.topic}: the rates look like deg/s: {evidence}; pass "
+                f"--gyro-units deg/s to convert"
+            )
 
     has_truth = np.all(np.isfinite(q_truth), axis=1)
     start = int(np.flatnonzero(has_truth)[0]) if has_truth.any() else 0
@@ -286,15 +317,22 @@ def _replay(path, imu_topic, truth_topic, truth_frame, time, method, bias, gyro_
     finite = np.all(np.isfinite(q_est[start:]), axis=1)
     if not finite.all():
         k = start + int(np.flatnonzero(~finite)[0])
-        raise LogError(f"Expected a finite attitude estimate, got NaN/Inf from sample {k} "
-                       f"(t = {t_s[k]:.3f} s) on {imu.topic}")
+        raise LogError(
+            f"Expected a finite attitude estimate, got NaN/Inf from sample {k} "
+            f"(t = {t_s[k]:.3f} s) on {imu.topic}"
+        )
 
     both = has_truth & np.all(np.isfinite(q_est), axis=1)
     unit = np.array([0, 0, 0, 1.0])
-    err_full = attitude_error_deg(np.where(both[:, None], q_est, unit),
-                                  np.where(both[:, None], q_truth, unit))
-    error = AttitudeError(*(np.where(both, a, np.nan) for a in (
-        err_full.total_deg, err_full.inclination_deg, err_full.heading_deg)))
+    err_full = attitude_error_deg(
+        np.where(both[:, None], q_est, unit), np.where(both[:, None], q_truth, unit)
+    )
+    error = AttitudeError(
+        *(
+            np.where(both, a, np.nan)
+            for a in (err_full.total_deg, err_full.inclination_deg, err_full.heading_deg)
+        )
+    )
 
     def stat_(a: NDArray, f) -> float | None:
         return float(f(a[both])) if both.any() else None
@@ -315,9 +353,10 @@ def _replay(path, imu_topic, truth_topic, truth_frame, time, method, bias, gyro_
         gyro_units=gyro_units,
         bias_mode=bias_est.mode,
         bias_rad_s=tuple(float(x) for x in bias_est.bias_b[start:].mean(axis=0)),
-        bias_segments=tuple({"start_s": s.start_s, "end_s": s.end_s,
-                             "bias_rad_s": [float(x) for x in s.bias_rad_s]}
-                            for s in bias_est.segments),
+        bias_segments=tuple(
+            {"start_s": s.start_s, "end_s": s.end_s, "bias_rad_s": [float(x) for x in s.bias_rad_s]}
+            for s in bias_est.segments
+        ),
         prefilter=prefilter,
         prefilter_summary=pf_summary,
         start_time_s=float(t_s[start]),
@@ -341,5 +380,16 @@ def _replay(path, imu_topic, truth_topic, truth_frame, time, method, bias, gyro_
         stopped_at=log.stopped_at,
         channels=tuple(dict(c.__dict__) for c in log.channels),
     )
-    return ReplayResult(t_ns, t_s, omega_raw, omega, bias_est.bias_b, q_est, q_truth, error,
-                        start, bias_est, summary)
+    return ReplayResult(
+        t_ns,
+        t_s,
+        omega_raw,
+        omega,
+        bias_est.bias_b,
+        q_est,
+        q_truth,
+        error,
+        start,
+        bias_est,
+        summary,
+    )

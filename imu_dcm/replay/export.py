@@ -31,14 +31,14 @@ def tum_text(t_ns: NDArray[np.int64], q_w_b: NDArray[np.float64]) -> str:
         raise InputError(f"Expected q_w_b of shape ({len(t)}, 4), got {q.shape}")
     ok = np.all(np.isfinite(q), axis=1)
     sec, nsec = np.divmod(t[ok], 1_000_000_000)
-    lines = [f"{s}.{ns:09d} 0 0 0 {a:.17g} {b:.17g} {c:.17g} {d:.17g}"
-             for s, ns, (a, b, c, d) in zip(sec.tolist(), nsec.tolist(), q[ok].tolist(),
-                                            strict=True)]
+    lines = [
+        f"{s}.{ns:09d} 0 0 0 {a:.17g} {b:.17g} {c:.17g} {d:.17g}"
+        for s, ns, (a, b, c, d) in zip(sec.tolist(), nsec.tolist(), q[ok].tolist(), strict=True)
+    ]
     return "".join(line + "\n" for line in lines)
 
 
-def check_export_dir(folder: str | os.PathLike, inputs: Iterable[str | os.PathLike] = ()
-                     ) -> Path:
+def check_export_dir(folder: str | os.PathLike, inputs: Iterable[str | os.PathLike] = ()) -> Path:
     """Check ``--export-tum DIR`` before anything is written: DIR is a folder (or new, with an
     existing parent), not an input and not holding one; the two files in it are regular or new.
     """
@@ -55,9 +55,13 @@ def check_export_dir(folder: str | os.PathLike, inputs: Iterable[str | os.PathLi
     return out
 
 
-def export_tum(folder: str | os.PathLike, t_ns: NDArray[np.int64], q_est: NDArray[np.float64],
-               q_truth: NDArray[np.float64] | None, inputs: Iterable[str | os.PathLike] = ()
-               ) -> list[Path]:
+def export_tum(
+    folder: str | os.PathLike,
+    t_ns: NDArray[np.int64],
+    q_est: NDArray[np.float64],
+    q_truth: NDArray[np.float64] | None,
+    inputs: Iterable[str | os.PathLike] = (),
+) -> list[Path]:
     """Write ``estimate.tum`` (and ``truth.tum`` when a truth row is finite) into ``folder``.
 
     Returns the files written. Each file is whole or absent (atomic replace).
@@ -67,8 +71,9 @@ def export_tum(folder: str | os.PathLike, t_ns: NDArray[np.int64], q_est: NDArra
     try:
         out.mkdir(exist_ok=True)
     except OSError as exc:
-        raise OutputError(f"Expected to create the folder {str(out)!r}, got "
-                          f"{type(exc).__name__}: {exc.strerror}") from None
+        raise OutputError(
+            f"Expected to create the folder {str(out)!r}, got {type(exc).__name__}: {exc.strerror}"
+        ) from None
     written = [write_text_atomic(out / "estimate.tum", tum_text(t_ns, q_est), inputs)]
     if q_truth is not None and np.isfinite(q_truth).all(axis=1).any():
         written.append(write_text_atomic(out / "truth.tum", tum_text(t_ns, q_truth), inputs))

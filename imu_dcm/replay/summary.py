@@ -68,7 +68,7 @@ class ReplaySummary:
     elapsed_s: float = 0.0
 
     def to_dict(self) -> dict[str, Any]:
-        """JSON-ready dict: tuples become lists, gaps become ``{"t_s", "length_s"}`` objects."""
+        """JSON-ready dict: tuples become lists, gaps ``{"t_s", "length_s"}`` objects, NaN None."""
         d = dataclasses.asdict(self)
         d["gaps"] = [{"t_s": a, "length_s": b} for a, b in self.gaps]
         return _plain(d)
@@ -82,7 +82,9 @@ def _plain(x: Any) -> Any:
     if isinstance(x, np.ndarray):
         return _plain(x.tolist())
     if isinstance(x, (np.floating, np.integer, np.bool_)):
-        return x.item()
+        x = x.item()
+    if isinstance(x, float) and not np.isfinite(x):
+        return None  # JSON has no NaN/Inf
     return x
 
 
@@ -130,25 +132,33 @@ def format_summary(s: ReplaySummary) -> str:
     """The summary for a person, one fact per line."""
     lines = [
         f"log        {s.path}",
-        (f"imu        {s.imu_topic} ({s.imu_type}): {s.samples} samples, "
-         f"{s.duration_s:.3f} s, {s.rate_hz:.1f} Hz, units {s.gyro_units}, {s.time} time"),
+        (
+            f"imu        {s.imu_topic} ({s.imu_type}): {s.samples} samples, "
+            f"{s.duration_s:.3f} s, {s.rate_hz:.1f} Hz, units {s.gyro_units}, {s.time} time"
+        ),
     ]
     check = s.truth_check
     if s.truth_topic:
         offset = f", offset {s.truth_offset_s * 1e3:+.1f} ms" if s.truth_offset_s else ""
-        lines.append(f"truth      {s.truth_topic} ({s.truth_type}): {s.truth_samples_used} gyro "
-                     f"samples inside its coverage{offset}")
+        lines.append(
+            f"truth      {s.truth_topic} ({s.truth_type}): {s.truth_samples_used} gyro "
+            f"samples inside its coverage{offset}"
+        )
     else:
         lines.append("truth      none (no error can be measured)")
     if check and check.get("checked"):
         verdict = "follows the gyro" if check["follows"] else "does NOT follow the gyro"
-        lines.append(f"truth rate {verdict}: correlation {check['correlation']:.2f}, best shift "
-                     f"{check['shift_s'] * 1e3:+.1f} ms, residual {check['residual_rad_s']:.3f} "
-                     f"rad/s")
+        lines.append(
+            f"truth rate {verdict}: correlation {check['correlation']:.2f}, best shift "
+            f"{check['shift_s'] * 1e3:+.1f} ms, residual {check['residual_rad_s']:.3f} "
+            f"rad/s"
+        )
     n_gaps = len(s.gaps)
-    lines.append(f"dropped    {s.dropped_nonfinite} NaN/Inf, {s.dropped_implausible} implausible, "
-                 f"{s.dropped_duplicate + s.dropped_backward} duplicate/backward stamps; "
-                 f"{n_gaps} gap{'s' if n_gaps != 1 else ''} over 5x the median step")
+    lines.append(
+        f"dropped    {s.dropped_nonfinite} NaN/Inf, {s.dropped_implausible} implausible, "
+        f"{s.dropped_duplicate + s.dropped_backward} duplicate/backward stamps; "
+        f"{n_gaps} gap{'s' if n_gaps != 1 else ''} over 5x the median step"
+    )
     b = np.asarray(s.bias_rad_s)
     bias = f"({b[0]:+.5f}, {b[1]:+.5f}, {b[2]:+.5f}) rad/s"
     bdeg = np.degrees(b)
@@ -156,17 +166,21 @@ def format_summary(s: ReplaySummary) -> str:
         lines.append("bias       auto: no rest segment found, no bias removed")
     elif s.bias_mode == "auto":
         nseg = len(s.bias_segments)
-        lines.append(f"bias       auto: {nseg} rest segment{'s' if nseg != 1 else ''}, mean "
-                     f"{bias} = ({bdeg[0]:+.3f}, {bdeg[1]:+.3f}, {bdeg[2]:+.3f}) °/s")
+        lines.append(
+            f"bias       auto: {nseg} rest segment{'s' if nseg != 1 else ''}, mean "
+            f"{bias} = ({bdeg[0]:+.3f}, {bdeg[1]:+.3f}, {bdeg[2]:+.3f}) °/s"
+        )
     else:
         lines.append(f"bias       {s.bias_mode}: {bias}")
     pf = f", pre-filter {s.prefilter}" if s.prefilter else ""
     lines.append(f"method     {s.method}{pf}; estimate from t = {s.start_time_s:.3f} s")
     if s.rms_error_deg is not None:
-        lines.append(f"error      total RMS {_fmt(s.rms_error_deg)}, max {_fmt(s.max_error_deg)}; "
-                     f"inclination RMS {_fmt(s.rms_inclination_deg)}, max "
-                     f"{_fmt(s.max_inclination_deg)}; heading RMS {_fmt(s.rms_heading_deg)}, "
-                     f"max {_fmt(s.max_heading_deg)}")
+        lines.append(
+            f"error      total RMS {_fmt(s.rms_error_deg)}, max {_fmt(s.max_error_deg)}; "
+            f"inclination RMS {_fmt(s.rms_inclination_deg)}, max "
+            f"{_fmt(s.max_inclination_deg)}; heading RMS {_fmt(s.rms_heading_deg)}, "
+            f"max {_fmt(s.max_heading_deg)}"
+        )
     if s.stopped_at:
         lines.append(f"stopped    {s.stopped_at}")
     lines.append(f"elapsed    {s.elapsed_s:.3f} s")

@@ -22,8 +22,14 @@ from numpy.typing import ArrayLike, NDArray
 
 from imu_dcm.so3 import exp_quat, log_quat, quat_conjugate, quat_multiply
 
-__all__ = ["MIN_CORRELATION", "TRUTH_BRIDGE_STEPS", "TruthCheck", "check_truth", "choose_time",
-           "slerp_truth"]
+__all__ = [
+    "MIN_CORRELATION",
+    "TRUTH_BRIDGE_STEPS",
+    "TruthCheck",
+    "check_truth",
+    "choose_time",
+    "slerp_truth",
+]
 
 #: Gaps between truth samples longer than this many median truth steps are not bridged.
 TRUTH_BRIDGE_STEPS = 2.0
@@ -62,9 +68,11 @@ class TruthCheck:
         """One clause for a person: shift, correlation and residual."""
         if not self.checked:
             return "too little overlap or motion to compare the rates"
-        return (f"rate-norm correlation {self.correlation:.2f} at a shift of "
-                f"{self.shift_s * 1e3:+.1f} ms, residual {self.residual_rad_s:.3f} rad/s "
-                f"(gyro RMS {self.gyro_rms_rad_s:.3f} rad/s)")
+        return (
+            f"rate-norm correlation {self.correlation:.2f} at a shift of "
+            f"{self.shift_s * 1e3:+.1f} ms, residual {self.residual_rad_s:.3f} rad/s "
+            f"(gyro RMS {self.gyro_rms_rad_s:.3f} rad/s)"
+        )
 
 
 def _span(t: NDArray[np.int64]) -> tuple[int, int]:
@@ -80,9 +88,13 @@ def _backward_fraction(t: NDArray[np.int64]) -> float:
     return float(np.mean(np.diff(t) < 0)) if len(t) > 1 else 0.0
 
 
-def choose_time(mode: str, imu_t_ns: NDArray[np.int64], imu_log_t_ns: NDArray[np.int64],
-                truth_t_ns: NDArray[np.int64] | None, truth_log_t_ns: NDArray[np.int64] | None
-                ) -> tuple[str, str | None]:
+def choose_time(
+    mode: str,
+    imu_t_ns: NDArray[np.int64],
+    imu_log_t_ns: NDArray[np.int64],
+    truth_t_ns: NDArray[np.int64] | None,
+    truth_log_t_ns: NDArray[np.int64] | None,
+) -> tuple[str, str | None]:
     """The time base to use, ``"header"`` or ``"log"``, and why log time was chosen (or None).
 
     ``mode`` is ``"header"``, ``"log"`` (used as given) or ``"auto"`` (the rule of this module).
@@ -95,12 +107,21 @@ def choose_time(mode: str, imu_t_ns: NDArray[np.int64], imu_log_t_ns: NDArray[np
         return "log", f"the IMU header stamps are all equal ({int(h[0])} ns)"
     back_h, back_l = _backward_fraction(h), _backward_fraction(lg)
     if back_h > MAX_BACKWARD_FRACTION and back_l < back_h / 2:
-        return "log", (f"the IMU header stamps fall at {100 * back_h:.0f} % of the steps in file "
-                       f"order (log times at {100 * back_l:.0f} %)")
-    if (truth_t_ns is not None and truth_log_t_ns is not None and len(truth_t_ns) and len(h)
-            and not _overlap(h, truth_t_ns) and _overlap(lg, truth_log_t_ns)):
-        return "log", ("the header stamps of the IMU and the truth never overlap while their "
-                       "log times do")
+        return "log", (
+            f"the IMU header stamps fall at {100 * back_h:.0f} % of the steps in file "
+            f"order (log times at {100 * back_l:.0f} %)"
+        )
+    if (
+        truth_t_ns is not None
+        and truth_log_t_ns is not None
+        and len(truth_t_ns)
+        and len(h)
+        and not _overlap(h, truth_t_ns)
+        and _overlap(lg, truth_log_t_ns)
+    ):
+        return "log", (
+            "the header stamps of the IMU and the truth never overlap while their log times do"
+        )
     return "header", None
 
 
@@ -162,8 +183,12 @@ def _pearson(a: NDArray[np.float64], b: NDArray[np.float64]) -> float:
     return float(np.mean((a - a.mean()) * (b - b.mean())) / (sa * sb))
 
 
-def check_truth(t_ns: NDArray[np.int64], omega_b: NDArray[np.float64],
-                truth_t_ns: NDArray[np.int64], q_w_b: NDArray[np.float64]) -> TruthCheck:
+def check_truth(
+    t_ns: NDArray[np.int64],
+    omega_b: NDArray[np.float64],
+    truth_t_ns: NDArray[np.int64],
+    q_w_b: NDArray[np.float64],
+) -> TruthCheck:
     """Compare the truth's rotation-rate norm with the gyro's over time shifts.
 
     Parameters
@@ -193,9 +218,12 @@ def check_truth(t_ns: NDArray[np.int64], omega_b: NDArray[np.float64],
         return TruthCheck(False, True)
     # gyro: mean rate vector over each grid step, from the trapezoid integral at the edges
     ts = (t_ns - t_ns[0]) * 1e-9
-    cum = np.concatenate([np.zeros((1, 3)),
-                          np.cumsum(0.5 * (omega_b[1:] + omega_b[:-1]) * np.diff(ts)[:, None],
-                                    axis=0)])
+    cum = np.concatenate(
+        [
+            np.zeros((1, 3)),
+            np.cumsum(0.5 * (omega_b[1:] + omega_b[:-1]) * np.diff(ts)[:, None], axis=0),
+        ]
+    )
     te = (edges - t_ns[0]) * 1e-9
     angle = np.stack([np.interp(te, ts, cum[:, k]) for k in range(3)], axis=1)
     g = np.linalg.norm(np.diff(angle, axis=0), axis=1) / np.diff(te)
@@ -220,8 +248,13 @@ def check_truth(t_ns: NDArray[np.int64], omega_b: NDArray[np.float64],
         c = _pearson(a, b)
         scores[k] = c
         if c > best[0]:
-            best = (c, k, float(np.sqrt(np.mean((a - b) ** 2))), float(np.sqrt(np.mean(a**2))),
-                    float(np.std(a)))
+            best = (
+                c,
+                k,
+                float(np.sqrt(np.mean((a - b) ** 2))),
+                float(np.sqrt(np.mean(a**2))),
+                float(np.std(a)),
+            )
     if not scores:
         return TruthCheck(False, True)
     c, k, resid, g_rms, _ = best
