@@ -226,3 +226,44 @@ def test_convert_csv_bad_files_are_one_line(tmp_path, capsys):
     assert csv.read_bytes() == before
     assert main(["convert-csv", str(csv), str(tmp_path / "bag"), *args]) == 0
     assert is_own_bag(tmp_path / "bag")
+
+
+def test_outputs_do_not_overwrite_each_other(bag, tmp_path, capsys):
+    out = tmp_path / "est"
+    _fails(
+        capsys,
+        [str(bag), "--rerun", "off", "--out", str(out), "--summary-json", str(out / "s.json")],
+        "separate paths",
+    )
+    _fails(
+        capsys,
+        [
+            str(bag),
+            "--rerun",
+            "off",
+            "--summary-json",
+            str(tmp_path / "t" / "truth.tum"),
+            "--export-tum",
+            str(tmp_path / "t"),
+        ],
+        "separate paths",
+    )
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["in"]
+    tum = tmp_path / "tum"  # a summary beside the TUM files is fine
+    tum.mkdir()
+    assert (
+        main(
+            [
+                str(bag),
+                "--rerun",
+                "off",
+                "--quiet",
+                "--export-tum",
+                str(tum),
+                "--summary-json",
+                str(tum / "summary.json"),
+            ]
+        )
+        == 0
+    )
+    assert sorted(p.name for p in tum.iterdir()) == ["estimate.tum", "summary.json", "truth.tum"]

@@ -14,6 +14,7 @@ one-line warnings.
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 import warnings
 from pathlib import Path
@@ -206,6 +207,28 @@ def _check_rerun(mode: str | None, inputs: tuple) -> None:
     raise InputError(f"Expected --rerun spawn, serve, save:PATH.rrd or off, got {mode!r}")
 
 
+def _distinct_outputs(args) -> None:
+    """No output is another output, and nothing is written inside the --out bag folder."""
+    from imu_dcm.errors import InputError
+
+    named = [("--out", args.out), ("--summary-json", args.summary_json)]
+    if args.export_tum:
+        named += [
+            ("--export-tum", os.path.join(args.export_tum, f))
+            for f in ("estimate.tum", "truth.tum")
+        ]
+    if args.rerun and args.rerun.startswith("save:"):
+        named.append(("--rerun save:", args.rerun[len("save:") :]))
+    paths = [(flag, Path(os.path.abspath(os.path.realpath(p)))) for flag, p in named if p]
+    for i, (fa, a) in enumerate(paths):
+        for fb, b in paths[i + 1 :]:
+            inside = (fa == "--out" and b.is_relative_to(a)) or (
+                fb == "--out" and a.is_relative_to(b)
+            )
+            if a == b or inside:
+                raise InputError(f"Expected {fa} and {fb} to be separate paths, got {a} and {b}")
+
+
 def _options(args) -> dict:
     """Every option parsed and checked, before any input is read or output written."""
     from imu_dcm.errors import InputError
@@ -241,6 +264,7 @@ def _options(args) -> dict:
             "--angular-accel, got --prefilter none"
         )
     inputs = (args.log,)
+    _distinct_outputs(args)
     if args.out:
         check_output_dir(args.out, inputs, force=args.force, what="--out bag")
     if args.summary_json:

@@ -186,6 +186,13 @@ def replay(
     return dataclasses.replace(result, summary=summary)
 
 
+def _record(obj) -> dict:
+    """A reader record (dataclass or plain object) as a dict for the summary."""
+    if dataclasses.is_dataclass(obj):
+        return dataclasses.asdict(obj)
+    return dict(vars(obj))
+
+
 def _warn(msg: str) -> None:
     warnings.warn(msg, ImuDcmWarning, stacklevel=3)
 
@@ -237,6 +244,7 @@ def _replay(
 
     q_truth = np.full((n, 4), np.nan)
     check: TruthCheck | None = None
+    rejected: str | None = None
     applied_offset = 0.0
     if truth is not None:
         tt = truth.t_ns if base == "header" else truth.log_t_ns
@@ -271,7 +279,7 @@ def _replay(
                 f"to score it anyway"
             )
             q_truth = np.full((n, 4), np.nan)
-            truth = None
+            rejected, truth = truth.topic, None
         elif not check.follows:
             _warn(
                 f"truth {truth.topic} ({truth.type}{frames}) does not follow the gyro "
@@ -378,7 +386,9 @@ def _replay(
         sorted_out_of_order=clean.sorted_out_of_order,
         gaps=clean.gaps,
         stopped_at=log.stopped_at,
-        channels=tuple(dict(c.__dict__) for c in log.channels),
+        damage=tuple(_record(d) for d in getattr(log, "damage", ())),
+        channels=tuple(_record(c) for c in log.channels),
+        truth_rejected=rejected,
     )
     return ReplayResult(
         t_ns,

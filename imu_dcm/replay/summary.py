@@ -20,7 +20,8 @@ __all__ = ["ReplayResult", "ReplaySummary", "format_summary"]
 class ReplaySummary:
     """The figures of one replay (angles in degrees, rates rad/s, times s since the first sample).
 
-    Error fields are None when nothing was scored (no truth, or truth rejected). ``gaps`` holds
+    Error fields are None when nothing was scored (no truth, or truth rejected: then
+    ``truth_rejected`` names the topic that did not follow the gyro). ``gaps`` holds
     (t_s, length_s) pairs; ``warnings`` the one-line warnings the replay raised;
     ``truth_check`` the rate comparison of truth and gyro (see
     :class:`imu_dcm.replay.truth.TruthCheck`) as a dict, or None without truth.
@@ -64,6 +65,8 @@ class ReplaySummary:
     gaps: tuple[tuple[float, float], ...]
     stopped_at: str | None
     channels: tuple[dict, ...]
+    damage: tuple[dict, ...] = ()
+    truth_rejected: str | None = None
     warnings: tuple[str, ...] = ()
     elapsed_s: float = 0.0
 
@@ -145,7 +148,12 @@ def format_summary(s: ReplaySummary) -> str:
             f"samples inside its coverage{offset}"
         )
     else:
-        lines.append("truth      none (no error can be measured)")
+        lines.append(
+            f"truth      none: {s.truth_rejected} does not follow the gyro, not scored "
+            f"(name it with --truth-topic to score it)"
+            if s.truth_rejected
+            else "truth      none (no error can be measured)"
+        )
     if check and check.get("checked"):
         verdict = "follows the gyro" if check["follows"] else "does NOT follow the gyro"
         lines.append(
