@@ -265,3 +265,39 @@ def test_truth_offset_is_measured_and_auto_applies_it(trial, tmp_path):
     assert abs(auto.summary.rms_error_deg - own.summary.rms_error_deg) < 0.02
     fixed, _ = _run(late, truth_offset_s=-0.030)  # seconds: exactly undoes the shift
     assert abs(fixed.summary.rms_error_deg - ref.summary.rms_error_deg) < 1e-6
+
+
+def test_steady_spin_truth_is_kept_and_still_truth_under_motion_is_not(tmp_path):
+    # A constant-rate spin: the rate norm is flat (nothing to correlate), the gyro noisy. Truth
+    # is exp(ω t) in closed form; it must be kept. The same gyro against a still truth must not.
+    t = np.arange(0, 4.0, 1 / 400)
+    w = np.array([0.3, -0.2, 2.0])
+    rng = np.random.default_rng(1)
+    gyro = w + rng.normal(0, 0.05, (len(t), 3))  # |ω| noise far above the 0.05 rad/s threshold
+    t_ns = 1_700_000_000_000_000_000 + np.round(t * 1e9).astype(np.int64)
+    spin = Rotation.from_rotvec(np.outer(t, w)).as_quat()
+    still = np.tile([0.0, 0.0, 0.0, 1.0], (len(t), 1))
+    for name, q, kept in (("spin", spin, True), ("still", still, False)):
+        bag = write_bag(
+            tmp_path / name,
+            imu=StampedSeries(t_ns, gyro, "imu"),
+            quaternions={TRUTH: StampedSeries(t_ns, q, "world")},
+        )
+        r, said = _run(bag, bias="none")
+        assert (r.summary.truth_topic == TRUTH) is kept, said
+        assert r.summary.truth_check["correlation"] is None  # a flat norm: levels compared
+        assert r.summary.truth_check["follows"] is kept
+
+
+def test_header_stamps_that_do_not_increase_use_log_time(trial, tmp_path):
+    # A driver that stamps in bursts: within every block of 4 messages the header stamps run
+    # backwards (3 of 4 steps fall), while the log (receive) times are right.
+    imu, truth, ref = trial
+    n = len(imu.t_ns) // 4 * 4
+    backwards = imu.t_ns[:n].reshape(-1, 4)[:, ::-1].ravel()
+    t = imu.t_ns.copy()
+    t[:n] = backwards
+    r, said = _run(_bag(tmp_path / "bursts", imu, truth, t=t, log_t=imu.t_ns))
+    assert r.summary.time == "log"
+    assert sum("header stamps fall at 75 % of the steps" in x for x in said) == 1
+    assert abs(r.summary.rms_error_deg - ref.summary.rms_error_deg) < 1e-6

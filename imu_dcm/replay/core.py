@@ -263,7 +263,7 @@ def _replay(
                 f"(0..{t_s[-1]:.3f} s), got {span}"
             )
         check = check_truth(t_ns, omega_raw, tt, truth.q_w_b)
-        if offset == "auto" and check.checked:
+        if offset == "auto" and check.shift_s is not None:
             applied_offset = float(check.shift_s)
             tt = tt + np.int64(round(applied_offset * 1e9))
             q_truth = slerp_truth(tt, truth.q_w_b, t_ns)

@@ -154,7 +154,13 @@ def format_summary(s: ReplaySummary) -> str:
             if s.truth_rejected
             else "truth      none (no error can be measured)"
         )
-    if check and check.get("checked"):
+    if check and check.get("checked") and check.get("correlation") is None:
+        verdict = "follows the gyro" if check["follows"] else "does NOT follow the gyro"
+        lines.append(
+            f"truth rate {verdict}: rate norms nearly constant, residual "
+            f"{check['residual_rad_s']:.3f} rad/s"
+        )
+    elif check and check.get("checked"):
         verdict = "follows the gyro" if check["follows"] else "does NOT follow the gyro"
         lines.append(
             f"truth rate {verdict}: correlation {check['correlation']:.2f}, best shift "

@@ -8,8 +8,9 @@ whether the truth is the IMU's attitude at all.
 * :func:`check_truth` — the body rate implied by the truth against the gyro: the rate norms
   (frame-free, so a constant mounting rotation does not matter) are correlated over time shifts
   of up to ±0.5 s; the best shift, its correlation and the residual rate error are returned.
-  A truth that does not follow the gyro (correlation below :data:`MIN_CORRELATION`, or a still
-  truth under a moving gyro) is not the IMU's attitude: wheel odometry in ``base_link`` under
+  A truth that does not follow the gyro (correlation below :data:`MIN_CORRELATION`, or, when a
+  rate norm hardly varies and cannot be correlated, a still truth under a clearly turning
+  gyro) is not the IMU's attitude: wheel odometry in ``base_link`` under
   an IMU that also tilts, or another body's pose.
 """
 
@@ -68,6 +69,11 @@ class TruthCheck:
         """One clause for a person: shift, correlation and residual."""
         if not self.checked:
             return "too little overlap or motion to compare the rates"
+        if self.correlation is None:
+            return (
+                f"rate norms nearly constant: residual {self.residual_rad_s:.3f} rad/s "
+                f"(gyro RMS {self.gyro_rms_rad_s:.3f} rad/s)"
+            )
         return (
             f"rate-norm correlation {self.correlation:.2f} at a shift of "
             f"{self.shift_s * 1e3:+.1f} ms, residual {self.residual_rad_s:.3f} rad/s "
@@ -232,9 +238,20 @@ def check_truth(
     rel = quat_multiply(quat_conjugate(q[:-1]), q[1:])
     h = 2 * np.arctan2(np.linalg.norm(rel[:, :3], axis=1), np.abs(rel[:, 3])) / np.diff(te)
     valid = np.isfinite(h)
+    if valid.sum() < 20:
+        return TruthCheck(False, True)
+    g0, h0 = g[valid], h[valid]
+    resid0 = float(np.sqrt(np.mean((g0 - h0) ** 2)))
+    g_rms0 = float(np.sqrt(np.mean(g0**2)))
+    if np.std(g0) < STILL_RAD_S or np.std(h0) < STILL_RAD_S:
+        # A norm that hardly varies (a still body, a steady spin) has no shape to correlate:
+        # only a still truth under a clearly turning gyro is evidence against it.
+        still_truth = float(np.mean(h0)) < STILL_RAD_S
+        turning = float(np.mean(g0)) > 10 * STILL_RAD_S
+        return TruthCheck(True, not (still_truth and turning), None, None, resid0, g_rms0)
     n = len(g)
     lags = int(min(MAX_SHIFT_S, span_s / 4) / dt)
-    best = (-np.inf, 0, 0.0, 0.0, 0.0)
+    best = (-np.inf, 0, resid0, g_rms0)
     scores = {}
     for k in range(-lags, lags + 1):
         gi = slice(max(k, 0), n + min(k, 0))  # g[i + k] against h[i]
@@ -243,21 +260,11 @@ def check_truth(
         if m.sum() < 20:
             continue
         a, b = g[gi][m], h[hi_][m]
-        if np.std(a) < STILL_RAD_S and np.std(b) < STILL_RAD_S:
-            continue
         c = _pearson(a, b)
         scores[k] = c
         if c > best[0]:
-            best = (
-                c,
-                k,
-                float(np.sqrt(np.mean((a - b) ** 2))),
-                float(np.sqrt(np.mean(a**2))),
-                float(np.std(a)),
-            )
-    if not scores:
-        return TruthCheck(False, True)
-    c, k, resid, g_rms, _ = best
+            best = (c, k, float(np.sqrt(np.mean((a - b) ** 2))), float(np.sqrt(np.mean(a**2))))
+    c, k, resid, g_rms = best
     shift = k * dt
     if k - 1 in scores and k + 1 in scores:  # parabola through the peak and its neighbours
         y0, y1, y2 = scores[k - 1], c, scores[k + 1]
