@@ -4,8 +4,8 @@ and reported with its time, so one bad byte costs one sample, never the answer.
 Rules, in order (all on the rates in rad/s, in file order until the sort):
 
 1. **Non-finite** rates (NaN, Inf) are dropped.
-2. **Implausible** rates are dropped: ``|ω|`` above :data:`MAX_RATE_RAD_S` (10⁴ rad/s, far above
-   any MEMS full scale, ±4000 °/s = 70 rad/s, even read as deg/s), and isolated spikes: a sample
+2. **Implausible** rates are dropped: a component above :data:`MAX_RATE_RAD_S` (10⁴ rad/s, far
+   above any MEMS full scale, ±4000 °/s = 70 rad/s, even read as deg/s), and isolated spikes: a sample
    whose ``|ω|`` exceeds :data:`SPIKE_RATIO` times both the log's 99.9th percentile of ``|ω|``
    and every neighbour within :data:`SPIKE_NEIGHBOURS` samples (and 1 rad/s). A flipped
    exponent bit gives such a sample; real motion never does (the six BROAD trials peak at 1.84,
@@ -93,41 +93,49 @@ def find_gaps(
 
 
 def _wild_stamps(t: NDArray[np.int64]) -> NDArray[np.bool_]:
-    """Stamps far from the median of their file-order window (see the module rules)."""
-    n = len(t)
-    if n < WILD_STAMP_WINDOW:
+    """Stamps far from the median of their file-order window (see the module rules).
+
+    Only samples whose window holds a suspicious step (not positive, or longer than the limit)
+    and the first and last windows can deviate: elsewhere the window is sorted and its median
+    is the sample itself. So only those are computed (a good log costs two windows).
+    """
+    n, w = len(t), WILD_STAMP_WINDOW
+    if n < w:
         return np.zeros(n, dtype=bool)
-    half = WILD_STAMP_WINDOW // 2
-    med = np.empty(n, dtype=np.int64)
-    med[:half] = np.median(t[:WILD_STAMP_WINDOW])  # the ends: the nearest full window
-    med[n - half :] = np.median(t[n - WILD_STAMP_WINDOW :])
-    block = 1 << 16
-    for s in range(0, n - 2 * half, block):  # bounded memory: a block of windows at a time
-        view = np.lib.stride_tricks.sliding_window_view(
-            t[s : s + block + 2 * half], WILD_STAMP_WINDOW
-        )
-        med[half + s : half + s + len(view)] = np.median(view, axis=1).astype(np.int64)
-    step = np.abs(np.diff(np.sort(t)))
-    step = step[step > 0]
-    if len(step) == 0:
+    step = np.diff(t)
+    positive = step[step > 0]
+    if len(positive) == 0:
         return np.zeros(n, dtype=bool)
-    limit = WILD_STAMP_STEPS * float(np.median(step))
-    return np.abs((t - med).astype(np.float64)) > limit
+    limit = WILD_STAMP_STEPS * float(np.median(positive))
+    half = w // 2
+    odd = np.flatnonzero((step <= 0) | (step > limit))
+    near = (odd[:, None] + np.arange(-half + 1, half + 1)).ravel()  # windows holding a step
+    cand = np.unique(np.concatenate([np.arange(w), np.arange(n - w, n), near]))
+    cand = cand[(cand >= 0) & (cand < n)]
+    start = np.clip(cand - half, 0, n - w)  # at the ends: the nearest full window
+    wild = np.zeros(n, dtype=bool)
+    for s in range(0, len(cand), 1 << 16):  # bounded memory: a block of windows at a time
+        c, st = cand[s : s + (1 << 16)], start[s : s + (1 << 16)]
+        med = np.median(t[st[:, None] + np.arange(w)], axis=1)
+        wild[c] = np.abs(t[c] - med) > limit
+    return wild
 
 
 def _spikes(w: NDArray[np.float64]) -> NDArray[np.bool_]:
     """Isolated samples far above both the log's 99.9th percentile and their neighbours."""
-    n = len(w)
-    norm = np.linalg.norm(w, axis=1)
-    if n < 2 * SPIKE_NEIGHBOURS + 1:
-        return np.zeros(n, dtype=bool)
-    p999 = float(np.percentile(norm, 99.9))
-    k = SPIKE_NEIGHBOURS
-    padded = np.concatenate([np.zeros(k), norm, np.zeros(k)])
-    near = np.zeros(n)
-    for s in [*range(-k, 0), *range(1, k + 1)]:
-        near = np.maximum(near, padded[k + s : k + s + n])
-    return norm > np.maximum(SPIKE_RATIO * np.maximum(p999, near), SPIKE_FLOOR_RAD_S)
+    n, k = len(w), SPIKE_NEIGHBOURS
+    spike = np.zeros(n, dtype=bool)
+    if n < 2 * k + 1:
+        return spike
+    norm = np.sqrt(np.einsum("ij,ij->i", w, w))
+    level = max(SPIKE_RATIO * float(np.percentile(norm, 99.9)), SPIKE_FLOOR_RAD_S)
+    cand = np.flatnonzero(norm > level)  # rare: a good log has none
+    if len(cand):
+        around = np.concatenate([np.arange(-k, 0), np.arange(1, k + 1)])
+        j = cand[:, None] + around
+        near = np.where((j >= 0) & (j < n), norm[np.clip(j, 0, n - 1)], 0.0).max(axis=1)
+        spike[cand] = norm[cand] > SPIKE_RATIO * near
+    return spike
 
 
 def _times(t: NDArray[np.int64], t0: int, limit: int = 5) -> str:
@@ -162,34 +170,46 @@ def clean_imu(t_ns: ArrayLike, omega_b: ArrayLike, topic: str = "IMU") -> Cleane
     t = np.asarray(t_ns, dtype=np.int64)
     w = np.asarray(omega_b, dtype=float)
     index = np.arange(len(t), dtype=np.int64)
-    finite = np.all(np.isfinite(w), axis=1)
-    n_bad = int((~finite).sum())
-    t, w, index = t[finite], w[finite], index[finite]
 
-    huge = np.linalg.norm(w, axis=1) > MAX_RATE_RAD_S
+    def drop(mask: NDArray[np.bool_]) -> None:  # copies only when something goes
+        nonlocal t, w, index
+        if mask.any():
+            t, w, index = t[~mask], w[~mask], index[~mask]
+
+    nonfinite = ~np.all(np.isfinite(w), axis=1)
+    n_bad = int(nonfinite.sum())
+    drop(nonfinite)
+
+    huge = np.max(np.abs(w), axis=1, initial=0.0) > MAX_RATE_RAD_S
     bad_t = [t[huge]]
-    t, w, index = t[~huge], w[~huge], index[~huge]
+    drop(huge)
 
     wild = _wild_stamps(t)
     n_wild = int(wild.sum())
     wild_t = t[wild]
-    t, w, index = t[~wild], w[~wild], index[~wild]
+    drop(wild)
 
-    order = np.argsort(t, kind="stable")
-    before = np.maximum.accumulate(np.concatenate([t[:1], t[:-1]])) if len(t) else t
-    n_sorted = int(np.count_nonzero(t < before))  # stamps earlier than one already seen
-    t, w, index = t[order], w[order], index[order]
+    step = np.diff(t)
+    n_sorted = 0
+    if np.any(step < 0):
+        before = np.maximum.accumulate(np.concatenate([t[:1], t[:-1]]))
+        n_sorted = int(np.count_nonzero(t < before))  # stamps earlier than one already seen
+        order = np.argsort(t, kind="stable")
+        t, w, index = t[order], w[order], index[order]
+        step = np.diff(t)
 
-    same = np.concatenate([[False], np.diff(t) == 0]) if len(t) else np.zeros(0, bool)
-    # a repeat of the previous stamp: an exact duplicate of the first sample at that stamp?
-    first = np.maximum.accumulate(np.where(~same, np.arange(len(t)), 0)) if len(t) else same
-    dup = same & np.all(w == w[first], axis=1)
-    conflict = same & ~dup
-    t, w, index = t[~same], w[~same], index[~same]
+    same = np.concatenate([[False], step == 0])
+    dup = conflict = np.zeros(len(t), dtype=bool)
+    if same.any():
+        # a repeat of the previous stamp: an exact duplicate of the first sample at that stamp?
+        first = np.maximum.accumulate(np.where(~same, np.arange(len(t)), 0))
+        dup = same & np.all(w == w[first], axis=1)
+        conflict = same & ~dup
+        drop(same)
 
     spike = _spikes(w)
     bad_t.append(t[spike])
-    t, w, index = t[~spike], w[~spike], index[~spike]
+    drop(spike)
     bad = np.sort(np.concatenate(bad_t))
     t0 = int(t[0]) if len(t) else (int(bad[0]) if len(bad) else 0)
 
@@ -200,7 +220,7 @@ def clean_imu(t_ns: ArrayLike, omega_b: ArrayLike, topic: str = "IMU") -> Cleane
         warn(f"dropped {n_bad} samples with NaN/Inf rates")
     if len(bad):
         warn(
-            f"dropped {len(bad)} implausible samples (|ω| over {MAX_RATE_RAD_S:.0e} rad/s or "
+            f"dropped {len(bad)} implausible samples (a rate over {MAX_RATE_RAD_S:.0e} rad/s or "
             f"an isolated spike over {SPIKE_RATIO:.0f}x the log's 99.9th percentile) at "
             f"{_times(bad, t0)}"
         )
