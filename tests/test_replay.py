@@ -211,8 +211,11 @@ def test_truth_that_never_overlaps_is_an_error(tmp_path):
     t = np.arange(0, 1.0, 0.01)
     t_ns = T0_NS + np.round(t * 1e9).astype(np.int64)
     q = np.tile([0, 0, 0, 1.0], (len(t), 1))
-    log = write_bag(tmp_path / "late", imu=StampedSeries(t_ns, np.zeros((len(t), 3)), "imu"),
-                    quaternions={"/truth": StampedSeries(t_ns + 5 * 10**9, q, "world")})
+    log = write_bag(
+        tmp_path / "late",
+        imu=StampedSeries(t_ns, np.zeros((len(t), 3)), "imu"),
+        quaternions={"/truth": StampedSeries(t_ns + 5 * 10**9, q, "world")},
+    )
     with pytest.raises(LogError, match=r"Expected the truth /truth to overlap the gyro "
                                        r"\(0..0.990 s\), got 5.000..5.990 s"):  # fmt: skip
         replay(log)
@@ -238,3 +241,42 @@ def test_bad_options():
         parse_numbers("1,0,0", 4, "init quaternion x,y,z,w")
     with pytest.raises(InputError, match=r"Expected bias \(rad/s\) as 3"):
         parse_numbers("0.1,x,0", 3, "bias (rad/s)")
+
+
+def test_result_and_summary_are_frozen_and_json_ready(tmp_path):
+    import dataclasses
+    import json
+
+    t = np.arange(0, 2.0, 0.01)
+    log = _write_log(tmp_path / "f", t, np.tile([0.1, 0.0, 0.0], (len(t), 1)))
+    r = replay(log, bias="none")
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        r.summary.samples = 0
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        r.start_index = 3
+    d = json.loads(json.dumps(r.summary.to_dict(), allow_nan=False))
+    contract = {
+        "path",
+        "samples",
+        "duration_s",
+        "rate_hz",
+        "imu_topic",
+        "truth_topic",
+        "method",
+        "bias_rad_s",
+        "rms_error_deg",
+        "max_error_deg",
+        "rms_inclination_deg",
+        "max_inclination_deg",
+        "rms_heading_deg",
+        "max_heading_deg",
+        "dropped_nonfinite",
+        "dropped_implausible",
+        "dropped_duplicate",
+        "dropped_backward",
+        "gaps",
+        "warnings",
+        "elapsed_s",
+    }
+    assert contract <= set(d)
+    assert d["samples"] == 200 and d["truth_topic"] is None and d["rms_error_deg"] is None
