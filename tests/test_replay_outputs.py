@@ -267,3 +267,13 @@ def test_outputs_do_not_overwrite_each_other(bag, tmp_path, capsys):
         == 0
     )
     assert sorted(p.name for p in tum.iterdir()) == ["estimate.tum", "summary.json", "truth.tum"]
+
+
+def test_a_log_file_named_inside_its_bag_folder_protects_the_folder(bag, capsys):
+    before = _snapshot(bag)
+    _fails(
+        capsys,
+        [str(bag / "bag.mcap"), "--rerun", "off", "--summary-json", str(bag / "metadata.yaml")],
+        "input folder",
+    )
+    assert _snapshot(bag) == before

@@ -207,6 +207,14 @@ def _check_rerun(mode: str | None, inputs: tuple) -> None:
     raise InputError(f"Expected --rerun spawn, serve, save:PATH.rrd or off, got {mode!r}")
 
 
+def _inputs(log: str) -> tuple[str, ...]:
+    """What must survive: the log, and the bag folder around a log file named inside one."""
+    parent = os.path.dirname(os.path.abspath(log))
+    if os.path.isfile(log) and os.path.isfile(os.path.join(parent, "metadata.yaml")):
+        return (log, parent)
+    return (log,)
+
+
 def _distinct_outputs(args) -> None:
     """No output is another output, and nothing is written inside the --out bag folder."""
     from imu_dcm.errors import InputError
@@ -263,7 +271,7 @@ def _options(args) -> dict:
             "Expected --prefilter kalman or rts with --gyro-noise-density / "
             "--angular-accel, got --prefilter none"
         )
-    inputs = (args.log,)
+    inputs = _inputs(args.log)
     _distinct_outputs(args)
     if args.out:
         check_output_dir(args.out, inputs, force=args.force, what="--out bag")
@@ -299,7 +307,7 @@ def _replay_main(argv: list[str]) -> int:
     from imu_dcm.replay.core import replay
     from imu_dcm.replay.summary import format_summary
 
-    inputs = (args.log,)
+    inputs = _inputs(args.log)
     progress = Progress()
     try:
         result = replay(args.log, progress=progress, **options)
