@@ -213,8 +213,8 @@ def test_zero_header_stamps_use_log_time_and_say_why(trial, tmp_path):
         == 1
     )
     assert abs(r.summary.rms_error_deg - ref.summary.rms_error_deg) < 1e-6
-    with pytest.raises(LogError, match="Expected at least 2 valid gyro samples"):
-        _run(tmp_path / "zero", time="header")  # as asked: every stamp equal
+    with pytest.raises(LogError, match="Expected at least 2 valid gyro samples.*try --time log"):
+        _run(tmp_path / "zero", time="header")  # as asked: every stamp equal, with the hint
 
 
 def test_device_clock_imu_against_wall_clock_truth_uses_log_time(trial, tmp_path):
@@ -225,6 +225,8 @@ def test_device_clock_imu_against_wall_clock_truth_uses_log_time(trial, tmp_path
         "never overlap while their log times do" in x for x in said
     )
     assert abs(r.summary.rms_error_deg - ref.summary.rms_error_deg) < 1e-6
+    with pytest.raises(LogError, match="to overlap the gyro.*try --time log"):
+        _run(tmp_path / "device", time="header")
 
 
 # ----------------------------------------------------------------------------- truth check

@@ -16,9 +16,6 @@ in degrees.
 from __future__ import annotations
 
 import dataclasses
-import math
-import os
-import stat
 import time as _time
 import warnings
 from collections.abc import Callable
@@ -28,64 +25,18 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from imu_dcm.bag_reader import read_log
-from imu_dcm.errors import GapWarning, ImuDcmWarning, InputError, LogError
-from imu_dcm.integrate import METHODS, integrate
+from imu_dcm.errors import GapWarning, ImuDcmWarning, LogError
+from imu_dcm.integrate import integrate
 from imu_dcm.metrics import AttitudeError, attitude_error_deg, rms
 from imu_dcm.replay.bias import RestConfig, estimate_bias
 from imu_dcm.replay.clean import CleanedImu, _deg_evidence, clean_imu
+from imu_dcm.replay.options import check_options
 from imu_dcm.replay.summary import ReplayResult, ReplaySummary
 from imu_dcm.replay.truth import TruthCheck, check_truth, choose_time, slerp_truth
-from imu_dcm.so3 import as_quat_xyzw
 
 __all__ = ["CleanedImu", "ReplayResult", "ReplaySummary", "clean_imu", "replay", "slerp_truth"]
 
 DEG = np.pi / 180.0
-TIME_BASES = ("auto", "header", "log")
-GYRO_UNITS = ("rad/s", "deg/s")
-PREFILTERS = ("kalman", "rts")
-
-
-def _check_options(
-    path, time, method, bias, gyro_units, init_q_w_b, prefilter, truth_offset_s
-) -> tuple:
-    """Validate every option once; returns (bias, q_init, offset) in their typed forms."""
-    if time not in TIME_BASES:
-        raise InputError(f"Expected time in {TIME_BASES}, got {time!r}")
-    if method not in METHODS:
-        raise InputError(f"Expected method in {METHODS}, got {method!r}")
-    if gyro_units is not None and gyro_units not in GYRO_UNITS:
-        raise InputError(f"Expected gyro units 'rad/s', 'deg/s' or None, got {gyro_units!r}")
-    if prefilter is not None and prefilter not in PREFILTERS:
-        raise InputError(f"Expected prefilter None, 'kalman' or 'rts', got {prefilter!r}")
-    if isinstance(bias, str):
-        if bias not in ("auto", "none"):
-            raise InputError(f"Expected bias 'auto', 'none' or 3 numbers (rad/s), got {bias!r}")
-    else:
-        try:
-            bias = np.asarray(bias, dtype=float)
-        except (TypeError, ValueError):
-            raise InputError(f"Expected bias as 3 finite numbers (rad/s), got {bias!r}") from None
-        if bias.shape != (3,) or not np.all(np.isfinite(bias)):
-            raise InputError(f"Expected bias as 3 finite numbers (rad/s), got {bias!r}")
-    q_init = None if init_q_w_b is None else as_quat_xyzw(init_q_w_b, "init_q_w_b")
-    if isinstance(truth_offset_s, str):
-        if truth_offset_s != "auto":
-            raise InputError(f"Expected truth offset 'auto' or seconds, got {truth_offset_s!r}")
-    elif (
-        not isinstance(truth_offset_s, (int, float))
-        or not math.isfinite(truth_offset_s)
-        or abs(truth_offset_s) > 1e6
-    ):
-        raise InputError(
-            f"Expected a finite truth offset in s (|x| <= 1e6), got {truth_offset_s!r}"
-        )
-    try:
-        mode = os.stat(path).st_mode
-    except (OSError, TypeError, ValueError):
-        mode = None  # the reader names a missing path
-    if mode is not None and not (stat.S_ISREG(mode) or stat.S_ISDIR(mode)):
-        raise LogError(f"Expected a log file or bag folder, got a special file {str(path)!r}")
-    return bias, q_init, truth_offset_s
 
 
 def replay(
@@ -153,7 +104,7 @@ def replay(
         A bad option value.
     """
     t0 = _time.perf_counter()
-    bias, q_init, offset = _check_options(
+    bias, q_init, offset = check_options(
         path, time, method, bias, gyro_units, init_q_w_b, prefilter, truth_offset_s
     )
     caught: list[warnings.WarningMessage] = []
@@ -184,6 +135,10 @@ def replay(
         result.summary, warnings=lines, elapsed_s=_time.perf_counter() - t0
     )
     return dataclasses.replace(result, summary=summary)
+
+
+def _spans_overlap(a: NDArray[np.int64], b: NDArray[np.int64]) -> bool:
+    return bool(len(a) and len(b) and a.min() <= b.max() and b.min() <= a.max())
 
 
 def _record(obj) -> dict:
@@ -237,7 +192,10 @@ def _replay(
     clean = clean_imu(imu_t, np.asarray(imu.omega_b, dtype=float) * scale, imu.topic)
     n = len(clean.t_ns)
     if n < 2:
-        raise LogError(f"Expected at least 2 valid gyro samples on {imu.topic}, got {n}")
+        hint = ""
+        if base == "header" and len(np.unique(imu.log_t_ns[:1000])) > 1:
+            hint = "; the log times differ: try --time log"
+        raise LogError(f"Expected at least 2 valid gyro samples on {imu.topic}, got {n}{hint}")
     t_ns = clean.t_ns
     t_s = (t_ns - t_ns[0]).astype(np.float64) * 1e-9
     omega_raw = clean.omega_b
@@ -258,9 +216,12 @@ def _replay(
                 if len(tt)
                 else "no samples"
             )
+            hint = ""
+            if base == "header" and _spans_overlap(imu.log_t_ns, truth.log_t_ns):
+                hint = "; their log times overlap: try --time log"
             raise LogError(
                 f"Expected the truth {truth.topic} to overlap the gyro "
-                f"(0..{t_s[-1]:.3f} s), got {span}"
+                f"(0..{t_s[-1]:.3f} s), got {span}{hint}"
             )
         check = check_truth(t_ns, omega_raw, tt, truth.q_w_b)
         if offset == "auto" and check.shift_s is not None:

@@ -155,10 +155,11 @@ def slerp_truth(truth_t_ns: ArrayLike, q_w_b: ArrayLike, t_ns: ArrayLike) -> NDA
     norm = np.linalg.norm(q, axis=1)
     ok = np.isfinite(norm) & (norm > 0.5)
     tt, q = tt[ok], q[ok] / norm[ok, None]
-    order = np.argsort(tt, kind="stable")
-    tt, q = tt[order], q[order]
-    uniq = np.concatenate([[True], np.diff(tt) > 0]) if len(tt) else np.zeros(0, bool)
-    tt, q = tt[uniq], q[uniq]
+    if len(tt) > 1 and not np.all(np.diff(tt) > 0):  # recorded truth is usually in order
+        order = np.argsort(tt, kind="stable")
+        tt, q = tt[order], q[order]
+        uniq = np.concatenate([[True], np.diff(tt) > 0])
+        tt, q = tt[uniq], q[uniq]
     out = np.full((len(t), 4), np.nan)
     if len(tt) == 0:
         return out
