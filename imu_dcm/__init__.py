@@ -7,8 +7,40 @@ in seconds.
 """
 
 from imu_dcm.errors import GapWarning, ImuDcmError, ImuDcmWarning, InputError, LogError
-from imu_dcm.integrate import DELTA_METHODS, METHODS, integrate, integrate_delta
-from imu_dcm.streaming import DcmIntegrator
+
+import sys as _sys
+import types as _types
+
+_LAZY = {  # loaded on first use, so a command's --help does not import the numerical stack
+    "DELTA_METHODS": "imu_dcm.integrate",
+    "METHODS": "imu_dcm.integrate",
+    "integrate": "imu_dcm.integrate",
+    "integrate_delta": "imu_dcm.integrate",
+    "DcmIntegrator": "imu_dcm.streaming",
+}
+
+
+def __getattr__(name: str):
+    if name in _LAZY:
+        import importlib
+
+        value = getattr(importlib.import_module(_LAZY[name]), name)
+        globals()[name] = value
+        return value
+    raise AttributeError(f"module 'imu_dcm' has no attribute {name!r}")
+
+
+class _Package(_types.ModuleType):
+    """``imu_dcm.integrate`` names the function, also after the submodule of the same name is
+    imported (the import system then sets the package attribute to the module)."""
+
+    def __setattr__(self, name: str, value) -> None:
+        if name == "integrate" and isinstance(value, _types.ModuleType):
+            value = value.integrate
+        super().__setattr__(name, value)
+
+
+_sys.modules[__name__].__class__ = _Package
 
 __all__ = [
     "DELTA_METHODS",

@@ -83,7 +83,8 @@ class ImuSeries:
 
     Attributes
     ----------
-    t_ns : int64 (N,) — sample stamps, ns (header stamp, or MCAP log time with ``time="log"``).
+    t_ns : int64 (N,) — sample stamps, ns (``header.stamp``; the log time for JSON without one).
+    log_t_ns : int64 (N,) — the container's log (receive) time of each sample, ns.
     omega_b : float64 (N, 3) — angular velocity, body (sensor) axes, in the log's unit (rad/s
         for ROS). Not cleaned: may hold NaN/Inf.
     orientation_xyzw : float64 (N, 4) or None — the message's own orientation ``q_w_b``
@@ -92,6 +93,7 @@ class ImuSeries:
     """
 
     t_ns: NDArray[np.int64]
+    log_t_ns: NDArray[np.int64]
     omega_b: NDArray[np.float64]
     orientation_xyzw: NDArray[np.float64] | None
     topic: str
@@ -101,12 +103,20 @@ class ImuSeries:
 
 @dataclass(frozen=True)
 class TruthSeries:
-    """Reference attitude samples ``q_w_b`` (``[x, y, z, w]``, body to world) with stamps."""
+    """Reference attitude samples ``q_w_b`` (``[x, y, z, w]``, body to world) with stamps.
+
+    ``t_ns`` header stamps and ``log_t_ns`` log times, int64 (M,); ``auto`` is true when the
+    channel was picked automatically (not named by the caller).
+    """
 
     t_ns: NDArray[np.int64]
+    log_t_ns: NDArray[np.int64]
     q_w_b: NDArray[np.float64]
     topic: str
     type: str
+    frame_id: str = ""
+    child_frame_id: str = ""
+    auto: bool = False
 
 
 @dataclass(frozen=True)
@@ -786,7 +796,7 @@ def _pick(scan: _Scan, topic: str | None, candidates: dict[int, str], what: str,
     return next(iter(candidates))
 
 
-def _read_imu(scan: _Scan, cid: int, path: str, time: str) -> tuple[ImuSeries, int]:
+def _read_imu(scan: _Scan, cid: int, path: str) -> tuple[ImuSeries, int]:
     ch = scan.channels[cid]
     sch = scan.schemas.get(ch.schema_id)
     raw = _collect(scan, cid)
@@ -803,18 +813,19 @@ def _read_imu(scan: _Scan, cid: int, path: str, time: str) -> tuple[ImuSeries, i
             try:
                 omega[i] = [float(av["x"]), float(av["y"]), float(av["z"])]
                 st = (m.get("header") or {}).get("stamp") or m.get("stamp")
-                if st is not None and time == "header":
+                if st is not None:
                     t_ns[i] = int(st.get("sec", 0)) * 1_000_000_000 + int(
                         st.get("nanosec", st.get("nsec", 0))
                     )
             except (TypeError, ValueError, AttributeError):
                 continue
             good[i] = True
-        series = ImuSeries(t_ns[good], omega[good], None, ch.topic, "json", "")
+        series = ImuSeries(t_ns[good], raw.log_time[good], omega[good], None, ch.topic, "json",
+                           "")
         return series, int(n - good.sum())
     out, good = _decode_cdr(raw, sch, _imu_want(path), ch.topic)
     p = path + "." if path else ""
-    t_ns = _stamps(out, path) if time == "header" else raw.log_time
+    t_ns = _stamps(out, path)
     omega = np.stack([out[p + "angular_velocity." + a] for a in "xyz"], axis=1)
     quat = np.stack([out[p + "orientation." + a] for a in "xyzw"], axis=1)
     cov0 = out[p + "orientation_covariance"]
@@ -825,7 +836,7 @@ def _read_imu(scan: _Scan, cid: int, path: str, time: str) -> tuple[ImuSeries, i
         # only a bare Imu has its header's frame_id at a fixed place
         frame = "" if path else _frame_id(raw.segments[raw.seg_idx[i]], int(raw.seg_start[i]))
     q = quat[good] if np.isfinite(quat[good]).any() else None
-    series = ImuSeries(t_ns[good], omega[good], q, ch.topic, sch.name, frame)
+    series = ImuSeries(t_ns[good], raw.log_time[good], omega[good], q, ch.topic, sch.name, frame)
     return series, int(n - good.sum())
 
 
@@ -838,7 +849,7 @@ def _truth_candidates(scan: _Scan) -> dict[int, str]:
     return found
 
 
-def _read_truth(scan: _Scan, cid: int, time: str) -> TruthSeries:
+def _read_truth(scan: _Scan, cid: int, auto: bool) -> TruthSeries:
     ch = scan.channels[cid]
     sch = scan.schemas[ch.schema_id]
     qpath = TRUTH_TYPES[_norm_type(sch.name, "")]
@@ -849,17 +860,17 @@ def _read_truth(scan: _Scan, cid: int, time: str) -> TruthSeries:
     want[hdr + ".stamp.nanosec"] = ("i8", 1)
     raw = _collect(scan, cid)
     out, good = _decode_cdr(raw, sch, want, ch.topic)
-    t_ns = (out[hdr + ".stamp.sec"] * 1_000_000_000 + out[hdr + ".stamp.nanosec"]
-            if time == "header" else raw.log_time)  # fmt: skip
+    t_ns = out[hdr + ".stamp.sec"] * 1_000_000_000 + out[hdr + ".stamp.nanosec"]
     q = np.stack([out[f"{qpath}.{a}"] for a in "xyzw"], axis=1)
-    return TruthSeries(t_ns[good].astype(np.int64), q[good], ch.topic, sch.name)
+    return TruthSeries(t_ns[good].astype(np.int64), np.asarray(raw.log_time)[good].astype(np.int64),
+                       q[good], ch.topic, sch.name, auto=auto)
 
 
 def read_log(
     path: str | Path,
     imu_topic: str | None = None,
     truth_topic: str | None = None,
-    time: str = "header",
+    truth_frame: str | None = None,
     progress: Callable[[float], None] | None = None,
 ) -> LogData:
     """Read the gyro samples and the reference attitude of a ROS 2 bag or an MCAP file.
@@ -880,8 +891,8 @@ def read_log(
         ``/estimate``; else the Imu's orientation where ``orientation_covariance[0] != -1``
         (unit norm, and not one constant value: devices leave the default ``0,0,0,1`` behind
         a garbage covariance). ``"none"`` disables truth.
-    time : {"header", "log"}
-        Stamps from the messages' ``header.stamp`` (default) or the MCAP log time.
+    truth_frame : str, optional
+        Child frame of a transform truth (accepted for the ``/tf`` reader; unused here).
     progress : callable(fraction), optional
         Called after each chunk with the fraction of the file read (for a progress bar).
 
@@ -902,8 +913,6 @@ def read_log(
         A truncated or corrupt file: the readable part is returned and the warning says where
         reading stopped.
     """
-    if time not in ("header", "log"):
-        raise LogError(f"Expected time 'header' or 'log', got {time!r}")
     mcap_path = resolve_mcap_path(path)
     scan = _scan_file(mcap_path, progress)
     channels = _channel_list(scan)
@@ -927,7 +936,7 @@ def read_log(
         raise LogError(f"Expected an IMU channel (sensor_msgs/msg/Imu or a type with an Imu "
                        f"field), got {_describe(channels)}")  # fmt: skip
     imu_cid = _pick(scan, imu_topic, candidates, "IMU", "--imu-topic")
-    imu, undecodable = _read_imu(scan, imu_cid, candidates[imu_cid], time)
+    imu, undecodable = _read_imu(scan, imu_cid, candidates[imu_cid])
     if undecodable:
         warnings.warn(f"{imu.topic}: dropped {undecodable} messages that do not decode",
                       ImuDcmWarning, stacklevel=2)  # fmt: skip
@@ -937,21 +946,22 @@ def read_log(
     if truth_topic != "none":
         truth_c = _truth_candidates(scan)
         if truth_topic is not None and truth_topic == imu.topic:
-            truth = _imu_truth(imu, required=True)
+            truth = _imu_truth(imu, required=True, auto=False)
         elif truth_topic is not None:
             tcid = _pick(scan, truth_topic, truth_c, "truth", "--truth-topic")
-            truth = _read_truth(scan, tcid, time)
+            truth = _read_truth(scan, tcid, auto=False)
         else:
             auto = {c: p for c, p in truth_c.items()
                     if not scan.channels[c].topic.startswith("/estimate")}  # fmt: skip
             if auto:
-                truth = _read_truth(scan, _pick(scan, None, auto, "truth", "--truth-topic"), time)
+                truth = _read_truth(scan, _pick(scan, None, auto, "truth", "--truth-topic"),
+                                    auto=True)
             else:
-                truth = _imu_truth(imu, required=False)
+                truth = _imu_truth(imu, required=False, auto=True)
     return LogData(mcap_path, imu, truth, channels, read_custom_data(path), scan.stopped_at)
 
 
-def _imu_truth(imu: ImuSeries, required: bool) -> TruthSeries | None:
+def _imu_truth(imu: ImuSeries, required: bool, auto: bool) -> TruthSeries | None:
     """The Imu's own orientation as truth where it is given (covariance[0] != -1, unit norm)."""
     q = imu.orientation_xyzw
     if q is None:
@@ -969,4 +979,5 @@ def _imu_truth(imu: ImuSeries, required: bool) -> TruthSeries | None:
         # A constant quaternion (typically the default 0,0,0,1 behind a garbage covariance
         # instead of the -1 flag) is no estimate; it is used only when asked for by topic.
         return None
-    return TruthSeries(imu.t_ns[ok], q[ok] / norm[ok, None], imu.topic, imu.type)
+    return TruthSeries(imu.t_ns[ok], imu.log_t_ns[ok], q[ok] / norm[ok, None], imu.topic,
+                       imu.type, imu.frame_id, auto=auto)

@@ -1,6 +1,6 @@
 """Write ROS 2 bags (MCAP storage) of IMU rates, quaternions and vectors, fast and atomically.
 
-The output is a rosbag2 folder in the layout of the real logs (DESIGN.md §7): ``metadata.yaml``
+The output is a rosbag2 folder in the layout of recorded ROS 2 logs: ``metadata.yaml``
 (rosbag2 format version 9) and one ``<folder name>.mcap`` file with profile ``ros2``, CDR
 messages, their ``ros2msg`` definitions embedded as schemas, zstd chunks, and the rosbag2
 metadata record. Readable by ``mcap`` + ``mcap-ros2-support`` and by ``rosbags``.
@@ -32,7 +32,7 @@ import shutil
 import struct
 import uuid
 import zlib
-from collections.abc import Mapping
+from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
 from itertools import pairwise
 from pathlib import Path
@@ -40,7 +40,8 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from imu_dcm.errors import InputError, LogError
+from imu_dcm.errors import InputError
+from imu_dcm.outputs import OutputError, check_output_dir
 
 __all__ = ["MSG_DEFINITIONS", "TYPE_HASHES", "StampedSeries", "write_bag"]
 
@@ -110,11 +111,15 @@ class StampedSeries:
         ``[x, y, z, w]``.
     frame_id : str
         ``header.frame_id`` (e.g. ``"imu"``, ``"world"``).
+    log_t_ns : ndarray of int64, shape (N,), optional
+        MCAP log (receive) times when they differ from the header stamps (default: equal).
+        Messages are written in log-time order, so header stamps may then be out of file order.
     """
 
     t_ns: NDArray[np.int64]
     values: NDArray[np.float64]
     frame_id: str
+    log_t_ns: NDArray[np.int64] | None = None
 
     def __post_init__(self) -> None:
         t = np.asarray(self.t_ns)
@@ -128,6 +133,17 @@ class StampedSeries:
             raise InputError(f"Expected `frame_id` a str without NUL, got {self.frame_id!r}")
         object.__setattr__(self, "t_ns", t.astype(np.int64, copy=False))
         object.__setattr__(self, "values", v)
+        if self.log_t_ns is not None:
+            lt = np.asarray(self.log_t_ns)
+            if lt.shape != t.shape or not np.issubdtype(lt.dtype, np.integer):
+                raise InputError(f"Expected `log_t_ns` an int64 array of shape {t.shape}, got "
+                                 f"{lt.dtype} of shape {lt.shape}")
+            object.__setattr__(self, "log_t_ns", lt.astype(np.int64, copy=False))
+
+    @property
+    def file_t_ns(self) -> NDArray[np.int64]:
+        """The MCAP log times: ``log_t_ns`` when given, else the header stamps."""
+        return self.t_ns if self.log_t_ns is None else self.log_t_ns
 
 
 def _check_series(name: str, s: StampedSeries, k: int) -> None:
@@ -137,10 +153,11 @@ def _check_series(name: str, s: StampedSeries, k: int) -> None:
         raise InputError(f"Expected {name} values of shape (N, {k}), got {s.values.shape}")
     if s.t_ns.size == 0:
         raise InputError(f"Expected {name} to hold at least one sample, got none")
-    bad = np.flatnonzero((s.t_ns < 0) | (s.t_ns >= _MAX_T_NS))
-    if bad.size:
-        raise InputError(f"Expected {name} stamps in [0, 2^31 s) ns, got t_ns[{bad[0]}] = "
-                         f"{int(s.t_ns[bad[0]])}")
+    for label, t in (("t_ns", s.t_ns), ("log_t_ns", s.file_t_ns)):
+        bad = np.flatnonzero((t < 0) | (t >= _MAX_T_NS))
+        if bad.size:
+            raise InputError(f"Expected {name} stamps in [0, 2^31 s) ns, got {label}[{bad[0]}] "
+                             f"= {int(t[bad[0]])}")
     finite = np.isfinite(s.values).all(axis=1)
     if not finite.all():
         i = int(np.argmin(finite))
@@ -394,6 +411,7 @@ def write_bag(
     imu_angular_velocity_covariance: ArrayLike | None = None,
     custom_data: Mapping[str, str] | None = None,
     force: bool = False,
+    inputs: Iterable[str | os.PathLike] = (),
 ) -> Path:
     """Write a rosbag2 folder (MCAP storage) atomically.
 
@@ -419,7 +437,10 @@ def write_bag(
     custom_data : dict of str -> str, optional
         Recorded in ``metadata.yaml`` ``custom_data`` (and in the MCAP's rosbag2 record).
     force : bool
-        Replace an existing ``out_dir``.
+        Replace an existing ``out_dir``, only if it is a bag this function wrote
+        (:func:`imu_dcm.outputs.is_own_bag`).
+    inputs : iterable of path
+        Paths that must survive: ``out_dir`` may not be, hold or lie inside any of them.
 
     Returns
     -------
@@ -429,17 +450,15 @@ def write_bag(
     Raises
     ------
     LogError
-        If ``out_dir`` exists and ``force`` is false, or its parent folder is missing.
+        (:class:`imu_dcm.outputs.OutputError`) If ``out_dir`` exists and ``force`` is false,
+        exists and is not a bag written here, is or holds an input, is a special file, its
+        parent folder is missing or read-only, or writing fails.
     InputError
         For a malformed series (shape, non-finite value, stamp out of range), no topics at all,
         a duplicated topic, or a non-string ``custom_data`` entry.
     """
-    out = Path(out_dir)
-    if (out.exists() or out.is_symlink()) and not force:
-        raise LogError(f"Expected output {str(out)!r} not to exist (use force), got an existing "
-                       f"{'folder' if out.is_dir() else 'file'}")
-    if not out.parent.is_dir():
-        raise LogError(f"Expected the parent folder of {str(out)!r} to exist, got none")
+    inputs = tuple(inputs)
+    out = check_output_dir(out_dir, inputs, force=force, what="output bag")
     quaternions = dict(quaternions or {})
     vectors = dict(vectors or {})
     custom = dict(custom_data or {})
@@ -481,31 +500,37 @@ def write_bag(
         if not name.startswith("/"):
             raise InputError(f"Expected topic names starting with '/', got {name!r}")
 
-    stamps = np.concatenate([t[2].t_ns for t in topics])
+    stamps = np.concatenate([t[2].file_t_ns for t in topics])
     start_ns, end_ns = int(stamps.min()), int(stamps.max())
 
     tmp = out.parent / f".{out.name}.tmp-{os.getpid()}-{uuid.uuid4().hex[:8]}"
     mcap_name = f"{out.name}.mcap"
-    tmp.mkdir()
+    try:
+        tmp.mkdir()
+    except OSError as exc:
+        raise OutputError(f"Expected to create the output bag {str(out)!r}, got "
+                          f"{type(exc).__name__}: {exc.strerror}") from None
     try:
         counts = [(t[0], t[1], int(t[2].t_ns.size)) for t in topics]
         meta_body = _metadata_yaml(mcap_name, counts, start_ns, end_ns, int(stamps.size), custom)
-        encoded = [(name, msgtype, s.t_ns, _cdr_messages(s.t_ns, s.frame_id, d))
+        encoded = [(name, msgtype, s.file_t_ns, _cdr_messages(s.t_ns, s.frame_id, d))
                    for name, msgtype, s, d in topics]
         with open(tmp / mcap_name, "wb") as f:
             _write_mcap(f, encoded, {"serialized_metadata": meta_body})
         indented = "".join("  " + ln + "\n" for ln in meta_body.splitlines())
         (tmp / "metadata.yaml").write_text("rosbag2_bagfile_information:\n" + indented)
-        if out.exists() or out.is_symlink():  # force: swap in, then remove the old one
+        check_output_dir(out, inputs, force=force, what="output bag")  # unchanged meanwhile
+        if out.exists():  # force, and it is our own bag: swap in, then remove the old one
             old = out.parent / f".{out.name}.old-{os.getpid()}-{uuid.uuid4().hex[:8]}"
             os.rename(out, old)
             os.rename(tmp, out)
-            if old.is_dir() and not old.is_symlink():
-                shutil.rmtree(old)
-            else:
-                old.unlink()
+            shutil.rmtree(old)
         else:
             os.rename(tmp, out)
+    except OSError as exc:
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise OutputError(f"Expected to write the output bag {str(out)!r}, got "
+                          f"{type(exc).__name__}: {exc.strerror or exc}") from None
     except BaseException:
         shutil.rmtree(tmp, ignore_errors=True)
         raise

@@ -1,8 +1,12 @@
-"""Command-line plumbing shared by ``python -m imu_dcm.replay`` and ``python -m data_synth``."""
+"""Command-line plumbing shared by ``python -m imu_dcm.replay`` and ``python -m data_synth``:
+a one-line argument parser and a terminal progress line (standard library only, so ``--help``
+stays fast)."""
 
 from __future__ import annotations
 
 import argparse
+import sys
+import time
 from typing import NoReturn
 
 
@@ -14,3 +18,39 @@ class OneLineArgumentParser(argparse.ArgumentParser):
 
     def error(self, message: str) -> NoReturn:
         self.exit(2, f"{self.prog}: error: {message}\n")
+
+
+class Progress:
+    """A plain-text progress line on stderr, drawn only when stderr is a terminal and only once
+    the replay has run for ``delay_s`` (short replays print nothing)."""
+
+    def __init__(self, stream=None, min_interval_s: float = 0.1, delay_s: float = 0.5):
+        self.stream = stream or sys.stderr
+        self.enabled = bool(getattr(self.stream, "isatty", lambda: False)())
+        self.min_interval_s = min_interval_s
+        self._start = time.monotonic()
+        self.delay_s = delay_s
+        self._last = 0.0
+        self._drawn = False
+
+    def __call__(self, stage: str, fraction: float) -> None:
+        if not self.enabled:
+            return
+        now = time.monotonic()
+        if now - self._start < self.delay_s:
+            return
+        if fraction < 1.0 and now - self._last < self.min_interval_s:
+            return
+        self._last = now
+        width = 30
+        filled = round(width * min(max(fraction, 0.0), 1.0))
+        self.stream.write(
+            f"\r{stage:<10} [{'#' * filled}{'.' * (width - filled)}] {100 * fraction:5.1f}%"
+        )
+        self.stream.flush()
+        self._drawn = True
+
+    def close(self) -> None:
+        if self._drawn:
+            self.stream.write("\r" + " " * 60 + "\r")
+            self.stream.flush()

@@ -15,7 +15,8 @@ from imu_dcm.bag_writer import StampedSeries, write_bag
 from imu_dcm.errors import GapWarning, ImuDcmWarning, InputError, LogError
 from imu_dcm.replay import ReplayResult, replay
 from imu_dcm.replay.bias import RestConfig, detect_rest, estimate_bias
-from imu_dcm.replay.core import clean_imu, slerp_truth
+from imu_dcm.replay.clean import clean_imu
+from imu_dcm.replay.truth import slerp_truth
 
 T0_NS = 1_700_000_000_000_000_000
 Q_Z90 = np.array([0.0, 0.0, np.sqrt(0.5), np.sqrt(0.5)])  # 90° about z, [x, y, z, w]
@@ -65,6 +66,7 @@ def test_clean_imu_drops_nonfinite_and_backward_stamps_with_counts():
     assert "dropped 2 samples with duplicate or backward stamps" in text  # t=2 again, t=1 back
     np.testing.assert_array_equal((c.t_ns - T0_NS) // 1_000_000, [0, 1, 2, 4, 6])
     assert (c.dropped_nonfinite, c.dropped_nonincreasing) == (2, 2)
+    assert c.dropped_duplicate == 2  # both repeats are exact copies (zeros)
 
 
 def test_clean_imu_warns_gaps_with_their_times():
@@ -139,15 +141,15 @@ def test_bias_auto_removes_bias_found_at_rest_before_truth(tmp_path):
     assert len(r.bias.segments) == 2 and r.bias.segments[0].start_s == 0.0
     # residual: bias error 5 standard errors 5·0.001/√300 rad/s over 7 s ≈ 0.12°, plus the
     # noise's angle random walk 0.001·√(0.005·8) rad ≈ 0.01°
-    assert r.summary["max_error_deg"] < 0.15
+    assert r.summary.max_error_deg < 0.15
     none = replay(log, bias="none")
     # uncorrected: |bias| = 0.023 rad/s integrates to 0.023·3 rad = 4° over the last rest
     # alone (the body's rotation spreads earlier drift): removal must win by a large factor
-    assert none.summary["max_error_deg"] > 1.0
-    assert none.summary["max_error_deg"] > 10 * r.summary["max_error_deg"]
-    fixed = replay(log, bias="0.01,-0.02,0.005")
-    assert fixed.summary["max_error_deg"] < 0.05  # the true bias: only the random walk is left
-    assert fixed.summary["bias_rad_s"] == pytest.approx([0.01, -0.02, 0.005])
+    assert none.summary.max_error_deg > 1.0
+    assert none.summary.max_error_deg > 10 * r.summary.max_error_deg
+    fixed = replay(log, bias=[0.01, -0.02, 0.005])
+    assert fixed.summary.max_error_deg < 0.05  # the true bias: only the random walk is left
+    assert fixed.summary.bias_rad_s == pytest.approx([0.01, -0.02, 0.005])
 
 
 def test_data_synth_heavy_top_log_matches_truth(tmp_path):
@@ -159,13 +161,13 @@ def test_data_synth_heavy_top_log_matches_truth(tmp_path):
                        "--out", str(out)]) == 0  # fmt: skip
     good = replay(out, bias="none", method="magnus4")
     # DESIGN §9: magnus4 is 5.9e-5° off after 1.2 s; stamps rounded to ns add < 1e-6°
-    assert good.summary["max_error_deg"] < 1e-3
-    assert good.summary["samples"] == 2401 and good.summary["truth_samples_used"] == 2401
+    assert good.summary.max_error_deg < 1e-3
+    assert good.summary.samples == 2401 and good.summary.truth_samples_used == 2401
     first = replay(out, bias="none", method="end")
     # DESIGN §5: the first-order rule with ω(t_{i+1}) is ~3° off in full attitude
-    assert 1.0 < first.summary["max_error_deg"] < 6.0
+    assert 1.0 < first.summary.max_error_deg < 6.0
     auto = replay(out)  # the top spins at 20 Hz: no rest, no bias removed
-    assert auto.bias.segments == () and auto.summary["max_error_deg"] < 1e-3
+    assert auto.bias.segments == () and auto.summary.max_error_deg < 1e-3
 
 
 def test_rates_in_deg_per_s_are_detected_and_converted(tmp_path):
@@ -174,15 +176,15 @@ def test_rates_in_deg_per_s_are_detected_and_converted(tmp_path):
     with pytest.warns(ImuDcmWarning, match=r"look like deg/s: the gyro rate is 5\d\.\dx the "
                                            r"truth's rotation rate"):  # fmt: skip
         bad = replay(log, bias="none")
-    assert bad.summary["max_error_deg"] > 30.0
+    assert bad.summary.max_error_deg > 30.0
     good = replay(log, bias="none", gyro_units="deg/s")
-    assert good.summary["max_error_deg"] < 0.05  # noise 1e-4 rad/s: walk ≈ 2e-5 rad
+    assert good.summary.max_error_deg < 0.05  # noise 1e-4 rad/s: walk ≈ 2e-5 rad
 
 
 def test_rates_above_full_scale_without_truth_warn():
     t = np.arange(0, 1, 0.01)
     w = np.tile([100.0, 0, 0], (len(t), 1))  # 100 rad/s = 5700 °/s: above a ±2000 °/s gyro
-    from imu_dcm.replay.core import _deg_evidence
+    from imu_dcm.replay.clean import _deg_evidence
 
     assert "above the ±2000 °/s" in _deg_evidence(w, t, np.full((len(t), 4), np.nan))
     assert _deg_evidence(w / 10, t, np.full((len(t), 4), np.nan)) is None
@@ -193,11 +195,11 @@ def test_without_truth_starts_from_init_quat(tmp_path):
     t = np.arange(0, 2.0, 0.01)
     w = np.array([0.7, 0.0, 0.0])
     log = _write_log(tmp_path / "n", t, np.tile(w, (len(t), 1)))
-    r = replay(log, bias="none", init_quat="0,0,0.7071067811865476,0.7071067811865476")
+    r = replay(log, bias="none", init_q_w_b=Q_Z90)
     ref = Rotation.from_quat(Q_Z90) * Rotation.from_rotvec(np.outer(t, w))
     ang = (Rotation.from_quat(r.q_est) * ref.inv()).magnitude()
     assert np.max(ang) < 1e-12  # constant axis: every method is exact up to round-off
-    assert r.summary["truth_topic"] is None and r.summary["rms_error_deg"] is None
+    assert r.summary.truth_topic is None and r.summary.rms_error_deg is None
     # the body x-axis (first column of R_w_b) starts along world y
     np.testing.assert_allclose(Rotation.from_quat(r.q_est[0]).as_matrix()[:, 0], [0, 1, 0],
                                atol=1e-15)  # fmt: skip
@@ -209,8 +211,11 @@ def test_truth_that_never_overlaps_is_an_error(tmp_path):
     t = np.arange(0, 1.0, 0.01)
     t_ns = T0_NS + np.round(t * 1e9).astype(np.int64)
     q = np.tile([0, 0, 0, 1.0], (len(t), 1))
-    log = write_bag(tmp_path / "late", imu=StampedSeries(t_ns, np.zeros((len(t), 3)), "imu"),
-                    quaternions={"/truth": StampedSeries(t_ns + 5 * 10**9, q, "world")})
+    log = write_bag(
+        tmp_path / "late",
+        imu=StampedSeries(t_ns, np.zeros((len(t), 3)), "imu"),
+        quaternions={"/truth": StampedSeries(t_ns + 5 * 10**9, q, "world")},
+    )
     with pytest.raises(LogError, match=r"Expected the truth /truth to overlap the gyro "
                                        r"\(0..0.990 s\), got 5.000..5.990 s"):  # fmt: skip
         replay(log)
@@ -221,7 +226,57 @@ def test_bad_options():
         replay("whatever", method="rk45")
     with pytest.raises(InputError, match="Expected gyro units"):
         replay("whatever", gyro_units="rpm")
+    with pytest.raises(InputError, match="init_q_w_b"):
+        replay("whatever", init_q_w_b=[1.0, 0.0, 0.0])
+    with pytest.raises(InputError, match=r"Expected bias as 3 finite numbers"):
+        replay("whatever", bias=[0.1, np.nan, 0.0])
+    with pytest.raises(InputError, match="Expected time in"):
+        replay("whatever", time="gps")
+    with pytest.raises(InputError, match="Expected truth offset 'auto' or seconds"):
+        replay("whatever", truth_offset_s="soon")
+    # text is parsed by the command line only, with the same one-line messages
+    from imu_dcm.replay.__main__ import parse_numbers
+
     with pytest.raises(InputError, match="Expected init quaternion x,y,z,w as 4"):
-        replay("whatever", init_quat="1,0,0")
+        parse_numbers("1,0,0", 4, "init quaternion x,y,z,w")
     with pytest.raises(InputError, match=r"Expected bias \(rad/s\) as 3"):
-        replay("whatever", bias="0.1,x,0")
+        parse_numbers("0.1,x,0", 3, "bias (rad/s)")
+
+
+def test_result_and_summary_are_frozen_and_json_ready(tmp_path):
+    import dataclasses
+    import json
+
+    t = np.arange(0, 2.0, 0.01)
+    log = _write_log(tmp_path / "f", t, np.tile([0.1, 0.0, 0.0], (len(t), 1)))
+    r = replay(log, bias="none")
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        r.summary.samples = 0
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        r.start_index = 3
+    d = json.loads(json.dumps(r.summary.to_dict(), allow_nan=False))
+    contract = {
+        "path",
+        "samples",
+        "duration_s",
+        "rate_hz",
+        "imu_topic",
+        "truth_topic",
+        "method",
+        "bias_rad_s",
+        "rms_error_deg",
+        "max_error_deg",
+        "rms_inclination_deg",
+        "max_inclination_deg",
+        "rms_heading_deg",
+        "max_heading_deg",
+        "dropped_nonfinite",
+        "dropped_implausible",
+        "dropped_duplicate",
+        "dropped_backward",
+        "gaps",
+        "warnings",
+        "elapsed_s",
+    }
+    assert contract <= set(d)
+    assert d["samples"] == 200 and d["truth_topic"] is None and d["rms_error_deg"] is None

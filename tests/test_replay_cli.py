@@ -25,8 +25,17 @@ from imu_dcm.replay.__main__ import main
 REPO = Path(__file__).resolve().parents[1]
 SHIPPED = REPO / "replay" / "broad_07_undisturbed_fast_rotation_B"
 T0_NS = 1_700_000_000_000_000_000
-SUMMARY_KEYS = {"samples", "duration_s", "imu_topic", "truth_topic", "method", "bias_rad_s",
-                "rms_error_deg", "max_error_deg", "elapsed_s"}  # fmt: skip (issue 4's list)
+SUMMARY_KEYS = {
+    "samples",
+    "duration_s",
+    "imu_topic",
+    "truth_topic",
+    "method",
+    "bias_rad_s",
+    "rms_error_deg",
+    "max_error_deg",
+    "elapsed_s",
+}  # fmt: skip (issue 4's list)
 
 
 @pytest.fixture(scope="module")
@@ -42,8 +51,11 @@ def coning_log(tmp_path_factory) -> Path:
                           np.full_like(t, np.cos(beta) - 1)]  # fmt: skip
     t_ns = T0_NS + np.round(t * 1e9).astype(np.int64)
     out = tmp_path_factory.mktemp("cli") / "coning"
-    return write_bag(out, imu=StampedSeries(t_ns, w, "imu"),
-                     quaternions={"/ground_truth/orientation": StampedSeries(t_ns, q, "world")})
+    return write_bag(
+        out,
+        imu=StampedSeries(t_ns, w, "imu"),
+        quaternions={"/ground_truth/orientation": StampedSeries(t_ns, q, "world")},
+    )
 
 
 def _error_lines(err: str) -> list[str]:
@@ -117,14 +129,20 @@ def test_bad_inputs_one_line_exit_2(tmp_path, capsys):
     with open(tmp_path / "pb.mcap", "wb") as f:
         w = McapWriter(f)
         w.start("", "test")
-        cid = w.register_channel("/imu", "protobuf", w.register_schema("foxglove.Imu",
-                                                                      "protobuf", b"x"))
+        cid = w.register_channel(
+            "/imu", "protobuf", w.register_schema("foxglove.Imu", "protobuf", b"x")
+        )
         w.add_message(cid, log_time=1, data=b"\x08\x01", publish_time=1)
         w.finish()
     _assert_one_line_error(capsys, [str(tmp_path / "pb.mcap"), "--rerun", "off"], "'protobuf'")
     imu = StampedSeries(t_ns, np.zeros((5, 3)), "imu")
-    late = write_bag(tmp_path / "late", imu=imu, quaternions={
-        "/truth": StampedSeries(t_ns + 10**10, np.tile([0, 0, 0, 1.0], (5, 1)), "world")})
+    late = write_bag(
+        tmp_path / "late",
+        imu=imu,
+        quaternions={
+            "/truth": StampedSeries(t_ns + 10**10, np.tile([0, 0, 0, 1.0], (5, 1)), "world")
+        },
+    )
     _assert_one_line_error(capsys, [str(late), "--rerun", "off"], "to overlap the gyro")
     _assert_one_line_error(capsys, [str(late), "--rerun", "off", "--init-quat", "1,2"],
                            "init quaternion")  # fmt: skip
@@ -159,8 +177,21 @@ def test_convert_csv_wxyz_deg_ms_round_trip(tmp_path, capsys):
     csv = tmp_path / "log.csv"
     np.savetxt(csv, rows, delimiter=",", header="t_ms,gx,gy,gz,qw,qx,qy,qz", comments="")
     bag = tmp_path / "bag"
-    argv = ["convert-csv", str(csv), str(bag), "--time-col", "t_ms", "--time-unit", "ms",
-            "--gyro-cols", "gx,gy,gz", "--gyro-units", "deg/s", "--truth-cols", "qw,qx,qy,qz"]
+    argv = [
+        "convert-csv",
+        str(csv),
+        str(bag),
+        "--time-col",
+        "t_ms",
+        "--time-unit",
+        "ms",
+        "--gyro-cols",
+        "gx,gy,gz",
+        "--gyro-units",
+        "deg/s",
+        "--truth-cols",
+        "qw,qx,qy,qz",
+    ]
     _assert_one_line_error(capsys, argv, "--truth-order")  # the order must be named
     assert main([*argv, "--truth-order", "wxyz"]) == 0
     js = tmp_path / "s.json"
@@ -223,7 +254,9 @@ def test_prefilter_writes_filtered_rate_to_out_bag(coning_log, tmp_path, capsys)
     assert code == 0, capsys.readouterr().err
     counts: dict[str, int] = {}
     with open(resolve_mcap_path(out), "rb") as f:
-        for _, ch, _, _ in make_reader(f, decoder_factories=[DecoderFactory()]).iter_decoded_messages():
+        for _, ch, _, _ in make_reader(
+            f, decoder_factories=[DecoderFactory()]
+        ).iter_decoded_messages():
             counts[ch.topic] = counts.get(ch.topic, 0) + 1
     assert counts == {"/estimate/orientation": 800, "/estimate/angular_velocity": 800}
     _assert_one_line_error(capsys, [str(coning_log), "--rerun", "off", "--angular-accel", "5"],
@@ -254,8 +287,35 @@ def test_a_gap_is_reported_once(tmp_path, capsys):
     t = np.arange(0.0, 2.0, 0.01)
     t = t[(t < 0.9) | (t > 1.3)]
     t_ns = (1_700_000_000_000_000_000 + np.round(t * 1e9)).astype(np.int64)
-    log = write_bag(tmp_path / "gappy", imu=StampedSeries(t_ns, np.tile([0.1, 0.2, 0.3], (len(t), 1)),
-                                                          "imu"))
+    log = write_bag(
+        tmp_path / "gappy", imu=StampedSeries(t_ns, np.tile([0.1, 0.2, 0.3], (len(t), 1)), "imu")
+    )
     assert main([str(log), "--rerun", "off"]) == 0
     err = capsys.readouterr().err
     assert err.count("gap") == 1 and "0.890 s (+0.420 s)" in err, err
+
+
+def test_help_loads_no_numerical_stack(tmp_path):
+    # --help must stay fast: it may not import what only a replay needs (asserted on the set of
+    # imported modules, not on a time).
+    code = (
+        "import runpy, sys\n"
+        "sys.argv = ['imu-dcm-replay', '--help']\n"
+        "try:\n"
+        "    runpy.run_module('imu_dcm.replay', run_name='__main__')\n"
+        "except SystemExit:\n"
+        "    pass\n"
+        "heavy = {'numpy', 'scipy', 'numba', 'rerun', 'mcap', 'mcap_ros2', 'rosbags'}\n"
+        "print(sorted({m.split('.')[0] for m in sys.modules} & heavy))\n"
+    )
+    proc = subprocess.run(
+        [sys.executable, "-c", code],
+        capture_output=True,
+        text=True,
+        cwd=tmp_path,
+        timeout=120,
+        check=False,
+        env=dict(os.environ, PYTHONPATH=str(REPO)),
+    )
+    assert proc.returncode == 0, proc.stderr
+    assert "--truth-offset" in proc.stdout and proc.stdout.strip().endswith("[]"), proc.stdout

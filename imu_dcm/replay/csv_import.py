@@ -37,6 +37,38 @@ class CsvColumns:
     q_w_b: NDArray[np.float64] | None
 
 
+def _rows(reader, idx: list[int], width: int, name: str) -> NDArray[np.float64]:
+    """The wanted columns of every data row as float64 (empty fields are NaN).
+
+    Raises LogError naming the line of a ragged row or a field that is not a number.
+    """
+    out: list[list[float]] = []
+    for row in reader:
+        if not row or (len(row) == 1 and not row[0].strip()):
+            continue  # blank line
+        if len(row) != width:
+            raise LogError(
+                f"Expected {width} fields per row in {name} (as in the header), got "
+                f"{len(row)} on line {reader.line_num}"
+            )
+        try:
+            out.append([float(row[i]) if row[i].strip() else np.nan for i in idx])
+        except ValueError:
+            bad = next(row[i] for i in idx if row[i].strip() and not _is_float(row[i]))
+            raise LogError(
+                f"Expected numbers in {name}, got {bad[:40]!r} on line {reader.line_num}"
+            ) from None
+    return np.array(out, dtype=float).reshape(-1, len(idx))
+
+
+def _is_float(text: str) -> bool:
+    try:
+        float(text)
+    except ValueError:
+        return False
+    return True
+
+
 def _split(names: str, n: int, what: str) -> list[str]:
     cols = [c.strip() for c in names.split(",")]
     if len(cols) != n or not all(cols):
@@ -74,31 +106,47 @@ def read_csv_columns(
     if gyro_units not in ("rad/s", "deg/s"):
         raise InputError(f"Expected gyro units 'rad/s' or 'deg/s', got {gyro_units!r}")
     if (truth_cols is None) != (truth_order is None):
-        raise InputError("Expected --truth-cols and --truth-order together (order xyzw or wxyz), "
-                         f"got cols={truth_cols!r}, order={truth_order!r}")  # fmt: skip
+        raise InputError(
+            "Expected --truth-cols and --truth-order together (order xyzw or wxyz), "
+            f"got cols={truth_cols!r}, order={truth_order!r}"
+        )
     if truth_order is not None and truth_order not in ("xyzw", "wxyz"):
         raise InputError(f"Expected truth order 'xyzw' or 'wxyz', got {truth_order!r}")
-    with p.open(newline="") as f:
-        header = next(csv.reader(f, delimiter=delimiter), None)
-    if not header:
-        raise LogError(f"Expected a CSV header row in {p}, got an empty file")
-    header = [h.strip() for h in header]
-    wanted = [time_col, *_split(gyro_cols, 3, "--gyro-cols")]
-    if truth_cols is not None:
-        wanted += _split(truth_cols, 4, "--truth-cols")
-    missing = [c for c in wanted if c not in header]
-    if missing:
-        raise InputError(f"Expected columns {missing} in {p.name}, got {header}")
-    idx = [header.index(c) for c in wanted]
-    data = np.genfromtxt(p, delimiter=delimiter, skip_header=1, usecols=idx, dtype=float,
-                         filling_values=np.nan, ndmin=2)  # fmt: skip
+    if not isinstance(delimiter, str) or len(delimiter) != 1 or delimiter in '\r\n"':
+        raise InputError(
+            f"Expected --delimiter to be one character (not a quote or newline), got {delimiter!r}"
+        )
+    try:
+        with p.open(newline="", encoding="utf-8") as f:
+            reader = csv.reader(f, delimiter=delimiter)
+            header = next(reader, None)
+            if not header:
+                raise LogError(f"Expected a CSV header row in {p}, got an empty file")
+            header = [h.strip() for h in header]
+            wanted = [time_col, *_split(gyro_cols, 3, "--gyro-cols")]
+            if truth_cols is not None:
+                wanted += _split(truth_cols, 4, "--truth-cols")
+            missing = [c for c in wanted if c not in header]
+            if missing:
+                shown = header if len(str(header)) < 300 else f"{len(header)} columns"
+                raise InputError(f"Expected columns {missing} in {p.name}, got {shown}")
+            idx = [header.index(c) for c in wanted]
+            data = _rows(reader, idx, len(header), p.name)
+    except UnicodeDecodeError as exc:
+        raise LogError(
+            f"Expected a UTF-8 text CSV in {p.name}, got the byte "
+            f"0x{exc.object[exc.start]:02x} at offset {exc.start} of a read block"
+        ) from None
+    except csv.Error as exc:
+        raise LogError(f"Expected a well-formed CSV in {p.name}, got {exc}") from None
     if data.size == 0:
         raise LogError(f"Expected data rows in {p.name}, got none")
     t = data[:, 0]
     if not np.all(np.isfinite(t)):
         bad = int(np.flatnonzero(~np.isfinite(t))[0])
-        raise InputError(f"Expected finite times in column {time_col!r}, got {t[bad]} in data "
-                         f"row {bad}")  # fmt: skip
+        raise InputError(
+            f"Expected finite times in column {time_col!r}, got {t[bad]} in data row {bad}"
+        )
     if np.any(t < 0):
         raise InputError(f"Expected times >= 0 in column {time_col!r}, got {t.min()}")
     t_ns = np.round(t * TIME_UNITS_NS[time_unit]).astype(np.int64)
@@ -111,15 +159,26 @@ def read_csv_columns(
     return CsvColumns(t_ns, omega, q)
 
 
-def convert_csv(csv_path: str | Path, out_dir: str | Path, *, imu_topic: str = "/imu/data",
-                truth_topic: str = "/ground_truth/orientation", frame_id: str = "imu",
-                force: bool = False, **columns) -> Path:  # fmt: skip
+def convert_csv(
+    csv_path: str | Path,
+    out_dir: str | Path,
+    *,
+    imu_topic: str = "/imu/data",
+    truth_topic: str = "/ground_truth/orientation",
+    frame_id: str = "imu",
+    force: bool = False,
+    **columns,
+) -> Path:
     """Read a CSV (see :func:`read_csv_columns` for ``columns``) and write a ROS 2 bag.
 
-    Returns the bag folder. The CSV is never modified; the bag appears whole or not at all.
+    Returns the bag folder. The CSV is never modified; the bag appears whole or not at all. The
+    output may not be or hold the CSV; ``force`` replaces only a bag this
+    project wrote (:func:`imu_dcm.outputs.check_output_dir`).
     """
     from imu_dcm.bag_writer import StampedSeries, write_bag
+    from imu_dcm.outputs import check_output_dir
 
+    check_output_dir(out_dir, (csv_path,), force=force, what="output bag")
     cols = read_csv_columns(csv_path, **columns)
     quats = {}
     if cols.q_w_b is not None:
@@ -131,9 +190,15 @@ def convert_csv(csv_path: str | Path, out_dir: str | Path, *, imu_topic: str = "
         "imu_dcm.converted_from": Path(csv_path).name,
         "imu_dcm.columns": ", ".join(f"{k}={v}" for k, v in sorted(columns.items())),
     }
-    return write_bag(out_dir, imu=StampedSeries(cols.t_ns, cols.omega_b, frame_id),
-                     quaternions=quats, imu_topic=imu_topic, custom_data=custom,
-                     force=force)  # fmt: skip
+    return write_bag(
+        out_dir,
+        imu=StampedSeries(cols.t_ns, cols.omega_b, frame_id),
+        quaternions=quats,
+        imu_topic=imu_topic,
+        custom_data=custom,
+        force=force,
+        inputs=(csv_path,),
+    )
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -144,14 +209,19 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("csv", help="input CSV file (header row with column names)")
     p.add_argument("out", help="output bag folder")
     p.add_argument("--time-col", required=True, help="time column name")
-    p.add_argument("--time-unit", required=True, choices=tuple(TIME_UNITS_NS),
-                   help="unit of the time column")  # fmt: skip
-    p.add_argument("--gyro-cols", required=True, metavar="X,Y,Z",
-                   help="body-rate column names, x,y,z")  # fmt: skip
+    p.add_argument(
+        "--time-unit", required=True, choices=tuple(TIME_UNITS_NS), help="unit of the time column"
+    )
+    p.add_argument(
+        "--gyro-cols", required=True, metavar="X,Y,Z", help="body-rate column names, x,y,z"
+    )
     p.add_argument("--gyro-units", required=True, choices=("rad/s", "deg/s"))
     p.add_argument("--truth-cols", metavar="A,B,C,D", help="truth quaternion column names")
-    p.add_argument("--truth-order", choices=("xyzw", "wxyz"),
-                   help="component order of --truth-cols (required with it)")  # fmt: skip
+    p.add_argument(
+        "--truth-order",
+        choices=("xyzw", "wxyz"),
+        help="component order of --truth-cols (required with it)",
+    )
     p.add_argument("--delimiter", default=",", help="field separator (default ,)")
     p.add_argument("--imu-topic", default="/imu/data")
     p.add_argument("--truth-topic", default="/ground_truth/orientation")
@@ -163,12 +233,20 @@ def build_parser() -> argparse.ArgumentParser:
 def convert_main(argv: list[str]) -> int:
     """The ``convert-csv`` sub-command; returns 0 (errors raise project errors)."""
     a = build_parser().parse_args(argv)
-    if Path(a.out).exists() and Path(a.out).resolve() == Path(a.csv).resolve():
-        raise InputError(f"Expected an output folder other than the input, got {a.out}")
-    out = convert_csv(a.csv, a.out, imu_topic=a.imu_topic, truth_topic=a.truth_topic,
-                      frame_id=a.frame_id, force=a.force, time_col=a.time_col,
-                      time_unit=a.time_unit, gyro_cols=a.gyro_cols, gyro_units=a.gyro_units,
-                      truth_cols=a.truth_cols, truth_order=a.truth_order,
-                      delimiter=a.delimiter)  # fmt: skip
+    out = convert_csv(
+        a.csv,
+        a.out,
+        imu_topic=a.imu_topic,
+        truth_topic=a.truth_topic,
+        frame_id=a.frame_id,
+        force=a.force,
+        time_col=a.time_col,
+        time_unit=a.time_unit,
+        gyro_cols=a.gyro_cols,
+        gyro_units=a.gyro_units,
+        truth_cols=a.truth_cols,
+        truth_order=a.truth_order,
+        delimiter=a.delimiter,
+    )
     print(f"wrote {out}")
     return 0

@@ -1,0 +1,292 @@
+"""Clean recorded gyro samples before integration: what no gyro can produce is dropped, counted
+and reported with its time, so one bad byte costs one sample, never the answer.
+
+Rules, in order (all on the rates in rad/s, in file order until the sort):
+
+1. **Non-finite** rates (NaN, Inf) are dropped.
+2. **Implausible** rates are dropped: a component above :data:`MAX_RATE_RAD_S` (10⁴ rad/s, far
+   above any MEMS full scale, ±4000 °/s = 70 rad/s, even read as deg/s), and isolated spikes: a sample
+   whose ``|ω|`` exceeds :data:`SPIKE_RATIO` times both the log's 99.9th percentile of ``|ω|``
+   and every neighbour within :data:`SPIKE_NEIGHBOURS` samples (and 1 rad/s). A flipped
+   exponent bit gives such a sample; real motion never does (the six BROAD trials peak at 1.84,
+   the tapping trial).
+3. **Wild stamps** are dropped: a stamp further than :data:`WILD_STAMP_STEPS` median steps from
+   the median of its :data:`WILD_STAMP_WINDOW` file-order neighbours (one stamp glitched a day
+   ahead costs that sample, not every later one). A monotone sequence, gaps included, is never
+   affected: the median of a sorted window is its centre. At either end of the file the window
+   is the nearest full one, so fewer than 5 samples cut off by a gap of that size there count
+   as wild too.
+4. The rest is **sorted by stamp** (stable): messages slightly out of file order keep their
+   place in time.
+5. **Exact duplicates** (same stamp, same rate) are dropped; a repeated stamp with a different
+   rate keeps the first sample (counted as a stamp conflict).
+6. **Gaps** over :data:`imu_dcm.integrate.GAP_FACTOR` median steps are listed (not dropped).
+"""
+
+from __future__ import annotations
+
+import warnings
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from imu_dcm.errors import GapWarning, ImuDcmWarning
+from imu_dcm.integrate import GAP_FACTOR
+from imu_dcm.so3 import quat_conjugate, quat_multiply
+
+__all__ = ["MAX_RATE_RAD_S", "SPIKE_RATIO", "CleanedImu", "clean_imu", "find_gaps"]
+
+#: Full scale of common MEMS gyros (±2000 °/s): rates above it suggest a deg/s log.
+FULL_SCALE_RAD_S = 2000.0 * np.pi / 180.0
+#: Rates above this are no gyro's (rad/s): 10⁴ rad/s = 5.7e5 °/s.
+MAX_RATE_RAD_S = 1.0e4
+#: An isolated sample this many times above the log's 99.9th percentile and its neighbours is a spike.
+SPIKE_RATIO = 8.0
+#: Neighbours on each side compared with a candidate spike.
+SPIKE_NEIGHBOURS = 2
+#: Spikes below this rate (rad/s) are left alone: they cannot spoil the attitude.
+SPIKE_FLOOR_RAD_S = 1.0
+#: File-order window (samples) whose median stamp a wild stamp is compared with.
+WILD_STAMP_WINDOW = 9
+#: A stamp this many median steps from its window's median is wild.
+WILD_STAMP_STEPS = 1000
+
+
+@dataclass(frozen=True)
+class CleanedImu:
+    """Gyro samples after cleaning, sorted by stamp, with the counts of what was dropped.
+
+    ``t_ns`` int64 (N,) strictly increasing; ``omega_b`` float64 (N, 3) finite, rad/s;
+    ``index`` int64 (N,) position of each kept sample in the input; gaps as (time s since the
+    first kept sample, length s); ``implausible_t_s`` the times of the implausible samples (s
+    since the first kept sample).
+    """
+
+    t_ns: NDArray[np.int64]
+    omega_b: NDArray[np.float64]
+    index: NDArray[np.int64]
+    dropped_nonfinite: int
+    dropped_implausible: int
+    dropped_wild_stamp: int
+    dropped_duplicate: int
+    dropped_stamp_conflict: int
+    sorted_out_of_order: int
+    gaps: tuple[tuple[float, float], ...]
+    implausible_t_s: tuple[float, ...]
+
+    @property
+    def dropped_nonincreasing(self) -> int:
+        """Samples dropped for their stamp: wild, duplicate or conflicting."""
+        return self.dropped_wild_stamp + self.dropped_duplicate + self.dropped_stamp_conflict
+
+
+def find_gaps(
+    t_ns: NDArray[np.int64], factor: float = GAP_FACTOR
+) -> tuple[tuple[float, float], ...]:
+    """Steps longer than ``factor`` median steps: ((start s since t_ns[0], length s), ...)."""
+    if len(t_ns) <= 2:
+        return ()
+    dt = np.diff(t_ns)
+    big = np.flatnonzero(dt > factor * np.median(dt))
+    return tuple((float((t_ns[i] - t_ns[0]) * 1e-9), float(dt[i] * 1e-9)) for i in big)
+
+
+def _wild_stamps(t: NDArray[np.int64]) -> NDArray[np.bool_]:
+    """Stamps far from the median of their file-order window (see the module rules).
+
+    Only samples whose window holds a suspicious step (not positive, or longer than the limit)
+    and the first and last windows can deviate: elsewhere the window is sorted and its median
+    is the sample itself. So only those are computed (a good log costs two windows).
+    """
+    n, w = len(t), WILD_STAMP_WINDOW
+    if n < w:
+        return np.zeros(n, dtype=bool)
+    step = np.diff(t)
+    positive = step[step > 0]
+    if len(positive) == 0:
+        return np.zeros(n, dtype=bool)
+    limit = WILD_STAMP_STEPS * float(np.median(positive))
+    half = w // 2
+    odd = np.flatnonzero((step <= 0) | (step > limit))
+    near = (odd[:, None] + np.arange(-half + 1, half + 1)).ravel()  # windows holding a step
+    cand = np.unique(np.concatenate([np.arange(w), np.arange(n - w, n), near]))
+    cand = cand[(cand >= 0) & (cand < n)]
+    start = np.clip(cand - half, 0, n - w)  # at the ends: the nearest full window
+    wild = np.zeros(n, dtype=bool)
+    for s in range(0, len(cand), 1 << 16):  # bounded memory: a block of windows at a time
+        c, st = cand[s : s + (1 << 16)], start[s : s + (1 << 16)]
+        med = np.median(t[st[:, None] + np.arange(w)], axis=1)
+        wild[c] = np.abs(t[c] - med) > limit
+    return wild
+
+
+def _spikes(w: NDArray[np.float64]) -> NDArray[np.bool_]:
+    """Isolated samples far above both the log's 99.9th percentile and their neighbours."""
+    n, k = len(w), SPIKE_NEIGHBOURS
+    spike = np.zeros(n, dtype=bool)
+    if n < 2 * k + 1:
+        return spike
+    norm = np.sqrt(np.einsum("ij,ij->i", w, w))
+    level = max(SPIKE_RATIO * float(np.percentile(norm, 99.9)), SPIKE_FLOOR_RAD_S)
+    cand = np.flatnonzero(norm > level)  # rare: a good log has none
+    if len(cand):
+        around = np.concatenate([np.arange(-k, 0), np.arange(1, k + 1)])
+        j = cand[:, None] + around
+        near = np.where((j >= 0) & (j < n), norm[np.clip(j, 0, n - 1)], 0.0).max(axis=1)
+        spike[cand] = norm[cand] > SPIKE_RATIO * near
+    return spike
+
+
+def _times(t: NDArray[np.int64], t0: int, limit: int = 5) -> str:
+    shown = ", ".join(f"{(x - t0) * 1e-9:.3f} s" for x in t[:limit])
+    return shown + (f" and {len(t) - limit} more" if len(t) > limit else "")
+
+
+def clean_imu(t_ns: ArrayLike, omega_b: ArrayLike, topic: str = "IMU") -> CleanedImu:
+    """Apply the cleaning rules of this module to gyro samples in file order.
+
+    Parameters
+    ----------
+    t_ns : array_like, int64 (N,)
+        Stamps, ns, in file order.
+    omega_b : array_like, (N, 3)
+        Body rates, rad/s, body axes.
+    topic : str
+        Named in the warnings.
+
+    Returns
+    -------
+    CleanedImu
+
+    Warns
+    -----
+    ImuDcmWarning
+        One line per rule that dropped or sorted samples, with counts and first times (s since
+        the first kept sample).
+    GapWarning
+        The gaps, with their times.
+    """
+    t = np.asarray(t_ns, dtype=np.int64)
+    w = np.asarray(omega_b, dtype=float)
+    index = np.arange(len(t), dtype=np.int64)
+
+    def drop(mask: NDArray[np.bool_]) -> None:  # copies only when something goes
+        nonlocal t, w, index
+        if mask.any():
+            t, w, index = t[~mask], w[~mask], index[~mask]
+
+    nonfinite = ~np.all(np.isfinite(w), axis=1)
+    n_bad = int(nonfinite.sum())
+    drop(nonfinite)
+
+    huge = np.max(np.abs(w), axis=1, initial=0.0) > MAX_RATE_RAD_S
+    bad_t = [t[huge]]
+    drop(huge)
+
+    wild = _wild_stamps(t)
+    n_wild = int(wild.sum())
+    wild_t = t[wild]
+    drop(wild)
+
+    step = np.diff(t)
+    n_sorted = 0
+    if np.any(step < 0):
+        before = np.maximum.accumulate(np.concatenate([t[:1], t[:-1]]))
+        n_sorted = int(np.count_nonzero(t < before))  # stamps earlier than one already seen
+        order = np.argsort(t, kind="stable")
+        t, w, index = t[order], w[order], index[order]
+        step = np.diff(t)
+
+    same = np.concatenate([[False], step == 0])
+    dup = conflict = np.zeros(len(t), dtype=bool)
+    if same.any():
+        # a repeat of the previous stamp: an exact duplicate of the first sample at that stamp?
+        first = np.maximum.accumulate(np.where(~same, np.arange(len(t)), 0))
+        dup = same & np.all(w == w[first], axis=1)
+        conflict = same & ~dup
+        drop(same)
+
+    spike = _spikes(w)
+    bad_t.append(t[spike])
+    drop(spike)
+    bad = np.sort(np.concatenate(bad_t))
+    t0 = int(t[0]) if len(t) else (int(bad[0]) if len(bad) else 0)
+
+    def warn(msg: str, cat: type[Warning] = ImuDcmWarning) -> None:
+        warnings.warn(f"{topic}: {msg}", cat, stacklevel=3)
+
+    if n_bad:
+        warn(f"dropped {n_bad} samples with NaN/Inf rates")
+    if len(bad):
+        warn(
+            f"dropped {len(bad)} implausible samples (a rate over {MAX_RATE_RAD_S:.0e} rad/s or "
+            f"an isolated spike over {SPIKE_RATIO:.0f}x the log's 99.9th percentile) at "
+            f"{_times(bad, t0)}"
+        )
+    n_dup, n_conf = int(dup.sum()), int(conflict.sum())
+    if n_wild or n_dup or n_conf:
+        parts = []
+        if n_dup:
+            parts.append(f"{n_dup} exact duplicates")
+        if n_conf:
+            parts.append(f"{n_conf} repeated stamps with another rate")
+        if n_wild:
+            parts.append(f"{n_wild} wild stamps far from their neighbours at {_times(wild_t, t0)}")
+        warn(
+            f"dropped {n_wild + n_dup + n_conf} samples with duplicate or backward stamps "
+            f"({'; '.join(parts)})"
+        )
+    if n_sorted:
+        warn(f"sorted {n_sorted} samples that were out of file order by their stamps")
+    gaps = find_gaps(t)
+    if gaps:
+        dt = np.diff(t)
+        listed = ", ".join(f"{a:.3f} s (+{d:.3f} s)" for a, d in gaps[:5])
+        more = f" and {len(gaps) - 5} more" if len(gaps) > 5 else ""
+        warn(
+            f"{len(gaps)} gaps over {GAP_FACTOR:g}x the median step ({np.median(dt) * 1e-9 * 1e3:.3f} ms) "
+            f"at {listed}{more}",
+            GapWarning,
+        )
+    return CleanedImu(
+        t,
+        w,
+        index,
+        n_bad,
+        len(bad),
+        n_wild,
+        n_dup,
+        n_conf,
+        n_sorted,
+        gaps,
+        tuple(float((x - t0) * 1e-9) for x in bad),
+    )
+
+
+def _deg_evidence(omega_b: NDArray, t_s: NDArray, q_truth: NDArray) -> str | None:
+    """Evidence that rates are in deg/s, or None. Compares with the truth's rate if possible."""
+    ok = np.all(np.isfinite(q_truth), axis=1)
+    pair = ok[:-1] & ok[1:]
+    if pair.sum() > 10:
+        i = np.flatnonzero(pair)
+        rel = quat_multiply(quat_conjugate(q_truth[i]), q_truth[i + 1])
+        ang = 2 * np.arctan2(np.linalg.norm(rel[:, :3], axis=1), np.abs(rel[:, 3]))
+        truth_rate = ang / np.diff(t_s)[i]
+        gyro_rate = np.linalg.norm(0.5 * (omega_b[i] + omega_b[i + 1]), axis=1)
+        moving = truth_rate > 0.2  # rad/s: motion well above noise
+        if moving.sum() > 10:
+            ratio = float(np.median(gyro_rate[moving] / truth_rate[moving]))
+            if abs(ratio / (180 / np.pi) - 1) < 0.2:
+                return (
+                    f"the gyro rate is {ratio:.1f}x the truth's rotation rate "
+                    f"(180/π = 57.3 for deg/s)"
+                )
+            return None
+    p99 = float(np.percentile(np.linalg.norm(omega_b, axis=1), 99)) if len(omega_b) else 0.0
+    if p99 > FULL_SCALE_RAD_S:
+        return (
+            f"99 % of |omega| are below {p99:.0f}, above the ±2000 °/s = "
+            f"{FULL_SCALE_RAD_S:.1f} rad/s full scale of common gyros"
+        )
+    return None

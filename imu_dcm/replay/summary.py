@@ -1,0 +1,201 @@
+"""What a replay returns: :class:`ReplayResult` (arrays) and :class:`ReplaySummary` (figures),
+both frozen, and the summary as text for a person (:func:`format_summary`)."""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from imu_dcm.metrics import AttitudeError
+from imu_dcm.replay.bias import BiasEstimate
+
+__all__ = ["ReplayResult", "ReplaySummary", "format_summary"]
+
+
+@dataclass(frozen=True)
+class ReplaySummary:
+    """The figures of one replay (angles in degrees, rates rad/s, times s since the first sample).
+
+    Error fields are None when nothing was scored (no truth, or truth rejected: then
+    ``truth_rejected`` names the topic that did not follow the gyro). ``gaps`` holds
+    (t_s, length_s) pairs; ``warnings`` the one-line warnings the replay raised;
+    ``truth_check`` the rate comparison of truth and gyro (see
+    :class:`imu_dcm.replay.truth.TruthCheck`) as a dict, or None without truth.
+    """
+
+    path: str
+    container: str
+    samples: int
+    samples_estimated: int
+    duration_s: float
+    rate_hz: float
+    imu_topic: str
+    imu_type: str
+    truth_topic: str | None
+    truth_type: str | None
+    time: str
+    method: str
+    gyro_units: str
+    bias_mode: str
+    bias_rad_s: tuple[float, float, float]
+    bias_segments: tuple[dict, ...]
+    prefilter: str | None
+    prefilter_summary: dict | None
+    start_time_s: float
+    initial_q_w_b: tuple[float, float, float, float]
+    truth_samples_used: int
+    truth_offset_s: float
+    truth_check: dict | None
+    rms_error_deg: float | None
+    max_error_deg: float | None
+    rms_inclination_deg: float | None
+    max_inclination_deg: float | None
+    rms_heading_deg: float | None
+    max_heading_deg: float | None
+    dropped_nonfinite: int
+    dropped_implausible: int
+    implausible_t_s: tuple[float, ...]
+    dropped_duplicate: int
+    dropped_backward: int
+    sorted_out_of_order: int
+    gaps: tuple[tuple[float, float], ...]
+    stopped_at: str | None
+    channels: tuple[dict, ...]
+    damage: tuple[dict, ...] = ()
+    truth_rejected: str | None = None
+    warnings: tuple[str, ...] = ()
+    elapsed_s: float = 0.0
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready dict: tuples become lists, gaps ``{"t_s", "length_s"}`` objects, NaN None."""
+        d = dataclasses.asdict(self)
+        d["gaps"] = [{"t_s": a, "length_s": b} for a, b in self.gaps]
+        return _plain(d)
+
+
+def _plain(x: Any) -> Any:
+    if isinstance(x, dict):
+        return {str(k): _plain(v) for k, v in x.items()}
+    if isinstance(x, (list, tuple)):
+        return [_plain(v) for v in x]
+    if isinstance(x, np.ndarray):
+        return _plain(x.tolist())
+    if isinstance(x, (np.floating, np.integer, np.bool_)):
+        x = x.item()
+    if isinstance(x, float) and not np.isfinite(x):
+        return None  # JSON has no NaN/Inf
+    return x
+
+
+@dataclass(frozen=True)
+class ReplayResult:
+    """Everything a replay produced. Arrays cover the N cleaned gyro samples.
+
+    Attributes
+    ----------
+    t_ns : int64 (N,) — gyro stamps, ns (on the chosen time base).
+    t_s : float64 (N,) — seconds since the first gyro sample.
+    omega_raw_b : float64 (N, 3) — gyro rates as read (after unit conversion), body, rad/s.
+    omega_b : float64 (N, 3) — rates as integrated (bias removed, pre-filtered), body, rad/s.
+    bias_b : float64 (N, 3) — bias removed at each sample, body, rad/s.
+    q_est : float64 (N, 4) — estimate ``q_w_b`` ``[x, y, z, w]``; NaN before ``start_index``.
+    q_truth : float64 (N, 4) — truth slerped at the gyro stamps; NaN outside its coverage or
+        when the truth was rejected.
+    error : AttitudeError — per-sample errors, deg; NaN where there is no truth or estimate.
+    start_index : int — first estimated sample (the first inside truth coverage, or 0).
+    bias : BiasEstimate — rest segments and mode.
+    summary : ReplaySummary
+    """
+
+    t_ns: NDArray[np.int64]
+    t_s: NDArray[np.float64]
+    omega_raw_b: NDArray[np.float64]
+    omega_b: NDArray[np.float64]
+    bias_b: NDArray[np.float64]
+    q_est: NDArray[np.float64]
+    q_truth: NDArray[np.float64]
+    error: AttitudeError
+    start_index: int
+    bias: BiasEstimate
+    summary: ReplaySummary
+
+
+def _fmt(x: float | None, unit: str = "°") -> str:
+    """Two decimals, or two significant digits below 0.01 (so 1.2e-05° does not read as 0.00°)."""
+    if x is None:
+        return "n/a"
+    return f"{x:.2f}{unit}" if x == 0.0 or abs(x) >= 0.01 else f"{x:.2g}{unit}"
+
+
+def format_summary(s: ReplaySummary) -> str:
+    """The summary for a person, one fact per line."""
+    lines = [
+        f"log        {s.path}",
+        (
+            f"imu        {s.imu_topic} ({s.imu_type}): {s.samples} samples, "
+            f"{s.duration_s:.3f} s, {s.rate_hz:.1f} Hz, units {s.gyro_units}, {s.time} time"
+        ),
+    ]
+    check = s.truth_check
+    if s.truth_topic:
+        offset = f", offset {s.truth_offset_s * 1e3:+.1f} ms" if s.truth_offset_s else ""
+        lines.append(
+            f"truth      {s.truth_topic} ({s.truth_type}): {s.truth_samples_used} gyro "
+            f"samples inside its coverage{offset}"
+        )
+    else:
+        lines.append(
+            f"truth      none: {s.truth_rejected} does not follow the gyro, not scored "
+            f"(name it with --truth-topic to score it)"
+            if s.truth_rejected
+            else "truth      none (no error can be measured)"
+        )
+    if check and check.get("checked") and check.get("correlation") is None:
+        verdict = "follows the gyro" if check["follows"] else "does NOT follow the gyro"
+        lines.append(
+            f"truth rate {verdict}: rate norms nearly constant, residual "
+            f"{check['residual_rad_s']:.3f} rad/s"
+        )
+    elif check and check.get("checked"):
+        verdict = "follows the gyro" if check["follows"] else "does NOT follow the gyro"
+        lines.append(
+            f"truth rate {verdict}: correlation {check['correlation']:.2f}, best shift "
+            f"{check['shift_s'] * 1e3:+.1f} ms, residual {check['residual_rad_s']:.3f} "
+            f"rad/s"
+        )
+    n_gaps = len(s.gaps)
+    lines.append(
+        f"dropped    {s.dropped_nonfinite} NaN/Inf, {s.dropped_implausible} implausible, "
+        f"{s.dropped_duplicate + s.dropped_backward} duplicate/backward stamps; "
+        f"{n_gaps} gap{'s' if n_gaps != 1 else ''} over 5x the median step"
+    )
+    b = np.asarray(s.bias_rad_s)
+    bias = f"({b[0]:+.5f}, {b[1]:+.5f}, {b[2]:+.5f}) rad/s"
+    bdeg = np.degrees(b)
+    if s.bias_mode == "auto" and not s.bias_segments:
+        lines.append("bias       auto: no rest segment found, no bias removed")
+    elif s.bias_mode == "auto":
+        nseg = len(s.bias_segments)
+        lines.append(
+            f"bias       auto: {nseg} rest segment{'s' if nseg != 1 else ''}, mean "
+            f"{bias} = ({bdeg[0]:+.3f}, {bdeg[1]:+.3f}, {bdeg[2]:+.3f}) °/s"
+        )
+    else:
+        lines.append(f"bias       {s.bias_mode}: {bias}")
+    pf = f", pre-filter {s.prefilter}" if s.prefilter else ""
+    lines.append(f"method     {s.method}{pf}; estimate from t = {s.start_time_s:.3f} s")
+    if s.rms_error_deg is not None:
+        lines.append(
+            f"error      total RMS {_fmt(s.rms_error_deg)}, max {_fmt(s.max_error_deg)}; "
+            f"inclination RMS {_fmt(s.rms_inclination_deg)}, max "
+            f"{_fmt(s.max_inclination_deg)}; heading RMS {_fmt(s.rms_heading_deg)}, "
+            f"max {_fmt(s.max_heading_deg)}"
+        )
+    if s.stopped_at:
+        lines.append(f"stopped    {s.stopped_at}")
+    lines.append(f"elapsed    {s.elapsed_s:.3f} s")
+    return "\n".join(lines)

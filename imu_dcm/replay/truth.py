@@ -1,0 +1,275 @@
+"""The truth side of a replay: which time base to trust, truth attitudes at the gyro stamps, and
+whether the truth is the IMU's attitude at all.
+
+* :func:`choose_time` — ``"auto"`` uses the header stamps unless they are all equal, fall in
+  file order at more than 10 % of the steps, or miss the truth while the log times overlap it;
+  then the log (receive) times, with the reason in one line.
+* :func:`slerp_truth` — truth ``q_w_b`` at the gyro stamps, never bridged across long gaps.
+* :func:`check_truth` — the body rate implied by the truth against the gyro: the rate norms
+  (frame-free, so a constant mounting rotation does not matter) are correlated over time shifts
+  of up to ±0.5 s; the best shift, its correlation and the residual rate error are returned.
+  A truth that does not follow the gyro (correlation below :data:`MIN_CORRELATION`, or, when a
+  rate norm hardly varies and cannot be correlated, a still truth under a clearly turning
+  gyro) is not the IMU's attitude: wheel odometry in ``base_link`` under
+  an IMU that also tilts, or another body's pose.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from imu_dcm.so3 import exp_quat, log_quat, quat_conjugate, quat_multiply
+
+__all__ = [
+    "MIN_CORRELATION",
+    "TRUTH_BRIDGE_STEPS",
+    "TruthCheck",
+    "check_truth",
+    "choose_time",
+    "slerp_truth",
+]
+
+#: Gaps between truth samples longer than this many median truth steps are not bridged.
+TRUTH_BRIDGE_STEPS = 2.0
+#: A truth whose rate norm correlates less than this with the gyro's does not follow it.
+MIN_CORRELATION = 0.6
+#: Time shifts searched between truth and gyro, s (each way).
+MAX_SHIFT_S = 0.5
+#: Below this spread of the rate norm (rad/s) a series is taken as still.
+STILL_RAD_S = 0.05
+#: Header stamps falling at more than this fraction of file-order steps are "not increasing".
+MAX_BACKWARD_FRACTION = 0.1
+
+
+@dataclass(frozen=True)
+class TruthCheck:
+    """How well the truth's rotation rate follows the gyro's.
+
+    Attributes
+    ----------
+    checked : bool — False when there was too little overlap or motion to tell.
+    follows : bool — the truth moves with the gyro (True when unchecked: no evidence against).
+    shift_s : float or None — time shift to add to the truth stamps that best aligns the rates.
+    correlation : float or None — Pearson correlation of the rate norms at ``shift_s``.
+    residual_rad_s : float or None — RMS of (gyro − truth) rate norm at ``shift_s``, rad/s.
+    gyro_rms_rad_s : float or None — RMS of the gyro rate norm over the same samples, rad/s.
+    """
+
+    checked: bool
+    follows: bool
+    shift_s: float | None = None
+    correlation: float | None = None
+    residual_rad_s: float | None = None
+    gyro_rms_rad_s: float | None = None
+
+    def describe(self) -> str:
+        """One clause for a person: shift, correlation and residual."""
+        if not self.checked:
+            return "too little overlap or motion to compare the rates"
+        if self.correlation is None:
+            return (
+                f"rate norms nearly constant: residual {self.residual_rad_s:.3f} rad/s "
+                f"(gyro RMS {self.gyro_rms_rad_s:.3f} rad/s)"
+            )
+        return (
+            f"rate-norm correlation {self.correlation:.2f} at a shift of "
+            f"{self.shift_s * 1e3:+.1f} ms, residual {self.residual_rad_s:.3f} rad/s "
+            f"(gyro RMS {self.gyro_rms_rad_s:.3f} rad/s)"
+        )
+
+
+def _span(t: NDArray[np.int64]) -> tuple[int, int]:
+    return int(t.min()), int(t.max())
+
+
+def _overlap(a: NDArray[np.int64], b: NDArray[np.int64]) -> bool:
+    (a0, a1), (b0, b1) = _span(a), _span(b)
+    return a0 <= b1 and b0 <= a1
+
+
+def _backward_fraction(t: NDArray[np.int64]) -> float:
+    return float(np.mean(np.diff(t) < 0)) if len(t) > 1 else 0.0
+
+
+def choose_time(
+    mode: str,
+    imu_t_ns: NDArray[np.int64],
+    imu_log_t_ns: NDArray[np.int64],
+    truth_t_ns: NDArray[np.int64] | None,
+    truth_log_t_ns: NDArray[np.int64] | None,
+) -> tuple[str, str | None]:
+    """The time base to use, ``"header"`` or ``"log"``, and why log time was chosen (or None).
+
+    ``mode`` is ``"header"``, ``"log"`` (used as given) or ``"auto"`` (the rule of this module).
+    All stamps int64 ns in file order; the truth arguments are None without truth.
+    """
+    if mode != "auto":
+        return mode, None
+    h, lg = imu_t_ns, imu_log_t_ns
+    if len(h) > 1 and np.all(h == h[0]):
+        return "log", f"the IMU header stamps are all equal ({int(h[0])} ns)"
+    back_h, back_l = _backward_fraction(h), _backward_fraction(lg)
+    if back_h > MAX_BACKWARD_FRACTION and back_l < back_h / 2:
+        return "log", (
+            f"the IMU header stamps fall at {100 * back_h:.0f} % of the steps in file "
+            f"order (log times at {100 * back_l:.0f} %)"
+        )
+    if (
+        truth_t_ns is not None
+        and truth_log_t_ns is not None
+        and len(truth_t_ns)
+        and len(h)
+        and not _overlap(h, truth_t_ns)
+        and _overlap(lg, truth_log_t_ns)
+    ):
+        return "log", (
+            "the header stamps of the IMU and the truth never overlap while their log times do"
+        )
+    return "header", None
+
+
+def slerp_truth(truth_t_ns: ArrayLike, q_w_b: ArrayLike, t_ns: ArrayLike) -> NDArray[np.float64]:
+    """Truth attitudes at times ``t_ns`` by slerp, NaN outside coverage and across long gaps.
+
+    Parameters
+    ----------
+    truth_t_ns : array_like, int64 (M,)
+        Truth stamps (any order; sorted here, duplicates dropped).
+    q_w_b : array_like, shape (M, 4)
+        Truth ``[x, y, z, w]`` (body to world); need not be sign-continuous.
+    t_ns : array_like, int64 (N,)
+        Query stamps.
+
+    Returns
+    -------
+    ndarray, shape (N, 4)
+        Unit quaternions; NaN rows before the first / after the last truth sample and inside
+        gaps longer than ``TRUTH_BRIDGE_STEPS`` median truth steps (never bridged).
+    """
+    tt = np.asarray(truth_t_ns, dtype=np.int64)
+    q = np.asarray(q_w_b, dtype=float)
+    t = np.asarray(t_ns, dtype=np.int64)
+    norm = np.linalg.norm(q, axis=1)
+    ok = np.isfinite(norm) & (norm > 0.5)
+    tt, q = tt[ok], q[ok] / norm[ok, None]
+    if len(tt) > 1 and not np.all(np.diff(tt) > 0):  # recorded truth is usually in order
+        order = np.argsort(tt, kind="stable")
+        tt, q = tt[order], q[order]
+        uniq = np.concatenate([[True], np.diff(tt) > 0])
+        tt, q = tt[uniq], q[uniq]
+    out = np.full((len(t), 4), np.nan)
+    if len(tt) == 0:
+        return out
+    j = np.searchsorted(tt, t, side="right") - 1  # tt[j] <= t < tt[j+1]
+    exact = (j >= 0) & (tt[np.clip(j, 0, None)] == t)
+    out[exact] = q[j[exact]]
+    if len(tt) < 2:
+        return out
+    max_step = TRUTH_BRIDGE_STEPS * float(np.median(np.diff(tt)))
+    inner = ~exact & (j >= 0) & (j < len(tt) - 1)
+    jj = j[inner]
+    step = (tt[jj + 1] - tt[jj]).astype(float)
+    bridge = step <= max_step * (1 + 1e-6)
+    idx = np.flatnonzero(inner)[bridge]
+    jj = jj[bridge]
+    u = (t[idx] - tt[jj]).astype(float) / (tt[jj + 1] - tt[jj]).astype(float)
+    q0, q1 = q[jj], q[jj + 1]
+    rel = quat_multiply(quat_conjugate(q0), q1)
+    rel = np.where(rel[:, 3:4] < 0, -rel, rel)  # shortest arc
+    out[idx] = quat_multiply(q0, exp_quat(u[:, None] * log_quat(rel)))
+    return out
+
+
+def _pearson(a: NDArray[np.float64], b: NDArray[np.float64]) -> float:
+    sa, sb = float(np.std(a)), float(np.std(b))
+    if sa == 0.0 or sb == 0.0:
+        return 0.0
+    return float(np.mean((a - a.mean()) * (b - b.mean())) / (sa * sb))
+
+
+def check_truth(
+    t_ns: NDArray[np.int64],
+    omega_b: NDArray[np.float64],
+    truth_t_ns: NDArray[np.int64],
+    q_w_b: NDArray[np.float64],
+) -> TruthCheck:
+    """Compare the truth's rotation-rate norm with the gyro's over time shifts.
+
+    Parameters
+    ----------
+    t_ns : int64 (N,), strictly increasing — gyro stamps.
+    omega_b : float64 (N, 3) — gyro rates, rad/s, body axes (bias left in: it is small).
+    truth_t_ns : int64 (M,) — truth stamps on the same clock.
+    q_w_b : float64 (M, 4) — truth ``[x, y, z, w]``.
+
+    Returns
+    -------
+    TruthCheck
+        On a grid of mean rates over steps of ``max(10 ms, 2 truth steps, gyro step)``.
+    """
+    tt = np.asarray(truth_t_ns, dtype=np.int64)
+    if len(t_ns) < 4 or len(tt) < 4:
+        return TruthCheck(False, True)
+    lo, hi = max(int(t_ns[0]), int(tt.min())), min(int(t_ns[-1]), int(tt.max()))
+    if hi <= lo:
+        return TruthCheck(False, True)
+    dt_g = float(np.median(np.diff(t_ns))) * 1e-9
+    dt_t = float(np.median(np.diff(np.sort(tt)))) * 1e-9
+    span_s = (hi - lo) * 1e-9
+    dt = max(0.01, 2 * dt_t, dt_g, span_s / 100_000)
+    edges = lo + np.round(np.arange(0.0, span_s, dt) * 1e9).astype(np.int64)
+    if len(edges) < 24:
+        return TruthCheck(False, True)
+    # gyro: mean rate vector over each grid step, from the trapezoid integral at the edges
+    ts = (t_ns - t_ns[0]) * 1e-9
+    cum = np.concatenate(
+        [
+            np.zeros((1, 3)),
+            np.cumsum(0.5 * (omega_b[1:] + omega_b[:-1]) * np.diff(ts)[:, None], axis=0),
+        ]
+    )
+    te = (edges - t_ns[0]) * 1e-9
+    angle = np.stack([np.interp(te, ts, cum[:, k]) for k in range(3)], axis=1)
+    g = np.linalg.norm(np.diff(angle, axis=0), axis=1) / np.diff(te)
+    # truth: rotation angle over each grid step
+    q = slerp_truth(tt, q_w_b, edges)
+    rel = quat_multiply(quat_conjugate(q[:-1]), q[1:])
+    h = 2 * np.arctan2(np.linalg.norm(rel[:, :3], axis=1), np.abs(rel[:, 3])) / np.diff(te)
+    valid = np.isfinite(h)
+    if valid.sum() < 20:
+        return TruthCheck(False, True)
+    g0, h0 = g[valid], h[valid]
+    resid0 = float(np.sqrt(np.mean((g0 - h0) ** 2)))
+    g_rms0 = float(np.sqrt(np.mean(g0**2)))
+    if np.std(g0) < STILL_RAD_S or np.std(h0) < STILL_RAD_S:
+        # A norm that hardly varies (a still body, a steady spin) has no shape to correlate:
+        # only a still truth under a clearly turning gyro is evidence against it.
+        still_truth = float(np.mean(h0)) < STILL_RAD_S
+        turning = float(np.mean(g0)) > 10 * STILL_RAD_S
+        return TruthCheck(True, not (still_truth and turning), None, None, resid0, g_rms0)
+    n = len(g)
+    lags = int(min(MAX_SHIFT_S, span_s / 4) / dt)
+    best = (-np.inf, 0, resid0, g_rms0)
+    scores = {}
+    for k in range(-lags, lags + 1):
+        gi = slice(max(k, 0), n + min(k, 0))  # g[i + k] against h[i]
+        hi_ = slice(max(-k, 0), n - max(k, 0))
+        m = valid[hi_]
+        if m.sum() < 20:
+            continue
+        a, b = g[gi][m], h[hi_][m]
+        c = _pearson(a, b)
+        scores[k] = c
+        if c > best[0]:
+            best = (c, k, float(np.sqrt(np.mean((a - b) ** 2))), float(np.sqrt(np.mean(a**2))))
+    c, k, resid, g_rms = best
+    shift = k * dt
+    if k - 1 in scores and k + 1 in scores:  # parabola through the peak and its neighbours
+        y0, y1, y2 = scores[k - 1], c, scores[k + 1]
+        den = y0 - 2 * y1 + y2
+        if den < 0:
+            shift += 0.5 * (y0 - y2) / den * dt
+    return TruthCheck(True, c >= MIN_CORRELATION, shift, c, resid, g_rms)

@@ -1,0 +1,305 @@
+"""Replay under damaged or unusual logs: implausible samples, wild and shuffled stamps,
+duplicates, the time base, a truth that is not the IMU's attitude, a truth offset, a non-finite
+estimate. Built from the shipped BROAD trial 07 (real IMU, optical truth), rewritten with the
+damage; the undamaged trial is the oracle (same samples, same answer)."""
+
+from __future__ import annotations
+
+import warnings
+from pathlib import Path
+
+import numpy as np
+import pytest
+from conftest import BROAD_TRIALS
+from scipy.spatial.transform import Rotation
+
+from imu_dcm.bag_reader import read_log
+from imu_dcm.bag_writer import StampedSeries, write_bag
+from imu_dcm.errors import ImuDcmWarning, LogError
+from imu_dcm.replay import replay
+from imu_dcm.replay.clean import clean_imu
+
+REPO = Path(__file__).resolve().parents[1]
+SHIPPED = REPO / "replay" / "broad_07_undisturbed_fast_rotation_B"
+TRUTH = "/ground_truth/orientation"
+DAY_NS = 86_400 * 10**9
+
+
+@pytest.fixture(scope="module")
+def trial():
+    """The shipped trial's arrays and its undamaged replay (the oracle)."""
+    log = read_log(SHIPPED)
+    return log.imu, log.truth, replay(SHIPPED)
+
+
+def _bag(path, imu, truth, *, t=None, w=None, log_t=None, tt=None, q=None, tlog=None, topic=TRUTH):
+    return write_bag(
+        path,
+        imu=StampedSeries(
+            imu.t_ns if t is None else t, imu.omega_b if w is None else w, "imu", log_t
+        ),
+        quaternions={
+            topic: StampedSeries(
+                truth.t_ns if tt is None else tt, truth.q_w_b if q is None else q, "world", tlog
+            )
+        },
+    )
+
+
+def _run(path, **kw):
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        r = replay(path, **kw)
+    return r, [str(c.message) for c in caught]
+
+
+# ------------------------------------------------------------- the rule changes no good log
+def _assert_untouched(t_ns, omega, name):
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", ImuDcmWarning)  # not a word about a good log
+        c = clean_imu(t_ns, omega, name)
+    assert (c.dropped_implausible, c.dropped_nonincreasing, c.sorted_out_of_order) == (0, 0, 0)
+    assert len(c.t_ns) == len(t_ns), name
+
+
+@pytest.mark.parametrize(
+    "name", sorted(p.name for p in (REPO / "replay").iterdir() if (p / "metadata.yaml").is_file())
+)
+def test_cleaning_leaves_shipped_logs_untouched(name):
+    log = read_log(REPO / "replay" / name)
+    _assert_untouched(log.imu.t_ns, log.imu.omega_b, name)
+
+
+def test_cleaning_leaves_every_broad_trial_untouched(broad_dir):
+    for trial in BROAD_TRIALS:
+        log = read_log(broad_dir / trial)
+        _assert_untouched(log.imu.t_ns, log.imu.omega_b, trial)
+
+
+def test_cleaning_leaves_synthetic_scenes_untouched(tmp_path):
+    from data_synth.cli import main as synth_main
+
+    for scene in (
+        ["heavy-top", "--motion", "wavy"],
+        ["free-body", "--case", "intermediate"],
+        ["coning"],
+    ):
+        out = tmp_path / scene[0]
+        assert (
+            synth_main(
+                [
+                    *scene,
+                    "--rate",
+                    "400",
+                    "--duration",
+                    "5",
+                    "--gyro-noise-density",
+                    "1e-2",
+                    "--seed",
+                    "3",
+                    "--out",
+                    str(out),
+                ]
+            )
+            == 0
+        )
+        log = read_log(out)
+        _assert_untouched(log.imu.t_ns, log.imu.omega_b, scene[0])
+
+
+# ----------------------------------------------------------- implausible samples: one each
+def test_implausible_samples_cost_one_sample_each(trial, tmp_path):
+    imu, truth, ref = trial
+    w = imu.omega_b.copy()
+    bad = [10_000, 20_000, 30_000, 40_000]
+    w[bad[0]] = 1e300  # a gyro of 1e300: no estimate at all before
+    w[bad[1], 0] = 1e6  # a single 1e6 rad/s spike
+    w[bad[2], 2] = -1.9e72  # one flipped exponent byte
+    w[bad[3]] *= 256.0  # a flipped low exponent bit: 256x, below the hard limit
+    assert 8 * np.percentile(np.linalg.norm(imu.omega_b, axis=1), 99.9) < np.linalg.norm(
+        w[bad[3]]
+    )  # the last is an isolated spike by the log's own statistics
+    r, said = _run(_bag(tmp_path / "spikes", imu, truth, w=w))
+    s = r.summary
+    assert s.dropped_implausible == 4 and s.samples == ref.summary.samples - 4
+    expect = (imu.t_ns[bad] - imu.t_ns[0]) * 1e-9
+    np.testing.assert_allclose(s.implausible_t_s, expect, rtol=0, atol=1e-9)
+    assert any("dropped 4 implausible samples" in x for x in said)
+    # four missing 3.5 ms samples among 52 518: the answer is the undamaged one (3.80°), not
+    # the 128° an integrated spike gives
+    assert abs(s.rms_error_deg - ref.summary.rms_error_deg) < 0.02
+
+
+def test_a_log_of_only_implausible_rates_is_an_error(tmp_path):
+    t_ns = 1_700_000_000_000_000_000 + np.arange(100, dtype=np.int64) * 10**7
+    log = write_bag(tmp_path / "huge", imu=StampedSeries(t_ns, np.full((100, 3), 1e300), "imu"))
+    with pytest.raises(LogError, match="Expected at least 2 valid gyro samples"):
+        _run(log)
+
+
+def test_a_non_finite_estimate_is_an_error_never_a_score(trial, tmp_path, monkeypatch):
+    from imu_dcm.replay import core
+
+    class Broken:
+        def __init__(self, n):
+            self.q = np.full((n, 4), np.nan)
+
+        def as_quat(self):
+            return self.q
+
+    monkeypatch.setattr(core, "integrate", lambda w, t, q0, method: Broken(len(t)))
+    with pytest.raises(LogError, match="Expected a finite attitude estimate, got NaN/Inf"):
+        _run(SHIPPED)
+
+
+# ---------------------------------------------------------------------------- stamps
+def test_one_wild_stamp_costs_one_sample(trial, tmp_path):
+    imu, truth, ref = trial
+    for k, jump in ((5_000, DAY_NS), (30_000, -DAY_NS), (len(imu.t_ns) - 1, DAY_NS)):
+        t = imu.t_ns.copy()
+        t[k] += jump
+        # file order is arrival order: the log times stay right, one header stamp is wild
+        r, said = _run(_bag(tmp_path / f"wild{k}", imu, truth, t=t, log_t=imu.t_ns))
+        assert r.summary.samples == ref.summary.samples - 1  # was 62 % of the log
+        assert r.summary.dropped_backward == 1 and r.summary.gaps == ()
+        assert any("1 wild stamps" in x for x in said)
+        assert abs(r.summary.rms_error_deg - ref.summary.rms_error_deg) < 0.01
+
+
+def test_out_of_file_order_messages_are_sorted_and_duplicates_dropped(trial, tmp_path):
+    imu, truth, ref = trial
+    n = len(imu.t_ns)
+    rng = np.random.default_rng(7)
+    swap = rng.choice(np.arange(1, n - 2, 3), size=n // 100, replace=False)  # 1 % of messages
+    rows = np.arange(n)
+    rows[swap], rows[swap + 1] = swap + 1, swap  # neighbours arrive in the wrong order
+    calm = np.setdiff1d(np.arange(n), np.concatenate([swap, swap + 1]))
+    dup = np.sort(rng.choice(calm, size=200, replace=False))  # duplicates of in-order messages
+    where = np.argsort(rows)[dup] + 1
+    rows = np.insert(rows, where, dup)  # each duplicate right after its original
+    arrival = np.sort(imu.t_ns[rows])  # log times increase in file order
+    r, _said = _run(
+        _bag(
+            tmp_path / "shuffled", imu, truth, t=imu.t_ns[rows], w=imu.omega_b[rows], log_t=arrival
+        )
+    )
+    s = r.summary
+    assert s.time == "header" and s.samples == ref.summary.samples
+    assert s.dropped_duplicate == 200 and s.sorted_out_of_order == len(swap)
+    assert s.dropped_backward == 0
+    np.testing.assert_array_equal(r.t_ns, ref.t_ns)
+    assert abs(s.rms_error_deg - ref.summary.rms_error_deg) < 1e-6
+
+
+def test_zero_header_stamps_use_log_time_and_say_why(trial, tmp_path):
+    imu, truth, ref = trial
+    r, said = _run(
+        _bag(
+            tmp_path / "zero",
+            imu,
+            truth,
+            t=np.zeros_like(imu.t_ns),
+            log_t=imu.t_ns,
+            tt=np.zeros_like(truth.t_ns),
+            tlog=truth.t_ns,
+        )
+    )
+    assert r.summary.time == "log" and r.summary.samples == ref.summary.samples
+    assert (
+        sum(
+            "using log time, not header stamps: the IMU header stamps are all equal" in x
+            for x in said
+        )
+        == 1
+    )
+    assert abs(r.summary.rms_error_deg - ref.summary.rms_error_deg) < 1e-6
+    with pytest.raises(LogError, match="Expected at least 2 valid gyro samples.*try --time log"):
+        _run(tmp_path / "zero", time="header")  # as asked: every stamp equal, with the hint
+
+
+def test_device_clock_imu_against_wall_clock_truth_uses_log_time(trial, tmp_path):
+    imu, truth, ref = trial
+    device = imu.t_ns - imu.t_ns[0] + 5 * 10**9  # the IMU's own clock, from 5 s
+    r, said = _run(_bag(tmp_path / "device", imu, truth, t=device, log_t=imu.t_ns))
+    assert r.summary.time == "log" and any(
+        "never overlap while their log times do" in x for x in said
+    )
+    assert abs(r.summary.rms_error_deg - ref.summary.rms_error_deg) < 1e-6
+    with pytest.raises(LogError, match="to overlap the gyro.*try --time log"):
+        _run(tmp_path / "device", time="header")
+
+
+# ----------------------------------------------------------------------------- truth check
+def test_truth_that_does_not_follow_the_gyro(trial, tmp_path):
+    # Wheel-odometry-like truth: yaw only, unrelated to the IMU's motion.
+    imu, truth, ref = trial
+    t = (truth.t_ns - truth.t_ns[0]) * 1e-9
+    yaw = Rotation.from_rotvec(
+        np.outer(0.8 * np.sin(0.3 * t) + 0.5 * np.sin(1.1 * t), [0, 0, 1])
+    ).as_quat()
+    bag = _bag(tmp_path / "odom", imu, truth, q=yaw, topic="/odom")
+    r, said = _run(bag)  # auto-picked: not scored, and said so in one line
+    assert r.summary.truth_topic is None and r.summary.rms_error_deg is None
+    line = [x for x in said if "does not follow the gyro" in x]
+    assert len(line) == 1 and "replaying without truth" in line[0]
+    assert r.summary.truth_check["correlation"] < 0.6
+    named, said = _run(bag, truth_topic="/odom")  # named: scored anyway, mismatch recorded
+    assert named.summary.truth_topic == "/odom" and named.summary.rms_error_deg > 20
+    assert not named.summary.truth_check["follows"]
+    assert any("scored anyway" in x for x in named.summary.warnings)
+    # the real truth follows: correlation near 1 (the optical truth is the IMU's attitude)
+    assert ref.summary.truth_check["follows"] and ref.summary.truth_check["correlation"] > 0.95
+
+
+def test_truth_offset_is_measured_and_auto_applies_it(trial, tmp_path):
+    imu, truth, ref = trial
+    late = _bag(tmp_path / "late", imu, truth, tt=truth.t_ns + 30_000_000)  # truth 30 ms late
+    r, _ = _run(late)
+    base = ref.summary.truth_check["shift_s"]  # the trial's own small offset
+    # the measured shift moves by the 30 ms added; grid of 10 ms refined by a parabola
+    assert r.summary.truth_check["shift_s"] - base == pytest.approx(-0.030, abs=0.002)
+    assert r.summary.truth_offset_s == 0.0 and r.summary.rms_error_deg > ref.summary.rms_error_deg
+    auto, _ = _run(late, truth_offset_s="auto")
+    own, _ = _run(SHIPPED, truth_offset_s="auto")
+    assert auto.summary.truth_offset_s == pytest.approx(
+        own.summary.truth_offset_s - 0.030, abs=0.002
+    )
+    assert abs(auto.summary.rms_error_deg - own.summary.rms_error_deg) < 0.02
+    fixed, _ = _run(late, truth_offset_s=-0.030)  # seconds: exactly undoes the shift
+    assert abs(fixed.summary.rms_error_deg - ref.summary.rms_error_deg) < 1e-6
+
+
+def test_steady_spin_truth_is_kept_and_still_truth_under_motion_is_not(tmp_path):
+    # A constant-rate spin: the rate norm is flat (nothing to correlate), the gyro noisy. Truth
+    # is exp(ω t) in closed form; it must be kept. The same gyro against a still truth must not.
+    t = np.arange(0, 4.0, 1 / 400)
+    w = np.array([0.3, -0.2, 2.0])
+    rng = np.random.default_rng(1)
+    gyro = w + rng.normal(0, 0.05, (len(t), 3))  # |ω| noise far above the 0.05 rad/s threshold
+    t_ns = 1_700_000_000_000_000_000 + np.round(t * 1e9).astype(np.int64)
+    spin = Rotation.from_rotvec(np.outer(t, w)).as_quat()
+    still = np.tile([0.0, 0.0, 0.0, 1.0], (len(t), 1))
+    for name, q, kept in (("spin", spin, True), ("still", still, False)):
+        bag = write_bag(
+            tmp_path / name,
+            imu=StampedSeries(t_ns, gyro, "imu"),
+            quaternions={TRUTH: StampedSeries(t_ns, q, "world")},
+        )
+        r, said = _run(bag, bias="none")
+        assert (r.summary.truth_topic == TRUTH) is kept, said
+        assert r.summary.truth_check["correlation"] is None  # a flat norm: levels compared
+        assert r.summary.truth_check["follows"] is kept
+
+
+def test_header_stamps_that_do_not_increase_use_log_time(trial, tmp_path):
+    # A driver that stamps in bursts: within every block of 4 messages the header stamps run
+    # backwards (3 of 4 steps fall), while the log (receive) times are right.
+    imu, truth, ref = trial
+    n = len(imu.t_ns) // 4 * 4
+    backwards = imu.t_ns[:n].reshape(-1, 4)[:, ::-1].ravel()
+    t = imu.t_ns.copy()
+    t[:n] = backwards
+    r, said = _run(_bag(tmp_path / "bursts", imu, truth, t=t, log_t=imu.t_ns))
+    assert r.summary.time == "log"
+    assert sum("header stamps fall at 75 % of the steps" in x for x in said) == 1
+    assert abs(r.summary.rms_error_deg - ref.summary.rms_error_deg) < 1e-6
