@@ -280,6 +280,10 @@ def _replay_main(argv: list[str]) -> int:
 def main(argv: list[str] | None = None) -> int:
     """Run the command; returns the exit code (0 fine, 2 bad input)."""
     argv = list(sys.argv[1:] if argv is None else argv)
+    if argv and argv[0] == "batch":
+        from imu_dcm.replay import batch
+
+        return batch.main(argv[1:])
     message = ""
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
