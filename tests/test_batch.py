@@ -25,7 +25,7 @@ from data_synth.cli import main as synth_main
 from imu_dcm.replay import replay, replay_many
 from imu_dcm.replay.batch import find_logs, row_from_result
 from imu_dcm.replay.batch_cli import main as batch_main
-from imu_dcm.replay.table import COLUMNS, LogRow, read_table
+from imu_dcm.replay.table import COLUMNS, LogRow, append_rows, read_table
 
 REPO_ROOT = Path(__file__).resolve().parents[1]
 SHIPPED = sorted(p for p in (REPO_ROOT / "replay").iterdir() if (p / "metadata.yaml").is_file())
@@ -256,3 +256,14 @@ def test_failed_logs_give_exit_code_1(logs, tmp_path, capsys):
     out = capsys.readouterr().out
     assert code == 1 and "failed     " in out and "2 logs, 1 failed" in out
     assert np.isfinite(read_table(tmp_path / "t.csv")[0].rms_error_deg)
+
+
+def test_resume_replays_a_log_whose_worker_died(logs, tmp_path):
+    out = tmp_path / "t.csv"
+    lost = LogRow(os.path.abspath(logs[-1]), error="BrokenProcessPool: worker lost: killed")
+    failed = LogRow(os.path.abspath(logs[-2]), error="LogError: Expected an IMU channel, got none")
+    append_rows(out, [lost, failed])
+    res = replay_many(logs[-2:], out, jobs=1, resume=True, chart=None)
+    assert res.resumed == 1 and res.rows[0] == failed  # the log's own failure stands
+    assert res.rows[1].error is None and res.rows[1].samples > 0  # the lost one ran again
+    assert read_table(out) == list(res.rows)

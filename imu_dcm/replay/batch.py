@@ -12,6 +12,7 @@ decimated error curve, so a worker's memory is what that log's replay needs.
 
 from __future__ import annotations
 
+import contextlib
 import os
 import threading
 import time
@@ -22,12 +23,13 @@ from pathlib import Path
 from typing import Any
 
 from imu_dcm.errors import ImuDcmWarning, InputError
-from imu_dcm.replay.runners import run_dask, run_local
+from imu_dcm.replay.runners import LOST, run_dask, run_local
 from imu_dcm.replay.table import (
     Curve,
     LogRow,
     append_curve,
     append_rows,
+    curves_path,
     decimate_curve,
     one_line,
     read_curves,
@@ -54,7 +56,8 @@ class BatchResult:
     ``rows``: one :class:`LogRow` per input log, in input order (rows resumed from the table
     included); ``failed``: how many carry an error; ``resumed``: how many were already in the
     table; ``table``, ``markdown``, ``chart``: files written (None when not asked for or, for the
-    chart, when matplotlib is missing); ``summary``: the summary line.
+    chart, when matplotlib is missing); ``summary``: the summary line of the whole table (which
+    also keeps rows of earlier runs over other logs).
     """
 
     rows: tuple[LogRow, ...]
@@ -208,7 +211,8 @@ def replay_many(
         A Dask client or scheduler address (``"tcp://host:8786"``); replaces ``jobs``. The
         workers must see the logs at the same paths.
     resume : bool
-        Skip logs that already have a row in ``table`` (failed ones included).
+        Skip logs that already have a row in ``table``, failed ones included, except rows whose
+        worker process died (those logs are replayed again).
     overwrite : bool
         Start ``table`` afresh when it exists (otherwise an existing table needs ``resume``).
     chart : str, Path or None
@@ -254,17 +258,19 @@ def replay_many(
                              f"{INSTALL_HINT}")  # fmt: skip
         chart_path = Path(chart)
 
-    done: dict[str, LogRow] = {}
+    old: dict[str, LogRow] = {}
     if table is not None:
         table = Path(table)
         if table.exists() and table.stat().st_size and not (resume or overwrite):
             raise InputError(f"Expected a new table, got an existing {table} (resume or "
                              f"overwrite it)")  # fmt: skip
         if overwrite and not resume:
-            for p in (table, table.with_suffix(".curves.jsonl")):
+            for p in (table, curves_path(table)):
                 p.unlink(missing_ok=True)
         table.parent.mkdir(parents=True, exist_ok=True)
-        done = {r.path: r for r in read_table(table)} if resume else {}
+        old = {r.path: r for r in read_table(table)} if resume else {}  # the last row wins
+    # A row whose worker died is not the log's verdict: replay that log again.
+    done = {k: r for k, r in old.items() if not (r.error and f": {LOST}: " in r.error)}
     todo = [p for p in logs if p not in done]
     resumed = len(logs) - len(todo)
     options = dict(replay_options)
@@ -276,20 +282,21 @@ def replay_many(
             runs = run_dask(replay_one, todo, options, dask)
         else:
             runs = run_local(replay_one, todo, options, jobs)
-        for row, curve in runs:
-            if table is not None:
-                if curve is not None:
-                    append_curve(table, curve)  # before the row: a row always has its curve
-                append_rows(table, [row])
-            elif curve is not None:
-                new_curves[row.path] = curve
-            fresh[row.path] = row
-            if progress is not None:
-                progress(resumed + len(fresh), len(logs), row)
+        with contextlib.closing(runs):  # stops the workers if this loop is interrupted
+            for row, curve in runs:
+                if table is not None:
+                    if curve is not None:
+                        append_curve(table, curve)  # first: a row always has its curve
+                    append_rows(table, [row])
+                elif curve is not None:
+                    new_curves[row.path] = curve
+                fresh[row.path] = row
+                if progress is not None:
+                    progress(resumed + len(fresh), len(logs), row)
 
     rows = [fresh.get(p) or done[p] for p in logs]
     listed = set(logs)
-    others = [r for r in done.values() if r.path not in listed]  # resumed from other inputs
+    others = [r for r in old.values() if r.path not in listed]  # earlier runs, other logs
     md = None
     curves = new_curves
     if table is not None:

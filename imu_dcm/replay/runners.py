@@ -21,8 +21,10 @@ from typing import Any
 from imu_dcm.errors import ImuDcmWarning, InputError
 from imu_dcm.replay.table import Curve, LogRow, one_line
 
-__all__ = ["DASK_HINT", "run_dask", "run_local"]
+__all__ = ["DASK_HINT", "LOST", "run_dask", "run_local"]
 
+#: In the error of a row whose worker died (not the log's fault: ``resume`` retries it).
+LOST = "worker lost"
 DASK_HINT = "pip install 'imu_dcm[dask]' (or pip install 'dask[distributed]')"
 _BLAS_ENV = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS",
              "VECLIB_MAXIMUM_THREADS", "NUMEXPR_NUM_THREADS")  # fmt: skip
@@ -77,7 +79,7 @@ def _env(values: Mapping[str, str]):
 
 
 def _lost(path: str, exc: BaseException) -> Outcome:
-    return LogRow(path, error=f"{type(exc).__name__}: worker lost: {one_line(str(exc))}"), None
+    return LogRow(path, error=f"{type(exc).__name__}: {LOST}: {one_line(str(exc))}"), None
 
 
 def run_local(fn: PerLog, paths: list[str], options: Mapping[str, Any],
