@@ -39,7 +39,7 @@ def write_chart(path: str | Path, rows: Sequence[LogRow], curves: dict[str, Curv
 
     names = short_names([r.path for r in rows])
     named = len(rows) <= MAX_NAMED
-    top_h = 0.28 * len(rows) + 1.0 if named else 3.0
+    top_h = 0.28 * len(rows) + 1.6 if named else 3.0
     fig = Figure(figsize=(10, top_h + 4.5), layout="constrained")
     FigureCanvasAgg(fig)
     ax_rms, ax_t = fig.subplots(2, 1, height_ratios=[top_h, 4.5])
@@ -51,7 +51,8 @@ def write_chart(path: str | Path, rows: Sequence[LogRow], curves: dict[str, Curv
     colors = [f"C{k % 10}" for k in range(len(rows))]
     if named:
         y = np.arange(len(rows))[::-1]
-        ax_rms.barh(y, np.where(np.isfinite(rms), rms, 0.0), left=0, color=colors)
+        has = np.isfinite(rms) & (rms > 0)
+        ax_rms.barh(y[has], rms[has], color=[c for c, h in zip(colors, has) if h])
         for yi, r, v in zip(y, rows, rms):
             if r.failed:
                 ax_rms.text(floor, yi, "  failed: " + r.error[:90], va="center", fontsize=7,
@@ -67,9 +68,13 @@ def write_chart(path: str | Path, rows: Sequence[LogRow], curves: dict[str, Curv
         ax_rms.plot(np.arange(1, len(order) + 1), order, ".", ms=3)
         ax_rms.set_xlabel(f"logs sorted by RMS error ({len(rows) - len(good)} failed or "
                           f"without truth not shown)")  # fmt: skip
-    ax_rms.set_xscale("log") if named else ax_rms.set_yscale("log")
-    if named and len(good):
-        ax_rms.set_xlim(floor, float(good.max()) * 30)
+    top = float(good.max()) if len(good) else 1.0
+    if named:
+        ax_rms.set_xscale("log")
+        ax_rms.set_xlim(floor, top * 30)
+    else:
+        ax_rms.set_yscale("log")
+        ax_rms.set_ylim(floor, top * 3)
     ax_rms.set_title("RMS attitude error per log, deg", fontsize=10, loc="left")
     ax_rms.grid(True, which="major", alpha=0.3)
 
@@ -96,6 +101,11 @@ def write_chart(path: str | Path, rows: Sequence[LogRow], curves: dict[str, Curv
 
             handles = [Line2D([], [], color=c) for c in seg_colors]
             ax_t.legend(handles, labels, fontsize=7, loc="upper left", bbox_to_anchor=(1.01, 1.0))
+    else:
+        ax_t.set_xlim(0, 1)
+        ax_t.set_ylim(1e-3, 1)
+        ax_t.text(0.5, 0.5, "no log with an error curve", ha="center", va="center",
+                  transform=ax_t.transAxes, color="gray")  # fmt: skip
     ax_t.set_yscale("log")
     ax_t.set_xlabel("time since the log's first sample, s")
     ax_t.set_ylabel("total attitude error, deg")
