@@ -116,11 +116,15 @@ def main(argv: list[str] | None = None) -> int:
     base = local["jobs 1"].median_s
     ratio = local["jobs 2"].median_s / base
     spin = local["spin 2 processes"].median_s / local["spin 1 process"].median_s
-    print(f"jobs 2 / jobs 1 wall ratio: {ratio:.2f} (target <= {TARGET_RATIO}); the same ratio "
-          f"for pure CPU work split over 2 processes now: {spin:.2f} (0.5 on two idle cores)")
-    print(f"per-log overhead, jobs 1 vs bare: "
-          f"{1e3 * (base - local['bare'].median_s) / n:+.1f} ms/log; with the table files: "
-          f"{1e3 * (local['jobs 1 + table'].median_s - local['bare'].median_s) / n:+.1f} ms/log")
+    print(
+        f"jobs 2 / jobs 1 wall ratio: {ratio:.2f} (target <= {TARGET_RATIO}); the same ratio "
+        f"for pure CPU work split over 2 processes now: {spin:.2f} (0.5 on two idle cores)"
+    )
+    print(
+        f"per-log overhead, jobs 1 vs bare: "
+        f"{1e3 * (base - local['bare'].median_s) / n:+.1f} ms/log; with the table files: "
+        f"{1e3 * (local['jobs 1 + table'].median_s - local['bare'].median_s) / n:+.1f} ms/log"
+    )
 
     try:
         from distributed import LocalCluster

@@ -244,7 +244,9 @@ def test_cli_bad_input_is_one_line_and_exit_2(logs, tmp_path, capsys, monkeypatc
     assert batch_main([logs[-1], "--table", str(out), "--jobs", "0", "--force"]) == 2
     assert "jobs >= 1" in capsys.readouterr().err
     monkeypatch.setitem(sys.modules, "distributed", None)  # as if Dask were not installed
-    assert batch_main([logs[-1], "--table", str(out), "--force", "--dask", "tcp://127.0.0.1:1"]) == 2
+    assert (
+        batch_main([logs[-1], "--table", str(out), "--force", "--dask", "tcp://127.0.0.1:1"]) == 2
+    )
     err = capsys.readouterr().err
     assert "pip install 'imu_dcm[dask]'" in err and err.count("\n") == 1
 

@@ -310,7 +310,6 @@ def replay_many(
                        summary_line(rows + others))  # fmt: skip
 
 
-
 # ------------------------------------------------------------------------------- CLI
 def main(argv: list[str] | None = None) -> int:
     """``python -m imu_dcm.replay batch ...``: see :mod:`imu_dcm.replay.batch_cli`."""

@@ -46,12 +46,18 @@ def build_parser() -> argparse.ArgumentParser:
     where.add_argument("--dask", metavar="ADDRESS",
                        help="run on a Dask cluster, e.g. tcp://HOST:8786 (workers must see the "
                        "logs at the same paths)")  # fmt: skip
-    p.add_argument("--resume", action="store_true",
-                   help="skip logs that already have a row in OUT (failed ones too)")
+    p.add_argument(
+        "--resume",
+        action="store_true",
+        help="skip logs that already have a row in OUT (failed ones too)",
+    )
     p.add_argument("--force", action="store_true", help="start OUT afresh if it exists")
     chart = p.add_mutually_exclusive_group()
-    chart.add_argument("--chart", metavar="PATH.png",
-                       help="where to draw the chart (default OUT.png; needs matplotlib)")
+    chart.add_argument(
+        "--chart",
+        metavar="PATH.png",
+        help="where to draw the chart (default OUT.png; needs matplotlib)",
+    )
     chart.add_argument("--no-chart", action="store_true", help="draw no chart")
     p.add_argument("--quiet", action="store_true", help="print only the summary and errors")
     g = p.add_argument_group("replay options (the same for every log)")
@@ -61,18 +67,36 @@ def build_parser() -> argparse.ArgumentParser:
                    help="stamps from header.stamp (default) or MCAP log time")  # fmt: skip
     g.add_argument("--method", choices=METHODS, default="magnus4",
                    help="integrator increment (default magnus4)")  # fmt: skip
-    g.add_argument("--bias", default="auto",
-                   help="gyro bias: auto (from rest segments, default), none, or x,y,z in rad/s")
+    g.add_argument(
+        "--bias",
+        default="auto",
+        help="gyro bias: auto (from rest segments, default), none, or x,y,z in rad/s",
+    )
     g.add_argument("--gyro-units", choices=("rad/s", "deg/s"), default="rad/s",
                    help="unit of the logs' angular velocity (default rad/s)")  # fmt: skip
-    g.add_argument("--init-quat", metavar="X,Y,Z,W",
-                   help="initial q_world_body (scalar last) for logs without truth")
-    g.add_argument("--prefilter", choices=("none", "kalman", "rts"), default="none",
-                   help="gyro pre-filter: Kalman filter or RTS smoother (default none)")
-    g.add_argument("--gyro-noise-density", type=float, metavar="RAD_S_SQRT_HZ",
-                   help="pre-filter: gyro white-noise density, rad/s/√Hz (default: from rest)")
-    g.add_argument("--angular-accel", type=float, metavar="RAD_S2",
-                   help="pre-filter: angular-acceleration scale, rad/s² (default: fitted)")
+    g.add_argument(
+        "--init-quat",
+        metavar="X,Y,Z,W",
+        help="initial q_world_body (scalar last) for logs without truth",
+    )
+    g.add_argument(
+        "--prefilter",
+        choices=("none", "kalman", "rts"),
+        default="none",
+        help="gyro pre-filter: Kalman filter or RTS smoother (default none)",
+    )
+    g.add_argument(
+        "--gyro-noise-density",
+        type=float,
+        metavar="RAD_S_SQRT_HZ",
+        help="pre-filter: gyro white-noise density, rad/s/√Hz (default: from rest)",
+    )
+    g.add_argument(
+        "--angular-accel",
+        type=float,
+        metavar="RAD_S2",
+        help="pre-filter: angular-acceleration scale, rad/s² (default: fitted)",
+    )
     return p
 
 
