@@ -99,6 +99,7 @@ def run_local(fn: PerLog, paths: list[str], options: Mapping[str, Any],
         return
     pool = ProcessPoolExecutor(min(jobs, len(paths)), mp_context=_pool_context(),
                                initializer=_worker_init)  # fmt: skip
+    finished = False
     try:
         with _env(dict.fromkeys(_BLAS_ENV, "1")):  # spawned workers start as tasks are submitted
             futures = {pool.submit(fn, p, options): p for p in paths}
@@ -106,12 +107,16 @@ def run_local(fn: PerLog, paths: list[str], options: Mapping[str, Any],
             path = futures.pop(fut)
             exc = fut.exception()
             yield fut.result() if exc is None else _lost(path, exc)
+        finished = True
     finally:
-        procs = list((getattr(pool, "_processes", None) or {}).values())
-        pool.shutdown(wait=False, cancel_futures=True)
-        for proc in procs:  # a batch stopped early does not leave workers replaying
-            if proc.is_alive():
-                proc.terminate()
+        if finished:  # every worker is idle: let them exit, so no pool thread outlives the batch
+            pool.shutdown(wait=True)
+        else:  # stopped early: do not leave workers replaying
+            procs = list((getattr(pool, "_processes", None) or {}).values())
+            pool.shutdown(wait=False, cancel_futures=True)
+            for proc in procs:
+                if proc.is_alive():
+                    proc.terminate()
 
 
 def run_dask(fn: PerLog, paths: list[str], options: Mapping[str, Any],
