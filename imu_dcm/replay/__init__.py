@@ -7,7 +7,7 @@
 
 from __future__ import annotations
 
-__all__ = ["ReplayResult", "ReplaySummary", "replay"]
+__all__ = ["ReplayResult", "ReplaySummary", "replay", "replay_many"]
 
 
 def __getattr__(name: str):
@@ -15,6 +15,10 @@ def __getattr__(name: str):
         from imu_dcm.replay.core import replay
 
         return replay
+    if name == "replay_many":
+        from imu_dcm.replay.batch import replay_many
+
+        return replay_many
     if name in ("ReplayResult", "ReplaySummary"):
         from imu_dcm.replay import summary
 

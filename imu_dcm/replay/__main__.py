@@ -372,6 +372,10 @@ def main(argv: list[str] | None = None) -> int:
     from imu_dcm.errors import ImuDcmError
 
     argv = list(sys.argv[1:] if argv is None else argv)
+    if argv and argv[0] == "batch":
+        from imu_dcm.replay import batch
+
+        return batch.main(argv[1:])
     message = ""
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")

@@ -1,0 +1,153 @@
+"""Batch replay speed: a process pool and a Dask cluster against one process, and the per-log
+cost of the batch machinery against a bare replay.
+
+``python -m benchmarks.batch_speed [--rounds N] [--broad DIR]``
+
+Logs: the six BROAD bags (``../shared/data/broad`` beside the repository, or ``--broad``) and the
+shipped BROAD trial under ``replay/``. Wall time, medians of interleaved rounds after a warm-up,
+one BLAS thread per process (see :mod:`benchmarks.timing`). Two phases:
+
+1. Local, no Dask client alive (so the pool forks its workers): ``bare`` (a loop of
+   :func:`imu_dcm.replay.replay` calls), ``jobs 1`` (:func:`imu_dcm.replay.replay_many` in this
+   process, rows in memory), ``jobs 1 + table`` (the same writing the CSV with fsync per row,
+   the markdown and the curves; no chart), ``jobs 2`` (a pool of two workers, started inside
+   the timed call). Target: ``jobs 2`` / ``jobs 1`` <= 0.6 on two cores. Beside them, two
+   units of pure-Python CPU work in this process or split over a fresh pool of two: on a
+   shared machine this ratio says how much parallelism the machine gave during the run
+   (0.5 on two idle cores, 1.0 when other work takes a whole core).
+2. Dask: a ``LocalCluster`` of two single-thread worker processes on 127.0.0.1 (started before
+   the rounds, warmed up by one batch), against ``jobs 1`` timed in the same rounds.
+
+Every mode must give the same rows, bit for bit except the wall time; the script checks it.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import os
+import sys
+import tempfile
+from pathlib import Path
+
+from benchmarks.timing import limit_threads_env
+
+REPO = Path(__file__).resolve().parents[1]
+DEFAULT_BROAD = REPO.parent / "shared" / "data" / "broad"
+SHIPPED = REPO / "replay" / "broad_07_undisturbed_fast_rotation_B"
+TARGET_RATIO = 0.6
+
+
+SPIN = 10_000_000  # loop iterations of one unit of pure CPU work (~0.5 s on an idle core)
+
+
+def _spin(n: int) -> int:
+    s = 0
+    for i in range(n):
+        s += i
+    return s
+
+
+def _spin_units(jobs: int) -> None:
+    """Two units of CPU work: in this process (jobs 1) or in a fresh pool of two workers, as the
+    batch runs them. The ratio of the two says what parallelism the machine gives right now."""
+    if jobs == 1:
+        _spin(SPIN), _spin(SPIN)
+        return
+    import multiprocessing
+    from concurrent.futures import ProcessPoolExecutor
+
+    with ProcessPoolExecutor(2, mp_context=multiprocessing.get_context("fork")) as ex:
+        list(ex.map(_spin, [SPIN, SPIN]))
+
+
+def _same(a, b) -> bool:
+    strip = lambda rows: [dataclasses.replace(r, elapsed_s=None) for r in rows]
+    return strip(a) == strip(b)
+
+
+def main(argv: list[str] | None = None) -> int:
+    p = argparse.ArgumentParser(prog="python -m benchmarks.batch_speed", description=__doc__,
+                                formatter_class=argparse.RawDescriptionHelpFormatter)  # fmt: skip
+    p.add_argument("--broad", type=Path, default=DEFAULT_BROAD, help="folder of BROAD bags")
+    p.add_argument("--rounds", type=int, default=5, help="timed rounds (default 5)")
+    args = p.parse_args(argv)
+
+    limit_threads_env()
+    from benchmarks.timing import interleaved_medians, single_thread
+    from imu_dcm.replay import replay, replay_many
+    from imu_dcm.replay.batch import find_logs
+
+    logs = find_logs([args.broad, SHIPPED])
+    if len(logs) != 7:
+        print(f"expected the six BROAD bags under {args.broad} and the shipped trial, "
+              f"found {len(logs)} logs", file=sys.stderr)  # fmt: skip
+        return 2
+    n = len(logs)
+    tmp = Path(tempfile.mkdtemp(prefix="batch_speed_"))
+    results = {}
+
+    def run(name, **kw):
+        def fn():
+            results[name] = replay_many(logs, chart=None, **kw).rows
+
+        return fn
+
+    def bare():
+        for path in logs:
+            replay(path)
+
+    print(f"{n} logs; {os.cpu_count()} cores; load average before: "
+          f"{' '.join(f'{x:.2f}' for x in os.getloadavg())}")  # fmt: skip
+    with single_thread():
+        local = interleaved_medians({
+            "bare": (bare, n),
+            "jobs 1": (run("jobs 1", jobs=1), n),
+            "jobs 1 + table": (run("table", table=tmp / "t.csv", jobs=1, overwrite=True), n),
+            "jobs 2": (run("jobs 2", jobs=2), n),
+            "spin 1 process": (lambda: _spin_units(1), 2),
+            "spin 2 processes": (lambda: _spin_units(2), 2),
+        }, rounds=args.rounds)  # fmt: skip
+    for name, t in local.items():
+        if name.startswith("spin"):
+            continue
+        print(f"{name:<16} median {t.median_s:6.3f} s  ({1e3 * t.median_s / n:6.1f} ms/log; "
+              f"rounds {', '.join(f'{x:.2f}' for x in t.times_s)})")  # fmt: skip
+    base = local["jobs 1"].median_s
+    ratio = local["jobs 2"].median_s / base
+    spin = local["spin 2 processes"].median_s / local["spin 1 process"].median_s
+    print(
+        f"jobs 2 / jobs 1 wall ratio: {ratio:.2f} (target <= {TARGET_RATIO}); the same ratio "
+        f"for pure CPU work split over 2 processes now: {spin:.2f} (0.5 on two idle cores)"
+    )
+    print(
+        f"per-log overhead, jobs 1 vs bare: "
+        f"{1e3 * (base - local['bare'].median_s) / n:+.1f} ms/log; with the table files: "
+        f"{1e3 * (local['jobs 1 + table'].median_s - local['bare'].median_s) / n:+.1f} ms/log"
+    )
+
+    try:
+        from distributed import LocalCluster
+    except ImportError:
+        print("dask: not installed (pip install 'imu_dcm[dask]'), phase skipped")
+        return 0
+    with LocalCluster(n_workers=2, threads_per_worker=1, processes=True, host="127.0.0.1",
+                      dashboard_address=None) as cluster, single_thread():  # fmt: skip
+        address = cluster.scheduler_address
+        on_dask = interleaved_medians({
+            "jobs 1": (run("jobs 1", jobs=1), n),
+            "dask 2 workers": (run("dask", dask=address), n),
+        }, rounds=args.rounds)  # fmt: skip
+    for name, t in on_dask.items():
+        print(f"{name:<16} median {t.median_s:6.3f} s  ({1e3 * t.median_s / n:6.1f} ms/log; "
+              f"rounds {', '.join(f'{x:.2f}' for x in t.times_s)})")  # fmt: skip
+    dratio = on_dask["dask 2 workers"].median_s / on_dask["jobs 1"].median_s
+    print(f"dask (LocalCluster, 2 worker processes) / jobs 1 wall ratio: {dratio:.2f}")
+    same = all(_same(results[k], results["jobs 1"]) for k in ("jobs 2", "table", "dask"))
+    print(f"same rows in every mode (bit for bit, wall time aside): {'yes' if same else 'NO'}")
+    print(f"load average after: {' '.join(f'{x:.2f}' for x in os.getloadavg())}")
+    return 0 if same else 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,318 @@
+"""Replay many logs at once: on all cores of this machine, or on a Dask cluster.
+
+``python -m imu_dcm.replay batch PATH... --table OUT.csv [--jobs N | --dask ADDRESS]`` or
+:func:`replay_many`. Every log runs through :func:`replay_one` (the same function in a process
+pool, in a Dask worker, or in this process for ``jobs=1``), which never raises: a log that fails
+gives a row carrying its one-line error. Rows are appended to the table as they arrive (see
+:mod:`imu_dcm.replay.table`), so ``resume=True`` picks up a batch that was killed.
+
+Workers run one log at a time with one BLAS thread each, and send back only the row and a
+decimated error curve, so a worker's memory is what that log's replay needs.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import threading
+import time
+import warnings
+from collections.abc import Callable, Iterable, Iterator, Mapping
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from imu_dcm.errors import ImuDcmWarning, InputError
+from imu_dcm.replay.runners import LOST, run_dask, run_local
+from imu_dcm.replay.table import (
+    Curve,
+    LogRow,
+    append_curve,
+    append_rows,
+    curves_path,
+    decimate_curve,
+    one_line,
+    read_curves,
+    read_table,
+    summary_line,
+    write_curves,
+    write_markdown,
+    write_table,
+)
+
+__all__ = ["BatchResult", "find_logs", "main", "replay_many", "replay_one", "row_from_result"]
+
+#: Files taken as logs when a folder is searched (a folder with metadata.yaml is a bag itself).
+LOG_SUFFIXES = (".mcap", ".db3", ".bag")
+#: Files read as lists of logs (one path a line, relative to the list; ``#`` comments).
+LIST_SUFFIXES = (".txt", ".list", ".lst")
+_ONE_AT_A_TIME = threading.Lock()  # warnings are process-global: one replay per process
+
+
+@dataclass(frozen=True)
+class BatchResult:
+    """What :func:`replay_many` produced.
+
+    ``rows``: one :class:`LogRow` per input log, in input order (rows resumed from the table
+    included); ``failed``: how many carry an error; ``resumed``: how many were already in the
+    table; ``table``, ``markdown``, ``chart``: files written (None when not asked for or, for the
+    chart, when matplotlib is missing); ``summary``: the summary line of the whole table (which
+    also keeps rows of earlier runs over other logs).
+    """
+
+    rows: tuple[LogRow, ...]
+    failed: int
+    resumed: int
+    table: Path | None
+    markdown: Path | None
+    chart: Path | None
+    summary: str
+
+
+# ------------------------------------------------------------------------------ inputs
+def _search(folder: Path) -> Iterator[Path]:
+    if (folder / "metadata.yaml").is_file():
+        yield folder
+        return
+    for p in sorted(folder.iterdir()):
+        if p.name.startswith("."):
+            continue
+        if p.is_dir():
+            yield from _search(p)
+        elif p.suffix in LOG_SUFFIXES:
+            yield p
+
+
+def find_logs(paths: Iterable[str | Path]) -> list[str]:
+    """The logs named by ``paths``, as absolute paths, each once, in the order found.
+
+    A folder holding ``metadata.yaml`` is a bag; another folder is searched (sorted, hidden
+    entries skipped) for bags and ``.mcap`` / ``.db3`` / ``.bag`` files; a ``.txt`` / ``.list``
+    file lists paths, one a line (relative to the list's folder; blank lines and ``#`` comments
+    skipped); anything else, including a path that does not exist, is taken as a log (and gets
+    an error row if it is not one).
+    """
+    out: dict[str, None] = {}
+
+    def add(p: Path, from_list: bool) -> None:
+        if p.is_dir():
+            found = list(_search(p))
+            if not found:
+                warnings.warn(f"no logs found under {p}", ImuDcmWarning, stacklevel=3)
+            out.update((os.path.abspath(f), None) for f in found)
+        elif p.suffix in LIST_SUFFIXES and p.is_file() and not from_list:
+            for line in p.read_text().splitlines():
+                line = line.split("#", 1)[0].strip()
+                if line:
+                    add(p.parent / line, True)
+        else:
+            out[os.path.abspath(p)] = None
+
+    for p in paths:
+        add(Path(p), False)
+    return list(out)
+
+
+# --------------------------------------------------------------------------- one log
+def row_from_result(path: str, result, warnings_seen: Iterable[str], elapsed_s: float) -> LogRow:
+    """The table row of one replay result (the one place that reads a replay's summary).
+
+    Accepts a summary given as a dict or as a dataclass with ``to_dict()``; ``dropped`` sums
+    every ``dropped_*`` count; warnings are the replay's own plus those it raised, each once.
+    """
+    s = result.summary
+    s = s if isinstance(s, dict) else s.to_dict()
+
+    def num(key: str) -> float | None:
+        v = s.get(key)
+        return None if v is None else float(v)
+
+    bias = s.get("bias_rad_s")
+    bx, by, bz = (None, None, None) if bias is None else (float(b) for b in bias)
+    said = dict.fromkeys(one_line(w) for w in (*(s.get("warnings") or ()), *warnings_seen))
+    return LogRow(
+        path=path,
+        samples=int(s["samples"]),
+        duration_s=num("duration_s"),
+        rate_hz=num("rate_hz"),
+        imu_topic=s.get("imu_topic"),
+        truth_topic=s.get("truth_topic"),
+        bias_x_rad_s=bx,
+        bias_y_rad_s=by,
+        bias_z_rad_s=bz,
+        rms_error_deg=num("rms_error_deg"),
+        max_error_deg=num("max_error_deg"),
+        rms_inclination_deg=num("rms_inclination_deg"),
+        max_inclination_deg=num("max_inclination_deg"),
+        rms_heading_deg=num("rms_heading_deg"),
+        max_heading_deg=num("max_heading_deg"),
+        dropped=sum(int(v) for k, v in s.items() if k.startswith("dropped_")),
+        gaps=len(s.get("gaps") or ()),
+        warnings=tuple(said),
+        elapsed_s=float(elapsed_s),
+    )
+
+
+def replay_one(path: str, options: Mapping[str, Any]) -> tuple[LogRow, Curve | None]:
+    """Replay one log with ``options`` (keywords of :func:`imu_dcm.replay.replay`); never raises
+    an ``Exception``: a failure gives a row with ``error`` set and no curve.
+
+    Returns the row and the log's total error over time, decimated (None without truth).
+    """
+    t0 = time.perf_counter()
+    with _ONE_AT_A_TIME, warnings.catch_warnings(record=True) as caught:
+        warnings.resetwarnings()
+        warnings.simplefilter("ignore")  # library deprecations are not the log's business
+        warnings.simplefilter("always", UserWarning)  # ImuDcmWarning and kin
+        warnings.simplefilter("always", RuntimeWarning)
+        try:
+            from imu_dcm.replay.core import replay
+
+            result = replay(path, **options)
+            row = row_from_result(path, result, (str(w.message) for w in caught),
+                                  time.perf_counter() - t0)  # fmt: skip
+        except Exception as exc:  # noqa: BLE001 - one bad log never stops the batch
+            said = tuple(dict.fromkeys(one_line(str(w.message)) for w in caught))
+            error = f"{type(exc).__name__}: {one_line(str(exc))}"
+            return LogRow(path, warnings=said, elapsed_s=time.perf_counter() - t0,
+                          error=error), None  # fmt: skip
+    curve = None
+    if row.rms_error_deg is not None:
+        curve = decimate_curve(path, result.t_s, result.error.total_deg)
+    return row, curve
+
+
+# ---------------------------------------------------------------------------- driver
+def replay_many(
+    paths: Iterable[str | Path],
+    table: str | Path | None = None,
+    *,
+    jobs: int | None = None,
+    dask=None,
+    resume: bool = False,
+    overwrite: bool = False,
+    chart: str | Path | None = "auto",
+    progress: Callable[[int, int, LogRow], None] | None = None,
+    **replay_options,
+) -> BatchResult:
+    """Replay every log found under ``paths`` and tabulate one row per log.
+
+    Parameters
+    ----------
+    paths : iterable of str or Path
+        Logs, folders searched for logs, or list files (see :func:`find_logs`).
+    table : str or Path, optional
+        CSV table ``OUT.csv``; rows are appended as logs finish, then the table is rewritten in
+        input order, with ``OUT.md`` (markdown and summary) and ``OUT.curves.jsonl`` beside it.
+        None keeps the rows in memory only.
+    jobs : int, optional
+        Worker processes (default: the cores this process may use); 1 runs in this process.
+    dask : distributed.Client or str, optional
+        A Dask client or scheduler address (``"tcp://host:8786"``); replaces ``jobs``. The
+        workers must see the logs at the same paths.
+    resume : bool
+        Skip logs that already have a row in ``table``, failed ones included, except rows whose
+        worker process died (those logs are replayed again).
+    overwrite : bool
+        Start ``table`` afresh when it exists (otherwise an existing table needs ``resume``).
+    chart : str, Path or None
+        PNG of the RMS per log and the error curves; ``"auto"`` puts ``OUT.png`` beside the
+        table when matplotlib is installed; None draws none.
+    progress : callable(done, total, row), optional
+        Called after each log.
+    **replay_options
+        Keywords of :func:`imu_dcm.replay.replay` (``method``, ``bias``, ...), the same for every
+        log (``progress`` excluded).
+
+    Returns
+    -------
+    BatchResult
+
+    Raises
+    ------
+    InputError
+        No logs found, a bad ``jobs``, an existing table without ``resume`` or ``overwrite``,
+        an unreadable table, ``chart`` asked without matplotlib, ``dask`` without Dask.
+    """
+    from imu_dcm.replay.batch_chart import INSTALL_HINT, chart_available, write_chart
+
+    logs = find_logs(paths)
+    if not logs:
+        raise InputError("Expected at least one log in the batch, got none")
+    if jobs is None:
+        jobs = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
+    if not isinstance(jobs, int) or jobs < 1:
+        raise InputError(f"Expected jobs >= 1, got {jobs!r}")
+    if "progress" in replay_options:
+        raise InputError("Expected no per-log progress callback in a batch, got progress=")
+    chart_path = None
+    if chart == "auto":
+        if table is not None and chart_available():
+            chart_path = Path(table).with_suffix(".png")
+        elif table is not None:
+            warnings.warn(f"no chart: matplotlib is not installed ({INSTALL_HINT})",
+                          ImuDcmWarning, stacklevel=2)  # fmt: skip
+    elif chart is not None:
+        if not chart_available():
+            raise InputError(f"Expected matplotlib for the chart, got it not installed: "
+                             f"{INSTALL_HINT}")  # fmt: skip
+        chart_path = Path(chart)
+
+    old: dict[str, LogRow] = {}
+    if table is not None:
+        table = Path(table)
+        if table.exists() and table.stat().st_size and not (resume or overwrite):
+            raise InputError(f"Expected a new table, got an existing {table} (resume or "
+                             f"overwrite it)")  # fmt: skip
+        if overwrite and not resume:
+            for p in (table, curves_path(table)):
+                p.unlink(missing_ok=True)
+        table.parent.mkdir(parents=True, exist_ok=True)
+        old = {r.path: r for r in read_table(table)} if resume else {}  # the last row wins
+    # A row whose worker died is not the log's verdict: replay that log again.
+    done = {k: r for k, r in old.items() if not (r.error and f": {LOST}: " in r.error)}
+    todo = [p for p in logs if p not in done]
+    resumed = len(logs) - len(todo)
+    options = dict(replay_options)
+
+    fresh: dict[str, LogRow] = {}
+    new_curves: dict[str, Curve] = {}
+    if todo:
+        if dask is not None:
+            runs = run_dask(replay_one, todo, options, dask)
+        else:
+            runs = run_local(replay_one, todo, options, jobs)
+        with contextlib.closing(runs):  # stops the workers if this loop is interrupted
+            for row, curve in runs:
+                if table is not None:
+                    if curve is not None:
+                        append_curve(table, curve)  # first: a row always has its curve
+                    append_rows(table, [row])
+                elif curve is not None:
+                    new_curves[row.path] = curve
+                fresh[row.path] = row
+                if progress is not None:
+                    progress(resumed + len(fresh), len(logs), row)
+
+    rows = [fresh.get(p) or done[p] for p in logs]
+    listed = set(logs)
+    others = [r for r in old.values() if r.path not in listed]  # earlier runs, other logs
+    md = None
+    curves = new_curves
+    if table is not None:
+        write_table(table, rows + others)
+        curves = read_curves(table)
+        write_curves(table, [curves[r.path] for r in rows + others if r.path in curves])
+        md = write_markdown(table, rows + others)
+    if chart_path is not None:
+        chart_path = write_chart(chart_path, rows + others, curves)
+    return BatchResult(tuple(rows), sum(r.failed for r in rows), resumed, table, md, chart_path,
+                       summary_line(rows + others))  # fmt: skip
+
+
+# ------------------------------------------------------------------------------- CLI
+def main(argv: list[str] | None = None) -> int:
+    """``python -m imu_dcm.replay batch ...``: see :mod:`imu_dcm.replay.batch_cli`."""
+    from imu_dcm.replay.batch_cli import main as cli_main
+
+    return cli_main(argv)

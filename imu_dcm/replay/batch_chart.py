@@ -1,0 +1,117 @@
+"""The chart of a batch replay: RMS error per log, and every log's error over time on one axis.
+
+Drawn with matplotlib's object API onto an Agg canvas (no pyplot, no global backend change).
+matplotlib is optional (``pip install 'imu_dcm[bench]'``): :func:`chart_available` says whether
+it is installed.
+"""
+
+from __future__ import annotations
+
+import importlib.util
+from collections.abc import Sequence
+from pathlib import Path
+
+import numpy as np
+
+from imu_dcm.replay.table import Curve, LogRow, short_names, summary_line
+
+__all__ = ["INSTALL_HINT", "chart_available", "write_chart"]
+
+INSTALL_HINT = "pip install 'imu_dcm[bench]' (or pip install matplotlib)"
+#: Up to this many logs the top panel names each log; beyond, it shows the sorted RMS values.
+MAX_NAMED = 40
+
+
+def chart_available() -> bool:
+    return importlib.util.find_spec("matplotlib") is not None
+
+
+def write_chart(path: str | Path, rows: Sequence[LogRow], curves: dict[str, Curve]) -> Path:
+    """Draw the batch chart to ``path`` (PNG, or any format matplotlib knows by its suffix).
+
+    Top: total RMS attitude error of each log, deg, log scale (failed logs marked, logs without
+    truth listed as such). Bottom: the total error over time of every log with a curve, deg,
+    log scale, seconds since each log's first sample.
+    """
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.collections import LineCollection
+    from matplotlib.figure import Figure
+
+    names = short_names([r.path for r in rows])
+    named = len(rows) <= MAX_NAMED
+    top_h = 0.28 * len(rows) + 1.6 if named else 3.0
+    fig = Figure(figsize=(10, top_h + 4.5), layout="constrained")
+    FigureCanvasAgg(fig)
+    ax_rms, ax_t = fig.subplots(2, 1, height_ratios=[top_h, 4.5])
+    fig.suptitle(summary_line(rows), fontsize=10)
+
+    rms = np.array([np.nan if r.rms_error_deg is None else r.rms_error_deg for r in rows])
+    good = rms[np.isfinite(rms) & (rms > 0)]
+    floor = float(good.min()) / 3 if len(good) else 1e-3
+    colors = [f"C{k % 10}" for k in range(len(rows))]
+    if named:
+        y = np.arange(len(rows))[::-1]
+        has = np.isfinite(rms) & (rms > 0)
+        ax_rms.barh(y[has], rms[has], color=[c for c, h in zip(colors, has) if h])
+        for yi, r, v in zip(y, rows, rms):
+            if r.failed:
+                ax_rms.text(floor, yi, "  failed: " + r.error[:90], va="center", fontsize=7,
+                            color="firebrick")  # fmt: skip
+            elif not np.isfinite(v):
+                ax_rms.text(floor, yi, "  no truth", va="center", fontsize=7, color="gray")
+            else:
+                ax_rms.text(v, yi, f" {v:.3g}°", va="center", fontsize=7)
+        ax_rms.set_yticks(y, names, fontsize=7)
+        ax_rms.set_ylim(-0.6, len(rows) - 0.4)
+    else:
+        order = np.sort(good)
+        ax_rms.plot(np.arange(1, len(order) + 1), order, ".", ms=3)
+        ax_rms.set_xlabel(f"logs sorted by RMS error ({len(rows) - len(good)} failed or "
+                          f"without truth not shown)")  # fmt: skip
+    top = float(good.max()) if len(good) else 1.0
+    if named:
+        ax_rms.set_xscale("log")
+        ax_rms.set_xlim(floor, top * 30)
+    else:
+        ax_rms.set_yscale("log")
+        ax_rms.set_ylim(floor, top * 3)
+    ax_rms.set_title("RMS attitude error per log, deg", fontsize=10, loc="left")
+    ax_rms.grid(True, which="major", alpha=0.3)
+
+    segs, seg_colors, labels = [], [], []
+    for k, (name, r) in enumerate(zip(names, rows)):
+        c = curves.get(r.path)
+        if c is None or not len(c.t_s):
+            continue
+        t, e = np.asarray(c.t_s, float), np.asarray(c.error_deg, float)
+        ok = np.isfinite(e) & (e > 0)
+        if ok.sum() < 2:
+            continue
+        segs.append(np.column_stack([t[ok], e[ok]]))
+        seg_colors.append(colors[k])
+        labels.append(name)
+    if segs:
+        alpha = 0.9 if len(segs) <= 20 else max(0.15, 20 / len(segs))
+        ax_t.add_collection(LineCollection(segs, colors=seg_colors, linewidths=1.0, alpha=alpha))
+        allpts = np.concatenate(segs)
+        ax_t.set_xlim(0, float(allpts[:, 0].max()) * 1.02 or 1.0)
+        ax_t.set_ylim(float(allpts[:, 1].min()) / 2, float(allpts[:, 1].max()) * 2)
+        if len(segs) <= 12:
+            from matplotlib.lines import Line2D
+
+            handles = [Line2D([], [], color=c) for c in seg_colors]
+            ax_t.legend(handles, labels, fontsize=7, loc="upper left", bbox_to_anchor=(1.01, 1.0))
+    else:
+        ax_t.set_xlim(0, 1)
+        ax_t.set_ylim(1e-3, 1)
+        ax_t.text(0.5, 0.5, "no log with an error curve", ha="center", va="center",
+                  transform=ax_t.transAxes, color="gray")  # fmt: skip
+    ax_t.set_yscale("log")
+    ax_t.set_xlabel("time since the log's first sample, s")
+    ax_t.set_ylabel("total attitude error, deg")
+    ax_t.set_title("error over time, every log (largest error per time bin)", fontsize=10,
+                   loc="left")  # fmt: skip
+    ax_t.grid(True, which="major", alpha=0.3)
+    out = Path(path)
+    fig.savefig(out, dpi=110)
+    return out

@@ -1,0 +1,323 @@
+"""The results table of a batch replay: one :class:`LogRow` per log, as CSV, markdown and curves.
+
+Files written next to each other for a table ``OUT.csv``:
+
+- ``OUT.csv``: one row per log, appended as each log finishes. Every append writes whole lines
+  in one ``write`` on a file opened for appending, then ``fsync``, so a batch killed at any
+  moment leaves complete rows only (a torn last line left by a crash of the machine is dropped
+  when the table is read again). Numbers are written with ``repr``, which reads back to the
+  same bits.
+- ``OUT.curves.jsonl``: the error-over-time curve of each log (at most :data:`CURVE_POINTS`
+  points, the largest error in each time bin), appended before the row, for the chart.
+- ``OUT.md``: the table for people, with a summary line; rewritten (write, then rename) at the
+  end of a batch.
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import json
+import os
+import statistics
+from collections.abc import Iterable, Sequence
+from dataclasses import astuple, dataclass, fields
+from pathlib import Path
+
+import numpy as np
+from numpy.typing import ArrayLike
+
+from imu_dcm.errors import InputError
+
+__all__ = [
+    "COLUMNS",
+    "CURVE_POINTS",
+    "Curve",
+    "LogRow",
+    "append_curve",
+    "append_rows",
+    "curves_path",
+    "decimate_curve",
+    "markdown_path",
+    "read_curves",
+    "read_table",
+    "summary_line",
+    "write_curves",
+    "write_markdown",
+    "write_table",
+]
+
+#: Points kept of each log's error curve (the largest error in each of this many time bins).
+CURVE_POINTS = 300
+#: Separator of several warnings in one CSV cell.
+WARNING_SEPARATOR = " | "
+
+
+@dataclass(frozen=True)
+class LogRow:
+    """The outcome of replaying one log. Numbers are None when the log failed or has no truth.
+
+    Attributes
+    ----------
+    path : str — the log (absolute path, as found).
+    samples : int — gyro samples replayed (after cleaning).
+    duration_s : float — first to last replayed sample, s.
+    rate_hz : float — 1 / median sample step, Hz.
+    imu_topic, truth_topic : str — channels used (truth None when the log has none).
+    bias_x_rad_s, bias_y_rad_s, bias_z_rad_s : float — mean gyro bias removed, body axes, rad/s.
+    rms_error_deg, max_error_deg : float — total attitude error against the truth, deg.
+    rms_inclination_deg, max_inclination_deg : float — tilt part of the error, deg.
+    rms_heading_deg, max_heading_deg : float — heading part of the error, deg.
+    dropped : int — samples dropped while cleaning (NaN/Inf, duplicate, backward, ...).
+    gaps : int — gaps over 5x the median step.
+    warnings : tuple of str — one line per warning the replay gave.
+    elapsed_s : float — wall time of this log's replay in its worker, s.
+    error : str — one line ``Type: message`` when the log failed, else None.
+    """
+
+    path: str
+    samples: int | None = None
+    duration_s: float | None = None
+    rate_hz: float | None = None
+    imu_topic: str | None = None
+    truth_topic: str | None = None
+    bias_x_rad_s: float | None = None
+    bias_y_rad_s: float | None = None
+    bias_z_rad_s: float | None = None
+    rms_error_deg: float | None = None
+    max_error_deg: float | None = None
+    rms_inclination_deg: float | None = None
+    max_inclination_deg: float | None = None
+    rms_heading_deg: float | None = None
+    max_heading_deg: float | None = None
+    dropped: int | None = None
+    gaps: int | None = None
+    warnings: tuple[str, ...] = ()
+    elapsed_s: float | None = None
+    error: str | None = None
+
+    @property
+    def failed(self) -> bool:
+        return self.error is not None
+
+
+COLUMNS = tuple(f.name for f in fields(LogRow))
+_INT = {"samples", "dropped", "gaps"}
+_FLOAT = {f.name for f in fields(LogRow) if f.name.endswith(("_s", "_hz", "_deg"))}
+
+
+@dataclass(frozen=True)
+class Curve:
+    """A log's attitude error over time, decimated for a chart: ``t_s`` (K,) seconds since the
+    log's first sample, ``error_deg`` (K,) total error, deg (NaN where there is none)."""
+
+    path: str
+    t_s: tuple[float, ...]
+    error_deg: tuple[float, ...]
+
+
+def one_line(text: str) -> str:
+    """The first line of ``text``, without carriage returns (a CSV cell never spans lines)."""
+    return (text.splitlines() or [""])[0].replace("\r", " ").strip()
+
+
+def decimate_curve(path: str, t_s: ArrayLike, error_deg: ArrayLike,
+                   points: int = CURVE_POINTS) -> Curve:  # fmt: skip
+    """Keep the largest error in each of ``points`` equal-count bins (peaks survive); 4 digits.
+
+    ``t_s`` (N,) s and ``error_deg`` (N,) deg, NaN where no error was measured.
+    """
+    t = np.asarray(t_s, dtype=float)
+    e = np.asarray(error_deg, dtype=float)
+    if len(t) == 0:
+        return Curve(path, (), ())
+    edges = np.unique(np.linspace(0, len(t), min(points, len(t)) + 1).astype(int))[:-1]
+    finite = np.where(np.isfinite(e), e, -np.inf)
+    peak = np.maximum.reduceat(finite, edges)
+    peak = np.where(np.isfinite(peak), peak, np.nan)
+    return Curve(path, tuple(float(f"{x:.4g}") for x in t[edges]),
+                 tuple(float(f"{x:.4g}") for x in peak))  # fmt: skip
+
+
+# --------------------------------------------------------------------------- CSV cells
+def _cell(name: str, value) -> str:
+    if value is None:
+        return ""
+    if name == "warnings":
+        return WARNING_SEPARATOR.join(one_line(w) for w in value)
+    if isinstance(value, float):
+        return repr(value)  # shortest text that reads back to the same bits
+    return one_line(str(value))
+
+
+def _parse(name: str, text: str):
+    if name == "warnings":
+        return tuple(text.split(WARNING_SEPARATOR)) if text else ()
+    if text == "":
+        return None
+    if name in _INT:
+        return int(text)
+    if name in _FLOAT:
+        return float(text)
+    return text
+
+
+def format_lines(rows: Iterable[LogRow], header: bool = False) -> str:
+    """CSV text of ``rows`` (each ending in a newline), with the header line first if asked."""
+    buf = io.StringIO()
+    w = csv.writer(buf, lineterminator="\n")
+    if header:
+        w.writerow(COLUMNS)
+    for r in rows:
+        w.writerow([_cell(n, v) for n, v in zip(COLUMNS, astuple(r))])
+    return buf.getvalue()
+
+
+# ------------------------------------------------------------------------------- files
+def markdown_path(table: str | Path) -> Path:
+    return Path(table).with_suffix(".md")
+
+
+def curves_path(table: str | Path) -> Path:
+    return Path(table).with_suffix(".curves.jsonl")
+
+
+def _append(path: Path, text: str) -> None:
+    """Append whole lines with one ``write`` call (retried on a short write), then fsync."""
+    data = memoryview(text.encode())
+    fd = os.open(path, os.O_WRONLY | os.O_APPEND | os.O_CREAT, 0o644)
+    try:
+        while data:
+            data = data[os.write(fd, data) :]
+        os.fsync(fd)
+    finally:
+        os.close(fd)
+
+
+def _replace(path: Path, text: str) -> None:
+    """Write ``text`` to a temporary file beside ``path``, fsync, and rename it over ``path``."""
+    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
+    try:
+        with open(tmp, "w") as f:
+            f.write(text)
+            f.flush()
+            os.fsync(f.fileno())
+        os.replace(tmp, path)
+    finally:
+        tmp.unlink(missing_ok=True)
+
+
+def append_rows(table: str | Path, rows: Sequence[LogRow]) -> None:
+    """Append ``rows`` to the CSV ``table`` (with the header when the file is new or empty)."""
+    p = Path(table)
+    new = not p.exists() or p.stat().st_size == 0
+    _append(p, format_lines(rows, header=new))
+
+
+def write_table(table: str | Path, rows: Sequence[LogRow]) -> None:
+    """Replace the CSV ``table`` with ``rows`` (rename over the old file: never half written)."""
+    _replace(Path(table), format_lines(rows, header=True))
+
+
+def read_table(table: str | Path) -> list[LogRow]:
+    """The rows of a CSV table written by :func:`append_rows` (empty when it does not exist).
+
+    A last line without its newline (the machine went down mid-write) is dropped and the file
+    is rewritten without it.
+
+    Raises
+    ------
+    InputError
+        A header other than :data:`COLUMNS`, or a complete line with the wrong number of cells.
+    """
+    p = Path(table)
+    if not p.exists():
+        return []
+    text = p.read_text()
+    if text and not text.endswith("\n"):
+        text = text[: text.rfind("\n") + 1]
+        _replace(p, text)
+    lines = list(csv.reader(io.StringIO(text)))
+    if not lines:
+        return []
+    if tuple(lines[0]) != COLUMNS:
+        raise InputError(f"Expected a batch table with columns {','.join(COLUMNS[:3])},..., got "
+                         f"{','.join(lines[0][:3])},... in {p}")  # fmt: skip
+    rows = []
+    for k, cells in enumerate(lines[1:], start=2):
+        if len(cells) != len(COLUMNS):
+            raise InputError(f"Expected {len(COLUMNS)} cells on line {k} of {p}, got {len(cells)}")
+        rows.append(LogRow(*(_parse(n, c) for n, c in zip(COLUMNS, cells))))
+    return rows
+
+
+def append_curve(table: str | Path, curve: Curve) -> None:
+    _append(curves_path(table), json.dumps(curve.__dict__, allow_nan=True) + "\n")
+
+
+def read_curves(table: str | Path) -> dict[str, Curve]:
+    """Curves by path (the last one of a path wins; a torn last line is skipped)."""
+    p = curves_path(table)
+    out: dict[str, Curve] = {}
+    if not p.exists():
+        return out
+    for line in p.read_text().splitlines(keepends=True):
+        if not line.endswith("\n"):
+            break
+        d = json.loads(line)
+        out[d["path"]] = Curve(d["path"], tuple(d["t_s"]), tuple(d["error_deg"]))
+    return out
+
+
+def write_curves(table: str | Path, curves: Iterable[Curve]) -> None:
+    _replace(curves_path(table),
+             "".join(json.dumps(c.__dict__, allow_nan=True) + "\n" for c in curves))  # fmt: skip
+
+
+# ---------------------------------------------------------------------------- markdown
+def _num(x: float | None, digits: int = 3) -> str:
+    return "" if x is None else f"{x:.{digits}g}"
+
+
+def summary_line(rows: Sequence[LogRow]) -> str:
+    """``N logs, F failed; RMS error over M logs with truth: mean X°, median Y°``."""
+    failed = sum(r.failed for r in rows)
+    rms = [r.rms_error_deg for r in rows if r.rms_error_deg is not None]
+    head = f"{len(rows)} log{'s' if len(rows) != 1 else ''}, {failed} failed"
+    if not rms:
+        return f"{head}; no log with truth, no RMS error"
+    return (f"{head}; RMS error over {len(rms)} log{'s' if len(rms) != 1 else ''} with truth: "
+            f"mean {statistics.fmean(rms):.4g}°, median {statistics.median(rms):.4g}°")  # fmt: skip
+
+
+def short_names(paths: Sequence[str]) -> list[str]:
+    """The shortest tails of the paths (name, parent/name, ...) that tell the logs apart."""
+    parts = [Path(p.rstrip("/")).parts for p in paths]
+    depth = 1
+    while True:
+        names = ["/".join(q[-depth:]) for q in parts]
+        if len(set(names)) == len(names) or depth >= max((len(q) for q in parts), default=1):
+            return names
+        depth += 1
+
+
+def markdown(rows: Sequence[LogRow]) -> str:
+    """The table for people: one line per log, errors in degrees, and the summary line."""
+    head = ("| log | samples | duration s | rate Hz | RMS ° | max ° | RMS incl. ° | "
+            "RMS heading ° | dropped | gaps | warnings | elapsed s | error |")  # fmt: skip
+    lines = [head, "|" + "---|" * head.count(" | ") + "---|"]
+    for name, r in zip(short_names([r.path for r in rows]), rows):
+        cells = [name, "" if r.samples is None else str(r.samples), _num(r.duration_s, 4),
+                 _num(r.rate_hz, 4), _num(r.rms_error_deg), _num(r.max_error_deg),
+                 _num(r.rms_inclination_deg), _num(r.rms_heading_deg),
+                 "" if r.dropped is None else str(r.dropped),
+                 "" if r.gaps is None else str(r.gaps), str(len(r.warnings)),
+                 _num(r.elapsed_s, 2), r.error or ""]  # fmt: skip
+        lines.append("| " + " | ".join(c.replace("|", "\\|") for c in cells) + " |")
+    return "\n".join(lines) + "\n\n" + summary_line(rows) + "\n"
+
+
+def write_markdown(table: str | Path, rows: Sequence[LogRow]) -> Path:
+    p = markdown_path(table)
+    _replace(p, markdown(rows))
+    return p
