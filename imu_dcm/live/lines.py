@@ -4,7 +4,7 @@ CSV: ``t,gx,gy,gz`` with the stamp in ``time_units`` (s, ms, us or ns) and the r
 ``gyro_units`` (rad/s or deg/s), body axes. A first line with letters (a header) is skipped.
 JSON: an object with the stamp as ``t_ns`` (int, ns) or ``t_s`` (s), the rates as ``omega_b``
 (or ``gyro``) ``[x, y, z]`` or ``gx``, ``gy``, ``gz`` in ``gyro_units``, and optionally a truth
-``q_w_b`` ``[x, y, z, w]``. Stamps are parsed as exact decimals (``1700000026.505500000`` s is
+``q_w_b`` ``[x, y, z, w]`` (a line with a stamp and ``q_w_b`` only is a truth sample). Stamps are parsed as exact decimals (``1700000026.505500000`` s is
 exactly 1700000026505500000 ns; a float64 would round it to ~0.2 µs).
 
 Anything else — wrong field count, not a number, non-finite values — is a malformed line:
@@ -54,13 +54,16 @@ def _parse_json(obj, gyro_scale: float) -> tuple[int, list[float], list[float] |
         t_ns = _stamp_ns(obj["t_s"], 1_000_000_000)
     else:
         raise ValueError("no t_ns or t_s")
-    w = obj.get("omega_b", obj.get("gyro"))
-    if w is None:
-        w = [obj["gx"], obj["gy"], obj["gz"]]
-    if not isinstance(w, list) or len(w) != 3:
-        raise ValueError("omega_b not 3 numbers")
-    omega = [float(v) * gyro_scale for v in w]
     q = obj.get("q_w_b")
+    w = obj.get("omega_b", obj.get("gyro"))
+    if w is None and "gx" in obj:
+        w = [obj["gx"], obj["gy"], obj["gz"]]
+    if w is None and q is not None:
+        omega = None  # a truth-only line
+    elif not isinstance(w, list) or len(w) != 3:
+        raise ValueError("omega_b not 3 numbers")
+    else:
+        omega = [float(v) * gyro_scale for v in w]
     if q is not None:
         if not isinstance(q, list) or len(q) != 4:
             raise ValueError("q_w_b not 4 numbers")
@@ -122,13 +125,16 @@ def parse_lines(lines: list[bytes], *, gyro_units: str = "rad/s", time_units: st
                 q = None
             if not 0 <= t_ns < 2**63:
                 raise ValueError("stamp out of range")
-            if not all(math.isfinite(v) for v in omega):
+            if omega is not None and not all(math.isfinite(v) for v in omega):
                 raise ValueError("non-finite rate")
-            if q is not None and all(math.isfinite(v) for v in q):
+            if q is not None:
+                if not all(math.isfinite(v) for v in q):
+                    raise ValueError("non-finite quaternion")
                 tts.append(t_ns)
                 qs.append(q)
-            ts.append(t_ns)
-            ws.append(omega)
+            if omega is not None:
+                ts.append(t_ns)
+                ws.append(omega)
         except (ValueError, KeyError, TypeError, UnicodeDecodeError, OverflowError):
             bad += 1
     return (np.array(ts, dtype=np.int64), np.array(ws, dtype=float).reshape(-1, 3),

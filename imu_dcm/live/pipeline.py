@@ -34,7 +34,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from imu_dcm.errors import GapWarning, InputError
-from imu_dcm.integrate import GAP_FACTOR, METHODS
+from imu_dcm.integrate import GAP_FACTOR, METHODS, integrate
 from imu_dcm.live.reorder import ReorderBuffer
 from imu_dcm.live.rest import CausalRestBias
 from imu_dcm.live.sources import Received, Source, open_source, parse_source
@@ -114,6 +114,7 @@ class _Pipeline:
         self._since_median = 0
         self._prev_t_s: float | None = None
         self.integ: DcmIntegrator | None = None
+        self._warm: list | None = None
         self.q0: NDArray | None = None
         self.start_t_s: float | None = None
         self.waiting: list[tuple[int, float, tuple]] = []
@@ -218,6 +219,7 @@ class _Pipeline:
         t_ns, t_s, _ = waiting[i]
         self.start_t_s = t_s
         self.integ = DcmIntegrator(self.q0, self.method)
+        self._warm = [] if self.method == "magnus4" else None
         if why:
             self.say(why)
         self.waiting = []
@@ -261,6 +263,21 @@ class _Pipeline:
     def _step(self, t_ns: int, t_s: float, wc: tuple) -> None:
         q = self.integ.update(wc, t_s)
         te = self.integ.t_s
+        warm = self._warm
+        if warm is not None:
+            warm.append((t_ns, t_s, wc))
+            if len(warm) == 4:
+                # magnus4 commits its first two steps at once (the start stencil needs four
+                # samples): the attitude at the second stamp comes from the batch integrator on
+                # the same four samples, which is what the streaming one computes inside.
+                self._warm = None
+                W = np.array([r[2] for r in warm])
+                T = np.array([r[1] for r in warm])
+                with warnings.catch_warnings():
+                    warnings.simplefilter("ignore", GapWarning)
+                    q1 = integrate(W, T, self.q0, self.method).as_quat()[1]
+                self.e_rows.append((warm[1][0], warm[1][1], tuple(q1.tolist())))
+                self.last_est_t_s = warm[1][1]
         if te is not None and te > self.last_est_t_s:
             self.last_est_t_s = te
             tn = t_ns if te == t_s else self._ns_of(te)

@@ -151,14 +151,14 @@ class _LineSource(Source):
         self._first = False
         if bad:
             self.events.put(("malformed", bad))
-        if len(t):
-            n = len(t)
-            self.events.put(("data", Received("imu", t, w, np.full(n, arrival_ns, np.int64),
-                                              np.full(n, wall_ns, np.int64))))  # fmt: skip
         if len(tt):
             m = len(tt)
             self.events.put(("data", Received("truth", tt, q, np.full(m, arrival_ns, np.int64),
                                               np.full(m, wall_ns, np.int64))))  # fmt: skip
+        if len(t):
+            n = len(t)
+            self.events.put(("data", Received("imu", t, w, np.full(n, arrival_ns, np.int64),
+                                              np.full(n, wall_ns, np.int64))))  # fmt: skip
 
 
 class UdpSource(_LineSource):
