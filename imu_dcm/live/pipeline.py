@@ -496,18 +496,17 @@ def run(
     from imu_dcm.live.view import LiveView, check_mode
 
     check_mode(rerun)
-    recorder = None
-    if record is not None:
-        from imu_dcm.live.recorder import LiveRecorder
-
-        recorder = LiveRecorder(record, force=force, custom_data={
-            "imu_dcm.live.source": source, "imu_dcm.method": method,
-            "imu_dcm.bias_mode": bias_v if isinstance(bias_v, str) else "fixed"})
     src: Source = open_source(spec, imu_topic=imu_topic, truth_topic=truth_topic,
                               gyro_units=gyro_units, time_units=time_units, give_up_s=give_up_s,
                               stdin_fd=stdin_fd)  # fmt: skip
-    view = None
+    recorder = view = None
     try:
+        if record is not None:
+            from imu_dcm.live.recorder import LiveRecorder
+
+            recorder = LiveRecorder(record, force=force, custom_data={
+                "imu_dcm.live.source": source, "imu_dcm.method": method,
+                "imu_dcm.bias_mode": bias_v if isinstance(bias_v, str) else "fixed"})
         if rerun != "off":
             view = LiveView(rerun, title=f"live {source}", say=say)
         pipe = _Pipeline(method=method, bias=bias_v, init_q=init_q,

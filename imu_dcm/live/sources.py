@@ -127,6 +127,11 @@ class Source:
         self._stop.set()
         if self._thread.is_alive() and threading.current_thread() is not self._thread:
             self._thread.join(timeout_s)
+        elif self._thread.ident is None:
+            self._close()  # never started
+
+    def _close(self) -> None:
+        """Release what the constructor opened (for a source that never started)."""
 
     def _guarded(self) -> None:
         try:
@@ -175,6 +180,9 @@ class UdpSource(_LineSource):
             raise InputError(f"Expected to bind udp://{host}:{port}, got {exc}") from None
         self.address = self.sock.getsockname()
         self.sock.settimeout(0.2)
+
+    def _close(self) -> None:
+        self.sock.close()
 
     def _run(self) -> None:
         where = f"udp://{self.address[0]}:{self.address[1]}"
