@@ -395,7 +395,7 @@ def run(
     time_units: str = "s",
     init_quat: ArrayLike | None = None,
     reorder_window_s: float = 0.05,
-    view_interval_s: float = 0.015,
+    view_interval_s: float = 0.05,
     rerun: str | None = None,
     record: str | Path | None = None,
     force: bool = False,
@@ -466,7 +466,8 @@ def run(
         reordered, malformed, gaps, reconnects, gyro_units, bias_mode, bias_rad_s,
         bias_segments, method, start_time_s, initial_quat_xyzw, final_quat_xyzw, final_t_s,
         truth_samples_used, rms/max error/inclination/heading (deg, None without truth),
-        latency_p50_ms, latency_p99_ms, stopped, record, elapsed_s``.
+        latency_p50_ms, latency_p99_ms, stopped, record, cpu_s (process CPU time while
+        receiving, all threads), elapsed_s``.
     """
     started = time.perf_counter()
     spec = parse_source(source)
@@ -561,6 +562,7 @@ def _loop(src: Source, pipe: _Pipeline, stop: threading.Event, gyro_scale: float
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", GapWarning)  # gaps are reported once, here
+            pipe.cpu_start = time.process_time()
             src.start()
             if on_ready is not None:
                 info = {"address": getattr(src, "address", None)}
@@ -638,6 +640,7 @@ def _loop(src: Source, pipe: _Pipeline, stop: threading.Event, gyro_scale: float
                     pipe.malformed += ev[1]
             pipe.finish()
             pipe.flush(final=True)
+            pipe.cpu_s = time.process_time() - pipe.cpu_start
             if tty and status:
                 sys.stderr.write("\r" + " " * 100 + "\r")
     finally:
@@ -716,5 +719,6 @@ def _summary(pipe: _Pipeline, src: Source, spec, source: str, method: str, bias_
         "latency_p99_ms": _pct(lat, 99),
         "stopped": reason,
         "record": str(recorder.path) if recorder is not None else None,
+        "cpu_s": getattr(pipe, "cpu_s", None),
         "elapsed_s": time.perf_counter() - started,
     }
