@@ -1,0 +1,141 @@
+"""Line samples for the UDP and stdin sources: CSV ``t,gx,gy,gz`` or JSON lines.
+
+CSV: ``t,gx,gy,gz`` with the stamp in ``time_units`` (s, ms, us or ns) and the rates in
+``gyro_units`` (rad/s or deg/s), body axes. A first line with letters (a header) is skipped.
+JSON: an object with the stamp as ``t_ns`` (int, ns) or ``t_s`` (s), the rates as ``omega_b``
+(or ``gyro``) ``[x, y, z]`` or ``gx``, ``gy``, ``gz`` in ``gyro_units``, and optionally a truth
+``q_w_b`` ``[x, y, z, w]`` (a line with a stamp and ``q_w_b`` only is a truth sample). Stamps are parsed as exact decimals (``1700000026.505500000`` s is
+exactly 1700000026505500000 ns; a float64 would round it to ~0.2 µs).
+
+Anything else — wrong field count, not a number, non-finite values — is a malformed line:
+:func:`parse_lines` counts it and goes on.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from decimal import Decimal, InvalidOperation
+
+import numpy as np
+from numpy.typing import NDArray
+
+__all__ = ["TIME_UNITS", "parse_lines"]
+
+#: Nanoseconds per unit of a CSV stamp.
+TIME_UNITS = {"s": 1_000_000_000, "ms": 1_000_000, "us": 1_000, "ns": 1}
+DEG = math.pi / 180.0
+
+
+def _stamp_ns(text, scale: int) -> int:
+    """An exact decimal (str) or a number to integer ns; raises ValueError."""
+    if isinstance(text, bool):
+        raise TypeError("a bool is no stamp")
+    if isinstance(text, int):
+        return text * scale
+    try:
+        d = Decimal(text.strip() if isinstance(text, str) else repr(float(text)))
+    except (InvalidOperation, TypeError, ValueError):
+        raise ValueError(f"not a number: {text!r}") from None
+    if not d.is_finite():
+        raise ValueError("non-finite stamp")
+    return int((d * scale).to_integral_value())
+
+
+def _parse_json(obj, gyro_scale: float) -> tuple[int, list[float], list[float] | None]:
+    if not isinstance(obj, dict):
+        raise TypeError("not an object")
+    if "t_ns" in obj:
+        t = obj["t_ns"]
+        if not isinstance(t, int) or isinstance(t, bool):
+            raise ValueError("t_ns not an integer")
+        t_ns = t
+    elif "t_s" in obj:
+        t_ns = _stamp_ns(obj["t_s"], 1_000_000_000)
+    else:
+        raise ValueError("no t_ns or t_s")
+    q = obj.get("q_w_b")
+    w = obj.get("omega_b", obj.get("gyro"))
+    if w is None and "gx" in obj:
+        w = [obj["gx"], obj["gy"], obj["gz"]]
+    if w is None and q is not None:
+        omega = None  # a truth-only line
+    elif not isinstance(w, list) or len(w) != 3:
+        raise ValueError("omega_b not 3 numbers")
+    else:
+        omega = [float(v) * gyro_scale for v in w]
+    if q is not None:
+        if not isinstance(q, list) or len(q) != 4:
+            raise ValueError("q_w_b not 4 numbers")
+        q = [float(v) for v in q]
+    return t_ns, omega, q
+
+
+def parse_lines(lines: list[bytes], *, gyro_units: str = "rad/s", time_units: str = "s",
+                first: bool = False) -> tuple[NDArray, NDArray, NDArray, NDArray, int]:
+    """Parse sample lines.
+
+    Parameters
+    ----------
+    lines : list of bytes
+        One sample per line (no line ends needed; blank lines are ignored).
+    gyro_units : {"rad/s", "deg/s"}
+        Unit of the rates; converted to rad/s.
+    time_units : {"s", "ms", "us", "ns"}
+        Unit of CSV stamps (JSON names its unit by key).
+    first : bool
+        ``lines[0]`` is the first line of the stream (a header there is skipped, not counted).
+
+    Returns
+    -------
+    t_ns : int64 (n,)
+    omega_b : float64 (n, 3), rad/s, body axes
+    truth_t_ns : int64 (m,)
+    truth_q_w_b : float64 (m, 4), ``[x, y, z, w]``
+    malformed : int
+        Lines that are neither a CSV sample nor a JSON sample (or hold non-finite values).
+    """
+    gyro_scale = DEG if gyro_units == "deg/s" else 1.0
+    t_scale = TIME_UNITS[time_units]
+    ts: list[int] = []
+    ws: list[list[float]] = []
+    tts: list[int] = []
+    qs: list[list[float]] = []
+    bad = 0
+    for i, raw in enumerate(lines):
+        line = raw.strip()
+        if not line:
+            continue
+        try:
+            if line[:1] == b"{":
+                t_ns, omega, q = _parse_json(json.loads(line), gyro_scale)
+            else:
+                parts = line.split(b",")
+                if len(parts) != 4:
+                    if i == 0 and first and any(c.isalpha() for c in line.decode(errors="replace")):
+                        continue  # a CSV header
+                    raise ValueError("not 4 fields")
+                try:
+                    t_ns = _stamp_ns(parts[0].decode("ascii"), t_scale)
+                except (ValueError, UnicodeDecodeError):
+                    if i == 0 and first:
+                        continue  # a CSV header
+                    raise
+                omega = [float(p) * gyro_scale for p in parts[1:]]
+                q = None
+            if not 0 <= t_ns < 2**63:
+                raise ValueError("stamp out of range")
+            if omega is not None and not all(math.isfinite(v) for v in omega):
+                raise ValueError("non-finite rate")
+            if q is not None:
+                if not all(math.isfinite(v) for v in q):
+                    raise ValueError("non-finite quaternion")
+                tts.append(t_ns)
+                qs.append(q)
+            if omega is not None:
+                ts.append(t_ns)
+                ws.append(omega)
+        except (ValueError, KeyError, TypeError, UnicodeDecodeError, OverflowError):
+            bad += 1
+    return (np.array(ts, dtype=np.int64), np.array(ws, dtype=float).reshape(-1, 3),
+            np.array(tts, dtype=np.int64), np.array(qs, dtype=float).reshape(-1, 4), bad)

@@ -1,0 +1,208 @@
+"""The live rerun view: replay's entities and blueprint, fed in batches at display rate.
+
+The same entity paths (``imu_dcm.viz.ENTITY``), timeline and blueprint as replay's view
+(:func:`imu_dcm.viz.make_blueprint`), so a live view reads like a replayed one: estimated and
+true body axes in 3D with the z-tip trail of the last 2 s, the attitude error and the gyro rates
+over time. Each :meth:`LiveView.log` call sends what arrived since the previous one with one
+``send_columns`` per entity (never one log call per sample); the 3D axes are thinned to at most
+``AXES_HZ`` rows per second of source time (the scalars keep every sample).
+
+Modes: ``spawn`` starts the native viewer (the ``rerun`` binary, listening on 127.0.0.1 only) —
+it needs a display; ``serve`` runs ``rerun --serve-web --bind 127.0.0.1`` (via
+:func:`imu_dcm.viz.serve_rrd`) and streams to it, the server staying up after the run so the
+recording can still be looked at; ``save:PATH.rrd`` streams into a file; ``None`` spawns with a
+display and serves without one.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import socket
+import subprocess
+import time
+import uuid
+from collections import deque
+
+import numpy as np
+from numpy.typing import NDArray
+
+from imu_dcm.errors import InputError
+from imu_dcm.so3 import quat_rotate
+
+__all__ = ["AXES_HZ", "LiveView", "check_mode"]
+
+#: Rows of 3D body axes per second of source time (the viewer draws the latest anyway).
+AXES_HZ = 60.0
+_TRAIL_S = 2.0
+_TRAIL_POINTS = 120
+_EST_RGB = np.array([[255, 165, 150], [150, 235, 140], [150, 195, 255]], dtype=np.uint8)
+_TRUTH_RGB = np.array([[220, 40, 40], [30, 170, 50], [40, 90, 235]], dtype=np.uint8)
+_FLUSH_TIMEOUT_S = 10.0
+
+
+def check_mode(mode: str | None) -> None:
+    """Raise InputError for a mode other than None, spawn, serve, off or save:PATH.rrd."""
+    if mode is None or mode in ("spawn", "serve", "off"):
+        return
+    if isinstance(mode, str) and mode.startswith("save:") and mode.endswith(".rrd") \
+            and len(mode) > len("save:.rrd"):
+        return
+    raise InputError(f"Expected --rerun spawn, serve, save:PATH.rrd or off, got {mode!r}")
+
+
+def _free_port() -> int:
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+
+
+def _axes(q: NDArray) -> NDArray:
+    """Body axes in world coordinates, (n, 3 axes, 3)."""
+    return quat_rotate(q[:, None, :], np.eye(3)[None, :, :])
+
+
+class LiveView:
+    """A rerun recording fed as the live run goes (see the module doc)."""
+
+    def __init__(self, mode: str | None, title: str, say=print) -> None:
+        import rerun as rr
+
+        from imu_dcm import viz
+
+        check_mode(mode)
+        if mode is None:
+            mode = "spawn" if viz.has_display() else "serve"
+        self.mode = mode
+        self.say = say
+        self.served = None
+        self.viewer_pid = None
+        self.rr = rr
+        self.entity = viz.ENTITY
+        self.timeline = viz.TIMELINE
+        nan4 = np.full((1, 4), np.nan)
+        self._blank = viz.ViewData(t_s=np.zeros(1), q_est=nan4, q_truth=nan4,
+                                   omega_b=np.zeros((1, 3)), error_total_deg=np.full(1, np.nan),
+                                   error_inclination_deg=np.full(1, np.nan),
+                                   error_heading_deg=np.full(1, np.nan), title=title)
+        blueprint = viz.make_blueprint(self._blank)
+        rec = rr.RecordingStream("imu_dcm", recording_id=uuid.uuid4())
+        if mode == "spawn":
+            if not viz.has_display():
+                raise InputError("Expected a display (DISPLAY or WAYLAND_DISPLAY) for rerun mode "
+                                 "'spawn', got none; use 'serve' or 'save:PATH.rrd'")
+            port = _free_port()
+            proc = subprocess.Popen(
+                [str(viz.rerun_binary()), "--bind", "127.0.0.1", "--port", str(port),
+                 "--expect-data-soon"], stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL,
+                stderr=subprocess.DEVNULL, start_new_session=True,
+                env={**os.environ, "TELEMETRY_ENABLED": "false"})  # fmt: skip
+            self.viewer_pid = proc.pid
+            self._proc = proc
+            deadline = time.monotonic() + 20.0
+            while True:
+                try:
+                    with socket.create_connection(("127.0.0.1", port), timeout=0.2):
+                        break
+                except OSError:
+                    if proc.poll() is not None or time.monotonic() > deadline:
+                        raise InputError(f"Expected the rerun viewer on 127.0.0.1:{port}, got "
+                                         f"none (exit code {proc.poll()})") from None
+                    time.sleep(0.05)
+            rec.connect_grpc(f"rerun+http://127.0.0.1:{port}/proxy", default_blueprint=blueprint)
+            say(f"rerun: viewer started (pid {proc.pid}, listening on 127.0.0.1:{port})")
+        elif mode == "serve":
+            self.served = viz.serve_rrd(None)
+            rec.connect_grpc(self.served.grpc_url, default_blueprint=blueprint)
+            say(f"rerun: open {self.served.url} (web viewer, 127.0.0.1 only)")
+        else:
+            rec.save(mode[len("save:"):], default_blueprint=blueprint)
+        rec.send_recording_name(title)
+        self.rec = rec
+        self._static()
+        self._last_axes = {"est": -math.inf, "truth": -math.inf}
+        self._tips = {"est": deque(), "truth": deque()}
+        self.log_calls = 0
+
+    def _static(self) -> None:
+        rr = self.rr
+        try:
+            from imu_dcm import viz
+
+            viz._send_static(self._blank, self.rec)  # replay's styles (colours, names, widths)
+        except (ImportError, AttributeError):
+            self.rec.log("/world", rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
+
+    def _time(self, t_s: NDArray):
+        return self.rr.TimeColumn(self.timeline,
+                                  duration=np.rint(t_s * 1e9).astype("timedelta64[ns]"))
+
+    def _send(self, path: str, t_s: NDArray, columns) -> None:
+        self.rec.send_columns(path, indexes=[self._time(t_s)], columns=columns)
+        self.log_calls += 1
+
+    def _axes_rows(self, key: str, t_s: NDArray, q: NDArray) -> None:
+        ok = np.all(np.isfinite(q), axis=1)
+        t_s, q = t_s[ok], q[ok]
+        if not len(t_s):
+            return
+        # thin to AXES_HZ, always keeping the newest row
+        keep, last = [], self._last_axes[key]
+        for i, t in enumerate(t_s.tolist()):
+            if t - last >= 1.0 / AXES_HZ or i == len(t_s) - 1:
+                keep.append(i)
+                last = t
+        self._last_axes[key] = last
+        idx = np.array(keep)
+        ax = _axes(q[idx])
+        n = len(idx)
+        rgb, radius = (_EST_RGB, 0.018) if key == "est" else (_TRUTH_RGB, 0.035)
+        fields = {"vectors": ax.reshape(-1, 3), "colors": np.tile(rgb, (n, 1)),
+                  "radii": np.full(3 * n, radius, dtype=np.float32)}
+        if key == "truth":
+            fields["labels"] = np.tile(np.array(["x", "y", "z"]), n)
+        cols = self.rr.Arrows3D.columns(**fields).partition(np.full(n, 3))
+        path = self.entity["estimate_axes" if key == "est" else "truth_axes"]
+        self._send(path, t_s[idx], cols)
+        # z-tip trail: the last _TRAIL_S seconds, one strip per call
+        tips = self._tips[key]
+        for t, z in zip(t_s.tolist(), _axes(q)[:, 2].tolist()):
+            tips.append((t, z))
+        while tips and tips[0][0] < t_s[-1] - _TRAIL_S:
+            tips.popleft()
+        pts = np.array([p for _, p in tips])
+        if len(pts) > _TRAIL_POINTS:
+            pts = pts[np.linspace(0, len(pts) - 1, _TRAIL_POINTS).round().astype(int)]
+        color = (240, 150, 0) if key == "est" else (150, 70, 220)
+        radius = 0.004 if key == "est" else 0.007
+        cols = self.rr.LineStrips3D.columns(strips=[pts], colors=[color], radii=[radius])
+        self._send(self.entity["estimate_trail" if key == "est" else "truth_trail"],
+                   t_s[-1:], cols)  # fmt: skip
+
+    def log(self, *, gyro_t_s: NDArray, omega_b: NDArray, est_t_s: NDArray, q_est: NDArray,
+            truth_t_s: NDArray, q_truth: NDArray, err_t_s: NDArray, err_deg: NDArray) -> None:
+        """Send one batch: times in s since the first sample; rates (n, 3) rad/s body axes;
+        ``q_*`` (n, 4) ``[x, y, z, w]`` body to world; errors (n, 3) deg (total, incl., head)."""
+        rr = self.rr
+        if len(gyro_t_s):
+            for k, a in enumerate("xyz"):
+                self._send(self.entity[f"gyro_{a}"], gyro_t_s,
+                           rr.Scalars.columns(scalars=omega_b[:, k]))
+        if len(est_t_s):
+            self._axes_rows("est", est_t_s, q_est)
+        if len(truth_t_s):
+            order = np.argsort(truth_t_s, kind="stable")
+            self._axes_rows("truth", truth_t_s[order], q_truth[order])
+        if len(err_t_s):
+            self._send(self.entity["errors"], err_t_s, rr.Scalars.columns(scalars=err_deg))
+
+    def close(self) -> str:
+        """Flush and disconnect; return the line to print about the viewer."""
+        self.rec.flush(timeout_sec=_FLUSH_TIMEOUT_S)
+        self.rec.disconnect()
+        if self.served is not None:
+            return (f"rerun: the web viewer stays at {self.served.url} (127.0.0.1 only; stop it "
+                    f"with: kill {self.served.process.pid})")
+        if self.viewer_pid is not None:
+            return f"rerun: viewer running (pid {self.viewer_pid})"
+        return f"rerun: saved {self.mode[len('save:'):]}"

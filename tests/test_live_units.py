@@ -1,0 +1,175 @@
+"""Live building blocks: the reorder window, line parsing, the causal rest bias (against
+replay's batch rule), and the command on stdin (90 deg about z; bad input: one line, exit 2)."""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from imu_dcm.errors import InputError
+from imu_dcm.live.lines import parse_lines
+from imu_dcm.live.reorder import ReorderBuffer
+from imu_dcm.live.rest import CausalRestBias
+from imu_dcm.live.sources import parse_source
+from imu_dcm.replay.bias import estimate_bias
+
+REPO = Path(__file__).resolve().parents[1]
+W = (0.0, 0.0, 1.0)
+
+
+def push_all(buf: ReorderBuffer, stamps) -> list[int]:
+    out: list = []
+    for t in stamps:
+        buf.push(t, W, None, out)
+    buf.flush(out)
+    return [t for t, _, _ in out]
+
+
+def test_reorder_window_puts_late_samples_in_order_and_counts_the_rest():
+    ms = 1_000_000
+    buf = ReorderBuffer(50 * ms)
+    # 30 ms late (inside 50 ms): reordered; 3 duplicates (held, and the last released);
+    # one 200 ms late: backward
+    stamps = [0, 10, 20, 50, 40, 30, 60, 60, 70, 80, 90, 100, 150, 200, 300, 100, 300, 305]
+    got = push_all(buf, [t * ms for t in stamps])
+    assert got == [t * ms for t in [0, 10, 20, 30, 40, 50, 60, 70, 80, 90, 100, 150, 200, 300,
+                                    305]]
+    assert buf.reordered == 2  # 40 and 30
+    assert buf.dropped_duplicate == 2  # 60 held, 300 held
+    assert buf.dropped_backward == 1  # 100 after 150, 200 were released
+    out: list = []
+    buf.push(310 * ms, (math.nan, 0.0, 0.0), None, out)
+    assert buf.dropped_nonfinite == 1 and out == []
+
+
+def test_reorder_window_zero_releases_at_once():
+    buf = ReorderBuffer(0)
+    out: list = []
+    buf.push(5, W, "a", out)
+    assert [t for t, _, _ in out] == [5]
+    buf.push(5, W, "b", out)
+    buf.push(4, W, "c", out)
+    assert buf.dropped_duplicate == 1 and buf.dropped_backward == 1 and len(out) == 1
+
+
+def test_lines_csv_json_units_and_malformed():
+    lines = [
+        b"t_s,gx,gy,gz",  # header: skipped, not counted
+        b"1700000026.505500001,1,2,3",  # exact decimal stamp (1 ns resolution)
+        b'{"t_ns": 1700000026509000000, "omega_b": [0.5, 0, 0]}',
+        b'{"t_s": "1700000026.5125", "gx": 1, "gy": 0, "gz": 0, "q_w_b": [0, 0, 0.6, 0.8]}',
+        b'{"t_ns": 1700000026516000000, "q_w_b": [0, 0, 0, 1]}',  # truth only
+        b"1700000026.52,nan,0,0",  # non-finite: malformed
+        b"1,2,3",  # 3 fields
+        b"{broken",
+        b'{"t_ns": 1.5, "omega_b": [0, 0, 0]}',  # t_ns must be an integer
+        b"",
+    ]
+    t, w, tt, q, bad = parse_lines(lines, gyro_units="deg/s", first=True)
+    assert t.tolist() == [1700000026505500001, 1700000026509000000, 1700000026512500000]
+    assert np.allclose(w, np.radians([[1, 2, 3], [0.5, 0, 0], [1, 0, 0]]), rtol=1e-15, atol=0)
+    assert tt.tolist() == [1700000026512500000, 1700000026516000000]
+    assert q.tolist() == [[0, 0, 0.6, 0.8], [0, 0, 0, 1]]
+    assert bad == 4
+    t, _, _, _, bad = parse_lines([b"12.5,0,0,1", b"13,0,0,1"], time_units="ms")
+    assert t.tolist() == [12_500_000, 13_000_000] and bad == 0
+    _, _, _, _, bad = parse_lines([b"t_s,gx,gy,gz"], first=False)  # not first: malformed
+    assert bad == 1
+
+
+def test_parse_source():
+    assert parse_source("-").kind == "stdin"
+    s = parse_source("ws://127.0.0.1:8765")
+    assert (s.kind, s.host, s.port) == ("ws", "127.0.0.1", 8765)
+    assert parse_source("udp://localhost:9870").port == 9870
+    for bad in ("tcp://x:1", "ws://host", "udp://:5", "file.mcap"):
+        with pytest.raises(InputError, match="Expected SOURCE"):
+            parse_source(bad)
+
+
+def rest_motion_log(seed: int = 3, rate_hz: float = 256.0):
+    """Rest 2 s, motion 3 s, rest 1.5 s, motion 1 s, rest 2 s; bias changes between rests.
+
+    256 Hz: the step is exact in binary, so the rest window (0.5 s / median step) is the same
+    number of samples online (first steps) and in replay (all steps)."""
+    rng = np.random.default_rng(seed)
+    parts, biases = [], [(0.004, -0.002, 0.001), (0.006, -0.001, -0.002), (0.003, 0.0, 0.002)]
+    b_i = 0
+    for kind, dur in [("rest", 2.0), ("move", 3.0), ("rest", 1.5), ("move", 1.0), ("rest", 2.0)]:
+        n = int(dur * rate_hz)
+        w = rng.normal(0, 0.002, (n, 3)) + biases[min(b_i, 2)]
+        if kind == "move":
+            tt = np.arange(n) / rate_hz
+            w += np.stack([np.sin(3 * tt), np.cos(2 * tt), 0.5 + 0 * tt], axis=1)
+            b_i += 1
+        parts.append(w)
+    w = np.concatenate(parts)
+    t = np.arange(len(w)) / rate_hz
+    return w, t
+
+
+def test_causal_rest_bias_ends_each_segment_on_replays_value():
+    w, t = rest_motion_log()
+    batch = estimate_bias(w, t, "auto")
+    live = CausalRestBias()
+    applied = np.array([live.update(tuple(x), s) for x, s in zip(w.tolist(), t.tolist())])
+    live.finish()
+    assert len(live.segments) == len(batch.segments) == 3
+    # segments that end before the log does: the last causal update is replay's segment mean
+    # (a sum of n samples: relative rounding <= n eps)
+    for seg_live, seg in zip(live.segments[:2], batch.segments[:2]):
+        n = seg.stop - seg.start
+        assert seg_live["bias_rad_s"] == pytest.approx(seg.bias_rad_s,
+                                                       abs=4 * n * np.finfo(float).eps * 0.01)
+        assert seg_live["start_s"] == seg.start_s and seg_live["end_s"] == seg.end_s
+    # causal: the bias uses samples one window behind the newest, so the first sample with a
+    # bias is number win (the first still window ends at win - 1 and holds nothing older)
+    win = math.ceil(0.5 / (t[1] - t[0]))
+    assert np.all(applied[:win] == 0.0)
+    assert np.all(applied[win] == w[0])
+
+
+def run_cli(args: list[str], stdin: bytes = b"", timeout: float = 60):
+    env = {**os.environ, "PYTHONPATH": str(REPO)}
+    return subprocess.run([sys.executable, "-m", "imu_dcm.live", *args], input=stdin,
+                          capture_output=True, env=env, timeout=timeout, check=False)
+
+
+def test_stdin_constant_rate_gives_90_deg_about_z(tmp_path):
+    # 1 s at 90 deg/s about body z, in deg/s with millisecond stamps
+    lines = "".join(f"{k * 10},0,0,90\n" for k in range(101)).encode()
+    out = tmp_path / "summary.json"
+    r = run_cli(["-", "--rerun", "off", "--bias", "none", "--gyro-units", "deg/s",
+                 "--time-units", "ms", "--method", "trapezoid", "--no-status",
+                 "--summary-json", str(out)], lines)
+    assert r.returncode == 0, r.stderr.decode()
+    text = r.stdout.decode()
+    assert "stopped    end of input" in text
+    assert "final      q_w_b [x, y, z, w] = [+0.000000, +0.000000, +0.707107, +0.707107]" in text
+    summary = json.loads(out.read_text())
+    q = np.array(summary["final_quat_xyzw"])
+    h = math.sqrt(0.5)
+    # constant axis: exact up to rounding of 100 steps
+    assert np.allclose(q, [0, 0, h, h], atol=100 * 4 * np.finfo(float).eps)
+    assert summary["final_t_s"] == 1.0 and summary["samples"] == 101
+
+
+@pytest.mark.parametrize("args, needle", [
+    (["tcp://x:1"], "Expected SOURCE"),
+    (["-", "--rerun", "window"], "Expected --rerun"),
+    (["-", "--bias", "1,2"], "Expected bias"),
+    (["-", "--init-quat", "0,0,0"], "init"),
+    (["-", "--method", "rk4"], "invalid choice"),
+])
+def test_cli_bad_input_one_line_exit_2(args, needle):
+    r = run_cli([*args, "--no-status"], b"")
+    assert r.returncode == 2
+    err = r.stderr.decode().strip().splitlines()
+    assert len(err) == 1 and needle in err[0] and err[0].startswith("imu-dcm-live: error:")
