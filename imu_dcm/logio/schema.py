@@ -101,17 +101,31 @@ def _check_depth(defs: Defs, root: str) -> None:
                 stack.append((f.base, d + 1, seen | {name}))
 
 
+def _idl_types(text: str) -> dict:
+    """Types of an IDL schema, possibly several IDL files separated by ``=== / IDL: name``."""
+    import re
+
+    from rosbags.typesys import get_types_from_idl
+
+    types: dict = {}
+    for piece in re.split(r"^=+[ \t]*$", text, flags=re.MULTILINE):
+        body = re.sub(r"\A\s*IDL:[^\n]*\n", "", piece)
+        if body.strip():
+            types.update(get_types_from_idl(body))
+    return types
+
+
 @lru_cache(maxsize=64)
 def _parse(msgtype: str, encoding: str, text: str, serialization: str) -> tuple[Defs, str]:
-    from rosbags.typesys import get_types_from_idl, get_types_from_msg
+    from rosbags.typesys import get_types_from_msg
 
     root = norm_type(msgtype)
     if len(text.encode("utf-8", "surrogatepass")) > MAX_SCHEMA_BYTES:
         raise LogError(f"Expected a message definition of at most {MAX_SCHEMA_BYTES} bytes for "
                        f"{msgtype}, got {len(text)} characters")  # fmt: skip
     if text.strip():
-        if encoding == "ros2idl":
-            typesdict = get_types_from_idl(text)
+        if encoding in ("ros2idl", "omgidl"):
+            typesdict = _idl_types(text)
         else:
             typesdict = get_types_from_msg(text, root)
     else:
@@ -155,15 +169,15 @@ def definitions(conn: Conn) -> tuple[Defs, str]:
 
 def typestore_for(conn: Conn):
     """A rosbags type store holding ``conn``'s types (for the per-message fallback)."""
-    from rosbags.typesys import Stores, get_types_from_idl, get_types_from_msg, get_typestore
+    from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 
     root = norm_type(conn.msgtype)
     if not conn.schema_text.strip():
         return get_typestore(Stores.ROS1_NOETIC if conn.encoding == "ros1"
                              else Stores.ROS2_HUMBLE), root  # fmt: skip
     store = get_typestore(Stores.EMPTY)
-    if conn.schema_encoding == "ros2idl":
-        types = get_types_from_idl(conn.schema_text)
+    if conn.schema_encoding in ("ros2idl", "omgidl"):
+        types = _idl_types(conn.schema_text)
     else:
         types = get_types_from_msg(conn.schema_text, root)
     base = get_typestore(Stores.ROS2_HUMBLE)
