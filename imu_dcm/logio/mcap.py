@@ -120,6 +120,7 @@ class McapSource:
         self.channels: dict[int, tuple[int, str, str]] = {}
         self.counts: dict[int, int] = {}
         self.counts_seen: dict[int, int] = {}
+        self._n_kept = 0
         self.parts: dict[int, list[Payloads]] = {}
         self.damage: list[Damage] = []
         self.profile = ""
@@ -299,9 +300,10 @@ class McapSource:
         data = decompress(comp, f.read(n), usize)
         if crc != 0 and zlib.crc32(data) != crc:
             raise _Bad("it fails its CRC check")
-        self._take(data, pos, seq, entries)
+        self._take(data, pos, seq, entries, (_t0, _t1))
 
-    def _take(self, data: bytes, pos: int, seq: int, entries: dict | None) -> None:
+    def _take(self, data: bytes, pos: int, seq: int, entries: dict | None,
+              span: tuple[int, int] = (None, None)) -> None:  # fmt: skip
         """Locate the messages in a decompressed chunk; keep payloads of kept channels."""
         d = np.frombuffer(data, np.uint8)
         if entries:
@@ -318,12 +320,15 @@ class McapSource:
                     # schema/channel records sit between indexed messages: walk only those gaps
                     gs, ge = np.concatenate([[0], ends]), np.concatenate([offs, [len(data)]])
                     for a, b in zip(gs[ge > gs].tolist(), ge[ge > gs].tolist()):
-                        self._walk(data, a, b, pos, seq, meta_only=True)
+                        self._walk(data, a, b, pos, seq, meta_only=True, span=span)
                     cid = gather(d, offs + 9, "u2").astype(np.int64)
                     lt = gather(d, offs + 15, "u8").astype(np.int64)
                     self._keep_spans(d, offs, length, cid, lt, seq)
                     return
-        self._walk(data, 0, len(data), pos, seq, meta_only=False)
+        expected = sum(len(e[0]) for c, e in (entries or {}).items() if self._is_kept(c))
+        self._n_kept = 0
+        self._walk(data, 0, len(data), pos, seq, meta_only=False, span=span,
+                   expected=expected if entries else None)
 
     def _keep_spans(self, d, offs, length, cid, log_time, seq: int) -> None:
         for c in np.unique(cid).tolist():
@@ -331,12 +336,14 @@ class McapSource:
             self.counts_seen[c] = self.counts_seen.get(c, 0) + int(m.sum())
             if not self._is_kept(c):
                 continue
+            self._n_kept += int(m.sum())
             s = offs[m] + _MSG_HEADER
             n = length[m] - 22
             self.parts.setdefault(c, []).append(
                 Payloads(*compact(d, s, n), log_time[m], (seq << 32) + offs[m]))
 
-    def _walk(self, data: bytes, a: int, b: int, pos: int, seq: int, meta_only: bool) -> None:
+    def _walk(self, data: bytes, a: int, b: int, pos: int, seq: int, meta_only: bool,
+              span=(None, None), expected: int | None = None) -> None:
         """Walk the records in ``data[a:b]`` of one chunk (chunk at file offset ``pos``)."""
         offs, lens, cids, times = [], [], [], []
         p = a
@@ -359,14 +366,16 @@ class McapSource:
             except (struct.error, _Bad):
                 break
             p = end
-        if p < b:
-            self.damage.append(Damage(pos, f"a record inside the chunk at byte {pos} is damaged "
-                                      f"(at byte {p} of its {len(data)} decompressed bytes); "
-                                      f"the rest of that chunk is lost"))  # fmt: skip
         if offs:
             d = np.frombuffer(data, np.uint8)
             self._keep_spans(d, np.asarray(offs, np.int64), np.asarray(lens, np.int64),
                              np.asarray(cids, np.int64), np.asarray(times, np.int64), seq)
+        if p < b:
+            lost = None if expected is None else max(expected - self._n_kept, 0)
+            self.damage.append(Damage(pos, f"a record inside the chunk at byte {pos} is damaged "
+                                      f"(at byte {p} of its {len(data)} decompressed bytes); "
+                                      f"the rest of that chunk is lost", span[0], span[1],
+                                      lost))  # fmt: skip
 
     # ------------------------------------------------------------------ forward scan
     def _scan(self, f) -> None:
