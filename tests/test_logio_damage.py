@@ -200,3 +200,111 @@ def test_zstd_frame_larger_than_the_chunk_declares_is_refused(tmp_path):
     with pytest.warns(ImuDcmWarning, match="its zstd frame declares 10485760 bytes"):
         with pytest.raises(LogError):
             read_log(p)
+
+
+# ------------------------------------------------------------ hostile schemas, JSON, YAML
+def _one_channel(tmp_path: Path, name: str, enc: str, text: bytes, payloads: list[bytes],
+                 msg_enc: str = "cdr") -> Path:  # fmt: skip
+    from mcap.writer import Writer
+
+    p = tmp_path / "h.mcap"
+    with open(p, "wb") as f:
+        w = Writer(f)
+        w.start("ros2", "test")
+        sid = w.register_schema(name, enc, text)
+        cid = w.register_channel("/imu/data", msg_enc, sid)
+        for i, data in enumerate(payloads):
+            w.add_message(cid, log_time=i + 1, data=data, publish_time=i + 1)
+        w.finish()
+    return p
+
+
+@pytest.mark.parametrize("text", [b"\xff\xfe not utf-8 \x80", b"float64 x y z\n!!! ???",
+                                  b"std_msgs/Header header\nfloat64[9 orientation_covariance"])
+def test_corrupt_imu_schema_is_one_line_error(tmp_path, text):
+    p = _one_channel(tmp_path, "sensor_msgs/msg/Imu", "ros2msg", text, [b"\x00\x01\x00\x00"])
+    with pytest.raises(LogError, match=r"^/imu/data: |Expected a readable ros2msg definition"):
+        read_log(p)
+
+
+def test_self_containing_and_very_deep_types_are_refused(tmp_path):
+    from test_logio import IMU_SECTION, HEADER, QUAT, VEC3
+
+    sep = "\n" + "=" * 80 + "\n"
+    rec = "acme_msgs/Rec rec\nsensor_msgs/Imu imu\n" + IMU_SECTION + HEADER + QUAT + VEC3
+    rec += sep + "MSG: acme_msgs/Rec\nacme_msgs/Rec rec\n"
+    p = _one_channel(tmp_path, "acme_msgs/msg/Rec", "ros2msg", rec.encode(), [b"\x00\x01\0\0"])
+    with pytest.raises(LogError):
+        read_log(p)
+    deep = "acme_msgs/T1 t\n" + "".join(f"{sep}MSG: acme_msgs/T{i}\nacme_msgs/T{i + 1} t\n"
+                                        for i in range(1, 3000)) + f"{sep}MSG: acme_msgs/T3000\nint8 x\n"
+    p = _one_channel(tmp_path, "sensor_msgs/msg/Imu", "ros2msg", deep.encode(), [b"\0\1\0\0"])
+    with pytest.raises(LogError):
+        read_log(p)
+
+
+def test_empty_covariance_sequence_keeps_the_gyro(tmp_path):
+    # A vendor Imu whose orientation_covariance is float64[] and empty: the per-message decoder
+    # reads the gyro and leaves the orientation flag unknown (no StopIteration).
+    from rosbags.typesys import Stores, get_types_from_msg, get_typestore
+
+    from test_logio import HEADER, QUAT, VEC3
+
+    fields = ("std_msgs/Header header\ngeometry_msgs/Quaternion orientation\n"
+              "float64[] orientation_covariance\ngeometry_msgs/Vector3 angular_velocity\n")
+    text = fields + HEADER + QUAT + VEC3
+    store = get_typestore(Stores.EMPTY)
+    types = get_types_from_msg(text, "sensor_msgs/msg/Imu")
+    types["builtin_interfaces/msg/Time"] = get_typestore(Stores.ROS2_HUMBLE).fielddefs[
+        "builtin_interfaces/msg/Time"]
+    store.register(types)
+    T = store.types
+    omega = np.random.default_rng(3).normal(size=(5, 3))
+    payloads = []
+    for i, w in enumerate(omega):
+        hdr = T["std_msgs/msg/Header"](T["builtin_interfaces/msg/Time"](1, i), "imu")
+        m = T["sensor_msgs/msg/Imu"](hdr, T["geometry_msgs/msg/Quaternion"](0.0, 0.0, 0.0, 1.0),
+                                   np.zeros(0), T["geometry_msgs/msg/Vector3"](*w))
+        payloads.append(bytes(store.serialize_cdr(m, "sensor_msgs/msg/Imu")))
+    p = _one_channel(tmp_path, "sensor_msgs/msg/Imu", "ros2msg", text.encode(), payloads)
+    log = read_log(p, imu_topic="/imu/data")
+    np.testing.assert_array_equal(log.imu.omega_b, omega)
+
+
+@pytest.mark.parametrize("stamp", ["1e300", str(2**70), "Infinity", "NaN"])
+def test_json_stamps_beyond_int64_drop_that_message(tmp_path, stamp):
+    good = [b'{"header": {"stamp": {"sec": %d, "nanosec": 0}}, "angular_velocity": '
+            b'{"x": 1.0, "y": 2.0, "z": 3.0}}' % i for i in range(1, 4)]
+    bad = ('{"header": {"stamp": {"sec": %s, "nanosec": 0}}, "angular_velocity": '
+           '{"x": 1.0, "y": 2.0, "z": 3.0}}' % stamp).encode()
+    p = _one_channel(tmp_path, "Imu", "jsonschema", b"{}", good + [bad], msg_enc="json")
+    with pytest.warns(ImuDcmWarning, match="dropped 1 messages"):
+        log = read_log(p)
+    np.testing.assert_array_equal(log.imu.t_ns, [1_000_000_000, 2_000_000_000, 3_000_000_000])
+
+
+def test_json_nested_100000_deep_is_dropped(tmp_path):
+    good = b'{"angular_velocity": {"x": 1.0, "y": 2.0, "z": 3.0}}'
+    deep = b'{"angular_velocity": {"x": 1.0, "y": 2.0, "z": 3.0}, "a": ' + b"[" * 100_000 + \
+        b"]" * 100_000 + b"}"
+    p = _one_channel(tmp_path, "Imu", "jsonschema", b"{}", [good, deep, good], msg_enc="json")
+    with pytest.warns(ImuDcmWarning, match="dropped 1 messages"):
+        assert len(read_log(p).imu.t_ns) == 2
+
+
+@pytest.mark.parametrize("text, match", [
+    (b"- just\n- a list\n", "Expected a rosbag2_bagfile_information mapping"),
+    (b"rosbag2_bagfile_information: \xff\xfe\n", "Expected a UTF-8 metadata.yaml"),
+    (b"rosbag2_bagfile_information: [unclosed\n", "Expected a YAML metadata.yaml"),
+    (b"a: &a [x, x, x, x, x, x, x, x, x]\nb: &b [*a, *a, *a, *a, *a, *a, *a, *a, *a]\n"
+     b"c: &c [*b, *b, *b, *b, *b, *b, *b, *b, *b]\nrosbag2_bagfile_information: [*c, *c, *c]\n",
+     "without YAML aliases"),
+    (b"rosbag2_bagfile_information:\n  storage_identifier: mcap\n  relative_file_paths: 3\n",
+     "Expected relative_file_paths"),
+])  # fmt: skip
+def test_bad_metadata_yaml_is_one_line_error(tmp_path, text, match):
+    bag = tmp_path / "bag"
+    bag.mkdir()
+    (bag / "metadata.yaml").write_bytes(text)
+    with pytest.raises(LogError, match=match):
+        read_log(bag)

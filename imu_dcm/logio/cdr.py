@@ -167,15 +167,13 @@ def decode_slow(conn: Conn, raw: Payloads, want: Want) -> tuple[dict[str, NDArra
             vals = {k: _leaf(msg, k) for k in want}
         except Exception:  # noqa: BLE001 (a corrupt payload: counted as dropped by the caller)
             continue
-        ok = True
         for k, (_, c) in want.items():
             v = vals[k]
             if isinstance(v, (list, tuple, np.ndarray)):
                 v = np.asarray(v).ravel()
                 if len(v) < c:
-                    ok = False  # an empty or short array holds no value
-                    break
+                    continue  # an empty sequence holds no value: the row keeps NaN / 0
                 v = v[0] if c == 1 else v[:c]
             out[k][i] = v
-        good[i] = ok
+        good[i] = True
     return out, good
