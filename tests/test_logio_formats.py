@@ -363,3 +363,50 @@ def test_copy_of_shipped_bag_reads_the_same(tmp_path):
     a, b = read_log(dst), read_log(next(dst.glob("*.mcap")))
     np.testing.assert_array_equal(a.imu.omega_b, b.imu.omega_b)
     assert a.container == "ros2 mcap" and a.custom_data == b.custom_data != {}
+
+
+# ---------------------------------------------------------------------------- memory
+# VmHWM, not ru_maxrss: Linux keeps ru_maxrss across exec, so a child forked from a big
+# pytest process would report the parent's peak.
+_PEAK = """
+import sys, warnings
+warnings.simplefilter("ignore")
+from imu_dcm.logio import read_log
+log = read_log(sys.argv[1])
+hwm = [ln for ln in open("/proc/self/status") if ln.startswith("VmHWM:")][0].split()[1]
+print(len(log.imu.t_ns), hwm)
+"""
+
+
+def _peak_kib(path: Path) -> tuple[int, int]:
+    import os
+    import subprocess
+    import sys
+
+    env = dict(os.environ, PYTHONPATH=str(Path(__file__).resolve().parents[1]))
+    out = subprocess.run([sys.executable, "-c", _PEAK, str(path)], capture_output=True,
+                         text=True, env=env, check=True).stdout.split()  # fmt: skip
+    return int(out[0]), int(out[1])
+
+
+@pytest.mark.skipif(not Path("/proc/self/status").is_file(), reason="needs Linux /proc")
+def test_a_camera_topic_does_not_raise_peak_memory(tmp_path):
+    # The whole trial plus a 10 Hz camera of 48 kB incompressible frames (~88 MB, mixed into
+    # the same 768 KiB chunks as the IMU, as rosbag2 records): peak RSS (VmHWM) rises <= 20 %.
+    with open(_shipped_mcap(), "rb") as f:
+        reader = make_reader(f)
+        msgs = [(c.topic, s.name, s.data, m.log_time, m.publish_time, m.data)
+                for s, c, m in reader.iter_messages()]  # fmt: skip
+    plain = write_mcap(tmp_path / "plain.mcap", msgs, chunk_size=768 * 1024)
+    rng = np.random.default_rng(0)
+    t0, t1 = msgs[0][3], msgs[-1][3]
+    cam = [("/camera/image_raw", "sensor_msgs/msg/Image", b"uint8[] data\n", int(t), int(t),
+            b"\x00\x01\x00\x00" + rng.bytes(48_000)) for t in range(t0, t1, 100_000_000)]
+    mixed = sorted(msgs + cam, key=lambda m: m[3])
+    with_cam = write_mcap(tmp_path / "cam.mcap", mixed, chunk_size=768 * 1024)
+    del msgs, mixed, cam
+    assert with_cam.stat().st_size > plain.stat().st_size + 80e6
+    n0, peak0 = _peak_kib(plain)
+    n1, peak1 = _peak_kib(with_cam)
+    assert n0 == n1 == 52518
+    assert peak1 <= 1.2 * peak0, f"peak RSS {peak0} KiB without the camera, {peak1} KiB with"
