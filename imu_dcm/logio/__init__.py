@@ -18,11 +18,11 @@ from collections.abc import Callable
 from pathlib import Path
 
 from imu_dcm.errors import ImuDcmWarning, LogError
-from imu_dcm.logio.channels import TRUTH_TYPES, describe, keep_predicate, pick_imu, read_imu
+from imu_dcm.logio.channels import TRUTH_TYPES, describe, pick_imu, plan, read_imu
 from imu_dcm.logio.channels import read_truth as _read_truth
 from imu_dcm.logio.containers import open_source, resolve_mcap_path
 from imu_dcm.logio.meta import read_custom_data
-from imu_dcm.logio.types import ChannelInfo, Damage, ImuSeries, LogData, TruthSeries
+from imu_dcm.logio.types import ChannelInfo, Damage, ImuSeries, LogData, Sink, TruthSeries
 
 __all__ = [
     "TRUTH_TYPES",
@@ -101,7 +101,7 @@ def read_log(
         lost), or messages did not decode.
     """
     source, shown, custom = open_source(path, progress)
-    got = source.read(keep_predicate(imu_topic, truth_topic))
+    got = source.read(Sink(plan(imu_topic, truth_topic)))
     channels = tuple(ChannelInfo(c.topic, c.msgtype, c.encoding, int(c.count or 0))
                      for c in got.conns)  # fmt: skip
     stopped_at = _damage_summary(shown.name, got.damage) if got.damage else None

@@ -21,7 +21,7 @@ from numpy.typing import NDArray
 from imu_dcm.errors import LogError
 from imu_dcm.logio.cdr import decode
 from imu_dcm.logio.schema import Defs, definitions, norm_type
-from imu_dcm.logio.types import Collected, Conn, ImuSeries, Payloads, TruthSeries
+from imu_dcm.logio.types import Collected, Columns, Conn, ImuSeries, Payloads, TruthSeries
 
 IMU_TYPE = "sensor_msgs/msg/Imu"
 VEC3_TYPE = "geometry_msgs/msg/Vector3Stamped"
@@ -76,19 +76,84 @@ def is_truth(conn: Conn) -> bool:
     return conn.encoding in ("cdr", "ros1") and (t in TRUTH_TYPES or t == TF_TYPE)
 
 
+def _raw(p: Payloads) -> Payloads:
+    return p
+
+
+class _Decoder:
+    """Decodes batches of one channel's payloads into the columns its role needs."""
+
+    def __init__(self, conn: Conn, role: str, path: str = ""):
+        self.conn, self.role, self.path = conn, role, path
+        self.ready: tuple | None = None
+        self.error: LogError | None = None
+
+    def _setup(self) -> tuple:
+        defs, root = definitions(self.conn)
+        if self.role == "truth":
+            q = TRUTH_TYPES[root]
+            want = {f"{q}.{a}": ("f8", 1) for a in "xyzw"}
+            want.update({"header.stamp.sec": ("i8", 1), "header.stamp.nanosec": ("i8", 1)})
+        elif self.path == "vec3":
+            want = {"header.stamp.sec": ("i8", 1), "header.stamp.nanosec": ("i8", 1)}
+            want.update({"vector." + a: ("f8", 1) for a in "xyz"})
+        else:
+            want = _imu_want(self.path)
+        return defs, root, want
+
+    def __call__(self, p: Payloads) -> Columns:
+        if self.ready is None and self.error is None:
+            try:
+                self.ready = self._setup()
+            except LogError as exc:
+                self.error = exc
+        if self.error is not None:
+            return Columns(p.order, p.log_time, np.zeros(len(p), bool), {}, {}, self.error)
+        defs, root, want = self.ready
+        out, good = decode(self.conn, defs, root, p, want)
+        frames = {}
+        if good.any() and (self.role == "truth" or self.path in ("", "vec3")):
+            # only a bare message has its header's frame_id at a fixed place
+            frames["frame_id"] = _frame_id(self.conn, p, good)
+            if root in ("nav_msgs/msg/Odometry", "geometry_msgs/msg/TransformStamped"):
+                frames["child_frame_id"] = _child_frame(self.conn, p, good)
+        frames["type"] = root
+        return Columns(p.order, p.log_time, good, out, frames)
+
+
+def plan(imu_topic: str | None, truth_topic: str | None) -> Callable[[Conn], object]:
+    """What a container must do with each channel: skip it (None), keep it raw, or decode it.
+
+    Only channels that can be the IMU or the truth are kept; the IMU and truth types are
+    decoded batch by batch, so their raw payloads never pile up.
+    """
+
+    def role(c: Conn):
+        imu_ok = imu_topic is None or c.topic == imu_topic
+        truth_ok = truth_topic is None or c.topic == truth_topic
+        if truth_topic == "none":
+            truth_ok = False
+        if c.encoding == "json":
+            return _raw if imu_ok else None
+        if imu_ok:
+            path = imu_path(c)
+            if path is not None:
+                return _Decoder(c, "imu", path)
+        if truth_ok and is_truth(c):
+            if norm_type(c.msgtype) == TF_TYPE:
+                return _raw
+            return _Decoder(c, "truth")
+        if c.topic in (imu_topic, truth_topic):
+            return _raw  # named but of an unexpected type: kept to say so
+        return None
+
+    return role
+
+
 def keep_predicate(imu_topic: str | None, truth_topic: str | None) -> Callable[[Conn], bool]:
-    """Which channels a container must hand over: the possible IMU and truth channels only."""
-
-    def keep(c: Conn) -> bool:
-        if imu_topic is not None and c.topic == imu_topic:
-            return True
-        if truth_topic not in (None, "none") and c.topic == truth_topic:
-            return True
-        if imu_topic is None and (c.encoding == "json" or imu_path(c) is not None):
-            return True
-        return truth_topic is None and is_truth(c)
-
-    return keep
+    """Whether a channel can be the IMU or the truth (see :func:`plan`)."""
+    p = plan(imu_topic, truth_topic)
+    return lambda c: p(c) is not None
 
 
 def describe(conns: list[Conn]) -> str:
@@ -187,23 +252,23 @@ def _imu_want(path: str) -> dict[str, tuple[str, int]]:
     return want
 
 
-def _decode_imu(c: Conn, p: Payloads, path: str):
+def _imu_columns(c: Conn, data, path: str):
+    """(t_ns, omega, quat or None, good, type, frame) of one IMU channel's data."""
     if c.encoding == "json":
-        return _json_imu(c, p)
-    defs, root = definitions(c)
+        return _json_imu(c, data)
+    if data.error is not None:
+        raise data.error
+    out, good = data.fields, data.good
     if path == "vec3":
-        want = {"header.stamp.sec": ("i8", 1), "header.stamp.nanosec": ("i8", 1)}
-        want.update({"vector." + a: ("f8", 1) for a in "xyz"})
-        out, good = decode(c, defs, root, p, want)
         omega = np.stack([out["vector." + a] for a in "xyz"], axis=1)
-        return _stamp(out, "header."), omega, None, good, root, _frame_id(c, p, good)
-    out, good = decode(c, defs, root, p, _imu_want(path))
+        return _stamp(out, "header."), omega, None, good, data.frames.get("type", ""), \
+            data.frames.get("frame_id", "")
     pre = path + "." if path else ""
     omega = np.stack([out[pre + "angular_velocity." + a] for a in "xyz"], axis=1)
     quat = np.stack([out[pre + "orientation." + a] for a in "xyzw"], axis=1)
     quat[out[pre + "orientation_covariance"] == -1.0] = np.nan
-    frame = _frame_id(c, p, good) if not path else ""  # only a bare Imu has it at a fixed place
-    return _stamp(out, pre + "header."), omega, quat, good, root, frame
+    return (_stamp(out, pre + "header."), omega, quat, good, data.frames.get("type", ""),
+            data.frames.get("frame_id", ""))
 
 
 def _merge(rows: list[tuple[NDArray[np.int64], list[NDArray]]]) -> list[NDArray]:
@@ -273,8 +338,11 @@ def read_imu(got: Collected, topic: str, conns: list[tuple[Conn, str]]) -> tuple
     """The IMU series of ``topic`` (its channels merged) and the count of undecodable ones."""
     rows, dropped, typ, frame = [], 0, "", ""
     for c, path in conns:
-        p = got.payloads.get(c.id) or Payloads.empty()
-        t_ns, omega, quat, good, typ_c, frame_c = _decode_imu(c, p, path)
+        p = got.payloads.get(c.id)
+        if p is None:
+            p = Payloads.empty() if c.encoding == "json" else _Decoder(c, "imu", path)(
+                Payloads.empty())
+        t_ns, omega, quat, good, typ_c, frame_c = _imu_columns(c, p, path)
         dropped += int(len(p) - good.sum())
         typ, frame = typ or typ_c, frame or frame_c
         q = quat[good] if quat is not None else None
@@ -290,19 +358,20 @@ def read_imu(got: Collected, topic: str, conns: list[tuple[Conn, str]]) -> tuple
 def _read_truth_topic(got: Collected, topic: str, conns: list[Conn], auto: bool) -> TruthSeries:
     rows, typ, frame, child = [], "", "", ""
     for c in conns:
-        p = got.payloads.get(c.id) or Payloads.empty()
-        defs, root = definitions(c)
+        data = got.payloads.get(c.id)
+        if data is None:
+            data = _Decoder(c, "truth")(Payloads.empty())
+        if data.error is not None:
+            raise data.error
+        root = data.frames.get("type") or norm_type(c.msgtype)
         qpath = TRUTH_TYPES[root]
-        want = {f"{qpath}.{a}": ("f8", 1) for a in "xyzw"}
-        want["header.stamp.sec"] = ("i8", 1)
-        want["header.stamp.nanosec"] = ("i8", 1)
-        out, good = decode(c, defs, root, p, want)
+        out, good = data.fields, data.good
         q = np.stack([out[f"{qpath}.{a}"] for a in "xyzw"], axis=1)
-        rows.append((p.order[good], [_stamp(out, "header.")[good], p.log_time[good], q[good]]))
+        rows.append((data.order[good], [_stamp(out, "header.")[good], data.log_time[good],
+                                        q[good]]))  # fmt: skip
         typ = typ or root
-        frame = frame or _frame_id(c, p, good)
-        if not child and root in ("nav_msgs/msg/Odometry", "geometry_msgs/msg/TransformStamped"):
-            child = _child_frame(c, p, good)
+        frame = frame or data.frames.get("frame_id", "")
+        child = child or data.frames.get("child_frame_id", "")
     t_ns, log_t, q = _merge(rows)
     return TruthSeries(t_ns.astype(np.int64), log_t.astype(np.int64), q, topic, typ, frame,
                        child, auto)  # fmt: skip

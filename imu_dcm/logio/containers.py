@@ -6,8 +6,9 @@ a device such as ``/dev/zero``, a socket - is refused before a byte is read. A f
 cannot be read raises :class:`~imu_dcm.errors.LogError` saying what it is and the one command
 that converts it.
 
-Every source has ``kind`` and ``read(keep) -> Collected``: all channels, the raw payloads of the
-channels ``keep`` accepts, and the damaged parts skipped.
+Every source has ``kind`` and ``read(sink) -> Collected``: all channels, the data of the
+channels the :class:`~imu_dcm.logio.types.Sink` wants (decoded batch by batch), and the damaged
+parts skipped.
 """
 
 from __future__ import annotations
@@ -24,7 +25,7 @@ from imu_dcm.logio.mcap import McapSource
 from imu_dcm.logio.ros1 import MAGIC as ROS1_MAGIC
 from imu_dcm.logio.ros1 import Ros1Source
 from imu_dcm.logio.rosbag2 import Rosbag2Folder, SqliteSource, decompress_file
-from imu_dcm.logio.types import Collected, Conn
+from imu_dcm.logio.types import Collected, Sink
 
 SQLITE_MAGIC = b"SQLite format 3\x00"
 ZSTD_MAGIC = b"\x28\xb5\x2f\xfd"
@@ -72,11 +73,11 @@ class _ZstdFile:
         self.progress = progress
         self.kind = "zstd-compressed file"
 
-    def read(self, keep: Callable[[Conn], bool]) -> Collected:
+    def read(self, sink: Sink) -> Collected:
         with tempfile.TemporaryDirectory(prefix="imu_dcm_bag_") as tmp:
             inner = decompress_file(self.path, Path(tmp))
             src = source_for_file(inner, "", self.progress)
-            got = src.read(keep)
+            got = src.read(sink)
             self.kind = f"{getattr(src, 'kind', 'log')}, file-compressed"
             got.kind = self.kind
             return got

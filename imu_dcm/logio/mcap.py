@@ -19,7 +19,7 @@ from pathlib import Path
 import numpy as np
 
 from imu_dcm.errors import LogError
-from imu_dcm.logio.types import Collected, Conn, Damage, Payloads, join_payloads
+from imu_dcm.logio.types import Collected, Conn, Damage, Payloads, Sink
 
 MAGIC = b"\x89MCAP0\r\n"
 _SCHEMA, _CHANNEL, _MESSAGE, _CHUNK, _MSG_INDEX, _CHUNK_INDEX, _STATS = 3, 4, 5, 6, 7, 8, 11
@@ -109,7 +109,7 @@ def _channel(buf, pos: int, out: dict) -> None:
 
 
 class McapSource:
-    """One MCAP file. ``read(keep)`` returns every channel and the payloads of kept ones."""
+    """One MCAP file. ``read(sink)`` returns every channel and the data of kept ones."""
 
     kind = "mcap"
 
@@ -121,10 +121,9 @@ class McapSource:
         self.counts: dict[int, int] = {}
         self.counts_seen: dict[int, int] = {}
         self._n_kept = 0
-        self.parts: dict[int, list[Payloads]] = {}
         self.damage: list[Damage] = []
         self.profile = ""
-        self._keep: Callable[[Conn], bool] = lambda c: False
+        self.sink = Sink(lambda c: None)
         self._kept: dict[int, bool] = {}
 
     # ------------------------------------------------------------------ channels
@@ -143,12 +142,12 @@ class McapSource:
     def _is_kept(self, cid: int) -> bool:
         k = self._kept.get(cid)
         if k is None:
-            k = self._kept[cid] = cid in self.channels and bool(self._keep(self.conn(cid)))
+            k = self._kept[cid] = cid in self.channels and self.sink.wants(self.conn(cid))
         return k
 
     # ------------------------------------------------------------------ reading
-    def read(self, keep: Callable[[Conn], bool]) -> Collected:
-        self._keep = keep
+    def read(self, sink: Sink) -> Collected:
+        self.sink = sink
         try:
             f = open(self.path, "rb")  # noqa: SIM115
         except OSError as exc:
@@ -172,7 +171,7 @@ class McapSource:
         if self.kind == "mcap" and self.profile in ("ros1", "ros2"):
             self.kind = f"{self.profile} mcap"
         conns = [self.conn(c) for c in sorted(self.channels)]
-        payloads = {c: join_payloads(p) for c, p in self.parts.items()}
+        payloads = self.sink.finish()
         return Collected(self.kind, conns, payloads, self.damage)
 
     def _header_profile(self, f) -> str:
@@ -339,8 +338,7 @@ class McapSource:
             self._n_kept += int(m.sum())
             s = offs[m] + _MSG_HEADER
             n = length[m] - 22
-            self.parts.setdefault(c, []).append(
-                Payloads(*compact(d, s, n), log_time[m], (seq << 32) + offs[m]))
+            self.sink.add(c, Payloads(*compact(d, s, n), log_time[m], (seq << 32) + offs[m]))
 
     def _walk(self, data: bytes, a: int, b: int, pos: int, seq: int, meta_only: bool,
               span=(None, None), expected: int | None = None) -> None:
@@ -437,7 +435,7 @@ class McapSource:
                 if self._is_kept(cid):
                     payload = np.frombuffer(f.read(length - 22), np.uint8)
                     one = np.array([0], np.int64)
-                    self.parts.setdefault(cid, []).append(Payloads(
+                    self.sink.add(cid, Payloads(
                         payload, one, np.array([len(payload)], np.int64),
                         np.array([lt], np.int64), np.array([(seq << 32) + 0], np.int64)))
                 seq += 1

@@ -19,7 +19,7 @@ import numpy as np
 
 from imu_dcm.errors import LogError
 from imu_dcm.logio.mcap import compact, size_bound
-from imu_dcm.logio.types import Collected, Conn, Damage, Payloads, join_payloads
+from imu_dcm.logio.types import Collected, Conn, Damage, Payloads, Sink
 
 MAGIC = b"#ROSBAG V"
 
@@ -60,7 +60,7 @@ class Ros1Source:
         self.path = path
         self.progress = progress
 
-    def read(self, keep: Callable[[Conn], bool]) -> Collected:
+    def read(self, sink: Sink) -> Collected:
         from rosbags.rosbag1 import Reader, ReaderError
 
         reader = Reader(self.path)
@@ -81,18 +81,18 @@ class Ros1Source:
                            f"({type(exc).__name__}); `rosbag reindex {self.path.name}` rebuilds "
                            f"it") from None  # fmt: skip
         try:
-            return self._read(reader, keep)
+            return self._read(reader, sink)
         finally:
             reader.close()
 
-    def _read(self, reader, keep) -> Collected:
+    def _read(self, reader, sink: Sink) -> Collected:
         from rosbags.rosbag1.reader import Header, RecordType
 
         conns = []
         for c in reader.connections:
             conns.append(Conn(c.id, c.topic, c.msgtype, "ros1", "ros1msg", c.msgdef.data,
                               c.msgcount))  # fmt: skip
-        kept = {c.id for c in conns if keep(c)}
+        kept = {c.id for c in conns if sink.wants(c)}
         # index entries of kept connections, grouped by chunk: (offsets, times)
         by_chunk: dict[int, dict[int, tuple[list, list]]] = defaultdict(dict)
         for cid in kept:
@@ -100,7 +100,6 @@ class Ros1Source:
                 offs, times = by_chunk[e.chunk_pos].setdefault(cid, ([], []))
                 offs.append(e.offset)
                 times.append(e.time)
-        parts: dict[int, list[Payloads]] = {}
         damage = []
         bio = reader.bio
         infos = sorted(reader.chunk_infos, key=lambda ci: ci.pos)
@@ -121,17 +120,17 @@ class Ros1Source:
                 chunk = reader.chunks[info.pos]
                 bio.seek(chunk.datapos)
                 data = _decompress(compression, bio.read(chunk.datasize), size)
-                self._take(np.frombuffer(data, np.uint8), entries, k, parts)
+                self._take(np.frombuffer(data, np.uint8), entries, k, sink)
             except _Bad as exc:
                 lost = sum(len(e[0]) for e in entries.values())
                 damage.append(Damage(info.pos, f"ROS 1 chunk {k + 1} of {len(infos)} at byte "
                                      f"{info.pos} is damaged: {exc}", info.start_time,
                                      info.end_time, lost))  # fmt: skip
-        payloads = {c: join_payloads(p) for c, p in parts.items()}
+        payloads = sink.finish()
         return Collected(self.kind, conns, payloads, damage)
 
     @staticmethod
-    def _take(d: np.ndarray, entries: dict, seq: int, parts: dict) -> None:
+    def _take(d: np.ndarray, entries: dict, seq: int, sink: Sink) -> None:
         from imu_dcm.logio.cdr import gather
 
         for cid, (offs, times) in entries.items():
@@ -150,4 +149,4 @@ class Ros1Source:
                 raise _Bad("a message runs past the chunk")
             k = np.argsort(start, kind="stable")
             buf, out_start, n = compact(d, start[k], dl[k])
-            parts.setdefault(cid, []).append(Payloads(buf, out_start, n, t[k], (seq << 32) + off[k]))
+            sink.add(cid, Payloads(buf, out_start, n, t[k], (seq << 32) + off[k]))

@@ -15,7 +15,6 @@ from __future__ import annotations
 import shutil
 import sqlite3
 import tempfile
-from array import array
 from collections.abc import Callable
 from pathlib import Path
 
@@ -23,7 +22,7 @@ import numpy as np
 
 from imu_dcm.errors import LogError
 from imu_dcm.logio.mcap import size_bound
-from imu_dcm.logio.types import Collected, Conn, Damage, Payloads, join_payloads
+from imu_dcm.logio.types import Collected, Conn, Damage, Payloads, Sink, join_any
 
 #: Largest single decompressed message of a message-compressed bag (bytes).
 MAX_MESSAGE_BYTES = 256 << 20
@@ -38,14 +37,14 @@ class SqliteSource:
         self.path = path
         self.progress = progress
 
-    def read(self, keep: Callable[[Conn], bool]) -> Collected:
+    def read(self, sink: Sink) -> Collected:
         uri = f"file:{self.path.resolve().as_posix()}?mode=ro&immutable=1"
         try:
             db = sqlite3.connect(uri, uri=True)
         except sqlite3.Error as exc:
             raise LogError(f"Expected a readable sqlite3 bag, got {exc} in {self.path}") from None
         try:
-            return self._read(db, keep)
+            return self._read(db, sink)
         except sqlite3.DatabaseError as exc:
             raise LogError(f"Expected a rosbag2 sqlite3 database, got {str(exc).rstrip('.')} in "
                            f"{self.path}; `sqlite3 {self.path.name} .recover` may rescue "
@@ -53,7 +52,7 @@ class SqliteSource:
         finally:
             db.close()
 
-    def _read(self, db: sqlite3.Connection, keep) -> Collected:
+    def _read(self, db: sqlite3.Connection, sink: Sink) -> Collected:
         tables = {r[0] for r in db.execute("SELECT name FROM sqlite_master WHERE type='table'")}
         if not {"topics", "messages"} <= tables:
             raise LogError(f"Expected a rosbag2 sqlite3 database (tables topics, messages), got "
@@ -73,31 +72,23 @@ class SqliteSource:
             enc, text = defs.get(typ, ("", ""))
             conns.append(Conn(int(tid), str(name), str(typ), str(fmt), enc, text,
                               int(counts.get(tid, 0))))  # fmt: skip
-        kept = [c.id for c in conns if keep(c)]
-        bufs = {c: bytearray() for c in kept}
-        starts = {c: array("q") for c in kept}
-        lens = {c: array("q") for c in kept}
-        times = {c: array("q") for c in kept}
-        orders = {c: array("q") for c in kept}
+        kept = [c.id for c in conns if sink.wants(c)]
         if kept:
             marks = ",".join("?" * len(kept))
             rows = db.execute(f"SELECT id, topic_id, timestamp, data FROM messages "  # noqa: S608
                               f"WHERE topic_id IN ({marks}) ORDER BY id", kept)  # fmt: skip
-            for rid, tid, ts, data in rows:
-                b = bufs[tid]
-                starts[tid].append(len(b))
-                lens[tid].append(len(data))
-                times[tid].append(ts)
-                orders[tid].append(rid)
-                b += data
-        payloads = {
-            c: Payloads(np.frombuffer(bytes(bufs[c]), np.uint8),
-                        np.frombuffer(starts[c], np.int64).copy(),
-                        np.frombuffer(lens[c], np.int64).copy(),
-                        np.frombuffer(times[c], np.int64).copy(),
-                        np.frombuffer(orders[c], np.int64).copy())
-            for c in kept
-        }  # fmt: skip
+            while batch := rows.fetchmany(20_000):
+                by_topic: dict[int, list] = {}
+                for row in batch:
+                    by_topic.setdefault(row[1], []).append(row)
+                for tid, rs in by_topic.items():
+                    lens = np.fromiter((len(r[3]) for r in rs), np.int64, len(rs))
+                    starts = np.concatenate([[0], np.cumsum(lens)[:-1]]).astype(np.int64)
+                    buf = np.frombuffer(b"".join(r[3] for r in rs), np.uint8)
+                    sink.add(tid, Payloads(buf, starts, lens,
+                                           np.fromiter((r[2] for r in rs), np.int64, len(rs)),
+                                           np.fromiter((r[0] for r in rs), np.int64, len(rs))))
+        payloads = sink.finish()
         return Collected(self.kind, conns, payloads, [])
 
 
@@ -180,18 +171,23 @@ class Rosbag2Folder:
             parts.append(f"{self.mode}-compressed")
         return ", ".join(parts)
 
-    def read(self, keep: Callable[[Conn], bool]) -> Collected:
+    def read(self, sink: Sink) -> Collected:
         from imu_dcm.logio.containers import source_for_file
 
         merged: dict[tuple, Conn] = {}
-        parts: dict[int, list[Payloads]] = {}
+        parts: dict[int, list] = {}
         damage: list[Damage] = []
         with tempfile.TemporaryDirectory(prefix="imu_dcm_bag_") as tmp:
             for k, path in enumerate(self.files):
                 if self.mode == "file":
                     path = decompress_file(path, Path(tmp))
                 src = source_for_file(path, self.storage)
-                got = src.read(keep)
+                name = self.files[k].name
+                transform = None
+                if self.mode == "message":
+                    def transform(p, name=name):
+                        return decompress_messages(p, name, damage)
+                got = src.read(Sink(sink.plan, transform))
                 for d in got.damage:
                     damage.append(Damage(d.offset, f"{self.files[k].name}: {d.what}",
                                          d.t_start_ns, d.t_end_ns, d.messages_lost))
@@ -204,8 +200,6 @@ class Rosbag2Folder:
                     g.count = (g.count or 0) + (c.count or 0)
                     p = got.payloads.get(c.id)
                     if p is not None and len(p):
-                        if self.mode == "message":
-                            p = decompress_messages(p, f"{self.files[k].name} {c.topic}", damage)
                         p.order = p.order + (k << 56)
                         parts.setdefault(g.id, []).append(p)
                 if self.mode == "file":
@@ -213,5 +207,5 @@ class Rosbag2Folder:
                 if self.progress is not None:
                     self.progress((k + 1) / len(self.files))
             shutil.rmtree(tmp, ignore_errors=True)
-        payloads = {c: join_payloads(p) for c, p in parts.items()}
+        payloads = {c: join_any(p) for c, p in parts.items()}
         return Collected(self.kind, list(merged.values()), payloads, damage)

@@ -173,10 +173,98 @@ def join_payloads(parts: list[Payloads]) -> Payloads:
 
 
 @dataclass
+class Columns:
+    """Decoded fields of one channel (internal): one row per message, in file order.
+
+    ``fields`` maps a field path to an array (N,) or (N, k); ``good`` marks rows that decoded;
+    ``frames`` holds the first message's frame ids ("frame_id", "child_frame_id"); ``error``
+    is the schema error when the channel's definition could not be read (then no row is good).
+    """
+
+    order: NDArray[np.int64]
+    log_time: NDArray[np.int64]
+    good: NDArray[np.bool_]
+    fields: dict[str, NDArray]
+    frames: dict[str, str] = field(default_factory=dict)
+    error: Exception | None = None
+
+    def __len__(self) -> int:
+        return len(self.order)
+
+
+def join_columns(parts: list[Columns]) -> Columns:
+    """One Columns from several, ordered by their file-order keys (stable)."""
+    if len(parts) == 1:
+        return parts[0]
+    order = np.concatenate([p.order for p in parts])
+    idx = np.argsort(order, kind="stable")
+    frames: dict[str, str] = {}
+    for p in parts:
+        for k, v in p.frames.items():
+            frames.setdefault(k, v) if v else None
+    return Columns(order[idx], np.concatenate([p.log_time for p in parts])[idx],
+                   np.concatenate([p.good for p in parts])[idx],
+                   {k: np.concatenate([p.fields[k] for p in parts])[idx] for k in parts[0].fields},
+                   frames, next((p.error for p in parts if p.error is not None), None))  # fmt: skip
+
+
+def join_any(parts: list) -> Payloads | Columns:
+    if parts and isinstance(parts[0], Columns):
+        return join_columns(parts)
+    return join_payloads(parts)
+
+
+class Sink:
+    """Where a container puts the payloads of kept channels (internal).
+
+    ``plan(conn)`` says what to do with a channel: None (skip it), or a callable turning a
+    batch of :class:`Payloads` into :class:`Columns` (decoded now, so raw bytes never pile
+    up) or returning the Payloads themselves (kept raw: JSON, /tf). ``transform(p)`` runs on
+    each batch first (message decompression). Payloads are decoded every :data:`BATCH_BYTES`.
+    """
+
+    BATCH_BYTES = 8 << 20
+
+    def __init__(self, plan, transform=None):
+        self.plan = plan
+        self.transform = transform
+        self._plans: dict[int, object] = {}
+        self._pending: dict[int, list[Payloads]] = {}
+        self._bytes: dict[int, int] = {}
+        self._done: dict[int, list] = {}
+
+    def wants(self, conn: Conn) -> bool:
+        if conn.id not in self._plans:
+            self._plans[conn.id] = self.plan(conn)
+        return self._plans[conn.id] is not None
+
+    def add(self, cid: int, p: Payloads) -> None:
+        self._pending.setdefault(cid, []).append(p)
+        self._bytes[cid] = self._bytes.get(cid, 0) + len(p.buf)
+        if self._bytes[cid] >= self.BATCH_BYTES:
+            self._flush(cid)
+
+    def _flush(self, cid: int) -> None:
+        parts = self._pending.pop(cid, [])
+        self._bytes[cid] = 0
+        if not parts:
+            return
+        p = join_payloads(parts)
+        if self.transform is not None:
+            p = self.transform(p)
+        self._done.setdefault(cid, []).append(self._plans[cid](p))
+
+    def finish(self) -> dict[int, Payloads | Columns]:
+        for cid in list(self._pending):
+            self._flush(cid)
+        return {cid: join_any(parts) for cid, parts in self._done.items()}
+
+
+@dataclass
 class Collected:
-    """What a container read (internal): all channels, payloads of the kept ones, damage."""
+    """What a container read (internal): all channels, the kept ones' data, damage."""
 
     kind: str
     conns: list[Conn]
-    payloads: dict[int, Payloads]
+    payloads: dict[int, Payloads | Columns]
     damage: list[Damage] = field(default_factory=list)
