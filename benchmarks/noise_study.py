@@ -213,7 +213,7 @@ class BroadResult:
 
 def broad_trial(path: Path) -> BroadResult:
     """none / kalman / rts on one BROAD bag, rest bias removed first, errors over movement."""
-    from imu_dcm.bag_reader import read_log
+    from imu_dcm.logio import read_log
     from imu_dcm.replay.bias import estimate_bias
 
     log = read_log(path)

@@ -604,7 +604,7 @@ def test_broad_noise_estimate_agrees_with_the_raw_spread_at_rest(broad_dir):
     # BROAD trial 02 starts with ~40 s of rest at 285.7 Hz. The white-noise density read off the
     # Allan deviation must agree with the plain per-sample spread there (sigma / sqrt(rate));
     # 10 % allows the low-frequency (bias-drift) share of the spread.
-    from imu_dcm.bag_reader import read_log
+    from imu_dcm.logio import read_log
 
     log = read_log(broad_dir / "02_undisturbed_slow_rotation_B")
     t = (log.imu.t_ns - log.imu.t_ns[0]) * 1e-9

@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 from conftest import BROAD_TRIALS
 
-from imu_dcm.bag_reader import read_custom_data
+from imu_dcm.logio import read_custom_data
 from imu_dcm.metrics import rms
 from imu_dcm.replay import replay
 

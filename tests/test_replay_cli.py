@@ -16,9 +16,9 @@ from mcap.reader import make_reader
 from mcap.writer import Writer as McapWriter
 from mcap_ros2.decoder import DecoderFactory
 from scipy.spatial.transform import Rotation
-from test_bag_reader import write_imu_bag  # tests/ is on sys.path (pytest rootdir conftest)
+from test_logio import write_imu_bag  # tests/ is on sys.path (pytest rootdir conftest)
 
-from imu_dcm.bag_reader import resolve_mcap_path
+from imu_dcm.logio import resolve_mcap_path
 from imu_dcm.bag_writer import StampedSeries, write_bag
 from imu_dcm.replay.__main__ import main
 

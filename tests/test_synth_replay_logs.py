@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 from data_synth.cli import main
-from imu_dcm.bag_reader import read_log
+from imu_dcm.logio import read_log
 
 REPO_ROOT = Path(__file__).resolve().parents[1]
 

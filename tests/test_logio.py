@@ -1,4 +1,4 @@
-"""Tests of the bulk MCAP / ROS 2 CDR reader (imu_dcm.bag_reader).
+"""Tests of the log reader (imu_dcm.logio): MCAP walking, bulk CDR decoding, channel policy.
 
 Oracles: the values written into small bags made here with ``mcap_ros2.writer`` (an independent
 CDR serialiser), and the ``mcap`` + ``mcap_ros2`` per-message decoder on the shipped BROAD trial.
@@ -17,7 +17,7 @@ from mcap.writer import Writer as McapWriter
 from mcap_ros2.decoder import DecoderFactory
 from mcap_ros2.writer import Writer as Ros2Writer
 
-from imu_dcm.bag_reader import read_log, resolve_mcap_path
+from imu_dcm.logio import read_log, resolve_mcap_path
 from imu_dcm.errors import ImuDcmWarning, LogError
 
 SHIPPED = Path(__file__).resolve().parents[1] / "replay" / "broad_07_undisturbed_fast_rotation_B"
@@ -146,7 +146,7 @@ def test_variable_frame_id_lengths_decode_exactly(tmp_path):
     log = read_log(p)
     np.testing.assert_array_equal(log.imu.omega_b, omega)
     np.testing.assert_array_equal(log.imu.t_ns, t_ns)
-    np.testing.assert_array_equal(read_log(p).imu.log_t_ns, t_ns - 12_345)
+    np.testing.assert_array_equal(log.imu.log_t_ns, t_ns - 12_345)
     assert log.imu.topic == "/imu/data" and log.imu.type == "sensor_msgs/msg/Imu"
     assert log.truth is None  # covariance[0] == -1 everywhere: no orientation given
 
@@ -206,7 +206,7 @@ def test_json_channel(tmp_path):
     log = read_log(p)
     np.testing.assert_allclose(log.imu.omega_b, omega, rtol=0, atol=1e-15)
     np.testing.assert_array_equal(log.imu.t_ns, t_ns)
-    np.testing.assert_array_equal(read_log(p).imu.log_t_ns, t_ns + 7)
+    np.testing.assert_array_equal(log.imu.log_t_ns, t_ns + 7)
 
 
 def _write_truth(w: Ros2Writer, topic: str, typ: str, definition: str, t_ns, q, make):
@@ -378,20 +378,53 @@ def test_truncated_file_replays_readable_part(tmp_path, keep_fraction):
     assert (src.stat().st_mtime_ns, src.stat().st_size) == before
 
 
-def test_corrupt_chunk_stops_with_warning(tmp_path):
-    # Overwrite bytes inside the compressed data of the 16th chunk (of 30).
+def _chunk_messages(path: Path) -> list[list[tuple[str, int]]]:
+    """(topic, log time) of the messages of every chunk, by the mcap library's stream reader."""
+    from mcap.records import Channel, Chunk
+    from mcap.stream_reader import StreamReader, breakup_chunk
+
+    topics, chunks = {}, []
+    with open(path, "rb") as f:
+        for rec in StreamReader(f, emit_chunks=True).records:
+            if isinstance(rec, Chunk):
+                inner = breakup_chunk(rec)
+                topics.update({r.id: r.topic for r in inner if isinstance(r, Channel)})
+                chunks.append([(topics[r.channel_id], r.log_time) for r in inner
+                               if hasattr(r, "channel_id") and hasattr(r, "log_time")])
+    return chunks
+
+
+def test_corrupt_chunk_costs_only_itself(tmp_path):
+    # Overwrite bytes inside the compressed data of the 16th chunk (of 30): that chunk's
+    # messages are lost, every other chunk is read, and the warning names the chunk's file offset.
     src = resolve_mcap_path(SHIPPED)
     with open(src, "rb") as f:
-        chunk = make_reader(f).get_summary().chunk_indexes[15]
+        summary = make_reader(f).get_summary()
+    chunk = summary.chunk_indexes[15]
     data = bytearray(src.read_bytes())
     mid = chunk.chunk_start_offset + chunk.chunk_length // 2
     data[mid : mid + 64] = bytes(range(64))
     bad = tmp_path / "bad.mcap"
     bad.write_bytes(bytes(data))
-    with pytest.warns(ImuDcmWarning, match="truncated or corrupt: a chunk"):
+    with pytest.warns(ImuDcmWarning, match=rf"truncated or corrupt: .*file offset "
+                      rf"{chunk.chunk_start_offset}\b"):  # fmt: skip
         log = read_log(bad)
-    # the 15 intact chunks before it are read (~1750 IMU samples each), nothing after it
-    assert 15 * 1500 < len(log.imu.t_ns) < 16 * 1800
+    full = read_log(SHIPPED)
+    # Oracle: the mcap library's own chunk walker lists the messages of the 16th chunk.
+    per_chunk = _chunk_messages(src)
+    assert len(per_chunk) == 30
+    lost = per_chunk[15]
+    imu_lost = [m for m in lost if m[0] == "/imu/data"]
+    n_before = sum(sum(m[0] == "/imu/data" for m in c) for c in per_chunk[:15])
+    keep = np.ones(len(full.imu.t_ns), bool)
+    keep[n_before : n_before + len(imu_lost)] = False
+    assert 1500 < len(imu_lost) < 1900
+    np.testing.assert_array_equal(log.imu.omega_b, full.imu.omega_b[keep])
+    np.testing.assert_array_equal(log.imu.t_ns, full.imu.t_ns[keep])
+    (d,) = log.damage
+    assert d.offset == chunk.chunk_start_offset
+    assert d.messages_lost == sum(m[0] != "/imu/mag" for m in lost)
+    assert (d.t_start_ns, d.t_end_ns) == (chunk.message_start_time, chunk.message_end_time)
 
 
 def test_bag_folder_and_file_give_the_same(tmp_path):

@@ -1,0 +1,546 @@
+"""Which channels are the IMU and the truth, and their decoding into series.
+
+IMU: ``sensor_msgs/Imu`` (ROS 1 or ROS 2), a vendor type holding an ``Imu`` field, a JSON
+channel with ``angular_velocity {x, y, z}``, or - when there is none of these - a gyro topic of
+``geometry_msgs/Vector3Stamped``. Truth: a ``geometry_msgs`` quaternion/pose/transform type or
+``nav_msgs/Odometry``; else the transform in ``/tf`` / ``/tf_static`` whose child frame moves
+(``truth_frame`` chooses where several do); else the Imu's own orientation. Several channels of
+one topic are merged in file order.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import struct
+from collections.abc import Callable
+
+import numpy as np
+from numpy.typing import NDArray
+
+from imu_dcm.errors import LogError
+from imu_dcm.logio.cdr import decode
+from imu_dcm.logio.schema import Defs, definitions, norm_type
+from imu_dcm.logio.types import Collected, Columns, Conn, ImuSeries, Payloads, TruthSeries
+
+IMU_TYPE = "sensor_msgs/msg/Imu"
+VEC3_TYPE = "geometry_msgs/msg/Vector3Stamped"
+TF_TYPE = "tf2_msgs/msg/TFMessage"
+#: Truth message types and the field path of the quaternion ``q_w_b`` inside each.
+TRUTH_TYPES = {
+    "geometry_msgs/msg/QuaternionStamped": "quaternion",
+    "geometry_msgs/msg/PoseStamped": "pose.orientation",
+    "geometry_msgs/msg/PoseWithCovarianceStamped": "pose.pose.orientation",
+    "geometry_msgs/msg/TransformStamped": "transform.rotation",
+    "nav_msgs/msg/Odometry": "pose.pose.orientation",
+}
+KNOWN_ENCODINGS = ("cdr", "ros1", "json")
+_NOT_GYRO = ("/estimate", "/ground_truth")  # Vector3Stamped topics that are not a gyro
+_INT64 = 2**63
+
+
+# ----------------------------------------------------------------------------- roles
+def imu_path(conn: Conn) -> str | None:
+    """Field path of the Imu inside ``conn``'s type ("" for a bare Imu), "vec3", or None."""
+    t = norm_type(conn.msgtype)
+    if conn.encoding not in ("cdr", "ros1"):
+        return None
+    if t == IMU_TYPE:
+        return ""
+    if t == VEC3_TYPE:
+        return "vec3"
+    if "Imu" not in conn.schema_text:
+        return None
+    try:
+        defs, root = definitions(conn)
+    except LogError:
+        return None
+    return _find_imu(defs, root, 0)
+
+
+def _find_imu(defs: Defs, root: str, depth: int) -> str | None:
+    if root == IMU_TYPE:
+        return ""
+    if depth > 4 or root not in defs:
+        return None
+    for f in defs[root]:
+        if f.array is None and f.base in defs:
+            sub = _find_imu(defs, f.base, depth + 1)
+            if sub is not None:
+                return f.name if sub == "" else f"{f.name}.{sub}"
+    return None
+
+
+def is_truth(conn: Conn) -> bool:
+    t = norm_type(conn.msgtype)
+    return conn.encoding in ("cdr", "ros1") and (t in TRUTH_TYPES or t == TF_TYPE)
+
+
+def _raw(p: Payloads) -> Payloads:
+    return p
+
+
+class _Decoder:
+    """Decodes batches of one channel's payloads into the columns its role needs."""
+
+    def __init__(self, conn: Conn, role: str, path: str = ""):
+        self.conn, self.role, self.path = conn, role, path
+        self.ready: tuple | None = None
+        self.error: LogError | None = None
+
+    def _setup(self) -> tuple:
+        defs, root = definitions(self.conn)
+        if self.role == "truth":
+            q = TRUTH_TYPES[root]
+            want = {f"{q}.{a}": ("f8", 1) for a in "xyzw"}
+            want.update({"header.stamp.sec": ("i8", 1), "header.stamp.nanosec": ("i8", 1)})
+        elif self.path == "vec3":
+            want = {"header.stamp.sec": ("i8", 1), "header.stamp.nanosec": ("i8", 1)}
+            want.update({"vector." + a: ("f8", 1) for a in "xyz"})
+        else:
+            want = _imu_want(self.path)
+        return defs, root, want
+
+    def __call__(self, p: Payloads) -> Columns:
+        if self.ready is None and self.error is None:
+            try:
+                self.ready = self._setup()
+            except LogError as exc:
+                self.error = exc
+        if self.error is not None:
+            return Columns(p.order, p.log_time, np.zeros(len(p), bool), {}, {}, self.error)
+        defs, root, want = self.ready
+        out, good = decode(self.conn, defs, root, p, want)
+        frames = {}
+        if good.any() and (self.role == "truth" or self.path in ("", "vec3")):
+            # only a bare message has its header's frame_id at a fixed place
+            frames["frame_id"] = _frame_id(self.conn, p, good)
+            if root in ("nav_msgs/msg/Odometry", "geometry_msgs/msg/TransformStamped"):
+                frames["child_frame_id"] = _child_frame(self.conn, p, good)
+        frames["type"] = root
+        return Columns(p.order, p.log_time, good, out, frames)
+
+
+def plan(imu_topic: str | None, truth_topic: str | None) -> Callable[[Conn], object]:
+    """What a container must do with each channel: skip it (None), keep it raw, or decode it.
+
+    Only channels that can be the IMU or the truth are kept; the IMU and truth types are
+    decoded batch by batch, so their raw payloads never pile up.
+    """
+
+    def role(c: Conn):
+        imu_ok = imu_topic is None or c.topic == imu_topic
+        truth_ok = truth_topic is None or c.topic == truth_topic
+        if truth_topic == "none":
+            truth_ok = False
+        if c.encoding == "json":
+            return _raw if imu_ok else None
+        if imu_ok:
+            path = imu_path(c)
+            if path is not None:
+                return _Decoder(c, "imu", path)
+        if truth_ok and is_truth(c):
+            if norm_type(c.msgtype) == TF_TYPE:
+                return _raw
+            return _Decoder(c, "truth")
+        if c.topic in (imu_topic, truth_topic):
+            return _raw  # named but of an unexpected type: kept to say so
+        return None
+
+    return role
+
+
+def keep_predicate(imu_topic: str | None, truth_topic: str | None) -> Callable[[Conn], bool]:
+    """Whether a channel can be the IMU or the truth (see :func:`plan`)."""
+    p = plan(imu_topic, truth_topic)
+    return lambda c: p(c) is not None
+
+
+def describe(conns: list[Conn]) -> str:
+    if not conns:
+        return "no channels"
+    return ", ".join(f"{c.topic} ({c.msgtype or 'no schema'}, {c.encoding}, {c.count})"
+                     for c in conns)  # fmt: skip
+
+
+def _by_topic(got: Collected) -> dict[str, list[Conn]]:
+    out: dict[str, list[Conn]] = {}
+    for c in got.conns:
+        out.setdefault(c.topic, []).append(c)
+    return out
+
+
+# ------------------------------------------------------------------------------ JSON
+def _json_msg(raw: bytes) -> dict | None:
+    try:
+        m = json.loads(raw)
+    except (ValueError, RecursionError):
+        return None
+    return m if isinstance(m, dict) else None
+
+
+def _is_json_imu(m: dict | None) -> bool:
+    av = (m or {}).get("angular_velocity")
+    return isinstance(av, dict) and all(k in av for k in "xyz")
+
+
+def _json_stamp(m: dict) -> int | None:
+    st = (m.get("header") or {}).get("stamp") if isinstance(m.get("header"), dict) else None
+    st = st if st is not None else m.get("stamp")
+    if not isinstance(st, dict):
+        return None
+    sec, nsec = st.get("sec", 0), st.get("nanosec", st.get("nsec", 0))
+    if not all(isinstance(v, int | float) and not isinstance(v, bool) and math.isfinite(v)
+               for v in (sec, nsec)):  # fmt: skip
+        raise ValueError("stamp not a finite number")
+    t = int(sec) * 1_000_000_000 + int(nsec)
+    if not -_INT64 <= t < _INT64:
+        raise ValueError("stamp beyond int64 nanoseconds")
+    return t
+
+
+def _json_imu(c: Conn, p: Payloads):
+    n = len(p)
+    omega = np.full((n, 3), np.nan)
+    t_ns = p.log_time.copy()
+    good = np.zeros(n, dtype=bool)
+    for i in range(n):
+        m = _json_msg(p.payload(i))
+        if not _is_json_imu(m):
+            continue
+        av = m["angular_velocity"]
+        try:
+            omega[i] = [float(av["x"]), float(av["y"]), float(av["z"])]
+            st = _json_stamp(m)
+        except (TypeError, ValueError, OverflowError):
+            continue
+        if st is not None:
+            t_ns[i] = st
+        good[i] = True
+    return t_ns, omega, None, good, "json", ""
+
+
+# ------------------------------------------------------------------------------- IMU
+def _frame_id(c: Conn, p: Payloads, good: NDArray[np.bool_]) -> str:
+    """frame_id of the first good message whose header comes first in the payload."""
+    idx = np.flatnonzero(good)
+    if not len(idx):
+        return ""
+    s = int(p.start[idx[0]])
+    ros1 = c.encoding == "ros1"
+    try:
+        (n,) = struct.unpack_from("<I", p.buf, s + 12)
+        raw = p.buf[s + 16 : s + 16 + n].tobytes()
+    except struct.error:
+        return ""
+    raw = raw if ros1 else raw.rstrip(b"\x00")
+    return raw.decode("utf-8", errors="replace")
+
+
+def _stamp(out: dict, prefix: str) -> NDArray[np.int64]:
+    sec = out[prefix + "stamp.sec"].astype(np.int64)
+    nsec = out[prefix + "stamp.nanosec"].astype(np.int64)
+    return sec * 1_000_000_000 + nsec
+
+
+def _imu_want(path: str) -> dict[str, tuple[str, int]]:
+    p = path + "." if path else ""
+    want = {p + "header.stamp.sec": ("i8", 1), p + "header.stamp.nanosec": ("i8", 1)}
+    want.update({p + "orientation." + a: ("f8", 1) for a in "xyzw"})
+    want[p + "orientation_covariance"] = ("f8", 1)  # first element only
+    want.update({p + "angular_velocity." + a: ("f8", 1) for a in "xyz"})
+    return want
+
+
+def _imu_columns(c: Conn, data, path: str):
+    """(t_ns, omega, quat or None, good, type, frame) of one IMU channel's data."""
+    if c.encoding == "json":
+        return _json_imu(c, data)
+    if data.error is not None:
+        raise data.error
+    out, good = data.fields, data.good
+    if path == "vec3":
+        omega = np.stack([out["vector." + a] for a in "xyz"], axis=1)
+        return _stamp(out, "header."), omega, None, good, data.frames.get("type", ""), \
+            data.frames.get("frame_id", "")
+    pre = path + "." if path else ""
+    omega = np.stack([out[pre + "angular_velocity." + a] for a in "xyz"], axis=1)
+    quat = np.stack([out[pre + "orientation." + a] for a in "xyzw"], axis=1)
+    quat[out[pre + "orientation_covariance"] == -1.0] = np.nan
+    return (_stamp(out, pre + "header."), omega, quat, good, data.frames.get("type", ""),
+            data.frames.get("frame_id", ""))
+
+
+def _merge(rows: list[tuple[NDArray[np.int64], list[NDArray]]]) -> list[NDArray]:
+    """Concatenate per-channel arrays of one topic and order them by file-order key."""
+    if len(rows) == 1:
+        return rows[0][1]
+    order = np.concatenate([r[0] for r in rows])
+    idx = np.argsort(order, kind="stable")
+    out = []
+    for k in range(len(rows[0][1])):
+        parts = [r[1][k] for r in rows]
+        out.append(None if any(x is None for x in parts) else np.concatenate(parts)[idx])
+    return out
+
+
+def pick_imu(got: Collected, imu_topic: str | None) -> tuple[str, list[tuple[Conn, str]]]:
+    """The IMU topic and its channels with their Imu field paths (LogError when unclear)."""
+    topics = _by_topic(got)
+    if imu_topic is not None:
+        conns = topics.get(imu_topic)
+        if not conns:
+            raise LogError(f"Expected IMU topic {imu_topic!r} in the log, got "
+                           f"{describe(got.conns)}")  # fmt: skip
+        out = []
+        for c in conns:
+            if c.encoding not in KNOWN_ENCODINGS:
+                raise LogError(f"Expected message encoding cdr, ros1 or json on {imu_topic}, got "
+                               f"{c.encoding!r}")  # fmt: skip
+            path = "json" if c.encoding == "json" else imu_path(c)
+            if path is None:
+                raise LogError(f"Expected IMU messages on {imu_topic}, got "
+                               f"{c.msgtype or 'no schema'} ({c.encoding})")  # fmt: skip
+            out.append((c, path))
+        return imu_topic, out
+    found: dict[str, list[tuple[Conn, str]]] = {}
+    gyro: dict[str, list[tuple[Conn, str]]] = {}
+    for topic, conns in topics.items():
+        for c in conns:
+            if c.encoding == "json":
+                p = got.payloads.get(c.id)
+                if p is not None and len(p) and _is_json_imu(_json_msg(p.payload(0))):
+                    found.setdefault(topic, []).append((c, "json"))
+                continue
+            path = imu_path(c)
+            if path == "vec3":
+                if not topic.startswith(_NOT_GYRO):
+                    gyro.setdefault(topic, []).append((c, path))
+            elif path is not None:
+                found.setdefault(topic, []).append((c, path))
+    found = found or gyro
+    if not found:
+        unknown = [c for c in got.conns if c.encoding not in KNOWN_ENCODINGS]
+        if unknown:
+            raise LogError(f"Expected message encoding cdr or json, got {unknown[0].encoding!r} "
+                           f"on {unknown[0].topic}")  # fmt: skip
+        raise LogError(f"Expected an IMU channel (sensor_msgs/msg/Imu, a type with an Imu field "
+                       f"or a geometry_msgs/msg/Vector3Stamped gyro), got "
+                       f"{describe(got.conns)}")  # fmt: skip
+    if len(found) > 1:
+        raise LogError(f"Expected one IMU channel, got {len(found)}: {', '.join(sorted(found))} "
+                       f"(choose with --imu-topic)")  # fmt: skip
+    topic = next(iter(found))
+    return topic, found[topic]
+
+
+def read_imu(got: Collected, topic: str, conns: list[tuple[Conn, str]]) -> tuple[ImuSeries, int]:
+    """The IMU series of ``topic`` (its channels merged) and the count of undecodable ones."""
+    rows, dropped, typ, frame = [], 0, "", ""
+    for c, path in conns:
+        p = got.payloads.get(c.id)
+        if p is None:
+            p = Payloads.empty() if c.encoding == "json" else _Decoder(c, "imu", path)(
+                Payloads.empty())
+        t_ns, omega, quat, good, typ_c, frame_c = _imu_columns(c, p, path)
+        dropped += int(len(p) - good.sum())
+        typ, frame = typ or typ_c, frame or frame_c
+        q = quat[good] if quat is not None else None
+        rows.append((p.order[good], [t_ns[good], p.log_time[good], omega[good], q]))
+    t_ns, log_t, omega, quat = _merge(rows)
+    if quat is not None and not np.isfinite(quat).any():
+        quat = None
+    return ImuSeries(t_ns.astype(np.int64), log_t.astype(np.int64), omega, quat, topic, typ,
+                     frame), dropped  # fmt: skip
+
+
+# ----------------------------------------------------------------------------- truth
+def _read_truth_topic(got: Collected, topic: str, conns: list[Conn], auto: bool) -> TruthSeries:
+    rows, typ, frame, child = [], "", "", ""
+    for c in conns:
+        data = got.payloads.get(c.id)
+        if data is None:
+            data = _Decoder(c, "truth")(Payloads.empty())
+        if data.error is not None:
+            raise data.error
+        root = data.frames.get("type") or norm_type(c.msgtype)
+        qpath = TRUTH_TYPES[root]
+        out, good = data.fields, data.good
+        q = np.stack([out[f"{qpath}.{a}"] for a in "xyzw"], axis=1)
+        rows.append((data.order[good], [_stamp(out, "header.")[good], data.log_time[good],
+                                        q[good]]))  # fmt: skip
+        typ = typ or root
+        frame = frame or data.frames.get("frame_id", "")
+        child = child or data.frames.get("child_frame_id", "")
+    t_ns, log_t, q = _merge(rows)
+    return TruthSeries(t_ns.astype(np.int64), log_t.astype(np.int64), q, topic, typ, frame,
+                       child, auto)  # fmt: skip
+
+
+def _child_frame(c: Conn, p: Payloads, good) -> str:
+    """child_frame_id right after the header (Odometry, TransformStamped)."""
+    idx = np.flatnonzero(good)
+    if not len(idx):
+        return ""
+    try:
+        rows = _tf_rows(p.buf[int(p.start[idx[0]]):int(p.start[idx[0]] + p.length[idx[0]])]
+                        .tobytes(), c.encoding == "ros1", single=True)  # fmt: skip
+        return rows[0][2] if rows else ""
+    except (struct.error, ValueError):
+        return ""
+
+
+def _tf_rows(raw: bytes, ros1: bool, single: bool = False) -> list[tuple]:
+    """(stamp ns, parent, child, q xyzw) of each TransformStamped in a TFMessage payload."""
+    base = 0 if ros1 else 4
+    o = 0
+
+    def al(n: int) -> None:
+        nonlocal o
+        if not ros1:
+            o = (o + n - 1) & ~(n - 1)
+
+    def u32() -> int:
+        nonlocal o
+        al(4)
+        (v,) = struct.unpack_from("<I", raw, base + o)
+        o += 4
+        return v
+
+    def string() -> str:
+        nonlocal o
+        n = u32()
+        s = raw[base + o : base + o + n]
+        if len(s) != n:
+            raise ValueError("string past the end")
+        o += n
+        return (s if ros1 else s.rstrip(b"\x00")).decode("utf-8", errors="replace")
+
+    count = 1 if single else u32()
+    if count > len(raw) // 60 + 1:
+        raise ValueError("transform count beyond the payload")
+    out = []
+    for _ in range(count):
+        if ros1:
+            u32()  # seq
+        sec, nsec = u32(), u32()
+        parent, child = string(), string()
+        if single:
+            return [(0, parent, child, None)]
+        al(8)
+        v = struct.unpack_from("<7d", raw, base + o)
+        o += 56
+        out.append((sec * 1_000_000_000 + nsec, parent, child, v[3:7]))
+    return out
+
+
+def _tf_truth(got: Collected, conns: list[Conn], imu_frame: str, truth_frame: str | None,
+              auto: bool) -> TruthSeries | None:  # fmt: skip
+    t, lt, order, parent, child, q = [], [], [], [], [], []
+    for c in conns:
+        p = got.payloads.get(c.id) or Payloads.empty()
+        for i in range(len(p)):
+            try:
+                rows = _tf_rows(p.payload(i), c.encoding == "ros1")
+            except (struct.error, ValueError):
+                continue
+            for stamp, par, ch, quat in rows:
+                t.append(stamp)
+                lt.append(int(p.log_time[i]))
+                order.append(int(p.order[i]))
+                parent.append(par)
+                child.append(ch)
+                q.append(quat)
+    if not t:
+        return None
+    q_arr = np.asarray(q, dtype=np.float64)
+    child_arr = np.asarray(child)
+    children = sorted(set(child))
+    moving = [ch for ch in children if np.ptp(q_arr[child_arr == ch], axis=0).max() > 1e-12]
+    topics = "/".join(sorted({c.topic for c in conns}))
+    if truth_frame is not None:
+        if truth_frame not in children:
+            raise LogError(f"Expected a transform to child frame {truth_frame!r} in {topics}, got "
+                           f"children {', '.join(children)}")  # fmt: skip
+        pick = truth_frame
+    elif not moving:
+        return None
+    elif len(moving) == 1:
+        pick = moving[0]
+    elif imu_frame.strip("/") in [m.strip("/") for m in moving]:
+        pick = next(m for m in moving if m.strip("/") == imu_frame.strip("/"))
+    else:
+        raise LogError(f"Expected one moving frame in {topics}, got {len(moving)}: "
+                       f"{', '.join(moving)} (choose with --truth-frame)")  # fmt: skip
+    m = child_arr == pick
+    idx = np.flatnonzero(m)
+    idx = idx[np.argsort(np.asarray(order)[idx], kind="stable")]
+    par = parent[int(idx[0])]
+    return TruthSeries(np.asarray(t, np.int64)[idx], np.asarray(lt, np.int64)[idx], q_arr[idx],
+                       topics, TF_TYPE, par, pick, auto)  # fmt: skip
+
+
+def imu_truth(imu: ImuSeries, required: bool) -> TruthSeries | None:
+    """The Imu's own orientation as truth where it is given (covariance[0] != -1, unit norm)."""
+    q = imu.orientation_xyzw
+    if q is None:
+        if required:
+            raise LogError(f"Expected an orientation on {imu.topic} (orientation_covariance[0] "
+                           f"!= -1), got none")  # fmt: skip
+        return None
+    norm = np.linalg.norm(q, axis=1)
+    ok = np.isfinite(norm) & (np.abs(norm - 1.0) < 1e-3)  # all-zero quaternions are not truth
+    if not ok.any():
+        if required:
+            raise LogError(f"Expected unit orientation quaternions on {imu.topic}, got none")
+        return None
+    if not required and ok.sum() > 1 and np.all(q[ok] == q[ok][0]):
+        # A constant quaternion (typically the default 0,0,0,1 behind a garbage covariance
+        # instead of the -1 flag) is no estimate; it is used only when asked for by topic.
+        return None
+    return TruthSeries(imu.t_ns[ok], imu.log_t_ns[ok], q[ok] / norm[ok, None], imu.topic,
+                       imu.type, imu.frame_id, "", not required)  # fmt: skip
+
+
+def read_truth(got: Collected, imu: ImuSeries, truth_topic: str | None,
+               truth_frame: str | None) -> TruthSeries | None:  # fmt: skip
+    """The truth series chosen by the policy in the module docstring (None when there is none)."""
+    if truth_topic == "none":
+        return None
+    topics = _by_topic(got)
+    if truth_topic is not None and truth_topic == imu.topic:
+        return imu_truth(imu, required=True)
+    if truth_topic is not None:
+        conns = topics.get(truth_topic)
+        if not conns:
+            raise LogError(f"Expected truth topic {truth_topic!r} in the log, got "
+                           f"{describe(got.conns)}")  # fmt: skip
+        for c in conns:
+            if not is_truth(c):
+                raise LogError(f"Expected truth messages on {truth_topic}, got "
+                               f"{c.msgtype or 'no schema'} ({c.encoding})")  # fmt: skip
+        if all(norm_type(c.msgtype) == TF_TYPE for c in conns):
+            tf = _tf_truth(got, conns, imu.frame_id, truth_frame, auto=False)
+            if tf is None:
+                raise LogError(f"Expected a moving transform in {truth_topic}, got none")
+            return tf
+        return _read_truth_topic(got, truth_topic, conns, auto=False)
+    tf = [c for c in got.conns if c.encoding in ("cdr", "ros1") and norm_type(c.msgtype) == TF_TYPE]
+    if truth_frame is not None:  # a frame names a transform
+        if not tf:
+            raise LogError(f"Expected /tf or /tf_static for truth frame {truth_frame!r}, got "
+                           f"{describe(got.conns)}")  # fmt: skip
+        return _tf_truth(got, tf, imu.frame_id, truth_frame, auto=False)
+    auto = {t: cs for t, cs in topics.items() if not t.startswith("/estimate")
+            and all(is_truth(c) and norm_type(c.msgtype) != TF_TYPE for c in cs)}  # fmt: skip
+    if len(auto) > 1:
+        raise LogError(f"Expected one truth channel, got {len(auto)}: {', '.join(sorted(auto))} "
+                       f"(choose with --truth-topic)")  # fmt: skip
+    if auto:
+        topic = next(iter(auto))
+        return _read_truth_topic(got, topic, auto[topic], auto=True)
+    if tf:
+        truth = _tf_truth(got, tf, imu.frame_id, truth_frame, auto=True)
+        if truth is not None:
+            return truth
+    return imu_truth(imu, required=False)

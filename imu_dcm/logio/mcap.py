@@ -1,0 +1,478 @@
+"""MCAP, read our own way: only the chunks that hold kept channels, each bounded and checked.
+
+With a summary (the normal case) the chunk indexes say which channels every chunk holds, so
+chunks of other channels (a camera) are never read. Without one (a truncated file) the file is
+walked forward record by record, one chunk in memory at a time; a chunk is skipped unread when
+the message indexes behind it show no kept channel. Each chunk is refused when its declared
+size is beyond :func:`size_bound`, and never decompresses past its declared size. A damaged
+chunk costs only itself: it becomes a :class:`Damage` (file offset, time range, messages lost)
+and reading goes on with the next chunk (from the index, or a scan for the next valid chunk).
+"""
+
+from __future__ import annotations
+
+import struct
+import zlib
+from collections.abc import Callable
+from pathlib import Path
+
+import numpy as np
+
+from imu_dcm.errors import LogError
+from imu_dcm.logio.types import Collected, Conn, Damage, Payloads, Sink
+
+MAGIC = b"\x89MCAP0\r\n"
+_SCHEMA, _CHANNEL, _MESSAGE, _CHUNK, _MSG_INDEX, _CHUNK_INDEX, _STATS = 3, 4, 5, 6, 7, 8, 11
+_FOOTER, _DATA_END = 2, 15
+_REC = struct.Struct("<BQ")
+_MSG = struct.Struct("<BQHIQQ")  # opcode, length, channel_id, sequence, log_time, publish_time
+_MSG_HEADER = _MSG.size  # 31 bytes before the payload of a message record
+_CHUNK_HEAD = struct.Struct("<QQQI")  # start time, end time, uncompressed size, uncompressed crc
+#: Hard limit on one decompressed chunk (bytes); rosbag2 writes 768 KiB chunks.
+MAX_CHUNK_BYTES = 1 << 31
+#: Largest schema / channel / summary record read whole (bytes).
+MAX_META_RECORD = 64 << 20
+
+
+def size_bound(compressed: int) -> int:
+    """Largest uncompressed size accepted for a chunk of ``compressed`` bytes.
+
+    1024x the compressed size (zstd reaches ~50x on IMU messages), at least 1 MiB, at most
+    :data:`MAX_CHUNK_BYTES`: a small file cannot make the reader allocate gigabytes.
+    """
+    return min(MAX_CHUNK_BYTES, max(1 << 20, 1024 * compressed))
+
+
+def compact(d: np.ndarray, start: np.ndarray, length: np.ndarray) -> tuple:
+    """Copy the byte ranges ``d[start:start+length]`` into one buffer, in order; returns
+    (buffer, new starts, lengths)."""
+    mv = memoryview(d)
+    buf = b"".join([mv[s : s + n] for s, n in zip(start.tolist(), length.tolist())])
+    out_start = np.concatenate([[0], np.cumsum(length)[:-1]]).astype(np.int64)
+    return np.frombuffer(buf, np.uint8), out_start, length.astype(np.int64)
+
+
+class _Bad(Exception):
+    """A damaged record: ``why`` is one line."""
+
+
+def _str(buf, pos: int) -> tuple[str, int]:
+    (n,) = struct.unpack_from("<I", buf, pos)
+    end = pos + 4 + n
+    if end > len(buf):
+        raise _Bad("a string runs past its record")
+    return bytes(buf[pos + 4 : end]).decode("utf-8", errors="replace"), end
+
+
+def decompress(compression: str, data: bytes, size: int) -> bytes:
+    """Decompress a chunk to exactly ``size`` bytes, never more; raises _Bad otherwise."""
+    if compression == "":
+        out = data
+    elif compression == "zstd":
+        import zstandard
+
+        declared = zstandard.frame_content_size(data) if len(data) >= 4 else -2
+        if declared not in (-1, size):
+            raise _Bad(f"its zstd frame declares {declared} bytes, the chunk {size}")
+        try:
+            out = zstandard.ZstdDecompressor().decompress(data, max_output_size=max(size, 1))
+        except zstandard.ZstdError as exc:
+            raise _Bad(f"it does not decompress ({str(exc)[:60]})") from None
+    elif compression == "lz4":
+        import lz4.frame
+
+        try:
+            out = lz4.frame.LZ4FrameDecompressor().decompress(data, max_length=size + 1)
+        except RuntimeError as exc:
+            raise _Bad(f"it does not decompress ({str(exc)[:60]})") from None
+    else:
+        raise LogError(f"Expected chunk compression zstd, lz4 or none, got {compression!r}")
+    if len(out) != size:
+        raise _Bad(f"it decompresses to {len(out)}{'+' if len(out) > size else ''} bytes, "
+                   f"not its declared {size}")  # fmt: skip
+    return out
+
+
+def _schema(buf, pos: int, out: dict) -> None:
+    (sid,) = struct.unpack_from("<H", buf, pos)
+    name, p = _str(buf, pos + 2)
+    enc, p = _str(buf, p)
+    (n,) = struct.unpack_from("<I", buf, p)
+    out[sid] = (name, enc, bytes(buf[p + 4 : p + 4 + n]))
+
+
+def _channel(buf, pos: int, out: dict) -> None:
+    cid, sid = struct.unpack_from("<HH", buf, pos)
+    topic, p = _str(buf, pos + 4)
+    enc, p = _str(buf, p)
+    out[cid] = (sid, topic, enc)
+
+
+class McapSource:
+    """One MCAP file. ``read(sink)`` returns every channel and the data of kept ones."""
+
+    kind = "mcap"
+
+    def __init__(self, path: Path, progress: Callable[[float], None] | None = None):
+        self.path = path
+        self.progress = progress
+        self.schemas: dict[int, tuple[str, str, bytes]] = {}
+        self.channels: dict[int, tuple[int, str, str]] = {}
+        self.counts: dict[int, int] = {}
+        self.counts_seen: dict[int, int] = {}
+        self._n_kept = 0
+        self.damage: list[Damage] = []
+        self.profile = ""
+        self.sink = Sink(lambda c: None)
+        self._kept: dict[int, bool] = {}
+
+    # ------------------------------------------------------------------ channels
+    def conn(self, cid: int) -> Conn:
+        sid, topic, enc = self.channels[cid]
+        name, senc, data = self.schemas.get(sid, ("", "", b""))
+        try:
+            text = data.decode("utf-8")
+        except UnicodeDecodeError:
+            text = "\x00"  # corrupt schema: fails to parse later, naming the topic
+        if enc == "ros1":
+            senc = senc or "ros1msg"
+        return Conn(cid, topic, name, enc, senc, text,
+                    self.counts.get(cid, self.counts_seen.get(cid, 0)))
+
+    def _is_kept(self, cid: int) -> bool:
+        k = self._kept.get(cid)
+        if k is None:
+            k = self._kept[cid] = cid in self.channels and self.sink.wants(self.conn(cid))
+        return k
+
+    # ------------------------------------------------------------------ reading
+    def read(self, sink: Sink) -> Collected:
+        self.sink = sink
+        try:
+            f = open(self.path, "rb")  # noqa: SIM115
+        except OSError as exc:
+            raise LogError(f"Expected a readable MCAP file, got {self.path} ({exc.strerror})") \
+                from None
+        with f:
+            self.size = f.seek(0, 2)
+            f.seek(0)
+            head = f.read(len(MAGIC))
+            if not head:
+                raise LogError(f"Expected an MCAP file, got an empty file: {self.path}")
+            if head != MAGIC:
+                raise LogError(f"Expected an MCAP file (magic \\x89MCAP0), got {head!r} in "
+                               f"{self.path}")  # fmt: skip
+            self.profile = self._header_profile(f)
+            index = self._summary(f)
+            if index is not None:
+                self._read_indexed(f, index)
+            else:
+                self._scan(f)
+        if self.kind == "mcap" and self.profile in ("ros1", "ros2"):
+            self.kind = f"{self.profile} mcap"
+        conns = [self.conn(c) for c in sorted(self.channels)]
+        payloads = self.sink.finish()
+        return Collected(self.kind, conns, payloads, self.damage)
+
+    def _header_profile(self, f) -> str:
+        try:
+            op, length = _REC.unpack(f.read(9))
+            if op == 1 and length < 1 << 16:
+                return _str(f.read(length), 0)[0]
+        except (struct.error, _Bad):
+            pass
+        return ""
+
+    def _summary(self, f) -> list[tuple] | None:
+        """Chunk indexes from the summary, or None when absent/unusable (then scan)."""
+        if self.size < 8 + 9 + 20 + 8:
+            return None
+        f.seek(self.size - 8 - 29)
+        tail = f.read(29 + 8)
+        if tail[-8:] != MAGIC or tail[0] != _FOOTER:
+            return None
+        summary_start, _, _ = struct.unpack_from("<QQI", tail, 9)
+        end = self.size - 8 - 29
+        if summary_start == 0 or not 8 <= summary_start <= end or end - summary_start > (
+            MAX_META_RECORD
+        ):
+            return None
+        f.seek(summary_start)
+        buf = f.read(end - summary_start)
+        schemas, channels, chunks, counts = {}, {}, [], {}
+        pos = 0
+        try:
+            while pos + 9 <= len(buf):
+                op, length = _REC.unpack_from(buf, pos)
+                p, rec_end = pos + 9, pos + 9 + length
+                if rec_end > len(buf):
+                    return None
+                if op == _SCHEMA:
+                    _schema(buf, p, schemas)
+                elif op == _CHANNEL:
+                    _channel(buf, p, channels)
+                elif op == _CHUNK_INDEX:
+                    t0, t1, start, clen, nmap = struct.unpack_from("<QQQQI", buf, p)
+                    q = p + 36
+                    offsets = {}
+                    for _ in range(nmap // 10):
+                        cid, off = struct.unpack_from("<HQ", buf, q)
+                        offsets[cid] = off
+                        q += 10
+                    (ilen,) = struct.unpack_from("<Q", buf, q)
+                    comp, q = _str(buf, q + 8)
+                    csize, usize = struct.unpack_from("<QQ", buf, q)
+                    chunks.append((start, clen, t0, t1, offsets, ilen, comp, csize, usize))
+                elif op == _STATS:
+                    (nmap,) = struct.unpack_from("<I", buf, p + 42)
+                    q = p + 46
+                    for _ in range(nmap // 10):
+                        cid, n = struct.unpack_from("<HQ", buf, q)
+                        counts[cid] = n
+                        q += 10
+                pos = rec_end
+        except (struct.error, _Bad):
+            return None
+        if not chunks and counts and sum(counts.values()):
+            return None  # messages outside chunks: walk the file
+        self.schemas.update(schemas)
+        self.channels.update(channels)
+        self.counts.update(counts)
+        return sorted(chunks)
+
+    def _read_indexed(self, f, index: list[tuple]) -> None:
+        wanted = {c for c in self.channels if self._is_kept(c)}
+        for k, (start, clen, t0, t1, offsets, _ilen, _c, _cs, _us) in enumerate(index):
+            if self.progress is not None:
+                self.progress(k / max(len(index), 1))
+            if offsets and not (wanted & offsets.keys()):
+                continue
+            entries = self._message_index(f, offsets, set(offsets))
+            try:
+                if start + clen > self.size or clen < 9:
+                    raise _Bad(f"its index points past the end of the file ({self.size} bytes)")
+                f.seek(start)
+                op, length = _REC.unpack(f.read(9))
+                if op != _CHUNK or 9 + length != clen:
+                    raise _Bad("its index does not point at a chunk record")
+                self._chunk(f, start, length, k, entries)
+            except _Bad as exc:
+                lost = sum(len(e[0]) for c, e in entries.items() if c in wanted) if (
+                    entries) else None
+                self.damage.append(Damage(start, f"chunk {k + 1} of {len(index)} is damaged: "
+                                          f"{exc}", t0, t1, lost))  # fmt: skip
+
+    def _message_index(self, f, offsets: dict[int, int], wanted: set[int]) -> dict:
+        """Message index entries (log times, offsets) of the kept channels of one chunk."""
+        out = {}
+        for cid in sorted(wanted & offsets.keys()):
+            off = offsets[cid]
+            if off + 15 > self.size:
+                continue
+            f.seek(off)
+            head = f.read(15)
+            op, length, c, nbytes = struct.unpack("<BQHI", head)
+            if op != _MSG_INDEX or c != cid or nbytes != length - 6 or nbytes % 16 or (
+                off + 9 + length > self.size
+            ):
+                continue
+            pairs = np.frombuffer(f.read(nbytes), "<u8").reshape(-1, 2).astype(np.int64)
+            out[cid] = (pairs[:, 1], pairs[:, 0])
+        return out
+
+    def _chunk(self, f, pos: int, length: int, seq: int, entries: dict | None) -> None:
+        """Read, check and decompress the chunk record at file offset ``pos``; keep payloads."""
+        if length < 40 or pos + 9 + length > self.size:
+            raise _Bad(f"its record of {length} bytes runs past the end of the file")
+        head = f.read(min(length, 4096))
+        _t0, _t1, usize, crc = _CHUNK_HEAD.unpack_from(head, 0)
+        comp, p = _str(head, 28)
+        (n,) = struct.unpack_from("<Q", head, p)
+        if p + 8 + n != length:
+            raise _Bad(f"its records size {n} does not match its record length {length}")
+        if usize > size_bound(n):
+            raise _Bad(f"it declares {usize} bytes uncompressed from {n} (refused, beyond "
+                       f"{size_bound(n)})")  # fmt: skip
+        if comp == "" and usize != n:
+            raise _Bad(f"it is uncompressed but declares {usize} bytes for {n}")
+        f.seek(pos + 9 + p + 8)
+        data = decompress(comp, f.read(n), usize)
+        if crc != 0 and zlib.crc32(data) != crc:
+            raise _Bad("it fails its CRC check")
+        self._take(data, pos, seq, entries, (_t0, _t1))
+
+    def _take(self, data: bytes, pos: int, seq: int, entries: dict | None,
+              span: tuple[int, int] = (None, None)) -> None:  # fmt: skip
+        """Locate the messages in a decompressed chunk; keep payloads of kept channels."""
+        d = np.frombuffer(data, np.uint8)
+        if entries:
+            offs = np.sort(np.concatenate([e[0] for e in entries.values()]))
+            ok = len(offs) and offs[0] >= 0 and offs[-1] + _MSG_HEADER <= len(data)
+            if ok and np.all(d[offs] == _MESSAGE):
+                from imu_dcm.logio.cdr import gather
+
+                length = gather(d, offs + 1, "u8").astype(np.int64)
+                ends = offs + 9 + length
+                if np.all(ends[:-1] <= offs[1:]) and ends[-1] <= len(data) and np.all(
+                    length >= 22
+                ):
+                    # schema/channel records sit between indexed messages: walk only those gaps
+                    gs, ge = np.concatenate([[0], ends]), np.concatenate([offs, [len(data)]])
+                    for a, b in zip(gs[ge > gs].tolist(), ge[ge > gs].tolist()):
+                        self._walk(data, a, b, pos, seq, meta_only=True, span=span)
+                    cid = gather(d, offs + 9, "u2").astype(np.int64)
+                    lt = gather(d, offs + 15, "u8").astype(np.int64)
+                    self._keep_spans(d, offs, length, cid, lt, seq)
+                    return
+        expected = sum(len(e[0]) for c, e in (entries or {}).items() if self._is_kept(c))
+        self._n_kept = 0
+        self._walk(data, 0, len(data), pos, seq, meta_only=False, span=span,
+                   expected=expected if entries else None)
+
+    def _keep_spans(self, d, offs, length, cid, log_time, seq: int) -> None:
+        for c in np.unique(cid).tolist():
+            m = cid == c
+            self.counts_seen[c] = self.counts_seen.get(c, 0) + int(m.sum())
+            if not self._is_kept(c):
+                continue
+            self._n_kept += int(m.sum())
+            s = offs[m] + _MSG_HEADER
+            n = length[m] - 22
+            self.sink.add(c, Payloads(*compact(d, s, n), log_time[m], (seq << 32) + offs[m]))
+
+    def _walk(self, data: bytes, a: int, b: int, pos: int, seq: int, meta_only: bool,
+              span=(None, None), expected: int | None = None) -> None:
+        """Walk the records in ``data[a:b]`` of one chunk (chunk at file offset ``pos``)."""
+        offs, lens, cids, times = [], [], [], []
+        p = a
+        while p + 9 <= b:
+            op, length = _REC.unpack_from(data, p)
+            end = p + 9 + length
+            if end > b:
+                break
+            try:
+                if op == _MESSAGE and not meta_only and length >= 22:
+                    _, _, cid, _, lt, _ = _MSG.unpack_from(data, p)
+                    offs.append(p)
+                    lens.append(length)
+                    cids.append(cid)
+                    times.append(lt)
+                elif op == _SCHEMA:
+                    _schema(data, p + 9, self.schemas)
+                elif op == _CHANNEL:
+                    _channel(data, p + 9, self.channels)
+            except (struct.error, _Bad):
+                break
+            p = end
+        if offs:
+            d = np.frombuffer(data, np.uint8)
+            self._keep_spans(d, np.asarray(offs, np.int64), np.asarray(lens, np.int64),
+                             np.asarray(cids, np.int64), np.asarray(times, np.int64), seq)
+        if p < b:
+            lost = None if expected is None else max(expected - self._n_kept, 0)
+            self.damage.append(Damage(pos, f"a record inside the chunk at byte {pos} is damaged "
+                                      f"(at byte {p} of its {len(data)} decompressed bytes); "
+                                      f"the rest of that chunk is lost", span[0], span[1],
+                                      lost))  # fmt: skip
+
+    # ------------------------------------------------------------------ forward scan
+    def _scan(self, f) -> None:
+        pos, seq = len(MAGIC), 0
+        f.seek(pos)
+        while pos + 9 <= self.size:
+            if self.progress is not None:
+                self.progress(pos / self.size)
+            f.seek(pos)
+            op, length = _REC.unpack(f.read(9))
+            end = pos + 9 + length
+            if op in (_DATA_END, _FOOTER):
+                return
+            if end > self.size or op == 0 or op > 0x0F:
+                nxt = self._resync(f, pos + 1)
+                what = ("the file ends inside a record" if nxt is None and end > self.size
+                        else "a record is damaged")  # fmt: skip
+                self.damage.append(Damage(pos, f"{what} at byte {pos} of {self.size}"
+                                          + ("" if nxt is None else f"; resumed at byte {nxt}")))
+                if nxt is None:
+                    return
+                pos = nxt
+                continue
+            if op == _CHUNK:
+                entries, after = self._following_index(f, end)
+                t0 = t1 = None
+                try:
+                    f.seek(pos + 9)
+                    t0, t1 = struct.unpack("<QQ", f.read(16))
+                    known = entries is not None and all(c in self.channels for c in entries)
+                    if known and not any(self._is_kept(c) for c in entries):
+                        for c, e in entries.items():
+                            self.counts_seen[c] = self.counts_seen.get(c, 0) + len(e[0])
+                    else:
+                        f.seek(pos + 9)
+                        self._chunk(f, pos, length, seq, entries)
+                except _Bad as exc:
+                    lost = None
+                    if entries is not None:
+                        lost = sum(len(e[0]) for c, e in entries.items()
+                                   if c not in self.channels or self._is_kept(c))  # fmt: skip
+                    self.damage.append(Damage(pos, f"the chunk at byte {pos} is damaged: {exc}",
+                                              t0, t1, lost))  # fmt: skip
+                seq += 1
+                pos = after
+                continue
+            if op in (_SCHEMA, _CHANNEL) and length <= MAX_META_RECORD:
+                buf = f.read(length)
+                try:
+                    (_schema if op == _SCHEMA else _channel)(
+                        buf, 0, self.schemas if op == _SCHEMA else self.channels)
+                except (struct.error, _Bad):
+                    self.damage.append(Damage(pos, f"a schema or channel record at byte {pos} "
+                                              f"is damaged"))  # fmt: skip
+            elif op == _MESSAGE and length >= 22:
+                head = f.read(22)
+                cid, _, lt, _ = struct.unpack_from("<HIQQ", head)
+                self.counts_seen[cid] = self.counts_seen.get(cid, 0) + 1
+                if self._is_kept(cid):
+                    payload = np.frombuffer(f.read(length - 22), np.uint8)
+                    one = np.array([0], np.int64)
+                    self.sink.add(cid, Payloads(
+                        payload, one, np.array([len(payload)], np.int64),
+                        np.array([lt], np.int64), np.array([(seq << 32) + 0], np.int64)))
+                seq += 1
+            pos = end
+
+    def _following_index(self, f, pos: int) -> tuple[dict | None, int]:
+        """Message index records right after a chunk: {channel: (offsets, log times)}."""
+        entries: dict = {}
+        while pos + 15 <= self.size:
+            f.seek(pos)
+            op, length, cid, nbytes = struct.unpack("<BQHI", f.read(15))
+            if op != _MSG_INDEX or pos + 9 + length > self.size or nbytes != length - 6:
+                break
+            if nbytes % 16 == 0 and nbytes <= MAX_META_RECORD:
+                pairs = np.frombuffer(f.read(nbytes), "<u8").reshape(-1, 2).astype(np.int64)
+                entries[cid] = (pairs[:, 1], pairs[:, 0])
+            pos += 9 + length
+        return (entries or None), pos
+
+    def _resync(self, f, pos: int) -> int | None:
+        """File offset of the next plausible chunk record at or after ``pos`` (None if none)."""
+        block = 1 << 20
+        while pos < self.size:
+            f.seek(pos)
+            buf = f.read(block + 64)
+            i = buf.find(b"\x06")
+            while i != -1 and i + 50 <= len(buf):
+                try:
+                    _, length = _REC.unpack_from(buf, i)
+                    comp, p = _str(buf, i + 9 + 28)
+                    (n,) = struct.unpack_from("<Q", buf, p)
+                    if comp in ("", "zstd", "lz4") and p - i - 9 + 8 + n == length and (
+                        pos + i + 9 + length <= self.size
+                    ):
+                        return pos + i
+                except (struct.error, _Bad):
+                    pass
+                i = buf.find(b"\x06", i + 1)
+            pos += block
+        return None

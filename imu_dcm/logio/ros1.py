@@ -1,0 +1,152 @@
+"""ROS 1 bags (v2.0; uncompressed, bz2 or lz4 chunks): rosbags reads the index, we the chunks.
+
+:class:`rosbags.rosbag1.Reader` parses the connection records and the per-chunk index. The
+chunks that hold kept connections are then read here, each decompressed to at most its declared
+``size`` (a chunk that claims 1000 bytes cannot inflate to gigabytes), and the message records
+located from the index offsets with numpy. ROS 1 payloads are little endian, packed without
+alignment; :mod:`imu_dcm.logio.cdr` decodes them in bulk. A damaged chunk is skipped and
+reported with its file offset, time range and the kept messages it held.
+"""
+
+from __future__ import annotations
+
+import bz2
+from collections import defaultdict
+from collections.abc import Callable
+from pathlib import Path
+
+import numpy as np
+
+from imu_dcm.errors import LogError
+from imu_dcm.logio.mcap import compact, size_bound
+from imu_dcm.logio.types import Collected, Conn, Damage, Payloads, Sink
+
+MAGIC = b"#ROSBAG V"
+
+
+class _Bad(Exception):
+    pass
+
+
+def _decompress(compression: str, data: bytes, size: int) -> bytes:
+    if size > size_bound(len(data)):
+        raise _Bad(f"it declares {size} bytes uncompressed from {len(data)} (refused)")
+    try:
+        if compression == "none":
+            out = data
+        elif compression == "bz2":
+            out = bz2.BZ2Decompressor().decompress(data, max_length=size + 1)
+        elif compression == "lz4":
+            import lz4.frame
+
+            out = lz4.frame.LZ4FrameDecompressor().decompress(data, max_length=size + 1)
+        else:
+            raise LogError(f"Expected ROS 1 chunk compression none, bz2 or lz4, got "
+                           f"{compression!r}; `rosbag decompress x.bag` rewrites it")  # fmt: skip
+    except (OSError, RuntimeError, ValueError, EOFError) as exc:
+        raise _Bad(f"it does not decompress ({str(exc)[:60]})") from None
+    if len(out) != size:
+        raise _Bad(f"it decompresses to {len(out)}{'+' if len(out) > size else ''} bytes, "
+                   f"not its declared {size}")  # fmt: skip
+    return out
+
+
+class Ros1Source:
+    """A ROS 1 bag file."""
+
+    kind = "ros1 bag"
+
+    def __init__(self, path: Path, progress: Callable[[float], None] | None = None):
+        self.path = path
+        self.progress = progress
+
+    def read(self, sink: Sink) -> Collected:
+        from rosbags.rosbag1 import Reader, ReaderError
+
+        reader = Reader(self.path)
+        try:
+            reader.open()
+        except ReaderError as exc:
+            msg = str(exc.args[0] if exc.args else exc)
+            fix = ""
+            if "not indexed" in msg or "index looks damaged" in msg:
+                fix = f"; `rosbag reindex {self.path.name}` rebuilds its index"
+            elif "version" in msg:
+                fix = (f"; `rosbag fix {self.path.name} out.bag` rewrites it as v2.0, then "
+                       f"read out.bag")  # fmt: skip
+            raise LogError(f"Expected a readable ROS 1 bag (v2.0), got {msg.rstrip('.')} in "
+                           f"{self.path}{fix}") from None  # fmt: skip
+        except (OSError, ValueError, KeyError, AssertionError, IndexError) as exc:
+            raise LogError(f"Expected a readable ROS 1 bag, got a damaged index in {self.path} "
+                           f"({type(exc).__name__}); `rosbag reindex {self.path.name}` rebuilds "
+                           f"it") from None  # fmt: skip
+        try:
+            return self._read(reader, sink)
+        finally:
+            reader.close()
+
+    def _read(self, reader, sink: Sink) -> Collected:
+        from rosbags.rosbag1.reader import Header, RecordType
+
+        conns = []
+        for c in reader.connections:
+            conns.append(Conn(c.id, c.topic, c.msgtype, "ros1", "ros1msg", c.msgdef.data,
+                              c.msgcount))  # fmt: skip
+        kept = {c.id for c in conns if sink.wants(c)}
+        # index entries of kept connections, grouped by chunk: (offsets, times)
+        by_chunk: dict[int, dict[int, tuple[list, list]]] = defaultdict(dict)
+        for cid in kept:
+            for e in reader.indexes.get(cid, []):
+                offs, times = by_chunk[e.chunk_pos].setdefault(cid, ([], []))
+                offs.append(e.offset)
+                times.append(e.time)
+        damage = []
+        bio = reader.bio
+        infos = sorted(reader.chunk_infos, key=lambda ci: ci.pos)
+        for k, info in enumerate(infos):
+            if self.progress is not None:
+                self.progress(k / max(len(infos), 1))
+            entries = by_chunk.get(info.pos)
+            if not entries:
+                continue
+            try:
+                bio.seek(info.pos)
+                try:
+                    head = Header.read(bio, RecordType.CHUNK)
+                    compression = head.get_string("compression")
+                    size = head.get_uint32("size")
+                except Exception as exc:  # noqa: BLE001 (rosbags raises several kinds)
+                    raise _Bad(f"its header is damaged ({type(exc).__name__})") from None
+                chunk = reader.chunks[info.pos]
+                bio.seek(chunk.datapos)
+                data = _decompress(compression, bio.read(chunk.datasize), size)
+                self._take(np.frombuffer(data, np.uint8), entries, k, sink)
+            except _Bad as exc:
+                lost = sum(len(e[0]) for e in entries.values())
+                damage.append(Damage(info.pos, f"ROS 1 chunk {k + 1} of {len(infos)} at byte "
+                                     f"{info.pos} is damaged: {exc}", info.start_time,
+                                     info.end_time, lost))  # fmt: skip
+        payloads = sink.finish()
+        return Collected(self.kind, conns, payloads, damage)
+
+    @staticmethod
+    def _take(d: np.ndarray, entries: dict, seq: int, sink: Sink) -> None:
+        from imu_dcm.logio.cdr import gather
+
+        for cid, (offs, times) in entries.items():
+            off = np.asarray(offs, np.int64)
+            t = np.asarray(times, np.int64)
+            if len(off) == 0:
+                continue
+            if off.min() < 0 or off.max() + 8 > len(d):
+                raise _Bad("its index points outside the chunk")
+            hl = gather(d, off, "u4").astype(np.int64)
+            if np.any(hl > 4096) or np.any(off + 8 + hl > len(d)):
+                raise _Bad("a message record header is damaged")
+            dl = gather(d, off + 4 + hl, "u4").astype(np.int64)
+            start = off + 8 + hl
+            if np.any(start + dl > len(d)):
+                raise _Bad("a message runs past the chunk")
+            k = np.argsort(start, kind="stable")
+            buf, out_start, n = compact(d, start[k], dl[k])
+            sink.add(cid, Payloads(buf, out_start, n, t[k], (seq << 32) + off[k]))

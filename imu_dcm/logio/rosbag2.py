@@ -1,0 +1,211 @@
+"""rosbag2 storage other than one plain MCAP: sqlite3 files, split bags, compressed bags.
+
+* sqlite3 (``.db3``, Humble's default): read with :mod:`sqlite3` opened read-only and immutable
+  (the input is never touched), only the kept topics, in insertion (file) order. Definitions come
+  from the ``message_definitions`` table when the bag has one (Iron and later), else from
+  rosbags' type store.
+* split bags: every file listed in ``metadata.yaml`` is read in order and channels of one topic
+  are merged across files.
+* ``file`` compression: each ``.zstd`` file is decompressed, streaming and bounded, into a
+  temporary file first. ``message`` compression: each kept payload is decompressed, bounded.
+"""
+
+from __future__ import annotations
+
+import shutil
+import sqlite3
+import tempfile
+from collections.abc import Callable
+from pathlib import Path
+
+import numpy as np
+
+from imu_dcm.errors import LogError
+from imu_dcm.logio.mcap import size_bound
+from imu_dcm.logio.types import Collected, Conn, Damage, Payloads, Sink, join_any
+
+#: Largest single decompressed message of a message-compressed bag (bytes).
+MAX_MESSAGE_BYTES = 256 << 20
+
+
+class SqliteSource:
+    """One rosbag2 sqlite3 file."""
+
+    kind = "sqlite3"
+
+    def __init__(self, path: Path, progress: Callable[[float], None] | None = None):
+        self.path = path
+        self.progress = progress
+
+    def read(self, sink: Sink) -> Collected:
+        uri = f"file:{self.path.resolve().as_posix()}?mode=ro&immutable=1"
+        try:
+            db = sqlite3.connect(uri, uri=True)
+        except sqlite3.Error as exc:
+            raise LogError(f"Expected a readable sqlite3 bag, got {exc} in {self.path}") from None
+        try:
+            return self._read(db, sink)
+        except sqlite3.DatabaseError as exc:
+            raise LogError(f"Expected a rosbag2 sqlite3 database, got {str(exc).rstrip('.')} in "
+                           f"{self.path}; `sqlite3 {self.path.name} .recover` may rescue "
+                           f"it") from None  # fmt: skip
+        finally:
+            db.close()
+
+    def _read(self, db: sqlite3.Connection, sink: Sink) -> Collected:
+        tables = {r[0] for r in db.execute("SELECT name FROM sqlite_master WHERE type='table'")}
+        if not {"topics", "messages"} <= tables:
+            raise LogError(f"Expected a rosbag2 sqlite3 database (tables topics, messages), got "
+                           f"{', '.join(sorted(tables)) or 'no tables'} in {self.path}")  # fmt: skip
+        defs: dict[str, tuple[str, str]] = {}
+        if "message_definitions" in tables:
+            for typ, enc, text in db.execute(
+                "SELECT topic_type, encoding, encoded_message_definition FROM message_definitions"
+            ):
+                if text:
+                    defs[typ] = (enc, text)
+        counts = dict(db.execute("SELECT topic_id, COUNT(*) FROM messages GROUP BY topic_id"))
+        conns = []
+        for tid, name, typ, fmt in db.execute(
+            "SELECT id, name, type, serialization_format FROM topics ORDER BY id"
+        ):
+            enc, text = defs.get(typ, ("", ""))
+            conns.append(Conn(int(tid), str(name), str(typ), str(fmt), enc, text,
+                              int(counts.get(tid, 0))))  # fmt: skip
+        kept = [c.id for c in conns if sink.wants(c)]
+        if kept:
+            marks = ",".join("?" * len(kept))
+            rows = db.execute(f"SELECT id, topic_id, timestamp, data FROM messages "  # noqa: S608
+                              f"WHERE topic_id IN ({marks}) ORDER BY id", kept)  # fmt: skip
+            while batch := rows.fetchmany(20_000):
+                by_topic: dict[int, list] = {}
+                for row in batch:
+                    by_topic.setdefault(row[1], []).append(row)
+                for tid, rs in by_topic.items():
+                    lens = np.fromiter((len(r[3]) for r in rs), np.int64, len(rs))
+                    starts = np.concatenate([[0], np.cumsum(lens)[:-1]]).astype(np.int64)
+                    buf = np.frombuffer(b"".join(r[3] for r in rs), np.uint8)
+                    sink.add(tid, Payloads(buf, starts, lens,
+                                           np.fromiter((r[2] for r in rs), np.int64, len(rs)),
+                                           np.fromiter((r[0] for r in rs), np.int64, len(rs))))
+        payloads = sink.finish()
+        return Collected(self.kind, conns, payloads, [])
+
+
+def decompress_messages(p: Payloads, where: str, damage: list[Damage]) -> Payloads:
+    """zstd-decompress every payload (a ``message``-compressed bag), each bounded."""
+    import zstandard
+
+    dec = zstandard.ZstdDecompressor()
+    out = bytearray()
+    starts, lens, keep = [], [], []
+    for i in range(len(p)):
+        data = p.payload(i)
+        try:
+            size = zstandard.frame_content_size(data)
+            cap = min(MAX_MESSAGE_BYTES, size_bound(len(data)))
+            if size > cap:
+                raise ValueError(f"declares {size} bytes")
+            m = dec.decompress(data, max_output_size=cap)
+        except (zstandard.ZstdError, ValueError) as exc:
+            damage.append(Damage(-1, f"{where}: message {i} does not decompress ({exc})",
+                                 int(p.log_time[i]), int(p.log_time[i]), 1))  # fmt: skip
+            continue
+        starts.append(len(out))
+        lens.append(len(m))
+        keep.append(i)
+        out += m
+    k = np.asarray(keep, np.int64)
+    return Payloads(np.frombuffer(bytes(out), np.uint8), np.asarray(starts, np.int64),
+                    np.asarray(lens, np.int64), p.log_time[k], p.order[k])  # fmt: skip
+
+
+def decompress_file(src: Path, dst_dir: Path) -> Path:
+    """Stream-decompress ``src`` (``.zstd``) into ``dst_dir``, at most size_bound(src) bytes."""
+    import zstandard
+
+    dst = dst_dir / src.name.removesuffix(".zstd")
+    cap = size_bound(src.stat().st_size) if src.stat().st_size < (1 << 21) else (
+        1024 * src.stat().st_size)  # fmt: skip
+    written = 0
+    try:
+        with open(src, "rb") as fin, open(dst, "wb") as fout:
+            reader = zstandard.ZstdDecompressor().stream_reader(fin)
+            while block := reader.read(1 << 20):
+                written += len(block)
+                if written > cap:
+                    raise LogError(f"Expected {src.name} to decompress to at most {cap} bytes, "
+                                   f"got more (refused)")  # fmt: skip
+                fout.write(block)
+    except zstandard.ZstdError as exc:
+        raise LogError(f"Expected a zstd-compressed bag file, got {exc} in {src}") from None
+    return dst
+
+
+class Rosbag2Folder:
+    """A rosbag2 folder: ``metadata.yaml`` and one or more storage files."""
+
+    def __init__(self, folder: Path, info: dict, files: list[Path],
+                 progress: Callable[[float], None] | None = None):  # fmt: skip
+        self.folder = folder
+        self.info = info
+        self.files = files
+        self.progress = progress
+        self.storage = str(info.get("storage_identifier") or "")
+        mode = str(info.get("compression_mode") or "").lower()
+        self.mode = "" if mode == "none" else mode
+        fmt = str(info.get("compression_format") or "")
+        if self.mode and fmt != "zstd":
+            raise LogError(f"Expected compression format zstd in {folder / 'metadata.yaml'}, got "
+                           f"{fmt!r}; `ros2 bag convert` can rewrite it uncompressed")  # fmt: skip
+        if self.mode not in ("", "file", "message"):
+            raise LogError(f"Expected compression_mode file, message or none, got {mode!r} in "
+                           f"{folder / 'metadata.yaml'}")  # fmt: skip
+
+    @property
+    def kind(self) -> str:
+        parts = [f"ros2 {self.storage}"]
+        if len(self.files) > 1:
+            parts.append(f"split in {len(self.files)} files")
+        if self.mode:
+            parts.append(f"{self.mode}-compressed")
+        return ", ".join(parts)
+
+    def read(self, sink: Sink) -> Collected:
+        from imu_dcm.logio.containers import source_for_file
+
+        merged: dict[tuple, Conn] = {}
+        parts: dict[int, list] = {}
+        damage: list[Damage] = []
+        with tempfile.TemporaryDirectory(prefix="imu_dcm_bag_") as tmp:
+            for k, path in enumerate(self.files):
+                if self.mode == "file":
+                    path = decompress_file(path, Path(tmp))
+                src = source_for_file(path, self.storage)
+                name = self.files[k].name
+                transform = None
+                if self.mode == "message":
+                    def transform(p, name=name):
+                        return decompress_messages(p, name, damage)
+                got = src.read(Sink(sink.plan, transform))
+                for d in got.damage:
+                    damage.append(Damage(d.offset, f"{self.files[k].name}: {d.what}",
+                                         d.t_start_ns, d.t_end_ns, d.messages_lost))
+                for c in got.conns:
+                    key = (c.topic, c.msgtype, c.encoding)
+                    g = merged.get(key)
+                    if g is None:
+                        g = merged[key] = Conn(len(merged) + 1, c.topic, c.msgtype, c.encoding,
+                                               c.schema_encoding, c.schema_text, 0)
+                    g.count = (g.count or 0) + (c.count or 0)
+                    p = got.payloads.get(c.id)
+                    if p is not None and len(p):
+                        p.order = p.order + (k << 56)
+                        parts.setdefault(g.id, []).append(p)
+                if self.mode == "file":
+                    path.unlink()
+                if self.progress is not None:
+                    self.progress((k + 1) / len(self.files))
+            shutil.rmtree(tmp, ignore_errors=True)
+        payloads = {c: join_any(p) for c, p in parts.items()}
+        return Collected(self.kind, list(merged.values()), payloads, damage)

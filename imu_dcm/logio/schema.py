@@ -1,0 +1,187 @@
+"""Message definitions as field lists, from ros2msg, ros1msg or ros2idl schemas (via rosbags).
+
+:mod:`rosbags.typesys` parses the schema text a container stores (``ros2msg`` / ``ros1msg``
+text with its ``MSG:`` dependencies, or ``ros2idl``); a channel without one (sqlite3 bags of
+Humble and older) takes its definition from rosbags' built-in type store. The result is a plain
+map ``type name -> [Field]`` that :mod:`imu_dcm.logio.cdr` walks. A corrupt schema, one that
+is too large, or one whose types nest deeper than :data:`MAX_DEPTH` (or contain themselves)
+raises :class:`~imu_dcm.errors.LogError`.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from functools import lru_cache
+
+from imu_dcm.errors import LogError
+from imu_dcm.logio.types import Conn
+
+#: Primitive ROS types and their little-endian numpy dtypes.
+PRIM = {
+    "bool": "u1", "byte": "u1", "char": "u1", "octet": "u1", "int8": "i1", "uint8": "u1",
+    "int16": "i2", "uint16": "u2", "int32": "i4", "uint32": "u4", "int64": "i8",
+    "uint64": "u8", "float32": "f4", "float64": "f8",
+}  # fmt: skip
+#: Deepest type nesting followed (real messages nest < 10 levels).
+MAX_DEPTH = 64
+#: Largest schema text parsed (bytes).
+MAX_SCHEMA_BYTES = 1 << 20
+_TIME = [("sec", "int32"), ("nanosec", "uint32")]
+
+
+@dataclass(frozen=True)
+class Field:
+    """One field: ``base`` is a primitive name, "string" or a full type "pkg/msg/Name";
+    ``array`` is None, "fixed" (``count`` elements) or "seq" (length-prefixed)."""
+
+    name: str
+    base: str
+    array: str | None
+    count: int
+
+
+Defs = dict[str, list[Field]]
+
+
+def norm_type(name: str) -> str:
+    """``pkg/Name`` or ``pkg/msg/Name`` -> ``pkg/msg/Name``."""
+    parts = name.strip().split("/")
+    if len(parts) == 2:
+        return f"{parts[0]}/msg/{parts[1]}"
+    return name.strip()
+
+
+def _base_name(desc) -> str:
+    kind, arg = desc
+    if int(kind) == 1:  # Nodetype.BASE: (name, string bound)
+        name = arg[0]
+        return "string" if name in ("string", "wstring") else name
+    return str(arg)  # Nodetype.NAME: full type name
+
+
+def _convert(typesdict) -> Defs:
+    defs: Defs = {}
+    for tname, (_consts, fields) in typesdict.items():
+        out = []
+        for fname, desc in fields:
+            if fname == "structure_needs_at_least_one_member":
+                continue
+            kind = int(desc[0])
+            if kind in (1, 2):
+                out.append(Field(fname, _base_name(desc), None, 0))
+            else:  # 3 ARRAY ((sub), count) / 4 SEQUENCE ((sub), bound)
+                sub, num = desc[1]
+                out.append(Field(fname, _base_name(sub), "fixed" if kind == 3 else "seq",
+                                 int(num) if kind == 3 else 0))  # fmt: skip
+        defs[tname] = out
+    for builtin in ("builtin_interfaces/msg/Time", "builtin_interfaces/msg/Duration"):
+        defs.setdefault(builtin, [Field(n, t, None, 0) for n, t in _TIME])
+    return defs
+
+
+def _check_depth(defs: Defs, root: str) -> None:
+    """Refuse self-containing types and nesting deeper than MAX_DEPTH (iteratively)."""
+    depth: dict[str, int] = {}
+    stack: list[tuple[str, int, frozenset]] = [(root, 0, frozenset())]
+    while stack:
+        name, d, seen = stack.pop()
+        if d > MAX_DEPTH:
+            raise LogError(f"Expected message types nested at most {MAX_DEPTH} deep, got deeper "
+                           f"in {root}")  # fmt: skip
+        if depth.get(name, -1) >= d:
+            continue
+        depth[name] = d
+        for f in defs.get(name, []):
+            if f.base in defs:
+                if f.base in seen or f.base == name:
+                    if f.array is None:
+                        raise LogError(f"Expected a message type that does not contain itself, "
+                                       f"got {f.base} inside {name}")  # fmt: skip
+                    continue
+                stack.append((f.base, d + 1, seen | {name}))
+
+
+def _idl_types(text: str) -> dict:
+    """Types of an IDL schema, possibly several IDL files separated by ``=== / IDL: name``."""
+    import re
+
+    from rosbags.typesys import get_types_from_idl
+
+    types: dict = {}
+    for piece in re.split(r"^=+[ \t]*$", text, flags=re.MULTILINE):
+        body = re.sub(r"\A\s*IDL:[^\n]*\n", "", piece)
+        if body.strip():
+            types.update(get_types_from_idl(body))
+    return types
+
+
+@lru_cache(maxsize=64)
+def _parse(msgtype: str, encoding: str, text: str, serialization: str) -> tuple[Defs, str]:
+    from rosbags.typesys import get_types_from_msg
+
+    root = norm_type(msgtype)
+    if len(text.encode("utf-8", "surrogatepass")) > MAX_SCHEMA_BYTES:
+        raise LogError(f"Expected a message definition of at most {MAX_SCHEMA_BYTES} bytes for "
+                       f"{msgtype}, got {len(text)} characters")  # fmt: skip
+    if text.strip():
+        if encoding in ("ros2idl", "omgidl"):
+            typesdict = _idl_types(text)
+        else:
+            typesdict = get_types_from_msg(text, root)
+    else:
+        from rosbags.typesys import Stores, get_typestore
+
+        store = get_typestore(Stores.ROS1_NOETIC if serialization == "ros1"
+                              else Stores.ROS2_HUMBLE)  # fmt: skip
+        if root not in store.fielddefs:
+            raise LogError(f"Expected a message definition for {msgtype} (the bag stores none "
+                           f"and rosbags does not know the type), got none")  # fmt: skip
+        typesdict = store.fielddefs
+    defs = _convert(typesdict)
+    if root not in defs:
+        raise LogError(f"Expected the definition of {msgtype} in its schema, got only "
+                       f"{', '.join(sorted(defs)[:4]) or 'nothing'}")  # fmt: skip
+    _check_depth(defs, root)
+    return defs, root
+
+
+def definitions(conn: Conn) -> tuple[Defs, str]:
+    """Field lists of ``conn``'s message type and its dependencies, and the root type name.
+
+    Raises
+    ------
+    LogError
+        The schema is corrupt, too large, too deep or self-containing (names the topic).
+    """
+    try:
+        return _parse(conn.msgtype, conn.schema_encoding, conn.schema_text, conn.encoding)
+    except LogError as exc:
+        raise LogError(f"{conn.topic}: {exc}") from None
+    except RecursionError:
+        raise LogError(f"Expected a readable {conn.schema_encoding or 'message'} definition of "
+                       f"{conn.msgtype} on {conn.topic}, got nesting too deep") from None
+    except Exception as exc:  # rosbags' parser raises TypesysError and a few builtins
+        msg = str(exc).splitlines()[0][:120] if str(exc) else type(exc).__name__
+        raise LogError(f"Expected a readable {conn.schema_encoding or 'message'} definition of "
+                       f"{conn.msgtype} on {conn.topic}, got {type(exc).__name__}: {msg}") \
+            from None
+
+
+def typestore_for(conn: Conn):
+    """A rosbags type store holding ``conn``'s types (for the per-message fallback)."""
+    from rosbags.typesys import Stores, get_types_from_msg, get_typestore
+
+    root = norm_type(conn.msgtype)
+    if not conn.schema_text.strip():
+        return get_typestore(Stores.ROS1_NOETIC if conn.encoding == "ros1"
+                             else Stores.ROS2_HUMBLE), root  # fmt: skip
+    store = get_typestore(Stores.EMPTY)
+    if conn.schema_encoding in ("ros2idl", "omgidl"):
+        types = _idl_types(conn.schema_text)
+    else:
+        types = get_types_from_msg(conn.schema_text, root)
+    base = get_typestore(Stores.ROS2_HUMBLE)
+    for builtin in ("builtin_interfaces/msg/Time", "builtin_interfaces/msg/Duration"):
+        types.setdefault(builtin, base.fielddefs[builtin])
+    store.register(types)
+    return store, root

@@ -1,0 +1,270 @@
+"""What the log readers return, and the raw form every container hands to the decoders.
+
+Conventions: stamps are int64 nanoseconds (``t_ns`` from the messages' header stamps,
+``log_t_ns`` from the container's receive/log time); rates ``omega_b`` are the body angular
+velocity in body (sensor) axes as stored (normally rad/s); quaternions are ``[x, y, z, w]``
+(Hamilton) and, for truth, ``q_w_b`` maps body to world.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+from numpy.typing import NDArray
+
+
+@dataclass(frozen=True)
+class ChannelInfo:
+    """One channel of the log: ``topic``, message ``type`` (schema name), ``encoding``, count."""
+
+    topic: str
+    type: str
+    encoding: str
+    count: int
+
+
+@dataclass(frozen=True)
+class Damage:
+    """A damaged part of a log that was skipped.
+
+    Attributes
+    ----------
+    offset : int — byte offset of the damaged record in its file (never chunk-relative).
+    what : str — what was wrong, one line (names the file when a bag has several).
+    t_start_ns, t_end_ns : int or None — log-time range the damaged part covered, when known.
+    messages_lost : int or None — messages of the selected channels it held, when known.
+    """
+
+    offset: int
+    what: str
+    t_start_ns: int | None = None
+    t_end_ns: int | None = None
+    messages_lost: int | None = None
+
+
+@dataclass(frozen=True)
+class ImuSeries:
+    """Gyro samples of the IMU topic, in file order (not yet sorted or cleaned).
+
+    Attributes
+    ----------
+    t_ns : int64 (N,) — header stamps, ns.
+    log_t_ns : int64 (N,) — the container's log (receive) times, ns.
+    omega_b : float64 (N, 3) — angular velocity, body (sensor) axes, in the log's unit (rad/s
+        for ROS). Not cleaned: may hold NaN/Inf.
+    orientation_xyzw : float64 (N, 4) or None — the message's own orientation ``q_w_b``
+        ``[x, y, z, w]``; NaN rows where ``orientation_covariance[0] == -1`` (none given).
+    topic, type, frame_id : where the samples came from.
+    """
+
+    t_ns: NDArray[np.int64]
+    log_t_ns: NDArray[np.int64]
+    omega_b: NDArray[np.float64]
+    orientation_xyzw: NDArray[np.float64] | None
+    topic: str
+    type: str
+    frame_id: str
+
+
+@dataclass(frozen=True)
+class TruthSeries:
+    """Reference attitude samples ``q_w_b`` (``[x, y, z, w]``, body to world) with stamps.
+
+    Attributes
+    ----------
+    t_ns, log_t_ns : int64 (M,) — header stamps and log times, ns.
+    q_w_b : float64 (M, 4) — body-to-world quaternion, ``[x, y, z, w]``.
+    topic, type, frame_id : where the samples came from (``frame_id`` is the parent frame).
+    child_frame_id : the body frame of a transform or odometry, "" otherwise.
+    auto : True when the truth was picked automatically (not named by the caller).
+    """
+
+    t_ns: NDArray[np.int64]
+    log_t_ns: NDArray[np.int64]
+    q_w_b: NDArray[np.float64]
+    topic: str
+    type: str
+    frame_id: str = ""
+    child_frame_id: str = ""
+    auto: bool = False
+
+
+@dataclass(frozen=True)
+class LogData:
+    """What :func:`imu_dcm.logio.read_log` found: IMU series, truth (or None), channels.
+
+    ``container`` names what was read ("ros2 mcap", "ros2 sqlite3", "ros1 bag", ...);
+    ``damage`` lists the damaged parts skipped; ``stopped_at`` summarises them (None if none).
+    """
+
+    path: Path
+    imu: ImuSeries
+    truth: TruthSeries | None
+    channels: tuple[ChannelInfo, ...]
+    custom_data: dict[str, str] = field(default_factory=dict)
+    container: str = ""
+    damage: tuple[Damage, ...] = ()
+    stopped_at: str | None = None
+
+
+# ---------------------------------------------------------------- between containers and decoders
+@dataclass
+class Conn:
+    """A channel as a container describes it (internal).
+
+    ``encoding`` is the payload serialisation: "cdr" (ROS 2), "ros1" (ROS 1, packed little
+    endian), "json" or whatever else the file says. ``schema_encoding`` is "ros2msg", "ros2idl",
+    "ros1msg" or "" (the definition then comes from rosbags' type store for ``msgtype``).
+    """
+
+    id: int
+    topic: str
+    msgtype: str
+    encoding: str
+    schema_encoding: str = ""
+    schema_text: str = ""
+    count: int | None = None
+
+
+@dataclass
+class Payloads:
+    """Raw payloads of one channel: ``buf[start[i] : start[i] + length[i]]`` (internal).
+
+    ``order`` is a file-order key (increasing within a file and across split files), used to
+    merge several channels of one topic in file order.
+    """
+
+    buf: NDArray[np.uint8]
+    start: NDArray[np.int64]
+    length: NDArray[np.int64]
+    log_time: NDArray[np.int64]
+    order: NDArray[np.int64]
+
+    @staticmethod
+    def empty() -> Payloads:
+        z = np.zeros(0, np.int64)
+        return Payloads(np.zeros(0, np.uint8), z, z, z, z)
+
+    def __len__(self) -> int:
+        return len(self.start)
+
+    def payload(self, i: int) -> bytes:
+        s = int(self.start[i])
+        return self.buf[s : s + int(self.length[i])].tobytes()
+
+
+def join_payloads(parts: list[Payloads]) -> Payloads:
+    """One Payloads from several (one buffer), ordered by their file-order keys (stable)."""
+    parts = [p for p in parts if len(p)]
+    if not parts:
+        return Payloads.empty()
+    if len(parts) == 1:
+        return parts[0]
+    shift = np.cumsum([0] + [len(p.buf) for p in parts[:-1]])
+    buf = np.concatenate([p.buf for p in parts])
+    start = np.concatenate([p.start + s for p, s in zip(parts, shift)])
+    length = np.concatenate([p.length for p in parts])
+    log_time = np.concatenate([p.log_time for p in parts])
+    order = np.concatenate([p.order for p in parts])
+    idx = np.argsort(order, kind="stable")
+    return Payloads(buf, start[idx], length[idx], log_time[idx], order[idx])
+
+
+@dataclass
+class Columns:
+    """Decoded fields of one channel (internal): one row per message, in file order.
+
+    ``fields`` maps a field path to an array (N,) or (N, k); ``good`` marks rows that decoded;
+    ``frames`` holds the first message's frame ids ("frame_id", "child_frame_id"); ``error``
+    is the schema error when the channel's definition could not be read (then no row is good).
+    """
+
+    order: NDArray[np.int64]
+    log_time: NDArray[np.int64]
+    good: NDArray[np.bool_]
+    fields: dict[str, NDArray]
+    frames: dict[str, str] = field(default_factory=dict)
+    error: Exception | None = None
+
+    def __len__(self) -> int:
+        return len(self.order)
+
+
+def join_columns(parts: list[Columns]) -> Columns:
+    """One Columns from several, ordered by their file-order keys (stable)."""
+    if len(parts) == 1:
+        return parts[0]
+    order = np.concatenate([p.order for p in parts])
+    idx = np.argsort(order, kind="stable")
+    frames: dict[str, str] = {}
+    for p in parts:
+        for k, v in p.frames.items():
+            frames.setdefault(k, v) if v else None
+    return Columns(order[idx], np.concatenate([p.log_time for p in parts])[idx],
+                   np.concatenate([p.good for p in parts])[idx],
+                   {k: np.concatenate([p.fields[k] for p in parts])[idx] for k in parts[0].fields},
+                   frames, next((p.error for p in parts if p.error is not None), None))  # fmt: skip
+
+
+def join_any(parts: list) -> Payloads | Columns:
+    if parts and isinstance(parts[0], Columns):
+        return join_columns(parts)
+    return join_payloads(parts)
+
+
+class Sink:
+    """Where a container puts the payloads of kept channels (internal).
+
+    ``plan(conn)`` says what to do with a channel: None (skip it), or a callable turning a
+    batch of :class:`Payloads` into :class:`Columns` (decoded now, so raw bytes never pile
+    up) or returning the Payloads themselves (kept raw: JSON, /tf). ``transform(p)`` runs on
+    each batch first (message decompression). Payloads are decoded every :data:`BATCH_BYTES`.
+    """
+
+    BATCH_BYTES = 8 << 20
+
+    def __init__(self, plan, transform=None):
+        self.plan = plan
+        self.transform = transform
+        self._plans: dict[int, object] = {}
+        self._pending: dict[int, list[Payloads]] = {}
+        self._bytes: dict[int, int] = {}
+        self._done: dict[int, list] = {}
+
+    def wants(self, conn: Conn) -> bool:
+        if conn.id not in self._plans:
+            self._plans[conn.id] = self.plan(conn)
+        return self._plans[conn.id] is not None
+
+    def add(self, cid: int, p: Payloads) -> None:
+        self._pending.setdefault(cid, []).append(p)
+        self._bytes[cid] = self._bytes.get(cid, 0) + len(p.buf)
+        if self._bytes[cid] >= self.BATCH_BYTES:
+            self._flush(cid)
+
+    def _flush(self, cid: int) -> None:
+        parts = self._pending.pop(cid, [])
+        self._bytes[cid] = 0
+        if not parts:
+            return
+        p = join_payloads(parts)
+        if self.transform is not None:
+            p = self.transform(p)
+        self._done.setdefault(cid, []).append(self._plans[cid](p))
+
+    def finish(self) -> dict[int, Payloads | Columns]:
+        for cid in list(self._pending):
+            self._flush(cid)
+        return {cid: join_any(parts) for cid, parts in self._done.items()}
+
+
+@dataclass
+class Collected:
+    """What a container read (internal): all channels, the kept ones' data, damage."""
+
+    kind: str
+    conns: list[Conn]
+    payloads: dict[int, Payloads | Columns]
+    damage: list[Damage] = field(default_factory=list)
