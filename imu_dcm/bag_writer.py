@@ -14,7 +14,13 @@ Message types and conventions:
 * Vectors: ``geometry_msgs/msg/Vector3Stamped``.
 
 Header stamps come from ``t_ns`` (int64 ns since the Unix epoch); MCAP ``log_time`` and
-``publish_time`` equal the header stamp. Messages are written in stamp order across topics.
+``publish_time`` equal the header stamp unless a series gives its own ``log_t_ns`` (to build
+logs whose receive times differ from their stamps). Messages are written in log-time order
+across topics.
+
+Output safety (:mod:`imu_dcm.outputs`): the bag never replaces an input, a folder holding one,
+or a special file; ``force`` replaces only a bag this module wrote (its MCAP header names
+``imu_dcm.bag_writer``).
 
 Speed: the fixed-layout CDR payloads and the MCAP message records and message indexes are built
 in bulk with numpy (one byte array per topic), chunks are compressed whole, and only the few
