@@ -107,32 +107,26 @@ def replay(
     bias, q_init, offset = check_options(
         path, time, method, bias, gyro_units, init_q_w_b, prefilter, truth_offset_s
     )
-    caught: list[warnings.WarningMessage] = []
-    try:
-        with warnings.catch_warnings(record=True) as caught:
-            warnings.simplefilter("always")
-            result = _replay(
-                path,
-                imu_topic,
-                truth_topic,
-                truth_frame,
-                time,
-                method,
-                bias,
-                gyro_units or "rad/s",
-                q_init,
-                prefilter,
-                prefilter_config,
-                offset,
-                rest_config,
-                progress or (lambda stage, frac: None),
-            )
-    finally:
-        for w in caught:  # passed on to the caller's filters, once each
-            warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
-    lines = tuple(str(w.message).splitlines()[0] for w in caught)
+    notes: list[str] = []  # this replay's warnings, for the summary (no global state)
+    result = _replay(
+        path,
+        imu_topic,
+        truth_topic,
+        truth_frame,
+        time,
+        method,
+        bias,
+        gyro_units or "rad/s",
+        q_init,
+        prefilter,
+        prefilter_config,
+        offset,
+        rest_config,
+        progress or (lambda stage, frac: None),
+        notes,
+    )
     summary = dataclasses.replace(
-        result.summary, warnings=lines, elapsed_s=_time.perf_counter() - t0
+        result.summary, warnings=tuple(notes), elapsed_s=_time.perf_counter() - t0
     )
     return dataclasses.replace(result, summary=summary)
 
@@ -148,7 +142,8 @@ def _record(obj) -> dict:
     return dict(vars(obj))
 
 
-def _warn(msg: str) -> None:
+def _warn(notes: list[str], msg: str) -> None:
+    notes.append(msg)
     warnings.warn(msg, ImuDcmWarning, stacklevel=3)
 
 
@@ -167,6 +162,7 @@ def _replay(
     offset,
     rest_config,
     report,
+    notes: list[str],
 ) -> ReplayResult:
     report("read", 0.0)
     log = read_log(
@@ -186,10 +182,11 @@ def _replay(
         truth.log_t_ns if truth is not None else None,
     )
     if why:
-        _warn(f"time: using log time, not header stamps: {why}")
+        _warn(notes, f"time: using log time, not header stamps: {why}")
     imu_t = imu.t_ns if base == "header" else imu.log_t_ns
     scale = DEG if gyro_units == "deg/s" else 1.0
     clean = clean_imu(imu_t, np.asarray(imu.omega_b, dtype=float) * scale, imu.topic)
+    notes.extend(clean.messages)
     n = len(clean.t_ns)
     if n < 2:
         hint = ""
@@ -235,23 +232,26 @@ def _replay(
         )
         if not check.follows and truth.auto:
             _warn(
+                notes,
                 f"truth {truth.topic} ({truth.type}{frames}) does not follow the gyro "
                 f"({check.describe()}): replaying without truth; name it with --truth-topic "
-                f"to score it anyway"
+                f"to score it anyway",
             )
             q_truth = np.full((n, 4), np.nan)
             rejected, truth = truth.topic, None
         elif not check.follows:
             _warn(
+                notes,
                 f"truth {truth.topic} ({truth.type}{frames}) does not follow the gyro "
-                f"({check.describe()}); scored anyway, as asked"
+                f"({check.describe()}); scored anyway, as asked",
             )
     if gyro_units == "rad/s":
         evidence = _deg_evidence(omega_raw, t_s, q_truth)
         if evidence:
             _warn(
+                notes,
                 f"{imu.topic}: the rates look like deg/s: {evidence}; pass "
-                f"--gyro-units deg/s to convert"
+                f"--gyro-units deg/s to convert",
             )
 
     has_truth = np.all(np.isfinite(q_truth), axis=1)
