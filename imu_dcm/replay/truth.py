@@ -189,11 +189,38 @@ def slerp_truth(truth_t_ns: ArrayLike, q_w_b: ArrayLike, t_ns: ArrayLike) -> NDA
     return out
 
 
-def _pearson(a: NDArray[np.float64], b: NDArray[np.float64]) -> float:
-    sa, sb = float(np.std(a)), float(np.std(b))
-    if sa == 0.0 or sb == 0.0:
-        return 0.0
-    return float(np.mean((a - a.mean()) * (b - b.mean())) / (sa * sb))
+def lagged_correlation(
+    g: NDArray[np.float64], h: NDArray[np.float64], valid: NDArray[np.bool_], lags: int
+) -> tuple[NDArray[np.float64], NDArray[np.int64]]:
+    """Pearson correlation of ``g[i + k]`` with ``h[i]`` over the valid ``i``, k = -lags..lags.
+
+    All lags at once: the five pair sums (count, Σa, Σa², Σb, Σb², Σab) are cross-correlations,
+    computed by FFT. Returns (correlation (2 lags + 1,), 0 where a series is constant; the
+    number of pairs per lag).
+    """
+    n = len(g)
+    w = valid.astype(float)
+    hv = np.where(valid, h, 0.0)
+    nfft = 1 << int(np.ceil(np.log2(2 * n)))
+    k = np.arange(-lags, lags + 1)
+
+    def xcorr(x: NDArray[np.float64], y: NDArray[np.float64]) -> NDArray[np.float64]:
+        r = np.fft.irfft(np.fft.rfft(x, nfft) * np.conj(np.fft.rfft(y, nfft)), nfft)
+        return r[k % nfft]  # Σ_i x[i + k] y[i]
+
+    ones = np.ones(n)
+    cnt = xcorr(ones, w)
+    sa, saa = xcorr(g, w), xcorr(g * g, w)
+    sb, sbb = xcorr(ones, hv), xcorr(ones, hv * hv)
+    sab = xcorr(g, hv)
+    count = np.rint(cnt).astype(np.int64)
+    safe = np.maximum(cnt, 1.0)
+    cov = sab - sa * sb / safe
+    var = np.maximum(saa - sa * sa / safe, 0.0) * np.maximum(sbb - sb * sb / safe, 0.0)
+    scale = np.sqrt(var)
+    tiny = scale <= 1e-12 * np.maximum(np.sqrt(saa * sbb), 1e-300)
+    corr = np.where(tiny, 0.0, cov / np.where(tiny, 1.0, scale))
+    return corr, count
 
 
 def check_truth(
@@ -256,26 +283,22 @@ def check_truth(
         still_truth = float(np.mean(h0)) < STILL_RAD_S
         turning = float(np.mean(g0)) > 10 * STILL_RAD_S
         return TruthCheck(True, not (still_truth and turning), None, None, resid0, g_rms0)
-    n = len(g)
     lags = int(min(MAX_SHIFT_S, span_s / 4) / dt)
-    best = (-np.inf, 0, resid0, g_rms0)
-    scores = {}
-    for k in range(-lags, lags + 1):
-        gi = slice(max(k, 0), n + min(k, 0))  # g[i + k] against h[i]
-        hi_ = slice(max(-k, 0), n - max(k, 0))
-        m = valid[hi_]
-        if m.sum() < 20:
-            continue
-        a, b = g[gi][m], h[hi_][m]
-        c = _pearson(a, b)
-        scores[k] = c
-        if c > best[0]:
-            best = (c, k, float(np.sqrt(np.mean((a - b) ** 2))), float(np.sqrt(np.mean(a**2))))
-    c, k, resid, g_rms = best
+    corr, count = lagged_correlation(g, h, valid, lags)
+    ok = count >= 20
+    if not ok.any():
+        return TruthCheck(False, True)
+    j = int(np.argmax(np.where(ok, corr, -np.inf)))
+    k, c = j - lags, float(corr[j])
+    n = len(g)
+    m = valid[max(-k, 0) : n - max(k, 0)]
+    a = g[max(k, 0) : n + min(k, 0)][m]  # g[i + k] against h[i]
+    b = h[max(-k, 0) : n - max(k, 0)][m]
+    resid, g_rms = float(np.sqrt(np.mean((a - b) ** 2))), float(np.sqrt(np.mean(a**2)))
     shift = k * dt
-    if k - 1 in scores and k + 1 in scores:  # parabola through the peak and its neighbours
-        y0, y1, y2 = scores[k - 1], c, scores[k + 1]
-        den = y0 - 2 * y1 + y2
+    if 0 < j < len(corr) - 1 and ok[j - 1] and ok[j + 1]:  # parabola through the peak
+        y0, y2 = float(corr[j - 1]), float(corr[j + 1])
+        den = y0 - 2 * c + y2
         if den < 0:
             shift += 0.5 * (y0 - y2) / den * dt
     return TruthCheck(True, c >= MIN_CORRELATION, shift, c, resid, g_rms)
