@@ -6,10 +6,10 @@ body axes, rad/s; increments multiply on the right, ``R_{i+1} = R_i · exp([φ_i
 in seconds.
 """
 
-from imu_dcm.errors import GapWarning, ImuDcmError, ImuDcmWarning, InputError, LogError
-
 import sys as _sys
 import types as _types
+
+from imu_dcm.errors import GapWarning, ImuDcmError, ImuDcmWarning, InputError, LogError
 
 _LAZY = {  # loaded on first use, so a command's --help does not import the numerical stack
     "DELTA_METHODS": "imu_dcm.integrate",

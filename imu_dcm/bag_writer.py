@@ -14,7 +14,13 @@ Message types and conventions:
 * Vectors: ``geometry_msgs/msg/Vector3Stamped``.
 
 Header stamps come from ``t_ns`` (int64 ns since the Unix epoch); MCAP ``log_time`` and
-``publish_time`` equal the header stamp. Messages are written in stamp order across topics.
+``publish_time`` equal the header stamp unless a series gives its own ``log_t_ns`` (to build
+logs whose receive times differ from their stamps). Messages are written in log-time order
+across topics.
+
+Output safety (:mod:`imu_dcm.outputs`): the bag never replaces an input, a folder holding one,
+or a special file; ``force`` replaces only a bag this module wrote (its MCAP header names
+``imu_dcm.bag_writer``).
 
 Speed: the fixed-layout CDR payloads and the MCAP message records and message indexes are built
 in bulk with numpy (one byte array per topic), chunks are compressed whole, and only the few
@@ -47,8 +53,10 @@ __all__ = ["MSG_DEFINITIONS", "TYPE_HASHES", "StampedSeries", "write_bag"]
 
 _SEP = "=" * 80 + "\n"
 _HEADER_DEFS = (
-    _SEP + "MSG: std_msgs/Header\nbuiltin_interfaces/Time stamp\nstring frame_id\n"
-    + _SEP + "MSG: builtin_interfaces/Time\nint32 sec\nuint32 nanosec\n"
+    _SEP
+    + "MSG: std_msgs/Header\nbuiltin_interfaces/Time stamp\nstring frame_id\n"
+    + _SEP
+    + "MSG: builtin_interfaces/Time\nint32 sec\nuint32 nanosec\n"
 )
 _QUAT_DEF = _SEP + "MSG: geometry_msgs/Quaternion\nfloat64 x\nfloat64 y\nfloat64 z\nfloat64 w\n"
 _VEC_DEF = _SEP + "MSG: geometry_msgs/Vector3\nfloat64 x\nfloat64 y\nfloat64 z\n"
@@ -71,12 +79,9 @@ MSG_DEFINITIONS: dict[str, str] = {
 
 #: REP 2011 type hashes (RIHS01) of the message types, as in rosbag2 metadata (Humble+ types).
 TYPE_HASHES: dict[str, str] = {
-    "sensor_msgs/msg/Imu":
-        "RIHS01_7d9a00ff131080897a5ec7e26e315954b8eae3353c3f995c55faf71574000b5b",
-    "geometry_msgs/msg/QuaternionStamped":
-        "RIHS01_381add86c6c3160644d228ca342182c7fd6c7fab11c7a85ad817a9cc22dbac6e",
-    "geometry_msgs/msg/Vector3Stamped":
-        "RIHS01_d4829622288cbb443886e7ea94ea5671a3b1be6bab4ad04224432a65f7d7887a",
+    "sensor_msgs/msg/Imu": "RIHS01_7d9a00ff131080897a5ec7e26e315954b8eae3353c3f995c55faf71574000b5b",
+    "geometry_msgs/msg/QuaternionStamped": "RIHS01_381add86c6c3160644d228ca342182c7fd6c7fab11c7a85ad817a9cc22dbac6e",
+    "geometry_msgs/msg/Vector3Stamped": "RIHS01_d4829622288cbb443886e7ea94ea5671a3b1be6bab4ad04224432a65f7d7887a",
 }
 
 _QOS_YAML = """- avoid_ros_namespace_conventions: false
@@ -124,8 +129,9 @@ class StampedSeries:
     def __post_init__(self) -> None:
         t = np.asarray(self.t_ns)
         if t.ndim != 1 or not np.issubdtype(t.dtype, np.integer):
-            raise InputError(f"Expected `t_ns` an int64 array of shape (N,), got {t.dtype} "
-                             f"of shape {t.shape}")
+            raise InputError(
+                f"Expected `t_ns` an int64 array of shape (N,), got {t.dtype} of shape {t.shape}"
+            )
         v = np.asarray(self.values, dtype=np.float64)
         if v.ndim != 2 or v.shape[0] != t.shape[0]:
             raise InputError(f"Expected `values` of shape (N={t.shape[0]}, k), got {v.shape}")
@@ -136,8 +142,10 @@ class StampedSeries:
         if self.log_t_ns is not None:
             lt = np.asarray(self.log_t_ns)
             if lt.shape != t.shape or not np.issubdtype(lt.dtype, np.integer):
-                raise InputError(f"Expected `log_t_ns` an int64 array of shape {t.shape}, got "
-                                 f"{lt.dtype} of shape {lt.shape}")
+                raise InputError(
+                    f"Expected `log_t_ns` an int64 array of shape {t.shape}, got "
+                    f"{lt.dtype} of shape {lt.shape}"
+                )
             object.__setattr__(self, "log_t_ns", lt.astype(np.int64, copy=False))
 
     @property
@@ -156,16 +164,19 @@ def _check_series(name: str, s: StampedSeries, k: int) -> None:
     for label, t in (("t_ns", s.t_ns), ("log_t_ns", s.file_t_ns)):
         bad = np.flatnonzero((t < 0) | (t >= _MAX_T_NS))
         if bad.size:
-            raise InputError(f"Expected {name} stamps in [0, 2^31 s) ns, got {label}[{bad[0]}] "
-                             f"= {int(t[bad[0]])}")
+            raise InputError(
+                f"Expected {name} stamps in [0, 2^31 s) ns, got {label}[{bad[0]}] "
+                f"= {int(t[bad[0]])}"
+            )
     finite = np.isfinite(s.values).all(axis=1)
     if not finite.all():
         i = int(np.argmin(finite))
         raise InputError(f"Expected {name} finite values, got row {i} = {s.values[i].tolist()}")
 
 
-def _cdr_messages(t_ns: NDArray[np.int64], frame_id: str,
-                  doubles: NDArray[np.float64]) -> NDArray[np.uint8]:
+def _cdr_messages(
+    t_ns: NDArray[np.int64], frame_id: str, doubles: NDArray[np.float64]
+) -> NDArray[np.uint8]:
     """CDR (little-endian) payloads of ``Header`` + ``k`` float64, one row of bytes per message."""
     n, k = doubles.shape
     frame = frame_id.encode("utf-8") + b"\0"
@@ -180,14 +191,17 @@ def _cdr_messages(t_ns: NDArray[np.int64], frame_id: str,
     buf[:, 4:8] = sec.view(np.uint8).reshape(n, 4)
     buf[:, 8:12] = nsec.view(np.uint8).reshape(n, 4)
     buf[:, 12:16] = np.frombuffer(np.uint32(len(frame)).astype("<u4").tobytes(), np.uint8)
-    buf[:, 16:16 + len(frame)] = np.frombuffer(frame, np.uint8)
+    buf[:, 16 : 16 + len(frame)] = np.frombuffer(frame, np.uint8)
     payload = np.ascontiguousarray(doubles, dtype="<f8").view(np.uint8)
-    buf[:, 4 + body_off:] = payload.reshape(n, 8 * k)
+    buf[:, 4 + body_off :] = payload.reshape(n, 8 * k)
     return buf
 
 
-def _imu_doubles(rates: NDArray[np.float64], accel: NDArray[np.float64] | None,
-                 gyro_cov: NDArray[np.float64] | None) -> NDArray[np.float64]:
+def _imu_doubles(
+    rates: NDArray[np.float64],
+    accel: NDArray[np.float64] | None,
+    gyro_cov: NDArray[np.float64] | None,
+) -> NDArray[np.float64]:
     """The 37 float64 of ``sensor_msgs/Imu`` after its header, one row per sample."""
     n = rates.shape[0]
     d = np.zeros((n, 37))
@@ -209,8 +223,12 @@ def _u8le(values: NDArray, width: int) -> NDArray[np.uint8]:
     return np.ascontiguousarray(values, dtype=dt).view(np.uint8).reshape(-1, width)
 
 
-def _write_mcap(f, topics: list[tuple[str, str, NDArray[np.int64], NDArray[np.uint8]]],
-                metadata: dict[str, str], chunk_size: int = 1 << 20) -> None:
+def _write_mcap(
+    f,
+    topics: list[tuple[str, str, NDArray[np.int64], NDArray[np.uint8]]],
+    metadata: dict[str, str],
+    chunk_size: int = 1 << 20,
+) -> None:
     """Write an indexed MCAP file (profile ros2, zstd chunks) with all records built in bulk.
 
     ``topics`` holds ``(topic, msgtype, t_ns, payloads)`` with ``payloads`` the (N, size) CDR
@@ -239,11 +257,21 @@ def _write_mcap(f, topics: list[tuple[str, str, NDArray[np.int64], NDArray[np.ui
     channels: list[Channel] = []
     for cid, (name, msgtype, _, _) in enumerate(topics, start=1):
         if msgtype not in schemas:
-            schemas[msgtype] = Schema(id=len(schemas) + 1, name=msgtype, encoding="ros2msg",
-                                      data=MSG_DEFINITIONS[msgtype].encode())
-        channels.append(Channel(id=cid, topic=name, message_encoding="cdr",
-                                schema_id=schemas[msgtype].id,
-                                metadata={"offered_qos_profiles": _QOS_YAML}))
+            schemas[msgtype] = Schema(
+                id=len(schemas) + 1,
+                name=msgtype,
+                encoding="ros2msg",
+                data=MSG_DEFINITIONS[msgtype].encode(),
+            )
+        channels.append(
+            Channel(
+                id=cid,
+                topic=name,
+                message_encoding="cdr",
+                schema_id=schemas[msgtype].id,
+                metadata={"offered_qos_profiles": _QOS_YAML},
+            )
+        )
 
     # All message records of the file, in (stamp, topic) order, as one byte array.
     stamps = np.concatenate([t[2] for t in topics])
@@ -267,7 +295,7 @@ def _write_mcap(f, topics: list[tuple[str, str, NDArray[np.int64], NDArray[np.ui
         rec[:, 31:] = payload
         flat = rec.tobytes()
         step = 31 + size
-        records.append([flat[k:k + step] for k in range(0, n * step, step)])
+        records.append([flat[k : k + step] for k in range(0, n * step, step)])
     body = b"".join([records[c][j] for c, j in zip(chan.tolist(), row.tolist())])
 
     # Chunk boundaries: close a chunk once its records reach chunk_size bytes.
@@ -291,13 +319,26 @@ def _write_mcap(f, topics: list[tuple[str, str, NDArray[np.int64], NDArray[np.ui
         raw = body[lo:hi]
         data = compressor.compress(raw)
         t0, t1 = int(stamps[a:b].min()), int(stamps[a:b].max())
-        Chunk(compression="zstd", data=data, message_start_time=t0, message_end_time=t1,
-              uncompressed_crc=zlib.crc32(raw), uncompressed_size=len(raw)).write(out)
+        Chunk(
+            compression="zstd",
+            data=data,
+            message_start_time=t0,
+            message_end_time=t1,
+            uncompressed_crc=zlib.crc32(raw),
+            uncompressed_size=len(raw),
+        ).write(out)
         chunk_bytes = out.end()
-        index = ChunkIndex(message_start_time=t0, message_end_time=t1, chunk_start_offset=pos,
-                           chunk_length=len(chunk_bytes), message_index_offsets={},
-                           message_index_length=0, compression="zstd",
-                           compressed_size=len(data), uncompressed_size=len(raw))
+        index = ChunkIndex(
+            message_start_time=t0,
+            message_end_time=t1,
+            chunk_start_offset=pos,
+            chunk_length=len(chunk_bytes),
+            message_index_offsets={},
+            message_index_length=0,
+            compression="zstd",
+            compressed_size=len(data),
+            uncompressed_size=len(raw),
+        )
         f.write(chunk_bytes)
         pos += len(chunk_bytes)
         idx_parts = []
@@ -333,17 +374,33 @@ def _write_mcap(f, topics: list[tuple[str, str, NDArray[np.int64], NDArray[np.ui
         start = summary.count
         for r in records:
             r.write(summary)
-        groups.append(SummaryOffset(group_opcode=opcode, group_start=summary_start + start,
-                                    group_length=summary.count - start))
+        groups.append(
+            SummaryOffset(
+                group_opcode=opcode,
+                group_start=summary_start + start,
+                group_length=summary.count - start,
+            )
+        )
 
     group(0x03, list(schemas.values()))
     group(0x04, channels)
     counts = {i + 1: int(t[2].size) for i, t in enumerate(topics)}
-    group(0x0B, [Statistics(message_count=int(stamps.size), schema_count=len(schemas),
-                            channel_count=len(channels), attachment_count=0, metadata_count=1,
-                            chunk_count=len(chunk_indexes),
-                            message_start_time=int(stamps[0]), message_end_time=int(stamps[-1]),
-                            channel_message_counts=counts)])
+    group(
+        0x0B,
+        [
+            Statistics(
+                message_count=int(stamps.size),
+                schema_count=len(schemas),
+                channel_count=len(channels),
+                attachment_count=0,
+                metadata_count=1,
+                chunk_count=len(chunk_indexes),
+                message_start_time=int(stamps[0]),
+                message_end_time=int(stamps[-1]),
+                channel_message_counts=counts,
+            )
+        ],
+    )
     group(0x08, chunk_indexes)
     group(0x0D, [meta_index])
     summary_offset_start = summary_start + summary.count
@@ -353,8 +410,9 @@ def _write_mcap(f, topics: list[tuple[str, str, NDArray[np.int64], NDArray[np.ui
     crc = zlib.crc32(summary_bytes)
     crc = zlib.crc32(struct.pack("<BQQQ", 0x02, 20, summary_start, summary_offset_start), crc)
     f.write(summary_bytes)
-    Footer(summary_start=summary_start, summary_offset_start=summary_offset_start,
-           summary_crc=crc).write(out)
+    Footer(
+        summary_start=summary_start, summary_offset_start=summary_offset_start, summary_crc=crc
+    ).write(out)
     f.write(out.end() + magic)
 
 
@@ -363,8 +421,14 @@ def _yaml_str(s: str) -> str:
     return json.dumps(s)
 
 
-def _metadata_yaml(mcap_name: str, topics: list[tuple[str, str, int]], start_ns: int,
-                   end_ns: int, total: int, custom_data: Mapping[str, str]) -> str:
+def _metadata_yaml(
+    mcap_name: str,
+    topics: list[tuple[str, str, int]],
+    start_ns: int,
+    end_ns: int,
+    total: int,
+    custom_data: Mapping[str, str],
+) -> str:
     """The rosbag2 ``metadata.yaml`` body (format version 9), unindented."""
     lines = ["compression_format: ''", "compression_mode: ''"]
     if custom_data:
@@ -373,14 +437,21 @@ def _metadata_yaml(mcap_name: str, topics: list[tuple[str, str, int]], start_ns:
     else:
         lines.append("custom_data: {}")
     lines += [
-        "duration:", f"  nanoseconds: {end_ns - start_ns}",
-        "files:", "- duration:", f"    nanoseconds: {end_ns - start_ns}",
-        f"  message_count: {total}", f"  path: {mcap_name}",
-        "  starting_time:", f"    nanoseconds_since_epoch: {start_ns}",
+        "duration:",
+        f"  nanoseconds: {end_ns - start_ns}",
+        "files:",
+        "- duration:",
+        f"    nanoseconds: {end_ns - start_ns}",
+        f"  message_count: {total}",
+        f"  path: {mcap_name}",
+        "  starting_time:",
+        f"    nanoseconds_since_epoch: {start_ns}",
         f"message_count: {total}",
-        "relative_file_paths:", f"- {mcap_name}",
+        "relative_file_paths:",
+        f"- {mcap_name}",
         "ros_distro: rosbags",
-        "starting_time:", f"  nanoseconds_since_epoch: {start_ns}",
+        "starting_time:",
+        f"  nanoseconds_since_epoch: {start_ns}",
         "storage_identifier: mcap",
         "topics_with_message_count:",
     ]
@@ -474,16 +545,18 @@ def write_bag(
         if imu_linear_acceleration is not None:
             accel = np.asarray(imu_linear_acceleration, dtype=float)
             if accel.shape != imu.values.shape or not np.all(np.isfinite(accel)):
-                raise InputError(f"Expected finite imu_linear_acceleration of shape "
-                                 f"{imu.values.shape}, got {accel.shape}")
+                raise InputError(
+                    f"Expected finite imu_linear_acceleration of shape "
+                    f"{imu.values.shape}, got {accel.shape}"
+                )
         cov = None
         if imu_angular_velocity_covariance is not None:
             cov = np.asarray(imu_angular_velocity_covariance, dtype=float)
             if cov.shape != (3, 3):
-                raise InputError(f"Expected imu_angular_velocity_covariance of shape (3, 3), "
-                                 f"got {cov.shape}")
-        topics.append((imu_topic, "sensor_msgs/msg/Imu", imu,
-                       _imu_doubles(imu.values, accel, cov)))
+                raise InputError(
+                    f"Expected imu_angular_velocity_covariance of shape (3, 3), got {cov.shape}"
+                )
+        topics.append((imu_topic, "sensor_msgs/msg/Imu", imu, _imu_doubles(imu.values, accel, cov)))
     for name, s in quaternions.items():
         _check_series(f"quaternions[{name!r}]", s, 4)
         topics.append((name, "geometry_msgs/msg/QuaternionStamped", s, s.values))
@@ -508,13 +581,17 @@ def write_bag(
     try:
         tmp.mkdir()
     except OSError as exc:
-        raise OutputError(f"Expected to create the output bag {str(out)!r}, got "
-                          f"{type(exc).__name__}: {exc.strerror}") from None
+        raise OutputError(
+            f"Expected to create the output bag {str(out)!r}, got "
+            f"{type(exc).__name__}: {exc.strerror}"
+        ) from None
     try:
         counts = [(t[0], t[1], int(t[2].t_ns.size)) for t in topics]
         meta_body = _metadata_yaml(mcap_name, counts, start_ns, end_ns, int(stamps.size), custom)
-        encoded = [(name, msgtype, s.file_t_ns, _cdr_messages(s.t_ns, s.frame_id, d))
-                   for name, msgtype, s, d in topics]
+        encoded = [
+            (name, msgtype, s.file_t_ns, _cdr_messages(s.t_ns, s.frame_id, d))
+            for name, msgtype, s, d in topics
+        ]
         with open(tmp / mcap_name, "wb") as f:
             _write_mcap(f, encoded, {"serialized_metadata": meta_body})
         indented = "".join("  " + ln + "\n" for ln in meta_body.splitlines())
@@ -529,8 +606,10 @@ def write_bag(
             os.rename(tmp, out)
     except OSError as exc:
         shutil.rmtree(tmp, ignore_errors=True)
-        raise OutputError(f"Expected to write the output bag {str(out)!r}, got "
-                          f"{type(exc).__name__}: {exc.strerror or exc}") from None
+        raise OutputError(
+            f"Expected to write the output bag {str(out)!r}, got "
+            f"{type(exc).__name__}: {exc.strerror or exc}"
+        ) from None
     except BaseException:
         shutil.rmtree(tmp, ignore_errors=True)
         raise

@@ -39,7 +39,8 @@ def _sample(n: int = 500, seed: int = 3):
 
 def _load_meta(folder: Path) -> dict:
     return YAML(typ="safe").load((folder / "metadata.yaml").read_text())[
-        "rosbag2_bagfile_information"]
+        "rosbag2_bagfile_information"
+    ]
 
 
 def _write(tmp_path: Path, **kw) -> Path:
@@ -49,7 +50,7 @@ def _write(tmp_path: Path, **kw) -> Path:
         imu=StampedSeries(t_ns, w, "imu"),
         quaternions={"/ground_truth/orientation": StampedSeries(t_ns, q, "world")},
         vectors={"/ground_truth/angular_velocity": StampedSeries(t_ns[::2], v[::2], "imu")},
-        custom_data={"data_synth.scene": "heavy-top", "data_synth.note": "it's \"quoted\""},
+        custom_data={"data_synth.scene": "heavy-top", "data_synth.note": 'it\'s "quoted"'},
         **kw,
     )
 
@@ -64,23 +65,29 @@ def test_round_trip_mcap_ros2_bit_identical(tmp_path):
         assert reader.get_header().profile == "ros2"
         summary = reader.get_summary()
         assert {s.name: s.encoding for s in summary.schemas.values()} == {
-            k: "ros2msg" for k in MSG_DEFINITIONS}
+            k: "ros2msg" for k in MSG_DEFINITIONS
+        }
         for schema, channel, message, decoded in reader.iter_decoded_messages():
             assert channel.message_encoding == "cdr"
             stamp = decoded.header.stamp.sec * 1_000_000_000 + decoded.header.stamp.nanosec
-            # log time = publish time = header stamp (DESIGN.md §7, like the BROAD bags)
+            # log time = publish time = header stamp (like the BROAD bags)
             assert message.log_time == message.publish_time == stamp
             got.setdefault(channel.topic, []).append((stamp, decoded))
     imu = got["/imu/data"]
     assert np.array_equal([s for s, _ in imu], t_ns)
-    rates = np.array([[m.angular_velocity.x, m.angular_velocity.y, m.angular_velocity.z]
-                      for _, m in imu])
+    rates = np.array(
+        [[m.angular_velocity.x, m.angular_velocity.y, m.angular_velocity.z] for _, m in imu]
+    )
     assert np.array_equal(rates, w)  # bit-identical, not approximately equal
     m0 = imu[0][1]
     assert m0.header.frame_id == "imu"
     assert m0.orientation_covariance[0] == -1.0 and m0.linear_acceleration_covariance[0] == -1.0
-    quats = np.array([[m.quaternion.x, m.quaternion.y, m.quaternion.z, m.quaternion.w]
-                      for _, m in got["/ground_truth/orientation"]])
+    quats = np.array(
+        [
+            [m.quaternion.x, m.quaternion.y, m.quaternion.z, m.quaternion.w]
+            for _, m in got["/ground_truth/orientation"]
+        ]
+    )
     assert np.array_equal(quats, q)
     assert got["/ground_truth/orientation"][0][1].header.frame_id == "world"
     vec = got["/ground_truth/angular_velocity"]
@@ -99,8 +106,11 @@ def test_multi_chunk_file_indexes_and_crcs(tmp_path):
     t_ns = EPOCH_NS + np.arange(n, dtype=np.int64) * 1_000_000
     rng = np.random.default_rng(9)
     w, v = rng.normal(size=(n, 3)), rng.normal(size=(n // 3, 3))
-    out = write_bag(tmp_path / "big", imu=StampedSeries(t_ns, w, "imu"),
-                    vectors={"/v": StampedSeries(t_ns[::3], v, "imu")})
+    out = write_bag(
+        tmp_path / "big",
+        imu=StampedSeries(t_ns, w, "imu"),
+        vectors={"/v": StampedSeries(t_ns[::3], v, "imu")},
+    )
     mcap_file = out / "big.mcap"
     with open(mcap_file, "rb") as f:
         reader = make_reader(f, validate_crcs=True)
@@ -113,8 +123,9 @@ def test_multi_chunk_file_indexes_and_crcs(tmp_path):
 
     data = mcap_file.read_bytes()
     with open(mcap_file, "rb") as f:
-        records = list(StreamReader(f, skip_magic=False, emit_chunks=True,
-                                    validate_crcs=True).records)
+        records = list(
+            StreamReader(f, skip_magic=False, emit_chunks=True, validate_crcs=True).records
+        )
     chunks = [r for r in records if isinstance(r, Chunk)]
     assert len(chunks) == len(summary.chunk_indexes)
     checked = 0
@@ -122,12 +133,13 @@ def test_multi_chunk_file_indexes_and_crcs(tmp_path):
     for r in records:
         if isinstance(r, Chunk):
             current = zstandard.ZstdDecompressor().decompress(
-                r.data, max_output_size=r.uncompressed_size)
+                r.data, max_output_size=r.uncompressed_size
+            )
         elif isinstance(r, MessageIndex):
             for log_time, offset in r.records:
                 assert current[offset] == 0x05  # a Message record starts there
-                assert int.from_bytes(current[offset + 9:offset + 11], "little") == r.channel_id
-                assert int.from_bytes(current[offset + 15:offset + 23], "little") == log_time
+                assert int.from_bytes(current[offset + 9 : offset + 11], "little") == r.channel_id
+                assert int.from_bytes(current[offset + 15 : offset + 23], "little") == log_time
                 checked += 1
     assert checked == n + n // 3
     for ci in summary.chunk_indexes:
@@ -135,9 +147,16 @@ def test_multi_chunk_file_indexes_and_crcs(tmp_path):
         for offset in ci.message_index_offsets.values():
             assert data[offset] == 0x07
     with AnyReader([out], default_typestore=TYPESTORE) as reader:
-        rates = np.array([[m.angular_velocity.x, m.angular_velocity.y, m.angular_velocity.z]
-                          for m in (reader.deserialize(raw, c.msgtype)
-                                    for c, _, raw in reader.messages() if c.topic == "/imu/data")])
+        rates = np.array(
+            [
+                [m.angular_velocity.x, m.angular_velocity.y, m.angular_velocity.z]
+                for m in (
+                    reader.deserialize(raw, c.msgtype)
+                    for c, _, raw in reader.messages()
+                    if c.topic == "/imu/data"
+                )
+            ]
+        )
     assert np.array_equal(rates, w)
 
 
@@ -147,9 +166,11 @@ def test_round_trip_rosbags_bit_identical(tmp_path):
     rates, quats, stamps = [], [], []
     with AnyReader([out], default_typestore=TYPESTORE) as reader:
         types = {c.topic: c.msgtype for c in reader.connections}
-        assert types == {"/imu/data": "sensor_msgs/msg/Imu",
-                         "/ground_truth/orientation": "geometry_msgs/msg/QuaternionStamped",
-                         "/ground_truth/angular_velocity": "geometry_msgs/msg/Vector3Stamped"}
+        assert types == {
+            "/imu/data": "sensor_msgs/msg/Imu",
+            "/ground_truth/orientation": "geometry_msgs/msg/QuaternionStamped",
+            "/ground_truth/angular_velocity": "geometry_msgs/msg/Vector3Stamped",
+        }
         log_times = []
         for con, t, raw in reader.messages():
             log_times.append(t)
@@ -178,8 +199,10 @@ def test_metadata_yaml_matches_rosbag2_v9(tmp_path):
     assert meta["message_count"] == 500 + 500 + 250
     assert meta["starting_time"]["nanoseconds_since_epoch"] == int(t_ns[0])
     assert meta["duration"]["nanoseconds"] == int(t_ns[-1] - t_ns[0])
-    assert meta["custom_data"] == {"data_synth.scene": "heavy-top",
-                                   "data_synth.note": "it's \"quoted\""}
+    assert meta["custom_data"] == {
+        "data_synth.scene": "heavy-top",
+        "data_synth.note": 'it\'s "quoted"',
+    }
     topics = {t["topic_metadata"]["name"]: t for t in meta["topics_with_message_count"]}
     assert topics["/imu/data"]["message_count"] == 500
     assert topics["/ground_truth/angular_velocity"]["message_count"] == 250
@@ -194,10 +217,13 @@ def test_metadata_has_the_keys_of_the_broad_bags(tmp_path, broad_dir):
     ours = _load_meta(_write(tmp_path))
     assert set(ours) == set(ref)
     assert set(ours["topics_with_message_count"][0]["topic_metadata"]) == set(
-        ref["topics_with_message_count"][0]["topic_metadata"])
+        ref["topics_with_message_count"][0]["topic_metadata"]
+    )
     assert ours["files"][0].keys() == ref["files"][0].keys()
-    assert (ours["topics_with_message_count"][0]["topic_metadata"]["offered_qos_profiles"]
-            == ref["topics_with_message_count"][0]["topic_metadata"]["offered_qos_profiles"])
+    assert (
+        ours["topics_with_message_count"][0]["topic_metadata"]["offered_qos_profiles"]
+        == ref["topics_with_message_count"][0]["topic_metadata"]["offered_qos_profiles"]
+    )
 
 
 def test_definitions_and_hashes_agree_with_rosbags_typestore():
@@ -210,12 +236,17 @@ def test_definitions_and_hashes_agree_with_rosbags_typestore():
 def test_acceleration_and_gyro_covariance(tmp_path):
     t_ns, w, _, v = _sample(20)
     cov = np.diag([1e-6, 2e-6, 3e-6])
-    out = write_bag(tmp_path / "acc", imu=StampedSeries(t_ns, w, "imu"),
-                    imu_linear_acceleration=v, imu_angular_velocity_covariance=cov)
+    out = write_bag(
+        tmp_path / "acc",
+        imu=StampedSeries(t_ns, w, "imu"),
+        imu_linear_acceleration=v,
+        imu_angular_velocity_covariance=cov,
+    )
     with AnyReader([out], default_typestore=TYPESTORE) as reader:
         msgs = [reader.deserialize(raw, c.msgtype) for c, _, raw in reader.messages()]
-    acc = np.array([[m.linear_acceleration.x, m.linear_acceleration.y, m.linear_acceleration.z]
-                    for m in msgs])
+    acc = np.array(
+        [[m.linear_acceleration.x, m.linear_acceleration.y, m.linear_acceleration.z] for m in msgs]
+    )
     assert np.array_equal(acc, v)
     assert msgs[0].linear_acceleration_covariance[0] == 0.0  # measured: not flagged
     assert np.array_equal(msgs[3].angular_velocity_covariance, cov.ravel())
@@ -259,12 +290,21 @@ def test_same_input_same_bytes(tmp_path):
         ({}, "at least one"),
         ({"imu": StampedSeries(np.array([0, 1]), np.zeros((2, 4)), "imu")}, r"\(N, 3\)"),
         ({"imu": StampedSeries(np.array([-5, 1]), np.zeros((2, 3)), "imu")}, r"t_ns\[0\] = -5"),
-        ({"quaternions": {"/q": StampedSeries(np.array([1, 2]),
-                                              np.array([[0, 0, 0, 1], [np.nan, 0, 0, 1.0]]),
-                                              "w")}}, "row 1"),
+        (
+            {
+                "quaternions": {
+                    "/q": StampedSeries(
+                        np.array([1, 2]), np.array([[0, 0, 0, 1], [np.nan, 0, 0, 1.0]]), "w"
+                    )
+                }
+            },
+            "row 1",
+        ),
         ({"vectors": {"v": StampedSeries(np.array([1]), np.zeros((1, 3)), "w")}}, "'/'"),
-        ({"imu": StampedSeries(np.array([1]), np.zeros((1, 3)), "imu"),
-          "custom_data": {"k": 3}}, "custom_data"),
+        (
+            {"imu": StampedSeries(np.array([1]), np.zeros((1, 3)), "imu"), "custom_data": {"k": 3}},
+            "custom_data",
+        ),
     ],
 )
 def test_bad_input_raises_input_error(tmp_path, kwargs, match):
@@ -280,31 +320,38 @@ def test_series_rejects_float_stamps_and_nul_frames():
         StampedSeries(np.array([1]), np.zeros((1, 3)), "im\0u")
 
 
-@settings(max_examples=25, deadline=None,
-          suppress_health_check=[HealthCheck.function_scoped_fixture])
-@given(frame=st.text(st.characters(blacklist_characters="\0"), min_size=0, max_size=12),
-       rows=st.lists(st.tuples(*[st.floats(allow_nan=False, allow_infinity=False)] * 4),
-                     min_size=1, max_size=6),
-       t0=st.integers(min_value=0, max_value=2**31 * 10**9 - 10**6))
+@settings(
+    max_examples=25, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture]
+)
+@given(
+    frame=st.text(st.characters(blacklist_characters="\0"), min_size=0, max_size=12),
+    rows=st.lists(
+        st.tuples(*[st.floats(allow_nan=False, allow_infinity=False)] * 4), min_size=1, max_size=6
+    ),
+    t0=st.integers(min_value=0, max_value=2**31 * 10**9 - 10**6),
+)
 def test_any_frame_id_and_values_round_trip(tmp_path_factory, frame, rows, t0):
     """Frame ids of every length shift the CDR alignment padding; any finite float (±0,
     subnormals, ±1e308) and any stamp in range must come back bit-identical."""
     vals = np.array(rows, dtype=float)
     t_ns = t0 + np.arange(len(rows), dtype=np.int64)
-    out = write_bag(tmp_path_factory.mktemp("h") / "bag",
-                    imu=StampedSeries(t_ns, vals[:, :3], frame),
-                    quaternions={"/q": StampedSeries(t_ns, vals, frame)})
+    out = write_bag(
+        tmp_path_factory.mktemp("h") / "bag",
+        imu=StampedSeries(t_ns, vals[:, :3], frame),
+        quaternions={"/q": StampedSeries(t_ns, vals, frame)},
+    )
     seen = {"/imu/data": [], "/q": []}
     with open(out / "bag.mcap", "rb") as f:
-        for _, ch, _, m in make_reader(f, decoder_factories=[DecoderFactory()]) \
-                .iter_decoded_messages():
+        for _, ch, _, m in make_reader(
+            f, decoder_factories=[DecoderFactory()]
+        ).iter_decoded_messages():
             assert m.header.frame_id == frame
             assert m.header.stamp.sec * 10**9 + m.header.stamp.nanosec in t_ns
             if ch.topic == "/imu/data":
-                seen["/imu/data"].append([m.angular_velocity.x, m.angular_velocity.y,
-                                          m.angular_velocity.z])
+                seen["/imu/data"].append(
+                    [m.angular_velocity.x, m.angular_velocity.y, m.angular_velocity.z]
+                )
             else:
-                seen["/q"].append([m.quaternion.x, m.quaternion.y, m.quaternion.z,
-                                   m.quaternion.w])
+                seen["/q"].append([m.quaternion.x, m.quaternion.y, m.quaternion.z, m.quaternion.w])
     assert np.array_equal(np.array(seen["/imu/data"]).view(np.int64), vals[:, :3].view(np.int64))
     assert np.array_equal(np.array(seen["/q"]).view(np.int64), vals.view(np.int64))

@@ -71,8 +71,11 @@ def test_clean_imu_drops_nonfinite_and_backward_stamps_with_counts():
 
 def test_clean_imu_warns_gaps_with_their_times():
     t = T0_NS + np.concatenate([np.arange(100), np.arange(150, 200)]).astype(np.int64) * 10**7
-    with pytest.warns(GapWarning, match=r"1 gaps over 5x the median step \(10.000 ms\) at "
-                                        r"0.990 s \(\+0.510 s\)"):  # fmt: skip
+    with pytest.warns(
+        GapWarning,
+        match=r"1 gaps over 5x the median step \(10.000 ms\) at "
+        r"0.990 s \(\+0.510 s\)",
+    ):
         c = clean_imu(t, np.zeros((150, 3)))
     assert c.gaps == ((pytest.approx(0.99), pytest.approx(0.51)),)
 
@@ -153,18 +156,33 @@ def test_bias_auto_removes_bias_found_at_rest_before_truth(tmp_path):
 
 
 def test_data_synth_heavy_top_log_matches_truth(tmp_path):
-    # The heavy top of DESIGN §5 at 2000 Hz, exact rate samples, through a data_synth log.
+    # The heavy symmetric top (data_synth) at 2000 Hz, exact rate samples, through a log.
     from data_synth.cli import main as synth_main
 
     out = tmp_path / "top"
-    assert synth_main(["heavy-top", "--motion", "cusp", "--rate", "2000", "--duration", "1.2",
-                       "--out", str(out)]) == 0  # fmt: skip
+    assert (
+        synth_main(
+            [
+                "heavy-top",
+                "--motion",
+                "cusp",
+                "--rate",
+                "2000",
+                "--duration",
+                "1.2",
+                "--out",
+                str(out),
+            ]
+        )
+        == 0
+    )
     good = replay(out, bias="none", method="magnus4")
-    # DESIGN §9: magnus4 is 5.9e-5° off after 1.2 s; stamps rounded to ns add < 1e-6°
+    # magnus4 (fourth order) is about 6e-5° off after 1.2 s on this top (the README's accuracy
+    # table); stamps rounded to ns add < 1e-6°
     assert good.summary.max_error_deg < 1e-3
     assert good.summary.samples == 2401 and good.summary.truth_samples_used == 2401
     first = replay(out, bias="none", method="end")
-    # DESIGN §5: the first-order rule with ω(t_{i+1}) is ~3° off in full attitude
+    # the first-order rule with ω(t_{i+1}) is a few degrees off in full attitude on this top
     assert 1.0 < first.summary.max_error_deg < 6.0
     auto = replay(out)  # the top spins at 20 Hz: no rest, no bias removed
     assert auto.bias.segments == () and auto.summary.max_error_deg < 1e-3
@@ -173,8 +191,11 @@ def test_data_synth_heavy_top_log_matches_truth(tmp_path):
 def test_rates_in_deg_per_s_are_detected_and_converted(tmp_path):
     t, omega, q_true = _rest_move_rest(bias=(0, 0, 0), sigma=1e-4)
     log = _write_log(tmp_path / "d", t, np.degrees(omega), q_true)
-    with pytest.warns(ImuDcmWarning, match=r"look like deg/s: the gyro rate is 5\d\.\dx the "
-                                           r"truth's rotation rate"):  # fmt: skip
+    with pytest.warns(
+        ImuDcmWarning,
+        match=r"look like deg/s: the gyro rate is 5\d\.\dx the "
+        r"truth's rotation rate",
+    ):
         bad = replay(log, bias="none")
     assert bad.summary.max_error_deg > 30.0
     good = replay(log, bias="none", gyro_units="deg/s")
@@ -201,8 +222,9 @@ def test_without_truth_starts_from_init_quat(tmp_path):
     assert np.max(ang) < 1e-12  # constant axis: every method is exact up to round-off
     assert r.summary.truth_topic is None and r.summary.rms_error_deg is None
     # the body x-axis (first column of R_w_b) starts along world y
-    np.testing.assert_allclose(Rotation.from_quat(r.q_est[0]).as_matrix()[:, 0], [0, 1, 0],
-                               atol=1e-15)  # fmt: skip
+    np.testing.assert_allclose(
+        Rotation.from_quat(r.q_est[0]).as_matrix()[:, 0], [0, 1, 0], atol=1e-15
+    )
     ident = replay(log, bias="none")
     np.testing.assert_array_equal(ident.q_est[0], [0, 0, 0, 1])
 
@@ -216,8 +238,11 @@ def test_truth_that_never_overlaps_is_an_error(tmp_path):
         imu=StampedSeries(t_ns, np.zeros((len(t), 3)), "imu"),
         quaternions={"/truth": StampedSeries(t_ns + 5 * 10**9, q, "world")},
     )
-    with pytest.raises(LogError, match=r"Expected the truth /truth to overlap the gyro "
-                                       r"\(0..0.990 s\), got 5.000..5.990 s"):  # fmt: skip
+    with pytest.raises(
+        LogError,
+        match=r"Expected the truth /truth to overlap the gyro "
+        r"\(0..0.990 s\), got 5.000..5.990 s",
+    ):
         replay(log)
 
 

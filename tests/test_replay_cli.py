@@ -25,7 +25,7 @@ from imu_dcm.replay.__main__ import main
 REPO = Path(__file__).resolve().parents[1]
 SHIPPED = REPO / "replay" / "broad_07_undisturbed_fast_rotation_B"
 T0_NS = 1_700_000_000_000_000_000
-SUMMARY_KEYS = {
+SUMMARY_KEYS = {  # issue 4's list
     "samples",
     "duration_s",
     "imu_topic",
@@ -35,20 +35,30 @@ SUMMARY_KEYS = {
     "rms_error_deg",
     "max_error_deg",
     "elapsed_s",
-}  # fmt: skip (issue 4's list)
+}
 
 
 @pytest.fixture(scope="module")
 def coning_log(tmp_path_factory) -> Path:
-    """Coning at 400 Hz for 2 s (DESIGN §5 closed form) with truth at every sample."""
+    """Coning at 400 Hz for 2 s with truth at every sample.
+
+    Closed form: q(t) = exp(Ωt ẑ) exp(β x̂) exp(-Ωt ẑ), body rate in closed form too.
+    """
     t = np.arange(0, 2.0, 1 / 400)
     beta, big_omega = np.radians(10.0), 2 * np.pi * 2.0
-    q = (Rotation.from_rotvec(np.outer(big_omega * t, [0, 0, 1]))
-         * Rotation.from_rotvec([beta, 0, 0])
-         * Rotation.from_rotvec(np.outer(-big_omega * t, [0, 0, 1]))).as_quat()  # fmt: skip
-    w = big_omega * np.c_[-np.sin(beta) * np.sin(big_omega * t),
-                          np.sin(beta) * np.cos(big_omega * t),
-                          np.full_like(t, np.cos(beta) - 1)]  # fmt: skip
+    q = (
+        Rotation.from_rotvec(np.outer(big_omega * t, [0, 0, 1]))
+        * Rotation.from_rotvec([beta, 0, 0])
+        * Rotation.from_rotvec(np.outer(-big_omega * t, [0, 0, 1]))
+    ).as_quat()
+    w = (
+        big_omega
+        * np.c_[
+            -np.sin(beta) * np.sin(big_omega * t),
+            np.sin(beta) * np.cos(big_omega * t),
+            np.full_like(t, np.cos(beta) - 1),
+        ]
+    )
     t_ns = T0_NS + np.round(t * 1e9).astype(np.int64)
     out = tmp_path_factory.mktemp("cli") / "coning"
     return write_bag(
@@ -76,8 +86,19 @@ def test_replay_writes_summary_json_and_estimate_bag(coning_log, tmp_path, capsy
     js = tmp_path / "s.json"
     out = tmp_path / "est"
     before = sorted((p.name, p.stat().st_size, p.stat().st_mtime_ns) for p in coning_log.iterdir())
-    code = main([str(coning_log), "--rerun", "off", "--bias", "none", "--summary-json", str(js),
-                 "--out", str(out)])  # fmt: skip
+    code = main(
+        [
+            str(coning_log),
+            "--rerun",
+            "off",
+            "--bias",
+            "none",
+            "--summary-json",
+            str(js),
+            "--out",
+            str(out),
+        ]
+    )
     text, err = capsys.readouterr()
     assert code == 0, err
     s = json.loads(js.read_text())
@@ -102,8 +123,7 @@ def test_replay_writes_summary_json_and_estimate_bag(coning_log, tmp_path, capsy
     assert before == after  # the input is never modified
     # an existing --out is not overwritten without --force
     _assert_one_line_error(capsys, [str(coning_log), "--rerun", "off", "--out", str(out)], "")
-    assert main([str(coning_log), "--rerun", "off", "--out", str(out), "--force",
-                 "--quiet"]) == 0  # fmt: skip
+    assert main([str(coning_log), "--rerun", "off", "--out", str(out), "--force", "--quiet"]) == 0
 
 
 def test_rerun_save_hand_off(coning_log, tmp_path, capsys):
@@ -122,10 +142,14 @@ def test_bad_inputs_one_line_exit_2(tmp_path, capsys):
     (tmp_path / "e.mcap").write_bytes(b"")
     _assert_one_line_error(capsys, [str(tmp_path / "e.mcap"), "--rerun", "off"], "empty file")
     t_ns = T0_NS + np.arange(5, dtype=np.int64) * 10**7
-    only_vec = write_bag(tmp_path / "vec", vectors={"/wind": StampedSeries(t_ns, np.zeros((5, 3)),
-                                                                            "world")})  # fmt: skip
-    _assert_one_line_error(capsys, [str(only_vec), "--rerun", "off"],
-                           "got /wind (geometry_msgs/msg/Vector3Stamped, cdr, 5)")  # fmt: skip
+    only_vec = write_bag(
+        tmp_path / "vec", vectors={"/wind": StampedSeries(t_ns, np.zeros((5, 3)), "world")}
+    )
+    _assert_one_line_error(
+        capsys,
+        [str(only_vec), "--rerun", "off"],
+        "got /wind (geometry_msgs/msg/Vector3Stamped, cdr, 5)",
+    )
     with open(tmp_path / "pb.mcap", "wb") as f:
         w = McapWriter(f)
         w.start("", "test")
@@ -144,8 +168,9 @@ def test_bad_inputs_one_line_exit_2(tmp_path, capsys):
         },
     )
     _assert_one_line_error(capsys, [str(late), "--rerun", "off"], "to overlap the gyro")
-    _assert_one_line_error(capsys, [str(late), "--rerun", "off", "--init-quat", "1,2"],
-                           "init quaternion")  # fmt: skip
+    _assert_one_line_error(
+        capsys, [str(late), "--rerun", "off", "--init-quat", "1,2"], "init quaternion"
+    )
     _assert_one_line_error(capsys, [str(late), "--rerun", "bogus"], "--rerun")
     _assert_one_line_error(capsys, [str(late), "--rerun", "off", "--imu-topic", "/x"], "'/x'")
 
@@ -172,8 +197,16 @@ def test_convert_csv_wxyz_deg_ms_round_trip(tmp_path, capsys):
     # 90°/s about body z for 2 s from identity; truth written scalar-first (wxyz) in the CSV.
     t = np.arange(0, 2.0, 0.005)
     half = np.radians(90.0) * t / 2
-    rows = np.c_[t * 1e3, np.zeros_like(t), np.zeros_like(t), np.full_like(t, 90.0),
-                 np.cos(half), np.zeros_like(t), np.zeros_like(t), np.sin(half)]  # fmt: skip
+    rows = np.c_[
+        t * 1e3,
+        np.zeros_like(t),
+        np.zeros_like(t),
+        np.full_like(t, 90.0),
+        np.cos(half),
+        np.zeros_like(t),
+        np.zeros_like(t),
+        np.sin(half),
+    ]
     csv = tmp_path / "log.csv"
     np.savetxt(csv, rows, delimiter=",", header="t_ms,gx,gy,gz,qw,qx,qy,qz", comments="")
     bag = tmp_path / "bag"
@@ -200,19 +233,46 @@ def test_convert_csv_wxyz_deg_ms_round_trip(tmp_path, capsys):
     # constant axis: exact up to round-off; a wrong quaternion order would be ~180° off
     assert s["max_error_deg"] < 1e-6 and s["samples"] == 400
     assert s["duration_s"] == pytest.approx(1.995)
-    _assert_one_line_error(capsys, ["convert-csv", str(csv), str(tmp_path / "b2"), "--time-col",
-                                    "time", "--time-unit", "s", "--gyro-cols", "gx,gy,gz",
-                                    "--gyro-units", "rad/s"], "'time'")  # fmt: skip
+    _assert_one_line_error(
+        capsys,
+        [
+            "convert-csv",
+            str(csv),
+            str(tmp_path / "b2"),
+            "--time-col",
+            "time",
+            "--time-unit",
+            "s",
+            "--gyro-cols",
+            "gx,gy,gz",
+            "--gyro-units",
+            "rad/s",
+        ],
+        "'time'",
+    )
 
 
 def test_subprocess_replays_shipped_trial(tmp_path):
     js = tmp_path / "s.json"
     env = dict(os.environ, PYTHONWARNINGS="error")
     proc = subprocess.run(
-        [sys.executable, "-m", "imu_dcm.replay", str(SHIPPED), "--rerun", "off",
-         "--summary-json", str(js)],
-        check=False, capture_output=True, text=True, cwd=tmp_path, env=env, timeout=300,
-    )  # fmt: skip
+        [
+            sys.executable,
+            "-m",
+            "imu_dcm.replay",
+            str(SHIPPED),
+            "--rerun",
+            "off",
+            "--summary-json",
+            str(js),
+        ],
+        check=False,
+        capture_output=True,
+        text=True,
+        cwd=tmp_path,
+        env=env,
+        timeout=300,
+    )
     assert proc.returncode == 0, proc.stderr
     assert proc.stderr == ""  # no warnings, and no progress bar when stderr is not a terminal
     s = json.loads(js.read_text())
@@ -248,9 +308,24 @@ def test_progress_bar_only_on_a_terminal():
 
 def test_prefilter_writes_filtered_rate_to_out_bag(coning_log, tmp_path, capsys):
     out = tmp_path / "pf"
-    code = main([str(coning_log), "--rerun", "off", "--bias", "none", "--prefilter", "kalman",
-                 "--gyro-noise-density", "1e-4", "--angular-accel", "50", "--out", str(out),
-                 "--quiet"])  # fmt: skip
+    code = main(
+        [
+            str(coning_log),
+            "--rerun",
+            "off",
+            "--bias",
+            "none",
+            "--prefilter",
+            "kalman",
+            "--gyro-noise-density",
+            "1e-4",
+            "--angular-accel",
+            "50",
+            "--out",
+            str(out),
+            "--quiet",
+        ]
+    )
     assert code == 0, capsys.readouterr().err
     counts: dict[str, int] = {}
     with open(resolve_mcap_path(out), "rb") as f:
@@ -259,8 +334,11 @@ def test_prefilter_writes_filtered_rate_to_out_bag(coning_log, tmp_path, capsys)
         ).iter_decoded_messages():
             counts[ch.topic] = counts.get(ch.topic, 0) + 1
     assert counts == {"/estimate/orientation": 800, "/estimate/angular_velocity": 800}
-    _assert_one_line_error(capsys, [str(coning_log), "--rerun", "off", "--angular-accel", "5"],
-                           "--prefilter kalman or rts")  # fmt: skip
+    _assert_one_line_error(
+        capsys,
+        [str(coning_log), "--rerun", "off", "--angular-accel", "5"],
+        "--prefilter kalman or rts",
+    )
 
 
 def test_bad_option_is_one_line_without_usage_dump(coning_log, capsys):

@@ -303,3 +303,23 @@ def test_header_stamps_that_do_not_increase_use_log_time(trial, tmp_path):
     assert r.summary.time == "log"
     assert sum("header stamps fall at 75 % of the steps" in x for x in said) == 1
     assert abs(r.summary.rms_error_deg - ref.summary.rms_error_deg) < 1e-6
+
+
+def test_lagged_correlation_equals_numpy_corrcoef_per_lag():
+    from imu_dcm.replay.truth import lagged_correlation
+
+    rng = np.random.default_rng(5)
+    n, lags = 500, 40
+    g = np.cumsum(rng.normal(size=n))
+    h = np.roll(g, 7) + rng.normal(0, 0.5, n)  # h[i] ≈ g[i - 7]: the best lag is k = -7
+    valid = rng.random(n) > 0.1
+    corr, count = lagged_correlation(g, h, valid, lags)
+    for k in range(-lags, lags + 1):
+        m = valid[max(-k, 0) : n - max(k, 0)]
+        a = g[max(k, 0) : n + min(k, 0)][m]
+        b = h[max(-k, 0) : n - max(k, 0)][m]
+        assert count[k + lags] == len(a)
+        # FFT sums of n products: round-off grows with n (n·eps·C, C for the data's range)
+        tol = n * np.finfo(float).eps * 1e3
+        assert abs(corr[k + lags] - np.corrcoef(a, b)[0, 1]) < tol, k
+    assert int(np.argmax(corr)) - lags == -7

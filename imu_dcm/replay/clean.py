@@ -60,7 +60,7 @@ class CleanedImu:
     ``t_ns`` int64 (N,) strictly increasing; ``omega_b`` float64 (N, 3) finite, rad/s;
     ``index`` int64 (N,) position of each kept sample in the input; gaps as (time s since the
     first kept sample, length s); ``implausible_t_s`` the times of the implausible samples (s
-    since the first kept sample).
+    since the first kept sample); ``messages`` the warnings it raised, one line each.
     """
 
     t_ns: NDArray[np.int64]
@@ -74,6 +74,7 @@ class CleanedImu:
     sorted_out_of_order: int
     gaps: tuple[tuple[float, float], ...]
     implausible_t_s: tuple[float, ...]
+    messages: tuple[str, ...] = ()
 
     @property
     def dropped_nonincreasing(self) -> int:
@@ -213,8 +214,11 @@ def clean_imu(t_ns: ArrayLike, omega_b: ArrayLike, topic: str = "IMU") -> Cleane
     bad = np.sort(np.concatenate(bad_t))
     t0 = int(t[0]) if len(t) else (int(bad[0]) if len(bad) else 0)
 
+    messages: list[str] = []
+
     def warn(msg: str, cat: type[Warning] = ImuDcmWarning) -> None:
-        warnings.warn(f"{topic}: {msg}", cat, stacklevel=3)
+        messages.append(f"{topic}: {msg}")
+        warnings.warn(messages[-1], cat, stacklevel=3)
 
     if n_bad:
         warn(f"dropped {n_bad} samples with NaN/Inf rates")
@@ -244,8 +248,9 @@ def clean_imu(t_ns: ArrayLike, omega_b: ArrayLike, topic: str = "IMU") -> Cleane
         dt = np.diff(t)
         listed = ", ".join(f"{a:.3f} s (+{d:.3f} s)" for a, d in gaps[:5])
         more = f" and {len(gaps) - 5} more" if len(gaps) > 5 else ""
+        step_ms = np.median(dt) * 1e-6
         warn(
-            f"{len(gaps)} gaps over {GAP_FACTOR:g}x the median step ({np.median(dt) * 1e-9 * 1e3:.3f} ms) "
+            f"{len(gaps)} gaps over {GAP_FACTOR:g}x the median step ({step_ms:.3f} ms) "
             f"at {listed}{more}",
             GapWarning,
         )
@@ -261,6 +266,7 @@ def clean_imu(t_ns: ArrayLike, omega_b: ArrayLike, topic: str = "IMU") -> Cleane
         n_sorted,
         gaps,
         tuple(float((x - t0) * 1e-9) for x in bad),
+        tuple(messages),
     )
 
 

@@ -32,7 +32,7 @@ from imu_dcm.replay.bias import RestConfig, estimate_bias
 from imu_dcm.replay.clean import CleanedImu, _deg_evidence, clean_imu
 from imu_dcm.replay.options import check_options
 from imu_dcm.replay.summary import ReplayResult, ReplaySummary
-from imu_dcm.replay.truth import TruthCheck, check_truth, choose_time, slerp_truth
+from imu_dcm.replay.truth import align_truth, choose_time, slerp_truth
 
 __all__ = ["CleanedImu", "ReplayResult", "ReplaySummary", "clean_imu", "replay", "slerp_truth"]
 
@@ -107,38 +107,28 @@ def replay(
     bias, q_init, offset = check_options(
         path, time, method, bias, gyro_units, init_q_w_b, prefilter, truth_offset_s
     )
-    caught: list[warnings.WarningMessage] = []
-    try:
-        with warnings.catch_warnings(record=True) as caught:
-            warnings.simplefilter("always")
-            result = _replay(
-                path,
-                imu_topic,
-                truth_topic,
-                truth_frame,
-                time,
-                method,
-                bias,
-                gyro_units or "rad/s",
-                q_init,
-                prefilter,
-                prefilter_config,
-                offset,
-                rest_config,
-                progress or (lambda stage, frac: None),
-            )
-    finally:
-        for w in caught:  # passed on to the caller's filters, once each
-            warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
-    lines = tuple(str(w.message).splitlines()[0] for w in caught)
+    notes: list[str] = []  # this replay's warnings, for the summary (no global state)
+    result = _replay(
+        path,
+        imu_topic,
+        truth_topic,
+        truth_frame,
+        time,
+        method,
+        bias,
+        gyro_units or "rad/s",
+        q_init,
+        prefilter,
+        prefilter_config,
+        offset,
+        rest_config,
+        progress or (lambda stage, frac: None),
+        notes,
+    )
     summary = dataclasses.replace(
-        result.summary, warnings=lines, elapsed_s=_time.perf_counter() - t0
+        result.summary, warnings=tuple(notes), elapsed_s=_time.perf_counter() - t0
     )
     return dataclasses.replace(result, summary=summary)
-
-
-def _spans_overlap(a: NDArray[np.int64], b: NDArray[np.int64]) -> bool:
-    return bool(len(a) and len(b) and a.min() <= b.max() and b.min() <= a.max())
 
 
 def _record(obj) -> dict:
@@ -148,7 +138,8 @@ def _record(obj) -> dict:
     return dict(vars(obj))
 
 
-def _warn(msg: str) -> None:
+def _warn(notes: list[str], msg: str) -> None:
+    notes.append(msg)
     warnings.warn(msg, ImuDcmWarning, stacklevel=3)
 
 
@@ -167,6 +158,7 @@ def _replay(
     offset,
     rest_config,
     report,
+    notes: list[str],
 ) -> ReplayResult:
     report("read", 0.0)
     log = read_log(
@@ -186,10 +178,11 @@ def _replay(
         truth.log_t_ns if truth is not None else None,
     )
     if why:
-        _warn(f"time: using log time, not header stamps: {why}")
+        _warn(notes, f"time: using log time, not header stamps: {why}")
     imu_t = imu.t_ns if base == "header" else imu.log_t_ns
     scale = DEG if gyro_units == "deg/s" else 1.0
     clean = clean_imu(imu_t, np.asarray(imu.omega_b, dtype=float) * scale, imu.topic)
+    notes.extend(clean.messages)
     n = len(clean.t_ns)
     if n < 2:
         hint = ""
@@ -200,58 +193,17 @@ def _replay(
     t_s = (t_ns - t_ns[0]).astype(np.float64) * 1e-9
     omega_raw = clean.omega_b
 
-    q_truth = np.full((n, 4), np.nan)
-    check: TruthCheck | None = None
-    rejected: str | None = None
-    applied_offset = 0.0
-    if truth is not None:
-        tt = truth.t_ns if base == "header" else truth.log_t_ns
-        if offset != "auto":
-            applied_offset = float(offset)
-        tt = tt + np.int64(round(applied_offset * 1e9))
-        q_truth = slerp_truth(tt, truth.q_w_b, t_ns)
-        if not np.isfinite(q_truth[:, 3]).any():
-            span = (
-                f"{(tt.min() - t_ns[0]) * 1e-9:.3f}..{(tt.max() - t_ns[0]) * 1e-9:.3f} s"
-                if len(tt)
-                else "no samples"
-            )
-            hint = ""
-            if base == "header" and _spans_overlap(imu.log_t_ns, truth.log_t_ns):
-                hint = "; their log times overlap: try --time log"
-            raise LogError(
-                f"Expected the truth {truth.topic} to overlap the gyro "
-                f"(0..{t_s[-1]:.3f} s), got {span}{hint}"
-            )
-        check = check_truth(t_ns, omega_raw, tt, truth.q_w_b)
-        if offset == "auto" and check.shift_s is not None:
-            applied_offset = float(check.shift_s)
-            tt = tt + np.int64(round(applied_offset * 1e9))
-            q_truth = slerp_truth(tt, truth.q_w_b, t_ns)
-        frames = (
-            f", frame {truth.child_frame_id or truth.frame_id}"
-            if (truth.child_frame_id or truth.frame_id)
-            else ""
-        )
-        if not check.follows and truth.auto:
-            _warn(
-                f"truth {truth.topic} ({truth.type}{frames}) does not follow the gyro "
-                f"({check.describe()}): replaying without truth; name it with --truth-topic "
-                f"to score it anyway"
-            )
-            q_truth = np.full((n, 4), np.nan)
-            rejected, truth = truth.topic, None
-        elif not check.follows:
-            _warn(
-                f"truth {truth.topic} ({truth.type}{frames}) does not follow the gyro "
-                f"({check.describe()}); scored anyway, as asked"
-            )
+    aligned = align_truth(
+        truth, base, t_ns, omega_raw, offset, imu.log_t_ns, lambda msg: _warn(notes, msg)
+    )
+    q_truth, truth = aligned.q_truth, aligned.truth
     if gyro_units == "rad/s":
         evidence = _deg_evidence(omega_raw, t_s, q_truth)
         if evidence:
             _warn(
+                notes,
                 f"{imu.topic}: the rates look like deg/s: {evidence}; pass "
-                f"--gyro-units deg/s to convert"
+                f"--gyro-units deg/s to convert",
             )
 
     has_truth = np.all(np.isfinite(q_truth), axis=1)
@@ -331,8 +283,8 @@ def _replay(
         start_time_s=float(t_s[start]),
         initial_q_w_b=tuple(float(x) for x in q0),
         truth_samples_used=int(both.sum()),
-        truth_offset_s=applied_offset,
-        truth_check=dataclasses.asdict(check) if check is not None else None,
+        truth_offset_s=aligned.offset_s,
+        truth_check=dataclasses.asdict(aligned.check) if aligned.check is not None else None,
         rms_error_deg=stat_(error.total_deg, rms),
         max_error_deg=stat_(error.total_deg, np.max),
         rms_inclination_deg=stat_(error.inclination_deg, rms),
@@ -349,7 +301,7 @@ def _replay(
         stopped_at=log.stopped_at,
         damage=tuple(_record(d) for d in getattr(log, "damage", ())),
         channels=tuple(_record(c) for c in log.channels),
-        truth_rejected=rejected,
+        truth_rejected=aligned.rejected,
     )
     return ReplayResult(
         t_ns,

@@ -22,9 +22,10 @@ class ReplaySummary:
 
     Error fields are None when nothing was scored (no truth, or truth rejected: then
     ``truth_rejected`` names the topic that did not follow the gyro). ``gaps`` holds
-    (t_s, length_s) pairs; ``warnings`` the one-line warnings the replay raised;
-    ``truth_check`` the rate comparison of truth and gyro (see
-    :class:`imu_dcm.replay.truth.TruthCheck`) as a dict, or None without truth.
+    (t_s, length_s) pairs. ``warnings`` holds the one-line warnings of the cleaning and the
+    truth checks, kept per replay so that replays in threads do not mix (the reader's own are
+    summed up in ``stopped_at`` / ``damage``). ``truth_check`` is the rate comparison of truth
+    and gyro (:class:`imu_dcm.replay.truth.TruthCheck`) as a dict, or None without truth.
     """
 
     path: str

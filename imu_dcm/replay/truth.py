@@ -5,6 +5,8 @@ whether the truth is the IMU's attitude at all.
   file order at more than 10 % of the steps, or miss the truth while the log times overlap it;
   then the log (receive) times, with the reason in one line.
 * :func:`slerp_truth` — truth ``q_w_b`` at the gyro stamps, never bridged across long gaps.
+* :func:`align_truth` — all of it for a replay: offset, check, slerp, and the decision to drop
+  an automatically picked truth that does not follow the gyro.
 * :func:`check_truth` — the body rate implied by the truth against the gyro: the rate norms
   (frame-free, so a constant mounting rotation does not matter) are correlated over time shifts
   of up to ±0.5 s; the best shift, its correlation and the residual rate error are returned.
@@ -16,17 +18,21 @@ whether the truth is the IMU's attitude at all.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from imu_dcm.errors import LogError
 from imu_dcm.so3 import exp_quat, log_quat, quat_conjugate, quat_multiply
 
 __all__ = [
     "MIN_CORRELATION",
     "TRUTH_BRIDGE_STEPS",
+    "AlignedTruth",
     "TruthCheck",
+    "align_truth",
     "check_truth",
     "choose_time",
     "slerp_truth",
@@ -183,11 +189,38 @@ def slerp_truth(truth_t_ns: ArrayLike, q_w_b: ArrayLike, t_ns: ArrayLike) -> NDA
     return out
 
 
-def _pearson(a: NDArray[np.float64], b: NDArray[np.float64]) -> float:
-    sa, sb = float(np.std(a)), float(np.std(b))
-    if sa == 0.0 or sb == 0.0:
-        return 0.0
-    return float(np.mean((a - a.mean()) * (b - b.mean())) / (sa * sb))
+def lagged_correlation(
+    g: NDArray[np.float64], h: NDArray[np.float64], valid: NDArray[np.bool_], lags: int
+) -> tuple[NDArray[np.float64], NDArray[np.int64]]:
+    """Pearson correlation of ``g[i + k]`` with ``h[i]`` over the valid ``i``, k = -lags..lags.
+
+    All lags at once: the five pair sums (count, Σa, Σa², Σb, Σb², Σab) are cross-correlations,
+    computed by FFT. Returns (correlation (2 lags + 1,), 0 where a series is constant; the
+    number of pairs per lag).
+    """
+    n = len(g)
+    w = valid.astype(float)
+    hv = np.where(valid, h, 0.0)
+    nfft = 1 << int(np.ceil(np.log2(2 * n)))
+    k = np.arange(-lags, lags + 1)
+
+    def xcorr(x: NDArray[np.float64], y: NDArray[np.float64]) -> NDArray[np.float64]:
+        r = np.fft.irfft(np.fft.rfft(x, nfft) * np.conj(np.fft.rfft(y, nfft)), nfft)
+        return r[k % nfft]  # Σ_i x[i + k] y[i]
+
+    ones = np.ones(n)
+    cnt = xcorr(ones, w)
+    sa, saa = xcorr(g, w), xcorr(g * g, w)
+    sb, sbb = xcorr(ones, hv), xcorr(ones, hv * hv)
+    sab = xcorr(g, hv)
+    count = np.rint(cnt).astype(np.int64)
+    safe = np.maximum(cnt, 1.0)
+    cov = sab - sa * sb / safe
+    var = np.maximum(saa - sa * sa / safe, 0.0) * np.maximum(sbb - sb * sb / safe, 0.0)
+    scale = np.sqrt(var)
+    tiny = scale <= 1e-12 * np.maximum(np.sqrt(saa * sbb), 1e-300)
+    corr = np.where(tiny, 0.0, cov / np.where(tiny, 1.0, scale))
+    return corr, count
 
 
 def check_truth(
@@ -250,26 +283,112 @@ def check_truth(
         still_truth = float(np.mean(h0)) < STILL_RAD_S
         turning = float(np.mean(g0)) > 10 * STILL_RAD_S
         return TruthCheck(True, not (still_truth and turning), None, None, resid0, g_rms0)
-    n = len(g)
     lags = int(min(MAX_SHIFT_S, span_s / 4) / dt)
-    best = (-np.inf, 0, resid0, g_rms0)
-    scores = {}
-    for k in range(-lags, lags + 1):
-        gi = slice(max(k, 0), n + min(k, 0))  # g[i + k] against h[i]
-        hi_ = slice(max(-k, 0), n - max(k, 0))
-        m = valid[hi_]
-        if m.sum() < 20:
-            continue
-        a, b = g[gi][m], h[hi_][m]
-        c = _pearson(a, b)
-        scores[k] = c
-        if c > best[0]:
-            best = (c, k, float(np.sqrt(np.mean((a - b) ** 2))), float(np.sqrt(np.mean(a**2))))
-    c, k, resid, g_rms = best
+    corr, count = lagged_correlation(g, h, valid, lags)
+    ok = count >= 20
+    if not ok.any():
+        return TruthCheck(False, True)
+    j = int(np.argmax(np.where(ok, corr, -np.inf)))
+    k, c = j - lags, float(corr[j])
+    n = len(g)
+    m = valid[max(-k, 0) : n - max(k, 0)]
+    a = g[max(k, 0) : n + min(k, 0)][m]  # g[i + k] against h[i]
+    b = h[max(-k, 0) : n - max(k, 0)][m]
+    resid, g_rms = float(np.sqrt(np.mean((a - b) ** 2))), float(np.sqrt(np.mean(a**2)))
     shift = k * dt
-    if k - 1 in scores and k + 1 in scores:  # parabola through the peak and its neighbours
-        y0, y1, y2 = scores[k - 1], c, scores[k + 1]
-        den = y0 - 2 * y1 + y2
+    if 0 < j < len(corr) - 1 and ok[j - 1] and ok[j + 1]:  # parabola through the peak
+        y0, y2 = float(corr[j - 1]), float(corr[j + 1])
+        den = y0 - 2 * c + y2
         if den < 0:
             shift += 0.5 * (y0 - y2) / den * dt
     return TruthCheck(True, c >= MIN_CORRELATION, shift, c, resid, g_rms)
+
+
+@dataclass(frozen=True)
+class AlignedTruth:
+    """The truth at the gyro stamps, after the offset and the rate check.
+
+    ``q_truth`` (N, 4) ``[x, y, z, w]``, NaN where there is none (all NaN when rejected);
+    ``truth`` the series used, or None; ``check`` the rate comparison; ``offset_s`` the shift
+    applied to the truth stamps; ``rejected`` the topic of an auto-picked truth that did not
+    follow the gyro.
+    """
+
+    q_truth: NDArray[np.float64]
+    truth: object | None
+    check: TruthCheck | None
+    offset_s: float
+    rejected: str | None
+
+
+def _spans_overlap(a: NDArray[np.int64], b: NDArray[np.int64]) -> bool:
+    return bool(len(a) and len(b) and a.min() <= b.max() and b.min() <= a.max())
+
+
+def align_truth(
+    truth,
+    base: str,
+    t_ns: NDArray[np.int64],
+    omega_b: NDArray[np.float64],
+    offset: float | str,
+    imu_log_t_ns: NDArray[np.int64],
+    warn: Callable[[str], None],
+) -> AlignedTruth:
+    """Shift, check and slerp the truth at the gyro stamps.
+
+    Parameters
+    ----------
+    truth : TruthSeries or None
+        From the reader (``t_ns``, ``log_t_ns``, ``q_w_b``, ``topic``, ``type``, frame ids,
+        ``auto``).
+    base : {"header", "log"}
+        The time base chosen for the gyro, used for the truth too.
+    t_ns, omega_b : the cleaned gyro stamps (N,) and rates (N, 3), rad/s.
+    offset : float or "auto"
+        Seconds added to the truth stamps; "auto": the best shift of :func:`check_truth`.
+    imu_log_t_ns : the gyro's log times, for the hint when header stamps never overlap.
+    warn : callable(str)
+        Receives the one-line warnings.
+
+    Raises
+    ------
+    LogError
+        The truth never overlaps the gyro.
+    """
+    n = len(t_ns)
+    none = np.full((n, 4), np.nan)
+    if truth is None:
+        return AlignedTruth(none, None, None, 0.0, None)
+    applied = 0.0 if offset == "auto" else float(offset)
+    tt = (truth.t_ns if base == "header" else truth.log_t_ns) + np.int64(round(applied * 1e9))
+    q_truth = slerp_truth(tt, truth.q_w_b, t_ns)
+    if not np.isfinite(q_truth[:, 3]).any():
+        t0 = t_ns[0]
+        span = (
+            f"{(tt.min() - t0) * 1e-9:.3f}..{(tt.max() - t0) * 1e-9:.3f} s"
+            if len(tt)
+            else "no samples"
+        )
+        hint = ""
+        if base == "header" and _spans_overlap(imu_log_t_ns, truth.log_t_ns):
+            hint = "; their log times overlap: try --time log"
+        raise LogError(
+            f"Expected the truth {truth.topic} to overlap the gyro "
+            f"(0..{(t_ns[-1] - t0) * 1e-9:.3f} s), got {span}{hint}"
+        )
+    check = check_truth(t_ns, omega_b, tt, truth.q_w_b)
+    if offset == "auto" and check.shift_s is not None:
+        applied = float(check.shift_s)
+        tt = tt + np.int64(round(applied * 1e9))
+        q_truth = slerp_truth(tt, truth.q_w_b, t_ns)
+    frame = truth.child_frame_id or truth.frame_id
+    what = f"truth {truth.topic} ({truth.type}{f', frame {frame}' if frame else ''})"
+    if not check.follows and truth.auto:
+        warn(
+            f"{what} does not follow the gyro ({check.describe()}): replaying without truth; "
+            f"name it with --truth-topic to score it anyway"
+        )
+        return AlignedTruth(none, None, check, applied, truth.topic)
+    if not check.follows:
+        warn(f"{what} does not follow the gyro ({check.describe()}); scored anyway, as asked")
+    return AlignedTruth(q_truth, truth, check, applied, None)
