@@ -19,6 +19,7 @@ from rosbags.highlevel import AnyReader
 from rosbags.typesys import Stores, get_typestore
 
 import data_synth
+from data_synth.budget import JobTooLarge
 from data_synth.cli import main
 from data_synth.gyro import DEFAULT_EPOCH_NS
 from data_synth.reference_scheme import reference_top
@@ -267,3 +268,18 @@ def test_force_replaces_only_a_bag_data_synth_wrote(tmp_path, capsys):
     assert sorted(p.name for p in tmp_path.iterdir()) == ["fifo", "plain.txt", "precious"]
     ours = tmp_path / "ours"
     assert main([*argv, str(ours)]) == 0 and main([*argv, str(ours)]) == 0  # its own bag: ok
+
+
+@pytest.mark.parametrize("scene, kw, duration_s", [
+    ("heavy-top", {"motion": "looping"}, 3.0),
+    ("heavy-top", {"motion": "cusp", "spin_hz": 60.0}, 1.0),
+    ("free-body", {"case": "intermediate"}, 20.0),
+])
+def test_ode_step_estimate_tracks_the_real_solve(scene, kw, duration_s):
+    # The refusal rests on the 200-step probe's extrapolation: it must track the real solve.
+    # DOP853 spends 12 right-hand-side calls per accepted step (plus rejections), so nfev / 12
+    # bounds the real step count from above; the estimate must sit within 3x of it.
+    with pytest.raises(JobTooLarge) as exc:
+        data_synth.simulate(scene, duration_s, max_steps=1, **kw)
+    real_steps = data_synth.simulate(scene, duration_s, **kw).nfev / 12
+    assert real_steps / 3 < exc.value.steps < 3 * real_steps
