@@ -70,22 +70,9 @@ def _floor(y: NDArray, lo: float = 1e-13) -> NDArray:
     return np.maximum(np.asarray(y, dtype=float), lo)
 
 
-def run(
-    out_dir: str | Path, quick: bool = False, progress: Callable[[str], None] = print
-) -> list[str]:
-    """Run all eight scenes, write ``stability_*.png`` into ``out_dir``; return markdown lines.
-
-    ``quick`` uses fewer points and 10⁶ instead of 10⁷ steps in the long run.
-    """
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    out = Path(out_dir)
-    md: list[str] = ["## Stability scenes", ""]
-
-    # 1. gimbal lock --------------------------------------------------------------------------
+def _scene_gimbal_lock(out: Path, quick: bool, progress: Callable[[str], None], plt) -> list[str]:
+    """Scene 1. gimbal lock: chart and markdown lines."""
+    md: list[str] = []
     progress("stability 1/8: gimbal lock (Euler angles vs DCM)")
     closest = (
         [0.0, 0.01, 0.1, 1.0, 10.0, 30.0]
@@ -148,8 +135,12 @@ def run(
             g = gl[(c, r)]
             md.append(f"| {c:g} | {r:.0f} | {_fmt(g.euler_max_deg)} | {_fmt(g.dcm_max_deg)} |")
     md.append("")
+    return md
 
-    # 2. rotvec_sum ---------------------------------------------------------------------------
+
+def _scene_rotvec_sum(out: Path, quick: bool, progress: Callable[[str], None], plt) -> list[str]:
+    """Scene 2. rotvec_sum: chart and markdown lines."""
+    md: list[str] = []
     progress("stability 2/8: rotation-vector-sum shortcut")
     rs = rotvec_sum_shortcut()
     fig, ax = plt.subplots(figsize=(8, 4.6))
@@ -188,8 +179,12 @@ def run(
         ),
         "",
     ]
+    return md
 
-    # 3. large steps --------------------------------------------------------------------------
+
+def _scene_large_steps(out: Path, quick: bool, progress: Callable[[str], None], plt) -> list[str]:
+    """Scene 3. large steps: chart and markdown lines."""
+    md: list[str] = []
     progress("stability 3/8: large steps |ω|dt 0.01..3 rad")
     ls_res = large_steps(tuple(np.geomspace(0.01, 3.0, 7 if quick else 13)))
     fig, ax = plt.subplots(figsize=(9, 5))
@@ -218,8 +213,12 @@ def run(
     for k, s in enumerate(ls_res.step_rad):
         md.append(f"| {s:.3g} | " + " | ".join(_fmt(ls_res.err_deg[m][k]) for m in names) + " |")
     md.append("")
+    return md
 
-    # 4. long run -----------------------------------------------------------------------------
+
+def _scene_long_run(out: Path, quick: bool, progress: Callable[[str], None], plt) -> list[str]:
+    """Scene 4. long run: chart and markdown lines."""
+    md: list[str] = []
     n_long = 1_000_000 if quick else 10_000_000
     progress(f"stability 4/8: long run, {n_long:.0e} steps (batch, chunked)")
     lr = long_run(n_long, method="magnus4", chunk=n_long // 10)
@@ -270,8 +269,12 @@ def run(
         ),
         "",
     ]
+    return md
 
-    # 5. free box -----------------------------------------------------------------------------
+
+def _scene_free_box(out: Path, quick: bool, progress: Callable[[str], None], plt) -> list[str]:
+    """Scene 5. free box: chart and markdown lines."""
+    md: list[str] = []
     progress("stability 5/8: free box, intermediate-axis flips")
     fb_rates = (20.0, 100.0) if quick else (20.0, 50.0, 100.0, 1000.0)
     fbs = {r: free_box(r) for r in fb_rates}
@@ -318,8 +321,12 @@ def run(
             + " |"
         )
     md.append("")
+    return md
 
-    # 6. tops ---------------------------------------------------------------------------------
+
+def _scene_tops(out: Path, quick: bool, progress: Callable[[str], None], plt) -> list[str]:
+    """Scene 6. tops: chart and markdown lines."""
+    md: list[str] = []
     progress("stability 6/8: sleeping top and fast top at high spin")
     top_rates = (200.0, 1000.0, 5000.0) if quick else (200.0, 500.0, 1000.0, 2000.0, 5000.0)
     tops = [
@@ -369,8 +376,12 @@ def run(
                 + " |"
             )
     md.append("")
+    return md
 
-    # 7. noise --------------------------------------------------------------------------------
+
+def _scene_noise(out: Path, quick: bool, progress: Callable[[str], None], plt) -> list[str]:
+    """Scene 7. noise: chart and markdown lines."""
+    md: list[str] = []
     progress("stability 7/8: noise and bias growth laws")
     ng = noise_growth(n_seeds=50 if quick else 200)
     fig, ax = plt.subplots(figsize=(8, 5))
@@ -398,8 +409,12 @@ def run(
         ),
         "",
     ]
+    return md
 
-    # 8. truncated ----------------------------------------------------------------------------
+
+def _scene_truncated(out: Path, quick: bool, progress: Callable[[str], None], plt) -> list[str]:
+    """Scene 8. truncated: chart and markdown lines."""
+    md: list[str] = []
     progress("stability 8/8: first-order truncated updates vs exact exponential")
     tr = truncated_update()
     fig, ax = plt.subplots(figsize=(8, 5))
@@ -429,4 +444,35 @@ def run(
             f"| {_fmt(tr.exact_err_deg[k])} | {_fmt(tr.unnormalised_norm[k])} |"
         )
     md.append("")
+    return md
+
+
+_SCENES = (
+    _scene_gimbal_lock,
+    _scene_rotvec_sum,
+    _scene_large_steps,
+    _scene_long_run,
+    _scene_free_box,
+    _scene_tops,
+    _scene_noise,
+    _scene_truncated,
+)
+
+
+def run(
+    out_dir: str | Path, quick: bool = False, progress: Callable[[str], None] = print
+) -> list[str]:
+    """Run all eight scenes, write ``stability_*.png`` into ``out_dir``; return markdown lines.
+
+    ``quick`` uses fewer points and 10⁶ instead of 10⁷ steps in the long run.
+    """
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    out = Path(out_dir)
+    md: list[str] = ["## Stability scenes", ""]
+    for scene in _SCENES:
+        md += scene(out, quick, progress, plt)
     return md

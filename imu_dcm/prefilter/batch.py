@@ -125,10 +125,12 @@ def prefilter(
             if i1 - i0 < _MIN_REST_SAMPLES or t_s[max(i1 - 1, i0)] - t_s[i0] < cfg.min_rest_s:
                 i0 = i1 = 0  # no rest long enough for the Allan deviation: use the spectrum
         if i1 > i0:
-            bias0 = _noise_from_rest(omega_b[i0:i1], t_s[i0:i1], cfg.min_rest_s, source, summary)
+            density, bias0 = _noise_from_rest(
+                omega_b[i0:i1], t_s[i0:i1], cfg.min_rest_s, source, summary
+            )
         else:
-            _noise_from_spectrum(omega_b, t_s, summary)
-        cfg = replace(cfg, noise_density_rad_s_sqrt_hz=summary.pop("_density"))
+            density = _noise_from_spectrum(omega_b, t_s, summary)
+        cfg = replace(cfg, noise_density_rad_s_sqrt_hz=density)
     else:
         summary["noise_source"] = "given"
     summary["noise_density_rad_s_sqrt_hz"] = cfg.noise_density_rad_s_sqrt_hz
@@ -170,12 +172,12 @@ def prefilter(
 
 def _noise_from_rest(
     omega_b: NDArray, t_s: NDArray, min_rest_s: float, source: str, summary: dict[str, Any]
-) -> NDArray:
-    """Noise density from a rest segment's Allan deviation into ``summary``; the rest mean."""
+) -> tuple[float, NDArray]:
+    """Noise density (RMS over the axes) from a rest segment's Allan deviation, and the rest
+    mean rate (the bias, rad/s); what was found goes into ``summary``."""
     est = estimate_noise_from_rest(omega_b, t_s, min_rest_s)
     arw = est.noise_density_rad_s_sqrt_hz
     summary.update(
-        _density=float(np.sqrt(np.mean(arw**2))),
         noise_source=f"Allan deviation of {source}",
         rest_interval_s=est.interval_s,
         angle_random_walk_rad_s_sqrt_hz=arw.tolist(),
@@ -185,16 +187,17 @@ def _noise_from_rest(
         bias_instability_tau_s=est.bias_instability_tau_s.tolist(),
         rest_mean_rate_rad_s=est.mean_rate_rad_s.tolist(),
     )
-    return est.mean_rate_rad_s
+    return float(np.sqrt(np.mean(arw**2))), est.mean_rate_rad_s
 
 
-def _noise_from_spectrum(omega_b: NDArray, t_s: NDArray, summary: dict[str, Any]) -> None:
-    """Noise density from the upper band of the log's spectrum (no rest) into ``summary``."""
+def _noise_from_spectrum(omega_b: NDArray, t_s: NDArray, summary: dict[str, Any]) -> float:
+    """Noise density (RMS over the axes) from the upper band of the log's spectrum (no rest);
+    what was found goes into ``summary``."""
     est = estimate_noise_from_spectrum(omega_b, t_s)
     density = est.noise_density_rad_s_sqrt_hz
     summary.update(
-        _density=float(np.sqrt(np.mean(density**2))),
         noise_source="spectrum of the log (no rest long enough for the Allan deviation)",
         spectrum_band_hz=est.band_hz,
         spectrum_noise_density_rad_s_sqrt_hz=density.tolist(),
     )
+    return float(np.sqrt(np.mean(density**2)))
