@@ -187,7 +187,8 @@ def _lines(path: Path) -> list[str]:
     return path.read_text().splitlines(keepends=True) if path.exists() else []
 
 
-def test_sigterm_halfway_then_resume_gives_the_complete_table(tmp_path):
+@pytest.mark.parametrize("jobs", ["1", "2"])
+def test_sigterm_halfway_then_resume_gives_the_complete_table(tmp_path, jobs):
     # 24 logs (links to one shipped bag) keep the batch busy for seconds after its first row.
     src = REPO_ROOT / "replay" / "heavy_top_wavy_noisy_400hz"
     for k in range(24):
@@ -196,7 +197,7 @@ def test_sigterm_halfway_then_resume_gives_the_complete_table(tmp_path):
         for f in src.iterdir():
             (d / f.name).symlink_to(f)
     out = tmp_path / "t.csv"
-    proc = _cli(str(tmp_path / "logs"), "--table", str(out), "--jobs", "2", "--no-chart")
+    proc = _cli(str(tmp_path / "logs"), "--table", str(out), "--jobs", jobs, "--no-chart")
     deadline = time.monotonic() + 60
     while len(_lines(out)) < 4 and proc.poll() is None and time.monotonic() < deadline:
         time.sleep(0.005)

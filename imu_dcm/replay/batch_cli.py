@@ -156,8 +156,8 @@ class _Bar:
             self.stream.flush()
 
 
-class _Terminated(Exception):
-    pass
+class _Terminated(BaseException):
+    """SIGTERM, raised like KeyboardInterrupt (a per-log ``except Exception`` never eats it)."""
 
 
 def _on_sigterm(signum, frame):

@@ -133,7 +133,10 @@ def run_dask(fn: PerLog, paths: list[str], options: Mapping[str, Any],
         raise InputError(f"Expected dask.distributed for --dask, got it not installed: "
                          f"{DASK_HINT}") from None  # fmt: skip
     own = isinstance(dask, str)
-    client = Client(dask) if own else dask
+    try:
+        client = Client(dask) if own else dask
+    except OSError as exc:  # refused, timed out
+        raise InputError(f"Expected a Dask scheduler at {dask}, got {one_line(str(exc))}") from None
     futures: dict = {}
     try:
         workers = client.scheduler_info().get("workers", {}).values()
