@@ -28,6 +28,7 @@ import argparse
 import dataclasses
 import logging
 import os
+import statistics
 import sys
 import tempfile
 import time
@@ -90,9 +91,15 @@ def main(argv: list[str] | None = None) -> int:
     tmp = Path(tempfile.mkdtemp(prefix="batch_speed_"))
     results = {}
 
+    cpu_s: dict[str, list[float]] = {}  # CPU of this process plus its reaped workers, per call
+
     def run(name, **kw):
         def fn():
+            before = os.times()
             results[name] = replay_many(logs, chart=None, **kw).rows
+            after = os.times()
+            used = sum(a - b for a, b in zip(after[:4], before[:4]))  # user, sys, children's
+            cpu_s.setdefault(name, []).append(used)
 
         return fn
 
@@ -142,6 +149,10 @@ def main(argv: list[str] | None = None) -> int:
     print(f"jobs 2 / jobs 1 wall ratio: {ratio:.2f} (target <= {TARGET_RATIO}); the same ratio "
           f"for pure CPU work split over 2 processes in the same rounds: {spin:.2f} (0.5 on two "
           f"idle cores)")  # fmt: skip
+    c1, c2 = statistics.median(cpu_s["jobs 1"]), statistics.median(cpu_s["jobs 2"])
+    print(f"CPU time per batch (this process and its workers): jobs 1 {c1:.2f} s, jobs 2 "
+          f"{c2:.2f} s ({c2 / c1:.2f}x): on two idle cores jobs 2 / jobs 1 would be about "
+          f"{c2 / c1 / 2:.2f} plus the pool's start")  # fmt: skip
 
     try:
         from distributed import LocalCluster

@@ -113,6 +113,15 @@ def find_logs(paths: Iterable[str | Path]) -> list[str]:
     return list(out)
 
 
+def _size(path: str) -> int:
+    """Bytes of a log (a bag folder's files summed; 0 when unreadable)."""
+    try:
+        p = Path(path)
+        return sum(f.stat().st_size for f in p.iterdir()) if p.is_dir() else p.stat().st_size
+    except OSError:
+        return 0
+
+
 # --------------------------------------------------------------------------- one log
 def row_from_result(path: str, result, warnings_seen: Iterable[str], elapsed_s: float) -> LogRow:
     """The table row of one replay result (the one place that reads a replay's summary).
@@ -278,6 +287,8 @@ def replay_many(
     fresh: dict[str, LogRow] = {}
     new_curves: dict[str, Curve] = {}
     if todo:
+        if dask is not None or jobs > 1:  # largest first: no big log left alone at the end
+            todo.sort(key=_size, reverse=True)
         if dask is not None:
             runs = run_dask(replay_one, todo, options, dask)
         else:
