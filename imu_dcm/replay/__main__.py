@@ -37,72 +37,7 @@ def build_parser() -> argparse.ArgumentParser:
         f"See also: {PROG} convert-csv --help",
     )
     p.add_argument("log", help="ROS 2 bag folder (metadata.yaml + .mcap) or a .mcap file")
-    p.add_argument("--imu-topic", help="IMU channel (default: the one Imu-typed channel)")
-    p.add_argument(
-        "--truth-topic",
-        help="truth channel (QuaternionStamped, PoseStamped, ...; the IMU topic for "
-        "its own orientation; 'none' to ignore truth). Named here, it is scored even "
-        "when its rate does not follow the gyro",
-    )
-    p.add_argument(
-        "--truth-frame",
-        metavar="CHILD",
-        help="child frame of a /tf truth, where several frames move",
-    )
-    p.add_argument(
-        "--truth-offset",
-        default="0",
-        metavar="auto|SECONDS",
-        help="shift added to the truth stamps: seconds (default 0) or auto (the "
-        "shift that best aligns the truth's rotation rate with the gyro's)",
-    )
-    p.add_argument(
-        "--time",
-        choices=TIME_BASES,
-        default="auto",
-        help="stamps: auto (default: header stamps unless they are all equal, not "
-        "increasing or miss the truth while log times overlap it), header, or log",
-    )
-    p.add_argument(
-        "--method",
-        default="magnus4",
-        metavar="METHOD",
-        help="integrator increment (default magnus4; one of imu_dcm.METHODS)",
-    )
-    p.add_argument(
-        "--bias",
-        default="auto",
-        help="gyro bias: auto (from rest segments, default), none, or x,y,z in rad/s",
-    )
-    p.add_argument(
-        "--gyro-units",
-        choices=("rad/s", "deg/s"),
-        default="rad/s",
-        help="unit of the log's angular velocity (default rad/s)",
-    )
-    p.add_argument(
-        "--init-quat",
-        metavar="X,Y,Z,W",
-        help="initial q_world_body (scalar last) when the log has no truth",
-    )
-    p.add_argument(
-        "--prefilter",
-        choices=("none", "kalman", "rts"),
-        default="none",
-        help="gyro pre-filter: Kalman filter or RTS smoother (default none)",
-    )
-    p.add_argument(
-        "--gyro-noise-density",
-        type=float,
-        metavar="RAD_S_SQRT_HZ",
-        help="pre-filter: gyro white-noise density, rad/s/√Hz (default: from rest)",
-    )
-    p.add_argument(
-        "--angular-accel",
-        type=float,
-        metavar="RAD_S2",
-        help="pre-filter: angular-acceleration scale, rad/s² (default: fitted)",
-    )
+    add_replay_options(p)
     p.add_argument("--summary-json", metavar="PATH", help="write the summary as JSON")
     p.add_argument(
         "--out", metavar="DIR", help="write the estimate as a ROS 2 bag (/estimate/orientation)"
@@ -128,6 +63,76 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.add_argument("--quiet", action="store_true", help="print only warnings and errors")
     return p
+
+
+def add_replay_options(g) -> None:
+    """The options that choose how one log is replayed (shared by ``replay`` and ``batch``)."""
+    g.add_argument("--imu-topic", help="IMU channel (default: the one Imu-typed channel)")
+    g.add_argument(
+        "--truth-topic",
+        help="truth channel (QuaternionStamped, PoseStamped, ...; the IMU topic for "
+        "its own orientation; 'none' to ignore truth). Named here, it is scored even "
+        "when its rate does not follow the gyro",
+    )
+    g.add_argument(
+        "--truth-frame",
+        metavar="CHILD",
+        help="child frame of a /tf truth, where several frames move",
+    )
+    g.add_argument(
+        "--truth-offset",
+        default="0",
+        metavar="auto|SECONDS",
+        help="shift added to the truth stamps: seconds (default 0) or auto (the "
+        "shift that best aligns the truth's rotation rate with the gyro's)",
+    )
+    g.add_argument(
+        "--time",
+        choices=TIME_BASES,
+        default="auto",
+        help="stamps: auto (default: header stamps unless they are all equal, not "
+        "increasing or miss the truth while log times overlap it), header, or log",
+    )
+    g.add_argument(
+        "--method",
+        default="magnus4",
+        metavar="METHOD",
+        help="integrator increment (default magnus4; one of imu_dcm.METHODS)",
+    )
+    g.add_argument(
+        "--bias",
+        default="auto",
+        help="gyro bias: auto (from rest segments, default), none, or x,y,z in rad/s",
+    )
+    g.add_argument(
+        "--gyro-units",
+        choices=("rad/s", "deg/s"),
+        default="rad/s",
+        help="unit of the log's angular velocity (default rad/s)",
+    )
+    g.add_argument(
+        "--init-quat",
+        metavar="X,Y,Z,W",
+        help="initial q_world_body (scalar last) when the log has no truth",
+    )
+    g.add_argument(
+        "--prefilter",
+        choices=("none", "kalman", "rts"),
+        default="none",
+        help="gyro pre-filter: Kalman filter or RTS smoother (default none)",
+    )
+    g.add_argument(
+        "--gyro-noise-density",
+        type=float,
+        metavar="RAD_S_SQRT_HZ",
+        help="pre-filter: gyro white-noise density, rad/s/√Hz (default: from rest)",
+    )
+    g.add_argument(
+        "--angular-accel",
+        type=float,
+        metavar="RAD_S2",
+        help="pre-filter: angular-acceleration scale, rad/s² (default: fitted)",
+    )
 
 
 def parse_numbers(text: str, n: int, name: str) -> list[float]:
@@ -237,11 +242,11 @@ def _distinct_outputs(args) -> None:
                 raise InputError(f"Expected {fa} and {fb} to be separate paths, got {a} and {b}")
 
 
-def _options(args) -> dict:
-    """Every option parsed and checked, before any input is read or output written."""
+def replay_keywords(args) -> dict:
+    """The keywords of :func:`imu_dcm.replay.replay` from :func:`add_replay_options`' options,
+    parsed and checked (string parsing lives here, not in the library)."""
     from imu_dcm.errors import InputError
     from imu_dcm.integrate import METHODS
-    from imu_dcm.outputs import check_output_dir, check_output_file
 
     if args.method not in METHODS:
         build_parser().error(
@@ -271,17 +276,6 @@ def _options(args) -> dict:
             "Expected --prefilter kalman or rts with --gyro-noise-density / "
             "--angular-accel, got --prefilter none"
         )
-    inputs = _inputs(args.log)
-    _distinct_outputs(args)
-    if args.out:
-        check_output_dir(args.out, inputs, force=args.force, what="--out bag")
-    if args.summary_json:
-        check_output_file(args.summary_json, inputs, "--summary-json file")
-    if args.export_tum:
-        from imu_dcm.replay.export import check_export_dir
-
-        check_export_dir(args.export_tum, inputs)
-    _check_rerun(args.rerun, inputs)
     return {
         "imu_topic": args.imu_topic,
         "truth_topic": args.truth_topic,
@@ -295,6 +289,25 @@ def _options(args) -> dict:
         "prefilter_config": config,
         "truth_offset_s": offset,
     }
+
+
+def _options(args) -> dict:
+    """Every option parsed and checked, before any input is read or output written."""
+    from imu_dcm.outputs import check_output_dir, check_output_file
+
+    keywords = replay_keywords(args)
+    inputs = _inputs(args.log)
+    _distinct_outputs(args)
+    if args.out:
+        check_output_dir(args.out, inputs, force=args.force, what="--out bag")
+    if args.summary_json:
+        check_output_file(args.summary_json, inputs, "--summary-json file")
+    if args.export_tum:
+        from imu_dcm.replay.export import check_export_dir
+
+        check_export_dir(args.export_tum, inputs)
+    _check_rerun(args.rerun, inputs)
+    return keywords
 
 
 def _replay_main(argv: list[str]) -> int:

@@ -126,37 +126,31 @@ def _size(path: str) -> int:
 def row_from_result(path: str, result, warnings_seen: Iterable[str], elapsed_s: float) -> LogRow:
     """The table row of one replay result (the one place that reads a replay's summary).
 
-    Accepts a summary given as a dict or as a dataclass with ``to_dict()``; ``dropped`` sums
-    every ``dropped_*`` count; warnings are the replay's own plus those it raised, each once.
+    ``dropped`` sums every ``dropped_*`` count of the :class:`ReplaySummary`; warnings are the
+    replay's own plus those it raised, each once.
     """
     s = result.summary
-    s = s if isinstance(s, dict) else s.to_dict()
-
-    def num(key: str) -> float | None:
-        v = s.get(key)
-        return None if v is None else float(v)
-
-    bias = s.get("bias_rad_s")
-    bx, by, bz = (None, None, None) if bias is None else (float(b) for b in bias)
-    said = dict.fromkeys(one_line(w) for w in (*(s.get("warnings") or ()), *warnings_seen))
+    bx, by, bz = (float(b) for b in s.bias_rad_s)
+    dropped = sum(v for k, v in vars(s).items() if k.startswith("dropped_"))
+    said = dict.fromkeys(one_line(w) for w in (*s.warnings, *warnings_seen))
     return LogRow(
         path=path,
-        samples=int(s["samples"]),
-        duration_s=num("duration_s"),
-        rate_hz=num("rate_hz"),
-        imu_topic=s.get("imu_topic"),
-        truth_topic=s.get("truth_topic"),
+        samples=int(s.samples),
+        duration_s=float(s.duration_s),
+        rate_hz=float(s.rate_hz),
+        imu_topic=s.imu_topic,
+        truth_topic=s.truth_topic,
         bias_x_rad_s=bx,
         bias_y_rad_s=by,
         bias_z_rad_s=bz,
-        rms_error_deg=num("rms_error_deg"),
-        max_error_deg=num("max_error_deg"),
-        rms_inclination_deg=num("rms_inclination_deg"),
-        max_inclination_deg=num("max_inclination_deg"),
-        rms_heading_deg=num("rms_heading_deg"),
-        max_heading_deg=num("max_heading_deg"),
-        dropped=sum(int(v) for k, v in s.items() if k.startswith("dropped_")),
-        gaps=len(s.get("gaps") or ()),
+        rms_error_deg=s.rms_error_deg,
+        max_error_deg=s.max_error_deg,
+        rms_inclination_deg=s.rms_inclination_deg,
+        max_inclination_deg=s.max_inclination_deg,
+        rms_heading_deg=s.rms_heading_deg,
+        max_heading_deg=s.max_heading_deg,
+        dropped=int(dropped),
+        gaps=len(s.gaps),
         warnings=tuple(said),
         elapsed_s=float(elapsed_s),
     )

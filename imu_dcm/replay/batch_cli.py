@@ -26,7 +26,7 @@ PROG = "imu-dcm-replay batch"
 def build_parser() -> argparse.ArgumentParser:
     """The parser of ``python -m imu_dcm.replay batch`` (options are checked before any I/O)."""
     from imu_dcm.cli import OneLineArgumentParser
-    from imu_dcm.integrate import METHODS
+    from imu_dcm.replay.__main__ import add_replay_options
 
     p = OneLineArgumentParser(
         prog=PROG,
@@ -60,74 +60,8 @@ def build_parser() -> argparse.ArgumentParser:
     )
     chart.add_argument("--no-chart", action="store_true", help="draw no chart")
     p.add_argument("--quiet", action="store_true", help="print only the summary and errors")
-    g = p.add_argument_group("replay options (the same for every log)")
-    g.add_argument("--imu-topic", help="IMU channel (default: the one Imu-typed channel)")
-    g.add_argument("--truth-topic", help="truth channel ('none' to ignore truth)")
-    g.add_argument("--time", choices=("header", "log"), default="header",
-                   help="stamps from header.stamp (default) or MCAP log time")  # fmt: skip
-    g.add_argument("--method", choices=METHODS, default="magnus4",
-                   help="integrator increment (default magnus4)")  # fmt: skip
-    g.add_argument(
-        "--bias",
-        default="auto",
-        help="gyro bias: auto (from rest segments, default), none, or x,y,z in rad/s",
-    )
-    g.add_argument("--gyro-units", choices=("rad/s", "deg/s"), default="rad/s",
-                   help="unit of the logs' angular velocity (default rad/s)")  # fmt: skip
-    g.add_argument(
-        "--init-quat",
-        metavar="X,Y,Z,W",
-        help="initial q_world_body (scalar last) for logs without truth",
-    )
-    g.add_argument(
-        "--prefilter",
-        choices=("none", "kalman", "rts"),
-        default="none",
-        help="gyro pre-filter: Kalman filter or RTS smoother (default none)",
-    )
-    g.add_argument(
-        "--gyro-noise-density",
-        type=float,
-        metavar="RAD_S_SQRT_HZ",
-        help="pre-filter: gyro white-noise density, rad/s/√Hz (default: from rest)",
-    )
-    g.add_argument(
-        "--angular-accel",
-        type=float,
-        metavar="RAD_S2",
-        help="pre-filter: angular-acceleration scale, rad/s² (default: fitted)",
-    )
+    add_replay_options(p.add_argument_group("replay options (the same for every log)"))
     return p
-
-
-def _numbers(text: str, n: int, name: str) -> None:
-    try:
-        ok = len([float(x) for x in text.split(",")]) == n
-    except ValueError:
-        ok = False
-    if not ok:
-        raise InputError(f"Expected {name} as {n} comma-separated numbers, got {text!r}")
-
-
-def replay_options(args: argparse.Namespace) -> dict[str, Any]:
-    """The keywords of :func:`imu_dcm.replay.replay` given by the command line's options."""
-    if args.bias not in ("auto", "none"):
-        _numbers(args.bias, 3, "--bias")
-    if args.init_quat is not None:
-        _numbers(args.init_quat, 4, "--init-quat")
-    config = None
-    if args.prefilter != "none":
-        from imu_dcm.prefilter import PrefilterConfig
-
-        config = PrefilterConfig(noise_density_rad_s_sqrt_hz=args.gyro_noise_density,
-                                 angular_accel_rad_s2=args.angular_accel)  # fmt: skip
-    elif args.gyro_noise_density is not None or args.angular_accel is not None:
-        raise InputError("Expected --prefilter kalman or rts with --gyro-noise-density / "
-                         "--angular-accel, got --prefilter none")  # fmt: skip
-    return {"imu_topic": args.imu_topic, "truth_topic": args.truth_topic, "time": args.time,
-            "method": args.method, "bias": args.bias, "gyro_units": args.gyro_units,
-            "init_quat": args.init_quat, "prefilter": args.prefilter,
-            "prefilter_config": config}  # fmt: skip
 
 
 class _Bar:
@@ -177,7 +111,9 @@ def main(argv: list[str] | None = None) -> int:
             args = build_parser().parse_args(argv)
             if not args.table.endswith(".csv"):
                 raise InputError(f"Expected --table ending in .csv, got {args.table!r}")
-            options = replay_options(args)
+            from imu_dcm.replay.__main__ import replay_keywords
+
+            options = replay_keywords(args)
             bar = _Bar()
             t0 = time.perf_counter()
             try:
