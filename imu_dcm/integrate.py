@@ -33,6 +33,7 @@ imported on the first call, so importing this module is cheap.
 
 from __future__ import annotations
 
+import math
 import warnings
 from typing import TYPE_CHECKING
 
@@ -76,10 +77,6 @@ def _as_float_array(a: ArrayLike, name: str) -> NDArray[np.float64]:
     return np.asarray(arr, dtype=np.float64)
 
 
-def _first_bad_row(ok_rows: NDArray[np.bool_]) -> int:
-    return int(np.flatnonzero(~ok_rows)[0])
-
-
 def check_samples(values: ArrayLike, t_s: ArrayLike, name: str = "omega_b",
                   n_extra_stamps: int = 0) -> tuple[NDArray, NDArray, NDArray]:
     """Validate ``(N, 3)`` samples and their stamps; return float64 arrays and the steps.
@@ -105,6 +102,11 @@ def check_samples(values: ArrayLike, t_s: ArrayLike, name: str = "omega_b",
         Wrong shape or dtype, fewer than two stamps, a non-finite value (first index named),
         stamps not strictly increasing (index and values named).
 
+    Notes
+    -----
+    The checks run in one compiled pass (:func:`imu_dcm.kernel.check_record`): importing numba
+    on the first call.
+
     Warns
     -----
     GapWarning
@@ -122,19 +124,21 @@ def check_samples(values: ArrayLike, t_s: ArrayLike, name: str = "omega_b",
                          f"for `{name}` of shape {v.shape}, got {len(t)}")
     if len(t) < 2 or len(v) < 1:
         raise InputError(f"Expected at least 2 stamps, got {len(t)}")
-    if not np.isfinite(v).all():
-        i = _first_bad_row(np.isfinite(v).all(axis=1))
-        raise InputError(f"Expected finite `{name}`, got {v[i].tolist()} at row {i}")
-    if not np.isfinite(t).all():
-        i = _first_bad_row(np.isfinite(t))
-        raise InputError(f"Expected finite `t_s`, got t_s[{i}] = {float(t[i])}")
-    dt = np.diff(t)
-    if not (dt > 0.0).all():
-        i = int(np.flatnonzero(~(dt > 0.0))[0]) + 1
-        raise InputError(f"Expected `t_s` strictly increasing, got t_s[{i}] = {float(t[i])!r} s "
-                         f"after t_s[{i - 1}] = {float(t[i - 1])!r} s")
-    _warn_gaps(t)
-    return np.ascontiguousarray(v), t, dt
+    from imu_dcm import kernel
+
+    v = np.ascontiguousarray(v)
+    row, stamp, order, dt_min, dt_max = kernel.check_record(v, t, -math.inf)
+    if row >= 0:
+        raise InputError(f"Expected finite `{name}`, got {v[row].tolist()} at row {row}")
+    if stamp >= 0:
+        raise InputError(f"Expected finite `t_s`, got t_s[{stamp}] = {float(t[stamp])}")
+    if order >= 0:
+        raise InputError(f"Expected `t_s` strictly increasing, got t_s[{order}] = "
+                         f"{float(t[order])!r} s after t_s[{order - 1}] = "
+                         f"{float(t[order - 1])!r} s")
+    if dt_max > GAP_FACTOR * dt_min:  # else no step can exceed GAP_FACTOR x the median
+        _warn_gaps(t)
+    return v, t, np.diff(t)
 
 
 def find_gaps(t_s: ArrayLike, factor: float = GAP_FACTOR) -> tuple[tuple[float, float], ...]:
@@ -205,7 +209,7 @@ def _rate_run(omega: NDArray, t: NDArray, q_first: NDArray, method: str,
     out[0] = q_first
     rows = out[1:]
     k = kernel.feed(state, omega, t, rows, emit_phi)
-    kernel.close(state, rows[k:], emit_phi)
+    rows[k:] = state[kernel.ROWS:kernel.ROWS + 4 * kernel.close(state, emit_phi)].reshape(-1, 4)
     return rows[:, :3] if emit_phi else out
 
 

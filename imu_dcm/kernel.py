@@ -28,7 +28,12 @@ import numba
 import numpy as np
 
 from imu_dcm.errors import ImuDcmWarning
+from imu_dcm.integrate import GAP_FACTOR
 from imu_dcm.so3 import COS_HALF_SERIES, SERIES_THETA2, SINC_HALF_SERIES
+
+# numba compiles the constants above into the cached code, and its cache is keyed on this file
+# alone: after changing them, touch this file. (The tests compare the compiled exponential with
+# so3's and the streaming gap warning with find_gaps, so a stale cache does not go unnoticed.)
 
 # -- method codes (positions in imu_dcm.integrate.METHODS / DELTA_METHODS) -------------------
 START, END, TRAPEZOID, CONING, MAGNUS4, ROTVEC_SUM = range(6)
@@ -42,7 +47,8 @@ W = 11  # [11:23] the last four rates, oldest first: sample r at [W + 3 r : W + 
 T = 23  # [23:27] their stamps, s
 N = 27  # samples received
 METHOD = 28  # method code
-STATE_SIZE = 29
+ROWS = 29  # [29:37] two rows of four: the attitudes push() commits for one sample
+STATE_SIZE = 37
 
 S0, S1, S2, S3, S4, S5, S6 = SINC_HALF_SERIES
 C0, C1, C2, C3, C4, C5, C6 = COS_HALF_SERIES
@@ -314,12 +320,12 @@ def _recursion(state, omega, t, out, j: int, k: int, method: int, emit_phi: bool
 
 
 @_jit
-def push(state, omega, t: float, gap_factor: float, scratch) -> int:
+def push(state, omega, t: float) -> int:
     """One unchecked sample (``omega`` a float array): check it, then :func:`_push` it.
 
     Returns ``NOT_FINITE`` or ``NOT_INCREASING`` (state unchanged); ``MAYBE_GAP`` when the step
-    exceeds ``gap_factor`` times the shortest of the last three (the caller then applies the gap
-    rule to the buffered stamps); else ``OK``.
+    exceeds ``GAP_FACTOR`` times the shortest of the last three (the caller then applies the
+    gap rule to the buffered stamps); else ``OK``.
     """
     if len(omega) != 3:
         return NOT_FINITE
@@ -336,17 +342,19 @@ def push(state, omega, t: float, gap_factor: float, scratch) -> int:
             shortest = state[T + 3] - state[T + 2]
             for r in range(max(1, 4 - int(n)), 3):
                 shortest = min(shortest, state[T + r + 1] - state[T + r])
-            if h > gap_factor * shortest:
+            if h > GAP_FACTOR * shortest:
                 code = MAYBE_GAP
-    _push(state, x, y, z, t, scratch, 0, False)
+    _push(state, x, y, z, t, state[ROWS:ROWS + 8].reshape((2, 4)), 0, False)
     return code
 
 
 @_jit
-def close(state, out, emit_phi: bool = False) -> int:
+def close(state, emit_phi: bool = False) -> int:
     """End of record: ``magnus4`` commits the steps still open, with a ghost sample after the
     last one (and before the first, for records of 2 or 3 samples) on the polynomial through
-    the last (up to four) samples. Other methods: nothing. Returns the rows written."""
+    the last (up to four) samples. Other methods: nothing. Returns the rows written to
+    ``state[ROWS:ROWS + 8]`` (two rows of four)."""
+    out = state[ROWS:ROWS + 8].reshape((2, 4))
     n = int(state[N])
     if int(state[METHOD]) != MAGNUS4 or n < 2:
         return 0
@@ -371,6 +379,42 @@ def close(state, out, emit_phi: bool = False) -> int:
                 emit_phi)
     return _commit(state, increment(MAGNUS4, b, c, d, ghost_end, h0, h_end, h_end), out, k,
                    emit_phi)
+
+
+# -- input checks ------------------------------------------------------------------------------
+
+@_jit
+def check_record(values, t, t_before: float) -> tuple:
+    """One pass over a record of samples ``values`` (n, 3) and stamps ``t``.
+
+    Returns ``(row, stamp, order, dt_min, dt_max)``: the first row of ``values`` with a
+    non-finite number, the first non-finite stamp, the first index ``i`` with ``t[i]`` not after
+    the stamp before it (``t_before`` for ``i = 0``; ``-inf``: none), each ``-1`` when there is
+    none; and the shortest and longest step (s, the one after ``t_before`` included).
+    """
+    row = -1
+    for i in range(values.shape[0]):
+        if not (math.isfinite(values[i, 0]) and math.isfinite(values[i, 1])
+                and math.isfinite(values[i, 2])):
+            row = i
+            break
+    stamp = -1
+    order = -1
+    dt_min = math.inf
+    dt_max = -math.inf
+    prev = t_before
+    for i in range(len(t)):
+        if not math.isfinite(t[i]):
+            stamp = i
+            break
+        h = t[i] - prev
+        if not h > 0.0 and order < 0:
+            order = i
+        if prev != -math.inf:
+            dt_min = min(dt_min, h)
+            dt_max = max(dt_max, h)
+        prev = t[i]
+    return row, stamp, order, dt_min, dt_max
 
 
 # -- delta angles --------------------------------------------------------------------------------

@@ -43,7 +43,6 @@ from imu_dcm.integrate import (
     _check_method,
     _to_rotation,
     _warn_rotvec_sum,
-    check_samples,
     find_gaps,
     gap_message,
 )
@@ -105,7 +104,6 @@ class DcmIntegrator:
         self._t0_s = t0
         self._state = kernel.new_state(as_quat_xyzw(q0), METHODS.index(method))
         self._q = self._state[kernel.Q:kernel.Q + 4]  # a view: the attitude, updated in place
-        self._scratch = np.empty((2, 4))  # rows the kernel writes for one sample
         self._finished = False
         if method == "rotvec_sum":
             _warn_rotvec_sum()
@@ -188,7 +186,7 @@ class DcmIntegrator:
             raise InputError("Expected no samples after finish(), got one")
         if self._t0_s is not None and self._state[kernel.N] == 0.0:
             self._start_at_t0(w, t)
-        code = kernel.push(self._state, w, t, GAP_FACTOR, self._scratch)
+        code = kernel.push(self._state, w, t)
         if code:
             self._not_ok(code, w, t)
         return self._q.copy()
@@ -208,7 +206,7 @@ class DcmIntegrator:
         if not t > self._t0_s:
             raise InputError(f"Expected the first `t_s` after t0_s = {self._t0_s!r} s, got "
                              f"{t!r} s")
-        code = kernel.push(self._state, w, self._t0_s, GAP_FACTOR, self._scratch)
+        code = kernel.push(self._state, w, self._t0_s)
         if code:
             self._not_ok(code, w, self._t0_s)
 
@@ -233,7 +231,7 @@ class DcmIntegrator:
         No sample may follow. Returns the ``[x, y, z, w]`` attitude, shape (4,).
         """
         if not self._finished:
-            kernel.close(self._state, self._scratch)
+            kernel.close(self._state)
             self._finished = True
         return self._q.copy()
 
@@ -298,17 +296,29 @@ class DcmIntegrator:
         return np.maximum(n - 1, 0)
 
     def _checked(self, w: NDArray, t: NDArray) -> tuple[NDArray, NDArray]:
-        """Check a chunk as one record with the buffered samples before it (finite, increasing
-        across the junction, gaps)."""
+        """Check a chunk as the continuation of the record (finite, increasing across the
+        junction, gaps among the buffered and new stamps); one compiled pass."""
         n = self.n_samples
-        keep = min(n, 3)
-        if keep + len(t) < 2:
-            if not (np.isfinite(w).all() and np.isfinite(t).all()):
-                raise InputError(f"Expected finite `omega_b` and `t_s`, got {w[0].tolist()} at "
-                                 f"t_s = {t[0]} (sample {n})")
-            return np.ascontiguousarray(w), t
-        s = self._state
-        W = np.vstack([s[kernel.W:kernel.W + 12].reshape(4, 3)[4 - keep:], w])
-        T = np.concatenate([s[kernel.T + 4 - keep:kernel.T + 4], t])
-        W, T, _dt = check_samples(W, T)
-        return W[keep:], T[keep:]
+        w = np.ascontiguousarray(w)
+        stamps = self._state[kernel.T + 4 - min(n, 4):kernel.T + 4]  # buffered, oldest first
+        t_before = stamps[-1] if n else -math.inf
+        row, stamp, order, dt_min, dt_max = kernel.check_record(w, t, t_before)
+        if row >= 0:
+            raise InputError(f"Expected finite `omega_b`, got {w[row].tolist()} at row {row} "
+                             f"(sample {n + row})")
+        if stamp >= 0:
+            raise InputError(f"Expected finite `t_s`, got t_s[{stamp}] = {float(t[stamp])} "
+                             f"(sample {n + stamp})")
+        if order >= 0:
+            before = t[order - 1] if order else t_before
+            raise InputError(f"Expected `t_s` strictly increasing, got t_s[{n + order}] = "
+                             f"{float(t[order])!r} s after t_s[{n + order - 1}] = "
+                             f"{float(before)!r} s")
+        old = stamps.tolist()
+        for a, b in zip(old, old[1:]):
+            dt_min = min(dt_min, b - a)
+        if dt_max > GAP_FACTOR * dt_min:  # else no step can exceed GAP_FACTOR x the median
+            gaps = find_gaps(np.concatenate([stamps, t]))
+            if gaps:
+                warnings.warn(gap_message(gaps), GapWarning, stacklevel=3)
+        return w, t
