@@ -48,13 +48,14 @@ T = 23  # [23:27] their stamps, s
 N = 27  # samples received
 METHOD = 28  # method code
 ROWS = 29  # [29:37] two rows of four: the attitudes push() commits for one sample
-STATE_SIZE = 37
+CLOSED = 37  # 1 once close() has run: push() refuses samples
+STATE_SIZE = 38
 
 S0, S1, S2, S3, S4, S5, S6 = SINC_HALF_SERIES
 C0, C1, C2, C3, C4, C5, C6 = COS_HALF_SERIES
 
 # -- codes returned by push --------------------------------------------------------------------
-OK, NOT_FINITE, NOT_INCREASING, MAYBE_GAP = 0, 1, 2, 3
+OK, NOT_FINITE, NOT_INCREASING, MAYBE_GAP, IS_CLOSED = 0, 1, 2, 3, 4
 
 
 
@@ -323,10 +324,13 @@ def _recursion(state, omega, t, out, j: int, k: int, method: int, emit_phi: bool
 def push(state, omega, t: float) -> int:
     """One unchecked sample (``omega`` a float array): check it, then :func:`_push` it.
 
-    Returns ``NOT_FINITE`` or ``NOT_INCREASING`` (state unchanged); ``MAYBE_GAP`` when the step
+    Returns ``IS_CLOSED``, ``NOT_FINITE`` or ``NOT_INCREASING`` (state unchanged);
+    ``MAYBE_GAP`` when the step
     exceeds ``GAP_FACTOR`` times the shortest of the last three (the caller then applies the
     gap rule to the buffered stamps); else ``OK``.
     """
+    if state[CLOSED]:
+        return IS_CLOSED
     if len(omega) != 3:
         return NOT_FINITE
     x, y, z = omega[0], omega[1], omega[2]
@@ -355,6 +359,7 @@ def close(state, emit_phi: bool = False) -> int:
     the last (up to four) samples. Other methods: nothing. Returns the rows written to
     ``state[ROWS:ROWS + 8]`` (two rows of four)."""
     out = state[ROWS:ROWS + 8].reshape((2, 4))
+    state[CLOSED] = 1.0
     n = int(state[N])
     if int(state[METHOD]) != MAGNUS4 or n < 2:
         return 0

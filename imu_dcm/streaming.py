@@ -55,6 +55,7 @@ __all__ = ["DcmIntegrator"]
 
 _ndarray = np.ndarray
 _F64 = np.dtype(np.float64)
+_push = kernel.push
 
 
 class DcmIntegrator:
@@ -105,6 +106,7 @@ class DcmIntegrator:
         self._state = kernel.new_state(as_quat_xyzw(q0), METHODS.index(method))
         self._q = self._state[kernel.Q:kernel.Q + 4]  # a view: the attitude, updated in place
         self._finished = False
+        self._t0_pending = t0 is not None
         if method == "rotvec_sum":
             _warn_rotvec_sum()
 
@@ -173,22 +175,17 @@ class DcmIntegrator:
         GapWarning
             The step is a gap (:func:`imu_dcm.integrate.find_gaps`) among the last four steps.
         """
-        if type(omega_b) is _ndarray and omega_b.dtype is _F64 and omega_b.ndim == 1:
-            w = omega_b
-        else:
-            w = self._as_rate(omega_b, t_s)
-        try:
-            t = float(t_s)
-        except (TypeError, ValueError):
-            raise InputError(f"Expected `omega_b` 3 numbers (rad/s) and `t_s` a number, got "
-                             f"{omega_b!r} and {t_s!r} (sample {self.n_samples})") from None
-        if self._finished:
-            raise InputError("Expected no samples after finish(), got one")
-        if self._t0_s is not None and self._state[kernel.N] == 0.0:
-            self._start_at_t0(w, t)
-        code = kernel.push(self._state, w, t)
+        # The usual sample, a float64 (3,) array and a float stamp, goes straight to the
+        # kernel, which checks it (finite, increasing, not closed) and returns a code.
+        if type(omega_b) is not _ndarray or omega_b.dtype is not _F64 or omega_b.ndim != 1:
+            omega_b = self._as_rate(omega_b, t_s)
+        if type(t_s) is not float:
+            t_s = self._as_stamp(omega_b, t_s)
+        if self._t0_pending:
+            self._start_at_t0(omega_b, t_s)
+        code = _push(self._state, omega_b, t_s)
         if code:
-            self._not_ok(code, w, t)
+            self._not_ok(code, omega_b, t_s)
         return self._q.copy()
 
     def _as_rate(self, omega_b: ArrayLike, t_s: object) -> NDArray[np.float64]:
@@ -201,18 +198,30 @@ class DcmIntegrator:
                              f"{omega_b!r} and {t_s!r} (sample {self.n_samples})")
         return w
 
+    def _as_stamp(self, omega_b: object, t_s: object) -> float:
+        try:
+            return float(t_s)
+        except (TypeError, ValueError):
+            raise InputError(f"Expected `omega_b` 3 numbers (rad/s) and `t_s` a number, got "
+                             f"{omega_b!r} and {t_s!r} (sample {self.n_samples})") from None
+
     def _start_at_t0(self, w: NDArray, t: float) -> None:
         """First sample with ``t0_s``: its rate enters at ``t0_s`` too."""
+        if self._finished:
+            raise InputError("Expected no samples after finish(), got one")
         if not t > self._t0_s:
             raise InputError(f"Expected the first `t_s` after t0_s = {self._t0_s!r} s, got "
                              f"{t!r} s")
-        code = kernel.push(self._state, w, self._t0_s)
+        code = _push(self._state, w, self._t0_s)
         if code:
             self._not_ok(code, w, self._t0_s)
+        self._t0_pending = False
 
     def _not_ok(self, code: int, w: NDArray, t: float) -> None:
         """Raise for a refused sample (the state is unchanged) or warn about a gap."""
         n = self.n_samples
+        if code == kernel.IS_CLOSED:
+            raise InputError("Expected no samples after finish(), got one")
         if code == kernel.NOT_FINITE:
             raise InputError(f"Expected finite `omega_b` and `t_s`, got {w.tolist()} at "
                              f"t_s = {t} (sample {n})")
@@ -273,10 +282,11 @@ class DcmIntegrator:
         w = _as_float_array(w, "omega_b")
         t = _as_float_array(t, "t_s")
         n_user = len(t)
-        if self._t0_s is not None and self._state[kernel.N] == 0.0:
+        if self._t0_pending:
             w = np.vstack([w[:1], w])
             t = np.concatenate([[self._t0_s], t])
         w, t = self._checked(w, t)
+        self._t0_pending = False
         n0 = self.n_samples
         q_before = self._q.copy()
         out = np.empty((len(t) + 1, 4))
