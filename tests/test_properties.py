@@ -133,7 +133,7 @@ def test_product_chain_equals_scipy_chain(m, seed):
 @given(st.integers(3, 200), st.integers(0, 2**32 - 1))
 def test_trapezoid_record_splits_at_any_sample(n, seed):
     # Two-point rules are Markov: integrating a record in two pieces (the second starting from
-    # the first's last attitude) gives the whole record's result.
+    # the first's last attitude) gives the whole record's result, to the rounding of n steps.
     rng = np.random.default_rng(seed)
     t = np.cumsum(rng.uniform(0.5, 1.5, n)) * 1e-2
     w = rng.normal(size=(n, 3))
@@ -141,4 +141,4 @@ def test_trapezoid_record_splits_at_any_sample(n, seed):
     whole = integrate(w, t, [0, 0, 0, 1], "trapezoid").as_quat()
     first = integrate(w[:k + 1], t[:k + 1], [0, 0, 0, 1], "trapezoid").as_quat()
     second = integrate(w[k:], t[k:], first[-1], "trapezoid").as_quat()
-    assert np.all(quat_angle_rad(whole[k:], second) <= 1e-13)
+    assert np.all(quat_angle_rad(whole[k:], second) <= 2 * n * EPS)
