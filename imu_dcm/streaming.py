@@ -27,6 +27,7 @@ Reading the lagged attitude as if it were at ``t_k`` costs one sample of motion 
 
 from __future__ import annotations
 
+import itertools
 import math
 import warnings
 from typing import TYPE_CHECKING
@@ -325,7 +326,7 @@ class DcmIntegrator:
                              f"{float(t[order])!r} s after t_s[{n + order - 1}] = "
                              f"{float(before)!r} s")
         old = stamps.tolist()
-        for a, b in zip(old, old[1:]):
+        for a, b in itertools.pairwise(old):
             dt_min = min(dt_min, b - a)
         if dt_max > GAP_FACTOR * dt_min:  # else no step can exceed GAP_FACTOR x the median
             gaps = find_gaps(np.concatenate([stamps, t]))
