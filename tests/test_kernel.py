@@ -10,13 +10,17 @@ split unevenly (1, 2, 3, 17, 5003 and 10^5 steps).
 from __future__ import annotations
 
 import math
+import os
+import subprocess
+import sys
 import warnings
+from pathlib import Path
 
 import numpy as np
 import pytest
 
-from imu_dcm import ImuDcmWarning, kernel
-from imu_dcm.integrate import METHODS, integrate, integrate_delta
+from imu_dcm import DcmIntegrator, GapWarning, ImuDcmWarning, kernel
+from imu_dcm.integrate import METHODS, find_gaps, gap_message, integrate, integrate_delta
 from imu_dcm.so3 import quat_angle_rad
 
 EPS = np.finfo(float).eps
@@ -160,3 +164,35 @@ def test_state_layout_fits():
     state = kernel.new_state(np.array([0.0, 0.0, 0.0, 1.0]), kernel.MAGNUS4)
     assert state.shape == (kernel.STATE_SIZE,)
     assert kernel.T + 4 <= kernel.N < kernel.METHOD < kernel.STATE_SIZE
+
+
+def test_no_writable_cache_folder_warns_once_and_still_imports(tmp_path):
+    # A read-only install with no user cache either: numba finds no cache folder. The kernel
+    # must still import (compiled per process) and say so once. Simulated by allowing only
+    # numba's NUMBA_CACHE_DIR locator and pointing it below a regular file.
+    blocker = tmp_path / "file"
+    blocker.write_text("")
+    env = {**os.environ, "NUMBA_CACHE_LOCATOR_CLASSES": "UserProvidedCacheLocator",
+           "NUMBA_CACHE_DIR": str(blocker / "cache"),
+           "PYTHONPATH": os.pathsep.join([str(Path(kernel.__file__).parents[1]),
+                                          os.environ.get("PYTHONPATH", "")])}
+    code = "import warnings; warnings.simplefilter('always'); import imu_dcm.kernel"
+    res = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True,
+                         check=False,
+                         timeout=300)
+    assert res.returncode == 0, res.stderr
+    assert res.stderr.count("Expected a writable folder to cache") == 1
+
+
+def test_find_gaps_is_the_one_rule():
+    t = np.concatenate([np.arange(10) * 0.01, 0.5 + np.arange(3) * 0.01])
+    assert find_gaps(t) == ((0.09, pytest.approx(0.41)),)
+    assert find_gaps(t, factor=50.0) == ()
+    assert find_gaps([0.0, 0.01, 1.0]) == ()  # two steps: no median to stand out from
+    # Streaming applies the same rule to the stamps it holds, with the same message.
+    integ = DcmIntegrator([0, 0, 0, 1], "trapezoid")
+    for k in range(10):
+        integ.update(np.zeros(3), t[k])
+    with pytest.warns(GapWarning) as caught:
+        integ.update(np.zeros(3), t[10])
+    assert str(caught[0].message) == gap_message(find_gaps(t[7:11]))
