@@ -1,6 +1,6 @@
 """Rotation maths on SO(3): pure, vectorised functions over leading axes.
 
-Conventions (DESIGN.md §3), the same in every function here:
+Conventions (README, "Frames and units"), the same in every function here:
 
 * Rotations are **active**. ``R_w_b`` maps body coordinates to world, ``v_w = R_w_b @ v_b``;
   its columns are the body axes expressed in world coordinates.
@@ -16,13 +16,20 @@ Arrays have shapes ``(..., 3)`` (vectors), ``(..., 4)`` (quaternions) and ``(...
 
 from __future__ import annotations
 
+import math
+import sys
+from typing import TYPE_CHECKING
+
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
-from scipy.spatial.transform import Rotation
 
 from imu_dcm.errors import InputError
 
+if TYPE_CHECKING:
+    from scipy.spatial.transform import Rotation
+
 __all__ = [
+    "angle_between_deg",
     "as_quat_xyzw",
     "exp_matrix",
     "exp_quat",
@@ -35,9 +42,25 @@ __all__ = [
     "quat_rotate",
 ]
 
-# Below this angle (rad) the Taylor branches are used: their truncation error (theta^6/5040 for
-# sin(x/2)/x) is far below double precision there, and they avoid 0/0.
+# Below this angle (rad) the Taylor branches of exp_matrix and log_quat are used: their truncation
+# error (theta^6/5040 for sin(x)/x) is far below double precision there, and they avoid 0/0.
 _SMALL_ANGLE_RAD = 1e-3
+#: exp(φ) as a quaternion (here and in the compiled kernel): up to this θ² (θ <= 0.5 rad), seven
+#: Taylor terms of sin(θ/2)/θ and cos(θ/2) in θ²; the first terms left out, θ¹⁴/(2¹⁵ 15!) < 2e-21
+#: and θ¹⁴/(4⁷ 14!) < 5e-20, are far below double rounding. Above, sin and cos.
+SERIES_THETA2 = 0.25
+#: Coefficients of θ^(2k), k = 0..6, of sin(θ/2)/θ = Σ (-1)^k θ^(2k) / (2^(2k+1) (2k+1)!).
+SINC_HALF_SERIES = tuple((-1) ** k / (2 ** (2 * k + 1) * math.factorial(2 * k + 1))
+                         for k in range(7))
+#: Coefficients of θ^(2k), k = 0..6, of cos(θ/2) = Σ (-1)^k θ^(2k) / (4^k (2k)!).
+COS_HALF_SERIES = tuple((-1) ** k / (4 ** k * math.factorial(2 * k)) for k in range(7))
+
+
+def _horner(t2: NDArray, coefs: tuple) -> NDArray:
+    acc = np.full_like(t2, coefs[-1])
+    for c in coefs[-2::-1]:
+        acc = acc * t2 + c
+    return acc
 
 
 def hat(v: ArrayLike) -> NDArray[np.float64]:
@@ -62,17 +85,16 @@ def hat(v: ArrayLike) -> NDArray[np.float64]:
 
 def _half_angle_terms(phi: NDArray[np.float64]) -> tuple[NDArray, NDArray]:
     """Return ``sin(θ/2)/θ`` and ``cos(θ/2)`` for ``θ = |phi|``, exact near zero."""
-    theta2 = np.einsum("...i,...i->...", phi, phi)
-    theta = np.sqrt(theta2)
-    small = theta < _SMALL_ANGLE_RAD
-    safe = np.where(small, 1.0, theta)
-    sinc_half = np.where(small, 0.5 - theta2 / 48.0 + theta2 * theta2 / 3840.0,
-                         np.sin(0.5 * safe) / safe)
-    return sinc_half, np.cos(0.5 * theta)
+    t2 = np.einsum("...i,...i->...", phi, phi)
+    small = t2 <= SERIES_THETA2
+    theta = np.sqrt(np.where(small, 1.0, t2))
+    sinc_half = np.where(small, _horner(t2, SINC_HALF_SERIES), np.sin(0.5 * theta) / theta)
+    cos_half = np.where(small, _horner(t2, COS_HALF_SERIES), np.cos(0.5 * theta))
+    return sinc_half, cos_half
 
 
 def exp_quat(phi: ArrayLike) -> NDArray[np.float64]:
-    """Quaternion ``exp(phi)`` of a rotation vector, exact (Taylor branch for tiny angles).
+    """Quaternion ``exp(phi)`` of a rotation vector, exact (series up to 0.5 rad).
 
     Parameters
     ----------
@@ -90,7 +112,7 @@ def exp_quat(phi: ArrayLike) -> NDArray[np.float64]:
 
 
 def exp_matrix(phi: ArrayLike) -> NDArray[np.float64]:
-    """Rotation matrix ``exp([phi×])`` by Rodrigues' formula (the reference document's ``CK``).
+    """Rotation matrix ``exp([phi×])`` by Rodrigues' formula (the Cayley–Klein matrix ``CK``).
 
     ``R = I + sin θ/θ [φ×] + (1 − cos θ)/θ² [φ×]²``, with Taylor branches for tiny ``θ``.
 
@@ -221,6 +243,23 @@ def quat_angle_rad(q_a: ArrayLike, q_b: ArrayLike) -> NDArray[np.float64]:
     return 2.0 * np.arctan2(np.linalg.norm(d[..., :3], axis=-1), np.abs(d[..., 3]))
 
 
+def angle_between_deg(q_a: ArrayLike, q_b: ArrayLike) -> NDArray[np.float64]:
+    """Angle (deg, in ``[0, 180]``) of the rotation between two attitudes, ``q_a* ⊗ q_b``.
+
+    Parameters
+    ----------
+    q_a, q_b : array_like, shape (..., 4)
+        ``[x, y, z, w]`` quaternions (normalised here), broadcast against each other; the sign
+        of either does not matter.
+
+    Returns
+    -------
+    ndarray, shape (...)
+        The attitude error, degrees; accurate for tiny angles (``atan2``, not ``acos``).
+    """
+    return np.degrees(quat_angle_rad(q_a, q_b))
+
+
 def as_quat_xyzw(attitude: ArrayLike | Rotation, name: str = "q0") -> NDArray[np.float64]:
     """Coerce an attitude given as quaternion, matrix or ``Rotation`` to a unit ``[x, y, z, w]``.
 
@@ -241,7 +280,10 @@ def as_quat_xyzw(attitude: ArrayLike | Rotation, name: str = "q0") -> NDArray[np
     InputError
         For any other shape, non-finite values, a zero quaternion or a non-orthonormal matrix.
     """
-    if isinstance(attitude, Rotation):
+    # scipy is imported lazily (it costs ~0.25 s): an object can only be a Rotation once
+    # scipy.spatial.transform has been imported by someone.
+    transform = sys.modules.get("scipy.spatial.transform")
+    if transform is not None and isinstance(attitude, transform.Rotation):
         if not attitude.single:
             raise InputError(f"Expected `{name}` a single Rotation, got {len(attitude)} rotations")
         return attitude.as_quat()
@@ -259,6 +301,8 @@ def as_quat_xyzw(attitude: ArrayLike | Rotation, name: str = "q0") -> NDArray[np
                 f"Expected `{name}` a rotation matrix (R^T R = I, det +1), "
                 f"got max |R^T R - I| = {err:.3g}, det = {np.linalg.det(a):.3g}"
             )
+        from scipy.spatial.transform import Rotation
+
         return Rotation.from_matrix(a).as_quat()
     raise InputError(
         f"Expected `{name}` an [x, y, z, w] quaternion (4,), a 3x3 R_w_b or a Rotation, "

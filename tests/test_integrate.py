@@ -10,9 +10,15 @@ from scipy.spatial.transform import Rotation
 
 from imu_dcm import GapWarning, ImuDcmError, ImuDcmWarning, InputError
 from imu_dcm.integrate import METHODS, increments, integrate, integrate_delta
-from imu_dcm.scan import prefix_product, quat_mul_parts
 
 STEP_METHODS = tuple(m for m in METHODS if m != "rotvec_sum")
+EPS = np.finfo(float).eps
+
+
+def rounding_bound(n_steps: int) -> float:
+    """Bound on the rounding a chain of ``n`` steps collects: two roundings of ~eps per step
+    (the exponential and the product), summed linearly (measured 0.02-0.3 n eps here)."""
+    return 2.0 * n_steps * EPS
 Q0 = Rotation.from_euler("xyz", [0.4, -0.7, 2.0]).as_quat()
 
 
@@ -33,7 +39,7 @@ def uneven_stamps(n: int, dt: float, seed: int) -> np.ndarray:
 def test_constant_axis_rotation_is_exact(method, uneven):
     # A rate constant in the body has the closed form q(t) = q0 ⊗ exp(ω (t - t0)) and every
     # rule integrates it exactly: all increments are parallel, the coning terms vanish, the
-    # magnus4 weights sum to dt. 2000 steps of rounding (~1e-16 each) stay far below 1e-12 rad.
+    # magnus4 weights sum to dt. What is left is 2000 steps of rounding.
     n = 2001
     t = uneven_stamps(n, 1e-3, seed=1) if uneven else np.linspace(0.3, 2.3, n)
     omega = np.array([0.7, -1.1, 2.9])  # rad/s, |ω| = 3.2 rad/s, 6.4 rad in total
@@ -42,7 +48,7 @@ def test_constant_axis_rotation_is_exact(method, uneven):
     with ctx:
         got = integrate(np.tile(omega, (n, 1)), t, Q0, method)
     assert len(got) == n
-    assert angle_rad(got, truth).max() <= 1e-12
+    assert angle_rad(got, truth).max() <= rounding_bound(n - 1)
 
 
 @pytest.mark.parametrize("uneven", [False, True])
@@ -60,13 +66,13 @@ def test_magnus4_exact_for_cubic_rate_about_fixed_axis(uneven):
     angle = c[0] * s + c[1] * s**2 / 2 + c[2] * s**3 / 3 + c[3] * s**4 / 4
     truth = Rotation.from_quat(Q0) * Rotation.from_rotvec(np.outer(angle, axis))
     got = integrate(np.outer(rate, axis), t, Q0, "magnus4")
-    assert angle_rad(got, truth).max() <= 1e-12
+    assert angle_rad(got, truth).max() <= rounding_bound(n - 1)
     trap = integrate(np.outer(rate, axis), t, Q0, "trapezoid")
     assert angle_rad(trap, truth).max() > 1e-9
 
 
 def coning_truth(t: np.ndarray, beta: float, om: float) -> tuple[Rotation, np.ndarray]:
-    """Pure coning (DESIGN.md §5): R(t) = Rz(Ωt) Rx(β) Rz(−Ωt) and its body rate."""
+    """Pure coning: R(t) = Rz(Ωt) Rx(β) Rz(−Ωt) and its body rate."""
     rz = Rotation.from_rotvec(np.outer(om * t, [0.0, 0.0, 1.0]))
     r = rz * Rotation.from_rotvec([beta, 0.0, 0.0]) * rz.inv()
     omega_b = om * np.column_stack([-np.sin(beta) * np.sin(om * t),
@@ -118,9 +124,10 @@ def test_90_deg_about_z_is_scalar_last(method):
     t = np.linspace(0.0, 1.0, 101)
     got = integrate(np.tile([0.0, 0.0, np.pi / 2], (101, 1)), t, [0, 0, 0, 1], method)
     np.testing.assert_allclose(got.as_quat()[-1], [0.0, 0.0, np.sqrt(0.5), np.sqrt(0.5)],
-                               atol=1e-14)
+                               atol=rounding_bound(100))
     # Columns of R_w_b are the body axes in world: body x now points along world y.
-    np.testing.assert_allclose(got.as_matrix()[-1][:, 0], [0.0, 1.0, 0.0], atol=1e-14)
+    np.testing.assert_allclose(got.as_matrix()[-1][:, 0], [0.0, 1.0, 0.0],
+                               atol=rounding_bound(100))
 
 
 def test_increments_multiply_on_the_right_like_scipy():
@@ -136,7 +143,7 @@ def test_increments_multiply_on_the_right_like_scipy():
         r = r * Rotation.from_rotvec(omega[i] * (t[i + 1] - t[i]))
         ref.append(r)
     ref = Rotation.concatenate(ref)
-    assert angle_rad(integrate(omega, t, Q0, "start"), ref).max() <= 1e-12
+    assert angle_rad(integrate(omega, t, Q0, "start"), ref).max() <= rounding_bound(n - 1)
     # The left product (world-frame increments) differs by O(1): the check can fail.
     left = Rotation.from_rotvec(omega[0] * (t[1] - t[0])) * Rotation.from_quat(Q0)
     assert angle_rad(left, ref[1]) > 1e-3
@@ -153,7 +160,10 @@ def test_large_steps_use_the_exact_exponential():
     for i in range(n - 1):
         r = r * Rotation.from_rotvec(omega[i] * 0.5)
         ref.append(r)
-    assert angle_rad(integrate(omega, t, Q0, "start"), Rotation.concatenate(ref)).max() <= 1e-12
+    # A step of θ rad rounds to ~θ eps: the bound sums max(1, θ) per step.
+    theta = np.linalg.norm(omega[:-1] * 0.5, axis=1)
+    bound = 2.0 * EPS * np.maximum(1.0, theta).sum()
+    assert angle_rad(integrate(omega, t, Q0, "start"), Rotation.concatenate(ref)).max() <= bound
 
 
 def test_q0_forms_agree():
@@ -178,29 +188,12 @@ def test_magnus4_interior_weights_are_classic():
     np.testing.assert_allclose(phi[1:10], want, rtol=0, atol=1e-15)
 
 
-# -- the blocked scan -------------------------------------------------------------------------
-
-@pytest.mark.parametrize("m", [1, 7, 64, 65, 1000, 5003, 9001])
-@pytest.mark.parametrize("block", [2, 8, 32])
-def test_blocked_scan_equals_sequential_loop(m, block):
-    # The blocked prefix product re-associates the product; in exact arithmetic it is the same.
-    # The sequential loop over Python floats is the reference; 5000 steps of ~1e-16 rounding in
-    # either order stay below 1e-14 per component.
-    rng = np.random.default_rng(m)
-    dq = Rotation.from_rotvec(rng.normal(scale=0.1, size=(m, 3))).as_quat()
-    q = tuple(Q0)
-    seq = [q]
-    for d in dq.tolist():
-        q = quat_mul_parts(q, d)
-        seq.append(q)
-    got = prefix_product(Q0, dq, block=block, normalize=False)
-    assert np.abs(got - np.array(seq)).max() <= 1e-14
-
+# -- orthonormality ---------------------------------------------------------------------------
 
 def test_orthonormal_after_ten_million_random_steps():
-    # 10^7 random steps (10 chained batches of 10^6, to keep memory near 1 GB at most):
-    # quaternions are normalised once at the end of each scan, so R = R(q) stays orthonormal to
-    # rounding (~1e-15) instead of drifting with the number of products.
+    # 10^7 random steps (10 chained batches of 10^6, to keep memory near 1 GB at most): the
+    # kernel pulls |q| back to 1 after every product, so R = R(q) stays orthonormal to rounding
+    # (a few eps) instead of drifting with the number of products (n eps = 2e-9 here).
     rng = np.random.default_rng(5)
     q = Q0
     worst = 0.0
@@ -233,7 +226,7 @@ def coning_delta(tb: np.ndarray, beta: float, om: float) -> np.ndarray:
 def test_delta_angle_methods_converge_on_coning(method, order):
     # Delta angles are exact integrals, so the error is only the coning (non-commutativity)
     # error: first order without correction, higher with. The drift per step is the cone-axis
-    # drift β²Ω y^(order+1)/... (DESIGN.md §5); orders measured from 120 to 960 intervals.
+    # drift β²Ω y^(order+1)/...; orders measured from 120 to 960 intervals.
     beta, om = 0.3, 2.0 * np.pi * 2.0
     errs = []
     for n in (120, 240, 480, 960):
