@@ -236,6 +236,10 @@ class _Pipeline:
             stamps = np.array([w[0] for w in waiting], dtype=np.int64)
             covered = stamps <= self.truth_max_ns
             if not covered.any():
+                if stamps[-1] - stamps[0] >= 10 * self.truth_wait_ns:  # the truth stalled
+                    self._start(0, np.array([0.0, 0.0, 0.0, 1.0]),
+                                f"the truth stopped {(stamps[-1] - self.truth_max_ns) * 1e-9:.3f} s "
+                                f"before the gyro: starting from the identity attitude")
                 return
             q = _slerp(tt, tq, stamps[covered])
             ok = np.flatnonzero(np.all(np.isfinite(q), axis=1))
