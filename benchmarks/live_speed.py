@@ -77,13 +77,16 @@ def free_port(kind=socket.SOCK_DGRAM) -> int:
         return int(s.getsockname()[1])
 
 
+VIEW = {"mode": "save"}  # --rerun: "save" (an .rrd per run) or "off"
+
+
 def run_live(source: str, feed, tmp: Path, window_ms: float = 50.0, stdin: bool = False,
              view_ms: float = 50.0) -> dict:
     """Start the live command on ``source``, call ``feed(proc)``, wait for its summary."""
     summary = tmp / f"summary_{time.monotonic_ns()}.json"
     rrd = tmp / f"view_{time.monotonic_ns()}.rrd"
     cmd = [sys.executable, "-m", "imu_dcm.live", source, "--bias", "none", "--rerun",
-           f"save:{rrd}", "--summary-json", str(summary), "--no-status", "--quiet",
+           f"save:{rrd}" if VIEW["mode"] == "save" else "off", "--summary-json", str(summary), "--no-status", "--quiet",
            "--idle-stop", "1.5", "--reorder-window", str(window_ms), "--view-interval",
            str(view_ms)]
     env = {**os.environ, "PYTHONPATH": str(REPO)}
@@ -235,9 +238,14 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--latency-duration", type=float, default=20.0, help="s (default 20)")
     p.add_argument("--replay-rounds", type=int, default=3)
     p.add_argument("--sources", default="ws,udp,stdin")
+    p.add_argument("--rerun", choices=("save", "off"), default="save",
+                   help="the live view: streamed into an .rrd (default) or off (for the share "
+                   "of the view in the CPU time)")
+    p.add_argument("--no-latency", action="store_true", help="skip the latency rows")
     p.add_argument("--json", type=Path, help="also write the rows as JSON")
     args = p.parse_args(argv)
     limit_threads_env()
+    VIEW["mode"] = args.rerun
     import platform
 
     import numpy as np
@@ -247,13 +255,14 @@ def main(argv: list[str] | None = None) -> int:
         tmp = Path(d)
         for kind in args.sources.split(","):
             rows.append(sustain(kind, args.rate, args.duration, tmp))
-        for window, view in ((50.0, 50.0), (0.0, 10.0)):
+        for window, view in () if args.no_latency else ((50.0, 50.0), (0.0, 10.0)):
             for kind in ("ws", "udp"):
                 rows.append(sustain(kind, args.latency_rate, args.latency_duration, tmp, window,
                                     view))
         rep = replay_cpu(args.rate, args.duration, tmp, args.replay_rounds)
     print(f"imu_dcm live speed: CPython {platform.python_version()}, numpy {np.__version__}, "
-          f"{platform.machine()}; live as a child process, view --rerun save:FILE.rrd, "
+          f"{platform.machine()}; live as a child process, view "
+          f"{'--rerun save:FILE.rrd' if args.rerun == 'save' else '--rerun off'}, "
           f"bias none, magnus4")
     print()
     head = (f"{'source':<7}{'rate Hz':>9}{'dur s':>7}{'window':>8}{'view':>7}{'sent':>9}"

@@ -4,7 +4,8 @@
 stamp order:
 
 1. puts it in order within the reorder window (:mod:`imu_dcm.live.reorder`); later samples,
-   duplicate stamps and non-finite rates are dropped and counted;
+   duplicate stamps and non-finite rates are dropped and counted; when the source has been
+   quiet for longer than the window (wall time), the held samples are released;
 2. reports a gap when the step exceeds ``GAP_FACTOR`` times the median of the recent steps
    (replay's rule, on the steps seen so far);
 3. subtracts the bias (``auto``: :class:`imu_dcm.live.rest.CausalRestBias`; ``none``; a vector);
@@ -285,6 +286,14 @@ class Pipeline:
             row = (tn, te, tuple(q.tolist()))
             self.e_rows.append(row)
             self.q_last, self.t_last_ns = q, tn
+
+    def release_held(self) -> None:
+        """Release every sample held by the reorder window (the source has gone quiet for
+        longer than the window: nothing can arrive that would still be put in order)."""
+        out: list = []
+        self.reorder.flush(out)
+        if out:
+            self._process(out)
 
     def finish(self) -> None:
         out: list = []

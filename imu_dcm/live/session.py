@@ -235,6 +235,7 @@ def _loop(src: Source, pipe: Pipeline, stop: threading.Event, gyro_scale: float,
             next_flush = time.monotonic() + interval_s
             next_status = time.monotonic() + status_every
             idle_since = time.monotonic()
+            window_s = pipe.reorder.window_ns * 1e-9
             while not stop.is_set():
                 timeout = max(0.0, next_flush - time.monotonic())
                 try:
@@ -279,6 +280,8 @@ def _loop(src: Source, pipe: Pipeline, stop: threading.Event, gyro_scale: float,
                 if status and now >= next_status:
                     _status(pipe, src, tty)
                     next_status = now + status_every
+                if len(pipe.reorder) and now - idle_since > window_s:
+                    pipe.release_held()  # the source went quiet: a sample waits <= the window
                 if idle_stop_s is not None and now - idle_since > idle_stop_s:
                     reason[0] = f"no sample for {idle_stop_s:g} s"
                     break
