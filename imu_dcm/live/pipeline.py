@@ -194,7 +194,16 @@ class Pipeline:
                     s = sorted(self._steps)
                     self._median = s[len(s) // 2]
             self._prev_t_s = t_s
-            b = rest.update(w, t_s) if rest is not None else fixed
+            if rest is not None:
+                n_seg = len(rest.segments)
+                b = rest.update(w, t_s)
+                if len(rest.segments) > n_seg:
+                    seg = rest.segments[-1]
+                    v = seg["bias_rad_s"]
+                    self.say(f"bias from rest {seg['start_s']:.3f}-{seg['end_s']:.3f} s: "
+                             f"({v[0]:+.5f}, {v[1]:+.5f}, {v[2]:+.5f}) rad/s")
+            else:
+                b = fixed
             wc = (w[0] - b[0], w[1] - b[1], w[2] - b[2])
             self.n += 1
             self.g_t.append(t_s)
