@@ -13,8 +13,9 @@ What is measured (the live command runs as a child process, as a user runs it; t
   reason) and samples lost on the way (sent - integrated - dropped).
 * **Latency** receive -> rerun log call of each sample, p50 / p99, from the live summary
   (``perf_counter`` at arrival to the ``send_columns`` batch holding it): at ``--rate`` with the
-  default 50 ms reorder window, and at ``--latency-rate`` with the window at 50 ms and at 0.
-  A sample is held until the window has passed in source time, so the window adds to latency.
+  default 50 ms reorder window and 50 ms view batches, and at ``--latency-rate`` with those
+  defaults and with ``--reorder-window 0 --view-interval 10``. A sample is held until the window
+  has passed in source time and then waits for the next batch: both add to the latency.
 * **CPU** of the live process while receiving (``process_time``, all threads), per 1000
   samples/s, against ``imu_dcm.replay.replay`` on the same samples written as a bag (median of
   ``--replay-rounds`` runs, CPU time): replay CPU s per 1000 samples.
@@ -76,13 +77,18 @@ def free_port(kind=socket.SOCK_DGRAM) -> int:
         return int(s.getsockname()[1])
 
 
-def run_live(source: str, feed, tmp: Path, window_ms: float = 50.0, stdin: bool = False) -> dict:
+VIEW = {"mode": "save"}  # --rerun: "save" (an .rrd per run) or "off"
+
+
+def run_live(source: str, feed, tmp: Path, window_ms: float = 50.0, stdin: bool = False,
+             view_ms: float = 50.0) -> dict:
     """Start the live command on ``source``, call ``feed(proc)``, wait for its summary."""
     summary = tmp / f"summary_{time.monotonic_ns()}.json"
     rrd = tmp / f"view_{time.monotonic_ns()}.rrd"
     cmd = [sys.executable, "-m", "imu_dcm.live", source, "--bias", "none", "--rerun",
-           f"save:{rrd}", "--summary-json", str(summary), "--no-status", "--quiet",
-           "--idle-stop", "1.5", "--reorder-window", str(window_ms)]
+           f"save:{rrd}" if VIEW["mode"] == "save" else "off", "--summary-json", str(summary), "--no-status", "--quiet",
+           "--idle-stop", "1.5", "--reorder-window", str(window_ms), "--view-interval",
+           str(view_ms)]
     env = {**os.environ, "PYTHONPATH": str(REPO)}
     errf = tmp / "live_stderr.txt"
     with open(errf, "wb") as err:
@@ -174,23 +180,28 @@ def feed_ws(t_ns, w, rate_hz: float, server_box: dict):
     return feed
 
 
-def sustain(kind: str, rate_hz: float, duration_s: float, tmp: Path, window_ms: float = 50.0):
+def sustain(kind: str, rate_hz: float, duration_s: float, tmp: Path, window_ms: float = 50.0,
+            view_ms: float = 50.0):
     t_ns, w = coning(rate_hz, duration_s)
     if kind == "udp":
         port = free_port()
-        s = run_live(f"udp://127.0.0.1:{port}", feed_udp(t_ns, w, rate_hz, port), tmp, window_ms)
+        s = run_live(f"udp://127.0.0.1:{port}", feed_udp(t_ns, w, rate_hz, port), tmp, window_ms,
+                     view_ms=view_ms)
     elif kind == "stdin":
-        s = run_live("-", feed_stdin(t_ns, w, rate_hz), tmp, window_ms, stdin=True)
+        s = run_live("-", feed_stdin(t_ns, w, rate_hz), tmp, window_ms, stdin=True,
+                     view_ms=view_ms)
     else:
         box: dict = {}
         feed = feed_ws(t_ns, w, rate_hz, box)
         try:
-            s = run_live(f"ws://127.0.0.1:{box['server'].port}", feed, tmp, window_ms)
+            s = run_live(f"ws://127.0.0.1:{box['server'].port}", feed, tmp, window_ms,
+                         view_ms=view_ms)
         finally:
             box["server"].stop()
     dropped = (s["dropped_nonfinite"] + s["dropped_duplicate"] + s["dropped_backward"]
                + s["malformed"])
     return {"source": kind, "rate_hz": rate_hz, "duration_s": duration_s, "window_ms": window_ms,
+            "view_ms": view_ms,
             "sent": len(t_ns), "integrated": s["samples"], "dropped": dropped,
             "lost": len(t_ns) - s["samples"] - dropped, "cpu_s": s["cpu_s"],
             "cpu_per_khz": s["cpu_s"] / duration_s / (rate_hz / 1000.0),
@@ -227,9 +238,14 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--latency-duration", type=float, default=20.0, help="s (default 20)")
     p.add_argument("--replay-rounds", type=int, default=3)
     p.add_argument("--sources", default="ws,udp,stdin")
+    p.add_argument("--rerun", choices=("save", "off"), default="save",
+                   help="the live view: streamed into an .rrd (default) or off (for the share "
+                   "of the view in the CPU time)")
+    p.add_argument("--no-latency", action="store_true", help="skip the latency rows")
     p.add_argument("--json", type=Path, help="also write the rows as JSON")
     args = p.parse_args(argv)
     limit_threads_env()
+    VIEW["mode"] = args.rerun
     import platform
 
     import numpy as np
@@ -239,19 +255,24 @@ def main(argv: list[str] | None = None) -> int:
         tmp = Path(d)
         for kind in args.sources.split(","):
             rows.append(sustain(kind, args.rate, args.duration, tmp))
-        for window in (50.0, 0.0):
-            rows.append(sustain("udp", args.latency_rate, args.latency_duration, tmp, window))
+        for window, view in () if args.no_latency else ((50.0, 50.0), (0.0, 10.0)):
+            for kind in ("ws", "udp"):
+                rows.append(sustain(kind, args.latency_rate, args.latency_duration, tmp, window,
+                                    view))
         rep = replay_cpu(args.rate, args.duration, tmp, args.replay_rounds)
     print(f"imu_dcm live speed: CPython {platform.python_version()}, numpy {np.__version__}, "
-          f"{platform.machine()}; live as a child process, view --rerun save:FILE.rrd, "
+          f"{platform.machine()}; live as a child process, view "
+          f"{'--rerun save:FILE.rrd' if args.rerun == 'save' else '--rerun off'}, "
           f"bias none, magnus4")
     print()
-    head = (f"{'source':<7}{'rate Hz':>9}{'dur s':>7}{'window':>8}{'sent':>9}{'integrated':>11}"
+    head = (f"{'source':<7}{'rate Hz':>9}{'dur s':>7}{'window':>8}{'view':>7}{'sent':>9}"
+            f"{'integrated':>11}"
             f"{'dropped':>9}{'lost':>6}{'CPU s':>8}{'CPU/kHz':>9}{'p50 ms':>8}{'p99 ms':>8}")
     print(head)
     for r in rows:
         print(f"{r['source']:<7}{r['rate_hz']:>9.0f}{r['duration_s']:>7.0f}"
-              f"{r['window_ms']:>6.0f}ms{r['sent']:>9}{r['integrated']:>11}{r['dropped']:>9}"
+              f"{r['window_ms']:>6.0f}ms{r['view_ms']:>5.0f}ms{r['sent']:>9}{r['integrated']:>11}"
+              f"{r['dropped']:>9}"
               f"{r['lost']:>6}{r['cpu_s']:>8.2f}{100 * r['cpu_per_khz']:>8.1f}%"
               f"{r['p50_ms']:>8.1f}{r['p99_ms']:>8.1f}")
     print()

@@ -128,3 +128,25 @@ def test_record_after_sigterm_to_the_command(trial, tmp_path):
     imu_t, imu_w, tr_t, tr_q = decode_slice(msgs)
     assert s["samples"] == len(imu_t)
     check_bag(bag, imu_t, imu_w, tr_t, tr_q, s)
+
+
+def test_record_closed_cleanly_when_the_source_is_lost(trial, tmp_path):
+    """The server goes away for good: after give_up_s the run stops by itself, says why, and
+    the bag holds everything received."""
+    msgs = trial["messages"][:400]
+    pub = Publisher(trial["schemas"])
+    bag = tmp_path / "lost_bag"
+    try:
+        th, said, out, _ = start_live(f"ws://127.0.0.1:{pub.port}", bias="none", record=bag,
+                                      give_up_s=1.0)
+        pub.wait_subscribed()
+        pub.publish(msgs, speed=10.0)
+        time.sleep(0.3)
+    finally:
+        pub.stop()
+    th.join(60)
+    assert not th.is_alive(), said
+    s = out["result"].summary
+    assert s["stopped"].startswith("source lost"), s["stopped"]
+    imu_t, imu_w, tr_t, tr_q = decode_slice(msgs)
+    check_bag(bag, imu_t, imu_w, tr_t, tr_q, s)

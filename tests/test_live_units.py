@@ -173,3 +173,20 @@ def test_cli_bad_input_one_line_exit_2(args, needle):
     assert r.returncode == 2
     err = r.stderr.decode().strip().splitlines()
     assert len(err) == 1 and needle in err[0] and err[0].startswith("imu-dcm-live: error:")
+
+
+def test_stdin_bias_auto_reports_replays_rest_segments(tmp_path):
+    w, t = rest_motion_log()
+    lines = "".join(f"{s!r},{a!r},{b!r},{c!r}\n" for s, (a, b, c) in
+                    zip(t.tolist(), w.tolist())).encode()
+    out = tmp_path / "s.json"
+    r = run_cli(["-", "--rerun", "off", "--no-status", "--summary-json", str(out)], lines)
+    assert r.returncode == 0, r.stderr.decode()
+    s = json.loads(out.read_text())
+    batch = estimate_bias(w, t, "auto")
+    assert s["bias_mode"] == "auto" and len(s["bias_segments"]) == len(batch.segments)
+    for seg_live, seg in zip(s["bias_segments"][:2], batch.segments[:2]):
+        n = seg.stop - seg.start
+        assert seg_live["bias_rad_s"] == pytest.approx(seg.bias_rad_s,
+                                                       abs=4 * n * np.finfo(float).eps * 0.01)
+    assert "bias       auto: 3 rest segments" in r.stdout.decode()

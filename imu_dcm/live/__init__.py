@@ -5,6 +5,7 @@ Foxglove WebSocket server such as ``foxglove_bridge``), ``udp://HOST:PORT`` or `
 with line samples. See :mod:`imu_dcm.live.pipeline` for what happens to each sample.
 """
 
-from imu_dcm.live.pipeline import LiveResult, run
+from imu_dcm.live.pipeline import LiveResult
+from imu_dcm.live.session import run
 
 __all__ = ["LiveResult", "run"]

@@ -149,7 +149,7 @@ def write_json(path: Path, data: dict) -> None:
 
 def _main(argv: list[str]) -> int:
     args = build_parser().parse_args(argv)
-    from imu_dcm.live.pipeline import run
+    from imu_dcm.live.session import run
     from imu_dcm.live.sources import parse_source
     from imu_dcm.live.view import check_mode
 

@@ -57,6 +57,19 @@ def _free_port() -> int:
         return int(s.getsockname()[1])
 
 
+def _spawn_detached(cmd: list[str]) -> int:
+    """Start the viewer in its own session, output discarded; it outlives the run (the user
+    closes it). Returns its pid."""
+    env = {**os.environ, "TELEMETRY_ENABLED": "false"}
+    if hasattr(os, "posix_spawn"):
+        actions = [(os.POSIX_SPAWN_OPEN, fd, os.devnull, os.O_RDWR, 0) for fd in (0, 1, 2)]
+        return os.posix_spawn(cmd[0], cmd, env, file_actions=actions, setsid=True)
+    proc = subprocess.Popen(cmd, stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL,
+                            stderr=subprocess.DEVNULL, env=env)  # pragma: no cover - Windows
+    proc.returncode = 0  # left running on purpose: no "still running" warning when dropped
+    return proc.pid
+
+
 def _axes(q: NDArray) -> NDArray:
     """Body axes in world coordinates, (n, 3 axes, 3)."""
     return quat_rotate(q[:, None, :], np.eye(3)[None, :, :])
@@ -92,25 +105,21 @@ class LiveView:
                 raise InputError("Expected a display (DISPLAY or WAYLAND_DISPLAY) for rerun mode "
                                  "'spawn', got none; use 'serve' or 'save:PATH.rrd'")
             port = _free_port()
-            proc = subprocess.Popen(
-                [str(viz.rerun_binary()), "--bind", "127.0.0.1", "--port", str(port),
-                 "--expect-data-soon"], stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL,
-                stderr=subprocess.DEVNULL, start_new_session=True,
-                env={**os.environ, "TELEMETRY_ENABLED": "false"})  # fmt: skip
-            self.viewer_pid = proc.pid
-            self._proc = proc
+            pid = _spawn_detached([str(viz.rerun_binary()), "--bind", "127.0.0.1", "--port",
+                                   str(port), "--expect-data-soon"])
+            self.viewer_pid = pid
             deadline = time.monotonic() + 20.0
             while True:
                 try:
                     with socket.create_connection(("127.0.0.1", port), timeout=0.2):
                         break
                 except OSError:
-                    if proc.poll() is not None or time.monotonic() > deadline:
+                    if time.monotonic() > deadline:
                         raise InputError(f"Expected the rerun viewer on 127.0.0.1:{port}, got "
-                                         f"none (exit code {proc.poll()})") from None
+                                         f"none within 20 s (pid {pid})") from None
                     time.sleep(0.05)
             rec.connect_grpc(f"rerun+http://127.0.0.1:{port}/proxy", default_blueprint=blueprint)
-            say(f"rerun: viewer started (pid {proc.pid}, listening on 127.0.0.1:{port})")
+            say(f"rerun: viewer started (pid {pid}, listening on 127.0.0.1:{port})")
         elif mode == "serve":
             self.served = viz.serve_rrd(None)
             rec.connect_grpc(self.served.grpc_url, default_blueprint=blueprint)
