@@ -168,10 +168,11 @@ def find_gaps(t_s: ArrayLike, factor: float = GAP_FACTOR) -> tuple[tuple[float, 
 
 
 def gap_message(gaps: tuple[tuple[float, float], ...], factor: float = GAP_FACTOR) -> str:
-    """The one-line description of :func:`find_gaps`' result (used by every caller)."""
-    t0, length = gaps[0]
-    return (f"Found {len(gaps)} gap(s) longer than {factor:g}x the median step; the first after "
-            f"t_s = {t0:.6f} s lasts {length:.6g} s")
+    """The one-line description of :func:`find_gaps`' result (used by every caller): how many,
+    and the first five as ``start s (+length s)``."""
+    listed = ", ".join(f"{t0:.3f} s (+{length:.3f} s)" for t0, length in gaps[:5])
+    more = f" and {len(gaps) - 5} more" if len(gaps) > 5 else ""
+    return f"{len(gaps)} gap(s) longer than {factor:g}x the median step at {listed}{more}"
 
 
 def _warn_gaps(t: NDArray, stacklevel: int = 3) -> None:

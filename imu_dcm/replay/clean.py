@@ -32,10 +32,10 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from imu_dcm.errors import GapWarning, ImuDcmWarning
-from imu_dcm.integrate import GAP_FACTOR
-from imu_dcm.so3 import quat_conjugate, quat_multiply
+from imu_dcm.integrate import find_gaps, gap_message
+from imu_dcm.so3 import angle_between_deg
 
-__all__ = ["MAX_RATE_RAD_S", "SPIKE_RATIO", "CleanedImu", "clean_imu", "find_gaps"]
+__all__ = ["MAX_RATE_RAD_S", "SPIKE_RATIO", "CleanedImu", "clean_imu"]
 
 #: Full scale of common MEMS gyros (±2000 °/s): rates above it suggest a deg/s log.
 FULL_SCALE_RAD_S = 2000.0 * np.pi / 180.0
@@ -80,17 +80,6 @@ class CleanedImu:
     def dropped_nonincreasing(self) -> int:
         """Samples dropped for their stamp: wild, duplicate or conflicting."""
         return self.dropped_wild_stamp + self.dropped_duplicate + self.dropped_stamp_conflict
-
-
-def find_gaps(
-    t_ns: NDArray[np.int64], factor: float = GAP_FACTOR
-) -> tuple[tuple[float, float], ...]:
-    """Steps longer than ``factor`` median steps: ((start s since t_ns[0], length s), ...)."""
-    if len(t_ns) <= 2:
-        return ()
-    dt = np.diff(t_ns)
-    big = np.flatnonzero(dt > factor * np.median(dt))
-    return tuple((float((t_ns[i] - t_ns[0]) * 1e-9), float(dt[i] * 1e-9)) for i in big)
 
 
 def _wild_stamps(t: NDArray[np.int64]) -> NDArray[np.bool_]:
@@ -243,17 +232,9 @@ def clean_imu(t_ns: ArrayLike, omega_b: ArrayLike, topic: str = "IMU") -> Cleane
         )
     if n_sorted:
         warn(f"sorted {n_sorted} samples that were out of file order by their stamps")
-    gaps = find_gaps(t)
+    gaps = find_gaps((t - t[0]) * 1e-9) if len(t) else ()
     if gaps:
-        dt = np.diff(t)
-        listed = ", ".join(f"{a:.3f} s (+{d:.3f} s)" for a, d in gaps[:5])
-        more = f" and {len(gaps) - 5} more" if len(gaps) > 5 else ""
-        step_ms = np.median(dt) * 1e-6
-        warn(
-            f"{len(gaps)} gaps over {GAP_FACTOR:g}x the median step ({step_ms:.3f} ms) "
-            f"at {listed}{more}",
-            GapWarning,
-        )
+        warn(gap_message(gaps), GapWarning)
     return CleanedImu(
         t,
         w,
@@ -276,8 +257,7 @@ def _deg_evidence(omega_b: NDArray, t_s: NDArray, q_truth: NDArray) -> str | Non
     pair = ok[:-1] & ok[1:]
     if pair.sum() > 10:
         i = np.flatnonzero(pair)
-        rel = quat_multiply(quat_conjugate(q_truth[i]), q_truth[i + 1])
-        ang = 2 * np.arctan2(np.linalg.norm(rel[:, :3], axis=1), np.abs(rel[:, 3]))
+        ang = np.radians(angle_between_deg(q_truth[i], q_truth[i + 1]))
         truth_rate = ang / np.diff(t_s)[i]
         gyro_rate = np.linalg.norm(0.5 * (omega_b[i] + omega_b[i + 1]), axis=1)
         moving = truth_rate > 0.2  # rad/s: motion well above noise

@@ -25,7 +25,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from imu_dcm.errors import LogError
-from imu_dcm.so3 import exp_quat, log_quat, quat_conjugate, quat_multiply
+from imu_dcm.so3 import angle_between_deg, exp_quat, log_quat, quat_conjugate, quat_multiply
 
 __all__ = [
     "MIN_CORRELATION",
@@ -269,8 +269,7 @@ def check_truth(
     g = np.linalg.norm(np.diff(angle, axis=0), axis=1) / np.diff(te)
     # truth: rotation angle over each grid step
     q = slerp_truth(tt, q_w_b, edges)
-    rel = quat_multiply(quat_conjugate(q[:-1]), q[1:])
-    h = 2 * np.arctan2(np.linalg.norm(rel[:, :3], axis=1), np.abs(rel[:, 3])) / np.diff(te)
+    h = np.radians(angle_between_deg(q[:-1], q[1:])) / np.diff(te)
     valid = np.isfinite(h)
     if valid.sum() < 20:
         return TruthCheck(False, True)
