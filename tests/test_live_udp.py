@@ -110,8 +110,8 @@ def test_udp_lines_equal_replay_with_bad_lines_counted(trial, tmp_path):
     q_replay, rep = replay_of(msgs, tmp_path, "magnus4", "none")
     assert res.t_ns == int(rep.t_ns[-1])
     assert angle_deg(res.q_w_b, q_replay) <= TOL_DEG
-    assert s["truth_samples_used"] == rep.summary["truth_samples_used"]
-    assert s["rms_error_deg"] == pytest.approx(rep.summary["rms_error_deg"], rel=1e-9)
+    assert s["truth_samples_used"] == rep.summary.to_dict()["truth_samples_used"]
+    assert s["rms_error_deg"] == pytest.approx(rep.summary.to_dict()["rms_error_deg"], rel=1e-9)
 
 
 def test_udp_deg_per_s_and_fixed_bias_equal_replay(trial, tmp_path):

@@ -173,9 +173,9 @@ def test_ws_live_equals_replay_on_the_same_messages(trial, tmp_path, method):
     assert angle_deg(res.q_w_b, q_replay) <= TOL_DEG
     assert s["initial_quat_xyzw"] == pytest.approx(rep.q_truth[rep.start_index], abs=1e-15)
     # the live error statistics are those of replay (same estimates, same truth)
-    assert s["truth_samples_used"] == rep.summary["truth_samples_used"]
-    assert s["rms_error_deg"] == pytest.approx(rep.summary["rms_error_deg"], rel=1e-9)
-    assert s["max_error_deg"] == pytest.approx(rep.summary["max_error_deg"], rel=1e-9)
+    assert s["truth_samples_used"] == rep.summary.to_dict()["truth_samples_used"]
+    assert s["rms_error_deg"] == pytest.approx(rep.summary.to_dict()["rms_error_deg"], rel=1e-9)
+    assert s["max_error_deg"] == pytest.approx(rep.summary.to_dict()["max_error_deg"], rel=1e-9)
     assert any("subscribed to /imu/data" in line for line in said)
 
 
@@ -220,5 +220,5 @@ def test_ws_server_killed_and_restarted_reconnects_reports_the_gap(trial, tmp_pa
     with pytest.warns(GapWarning, match="1 gaps"):  # replay sees the same gap
         q_replay, rep = replay_of(published, tmp_path, "magnus4", "none")
     assert [(g["t_s"], g["length_s"]) for g in s["gaps"]] == pytest.approx(
-        [(g["t_s"], g["length_s"]) for g in rep.summary["gaps"]], rel=1e-12)
+        [(g["t_s"], g["length_s"]) for g in rep.summary.to_dict()["gaps"]], rel=1e-12)
     assert angle_deg(out["result"].q_w_b, q_replay) <= TOL_DEG
