@@ -31,12 +31,6 @@ _STATIONARY_REL_TOL = 1e-11
 _PRIOR_SCALE = 100.0
 # Search range of the angular-acceleration scale for the likelihood fit, rad/s².
 _ACCEL_SEARCH_RAD_S2 = (1e-4, 1e6)
-# Spectral noise estimate: segment length (samples) and the band, as fractions of the Nyquist
-# frequency, where the white noise of a gyro lies above the motion of a rigid body.
-_SPECTRUM_SEGMENT = 256
-_SPECTRUM_BAND = (0.5, 0.95)
-# A spectral estimate below this many float64 roundings of the rates is no noise at all.
-_ROUNDOFF_FACTOR = 100.0
 # Bias allan-deviation minimum to bias instability (IEEE Std 952: flicker floor 0.664 B).
 _FLICKER_FACTOR = 0.664
 

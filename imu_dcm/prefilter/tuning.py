@@ -22,9 +22,6 @@ from imu_dcm.prefilter.config import (
     _ACCEL_SEARCH_RAD_S2,
     _FLICKER_FACTOR,
     _MIN_REST_SAMPLES,
-    _ROUNDOFF_FACTOR,
-    _SPECTRUM_BAND,
-    _SPECTRUM_SEGMENT,
     NoiseEstimate,
     SpectralNoiseEstimate,
     _check_rates,
@@ -77,6 +74,12 @@ def estimate_noise_from_rest(
     )
 
 
+# Spectral noise estimate: segment length (samples) and the band, as fractions of the Nyquist
+# frequency, where the white noise of a gyro lies above the motion of a rigid body.
+_SPECTRUM_SEGMENT = 256
+_SPECTRUM_BAND = (0.5, 0.95)
+# A spectral estimate below this many float64 roundings of the rates is no noise at all.
+_ROUNDOFF_FACTOR = 100.0
 # Differences taken before the periodogram: they flatten the motion's low-frequency power, so
 # that the window's leakage from it stays far below the noise in the upper band.
 _DIFFERENCE_ORDER = 2
