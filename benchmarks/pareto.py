@@ -133,7 +133,7 @@ class Case:
 
 
 _ORDER = {"start": "1", "end": "1", "trapezoid": "2", "coning": "2", "magnus4": "4",
-          "rotvec_sum": "none (eq. 13)"}
+          "rotvec_sum": "none (Xiaoliang 2014, eq. 13)"}
 
 
 def _batch(method: str) -> Callable:

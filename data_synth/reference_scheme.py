@@ -280,10 +280,10 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(prog="python -m data_synth.reference_scheme",
                                  description=__doc__.splitlines()[0])
     ap.add_argument("--rate", type=float, nargs="+", default=[2500.0, 2000.0],
-                    help="step rates, Hz (default: 2500 = Figure 11, 2000 = the listed code)")
+                    help="step rates, Hz (default: 2500 = its Figure 11, 2000 = its listed code)")
     ap.add_argument("--duration", type=float, default=1.2, help="length, s (default 1.2)")
     args = ap.parse_args(argv)
-    print("heavy top, cusp, Figure 11 parameters; max over the run, degrees")
+    print("heavy top, cusp, Xiaoliang (2014) Figure 11 parameters; max over the run, degrees")
     print("coupled scheme (RK4 + CK(w(t_i+1) h)):  axis vs Euler-angle | axis vs exact | "
           "attitude vs exact")
     print("strapdown on exact samples (same CK):    axis vs exact | attitude vs exact")

@@ -20,7 +20,7 @@ EPS = np.finfo(float).eps  # 2.2e-16: unit round-off bounds below are multiples 
 
 @pytest.fixture(scope="module")
 def fig11():
-    """Figure 11 conditions: 1.2 s at the caption's 2500 Hz."""
+    """Xiaoliang's (2014) Figure 11 conditions: 1.2 s at the caption's 2500 Hz."""
     return compare_reference(2500.0, 1.2)
 
 
