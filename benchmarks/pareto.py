@@ -5,10 +5,10 @@ a ground-truth trajectory (``data_synth``) from the true initial attitude; its f
 the **max total attitude error** against the truth over all samples (deg), and its cost is the
 **median time per gyro sample** (ns) over interleaved rounds after a warm-up, on one BLAS
 thread (:mod:`benchmarks.timing`): wall time by default, or the process's CPU time
-(``clock="cpu"``) on a shared machine. Speed ratios are against the reference document's loop
-(``reference_loop``) measured in the same rounds.
+(``clock="cpu"``) on a shared machine. Speed ratios are against the plain DCM loop of
+Xiaoliang (2014) (``reference_loop``) measured in the same rounds.
 
-Scenes (:data:`SCENES`): the reference document's heavy top (cusp motion) over 1.2 s and 10 s,
+Scenes (:data:`SCENES`): the heavy top of Xiaoliang (2014) (cusp motion) over 1.2 s and 10 s,
 pure coning (β = 10°, 5 Hz, closed form), and the free box near its intermediate axis
 (ω0 = (0.05, 3, 0.05) rad/s, one flip in 10 s).
 
@@ -16,7 +16,7 @@ Methods (:func:`method_cases`): ``imu_dcm.integrate`` with every method (batch),
 ``imu_dcm.DcmIntegrator`` per sample (``update``) and in blocks (``update_many``) when present,
 and the peers of :mod:`benchmarks.peers`.
 
-Conventions (DESIGN.md §3): quaternions ``q_w_b`` Hamilton ``[x, y, z, w]``, body to world;
+Conventions (docs/design.md): quaternions ``q_w_b`` Hamilton ``[x, y, z, w]``, body to world;
 ``omega_b`` body rate in body axes, rad/s; times ``t_s`` in seconds.
 """
 
@@ -133,7 +133,7 @@ class Case:
 
 
 _ORDER = {"start": "1", "end": "1", "trapezoid": "2", "coning": "2", "magnus4": "4",
-          "rotvec_sum": "none (eq. 13)"}
+          "rotvec_sum": "none (Xiaoliang 2014, eq. 13)"}
 
 
 def _batch(method: str) -> Callable:
@@ -148,7 +148,7 @@ def _batch(method: str) -> Callable:
 
 
 def _integrator_class():
-    """``imu_dcm.DcmIntegrator`` (or from ``imu_dcm.streaming`` if not re-exported); None if absent."""
+    """``imu_dcm.DcmIntegrator`` (or from ``imu_dcm.streaming`` if not re-exported), else None."""
     cls = getattr(imu_dcm, "DcmIntegrator", None)
     if cls is None:
         try:
@@ -193,7 +193,7 @@ def _streaming_per_sample(method: str) -> Callable:
     def fn(omega_b, t_s, q0):
         integ = _integrator_class()(q0, method)
         update = integ.update
-        out = [update(w, t) for w, t in zip(omega_b, t_s.tolist())]
+        out = [update(w, t) for w, t in zip(omega_b, t_s.tolist(), strict=False)]
         return _place(np.asarray(out), _report_index(method, len(t_s)), integ.finish(),
                       len(t_s))
 
@@ -477,7 +477,7 @@ def plot_pareto(meas: Sequence[Measurement], cases: Sequence[Case], path: str | 
     scenes = list(dict.fromkeys(m.scene for m in meas))
     titles = {s.key: s.title for s in SCENES}
     fig, axes = plt.subplots(2, 2, figsize=(15, 10.5))
-    for ax, key in zip(axes.flat, scenes):
+    for ax, key in zip(axes.flat, scenes, strict=False):
         for c in cases:
             if c.name in skip:
                 continue
@@ -525,7 +525,7 @@ def plot_convergence(conv: dict[str, dict[str, NDArray]], path: str | Path) -> N
 
     titles = {s.key: s.title for s in SCENES}
     fig, axes = plt.subplots(2, 2, figsize=(14, 10))
-    for ax, (key, res) in zip(axes.flat, conv.items()):
+    for ax, (key, res) in zip(axes.flat, conv.items(), strict=False):
         dt = res["dt_s"]
         for m, e in res.items():
             if m == "dt_s":

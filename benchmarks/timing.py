@@ -1,6 +1,7 @@
 """Timing helpers for the benchmarks: one BLAS thread, warm-up, medians of interleaved rounds.
 
-How a figure is measured here (STYLE.md, "Benchmarks"):
+How a figure is measured here (the project's rule: speed is measured in benchmarks, never
+asserted in tests; ratios against a reference measured in the same run):
 
 * **One BLAS/OpenMP thread.** Call :func:`limit_threads_env` *before* numpy is imported (it sets
   the usual environment variables), then run the measurement inside :func:`single_thread` (a

@@ -1,6 +1,6 @@
 """data_synth: rigid-body ground truth (Euler's equations), a synthetic gyro and a ROS 2 log writer.
 
-Conventions (DESIGN.md §3): ``q_w_b`` Hamilton ``[x, y, z, w]`` (scalar last), body to world;
+Conventions (docs/design.md): ``q_w_b`` Hamilton ``[x, y, z, w]`` (scalar last), body to world;
 ``omega_b`` the body rate relative to the world in body axes, rad/s; ``t_s`` seconds; world ENU,
 z up, gravity ``(0, 0, −g)``.
 
@@ -11,7 +11,7 @@ z up, gravity ``(0, 0, −g)``.
 
 Modules: ``rigid_body`` (Euler's equations + attitude, DOP853 1e-12, dense), ``scenes`` (heavy
 top, free box, coning), ``analytic`` (closed forms used as independent checks), ``gyro`` (the
-synthetic gyro), ``reference_scheme`` (the reference document's coupled RK4 + DCM top and its
+synthetic gyro), ``reference_scheme`` (the coupled RK4 + DCM top of Xiaoliang (2014) and its
 comparison), ``checks`` (measured exactness of the truth), ``cli`` (``python -m data_synth``).
 """
 

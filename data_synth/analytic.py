@@ -1,7 +1,7 @@
 """Closed-form motions: pure coning, the torque-free symmetric top, the torque-free box (Jacobi
 elliptic functions) and the heavy symmetric top (elliptic cos θ(t), steady precession).
 
-Conventions (DESIGN.md §3): ``q_w_b`` Hamilton ``[x, y, z, w]``, body to world; ``omega_b`` body
+Conventions (docs/design.md): ``q_w_b`` Hamilton ``[x, y, z, w]``, body to world; ``omega_b`` body
 rate relative to the world in body axes, rad/s; ``t_s`` seconds; world ENU, z up. Euler angles of
 the top are z-x-z, ``R_w_b = Rz(φ) Rx(θ) Rz(ψ)`` (φ precession, θ nutation from the vertical,
 ψ spin), so ``R_w_b(0) = Rx(tilt)`` is ``φ = ψ = 0, θ = tilt`` and (Goldstein 4-125)
@@ -74,7 +74,8 @@ def coning_rates(t_s: ArrayLike, half_angle_rad: float, freq_hz: float) -> NDArr
 
 
 class ConingTrajectory(Trajectory):
-    """Pure coning with closed-form attitude, rate and delta angles (DESIGN.md §5).
+    """Pure coning with closed-form attitude, rate and delta angles (docs/design.md, "The rotation
+    vector of a step": coning).
 
     Parameters
     ----------
@@ -229,12 +230,14 @@ def _omega_core(t: NDArray, e: dict[str, float]) -> NDArray[np.float64]:
 
 def box_omega_elliptic(t_s: ArrayLike, inertia_kg_m2: ArrayLike,
                        omega0_b: ArrayLike) -> NDArray[np.float64]:
-    """Body rate of a torque-free asymmetric body by Jacobi elliptic functions (DESIGN.md §5).
+    """Body rate of a torque-free asymmetric body by Jacobi elliptic functions (docs/design.md,
+    "Ground truth").
 
     For ``I1 < I2 < I3`` and ``M² > 2 E I2`` (the body turns on the major-axis side of the
     separatrix): ``ω = (s1 A1 cn, s2 A2 sn, s3 A3 dn)(λ t + τ0 | m)``, with the amplitudes,
-    ``λ`` and ``m`` of DESIGN.md §5 and the phase ``τ0`` and signs fitted to ``omega0_b``. For
-    ``M² < 2 E I2`` the same solution in the relabelled frame ``(z, −y, x)`` (``dn`` on x).
+    ``λ`` and ``m`` of docs/design.md ("Ground truth") and the phase ``τ0`` and signs fitted to
+    ``omega0_b``. For ``M² < 2 E I2`` the same solution in the relabelled frame ``(z, −y, x)``
+    (``dn`` on x).
 
     Parameters
     ----------

@@ -107,8 +107,8 @@ def _add_common(p: argparse.ArgumentParser, scheme: bool) -> None:
                    help="refuse a job estimated to run longer, minutes (default 30)")
     if scheme:
         g.add_argument("--scheme", choices=("exact", "reference"), default="exact",
-                       help="truth: exact (DOP853 1e-12, default) or the reference document's "
-                            "coupled RK4 + DCM scheme stepped at --rate")
+                       help="truth: exact (DOP853 1e-12, default) or the coupled RK4 + DCM "
+                            "scheme of Xiaoliang (2014) stepped at --rate")
     m = p.add_argument_group("gyro model (each term off unless given)")
     m.add_argument("--gyro-output", choices=OUTPUTS, default="rate",
                    help="rate: omega_b(t_k) (default); delta-angle: exact integral over each "
@@ -135,7 +135,7 @@ def build_parser() -> argparse.ArgumentParser:
                         "synthetic gyro and write a ROS 2 bag (MCAP) with its ground truth.")
     sub = ap.add_subparsers(dest="scene", required=True, metavar="SCENE",
                             parser_class=OneLineArgumentParser)
-    top = sub.add_parser("heavy-top", help="the reference document's heavy symmetric top")
+    top = sub.add_parser("heavy-top", help="the heavy symmetric top of Xiaoliang (2014)")
     top.add_argument("--motion", choices=MOTIONS, default="cusp",
                      help="initial precession rate: cusp (0), wavy (+1/2 slow steady), looping "
                           "(-1/2 slow steady), steady, sleeping (tilt 0)")
@@ -146,7 +146,7 @@ def build_parser() -> argparse.ArgumentParser:
     top.add_argument("--spin-hz", type=_positive, metavar="HZ",
                      help="spin omega_3 / 2 pi, Hz (default 20)")
     _add_common(top, scheme=True)
-    fb = sub.add_parser("free-body", help="the second reference document's torque-free box")
+    fb = sub.add_parser("free-body", help="the torque-free box of Shuijing (n.d.)")
     fb.add_argument("--case", choices=FREE_BODY_CASES, default="diagonal",
                     help="omega_b(0) = (1,1,1)/sqrt(3) rad/s (diagonal) or (0.05, 3, 0.05) "
                          "(intermediate: flips)")

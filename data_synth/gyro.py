@@ -1,4 +1,4 @@
-"""A synthetic strapdown gyro sampling a trajectory's truth (DESIGN.md §6).
+"""A synthetic strapdown gyro sampling a trajectory's truth (docs/design.md, "Ground truth").
 
 Conventions: rates ``omega_b`` in rad/s in body axes (relative to the world), angles in rad,
 ``t_s`` seconds from the start of the trajectory, ``t_ns`` int64 nanoseconds since the Unix
@@ -273,7 +273,8 @@ def synthetic_gyro(
             total = np.round(counts)
             values = np.diff(np.concatenate([np.zeros((1, 3)), total]), axis=0) * step
     if not np.all(np.isfinite(values)):
-        raise InputError(f"Expected a finite gyro output, got {np.count_nonzero(~np.isfinite(values))}"
+        raise InputError("Expected a finite gyro output, got "
+                         f"{np.count_nonzero(~np.isfinite(values))}"
                          f" non-finite values from the model {model.as_dict()}")
     return GyroRecord(t_s=t_s, t_ns=t_ns, values=values, output=output, rate_hz=float(rate_hz),
                       epoch_ns=int(epoch_ns), model=model, seed=int(seed), bias_b_rad_s=bias)

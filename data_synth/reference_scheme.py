@@ -1,7 +1,8 @@
-"""The reference document's own heavy-top simulator, as it describes it, and its comparison.
+"""The heavy-top simulator of Xiaoliang (2014), as it describes it, and its comparison.
 
-The reference document (``000_*.txt``, "RGCoordTrans") simulates the top with a *coupled*
-fixed-step scheme, its "five lines" (eq. 19):
+The heavy-top derivation of Xiaoliang (2014) (its program ``RGCoordTrans``; docs/design.md,
+"Source derivations") simulates the top with a *coupled* fixed-step scheme, its "five lines"
+(eq. 19):
 
 1. ``τ_b`` = gravity torque in body axes from the tracked DCM ``R_i`` (``Tau_body_temp``),
 2. ``ω_{i+1}`` = one classical RK4 step of Euler's equations (its eq. 17) from ``ω_i`` with that
@@ -19,7 +20,7 @@ I = 0.002, I_s = 0.0008, g = 9.8, 20 Hz spin, 54.57° tilt; sampling 2500 Hz in 
 against the exact truth (:func:`data_synth.scenes.heavy_top`), in symmetry axis and in full
 attitude. Run ``python -m data_synth.reference_scheme`` to print both.
 
-Conventions: ``R_w_b`` maps body to world (columns = body axes in world, the document's
+Conventions: ``R_w_b`` maps body to world (columns = body axes in world, Xiaoliang's
 ``cordvec``); ``omega_b`` body rate in body axes, rad/s; world z up.
 """
 
@@ -57,7 +58,7 @@ __all__ = [
 
 @dataclass(frozen=True)
 class ReferenceRun:
-    """Output of the reference document's coupled scheme.
+    """Output of the coupled scheme of Xiaoliang (2014).
 
     Attributes
     ----------
@@ -80,7 +81,7 @@ class ReferenceRun:
 def reference_top(duration_s: float, rate_hz: float, motion: str = "cusp", *,
                   branch: str = "slow", params: HeavyTopParams | None = None,
                   tilt_deg: float | None = None, spin_hz: float | None = None) -> ReferenceRun:
-    """Run the reference document's coupled RK4 + DCM scheme for the heavy top.
+    """Run the coupled RK4 + DCM scheme of Xiaoliang (2014) for the heavy top.
 
     Parameters
     ----------
@@ -111,12 +112,12 @@ def reference_top(duration_s: float, rate_hz: float, motion: str = "cusp", *,
     mg, arm = p.mass_kg * p.g_m_s2, p.arm_m
 
     def f(w1: float, w2: float, w3: float, t1: float, t2: float, t3: float):
-        # Euler's equations (the document's eq. 17) with a fixed body torque.
+        # Euler's equations (Xiaoliang 2014, eq. 17) with a fixed body torque.
         return k1 * w2 * w3 + t1 / i1, k2 * w3 * w1 + t2 / i2, k3 * w1 * w2 + t3 / i3
 
     R = np.empty((n + 1, 3, 3))
     W = np.empty((n + 1, 3))
-    R[0] = Rotation.from_quat(q0).as_matrix()  # Rx(tilt), the document's CK(Ω0)
+    R[0] = Rotation.from_quat(q0).as_matrix()  # Rx(tilt), Xiaoliang's CK(Ω0)
     W[0] = omega0
     w1, w2, w3 = W[0]
     track = R[0].copy()
@@ -140,12 +141,12 @@ def reference_top(duration_s: float, rate_hz: float, motion: str = "cusp", *,
 
 def euler_angle_top(t_s: ArrayLike, motion: str = "cusp", *, branch: str = "slow",
                     params: HeavyTopParams | None = None) -> NDArray[np.float64]:
-    """Symmetry axis of the heavy top from its Euler-angle equations (the document's check).
+    """Symmetry axis of the heavy top from its Euler-angle equations (Xiaoliang's check).
 
     z-x-z angles, ``R_w_b = Rz(φ) Rx(θ) Rz(ψ)``; with the first integrals ``ω3`` and
     ``L_z = I1 φ̇ sin²θ + I3 ω3 cos θ``: ``φ̇ = (L_z − I3 ω3 cos θ)/(I1 sin²θ)``,
     ``I1 θ̈ = I1 φ̇² sin θ cos θ − I3 ω3 φ̇ sin θ + M g l sin θ``. Solved by DOP853 at 1e-12;
-    singular when ``sin θ = 0`` (the divergence the document mentions).
+    singular when ``sin θ = 0`` (the divergence Xiaoliang (2014) mentions).
 
     Returns
     -------
@@ -192,7 +193,7 @@ class ReferenceComparison:
     euler_vs_truth_axis_deg : float
         Euler-angle solution against the exact truth (two independent exact solutions agree).
     strapdown_axis_deg, strapdown_attitude_deg : float
-        Pure strapdown with the document's update ``R_{i+1} = R_i CK(ω(t_{i+1}) h)`` fed the
+        Pure strapdown with Xiaoliang's update ``R_{i+1} = R_i CK(ω(t_{i+1}) h)`` fed the
         exact rates ``ω(t_i)`` (what a gyro would give it), against the exact truth: symmetry
         axis and full attitude.
     """
@@ -215,7 +216,7 @@ def _axis_angle_deg(a: NDArray, b: NDArray) -> NDArray:
 
 def compare_reference(rate_hz: float = 2500.0, duration_s: float = 1.2,
                       motion: str = "cusp") -> ReferenceComparison:
-    """Reproduce the document's comparison and measure the scheme against the exact truth."""
+    """Reproduce Xiaoliang's (2014) comparison and measure the scheme against the exact truth."""
     run = reference_top(duration_s, rate_hz, motion)
     axis_ref = run.R_w_b[:, :, 2]
     axis_euler = euler_angle_top(run.t_s, motion)
@@ -279,10 +280,10 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(prog="python -m data_synth.reference_scheme",
                                  description=__doc__.splitlines()[0])
     ap.add_argument("--rate", type=float, nargs="+", default=[2500.0, 2000.0],
-                    help="step rates, Hz (default: 2500 = Figure 11, 2000 = the listed code)")
+                    help="step rates, Hz (default: 2500 = its Figure 11, 2000 = its listed code)")
     ap.add_argument("--duration", type=float, default=1.2, help="length, s (default 1.2)")
     args = ap.parse_args(argv)
-    print("heavy top, cusp, Figure 11 parameters; max over the run, degrees")
+    print("heavy top, cusp, Xiaoliang (2014) Figure 11 parameters; max over the run, degrees")
     print("coupled scheme (RK4 + CK(w(t_i+1) h)):  axis vs Euler-angle | axis vs exact | "
           "attitude vs exact")
     print("strapdown on exact samples (same CK):    axis vs exact | attitude vs exact")

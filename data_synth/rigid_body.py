@@ -1,6 +1,6 @@
 """Rigid-body ground truth: Euler's equations coupled with the attitude, solved to 1e-12.
 
-Conventions (DESIGN.md §3): ``q_w_b`` is the Hamilton quaternion ``[x, y, z, w]`` (scalar last)
+Conventions (docs/design.md): ``q_w_b`` is the Hamilton quaternion ``[x, y, z, w]`` (scalar last)
 that maps body coordinates to world (active), so ``R_w_b`` has the body axes as its columns;
 ``omega_b`` is the angular velocity of the body relative to the world in body axes, rad/s;
 time ``t_s`` in seconds from the start of the trajectory.

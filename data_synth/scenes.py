@@ -1,10 +1,10 @@
 """The scenes of the simulator (also the CLI's sub-commands): heavy top, free body, coning.
 
-Conventions (DESIGN.md §3): ``q_w_b`` Hamilton ``[x, y, z, w]`` body to world; ``omega_b`` body
+Conventions (docs/design.md): ``q_w_b`` Hamilton ``[x, y, z, w]`` body to world; ``omega_b`` body
 rate relative to the world in body axes, rad/s; world ENU with gravity ``(0, 0, −g)``.
 
-* ``heavy-top``: the reference document's top (DESIGN.md §5): pivot at the world origin,
-  symmetry axis = body z, centre of mass at ``arm_m · z_b``, ``R_w_b(0) = Rx(+tilt)``,
+* ``heavy-top``: the top of Xiaoliang (2014) (docs/design.md, "Ground truth"): pivot at the
+  world origin, symmetry axis = body z, centre of mass at ``arm_m · z_b``, ``R_w_b(0) = Rx(+tilt)``,
   ``ω3 = 2π spin_hz`` (conserved), ``θ̇(0) = 0``. The motion is set by the initial precession
   rate ``φ̇(0)``, i.e. ``omega_b(0) = (0, φ̇(0) sin θ0, ω3)`` (Goldstein 4-125 with ψ = 0):
 
@@ -19,7 +19,7 @@ rate relative to the world in body axes, rad/s; world ENU with gravity ``(0, 0, 
   ==========  ===============================================================================
 
   with ``φ̇_slow, φ̇_fast`` the roots of ``I1 cosθ0 φ̇² − I3 ω3 φ̇ + M g l = 0``.
-* ``free-body``: the second reference document's box (edges 2.0 × 1.5 × 1.0 m along body x, y, z,
+* ``free-body``: the box of Shuijing (n.d.) (edges 2.0 × 1.5 × 1.0 m along body x, y, z,
   1 kg, about its centre of mass), ``R_w_b(0) = I``; ``case="diagonal"``:
   ``omega_b(0) = (1, 1, 1)/√3`` rad/s; ``case="intermediate"``: ``(0.05, 3, 0.05)`` rad/s, which
   flips about the intermediate axis (Dzhanibekov).
@@ -67,7 +67,7 @@ WAVY_LOOPING_FRACTION = 0.5
 
 @dataclass(frozen=True)
 class HeavyTopParams:
-    """Physical parameters of the heavy symmetric top (the reference document's Figure 11).
+    """Physical parameters of the heavy symmetric top (Xiaoliang 2014, Figure 11).
 
     Attributes
     ----------
@@ -213,7 +213,7 @@ def heavy_top(
     branch : {"slow", "fast"}
         Root used for ``motion="steady"``.
     params : HeavyTopParams, optional
-        Physical parameters; default the reference document's.
+        Physical parameters; default those of Xiaoliang (2014), Figure 11.
     tilt_deg, spin_hz : float, optional
         Override ``params``. A non-zero tilt is refused for ``sleeping``.
     rtol, atol : float
@@ -252,7 +252,7 @@ def free_body(
     atol: float = 1e-12,
     max_steps: float | None = None,
 ) -> SolvedTrajectory:
-    """Simulate the torque-free box of the second reference document.
+    """Simulate the torque-free box of Shuijing (n.d.).
 
     Parameters
     ----------
@@ -294,7 +294,7 @@ def free_body(
 
 def coning(duration_s: float, half_angle_deg: float = 10.0,
            freq_hz: float = 5.0) -> ConingTrajectory:
-    """Pure coning, ``R_w_b(t) = Rz(Ωt) Rx(β) Rz(−Ωt)`` (closed form, DESIGN.md §5)."""
+    """Pure coning, ``R_w_b(t) = Rz(Ωt) Rx(β) Rz(−Ωt)`` (closed form; docs/design.md, coning)."""
     return ConingTrajectory(duration_s, half_angle_deg=half_angle_deg, freq_hz=freq_hz)
 
 

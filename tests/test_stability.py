@@ -46,7 +46,7 @@ def test_gimbal_lock_euler_angles_fail_at_the_pole_where_the_dcm_keeps_its_order
     assert abs(_order(far[0], far[1], 2.0) - 2.0) < 0.1
 
 
-# 2. Rotation-vector sum (eq. 13) ---------------------------------------------------------------
+# 2. Rotation-vector sum (Xiaoliang 2014, eq. 13) -----------------------------------------------
 
 
 def test_rotvec_sum_error_is_the_analytic_coning_drift_and_zero_for_a_fixed_axis():
@@ -57,7 +57,7 @@ def test_rotvec_sum_error_is_the_analytic_coning_drift_and_zero_for_a_fixed_axis
     # up to roundoff of 5000 terms (1e-9 deg is ~1e-11 rad).
     np.testing.assert_allclose(res.rotvec_sum_err_deg[whole], res.predicted_deg[whole], atol=1e-9)
     assert res.rotvec_sum_err_deg[-1] > 100.0  # 0.134 Ω t = 4.2 rad at 5 s: wrong by ~119°
-    # Commuting motion: eq. 13 is exact (roundoff only).
+    # Commuting motion: Xiaoliang's eq. 13 is exact (roundoff only).
     assert res.fixed_axis_err_deg < 1e-9
     # magnus4 on the same samples: 4th-order coning drift ~ β² Ω y⁴ / 960 per second with
     # y = Ω dt = 6.3e-3 gives ~1e-11 rad; 1e-6 deg (1.7e-8 rad) leaves room for roundoff.

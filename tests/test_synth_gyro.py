@@ -44,7 +44,7 @@ def test_white_noise_density_by_allan_deviation(still, output):
     # ~1%, so the 10% bound is met with a wide margin on every axis.
     est = noise_density_from_allan(rec.rate_rad_s(), rate_hz)
     assert np.all(np.abs(est / density - 1.0) < 0.10)
-    # Per-sample σ = N √rate (DESIGN.md §6), checked directly as well.
+    # Per-sample σ = N √rate (docs/design.md, "Ground truth"), checked directly as well.
     assert np.all(np.abs(rec.rate_rad_s().std(axis=0) / (density * math.sqrt(rate_hz)) - 1) < 0.02)
 
 

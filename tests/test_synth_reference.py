@@ -1,5 +1,5 @@
-"""The reference document's own coupled scheme: its comparison reproduced, its distance from the
-exact truth measured, and its order of accuracy."""
+"""The coupled scheme of Xiaoliang (2014): its comparison reproduced, its distance from the exact
+truth measured, and its order of accuracy."""
 
 from __future__ import annotations
 
@@ -20,12 +20,12 @@ EPS = np.finfo(float).eps  # 2.2e-16: unit round-off bounds below are multiples 
 
 @pytest.fixture(scope="module")
 def fig11():
-    """Figure 11 conditions: 1.2 s at the caption's 2500 Hz."""
+    """Xiaoliang's (2014) Figure 11 conditions: 1.2 s at the caption's 2500 Hz."""
     return compare_reference(2500.0, 1.2)
 
 
 def test_reproduces_the_documents_check(fig11):
-    # The document reports its symmetry axis within 0.1° of the Euler-angle solution at every
+    # Xiaoliang (2014) reports its symmetry axis within 0.1° of the Euler-angle solution at every
     # instant over 1.2 s; our implementation of its scheme must meet the same claim.
     assert fig11.axis_vs_euler_deg < 0.1
 
@@ -34,7 +34,7 @@ def test_euler_angle_solution_agrees_with_the_exact_truth(fig11):
     # Two independent exact solutions (z-x-z Euler angles vs coupled quaternion ODE, both
     # DOP853 at 1e-12): measured 4e-10°; anything above 1e-7° would be a modelling error.
     assert fig11.euler_vs_truth_axis_deg < 1e-7
-    # Hence the document's comparison is, to 1e-7°, a comparison against the exact truth.
+    # Hence Xiaoliang's comparison is, to 1e-7°, a comparison against the exact truth.
     assert abs(fig11.axis_vs_truth_deg - fig11.axis_vs_euler_deg) < 1e-7
 
 
@@ -45,7 +45,8 @@ def test_coupled_scheme_and_strapdown_are_first_order():
     assert 1.7 < lo.axis_vs_truth_deg / hi.axis_vs_truth_deg < 2.3
     assert 1.7 < lo.strapdown_attitude_deg / hi.strapdown_attitude_deg < 2.3
     # Fed exact samples, the same update as a strapdown integrator is much worse than the
-    # coupled simulator at the same rate (DESIGN.md §5: ~3° vs < 0.1° at 2000 Hz).
+    # coupled simulator at the same rate (docs/design.md, "The source derivation's own scheme":
+    # ~3° vs < 0.1° at 2000 Hz).
     assert hi.strapdown_attitude_deg > 10 * hi.attitude_vs_truth_deg
 
 

@@ -49,7 +49,8 @@ def test_heavy_top_conserves_energy_lz_l3(motion):
     traj = data_synth.simulate("heavy-top", duration_s=2.0, motion=motion)
     q, w = traj.at(np.linspace(0.0, 2.0, 4001))
     energy, lz, l3 = _top_invariants(q, w)
-    # DESIGN.md §5 bound: relative drift <= 1e-10 (measured ~1e-12 at rtol = atol = 1e-12).
+    # Bound of docs/design.md, "Ground truth": relative drift <= 1e-10 (measured ~1e-12 at
+    # rtol = atol = 1e-12).
     assert np.ptp(energy) / abs(energy[0]) <= 1e-10
     scale_l = np.linalg.norm(I_TOP * w[0])  # |L|: L_z may be near zero, so scale by |L|
     assert np.ptp(lz) / scale_l <= 1e-10
@@ -71,7 +72,8 @@ def test_resolving_tighter_moves_attitude_below_1e_8_deg():
     t = np.linspace(0.0, 1.2, 2401)
     q12, _ = data_synth.heavy_top(1.2, "cusp").at(t)
     q13, _ = data_synth.heavy_top(1.2, "cusp", rtol=1e-13, atol=1e-13).at(t)
-    # The truth is converged: a 10x tighter tolerance changes it by < 1e-8 deg (DESIGN.md §5).
+    # The truth is converged: a 10x tighter tolerance changes it by < 1e-8 deg
+    # (docs/design.md, "Ground truth").
     assert _deg(q12, q13).max() < 1e-8
 
 
