@@ -108,17 +108,40 @@ class _Decoder:
             except LogError as exc:
                 self.error = exc
         if self.error is not None:
-            return Columns(p.order, p.log_time, np.zeros(len(p), bool), {}, {}, self.error)
+            z = np.zeros(0, np.int64)
+            return Columns(z, z, {}, {}, self.error, len(p))
         defs, root, want = self.ready
         out, good = decode(self.conn, defs, root, p, want)
-        frames = {}
+        frames = {"type": root}
         if good.any() and (self.role == "truth" or self.path in ("", "vec3")):
             # only a bare message has its header's frame_id at a fixed place
             frames["frame_id"] = _frame_id(self.conn, p, good)
             if root in ("nav_msgs/msg/Odometry", "geometry_msgs/msg/TransformStamped"):
                 frames["child_frame_id"] = _child_frame(self.conn, p, good)
-        frames["type"] = root
-        return Columns(p.order, p.log_time, good, out, frames)
+        every = bool(good.all())
+
+        def rows(a: NDArray) -> NDArray:
+            return a if every else a[good]
+
+        if self.role == "truth":
+            q = TRUTH_TYPES[root]
+            fields = {"t_ns": rows(_stamp(out, "header.")),
+                      "q": rows(np.stack([out[f"{q}.{a}"] for a in "xyzw"], axis=1))}
+        elif self.path == "vec3":
+            fields = {"t_ns": rows(_stamp(out, "header.")),
+                      "omega": rows(np.stack([out["vector." + a] for a in "xyz"], axis=1))}
+        else:
+            pre = self.path + "." if self.path else ""
+            fields = {"t_ns": rows(_stamp(out, pre + "header.")),
+                      "omega": rows(np.stack([out[pre + "angular_velocity." + a] for a in "xyz"],
+                                             axis=1))}  # fmt: skip
+            flagged = out[pre + "orientation_covariance"] == -1.0
+            if not flagged.all():
+                quat = np.stack([out[pre + "orientation." + a] for a in "xyzw"], axis=1)
+                quat[flagged] = np.nan
+                fields["quat"] = rows(quat)
+        return Columns(rows(p.order), rows(p.log_time), fields, frames, None,
+                       int(len(p) - good.sum()))  # fmt: skip
 
 
 def plan(imu_topic: str | None, truth_topic: str | None) -> Callable[[Conn], object]:
@@ -252,23 +275,19 @@ def _imu_want(path: str) -> dict[str, tuple[str, int]]:
     return want
 
 
-def _imu_columns(c: Conn, data, path: str):
-    """(t_ns, omega, quat or None, good, type, frame) of one IMU channel's data."""
+def _imu_columns(c: Conn, data):
+    """(order, t_ns, log_t_ns, omega, quat or None, dropped, type, frame) of one channel."""
     if c.encoding == "json":
-        return _json_imu(c, data)
+        t_ns, omega, _, good, typ, frame = _json_imu(c, data)
+        return (data.order[good], t_ns[good], data.log_time[good], omega[good], None,
+                int(len(data) - good.sum()), typ, frame)  # fmt: skip
     if data.error is not None:
         raise data.error
-    out, good = data.fields, data.good
-    if path == "vec3":
-        omega = np.stack([out["vector." + a] for a in "xyz"], axis=1)
-        return _stamp(out, "header."), omega, None, good, data.frames.get("type", ""), \
-            data.frames.get("frame_id", "")
-    pre = path + "." if path else ""
-    omega = np.stack([out[pre + "angular_velocity." + a] for a in "xyz"], axis=1)
-    quat = np.stack([out[pre + "orientation." + a] for a in "xyzw"], axis=1)
-    quat[out[pre + "orientation_covariance"] == -1.0] = np.nan
-    return (_stamp(out, pre + "header."), omega, quat, good, data.frames.get("type", ""),
-            data.frames.get("frame_id", ""))
+    f = data.fields
+    n = len(data)
+    return (data.order, f.get("t_ns", np.zeros(n, np.int64)), data.log_time,
+            f.get("omega", np.zeros((n, 3))), f.get("quat"), data.dropped,
+            data.frames.get("type", ""), data.frames.get("frame_id", ""))
 
 
 def _merge(rows: list[tuple[NDArray[np.int64], list[NDArray]]]) -> list[NDArray]:
@@ -338,20 +357,21 @@ def read_imu(got: Collected, topic: str, conns: list[tuple[Conn, str]]) -> tuple
     """The IMU series of ``topic`` (its channels merged) and the count of undecodable ones."""
     rows, dropped, typ, frame = [], 0, "", ""
     for c, path in conns:
-        p = got.payloads.get(c.id)
-        if p is None:
-            p = Payloads.empty() if c.encoding == "json" else _Decoder(c, "imu", path)(
+        data = got.payloads.get(c.id)
+        if data is None:
+            data = Payloads.empty() if c.encoding == "json" else _Decoder(c, "imu", path)(
                 Payloads.empty())
-        t_ns, omega, quat, good, typ_c, frame_c = _imu_columns(c, p, path)
-        dropped += int(len(p) - good.sum())
+        order, t_ns, log_t, omega, quat, drop, typ_c, frame_c = _imu_columns(c, data)
+        dropped += drop
         typ, frame = typ or typ_c, frame or frame_c
-        q = quat[good] if quat is not None else None
-        rows.append((p.order[good], [t_ns[good], p.log_time[good], omega[good], q]))
+        if quat is None and len(conns) > 1:
+            quat = np.full((len(t_ns), 4), np.nan)
+        rows.append((order, [t_ns, log_t, omega, quat]))
     t_ns, log_t, omega, quat = _merge(rows)
     if quat is not None and not np.isfinite(quat).any():
         quat = None
-    return ImuSeries(t_ns.astype(np.int64), log_t.astype(np.int64), omega, quat, topic, typ,
-                     frame), dropped  # fmt: skip
+    return ImuSeries(t_ns.astype(np.int64, copy=False), log_t.astype(np.int64, copy=False),
+                     omega, quat, topic, typ, frame), dropped  # fmt: skip
 
 
 # ----------------------------------------------------------------------------- truth
@@ -363,18 +383,15 @@ def _read_truth_topic(got: Collected, topic: str, conns: list[Conn], auto: bool)
             data = _Decoder(c, "truth")(Payloads.empty())
         if data.error is not None:
             raise data.error
-        root = data.frames.get("type") or norm_type(c.msgtype)
-        qpath = TRUTH_TYPES[root]
-        out, good = data.fields, data.good
-        q = np.stack([out[f"{qpath}.{a}"] for a in "xyzw"], axis=1)
-        rows.append((data.order[good], [_stamp(out, "header.")[good], data.log_time[good],
-                                        q[good]]))  # fmt: skip
-        typ = typ or root
+        n = len(data)
+        rows.append((data.order, [data.fields.get("t_ns", np.zeros(n, np.int64)), data.log_time,
+                                  data.fields.get("q", np.zeros((n, 4)))]))  # fmt: skip
+        typ = typ or data.frames.get("type") or norm_type(c.msgtype)
         frame = frame or data.frames.get("frame_id", "")
         child = child or data.frames.get("child_frame_id", "")
     t_ns, log_t, q = _merge(rows)
-    return TruthSeries(t_ns.astype(np.int64), log_t.astype(np.int64), q, topic, typ, frame,
-                       child, auto)  # fmt: skip
+    return TruthSeries(t_ns.astype(np.int64, copy=False), log_t.astype(np.int64, copy=False), q,
+                       topic, typ, frame, child, auto)  # fmt: skip
 
 
 def _child_frame(c: Conn, p: Payloads, good) -> str:
