@@ -152,6 +152,8 @@ def open_source(path: str | Path, progress=None):
             src = source_for_file(files[0], storage, progress)
             if isinstance(src, McapSource | SqliteSource):
                 src.kind = f"ros2 {storage}"
+            if isinstance(src, SqliteSource):
+                src.counts = meta.topic_counts(info)
             return src, files[0], custom
         return Rosbag2Folder(p, info, files, progress), p, custom
     found = [x for pat in ("*.mcap", "*.db3", "*.bag", "*.mcap.zstd") for x in sorted(p.glob(pat))]

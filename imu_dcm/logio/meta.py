@@ -76,6 +76,17 @@ def custom_data(info: dict[str, Any]) -> dict[str, str]:
     return {str(k): str(v) for k, v in data.items()}
 
 
+def topic_counts(info: dict[str, Any]) -> dict[str, int] | None:
+    """Message count per topic from ``topics_with_message_count`` (None when unusable)."""
+    out = {}
+    try:
+        for t in info.get("topics_with_message_count") or []:
+            out[str(t["topic_metadata"]["name"])] = int(t["message_count"])
+    except (KeyError, TypeError, ValueError):
+        return None
+    return out or None
+
+
 def file_list(info: dict[str, Any], folder: Path) -> list[Path]:
     """The bag's storage files in recording order (``relative_file_paths``), checked."""
     rel = info.get("relative_file_paths")

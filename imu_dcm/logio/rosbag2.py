@@ -21,6 +21,7 @@ from pathlib import Path
 import numpy as np
 
 from imu_dcm.errors import LogError
+from imu_dcm.logio.meta import topic_counts
 from imu_dcm.logio.mcap import size_bound
 from imu_dcm.logio.types import Collected, Conn, Damage, Payloads, Sink, join_any
 
@@ -33,9 +34,11 @@ class SqliteSource:
 
     kind = "sqlite3"
 
-    def __init__(self, path: Path, progress: Callable[[float], None] | None = None):
+    def __init__(self, path: Path, progress: Callable[[float], None] | None = None,
+                 counts: dict[str, int] | None = None):  # fmt: skip
         self.path = path
         self.progress = progress
+        self.counts = counts  # message count per topic from metadata.yaml (saves a table scan)
 
     def read(self, sink: Sink) -> Collected:
         uri = f"file:{self.path.resolve().as_posix()}?mode=ro&immutable=1"
@@ -64,11 +67,14 @@ class SqliteSource:
             ):
                 if text:
                     defs[typ] = (enc, text)
-        counts = dict(db.execute("SELECT topic_id, COUNT(*) FROM messages GROUP BY topic_id"))
+        topics = list(db.execute(
+            "SELECT id, name, type, serialization_format FROM topics ORDER BY id"))
+        if self.counts is not None and all(str(t[1]) in self.counts for t in topics):
+            counts = {t[0]: self.counts[str(t[1])] for t in topics}
+        else:
+            counts = dict(db.execute("SELECT topic_id, COUNT(*) FROM messages GROUP BY topic_id"))
         conns = []
-        for tid, name, typ, fmt in db.execute(
-            "SELECT id, name, type, serialization_format FROM topics ORDER BY id"
-        ):
+        for tid, name, typ, fmt in topics:
             enc, text = defs.get(typ, ("", ""))
             conns.append(Conn(int(tid), str(name), str(typ), str(fmt), enc, text,
                               int(counts.get(tid, 0))))  # fmt: skip
@@ -78,16 +84,16 @@ class SqliteSource:
             rows = db.execute(f"SELECT id, topic_id, timestamp, data FROM messages "  # noqa: S608
                               f"WHERE topic_id IN ({marks}) ORDER BY id", kept)  # fmt: skip
             while batch := rows.fetchmany(20_000):
-                by_topic: dict[int, list] = {}
-                for row in batch:
-                    by_topic.setdefault(row[1], []).append(row)
-                for tid, rs in by_topic.items():
-                    lens = np.fromiter((len(r[3]) for r in rs), np.int64, len(rs))
+                ids, tids, stamps, datas = zip(*batch)
+                tids = np.array(tids, np.int64)
+                for tid in np.unique(tids).tolist():
+                    sel = np.flatnonzero(tids == tid)
+                    rs = datas if len(sel) == len(datas) else [datas[i] for i in sel.tolist()]
+                    lens = np.fromiter(map(len, rs), np.int64, len(rs))
                     starts = np.concatenate([[0], np.cumsum(lens)[:-1]]).astype(np.int64)
-                    buf = np.frombuffer(b"".join(r[3] for r in rs), np.uint8)
-                    sink.add(tid, Payloads(buf, starts, lens,
-                                           np.fromiter((r[2] for r in rs), np.int64, len(rs)),
-                                           np.fromiter((r[0] for r in rs), np.int64, len(rs))))
+                    sink.add(tid, Payloads(np.frombuffer(b"".join(rs), np.uint8), starts, lens,
+                                           np.array(stamps, np.int64)[sel],
+                                           np.array(ids, np.int64)[sel]))
         payloads = sink.finish()
         return Collected(self.kind, conns, payloads, [])
 
@@ -182,6 +188,8 @@ class Rosbag2Folder:
                 if self.mode == "file":
                     path = decompress_file(path, Path(tmp))
                 src = source_for_file(path, self.storage)
+                if isinstance(src, SqliteSource) and len(self.files) == 1:
+                    src.counts = topic_counts(self.info)
                 name = self.files[k].name
                 transform = None
                 if self.mode == "message":
