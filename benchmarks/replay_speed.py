@@ -176,7 +176,7 @@ def write_hour(src: Path, dst: Path, rate_hz: float = 400.0, seconds: float = 36
     has_truth = rng.random(n) < 0.965
     omega = rng.normal(0.0, 1.0, (n, 3))
     t0 = 1_700_000_000_000_000_000
-    step = int(round(1e9 / rate_hz))
+    step = round(1e9 / rate_hz)
     with open(dst, "wb") as f:
         w = Writer(f, chunk_size=768 * 1024)
         w.start("ros2", "bench")

@@ -17,8 +17,8 @@ from mcap.writer import Writer as McapWriter
 from mcap_ros2.decoder import DecoderFactory
 from mcap_ros2.writer import Writer as Ros2Writer
 
-from imu_dcm.logio import read_log, resolve_mcap_path
 from imu_dcm.errors import ImuDcmWarning, LogError
+from imu_dcm.logio import read_log, resolve_mcap_path
 
 SHIPPED = Path(__file__).resolve().parents[1] / "replay" / "broad_07_undisturbed_fast_rotation_B"
 

@@ -15,7 +15,6 @@ from __future__ import annotations
 
 import stat
 import tempfile
-from collections.abc import Callable
 from pathlib import Path
 
 from imu_dcm.errors import LogError
@@ -31,10 +30,10 @@ SQLITE_MAGIC = b"SQLite format 3\x00"
 ZSTD_MAGIC = b"\x28\xb5\x2f\xfd"
 STORAGES = ("mcap", "sqlite3")
 _FOREIGN = {  # magic -> (what it is, how to convert it)
-    b"\x89HDF": ("an HDF5 file", "export the gyro as CSV and run "
-                 "`python -m imu_dcm.replay convert-csv gyro.csv`"),
-    b"ULog": ("a PX4 ULog", "`ulog2csv x.ulg` then `python -m imu_dcm.replay convert-csv "
-              "x_sensor_gyro_0.csv`"),
+    b"\x89HDF": ("an HDF5 file", ("export the gyro as CSV and run "
+                                  "`python -m imu_dcm.replay convert-csv gyro.csv`")),
+    b"ULog": ("a PX4 ULog", ("`ulog2csv x.ulg` then `python -m imu_dcm.replay convert-csv "
+                             "x_sensor_gyro_0.csv`")),
     b"\x1f\x8b": ("a gzip file", "`gunzip` it first"),
     b"BZh": ("a bzip2 file", "`bunzip2` it first"),
     b"PK\x03\x04": ("a zip archive", "`unzip` it first"),

@@ -27,7 +27,7 @@ def _yaml_load(text: str, where: Path) -> Any:
             if isinstance(event, yaml.AliasEvent):
                 raise LogError(f"Expected a rosbag2 metadata.yaml without YAML aliases, got an "
                                f"alias in {where}")  # fmt: skip
-        return yaml.load(text, Loader=loader_cls)  # noqa: S506 (a safe loader)
+        return yaml.load(text, Loader=loader_cls)
     except yaml.YAMLError as exc:
         line = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
         raise LogError(f"Expected a YAML metadata.yaml, got a syntax error in {where}: "

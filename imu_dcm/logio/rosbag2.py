@@ -21,8 +21,8 @@ from pathlib import Path
 import numpy as np
 
 from imu_dcm.errors import LogError
-from imu_dcm.logio.meta import topic_counts
 from imu_dcm.logio.mcap import size_bound
+from imu_dcm.logio.meta import topic_counts
 from imu_dcm.logio.types import Collected, Conn, Damage, Payloads, Sink, join_any
 
 #: Largest single decompressed message of a message-compressed bag (bytes).
@@ -81,7 +81,7 @@ class SqliteSource:
         kept = [c.id for c in conns if sink.wants(c)]
         if kept:
             marks = ",".join("?" * len(kept))
-            rows = db.execute(f"SELECT id, topic_id, timestamp, data FROM messages "  # noqa: S608
+            rows = db.execute(f"SELECT id, topic_id, timestamp, data FROM messages "
                               f"WHERE topic_id IN ({marks}) ORDER BY id", kept)  # fmt: skip
             while batch := rows.fetchmany(20_000):
                 ids, tids, stamps, datas = zip(*batch)
