@@ -338,7 +338,10 @@ class McapSource:
             self._n_kept += int(m.sum())
             s = offs[m] + _MSG_HEADER
             n = length[m] - 22
-            self.sink.add(c, Payloads(*compact(d, s, n), log_time[m], (seq << 32) + offs[m]))
+            # A channel that fills most of the chunk keeps the chunk as is (no copy); a small
+            # one (IMU beside a camera) copies out its payloads, so the chunk can go.
+            buf = (d, s, n) if 2 * int(n.sum()) >= len(d) else compact(d, s, n)
+            self.sink.add(c, Payloads(*buf, log_time[m], (seq << 32) + offs[m]))
 
     def _walk(self, data: bytes, a: int, b: int, pos: int, seq: int, meta_only: bool,
               span=(None, None), expected: int | None = None) -> None:
