@@ -307,3 +307,59 @@ def test_bad_metadata_yaml_is_one_line_error(tmp_path, text, match):
     (bag / "metadata.yaml").write_bytes(text)
     with pytest.raises(LogError, match=match):
         read_log(bag)
+
+
+# ------------------------------------------------------------------------- ROS 1 chunks
+def _ros1_bag(tmp_path: Path, msgs, compression: str) -> Path:
+    from rosbags.rosbag1 import Writer
+    from rosbags.typesys import Stores, get_typestore
+
+    ros2, ros1 = get_typestore(Stores.ROS2_HUMBLE), get_typestore(Stores.ROS1_NOETIC)
+    path = tmp_path / f"{compression}.bag"
+    w = Writer(path)
+    w.set_compression(Writer.CompressionFormat[compression.upper()])
+    w.chunk_threshold = 16 * 1024
+    with w:
+        conns = {}
+        for topic, sname, _sd, lt, _pt, data in msgs:
+            if topic not in conns:
+                conns[topic] = w.add_connection(topic, sname, typestore=ros1)
+            w.write(conns[topic], lt, ros2.cdr_to_ros1(data, sname))
+    return path
+
+
+def _ros1_chunks(path: Path) -> list[tuple[int, int]]:
+    """(file offset, IMU messages) of every chunk, from rosbags' index."""
+    from rosbags.rosbag1 import Reader
+
+    with Reader(path) as r:
+        imu = next(c.id for c in r.connections if c.topic == IMU)
+        return [(ci.pos, ci.connection_counts.get(imu, 0))
+                for ci in sorted(r.chunk_infos, key=lambda c: c.pos)]  # fmt: skip
+
+
+@pytest.mark.parametrize("compression, lie", [("bz2", "flip"), ("lz4", "size")])
+def test_ros1_damaged_chunk_costs_only_itself(tmp_path, msgs, compression, lie):
+    p = _ros1_bag(tmp_path, msgs, compression)
+    base = read_log(p)
+    chunks = _ros1_chunks(p)
+    assert len(chunks) > K + 3
+    pos, n_lost = chunks[K]
+    raw = bytearray(p.read_bytes())
+    if lie == "flip":  # a byte in the middle of the compressed data
+        end = chunks[K + 1][0]
+        mid = (pos + end) // 2
+        raw[mid : mid + 16] = bytes(16)
+    else:  # the chunk header's uncompressed size, 1000 bytes less than the truth
+        at = raw.index(b"size=", pos) + 5
+        size = struct.unpack_from("<I", raw, at)[0]
+        raw[at : at + 4] = struct.pack("<I", size - 1000)
+    bad = tmp_path / "bad.bag"
+    bad.write_bytes(bytes(raw))
+    log = read_warned(bad, pos)
+    n_before = sum(n for _, n in chunks[:K])
+    keep = np.ones(len(base.imu.t_ns), bool)
+    keep[n_before : n_before + n_lost] = False
+    np.testing.assert_array_equal(log.imu.omega_b, base.imu.omega_b[keep])
+    (d,) = log.damage
+    assert d.offset == pos and d.messages_lost >= n_lost

@@ -119,5 +119,7 @@ def read_log(
     if len(imu.t_ns) == 0:
         raise LogError(f"Expected IMU samples on {imu.topic}, got none that decode")
     truth = _read_truth(got, imu, truth_topic, truth_frame)
+    if progress is not None:
+        progress(1.0)
     return LogData(shown, imu, truth, channels, custom, got.kind or source.kind,
                    tuple(got.damage), stopped_at)  # fmt: skip

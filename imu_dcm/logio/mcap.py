@@ -233,8 +233,8 @@ class McapSource:
                 pos = rec_end
         except (struct.error, _Bad):
             return None
-        if not chunks and counts and sum(counts.values()):
-            return None  # messages outside chunks: walk the file
+        if not chunks:
+            return None  # no chunk index (or messages outside chunks): walk the file
         self.schemas.update(schemas)
         self.channels.update(channels)
         self.counts.update(counts)

@@ -50,8 +50,8 @@ class SqliteSource:
             return self._read(db, sink)
         except sqlite3.DatabaseError as exc:
             raise LogError(f"Expected a rosbag2 sqlite3 database, got {str(exc).rstrip('.')} in "
-                           f"{self.path}; `sqlite3 {self.path.name} .recover` may rescue "
-                           f"it") from None  # fmt: skip
+                           f"{self.path}; `sqlite3 {self.path.name} .recover | sqlite3 fixed.db3` "
+                           f"may rescue it") from None  # fmt: skip
         finally:
             db.close()
 
