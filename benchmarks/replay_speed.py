@@ -8,11 +8,12 @@ script would; rates are the bag's message count over the median time, so ratios 
 speed-ups on the same bag:
 
 * MCAP (the shipped trial): ``mcap`` + ``mcap_ros2`` ``iter_decoded_messages()`` against
-  :func:`imu_dcm.logio.read_log`. Target >= 10x. Also a ``rosbags`` loop that only *iterates*
-  the raw IMU and truth messages of the same file (no decoding at all): what a rosbags-backed
-  MCAP source could at best do, to show whether our own MCAP path earns its place.
+  :func:`imu_dcm.logio.read_log`. Target >= 10x.
 * sqlite3 and ROS 1 (the same trial written with rosbags' writers): ``rosbags`` ``AnyReader``
   + ``deserialize`` loop against ``read_log``. Target >= 5x.
+* In each group, a ``rosbags`` loop that only *iterates* the raw IMU and truth messages (no
+  decoding at all): the best a source built on rosbags' message iterator could do, to show
+  where our own container code (MCAP chunks, sqlite3 query, ROS 1 chunks) earns its place.
 * ``replay`` (no viewer), when :mod:`imu_dcm.replay` imports.
 
 Memory, each in a fresh subprocess (peak RSS = VmHWM):
@@ -275,10 +276,14 @@ def main(argv: list[str] | None = None) -> int:
             }, "decode loop (mcap + mcap_ros2)", TARGET_MCAP),
             "sqlite3": ({
                 "rosbags deserialize loop": (lambda: rosbags_loop(db), n_msgs),
+                "rosbags raw iteration, IMU+truth": (
+                    lambda: rosbags_raw_iteration(db, topics), n_msgs),
                 "read_log": (quiet(lambda: read_log(db)), n_msgs),
             }, "rosbags deserialize loop", TARGET_ROSBAGS),
             "ROS 1": ({
                 "rosbags deserialize loop": (lambda: rosbags_loop(bag1), n_msgs),
+                "rosbags raw iteration, IMU+truth": (
+                    lambda: rosbags_raw_iteration(bag1, topics), n_msgs),
                 "read_log": (quiet(lambda: read_log(bag1)), n_msgs),
             }, "rosbags deserialize loop", TARGET_ROSBAGS),
         }

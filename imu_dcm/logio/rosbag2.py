@@ -32,7 +32,7 @@ MAX_MESSAGE_BYTES = 256 << 20
 class SqliteSource:
     """One rosbag2 sqlite3 file."""
 
-    kind = "sqlite3"
+    kind = "ros2 sqlite3"
 
     def __init__(self, path: Path, progress: Callable[[float], None] | None = None,
                  counts: dict[str, int] | None = None):  # fmt: skip
@@ -83,7 +83,12 @@ class SqliteSource:
             marks = ",".join("?" * len(kept))
             rows = db.execute(f"SELECT id, topic_id, timestamp, data FROM messages "
                               f"WHERE topic_id IN ({marks}) ORDER BY id", kept)  # fmt: skip
+            total = max(sum(c.count or 0 for c in conns if c.id in kept), 1)
+            done = 0
             while batch := rows.fetchmany(20_000):
+                done += len(batch)
+                if self.progress is not None:
+                    self.progress(min(done / total, 1.0))
                 ids, tids, stamps, datas = zip(*batch)
                 tids = np.array(tids, np.int64)
                 for tid in np.unique(tids).tolist():

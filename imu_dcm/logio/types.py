@@ -31,7 +31,8 @@ class Damage:
 
     Attributes
     ----------
-    offset : int — byte offset of the damaged record in its file (never chunk-relative).
+    offset : int — byte offset of the damaged record in its file (never chunk-relative);
+        -1 where the container has no byte offsets (a message of a sqlite3 bag).
     what : str — what was wrong, one line (names the file when a bag has several).
     t_start_ns, t_end_ns : int or None — log-time range the damaged part covered, when known.
     messages_lost : int or None — messages of the selected channels it held, when known.
