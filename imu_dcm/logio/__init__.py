@@ -105,20 +105,25 @@ def read_log(
     channels = tuple(ChannelInfo(c.topic, c.msgtype, c.encoding, int(c.count or 0))
                      for c in got.conns)  # fmt: skip
     stopped_at = _damage_summary(shown.name, got.damage) if got.damage else None
-    if stopped_at:
-        warnings.warn(f"{shown.name} is truncated or corrupt: {stopped_at}", ImuDcmWarning,
-                      stacklevel=2)  # fmt: skip
     if not channels or sum(c.count for c in channels) == 0 and not got.payloads:
+        if stopped_at:  # one line: the damage is why nothing was read
+            raise LogError(f"Expected messages in the log, got none readable in {shown}: "
+                           f"{stopped_at}")  # fmt: skip
         raise LogError(f"Expected messages in the log, got an empty log "
                        f"({describe(got.conns)}): {shown}")  # fmt: skip
     topic, conns = pick_imu(got, imu_topic)
     imu, undecodable = read_imu(got, topic, conns)
+    if len(imu.t_ns) == 0:
+        raise LogError(f"Expected IMU samples on {imu.topic}, got none that decode "
+                       f"({undecodable} messages)")  # fmt: skip
+    truth = _read_truth(got, imu, truth_topic, truth_frame)
+    # Warnings only once the log is known to be usable: an error is then the only line.
+    if stopped_at:
+        warnings.warn(f"{shown.name} is truncated or corrupt: {stopped_at}", ImuDcmWarning,
+                      stacklevel=2)  # fmt: skip
     if undecodable:
         warnings.warn(f"{imu.topic}: dropped {undecodable} messages that do not decode",
                       ImuDcmWarning, stacklevel=2)  # fmt: skip
-    if len(imu.t_ns) == 0:
-        raise LogError(f"Expected IMU samples on {imu.topic}, got none that decode")
-    truth = _read_truth(got, imu, truth_topic, truth_frame)
     if progress is not None:
         progress(1.0)
     return LogData(shown, imu, truth, channels, custom, got.kind or source.kind,
