@@ -511,3 +511,23 @@ def test_live_batch_decode_matches_the_file_reader():
     np.testing.assert_array_equal(dec.values, full.truth.q_w_b[:300])
     schema, _ = by_topic["/imu/mag"]
     assert classify_schema(schema.name, schema.encoding, schema.data.decode()) is None
+
+
+def test_vector3stamped_is_the_gyro_only_when_its_name_says_so_or_it_is_named(tmp_path):
+    t_ns, omega = _samples(8)
+    vec_def = "std_msgs/Header header\ngeometry_msgs/Vector3 vector\n" + HEADER + VEC3
+    for topic, auto in (("/wind", False), ("/sensors/gyro", True), ("/imu/angular_velocity", True)):
+        p = tmp_path / f"{topic.strip('/').replace('/', '_')}.mcap"
+        with open(p, "wb") as f:
+            w = Ros2Writer(f)
+            schema = w.register_msgdef("geometry_msgs/msg/Vector3Stamped", vec_def)
+            for i, t in enumerate(t_ns):
+                w.write_message(topic, schema, {"header": _h(int(t)), "vector": dict(
+                    zip("xyz", omega[i].tolist()))}, log_time=int(t))  # fmt: skip
+            w.finish()
+        if auto:
+            np.testing.assert_array_equal(read_log(p).imu.omega_b, omega)
+        else:
+            with pytest.raises(LogError, match="named with --imu-topic"):
+                read_log(p)
+        np.testing.assert_array_equal(read_log(p, imu_topic=topic).imu.omega_b, omega)

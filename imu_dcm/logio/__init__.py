@@ -67,8 +67,9 @@ def read_log(
     imu_topic : str, optional
         The IMU topic. By default the one topic of ``sensor_msgs/Imu``, of a type containing an
         ``Imu`` field (vendor wrappers), or JSON with ``angular_velocity {x, y, z}``; failing
-        those, the one ``geometry_msgs/Vector3Stamped`` gyro topic (not under ``/estimate`` or
-        ``/ground_truth``).
+        those, the one ``geometry_msgs/Vector3Stamped`` topic whose name says gyro ("gyr",
+        "angular_vel" or "imu"; not under ``/estimate`` or ``/ground_truth``); any
+        Vector3Stamped topic when named here.
     truth_topic : str, optional
         The reference attitude ``q_w_b``: ``geometry_msgs`` QuaternionStamped, PoseStamped,
         PoseWithCovarianceStamped, TransformStamped, ``nav_msgs`` Odometry, ``/tf`` (TFMessage),

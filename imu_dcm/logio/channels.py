@@ -1,8 +1,9 @@
 """Which channels are the IMU and the truth, and their decoding into series.
 
 IMU: ``sensor_msgs/Imu`` (ROS 1 or ROS 2), a vendor type holding an ``Imu`` field, a JSON
-channel with ``angular_velocity {x, y, z}``, or - when there is none of these - a gyro topic of
-``geometry_msgs/Vector3Stamped``. Truth: a ``geometry_msgs`` quaternion/pose/transform type or
+channel with ``angular_velocity {x, y, z}``, or - when there is none of these - a
+``geometry_msgs/Vector3Stamped`` topic whose name says gyro ("gyr", "angular_vel" or "imu";
+any other one when named with ``imu_topic``). Truth: a ``geometry_msgs`` quaternion/pose/transform type or
 ``nav_msgs/Odometry``; else the transform in ``/tf`` / ``/tf_static`` whose child frame moves
 (``truth_frame`` chooses where several do); else the Imu's own orientation. Several channels of
 one topic are merged in file order.
@@ -12,6 +13,7 @@ from __future__ import annotations
 
 import json
 import math
+import re
 import struct
 from collections.abc import Callable
 
@@ -36,6 +38,12 @@ TRUTH_TYPES = {
 }
 KNOWN_ENCODINGS = ("cdr", "ros1", "json")
 _NOT_GYRO = ("/estimate", "/ground_truth")  # Vector3Stamped topics that are not a gyro
+#: A Vector3Stamped topic is taken as the gyro unasked only when its name says so.
+_GYRO_NAME = re.compile(r"gyr|angular_vel|imu", re.IGNORECASE)
+
+
+def _gyro_name(topic: str) -> bool:
+    return bool(_GYRO_NAME.search(topic)) and not topic.startswith(_NOT_GYRO)
 _INT64 = 2**63
 
 
@@ -160,7 +168,8 @@ def plan(imu_topic: str | None, truth_topic: str | None) -> Callable[[Conn], obj
             return _raw if imu_ok else None
         if imu_ok:
             path = imu_path(c)
-            if path is not None:
+            if path is not None and (path != "vec3" or imu_topic is not None
+                                     or _gyro_name(c.topic)):  # fmt: skip
                 return _Decoder(c, "imu", path)
         if truth_ok and is_truth(c):
             if norm_type(c.msgtype) == TF_TYPE:
@@ -333,7 +342,7 @@ def pick_imu(got: Collected, imu_topic: str | None) -> tuple[str, list[tuple[Con
                 continue
             path = imu_path(c)
             if path == "vec3":
-                if not topic.startswith(_NOT_GYRO):
+                if _gyro_name(topic):
                     gyro.setdefault(topic, []).append((c, path))
             elif path is not None:
                 found.setdefault(topic, []).append((c, path))
@@ -343,9 +352,9 @@ def pick_imu(got: Collected, imu_topic: str | None) -> tuple[str, list[tuple[Con
         if unknown:
             raise LogError(f"Expected message encoding cdr or json, got {unknown[0].encoding!r} "
                            f"on {unknown[0].topic}")  # fmt: skip
-        raise LogError(f"Expected an IMU channel (sensor_msgs/msg/Imu, a type with an Imu field "
-                       f"or a geometry_msgs/msg/Vector3Stamped gyro), got "
-                       f"{describe(got.conns)}")  # fmt: skip
+        raise LogError(f"Expected an IMU channel (sensor_msgs/msg/Imu or a type with an Imu "
+                       f"field; a geometry_msgs/msg/Vector3Stamped gyro named with --imu-topic), "
+                       f"got {describe(got.conns)}")  # fmt: skip
     if len(found) > 1:
         raise LogError(f"Expected one IMU channel, got {len(found)}: {', '.join(sorted(found))} "
                        f"(choose with --imu-topic)")  # fmt: skip
