@@ -17,8 +17,8 @@ from mcap.writer import Writer as McapWriter
 from mcap_ros2.decoder import DecoderFactory
 from mcap_ros2.writer import Writer as Ros2Writer
 
-from imu_dcm.logio import read_log, resolve_mcap_path
 from imu_dcm.errors import ImuDcmWarning, LogError
+from imu_dcm.logio import read_log, resolve_mcap_path
 
 SHIPPED = Path(__file__).resolve().parents[1] / "replay" / "broad_07_undisturbed_fast_rotation_B"
 
@@ -477,3 +477,57 @@ def test_short_message_is_dropped_and_counted(tmp_path):
     with pytest.warns(ImuDcmWarning, match="/imu/data: dropped 1 messages that do not decode"):
         log = read_log(p)
     np.testing.assert_array_equal(log.imu.omega_b, np.delete(omega, 7, axis=0))
+
+
+def test_live_batch_decode_matches_the_file_reader():
+    # A live source hands raw payloads and the schema text: the batch decoder must give the
+    # same samples as reading the file, and flag a cut payload.
+    from imu_dcm.logio.batch import classify_schema, decode_cdr_batch
+
+    src = resolve_mcap_path(SHIPPED)
+    by_topic: dict[str, list] = {}
+    with open(src, "rb") as f:
+        for schema, channel, m in make_reader(f).iter_messages():
+            got = by_topic.setdefault(channel.topic, [schema, []])
+            if len(got[1]) < 300:
+                got[1].append(m.data)
+            if all(len(v[1]) >= 300 for v in by_topic.values()) and len(by_topic) == 3:
+                break
+    full = read_log(SHIPPED)
+    schema, payloads = by_topic["/imu/data"]
+    kind = classify_schema(schema.name, schema.encoding, schema.data.decode())
+    assert kind == ("imu", "")
+    payloads[7] = payloads[7][:20]
+    dec = decode_cdr_batch(kind, schema.name, schema.encoding, schema.data.decode(), payloads,
+                           "/imu/data")  # fmt: skip
+    assert not dec.good[7] and dec.good.sum() == 299
+    np.testing.assert_array_equal(dec.values, np.delete(full.imu.omega_b[:300], 7, axis=0))
+    np.testing.assert_array_equal(dec.t_ns, np.delete(full.imu.t_ns[:300], 7))
+    schema, payloads = by_topic["/ground_truth/orientation"]
+    kind = classify_schema(schema.name, schema.encoding, schema.data.decode())
+    assert kind == ("truth", "quaternion")
+    dec = decode_cdr_batch(kind, schema.name, schema.encoding, schema.data.decode(), payloads,
+                           "/truth")  # fmt: skip
+    np.testing.assert_array_equal(dec.values, full.truth.q_w_b[:300])
+    schema, _ = by_topic["/imu/mag"]
+    assert classify_schema(schema.name, schema.encoding, schema.data.decode()) is None
+
+
+def test_vector3stamped_is_the_gyro_only_when_its_name_says_so_or_it_is_named(tmp_path):
+    t_ns, omega = _samples(8)
+    vec_def = "std_msgs/Header header\ngeometry_msgs/Vector3 vector\n" + HEADER + VEC3
+    for topic, auto in (("/wind", False), ("/sensors/gyro", True), ("/imu/angular_velocity", True)):
+        p = tmp_path / f"{topic.strip('/').replace('/', '_')}.mcap"
+        with open(p, "wb") as f:
+            w = Ros2Writer(f)
+            schema = w.register_msgdef("geometry_msgs/msg/Vector3Stamped", vec_def)
+            for i, t in enumerate(t_ns):
+                w.write_message(topic, schema, {"header": _h(int(t)), "vector": dict(
+                    zip("xyz", omega[i].tolist()))}, log_time=int(t))  # fmt: skip
+            w.finish()
+        if auto:
+            np.testing.assert_array_equal(read_log(p).imu.omega_b, omega)
+        else:
+            with pytest.raises(LogError, match="named with --imu-topic"):
+                read_log(p)
+        np.testing.assert_array_equal(read_log(p, imu_topic=topic).imu.omega_b, omega)

@@ -410,3 +410,27 @@ def test_a_camera_topic_does_not_raise_peak_memory(tmp_path):
     n1, peak1 = _peak_kib(with_cam)
     assert n0 == n1 == 52518
     assert peak1 <= 1.2 * peak0, f"peak RSS {peak0} KiB without the camera, {peak1} KiB with"
+
+
+def test_file_order_and_both_time_bases_are_kept(msgs, base, tmp_path):
+    # 1 % of the IMU messages swapped with their neighbour in the file, and every header stamp
+    # zero in a second file: the reader returns file order and both time bases untouched
+    # (sorting and the choice of time base are the replay's job).
+    imu_idx = [i for i, m in enumerate(msgs) if m[0] == IMU]
+    swapped = list(msgs)
+    for k in range(0, len(imu_idx) - 1, 100):
+        a, b = imu_idx[k], imu_idx[k + 1]
+        swapped[a], swapped[b] = swapped[b], swapped[a]
+    log = read_log(write_mcap(tmp_path / "swapped.mcap", swapped))
+    perm = np.arange(len(base.imu.t_ns))
+    for k in range(0, len(perm) - 1, 100):
+        perm[k], perm[k + 1] = perm[k + 1], perm[k]
+    np.testing.assert_array_equal(log.imu.t_ns, base.imu.t_ns[perm])
+    np.testing.assert_array_equal(log.imu.log_t_ns, base.imu.log_t_ns[perm])
+    np.testing.assert_array_equal(log.imu.omega_b, base.imu.omega_b[perm])
+    zeroed = [(t, s, sd, lt, pt, d[:4] + bytes(8) + d[12:]) if t in (IMU, TRUTH) else
+              (t, s, sd, lt, pt, d) for t, s, sd, lt, pt, d in msgs]  # fmt: skip
+    log = read_log(write_mcap(tmp_path / "zero.mcap", zeroed))
+    assert not log.imu.t_ns.any() and not log.truth.t_ns.any()
+    np.testing.assert_array_equal(log.imu.log_t_ns, base.imu.log_t_ns)
+    np.testing.assert_array_equal(log.imu.omega_b, base.imu.omega_b)

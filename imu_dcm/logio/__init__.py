@@ -67,8 +67,9 @@ def read_log(
     imu_topic : str, optional
         The IMU topic. By default the one topic of ``sensor_msgs/Imu``, of a type containing an
         ``Imu`` field (vendor wrappers), or JSON with ``angular_velocity {x, y, z}``; failing
-        those, the one ``geometry_msgs/Vector3Stamped`` gyro topic (not under ``/estimate`` or
-        ``/ground_truth``).
+        those, the one ``geometry_msgs/Vector3Stamped`` topic whose name says gyro ("gyr",
+        "angular_vel" or "imu"; not under ``/estimate`` or ``/ground_truth``); any
+        Vector3Stamped topic when named here.
     truth_topic : str, optional
         The reference attitude ``q_w_b``: ``geometry_msgs`` QuaternionStamped, PoseStamped,
         PoseWithCovarianceStamped, TransformStamped, ``nav_msgs`` Odometry, ``/tf`` (TFMessage),
@@ -105,19 +106,26 @@ def read_log(
     channels = tuple(ChannelInfo(c.topic, c.msgtype, c.encoding, int(c.count or 0))
                      for c in got.conns)  # fmt: skip
     stopped_at = _damage_summary(shown.name, got.damage) if got.damage else None
-    if stopped_at:
-        warnings.warn(f"{shown.name} is truncated or corrupt: {stopped_at}", ImuDcmWarning,
-                      stacklevel=2)  # fmt: skip
     if not channels or sum(c.count for c in channels) == 0 and not got.payloads:
+        if stopped_at:  # one line: the damage is why nothing was read
+            raise LogError(f"Expected messages in the log, got none readable in {shown}: "
+                           f"{stopped_at}")  # fmt: skip
         raise LogError(f"Expected messages in the log, got an empty log "
                        f"({describe(got.conns)}): {shown}")  # fmt: skip
     topic, conns = pick_imu(got, imu_topic)
     imu, undecodable = read_imu(got, topic, conns)
+    if len(imu.t_ns) == 0:
+        raise LogError(f"Expected IMU samples on {imu.topic}, got none that decode "
+                       f"({undecodable} messages)")  # fmt: skip
+    truth = _read_truth(got, imu, truth_topic, truth_frame)
+    # Warnings only once the log is known to be usable: an error is then the only line.
+    if stopped_at:
+        warnings.warn(f"{shown.name} is truncated or corrupt: {stopped_at}", ImuDcmWarning,
+                      stacklevel=2)  # fmt: skip
     if undecodable:
         warnings.warn(f"{imu.topic}: dropped {undecodable} messages that do not decode",
                       ImuDcmWarning, stacklevel=2)  # fmt: skip
-    if len(imu.t_ns) == 0:
-        raise LogError(f"Expected IMU samples on {imu.topic}, got none that decode")
-    truth = _read_truth(got, imu, truth_topic, truth_frame)
+    if progress is not None:
+        progress(1.0)
     return LogData(shown, imu, truth, channels, custom, got.kind or source.kind,
                    tuple(got.damage), stopped_at)  # fmt: skip

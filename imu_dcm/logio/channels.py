@@ -1,17 +1,17 @@
 """Which channels are the IMU and the truth, and their decoding into series.
 
 IMU: ``sensor_msgs/Imu`` (ROS 1 or ROS 2), a vendor type holding an ``Imu`` field, a JSON
-channel with ``angular_velocity {x, y, z}``, or - when there is none of these - a gyro topic of
-``geometry_msgs/Vector3Stamped``. Truth: a ``geometry_msgs`` quaternion/pose/transform type or
-``nav_msgs/Odometry``; else the transform in ``/tf`` / ``/tf_static`` whose child frame moves
+channel with ``angular_velocity {x, y, z}``, or - when there is none of these - a
+``geometry_msgs/Vector3Stamped`` topic whose name says gyro ("gyr", "angular_vel" or "imu";
+any other one when named with ``imu_topic``). Truth: a ``geometry_msgs`` quaternion, pose or
+transform type or ``nav_msgs/Odometry``; else the transform in ``/tf`` / ``/tf_static`` whose child frame moves
 (``truth_frame`` chooses where several do); else the Imu's own orientation. Several channels of
 one topic are merged in file order.
 """
 
 from __future__ import annotations
 
-import json
-import math
+import re
 import struct
 from collections.abc import Callable
 
@@ -20,12 +20,13 @@ from numpy.typing import NDArray
 
 from imu_dcm.errors import LogError
 from imu_dcm.logio.cdr import decode
+from imu_dcm.logio.json_imu import is_json_imu, json_imu_columns, json_msg
 from imu_dcm.logio.schema import Defs, definitions, norm_type
+from imu_dcm.logio.tf import TF_TYPE, child_frame, tf_truth
 from imu_dcm.logio.types import Collected, Columns, Conn, ImuSeries, Payloads, TruthSeries
 
 IMU_TYPE = "sensor_msgs/msg/Imu"
 VEC3_TYPE = "geometry_msgs/msg/Vector3Stamped"
-TF_TYPE = "tf2_msgs/msg/TFMessage"
 #: Truth message types and the field path of the quaternion ``q_w_b`` inside each.
 TRUTH_TYPES = {
     "geometry_msgs/msg/QuaternionStamped": "quaternion",
@@ -36,6 +37,12 @@ TRUTH_TYPES = {
 }
 KNOWN_ENCODINGS = ("cdr", "ros1", "json")
 _NOT_GYRO = ("/estimate", "/ground_truth")  # Vector3Stamped topics that are not a gyro
+#: A Vector3Stamped topic is taken as the gyro unasked only when its name says so.
+_GYRO_NAME = re.compile(r"gyr|angular_vel|imu", re.IGNORECASE)
+
+
+def _gyro_name(topic: str) -> bool:
+    return bool(_GYRO_NAME.search(topic)) and not topic.startswith(_NOT_GYRO)
 _INT64 = 2**63
 
 
@@ -108,17 +115,40 @@ class _Decoder:
             except LogError as exc:
                 self.error = exc
         if self.error is not None:
-            return Columns(p.order, p.log_time, np.zeros(len(p), bool), {}, {}, self.error)
+            z = np.zeros(0, np.int64)
+            return Columns(z, z, {}, {}, self.error, len(p))
         defs, root, want = self.ready
         out, good = decode(self.conn, defs, root, p, want)
-        frames = {}
+        frames = {"type": root}
         if good.any() and (self.role == "truth" or self.path in ("", "vec3")):
             # only a bare message has its header's frame_id at a fixed place
             frames["frame_id"] = _frame_id(self.conn, p, good)
             if root in ("nav_msgs/msg/Odometry", "geometry_msgs/msg/TransformStamped"):
-                frames["child_frame_id"] = _child_frame(self.conn, p, good)
-        frames["type"] = root
-        return Columns(p.order, p.log_time, good, out, frames)
+                frames["child_frame_id"] = child_frame(self.conn, p, good)
+        every = bool(good.all())
+
+        def rows(a: NDArray) -> NDArray:
+            return a if every else a[good]
+
+        if self.role == "truth":
+            q = TRUTH_TYPES[root]
+            fields = {"t_ns": rows(_stamp(out, "header.")),
+                      "q": rows(np.stack([out[f"{q}.{a}"] for a in "xyzw"], axis=1))}
+        elif self.path == "vec3":
+            fields = {"t_ns": rows(_stamp(out, "header.")),
+                      "omega": rows(np.stack([out["vector." + a] for a in "xyz"], axis=1))}
+        else:
+            pre = self.path + "." if self.path else ""
+            fields = {"t_ns": rows(_stamp(out, pre + "header.")),
+                      "omega": rows(np.stack([out[pre + "angular_velocity." + a] for a in "xyz"],
+                                             axis=1))}  # fmt: skip
+            flagged = out[pre + "orientation_covariance"] == -1.0
+            if not flagged.all():
+                quat = np.stack([out[pre + "orientation." + a] for a in "xyzw"], axis=1)
+                quat[flagged] = np.nan
+                fields["quat"] = rows(quat)
+        return Columns(rows(p.order), rows(p.log_time), fields, frames, None,
+                       int(len(p) - good.sum()))  # fmt: skip
 
 
 def plan(imu_topic: str | None, truth_topic: str | None) -> Callable[[Conn], object]:
@@ -137,7 +167,8 @@ def plan(imu_topic: str | None, truth_topic: str | None) -> Callable[[Conn], obj
             return _raw if imu_ok else None
         if imu_ok:
             path = imu_path(c)
-            if path is not None:
+            if path is not None and (path != "vec3" or imu_topic is not None
+                                     or _gyro_name(c.topic)):  # fmt: skip
                 return _Decoder(c, "imu", path)
         if truth_ok and is_truth(c):
             if norm_type(c.msgtype) == TF_TYPE:
@@ -148,12 +179,6 @@ def plan(imu_topic: str | None, truth_topic: str | None) -> Callable[[Conn], obj
         return None
 
     return role
-
-
-def keep_predicate(imu_topic: str | None, truth_topic: str | None) -> Callable[[Conn], bool]:
-    """Whether a channel can be the IMU or the truth (see :func:`plan`)."""
-    p = plan(imu_topic, truth_topic)
-    return lambda c: p(c) is not None
 
 
 def describe(conns: list[Conn]) -> str:
@@ -168,56 +193,6 @@ def _by_topic(got: Collected) -> dict[str, list[Conn]]:
     for c in got.conns:
         out.setdefault(c.topic, []).append(c)
     return out
-
-
-# ------------------------------------------------------------------------------ JSON
-def _json_msg(raw: bytes) -> dict | None:
-    try:
-        m = json.loads(raw)
-    except (ValueError, RecursionError):
-        return None
-    return m if isinstance(m, dict) else None
-
-
-def _is_json_imu(m: dict | None) -> bool:
-    av = (m or {}).get("angular_velocity")
-    return isinstance(av, dict) and all(k in av for k in "xyz")
-
-
-def _json_stamp(m: dict) -> int | None:
-    st = (m.get("header") or {}).get("stamp") if isinstance(m.get("header"), dict) else None
-    st = st if st is not None else m.get("stamp")
-    if not isinstance(st, dict):
-        return None
-    sec, nsec = st.get("sec", 0), st.get("nanosec", st.get("nsec", 0))
-    if not all(isinstance(v, int | float) and not isinstance(v, bool) and math.isfinite(v)
-               for v in (sec, nsec)):  # fmt: skip
-        raise ValueError("stamp not a finite number")
-    t = int(sec) * 1_000_000_000 + int(nsec)
-    if not -_INT64 <= t < _INT64:
-        raise ValueError("stamp beyond int64 nanoseconds")
-    return t
-
-
-def _json_imu(c: Conn, p: Payloads):
-    n = len(p)
-    omega = np.full((n, 3), np.nan)
-    t_ns = p.log_time.copy()
-    good = np.zeros(n, dtype=bool)
-    for i in range(n):
-        m = _json_msg(p.payload(i))
-        if not _is_json_imu(m):
-            continue
-        av = m["angular_velocity"]
-        try:
-            omega[i] = [float(av["x"]), float(av["y"]), float(av["z"])]
-            st = _json_stamp(m)
-        except (TypeError, ValueError, OverflowError):
-            continue
-        if st is not None:
-            t_ns[i] = st
-        good[i] = True
-    return t_ns, omega, None, good, "json", ""
 
 
 # ------------------------------------------------------------------------------- IMU
@@ -252,23 +227,19 @@ def _imu_want(path: str) -> dict[str, tuple[str, int]]:
     return want
 
 
-def _imu_columns(c: Conn, data, path: str):
-    """(t_ns, omega, quat or None, good, type, frame) of one IMU channel's data."""
+def _imu_columns(c: Conn, data):
+    """(order, t_ns, log_t_ns, omega, quat or None, dropped, type, frame) of one channel."""
     if c.encoding == "json":
-        return _json_imu(c, data)
+        t_ns, omega, _, good, typ, frame = json_imu_columns(c, data)
+        return (data.order[good], t_ns[good], data.log_time[good], omega[good], None,
+                int(len(data) - good.sum()), typ, frame)  # fmt: skip
     if data.error is not None:
         raise data.error
-    out, good = data.fields, data.good
-    if path == "vec3":
-        omega = np.stack([out["vector." + a] for a in "xyz"], axis=1)
-        return _stamp(out, "header."), omega, None, good, data.frames.get("type", ""), \
-            data.frames.get("frame_id", "")
-    pre = path + "." if path else ""
-    omega = np.stack([out[pre + "angular_velocity." + a] for a in "xyz"], axis=1)
-    quat = np.stack([out[pre + "orientation." + a] for a in "xyzw"], axis=1)
-    quat[out[pre + "orientation_covariance"] == -1.0] = np.nan
-    return (_stamp(out, pre + "header."), omega, quat, good, data.frames.get("type", ""),
-            data.frames.get("frame_id", ""))
+    f = data.fields
+    n = len(data)
+    return (data.order, f.get("t_ns", np.zeros(n, np.int64)), data.log_time,
+            f.get("omega", np.zeros((n, 3))), f.get("quat"), data.dropped,
+            data.frames.get("type", ""), data.frames.get("frame_id", ""))
 
 
 def _merge(rows: list[tuple[NDArray[np.int64], list[NDArray]]]) -> list[NDArray]:
@@ -309,12 +280,12 @@ def pick_imu(got: Collected, imu_topic: str | None) -> tuple[str, list[tuple[Con
         for c in conns:
             if c.encoding == "json":
                 p = got.payloads.get(c.id)
-                if p is not None and len(p) and _is_json_imu(_json_msg(p.payload(0))):
+                if p is not None and len(p) and is_json_imu(json_msg(p.payload(0))):
                     found.setdefault(topic, []).append((c, "json"))
                 continue
             path = imu_path(c)
             if path == "vec3":
-                if not topic.startswith(_NOT_GYRO):
+                if _gyro_name(topic):
                     gyro.setdefault(topic, []).append((c, path))
             elif path is not None:
                 found.setdefault(topic, []).append((c, path))
@@ -324,9 +295,9 @@ def pick_imu(got: Collected, imu_topic: str | None) -> tuple[str, list[tuple[Con
         if unknown:
             raise LogError(f"Expected message encoding cdr or json, got {unknown[0].encoding!r} "
                            f"on {unknown[0].topic}")  # fmt: skip
-        raise LogError(f"Expected an IMU channel (sensor_msgs/msg/Imu, a type with an Imu field "
-                       f"or a geometry_msgs/msg/Vector3Stamped gyro), got "
-                       f"{describe(got.conns)}")  # fmt: skip
+        raise LogError(f"Expected an IMU channel (sensor_msgs/msg/Imu or a type with an Imu "
+                       f"field; a geometry_msgs/msg/Vector3Stamped gyro named with --imu-topic), "
+                       f"got {describe(got.conns)}")  # fmt: skip
     if len(found) > 1:
         raise LogError(f"Expected one IMU channel, got {len(found)}: {', '.join(sorted(found))} "
                        f"(choose with --imu-topic)")  # fmt: skip
@@ -338,20 +309,21 @@ def read_imu(got: Collected, topic: str, conns: list[tuple[Conn, str]]) -> tuple
     """The IMU series of ``topic`` (its channels merged) and the count of undecodable ones."""
     rows, dropped, typ, frame = [], 0, "", ""
     for c, path in conns:
-        p = got.payloads.get(c.id)
-        if p is None:
-            p = Payloads.empty() if c.encoding == "json" else _Decoder(c, "imu", path)(
+        data = got.payloads.get(c.id)
+        if data is None:
+            data = Payloads.empty() if c.encoding == "json" else _Decoder(c, "imu", path)(
                 Payloads.empty())
-        t_ns, omega, quat, good, typ_c, frame_c = _imu_columns(c, p, path)
-        dropped += int(len(p) - good.sum())
+        order, t_ns, log_t, omega, quat, drop, typ_c, frame_c = _imu_columns(c, data)
+        dropped += drop
         typ, frame = typ or typ_c, frame or frame_c
-        q = quat[good] if quat is not None else None
-        rows.append((p.order[good], [t_ns[good], p.log_time[good], omega[good], q]))
+        if quat is None and len(conns) > 1:
+            quat = np.full((len(t_ns), 4), np.nan)
+        rows.append((order, [t_ns, log_t, omega, quat]))
     t_ns, log_t, omega, quat = _merge(rows)
     if quat is not None and not np.isfinite(quat).any():
         quat = None
-    return ImuSeries(t_ns.astype(np.int64), log_t.astype(np.int64), omega, quat, topic, typ,
-                     frame), dropped  # fmt: skip
+    return ImuSeries(t_ns.astype(np.int64, copy=False), log_t.astype(np.int64, copy=False),
+                     omega, quat, topic, typ, frame), dropped  # fmt: skip
 
 
 # ----------------------------------------------------------------------------- truth
@@ -363,121 +335,15 @@ def _read_truth_topic(got: Collected, topic: str, conns: list[Conn], auto: bool)
             data = _Decoder(c, "truth")(Payloads.empty())
         if data.error is not None:
             raise data.error
-        root = data.frames.get("type") or norm_type(c.msgtype)
-        qpath = TRUTH_TYPES[root]
-        out, good = data.fields, data.good
-        q = np.stack([out[f"{qpath}.{a}"] for a in "xyzw"], axis=1)
-        rows.append((data.order[good], [_stamp(out, "header.")[good], data.log_time[good],
-                                        q[good]]))  # fmt: skip
-        typ = typ or root
+        n = len(data)
+        rows.append((data.order, [data.fields.get("t_ns", np.zeros(n, np.int64)), data.log_time,
+                                  data.fields.get("q", np.zeros((n, 4)))]))  # fmt: skip
+        typ = typ or data.frames.get("type") or norm_type(c.msgtype)
         frame = frame or data.frames.get("frame_id", "")
         child = child or data.frames.get("child_frame_id", "")
     t_ns, log_t, q = _merge(rows)
-    return TruthSeries(t_ns.astype(np.int64), log_t.astype(np.int64), q, topic, typ, frame,
-                       child, auto)  # fmt: skip
-
-
-def _child_frame(c: Conn, p: Payloads, good) -> str:
-    """child_frame_id right after the header (Odometry, TransformStamped)."""
-    idx = np.flatnonzero(good)
-    if not len(idx):
-        return ""
-    try:
-        rows = _tf_rows(p.buf[int(p.start[idx[0]]):int(p.start[idx[0]] + p.length[idx[0]])]
-                        .tobytes(), c.encoding == "ros1", single=True)  # fmt: skip
-        return rows[0][2] if rows else ""
-    except (struct.error, ValueError):
-        return ""
-
-
-def _tf_rows(raw: bytes, ros1: bool, single: bool = False) -> list[tuple]:
-    """(stamp ns, parent, child, q xyzw) of each TransformStamped in a TFMessage payload."""
-    base = 0 if ros1 else 4
-    o = 0
-
-    def al(n: int) -> None:
-        nonlocal o
-        if not ros1:
-            o = (o + n - 1) & ~(n - 1)
-
-    def u32() -> int:
-        nonlocal o
-        al(4)
-        (v,) = struct.unpack_from("<I", raw, base + o)
-        o += 4
-        return v
-
-    def string() -> str:
-        nonlocal o
-        n = u32()
-        s = raw[base + o : base + o + n]
-        if len(s) != n:
-            raise ValueError("string past the end")
-        o += n
-        return (s if ros1 else s.rstrip(b"\x00")).decode("utf-8", errors="replace")
-
-    count = 1 if single else u32()
-    if count > len(raw) // 60 + 1:
-        raise ValueError("transform count beyond the payload")
-    out = []
-    for _ in range(count):
-        if ros1:
-            u32()  # seq
-        sec, nsec = u32(), u32()
-        parent, child = string(), string()
-        if single:
-            return [(0, parent, child, None)]
-        al(8)
-        v = struct.unpack_from("<7d", raw, base + o)
-        o += 56
-        out.append((sec * 1_000_000_000 + nsec, parent, child, v[3:7]))
-    return out
-
-
-def _tf_truth(got: Collected, conns: list[Conn], imu_frame: str, truth_frame: str | None,
-              auto: bool) -> TruthSeries | None:  # fmt: skip
-    t, lt, order, parent, child, q = [], [], [], [], [], []
-    for c in conns:
-        p = got.payloads.get(c.id) or Payloads.empty()
-        for i in range(len(p)):
-            try:
-                rows = _tf_rows(p.payload(i), c.encoding == "ros1")
-            except (struct.error, ValueError):
-                continue
-            for stamp, par, ch, quat in rows:
-                t.append(stamp)
-                lt.append(int(p.log_time[i]))
-                order.append(int(p.order[i]))
-                parent.append(par)
-                child.append(ch)
-                q.append(quat)
-    if not t:
-        return None
-    q_arr = np.asarray(q, dtype=np.float64)
-    child_arr = np.asarray(child)
-    children = sorted(set(child))
-    moving = [ch for ch in children if np.ptp(q_arr[child_arr == ch], axis=0).max() > 1e-12]
-    topics = "/".join(sorted({c.topic for c in conns}))
-    if truth_frame is not None:
-        if truth_frame not in children:
-            raise LogError(f"Expected a transform to child frame {truth_frame!r} in {topics}, got "
-                           f"children {', '.join(children)}")  # fmt: skip
-        pick = truth_frame
-    elif not moving:
-        return None
-    elif len(moving) == 1:
-        pick = moving[0]
-    elif imu_frame.strip("/") in [m.strip("/") for m in moving]:
-        pick = next(m for m in moving if m.strip("/") == imu_frame.strip("/"))
-    else:
-        raise LogError(f"Expected one moving frame in {topics}, got {len(moving)}: "
-                       f"{', '.join(moving)} (choose with --truth-frame)")  # fmt: skip
-    m = child_arr == pick
-    idx = np.flatnonzero(m)
-    idx = idx[np.argsort(np.asarray(order)[idx], kind="stable")]
-    par = parent[int(idx[0])]
-    return TruthSeries(np.asarray(t, np.int64)[idx], np.asarray(lt, np.int64)[idx], q_arr[idx],
-                       topics, TF_TYPE, par, pick, auto)  # fmt: skip
+    return TruthSeries(t_ns.astype(np.int64, copy=False), log_t.astype(np.int64, copy=False), q,
+                       topic, typ, frame, child, auto)  # fmt: skip
 
 
 def imu_truth(imu: ImuSeries, required: bool) -> TruthSeries | None:
@@ -520,7 +386,7 @@ def read_truth(got: Collected, imu: ImuSeries, truth_topic: str | None,
                 raise LogError(f"Expected truth messages on {truth_topic}, got "
                                f"{c.msgtype or 'no schema'} ({c.encoding})")  # fmt: skip
         if all(norm_type(c.msgtype) == TF_TYPE for c in conns):
-            tf = _tf_truth(got, conns, imu.frame_id, truth_frame, auto=False)
+            tf = tf_truth(got, conns, imu.frame_id, truth_frame, auto=False)
             if tf is None:
                 raise LogError(f"Expected a moving transform in {truth_topic}, got none")
             return tf
@@ -530,7 +396,7 @@ def read_truth(got: Collected, imu: ImuSeries, truth_topic: str | None,
         if not tf:
             raise LogError(f"Expected /tf or /tf_static for truth frame {truth_frame!r}, got "
                            f"{describe(got.conns)}")  # fmt: skip
-        return _tf_truth(got, tf, imu.frame_id, truth_frame, auto=False)
+        return tf_truth(got, tf, imu.frame_id, truth_frame, auto=False)
     auto = {t: cs for t, cs in topics.items() if not t.startswith("/estimate")
             and all(is_truth(c) and norm_type(c.msgtype) != TF_TYPE for c in cs)}  # fmt: skip
     if len(auto) > 1:
@@ -540,7 +406,7 @@ def read_truth(got: Collected, imu: ImuSeries, truth_topic: str | None,
         topic = next(iter(auto))
         return _read_truth_topic(got, topic, auto[topic], auto=True)
     if tf:
-        truth = _tf_truth(got, tf, imu.frame_id, truth_frame, auto=True)
+        truth = tf_truth(got, tf, imu.frame_id, truth_frame, auto=True)
         if truth is not None:
             return truth
     return imu_truth(imu, required=False)

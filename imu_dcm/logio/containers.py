@@ -15,7 +15,6 @@ from __future__ import annotations
 
 import stat
 import tempfile
-from collections.abc import Callable
 from pathlib import Path
 
 from imu_dcm.errors import LogError
@@ -31,10 +30,10 @@ SQLITE_MAGIC = b"SQLite format 3\x00"
 ZSTD_MAGIC = b"\x28\xb5\x2f\xfd"
 STORAGES = ("mcap", "sqlite3")
 _FOREIGN = {  # magic -> (what it is, how to convert it)
-    b"\x89HDF": ("an HDF5 file", "export the gyro as CSV and run "
-                 "`python -m imu_dcm.replay convert-csv gyro.csv`"),
-    b"ULog": ("a PX4 ULog", "`ulog2csv x.ulg` then `python -m imu_dcm.replay convert-csv "
-              "x_sensor_gyro_0.csv`"),
+    b"\x89HDF": ("an HDF5 file", ("export the gyro as CSV and run "
+                                  "`python -m imu_dcm.replay convert-csv gyro.csv`")),
+    b"ULog": ("a PX4 ULog", ("`ulog2csv x.ulg` then `python -m imu_dcm.replay convert-csv "
+                             "x_sensor_gyro_0.csv`")),
     b"\x1f\x8b": ("a gzip file", "`gunzip` it first"),
     b"BZh": ("a bzip2 file", "`bunzip2` it first"),
     b"PK\x03\x04": ("a zip archive", "`unzip` it first"),
@@ -152,6 +151,8 @@ def open_source(path: str | Path, progress=None):
             src = source_for_file(files[0], storage, progress)
             if isinstance(src, McapSource | SqliteSource):
                 src.kind = f"ros2 {storage}"
+            if isinstance(src, SqliteSource):
+                src.counts = meta.topic_counts(info)
             return src, files[0], custom
         return Rosbag2Folder(p, info, files, progress), p, custom
     found = [x for pat in ("*.mcap", "*.db3", "*.bag", "*.mcap.zstd") for x in sorted(p.glob(pat))]

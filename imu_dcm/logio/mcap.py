@@ -28,8 +28,8 @@ _REC = struct.Struct("<BQ")
 _MSG = struct.Struct("<BQHIQQ")  # opcode, length, channel_id, sequence, log_time, publish_time
 _MSG_HEADER = _MSG.size  # 31 bytes before the payload of a message record
 _CHUNK_HEAD = struct.Struct("<QQQI")  # start time, end time, uncompressed size, uncompressed crc
-#: Hard limit on one decompressed chunk (bytes); rosbag2 writes 768 KiB chunks.
-MAX_CHUNK_BYTES = 1 << 31
+#: Hard limit on one decompressed chunk (bytes); rosbag2 writes 768 KiB chunks, mcap 1 MiB.
+MAX_CHUNK_BYTES = 256 << 20
 #: Largest schema / channel / summary record read whole (bytes).
 MAX_META_RECORD = 64 << 20
 
@@ -37,10 +37,11 @@ MAX_META_RECORD = 64 << 20
 def size_bound(compressed: int) -> int:
     """Largest uncompressed size accepted for a chunk of ``compressed`` bytes.
 
-    1024x the compressed size (zstd reaches ~50x on IMU messages), at least 1 MiB, at most
-    :data:`MAX_CHUNK_BYTES`: a small file cannot make the reader allocate gigabytes.
+    128x the compressed size (zstd reaches 5-14x on real IMU chunks, ~31x on all-zero
+    messages), at least 1 MiB, at most :data:`MAX_CHUNK_BYTES`: a small file cannot make the
+    reader allocate gigabytes.
     """
-    return min(MAX_CHUNK_BYTES, max(1 << 20, 1024 * compressed))
+    return min(MAX_CHUNK_BYTES, max(1 << 20, 128 * compressed))
 
 
 def compact(d: np.ndarray, start: np.ndarray, length: np.ndarray) -> tuple:
@@ -120,6 +121,7 @@ class McapSource:
         self.channels: dict[int, tuple[int, str, str]] = {}
         self.counts: dict[int, int] = {}
         self.counts_seen: dict[int, int] = {}
+        self.unknown: dict[int, int] = {}  # chunk offset -> messages naming no defined channel
         self._n_kept = 0
         self.damage: list[Damage] = []
         self.profile = ""
@@ -168,6 +170,10 @@ class McapSource:
                 self._read_indexed(f, index)
             else:
                 self._scan(f)
+        for pos, n in sorted(self.unknown.items()):
+            self.damage.append(Damage(pos, f"{n} messages in the chunk at byte {pos} name a "
+                                      f"channel id that is not defined; they are lost", None,
+                                      None, n))  # fmt: skip
         if self.kind == "mcap" and self.profile in ("ros1", "ros2"):
             self.kind = f"{self.profile} mcap"
         conns = [self.conn(c) for c in sorted(self.channels)]
@@ -191,7 +197,7 @@ class McapSource:
         tail = f.read(29 + 8)
         if tail[-8:] != MAGIC or tail[0] != _FOOTER:
             return None
-        summary_start, _, _ = struct.unpack_from("<QQI", tail, 9)
+        summary_start, _, summary_crc = struct.unpack_from("<QQI", tail, 9)
         end = self.size - 8 - 29
         if summary_start == 0 or not 8 <= summary_start <= end or end - summary_start > (
             MAX_META_RECORD
@@ -199,6 +205,8 @@ class McapSource:
             return None
         f.seek(summary_start)
         buf = f.read(end - summary_start)
+        if summary_crc != 0 and zlib.crc32(tail[:25], zlib.crc32(buf)) != summary_crc:
+            return None  # a damaged summary: the data section is walked instead
         schemas, channels, chunks, counts = {}, {}, [], {}
         pos = 0
         try:
@@ -233,8 +241,15 @@ class McapSource:
                 pos = rec_end
         except (struct.error, _Bad):
             return None
-        if not chunks and counts and sum(counts.values()):
-            return None  # messages outside chunks: walk the file
+        if not chunks:
+            return None  # no chunk index (or messages outside chunks): walk the file
+        for start, clen, *_ in chunks:  # an index that lies about where a chunk is: walk
+            if start + clen > self.size or clen < 9:
+                return None
+            f.seek(start)
+            op, length = _REC.unpack(f.read(9))
+            if op != _CHUNK or 9 + length != clen:
+                return None
         self.schemas.update(schemas)
         self.channels.update(channels)
         self.counts.update(counts)
@@ -303,45 +318,77 @@ class McapSource:
 
     def _take(self, data: bytes, pos: int, seq: int, entries: dict | None,
               span: tuple[int, int] = (None, None)) -> None:  # fmt: skip
-        """Locate the messages in a decompressed chunk; keep payloads of kept channels."""
+        """Locate the messages in a decompressed chunk; keep payloads of kept channels.
+
+        With message indexes, every indexed record is checked (opcode, length, channel, no
+        overlap): a damaged message record costs only itself. Without, the chunk is walked
+        record by record, and a damaged record costs the rest of the chunk.
+        """
+        from imu_dcm.logio.cdr import gather
+
         d = np.frombuffer(data, np.uint8)
+        size = len(data)
         if entries:
-            offs = np.sort(np.concatenate([e[0] for e in entries.values()]))
-            ok = len(offs) and offs[0] >= 0 and offs[-1] + _MSG_HEADER <= len(data)
-            if ok and np.all(d[offs] == _MESSAGE):
-                from imu_dcm.logio.cdr import gather
-
-                length = gather(d, offs + 1, "u8").astype(np.int64)
-                ends = offs + 9 + length
-                if np.all(ends[:-1] <= offs[1:]) and ends[-1] <= len(data) and np.all(
-                    length >= 22
-                ):
-                    # schema/channel records sit between indexed messages: walk only those gaps
-                    gs, ge = np.concatenate([[0], ends]), np.concatenate([offs, [len(data)]])
-                    for a, b in zip(gs[ge > gs].tolist(), ge[ge > gs].tolist()):
-                        self._walk(data, a, b, pos, seq, meta_only=True, span=span)
-                    cid = gather(d, offs + 9, "u2").astype(np.int64)
-                    lt = gather(d, offs + 15, "u8").astype(np.int64)
-                    self._keep_spans(d, offs, length, cid, lt, seq)
-                    return
-        expected = sum(len(e[0]) for c, e in (entries or {}).items() if self._is_kept(c))
+            offs = np.concatenate([e[0] for e in entries.values()])
+            icid = np.concatenate([np.full(len(e[0]), c) for c, e in entries.items()])
+            k = np.argsort(offs, kind="stable")
+            offs, icid = offs[k], icid[k]
+            inside = (offs >= 0) & (offs + _MSG_HEADER <= size)
+            o = np.where(inside, offs, 0)
+            length_u = gather(d, o + 1, "u8")
+            valid = inside & (d[o] == _MESSAGE) & (length_u >= 22) & (length_u <= size)
+            length = np.where(valid, length_u, 22).astype(np.int64)
+            ends = o + 9 + length
+            nxt = np.concatenate([offs[1:], [size]])
+            valid &= (ends <= nxt) & (ends <= size)
+            cid = gather(d, o + 9, "u2").astype(np.int64)
+            valid &= cid == icid
+            lt = gather(d, o + 15, "u8").astype(np.int64)
+            all_valid = bool(valid.all())
+            # Schema/channel records sit between indexed messages: walk only those gaps. Where
+            # index entries do not match the data (a damaged or stale index), the walk of the
+            # gaps finds the messages they should have located.
+            self._n_kept = 0
+            gs = np.concatenate([[0], ends[valid]])
+            ge = np.concatenate([offs[valid], [size]])
+            for a, b in zip(gs[ge > gs].tolist(), ge[ge > gs].tolist()):
+                self._walk(data, a, b, pos, seq, span=span, quiet=not all_valid)
+            if not all_valid:
+                bad = ~valid
+                expected = int(sum(self._is_kept(int(c)) for c in icid[bad]))
+                lost = max(expected - self._n_kept, 0)
+                if lost:
+                    first = int(offs[bad][0])
+                    self.damage.append(Damage(pos, f"{int(bad.sum())} message records in the "
+                                              f"chunk at byte {pos} are damaged or misindexed "
+                                              f"(the first at byte {first} of its {size} "
+                                              f"decompressed bytes)", span[0], span[1], lost))
+            self._keep_spans(d, offs[valid], length[valid], cid[valid], lt[valid], seq, pos)
+            return
         self._n_kept = 0
-        self._walk(data, 0, len(data), pos, seq, meta_only=False, span=span,
-                   expected=expected if entries else None)
+        self._walk(data, 0, size, pos, seq, span=span, expected=None)
 
-    def _keep_spans(self, d, offs, length, cid, log_time, seq: int) -> None:
+    def _keep_spans(self, d, offs, length, cid, log_time, seq: int, pos: int = -1,
+                    note_unknown: bool = True) -> None:  # fmt: skip
         for c in np.unique(cid).tolist():
             m = cid == c
+            if c not in self.channels:
+                if note_unknown:
+                    self.unknown[pos] = self.unknown.get(pos, 0) + int(m.sum())
+                continue
             self.counts_seen[c] = self.counts_seen.get(c, 0) + int(m.sum())
             if not self._is_kept(c):
                 continue
             self._n_kept += int(m.sum())
             s = offs[m] + _MSG_HEADER
             n = length[m] - 22
-            self.sink.add(c, Payloads(*compact(d, s, n), log_time[m], (seq << 32) + offs[m]))
+            # A channel that fills most of the chunk keeps the chunk as is (no copy); a small
+            # one (IMU beside a camera) copies out its payloads, so the chunk can go.
+            buf = (d, s, n) if 2 * int(n.sum()) >= len(d) else compact(d, s, n)
+            self.sink.add(c, Payloads(*buf, log_time[m], (seq << 32) + offs[m]))
 
-    def _walk(self, data: bytes, a: int, b: int, pos: int, seq: int, meta_only: bool,
-              span=(None, None), expected: int | None = None) -> None:
+    def _walk(self, data: bytes, a: int, b: int, pos: int, seq: int, span=(None, None),
+              expected: int | None = None, quiet: bool = False) -> None:
         """Walk the records in ``data[a:b]`` of one chunk (chunk at file offset ``pos``)."""
         offs, lens, cids, times = [], [], [], []
         p = a
@@ -351,7 +398,7 @@ class McapSource:
             if end > b:
                 break
             try:
-                if op == _MESSAGE and not meta_only and length >= 22:
+                if op == _MESSAGE and length >= 22:
                     _, _, cid, _, lt, _ = _MSG.unpack_from(data, p)
                     offs.append(p)
                     lens.append(length)
@@ -367,8 +414,9 @@ class McapSource:
         if offs:
             d = np.frombuffer(data, np.uint8)
             self._keep_spans(d, np.asarray(offs, np.int64), np.asarray(lens, np.int64),
-                             np.asarray(cids, np.int64), np.asarray(times, np.int64), seq)
-        if p < b:
+                             np.asarray(cids, np.int64), np.asarray(times, np.int64), seq, pos,
+                             note_unknown=not quiet)  # fmt: skip
+        if p < b and not quiet:  # (a gap around damaged indexed records is reported once)
             lost = None if expected is None else max(expected - self._n_kept, 0)
             self.damage.append(Damage(pos, f"a record inside the chunk at byte {pos} is damaged "
                                       f"(at byte {p} of its {len(data)} decompressed bytes); "
@@ -398,7 +446,9 @@ class McapSource:
                 pos = nxt
                 continue
             if op == _CHUNK:
-                entries, after = self._following_index(f, end)
+                entries, after, complete = self._following_index(f, end)
+                if not complete:
+                    entries = None
                 t0 = t1 = None
                 try:
                     f.seek(pos + 9)
@@ -440,20 +490,31 @@ class McapSource:
                         np.array([lt], np.int64), np.array([(seq << 32) + 0], np.int64)))
                 seq += 1
             pos = end
+        # no data-end record: the file was cut (at a record boundary or inside a header)
+        where = "inside a record " if pos < self.size else ""
+        self.damage.append(Damage(pos, f"the file ends {where}at byte {pos} of {self.size} "
+                                  f"without its data-end record; anything after it is lost"))
 
-    def _following_index(self, f, pos: int) -> tuple[dict | None, int]:
-        """Message index records right after a chunk: {channel: (offsets, log times)}."""
+    def _following_index(self, f, pos: int) -> tuple[dict | None, int, bool]:
+        """Message index records right after a chunk: ({channel: (offsets, log times)}, the
+        offset after them, whether they are complete). Incomplete (cut or damaged) indexes
+        are not trusted: the chunk is then read and walked whole."""
         entries: dict = {}
-        while pos + 15 <= self.size:
+        while pos < self.size:
             f.seek(pos)
-            op, length, cid, nbytes = struct.unpack("<BQHI", f.read(15))
-            if op != _MSG_INDEX or pos + 9 + length > self.size or nbytes != length - 6:
-                break
-            if nbytes % 16 == 0 and nbytes <= MAX_META_RECORD:
-                pairs = np.frombuffer(f.read(nbytes), "<u8").reshape(-1, 2).astype(np.int64)
-                entries[cid] = (pairs[:, 1], pairs[:, 0])
+            head = f.read(15)
+            if head[0] != _MSG_INDEX:
+                return (entries or None), pos, True  # the next record: the index is complete
+            if len(head) < 15:
+                return (entries or None), pos, False
+            _, length, cid, nbytes = struct.unpack("<BQHI", head)
+            if (pos + 9 + length > self.size or nbytes != length - 6 or nbytes % 16
+                    or nbytes > MAX_META_RECORD):  # fmt: skip
+                return (entries or None), pos, False
+            pairs = np.frombuffer(f.read(nbytes), "<u8").reshape(-1, 2).astype(np.int64)
+            entries[cid] = (pairs[:, 1], pairs[:, 0])
             pos += 9 + length
-        return (entries or None), pos
+        return (entries or None), pos, False  # the file ends here: cut, maybe mid-index
 
     def _resync(self, f, pos: int) -> int | None:
         """File offset of the next plausible chunk record at or after ``pos`` (None if none)."""

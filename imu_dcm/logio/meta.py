@@ -15,6 +15,8 @@ from imu_dcm.errors import LogError
 
 #: Largest metadata.yaml read (bytes); real ones are a few kB, one per topic ~0.5 kB.
 MAX_METADATA_BYTES = 4 * 1024 * 1024
+#: Deepest nesting of [ ] / { } accepted (rosbag2 writes 2-3 levels).
+MAX_NESTING = 64
 
 
 def _yaml_load(text: str, where: Path) -> Any:
@@ -27,7 +29,7 @@ def _yaml_load(text: str, where: Path) -> Any:
             if isinstance(event, yaml.AliasEvent):
                 raise LogError(f"Expected a rosbag2 metadata.yaml without YAML aliases, got an "
                                f"alias in {where}")  # fmt: skip
-        return yaml.load(text, Loader=loader_cls)  # noqa: S506 (a safe loader)
+        return yaml.load(text, Loader=loader_cls)
     except yaml.YAMLError as exc:
         line = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
         raise LogError(f"Expected a YAML metadata.yaml, got a syntax error in {where}: "
@@ -35,6 +37,18 @@ def _yaml_load(text: str, where: Path) -> Any:
     except RecursionError:
         raise LogError(f"Expected a rosbag2 metadata.yaml, got nesting too deep in {where}") \
             from None
+
+
+def _check_nesting(raw: bytes, where: Path) -> None:
+    """Refuse flow collections nested deeper than MAX_NESTING (YAML parsers recurse on them)."""
+    import numpy as np
+
+    b = np.frombuffer(raw, np.uint8)
+    step = ((b == 0x5B) | (b == 0x7B)).astype(np.int32) - ((b == 0x5D) | (b == 0x7D))
+    depth = int(np.cumsum(step).max()) if len(b) else 0
+    if depth > MAX_NESTING:
+        raise LogError(f"Expected a rosbag2 metadata.yaml, got brackets nested {depth} deep in "
+                       f"{where}")  # fmt: skip
 
 
 def load_metadata(folder: Path) -> dict[str, Any]:
@@ -60,6 +74,7 @@ def load_metadata(folder: Path) -> dict[str, Any]:
     except UnicodeDecodeError as exc:
         raise LogError(f"Expected a UTF-8 metadata.yaml, got a non-UTF-8 byte at {exc.start} in "
                        f"{meta}") from None  # fmt: skip
+    _check_nesting(raw, meta)
     doc = _yaml_load(text, meta)
     info = doc.get("rosbag2_bagfile_information") if isinstance(doc, dict) else None
     if not isinstance(info, dict):
@@ -74,6 +89,17 @@ def custom_data(info: dict[str, Any]) -> dict[str, str]:
     if not isinstance(data, dict):
         return {}
     return {str(k): str(v) for k, v in data.items()}
+
+
+def topic_counts(info: dict[str, Any]) -> dict[str, int] | None:
+    """Message count per topic from ``topics_with_message_count`` (None when unusable)."""
+    out = {}
+    try:
+        for t in info.get("topics_with_message_count") or []:
+            out[str(t["topic_metadata"]["name"])] = int(t["message_count"])
+    except (KeyError, TypeError, ValueError):
+        return None
+    return out or None
 
 
 def file_list(info: dict[str, Any], folder: Path) -> list[Path]:

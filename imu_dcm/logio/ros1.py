@@ -11,6 +11,7 @@ reported with its file offset, time range and the kept messages it held.
 from __future__ import annotations
 
 import bz2
+import struct
 from collections import defaultdict
 from collections.abc import Callable
 from pathlib import Path
@@ -49,6 +50,44 @@ def _decompress(compression: str, data: bytes, size: int) -> bytes:
         raise _Bad(f"it decompresses to {len(out)}{'+' if len(out) > size else ''} bytes, "
                    f"not its declared {size}")  # fmt: skip
     return out
+
+
+def _op(d: np.ndarray, off: int, hl: int) -> int | None:
+    """The ``op`` field of the record header at ``off`` (header length ``hl``)."""
+    head = d[off + 4 : off + 4 + hl].tobytes()
+    p = 0
+    while p + 4 <= len(head):
+        (n,) = struct.unpack_from("<I", head, p)
+        name, _, value = head[p + 4 : p + 4 + n].partition(b"=")
+        if name == b"op" and len(value) == 1:
+            return value[0]
+        p += 4 + n
+    return None
+
+
+def _walk_records(d: np.ndarray, offs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Payload (start, length) of the message record at or after each offset, skipping
+    connection records (one record at a time)."""
+    starts, lens = [], []
+    for off in offs.tolist():
+        while True:
+            if off + 4 > len(d):
+                raise _Bad("a message record runs past the chunk")
+            (hl,) = struct.unpack_from("<I", d, off)
+            if off + 8 + hl > len(d):
+                raise _Bad("a message record header is damaged")
+            (dl,) = struct.unpack_from("<I", d, off + 4 + hl)
+            op = _op(d, off, hl)
+            if op == 2:
+                break
+            if op != 7:
+                raise _Bad(f"expected a message record, got op {op}")
+            off += 8 + hl + dl
+        if off + 8 + hl + dl > len(d):
+            raise _Bad("a message runs past the chunk")
+        starts.append(off + 8 + hl)
+        lens.append(dl)
+    return np.asarray(starts, np.int64), np.asarray(lens, np.int64)
 
 
 class Ros1Source:
@@ -147,6 +186,9 @@ class Ros1Source:
             start = off + 8 + hl
             if np.any(start + dl > len(d)):
                 raise _Bad("a message runs past the chunk")
+            if not all(_op(d, int(off[i]), int(hl[i])) == 2 for i in {0, len(off) - 1}):
+                # an index entry points at a connection record before its message: walk
+                start, dl = _walk_records(d, off)
             k = np.argsort(start, kind="stable")
             buf, out_start, n = compact(d, start[k], dl[k])
             sink.add(cid, Payloads(buf, out_start, n, t[k], (seq << 32) + off[k]))

@@ -22,6 +22,7 @@ import numpy as np
 
 from imu_dcm.errors import LogError
 from imu_dcm.logio.mcap import size_bound
+from imu_dcm.logio.meta import topic_counts
 from imu_dcm.logio.types import Collected, Conn, Damage, Payloads, Sink, join_any
 
 #: Largest single decompressed message of a message-compressed bag (bytes).
@@ -31,11 +32,13 @@ MAX_MESSAGE_BYTES = 256 << 20
 class SqliteSource:
     """One rosbag2 sqlite3 file."""
 
-    kind = "sqlite3"
+    kind = "ros2 sqlite3"
 
-    def __init__(self, path: Path, progress: Callable[[float], None] | None = None):
+    def __init__(self, path: Path, progress: Callable[[float], None] | None = None,
+                 counts: dict[str, int] | None = None):  # fmt: skip
         self.path = path
         self.progress = progress
+        self.counts = counts  # message count per topic from metadata.yaml (saves a table scan)
 
     def read(self, sink: Sink) -> Collected:
         uri = f"file:{self.path.resolve().as_posix()}?mode=ro&immutable=1"
@@ -47,8 +50,8 @@ class SqliteSource:
             return self._read(db, sink)
         except sqlite3.DatabaseError as exc:
             raise LogError(f"Expected a rosbag2 sqlite3 database, got {str(exc).rstrip('.')} in "
-                           f"{self.path}; `sqlite3 {self.path.name} .recover` may rescue "
-                           f"it") from None  # fmt: skip
+                           f"{self.path}; `sqlite3 {self.path.name} .recover | sqlite3 fixed.db3` "
+                           f"may rescue it") from None  # fmt: skip
         finally:
             db.close()
 
@@ -64,30 +67,38 @@ class SqliteSource:
             ):
                 if text:
                     defs[typ] = (enc, text)
-        counts = dict(db.execute("SELECT topic_id, COUNT(*) FROM messages GROUP BY topic_id"))
+        topics = list(db.execute(
+            "SELECT id, name, type, serialization_format FROM topics ORDER BY id"))
+        if self.counts is not None and all(str(t[1]) in self.counts for t in topics):
+            counts = {t[0]: self.counts[str(t[1])] for t in topics}
+        else:
+            counts = dict(db.execute("SELECT topic_id, COUNT(*) FROM messages GROUP BY topic_id"))
         conns = []
-        for tid, name, typ, fmt in db.execute(
-            "SELECT id, name, type, serialization_format FROM topics ORDER BY id"
-        ):
+        for tid, name, typ, fmt in topics:
             enc, text = defs.get(typ, ("", ""))
             conns.append(Conn(int(tid), str(name), str(typ), str(fmt), enc, text,
                               int(counts.get(tid, 0))))  # fmt: skip
         kept = [c.id for c in conns if sink.wants(c)]
         if kept:
             marks = ",".join("?" * len(kept))
-            rows = db.execute(f"SELECT id, topic_id, timestamp, data FROM messages "  # noqa: S608
+            rows = db.execute(f"SELECT id, topic_id, timestamp, data FROM messages "
                               f"WHERE topic_id IN ({marks}) ORDER BY id", kept)  # fmt: skip
+            total = max(sum(c.count or 0 for c in conns if c.id in kept), 1)
+            done = 0
             while batch := rows.fetchmany(20_000):
-                by_topic: dict[int, list] = {}
-                for row in batch:
-                    by_topic.setdefault(row[1], []).append(row)
-                for tid, rs in by_topic.items():
-                    lens = np.fromiter((len(r[3]) for r in rs), np.int64, len(rs))
+                done += len(batch)
+                if self.progress is not None:
+                    self.progress(min(done / total, 1.0))
+                ids, tids, stamps, datas = zip(*batch)
+                tids = np.array(tids, np.int64)
+                for tid in np.unique(tids).tolist():
+                    sel = np.flatnonzero(tids == tid)
+                    rs = datas if len(sel) == len(datas) else [datas[i] for i in sel.tolist()]
+                    lens = np.fromiter(map(len, rs), np.int64, len(rs))
                     starts = np.concatenate([[0], np.cumsum(lens)[:-1]]).astype(np.int64)
-                    buf = np.frombuffer(b"".join(r[3] for r in rs), np.uint8)
-                    sink.add(tid, Payloads(buf, starts, lens,
-                                           np.fromiter((r[2] for r in rs), np.int64, len(rs)),
-                                           np.fromiter((r[0] for r in rs), np.int64, len(rs))))
+                    sink.add(tid, Payloads(np.frombuffer(b"".join(rs), np.uint8), starts, lens,
+                                           np.array(stamps, np.int64)[sel],
+                                           np.array(ids, np.int64)[sel]))
         payloads = sink.finish()
         return Collected(self.kind, conns, payloads, [])
 
@@ -182,6 +193,8 @@ class Rosbag2Folder:
                 if self.mode == "file":
                     path = decompress_file(path, Path(tmp))
                 src = source_for_file(path, self.storage)
+                if isinstance(src, SqliteSource) and len(self.files) == 1:
+                    src.counts = topic_counts(self.info)
                 name = self.files[k].name
                 transform = None
                 if self.mode == "message":

@@ -160,7 +160,7 @@ def definitions(conn: Conn) -> tuple[Defs, str]:
     except RecursionError:
         raise LogError(f"Expected a readable {conn.schema_encoding or 'message'} definition of "
                        f"{conn.msgtype} on {conn.topic}, got nesting too deep") from None
-    except Exception as exc:  # rosbags' parser raises TypesysError and a few builtins
+    except Exception as exc:  # noqa: BLE001 (rosbags' parser raises TypesysError and builtins)
         msg = str(exc).splitlines()[0][:120] if str(exc) else type(exc).__name__
         raise LogError(f"Expected a readable {conn.schema_encoding or 'message'} definition of "
                        f"{conn.msgtype} on {conn.topic}, got {type(exc).__name__}: {msg}") \

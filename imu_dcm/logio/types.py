@@ -31,7 +31,8 @@ class Damage:
 
     Attributes
     ----------
-    offset : int — byte offset of the damaged record in its file (never chunk-relative).
+    offset : int — byte offset of the damaged record in its file (never chunk-relative);
+        -1 where the container has no byte offsets (a message of a sqlite3 bag).
     what : str — what was wrong, one line (names the file when a bag has several).
     t_start_ns, t_end_ns : int or None — log-time range the damaged part covered, when known.
     messages_lost : int or None — messages of the selected channels it held, when known.
@@ -174,38 +175,53 @@ def join_payloads(parts: list[Payloads]) -> Payloads:
 
 @dataclass
 class Columns:
-    """Decoded fields of one channel (internal): one row per message, in file order.
+    """Decoded fields of one channel (internal): one row per message that decoded, file order.
 
-    ``fields`` maps a field path to an array (N,) or (N, k); ``good`` marks rows that decoded;
-    ``frames`` holds the first message's frame ids ("frame_id", "child_frame_id"); ``error``
-    is the schema error when the channel's definition could not be read (then no row is good).
+    ``fields`` maps a name ("t_ns", "omega", "quat", "q") to an array (N,) or (N, k);
+    ``dropped`` counts messages that did not decode; ``frames`` holds the first message's
+    "frame_id" / "child_frame_id" and the "type"; ``error`` is the schema error when the
+    channel's definition could not be read (then every message is dropped).
     """
 
     order: NDArray[np.int64]
     log_time: NDArray[np.int64]
-    good: NDArray[np.bool_]
     fields: dict[str, NDArray]
     frames: dict[str, str] = field(default_factory=dict)
     error: Exception | None = None
+    dropped: int = 0
 
     def __len__(self) -> int:
         return len(self.order)
 
 
 def join_columns(parts: list[Columns]) -> Columns:
-    """One Columns from several, ordered by their file-order keys (stable)."""
+    """One Columns from several, ordered by their file-order keys (stable).
+
+    Fields are joined one at a time and each part's copy released as it goes, so the join
+    needs one field's worth of extra memory, not a second copy of everything.
+    """
     if len(parts) == 1:
         return parts[0]
     order = np.concatenate([p.order for p in parts])
-    idx = np.argsort(order, kind="stable")
+    idx = None if np.all(order[1:] >= order[:-1]) else np.argsort(order, kind="stable")
+
+    def joined(arrays: list[NDArray]) -> NDArray:
+        a = np.concatenate(arrays)
+        return a if idx is None else a[idx]
+
     frames: dict[str, str] = {}
     for p in parts:
         for k, v in p.frames.items():
-            frames.setdefault(k, v) if v else None
-    return Columns(order[idx], np.concatenate([p.log_time for p in parts])[idx],
-                   np.concatenate([p.good for p in parts])[idx],
-                   {k: np.concatenate([p.fields[k] for p in parts])[idx] for k in parts[0].fields},
-                   frames, next((p.error for p in parts if p.error is not None), None))  # fmt: skip
+            if v and k not in frames:
+                frames[k] = v
+    fields = {}
+    for k in sorted({k for p in parts for k in p.fields}):
+        proto = next(p.fields[k] for p in parts if k in p.fields)
+        fields[k] = joined([p.fields.pop(k) if k in p.fields else
+                            np.full((len(p),) + proto.shape[1:], np.nan) for p in parts])
+    return Columns(order if idx is None else order[idx], joined([p.log_time for p in parts]),
+                   fields, frames, next((p.error for p in parts if p.error is not None), None),
+                   sum(p.dropped for p in parts))  # fmt: skip
 
 
 def join_any(parts: list) -> Payloads | Columns:
