@@ -460,7 +460,7 @@ def _run_case(op: dict) -> dict:
     # The one import line of the reader: repoint when the reader moves (imu_dcm.logio).
     import warnings
 
-    from imu_dcm.bag_reader import read_log
+    from imu_dcm.logio import read_log
     from imu_dcm.errors import ImuDcmError
     from imu_dcm.replay import replay
     from imu_dcm.replay.__main__ import main as replay_main

@@ -39,7 +39,7 @@ CORE = (
     "reference",
     "errors",
 )
-LOG_IO = ("logio", "bag_reader", "bag_writer")
+LOG_IO = ("logio", "bag_writer")
 UPPER = ("imu_dcm.replay", "imu_dcm.viz", "imu_dcm.live", "benchmarks")
 
 

@@ -18,7 +18,7 @@ import pytest
 from test_live_udp import sample_lines, send
 from test_live_ws import IMU, SLICE, TRIAL, TRUTH, Publisher, decode_slice, read_slice, start_live
 
-from imu_dcm.bag_reader import read_log
+from imu_dcm.logio import read_log
 
 EST = "/estimate/orientation"
 REPO = Path(__file__).resolve().parents[1]

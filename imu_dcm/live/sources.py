@@ -39,7 +39,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from imu_dcm.errors import InputError
-from imu_dcm.live.decode import classify_schema, decode_cdr_batch
+from imu_dcm.logio.batch import classify_schema, decode_cdr_batch
 from imu_dcm.live.lines import parse_lines
 
 __all__ = ["Channel", "Received", "Source", "SourceSpec", "open_source", "parse_source"]

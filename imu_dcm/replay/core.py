@@ -24,7 +24,7 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from imu_dcm.bag_reader import read_log
+from imu_dcm.logio import read_log
 from imu_dcm.errors import GapWarning, ImuDcmWarning, LogError
 from imu_dcm.integrate import integrate
 from imu_dcm.metrics import AttitudeError, attitude_error_deg, rms
