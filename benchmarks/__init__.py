@@ -1,1 +1,4 @@
-"""Benchmarks and studies of imu_dcm: speed against accuracy, stability, noise (`python -m benchmarks`)."""
+"""Benchmarks and studies of imu_dcm: speed against accuracy, stability, noise.
+
+Run from the repository root: ``python -m benchmarks``.
+"""

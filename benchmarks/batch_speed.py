@@ -66,13 +66,18 @@ def _spin_units(jobs: int) -> None:
 
 
 def _same(a, b) -> bool:
-    strip = lambda rows: [dataclasses.replace(r, elapsed_s=None) for r in rows]
+    def strip(rows):
+        return [dataclasses.replace(r, elapsed_s=None) for r in rows]
+
     return strip(a) == strip(b)
 
 
 def main(argv: list[str] | None = None) -> int:
-    p = argparse.ArgumentParser(prog="python -m benchmarks.batch_speed", description=__doc__,
-                                formatter_class=argparse.RawDescriptionHelpFormatter)  # fmt: skip
+    p = argparse.ArgumentParser(
+        prog="python -m benchmarks.batch_speed",
+        description=__doc__,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
     p.add_argument("--broad", type=Path, default=DEFAULT_BROAD, help="folder of BROAD bags")
     p.add_argument("--rounds", type=int, default=5, help="timed rounds (default 5)")
     args = p.parse_args(argv)
@@ -84,8 +89,11 @@ def main(argv: list[str] | None = None) -> int:
 
     logs = find_logs([args.broad, SHIPPED])
     if len(logs) != 7:
-        print(f"expected the six BROAD bags under {args.broad} and the shipped trial, "
-              f"found {len(logs)} logs", file=sys.stderr)  # fmt: skip
+        print(
+            f"expected the six BROAD bags under {args.broad} and the shipped trial, "
+            f"found {len(logs)} logs",
+            file=sys.stderr,
+        )
         return 2
     n = len(logs)
     tmp = Path(tempfile.mkdtemp(prefix="batch_speed_"))
@@ -98,7 +106,9 @@ def main(argv: list[str] | None = None) -> int:
             before = os.times()
             results[name] = replay_many(logs, chart=None, **kw).rows
             after = os.times()
-            used = sum(a - b for a, b in zip(after[:4], before[:4]))  # user, sys, children's
+            used = sum(
+                a - b for a, b in zip(after[:4], before[:4], strict=False)
+            )  # user, sys, children's
             cpu_s.setdefault(name, []).append(used)
 
         return fn
@@ -107,13 +117,17 @@ def main(argv: list[str] | None = None) -> int:
         for path in logs:
             replay(path)
 
-    print(f"{n} logs; {os.cpu_count()} cores; load average before: "
-          f"{' '.join(f'{x:.2f}' for x in os.getloadavg())}")  # fmt: skip
+    print(
+        f"{n} logs; {os.cpu_count()} cores; load average before: "
+        f"{' '.join(f'{x:.2f}' for x in os.getloadavg())}"
+    )
 
     def show(timings) -> None:
         for name, t in timings.items():
-            print(f"  {name:<16} median {t.median_s:6.3f} s  ({1e3 * t.median_s / n:6.1f} ms/log; "
-                  f"rounds {', '.join(f'{x:.2f}' for x in t.times_s)})")  # fmt: skip
+            print(
+                f"  {name:<16} median {t.median_s:6.3f} s  ({1e3 * t.median_s / n:6.1f} ms/log; "
+                f"rounds {', '.join(f'{x:.2f}' for x in t.times_s)})"
+            )
 
     with single_thread():
         # Per-log cost of the machinery: all in this process, so CPU time is exact even on a
@@ -126,47 +140,67 @@ def main(argv: list[str] | None = None) -> int:
         cpu = interleaved_medians(costs, rounds=args.rounds, clock=time.process_time)
         wall = interleaved_medians(costs, rounds=args.rounds)
         # Parallel speed-up: wall time, the pool started inside the timed call.
-        par = interleaved_medians({
-            "jobs 1": (run("jobs 1", jobs=1), n),
-            "jobs 2": (run("jobs 2", jobs=2), n),
-            "spin 1 process": (lambda: _spin_units(1), 2),
-            "spin 2 processes": (lambda: _spin_units(2), 2),
-        }, rounds=args.rounds)  # fmt: skip
+        par = interleaved_medians(
+            {
+                "jobs 1": (run("jobs 1", jobs=1), n),
+                "jobs 2": (run("jobs 2", jobs=2), n),
+                "spin 1 process": (lambda: _spin_units(1), 2),
+                "spin 2 processes": (lambda: _spin_units(2), 2),
+            },
+            rounds=args.rounds,
+        )
     print("CPU time of this process:")
     show(cpu)
     print("wall time:")
     show(wall)
     for label, t in (("CPU", cpu), ("wall", wall)):
         bare_s = t["bare"].median_s
-        print(f"per-log overhead vs a bare replay ({label}): jobs 1 "
-              f"{1e3 * (t['jobs 1'].median_s - bare_s) / n:+.1f} ms/log, with the table files "
-              f"{1e3 * (t['jobs 1 + table'].median_s - bare_s) / n:+.1f} ms/log "
-              f"(bare {1e3 * bare_s / n:.0f} ms/log)")  # fmt: skip
+        print(
+            f"per-log overhead vs a bare replay ({label}): jobs 1 "
+            f"{1e3 * (t['jobs 1'].median_s - bare_s) / n:+.1f} ms/log, with the table files "
+            f"{1e3 * (t['jobs 1 + table'].median_s - bare_s) / n:+.1f} ms/log "
+            f"(bare {1e3 * bare_s / n:.0f} ms/log)"
+        )
     print("parallel, wall time:")
     show({k: v for k, v in par.items() if not k.startswith("spin")})
     ratio = par["jobs 2"].median_s / par["jobs 1"].median_s
     spin = par["spin 2 processes"].median_s / par["spin 1 process"].median_s
-    print(f"jobs 2 / jobs 1 wall ratio: {ratio:.2f} (target <= {TARGET_RATIO}); the same ratio "
-          f"for pure CPU work split over 2 processes in the same rounds: {spin:.2f} (0.5 on two "
-          f"idle cores)")  # fmt: skip
+    print(
+        f"jobs 2 / jobs 1 wall ratio: {ratio:.2f} (target <= {TARGET_RATIO}); the same ratio "
+        f"for pure CPU work split over 2 processes in the same rounds: {spin:.2f} (0.5 on two "
+        f"idle cores)"
+    )
     c1, c2 = statistics.median(cpu_s["jobs 1"]), statistics.median(cpu_s["jobs 2"])
-    print(f"CPU time per batch (this process and its workers): jobs 1 {c1:.2f} s, jobs 2 "
-          f"{c2:.2f} s ({c2 / c1:.2f}x): on two idle cores jobs 2 / jobs 1 would be about "
-          f"{c2 / c1 / 2:.2f} plus the pool's start")  # fmt: skip
+    print(
+        f"CPU time per batch (this process and its workers): jobs 1 {c1:.2f} s, jobs 2 "
+        f"{c2:.2f} s ({c2 / c1:.2f}x): on two idle cores jobs 2 / jobs 1 would be about "
+        f"{c2 / c1 / 2:.2f} plus the pool's start"
+    )
 
     try:
         from distributed import LocalCluster
     except ImportError:
         print("dask: not installed (pip install 'imu_dcm[dask]'), phase skipped")
         return 0
-    with LocalCluster(n_workers=2, threads_per_worker=1, processes=True, host="127.0.0.1",
-                      dashboard_address=None, silence_logs=logging.ERROR) as cluster, \
-            single_thread():  # fmt: skip
+    with (
+        LocalCluster(
+            n_workers=2,
+            threads_per_worker=1,
+            processes=True,
+            host="127.0.0.1",
+            dashboard_address=None,
+            silence_logs=logging.ERROR,
+        ) as cluster,
+        single_thread(),
+    ):
         address = cluster.scheduler_address
-        on_dask = interleaved_medians({
-            "jobs 1": (run("jobs 1", jobs=1), n),
-            "dask 2 workers": (run("dask", dask=address), n),
-        }, rounds=args.rounds)  # fmt: skip
+        on_dask = interleaved_medians(
+            {
+                "jobs 1": (run("jobs 1", jobs=1), n),
+                "dask 2 workers": (run("dask", dask=address), n),
+            },
+            rounds=args.rounds,
+        )
     print("Dask, wall time:")
     show(on_dask)
     dratio = on_dask["dask 2 workers"].median_s / on_dask["jobs 1"].median_s

@@ -65,9 +65,14 @@ def _vqf_raw(gyr: np.ndarray, acc: np.ndarray):
     import vqf
 
     def run():
-        v = vqf.VQF(1.0 / RATE_HZ, restBiasEstEnabled=False, motionBiasEstEnabled=False,
-                    magDistRejectionEnabled=False)
+        v = vqf.VQF(
+            1.0 / RATE_HZ,
+            restBiasEstEnabled=False,
+            motionBiasEstEnabled=False,
+            magDistRejectionEnabled=False,
+        )
         v.updateBatch(gyr, acc)
+
     return run
 
 
@@ -79,12 +84,14 @@ def _imufusion_loop(omega: np.ndarray):
 
     def run():
         ahrs = imufusion.Ahrs()
-        ahrs.set_settings(imufusion.AhrsSettings(sample_rate=RATE_HZ, gain=0.0,
-                                                 gyroscope_range=0.0))
+        ahrs.set_settings(
+            imufusion.AhrsSettings(sample_rate=RATE_HZ, gain=0.0, gyroscope_range=0.0)
+        )
         ahrs.skip_startup()
         for g in gyr_dps:
             ahrs.update_no_magnetometer(g, zeros)
             ahrs.get_quaternion()
+
     return run
 
 
@@ -94,8 +101,9 @@ def _update_loop(omega: np.ndarray, t: np.ndarray, method: str):
 
     def run():
         integ = DcmIntegrator([0.0, 0.0, 0.0, 1.0], method)
-        for w, ts in zip(rows, stamps):
+        for w, ts in zip(rows, stamps, strict=False):
             integ.update(w, ts)
+
     return run
 
 
@@ -103,7 +111,8 @@ def _update_many(omega: np.ndarray, t: np.ndarray, chunk: int):
     def run():
         integ = DcmIntegrator([0.0, 0.0, 0.0, 1.0], "magnus4")
         for i in range(0, len(t), chunk):
-            integ.update_many(omega[i:i + chunk], t[i:i + chunk])
+            integ.update_many(omega[i : i + chunk], t[i : i + chunk])
+
     return run
 
 
@@ -135,16 +144,26 @@ def report_speed(res: dict) -> list[tuple[str, float, float, bool]]:
     b = res["batch magnus4"].items_per_s
     checks = [
         ("batch magnus4 / vqf updateBatch", b / res["vqf updateBatch (C++)"].items_per_s, 1.5),
-        ("batch magnus4 / reference loop", b / res["reference loop (numpy 3x3)"].items_per_s,
-         150.0),
-        ("DcmIntegrator.update magnus4 / imufusion update",
-         res["DcmIntegrator.update magnus4"].items_per_s / res["imufusion update"].items_per_s,
-         1.0),
-        ("DcmIntegrator.update trapezoid / imufusion update",
-         res["DcmIntegrator.update trapezoid"].items_per_s / res["imufusion update"].items_per_s,
-         1.0),
-        ("update_many x1000 / batch magnus4", res["update_many x1000 magnus4"].items_per_s / b,
-         0.9),
+        (
+            "batch magnus4 / reference loop",
+            b / res["reference loop (numpy 3x3)"].items_per_s,
+            150.0,
+        ),
+        (
+            "DcmIntegrator.update magnus4 / imufusion update",
+            res["DcmIntegrator.update magnus4"].items_per_s / res["imufusion update"].items_per_s,
+            1.0,
+        ),
+        (
+            "DcmIntegrator.update trapezoid / imufusion update",
+            res["DcmIntegrator.update trapezoid"].items_per_s / res["imufusion update"].items_per_s,
+            1.0,
+        ),
+        (
+            "update_many x1000 / batch magnus4",
+            res["update_many x1000 magnus4"].items_per_s / b,
+            0.9,
+        ),
     ]
     print("\nratio (throughput)                                   measured   target   met")
     out = []
@@ -157,10 +176,10 @@ def report_speed(res: dict) -> list[tuple[str, float, float, bool]]:
 
 # -- look-ahead: lag one sample vs causal --------------------------------------------------------
 
+
 def coning(t: np.ndarray, beta: float = 0.3, freq_hz: float = 2.0):
     """Pure coning truth (``Rotation``) and body rates from data_synth's closed form."""
-    return (Rotation.from_quat(coning_attitude(t, beta, freq_hz)),
-            coning_rates(t, beta, freq_hz))
+    return (Rotation.from_quat(coning_attitude(t, beta, freq_hz)), coning_rates(t, beta, freq_hz))
 
 
 def causal_magnus4(omega: np.ndarray, t: np.ndarray, q0: np.ndarray) -> np.ndarray:
@@ -181,8 +200,10 @@ def causal_magnus4(omega: np.ndarray, t: np.ndarray, q0: np.ndarray) -> np.ndarr
 def lookahead() -> None:
     print("\nmagnus4 streaming look-ahead on pure coning (half-angle 0.3 rad, 2 Hz, 1 s),")
     print("max attitude error (deg) of the attitude each variant returns after sample k:")
-    print(f"{'rate':>6s} {'lag 1 (at t_k-1)':>18s} {'lag 1 taken as t_k':>19s} "
-          f"{'causal (at t_k)':>16s}")
+    print(
+        f"{'rate':>6s} {'lag 1 (at t_k-1)':>18s} {'lag 1 taken as t_k':>19s} "
+        f"{'causal (at t_k)':>16s}"
+    )
     for rate in (100, 200, 400, 1000):
         t = np.linspace(0.0, 1.0, rate + 1)
         truth, omega = coning(t)
@@ -224,21 +245,23 @@ def startup(runs: int) -> dict[str, float]:
     bare_runs = [_run_s([py, "-c", "pass"]) for _ in range(runs)]
 
     def first_call(env: dict | None = None) -> float:
-        out = subprocess.run([py, "-c", _FIRST_CALL], check=True, capture_output=True,
-                             text=True, env=env)
+        out = subprocess.run(
+            [py, "-c", _FIRST_CALL], check=True, capture_output=True, text=True, env=env
+        )
         return float(out.stdout.strip().splitlines()[-1])
 
     first_call()  # make sure the cache is warm
     warm_s = statistics.median(first_call() for _ in range(runs))
     with tempfile.TemporaryDirectory() as cache:
         compile_s = first_call({**os.environ, "NUMBA_CACHE_DIR": cache})
-    return {"python -m imu_dcm.replay --help (wall)": statistics.median(r[0] for r in help_runs),
-            "python -m imu_dcm.replay --help (CPU)": statistics.median(r[1] for r in help_runs),
-            "python -c pass (wall, the interpreter alone)": statistics.median(
-                r[0] for r in bare_runs),
-            "python -c pass (CPU)": statistics.median(r[1] for r in bare_runs),
-            "first integrate, warm cache (import + call)": warm_s,
-            "first integrate ever (import + compile + call)": compile_s}
+    return {
+        "python -m imu_dcm.replay --help (wall)": statistics.median(r[0] for r in help_runs),
+        "python -m imu_dcm.replay --help (CPU)": statistics.median(r[1] for r in help_runs),
+        "python -c pass (wall, the interpreter alone)": statistics.median(r[0] for r in bare_runs),
+        "python -c pass (CPU)": statistics.median(r[1] for r in bare_runs),
+        "first integrate, warm cache (import + call)": warm_s,
+        "first integrate ever (import + compile + call)": compile_s,
+    }
 
 
 def report_startup(res: dict[str, float]) -> None:
@@ -254,18 +277,24 @@ def main(argv: list[str] | None = None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--quick", action="store_true", help="small inputs, 3 rounds (smoke run)")
     ap.add_argument("--rounds", type=int, default=7, help="timed rounds (default 7)")
-    ap.add_argument("--wall", action="store_true",
-                    help="time with the wall clock (default: CPU time of this process, which "
-                         "leaves out the time other processes hold the CPU)")
+    ap.add_argument(
+        "--wall",
+        action="store_true",
+        help="time with the wall clock (default: CPU time of this process, which "
+        "leaves out the time other processes hold the CPU)",
+    )
     args = ap.parse_args(argv)
-    n_batch, n_loop, n_many = (100_000, 2_000, 20_000) if args.quick else (1_000_000, 50_000,
-                                                                          200_000)
+    n_batch, n_loop, n_many = (
+        (100_000, 2_000, 20_000) if args.quick else (1_000_000, 50_000, 200_000)
+    )
     rounds = 3 if args.quick else max(5, args.rounds)
     clock = "wall time" if args.wall else "CPU time"
-    print(f"imu_dcm core speed: {platform.python_implementation()} {platform.python_version()}, "
-          f"numpy {np.__version__}, {platform.machine()}, one thread, {clock}, median of "
-          f"{rounds} interleaved rounds; batch N = {n_batch:,}, per-sample loops N = "
-          f"{n_loop:,}\n")
+    print(
+        f"imu_dcm core speed: {platform.python_implementation()} {platform.python_version()}, "
+        f"numpy {np.__version__}, {platform.machine()}, one thread, {clock}, median of "
+        f"{rounds} interleaved rounds; batch N = {n_batch:,}, per-sample loops N = "
+        f"{n_loop:,}\n"
+    )
     report_speed(speed(n_batch, n_loop, n_many, rounds, wall=args.wall))
     report_startup(startup(runs=3 if args.quick else 5))
     lookahead()

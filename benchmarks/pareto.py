@@ -86,8 +86,9 @@ def _coning(duration_s: float) -> Callable[[], object]:
     def make():
         import data_synth
 
-        return data_synth.simulate("coning", duration_s=duration_s, half_angle_deg=10.0,
-                                   freq_hz=5.0)
+        return data_synth.simulate(
+            "coning", duration_s=duration_s, half_angle_deg=10.0, freq_hz=5.0
+        )
 
     return make
 
@@ -113,6 +114,7 @@ SCENES = (
 # Methods
 # ----------------------------------------------------------------------------------------------
 
+
 @dataclass(frozen=True)
 class Case:
     """One method under test: ``fn(omega_b (N, 3), t_s (N,), q0 (4,)) -> q_w_b (N, 4)`` xyzw.
@@ -132,8 +134,14 @@ class Case:
     stride: int = 1
 
 
-_ORDER = {"start": "1", "end": "1", "trapezoid": "2", "coning": "2", "magnus4": "4",
-          "rotvec_sum": "none (Xiaoliang 2014, eq. 13)"}
+_ORDER = {
+    "start": "1",
+    "end": "1",
+    "trapezoid": "2",
+    "coning": "2",
+    "magnus4": "4",
+    "rotvec_sum": "none (Xiaoliang 2014, eq. 13)",
+}
 
 
 def _batch(method: str) -> Callable:
@@ -194,8 +202,7 @@ def _streaming_per_sample(method: str) -> Callable:
         integ = _integrator_class()(q0, method)
         update = integ.update
         out = [update(w, t) for w, t in zip(omega_b, t_s.tolist(), strict=False)]
-        return _place(np.asarray(out), _report_index(method, len(t_s)), integ.finish(),
-                      len(t_s))
+        return _place(np.asarray(out), _report_index(method, len(t_s)), integ.finish(), len(t_s))
 
     return fn
 
@@ -205,10 +212,13 @@ def _streaming_blocks(method: str, block: int = 256) -> Callable:
 
     def fn(omega_b, t_s, q0):
         integ = _integrator_class()(q0, method)
-        out = [integ.update_many(omega_b[s:s + block], t_s[s:s + block]).as_quat()
-               for s in range(0, len(t_s), block)]
-        return _place(np.concatenate(out), _report_index(method, len(t_s)), integ.finish(),
-                      len(t_s))
+        out = [
+            integ.update_many(omega_b[s : s + block], t_s[s : s + block]).as_quat()
+            for s in range(0, len(t_s), block)
+        ]
+        return _place(
+            np.concatenate(out), _report_index(method, len(t_s)), integ.finish(), len(t_s)
+        )
 
     return fn
 
@@ -221,9 +231,9 @@ def _delta(method: str) -> Callable:
 
     def fn(dtheta_b, t_s, q0):
         n = len(dtheta_b) - len(dtheta_b) % m
-        q = imu_dcm.integrate_delta(dtheta_b[:n], t_s[:n + 1], q0, method).as_quat()
+        q = imu_dcm.integrate_delta(dtheta_b[:n], t_s[: n + 1], q0, method).as_quat()
         out = np.full((len(t_s), 4), np.nan)
-        out[:n + 1:m] = q
+        out[: n + 1 : m] = q
         return out
 
     return fn
@@ -234,23 +244,51 @@ _DELTA_STRIDE = {"two_sample": 2, "three_sample": 3}
 
 def method_cases(streaming: bool = True) -> list[Case]:
     """Every imu_dcm method (batch; streaming when ``imu_dcm.DcmIntegrator`` exists) and peer."""
-    cases = [Case(f"batch_{m}", _batch(m), "batch", f"imu_dcm.integrate(method={m!r})",
-                  _ORDER.get(m, "?")) for m in imu_dcm.METHODS]
+    cases = [
+        Case(
+            f"batch_{m}", _batch(m), "batch", f"imu_dcm.integrate(method={m!r})", _ORDER.get(m, "?")
+        )
+        for m in imu_dcm.METHODS
+    ]
     if streaming and _integrator_class() is not None:
         methods = _streaming_methods()
-        cases += [Case(f"stream_{m}", _streaming_per_sample(m), "streaming",
-                       f"DcmIntegrator({m!r}).update per sample", _ORDER.get(m, "?"))
-                  for m in methods]
+        cases += [
+            Case(
+                f"stream_{m}",
+                _streaming_per_sample(m),
+                "streaming",
+                f"DcmIntegrator({m!r}).update per sample",
+                _ORDER.get(m, "?"),
+            )
+            for m in methods
+        ]
         if hasattr(_integrator_class(), "update_many"):
-            cases += [Case(f"stream_many_{m}", _streaming_blocks(m), "streaming",
-                           f"DcmIntegrator({m!r}).update_many, blocks of 256",
-                           _ORDER.get(m, "?")) for m in methods]
+            cases += [
+                Case(
+                    f"stream_many_{m}",
+                    _streaming_blocks(m),
+                    "streaming",
+                    f"DcmIntegrator({m!r}).update_many, blocks of 256",
+                    _ORDER.get(m, "?"),
+                )
+                for m in methods
+            ]
     for m in getattr(imu_dcm, "DELTA_METHODS", ()):
-        cases.append(Case(f"delta_{m}", _delta(m), "delta",
-                          f"imu_dcm.integrate_delta(method={m!r}) on exact delta angles",
-                          "see convergence", input="delta", stride=_DELTA_STRIDE.get(m, 1)))
-    cases += [Case(name, p.fn, "peer", p.description, {"first": "1"}.get(p.order, p.order))
-              for name, p in PEERS.items()]
+        cases.append(
+            Case(
+                f"delta_{m}",
+                _delta(m),
+                "delta",
+                f"imu_dcm.integrate_delta(method={m!r}) on exact delta angles",
+                "see convergence",
+                input="delta",
+                stride=_DELTA_STRIDE.get(m, 1),
+            )
+        )
+    cases += [
+        Case(name, p.fn, "peer", p.description, {"first": "1"}.get(p.order, p.order))
+        for name, p in PEERS.items()
+    ]
     return cases
 
 
@@ -262,6 +300,7 @@ def _streaming_methods() -> tuple[str, ...]:
 # ----------------------------------------------------------------------------------------------
 # Measurement
 # ----------------------------------------------------------------------------------------------
+
 
 @dataclass(frozen=True)
 class Measurement:
@@ -310,9 +349,14 @@ CLOCKS = {"wall": time.perf_counter, "cpu": time.process_time}
 CLOCK_TEXT = {"wall": "wall time", "cpu": "CPU time"}
 
 
-def measure(scenes: Sequence[Scene], rates_hz: Sequence[float], cases: Sequence[Case],
-            rounds: int, progress: Callable[[str], None] = print,
-            clock: str = "wall") -> list[Measurement]:
+def measure(
+    scenes: Sequence[Scene],
+    rates_hz: Sequence[float],
+    cases: Sequence[Case],
+    rounds: int,
+    progress: Callable[[str], None] = print,
+    clock: str = "wall",
+) -> list[Measurement]:
     """Time every case on every scene and rate (interleaved rounds, warm-up), and score it.
 
     ``clock`` is a key of :data:`CLOCKS`.
@@ -324,17 +368,23 @@ def measure(scenes: Sequence[Scene], rates_hz: Sequence[float], cases: Sequence[
         for rate in rates_hz:
             t, q_true, w = _truth(traj, rate, sc.duration_s)
             q0 = q_true[0]
-            progress(f"pareto: {sc.title} at {rate:g} Hz ({len(t)} samples, {len(cases)} methods,"
-                     f" {rounds} rounds)")
+            progress(
+                f"pareto: {sc.title} at {rate:g} Hz ({len(t)} samples, {len(cases)} methods,"
+                f" {rounds} rounds)"
+            )
             feed = {"rate": w}
             if any(c.input == "delta" for c in cases):
                 feed["delta"] = np.ascontiguousarray(traj.delta_angles(t), dtype=float)
-            errs = {c.name: _max_err(c.fn(feed[c.input], t, q0), q_true, c.stride)
-                    for c in cases}
+            errs = {c.name: _max_err(c.fn(feed[c.input], t, q0), q_true, c.stride) for c in cases}
             timings = interleaved_medians(
-                {c.name: ((lambda f=c.fn, x=feed[c.input], t=t, q0=q0: f(x, t, q0)), len(t))
-                 for c in cases},
-                rounds=rounds, warmup=1, clock=CLOCKS[clock])
+                {
+                    c.name: ((lambda f=c.fn, x=feed[c.input], t=t, q0=q0: f(x, t, q0)), len(t))
+                    for c in cases
+                },
+                rounds=rounds,
+                warmup=1,
+                clock=CLOCKS[clock],
+            )
             ref = timings[REFERENCE].ns_per_item if REFERENCE in timings else float("nan")
             for c in cases:
                 ns = timings[c.name].ns_per_item
@@ -342,9 +392,12 @@ def measure(scenes: Sequence[Scene], rates_hz: Sequence[float], cases: Sequence[
     return out
 
 
-def convergence(scenes: Sequence[Scene], rates_hz: Sequence[float] = CONVERGENCE_RATES_HZ,
-                methods: Sequence[str] = ("start", "end", "trapezoid", "coning", "magnus4"),
-                progress: Callable[[str], None] = print) -> dict[str, dict[str, NDArray]]:
+def convergence(
+    scenes: Sequence[Scene],
+    rates_hz: Sequence[float] = CONVERGENCE_RATES_HZ,
+    methods: Sequence[str] = ("start", "end", "trapezoid", "coning", "magnus4"),
+    progress: Callable[[str], None] = print,
+) -> dict[str, dict[str, NDArray]]:
     """Max error (deg) of each batch method against dt, per scene (untimed).
 
     Keys of each scene's dict: ``dt_s``, the rate methods, and ``delta_<m>`` for every
@@ -364,14 +417,16 @@ def convergence(scenes: Sequence[Scene], rates_hz: Sequence[float] = CONVERGENCE
             if delta:
                 dth = np.ascontiguousarray(traj.delta_angles(t), dtype=float)
                 for m in delta:
-                    errs[f"delta_{m}"][k] = _max_err(_delta(m)(dth, t, q_true[0]), q_true,
-                                                     _DELTA_STRIDE.get(m, 1))
+                    errs[f"delta_{m}"][k] = _max_err(
+                        _delta(m)(dth, t, q_true[0]), q_true, _DELTA_STRIDE.get(m, 1)
+                    )
         res[sc.key] = {"dt_s": 1.0 / np.asarray(rates_hz, dtype=float), **errs}
     return res
 
 
-def observed_orders(conv: dict[str, dict[str, NDArray]], lo_deg: float = 1e-7,
-                    hi_deg: float = 1.0) -> dict[str, dict[str, float]]:
+def observed_orders(
+    conv: dict[str, dict[str, NDArray]], lo_deg: float = 1e-7, hi_deg: float = 1.0
+) -> dict[str, dict[str, float]]:
     """Least-squares slope of log error against log dt per scene and method, over the points
     with ``lo_deg < error < hi_deg`` (above the truth's accuracy floor, in the asymptotic range);
     NaN with fewer than 3 such points."""
@@ -383,8 +438,11 @@ def observed_orders(conv: dict[str, dict[str, NDArray]], lo_deg: float = 1e-7,
             if m == "dt_s":
                 continue
             ok = (e > lo_deg) & (e < hi_deg)
-            out[key][m] = (float(np.polyfit(np.log(dt[ok]), np.log(e[ok]), 1)[0])
-                           if np.count_nonzero(ok) >= 3 else float("nan"))
+            out[key][m] = (
+                float(np.polyfit(np.log(dt[ok]), np.log(e[ok]), 1)[0])
+                if np.count_nonzero(ok) >= 3
+                else float("nan")
+            )
     return out
 
 
@@ -393,17 +451,24 @@ def convergence_markdown(conv: dict[str, dict[str, NDArray]]) -> list[str]:
     orders = observed_orders(conv)
     titles = {s.key: s.title for s in SCENES}
     methods = [m for m in next(iter(conv.values())) if m != "dt_s"]
-    md = ["## Convergence (chart `convergence.png`)", "",
-          "Observed order: least-squares slope of log(max error) against log(dt) over the rates "
-          "whose error lies between 1e-7° (above the truth's accuracy) and 1° (asymptotic range); "
-          "— where fewer than 3 rates qualify. Rates: "
-          + ", ".join(f"{1 / d:g}" for d in next(iter(conv.values()))["dt_s"]) + " Hz.", "",
-          "| scene | " + " | ".join(f"`{m}`" for m in methods) + " |",
-          "|---" * (len(methods) + 1) + "|"]
+    md = [
+        "## Convergence (chart `convergence.png`)",
+        "",
+        "Observed order: least-squares slope of log(max error) against log(dt) over the rates "
+        "whose error lies between 1e-7° (above the truth's accuracy) and 1° (asymptotic range); "
+        "— where fewer than 3 rates qualify. Rates: "
+        + ", ".join(f"{1 / d:g}" for d in next(iter(conv.values()))["dt_s"])
+        + " Hz.",
+        "",
+        "| scene | " + " | ".join(f"`{m}`" for m in methods) + " |",
+        "|---" * (len(methods) + 1) + "|",
+    ]
     for key, row in orders.items():
-        md.append(f"| {titles.get(key, key)} | "
-                  + " | ".join("—" if not np.isfinite(row[m]) else f"{row[m]:.2f}"
-                               for m in methods) + " |")
+        md.append(
+            f"| {titles.get(key, key)} | "
+            + " | ".join("—" if not np.isfinite(row[m]) else f"{row[m]:.2f}" for m in methods)
+            + " |"
+        )
     md.append("")
     return md
 
@@ -414,19 +479,32 @@ def convergence_markdown(conv: dict[str, dict[str, NDArray]]) -> list[str]:
 
 _STYLE = {
     # imu_dcm batch: filled markers, solid lines, cool colours
-    "batch_start": ("#9ecae1", "v", "-"), "batch_end": ("#6baed6", "^", "-"),
-    "batch_trapezoid": ("#2171b5", "s", "-"), "batch_coning": ("#08519c", "D", "-"),
-    "batch_magnus4": ("#08306b", "o", "-"), "batch_rotvec_sum": ("#41ab5d", "*", "-"),
+    "batch_start": ("#9ecae1", "v", "-"),
+    "batch_end": ("#6baed6", "^", "-"),
+    "batch_trapezoid": ("#2171b5", "s", "-"),
+    "batch_coning": ("#08519c", "D", "-"),
+    "batch_magnus4": ("#08306b", "o", "-"),
+    "batch_rotvec_sum": ("#41ab5d", "*", "-"),
     # peers: warm colours, dashed
-    "reference_loop": ("#d62728", "X", "--"), "scipy_loop": ("#ff7f0e", "P", "--"),
-    "ahrs_angular_rate": ("#8c564b", "h", "--"), "imufusion_gain0": ("#e377c2", "<", "--"),
-    "vqf_batch": ("#bcbd22", ">", "--"), "vqf_update_gyr": ("#7f7f7f", "d", "--"),
+    "reference_loop": ("#d62728", "X", "--"),
+    "scipy_loop": ("#ff7f0e", "P", "--"),
+    "ahrs_angular_rate": ("#8c564b", "h", "--"),
+    "imufusion_gain0": ("#e377c2", "<", "--"),
+    "vqf_batch": ("#bcbd22", ">", "--"),
+    "vqf_update_gyr": ("#7f7f7f", "d", "--"),
     # imu_dcm on delta angles: purples, solid, half-filled look via small markers
-    "delta_plain": ("#9e9ac8", "$1$", "-"), "delta_one_plus_previous": ("#807dba", "p", "-"),
-    "delta_two_sample": ("#6a51a3", "$2$", "-"), "delta_three_sample": ("#3f007d", "$3$", "-"),
+    "delta_plain": ("#9e9ac8", "$1$", "-"),
+    "delta_one_plus_previous": ("#807dba", "p", "-"),
+    "delta_two_sample": ("#6a51a3", "$2$", "-"),
+    "delta_three_sample": ("#3f007d", "$3$", "-"),
 }
-_STREAM_COLOURS = {"start": "#c7e9c0", "end": "#a1d99b", "trapezoid": "#74c476",
-                   "coning": "#31a354", "magnus4": "#006d2c"}
+_STREAM_COLOURS = {
+    "start": "#c7e9c0",
+    "end": "#a1d99b",
+    "trapezoid": "#74c476",
+    "coning": "#31a354",
+    "magnus4": "#006d2c",
+}
 
 
 def _style(name: str) -> tuple[str, str, str, str]:
@@ -436,7 +514,7 @@ def _style(name: str) -> tuple[str, str, str, str]:
         return c, m, ls, c
     for prefix, ls in (("stream_many_", "-."), ("stream_", ":")):
         if name.startswith(prefix):
-            method = name[len(prefix):]
+            method = name[len(prefix) :]
             c = _STREAM_COLOURS.get(method, "#2ca02c")
             return c, _STYLE.get(f"batch_{method}", (c, "o", "-"))[1], ls, "none"
     return "#333333", "o", "-", "#333333"
@@ -456,14 +534,20 @@ def _label(name: str, cases: dict[str, Case]) -> str:
 #: Cases left off the main chart to keep it readable: streaming start/end/coning (cost as the
 #: streaming trapezoid, errors as their batch twins) and two of the four delta-angle rules;
 #: ``pareto_all.png`` and ``results.md`` have them.
-MAIN_CHART_SKIP = tuple(f"{p}{m}" for p in ("stream_", "stream_many_")
-                        for m in ("start", "end", "coning")) + ("delta_plain",
-                                                                "delta_three_sample")
+MAIN_CHART_SKIP = tuple(
+    f"{p}{m}" for p in ("stream_", "stream_many_") for m in ("start", "end", "coning")
+) + ("delta_plain", "delta_three_sample")
 
 
-def plot_pareto(meas: Sequence[Measurement], cases: Sequence[Case], path: str | Path,
-                title_note: str = "", skip: Sequence[str] = (),
-                label_rates: str = "batch_magnus4", clock: str = "wall") -> None:
+def plot_pareto(
+    meas: Sequence[Measurement],
+    cases: Sequence[Case],
+    path: str | Path,
+    title_note: str = "",
+    skip: Sequence[str] = (),
+    label_rates: str = "batch_magnus4",
+    clock: str = "wall",
+) -> None:
     """Write the 2x2 log-log Pareto chart: ns/sample against max error, a line per method.
 
     ``skip`` names cases left off; the points of ``label_rates`` are labelled with their rate.
@@ -481,15 +565,25 @@ def plot_pareto(meas: Sequence[Measurement], cases: Sequence[Case], path: str | 
         for c in cases:
             if c.name in skip:
                 continue
-            pts = sorted((m for m in meas if m.scene == key and m.case == c.name),
-                         key=lambda m: m.rate_hz)
+            pts = sorted(
+                (m for m in meas if m.scene == key and m.case == c.name), key=lambda m: m.rate_hz
+            )
             if not pts:
                 continue
             colour, marker, ls, face = _style(c.name)
             x = [m.ns_per_sample for m in pts]
             y = [max(m.max_err_deg, 1e-12) for m in pts]
-            ax.loglog(x, y, ls, color=colour, marker=marker, mfc=face, ms=7, lw=1.4,
-                      label=_label(c.name, by_case))
+            ax.loglog(
+                x,
+                y,
+                ls,
+                color=colour,
+                marker=marker,
+                mfc=face,
+                ms=7,
+                lw=1.4,
+                label=_label(c.name, by_case),
+            )
             if c.name == label_rates:
                 last_y = None
                 for m in pts:
@@ -497,19 +591,32 @@ def plot_pareto(meas: Sequence[Measurement], cases: Sequence[Case], path: str | 
                     if last_y is not None and max(m.max_err_deg, 1e-12) > last_y / 3.0:
                         continue
                     last_y = max(m.max_err_deg, 1e-12)
-                    ax.annotate(f"{m.rate_hz:g} Hz", (m.ns_per_sample, max(m.max_err_deg, 1e-12)),
-                                textcoords="offset points", xytext=(8, 0), ha="left",
-                                va="center", fontsize=8, color=colour)
+                    ax.annotate(
+                        f"{m.rate_hz:g} Hz",
+                        (m.ns_per_sample, max(m.max_err_deg, 1e-12)),
+                        textcoords="offset points",
+                        xytext=(8, 0),
+                        ha="left",
+                        va="center",
+                        fontsize=8,
+                        color=colour,
+                    )
         rates = sorted({m.rate_hz for m in meas if m.scene == key})
         ax.set_title(f"{titles.get(key, key)}  (points: {rates[0]:g}–{rates[-1]:g} Hz)")
         ax.set_xlabel(f"{CLOCK_TEXT[clock]} per gyro sample, ns (median, 1 thread)")
         ax.set_ylabel("max attitude error vs truth, deg")
         ax.grid(True, which="major", alpha=0.3)
-    for ax in axes.flat[len(scenes):]:
+    for ax in axes.flat[len(scenes) :]:
         ax.set_visible(False)
     handles, labels = axes.flat[0].get_legend_handles_labels()
-    fig.legend(handles, labels, loc="center right", fontsize=9, frameon=True,
-               title="method (higher rate → lower error)")
+    fig.legend(
+        handles,
+        labels,
+        loc="center right",
+        fontsize=9,
+        frameon=True,
+        title="method (higher rate → lower error)",
+    )
     fig.suptitle("Speed against accuracy: lower-left is better" + title_note, fontsize=14)
     fig.tight_layout(rect=(0, 0, 0.78, 0.97))
     fig.savefig(path, dpi=100)
@@ -536,8 +643,7 @@ def plot_convergence(conv: dict[str, dict[str, NDArray]], path: str | Path) -> N
             else:
                 colour, marker, _ls, _f = _style(f"batch_{m}")
                 label = f"{m} (order {_ORDER[m]})"
-            ax.loglog(dt, np.maximum(e, 1e-13), "-", color=colour, marker=marker, ms=6,
-                      label=label)
+            ax.loglog(dt, np.maximum(e, 1e-13), "-", color=colour, marker=marker, ms=6, label=label)
         # Theoretical slopes C dt^p, drawn 3x above the method of that order and anchored at its
         # coarsest step with an error below 1° (the asymptotic range), labelled at the finest dt.
         for p, m in ((1, "end"), (2, "trapezoid"), (4, "magnus4")):
@@ -549,21 +655,29 @@ def plot_convergence(conv: dict[str, dict[str, NDArray]], path: str | Path) -> N
             i = ok[np.argmax(dt[ok])]
             guide = 3.0 * res[m][i] * (dt / dt[i]) ** p
             ax.loglog(dt, guide, "k", ls=(0, (4, 3)), lw=0.9, alpha=0.7)
-            ax.annotate(f"slope {p}", (dt.min(), guide[np.argmin(dt)]), fontsize=9,
-                        ha="left", va="bottom")
+            ax.annotate(
+                f"slope {p}", (dt.min(), guide[np.argmin(dt)]), fontsize=9, ha="left", va="bottom"
+            )
         lo = min(float(np.min(e)) for m, e in res.items() if m != "dt_s")
         ax.set_title(titles.get(key, key))
         ax.set_xlabel("dt = 1 / sample rate, s")
         ax.set_ylabel("max attitude error vs truth, deg")
         ax.set_ylim(bottom=max(lo / 5.0, 1e-13))
         ax.grid(True, which="major", alpha=0.3)
-    for ax in axes.flat[len(conv):]:
+    for ax in axes.flat[len(conv) :]:
         ax.set_visible(False)
     handles, labels = axes.flat[0].get_legend_handles_labels()
-    fig.legend(handles, labels, loc="lower center", ncol=5, fontsize=9,
-               title="imu_dcm method (rate input: integrate; Δθ input: integrate_delta)")
-    fig.suptitle("Convergence: max error against step, with theoretical slopes (dashed)",
-                 fontsize=14)
+    fig.legend(
+        handles,
+        labels,
+        loc="lower center",
+        ncol=5,
+        fontsize=9,
+        title="imu_dcm method (rate input: integrate; Δθ input: integrate_delta)",
+    )
+    fig.suptitle(
+        "Convergence: max error against step, with theoretical slopes (dashed)", fontsize=14
+    )
     fig.tight_layout(rect=(0, 0.08, 1, 0.97))
     fig.savefig(path, dpi=100)
     plt.close(fig)
@@ -572,6 +686,7 @@ def plot_convergence(conv: dict[str, dict[str, NDArray]], path: str | Path) -> N
 # ----------------------------------------------------------------------------------------------
 # Table
 # ----------------------------------------------------------------------------------------------
+
 
 def peer_versions() -> dict[str, str]:
     """Installed versions of numpy, scipy and the peer libraries."""
@@ -594,21 +709,30 @@ def _g(x: float, digits: int = 2) -> str:
     return f"{x:.{digits + 1}g}"
 
 
-def results_markdown(meas: Sequence[Measurement], cases: Sequence[Case], rounds: int,
-                     command: str, clock: str = "wall") -> list[str]:
+def results_markdown(
+    meas: Sequence[Measurement],
+    cases: Sequence[Case],
+    rounds: int,
+    command: str,
+    clock: str = "wall",
+) -> list[str]:
     """Markdown: versions, method list, then per scene a table (methods x rates)."""
     vers = peer_versions()
     titles = {s.key: s.title for s in SCENES}
     md = [
         "## Speed against accuracy",
         "",
-        (f"Command: `{command}`. Machine: {platform.machine()}, {platform.python_implementation()} "
-        f"{platform.python_version()}, one BLAS thread; {CLOCK_TEXT[clock]} per sample, medians "
-        f"of {rounds} interleaved rounds "
-        "after one warm-up; every method integrates the same exact rate samples from the true "
-        "initial attitude. Error = max total attitude error against the truth over all samples; "
-        f"ratio = `{REFERENCE}` ns/sample ÷ the method's (same run; > 1 is faster). No peer is "
-        "timed on a prefix: every method runs every sample."),
+        (
+            f"Command: `{command}`. Machine: {platform.machine()}, "
+            f"{platform.python_implementation()} {platform.python_version()}, one BLAS thread; "
+            f"{CLOCK_TEXT[clock]} per sample, medians "
+            f"of {rounds} interleaved rounds "
+            "after one warm-up; every method integrates the same exact rate samples from the true "
+            "initial attitude. Error = max total attitude error against the truth over all "
+            "samples; "
+            f"ratio = `{REFERENCE}` ns/sample ÷ the method's (same run; > 1 is faster). No peer is "
+            "timed on a prefix: every method runs every sample."
+        ),
         "",
         "Versions: " + ", ".join(f"{k} {v}" for k, v in vers.items()) + f", imu_dcm "
         f"{imu_dcm.__version__}.",
@@ -620,18 +744,27 @@ def results_markdown(meas: Sequence[Measurement], cases: Sequence[Case], rounds:
     md.append("")
     for key in dict.fromkeys(m.scene for m in meas):
         rates = sorted({m.rate_hz for m in meas if m.scene == key})
-        md += [f"### {titles.get(key, key)}", "",
-               "Cells: max error (deg) · ns/sample · speed ratio vs reference.", "",
-               "| method | " + " | ".join(f"{r:g} Hz" for r in rates) + " |",
-               "|---" * (len(rates) + 1) + "|"]
+        md += [
+            f"### {titles.get(key, key)}",
+            "",
+            "Cells: max error (deg) · ns/sample · speed ratio vs reference.",
+            "",
+            "| method | " + " | ".join(f"{r:g} Hz" for r in rates) + " |",
+            "|---" * (len(rates) + 1) + "|",
+        ]
         for c in cases:
             cells = []
             for r in rates:
-                m = next((m for m in meas if m.scene == key and m.case == c.name
-                          and m.rate_hz == r), None)
-                cells.append("—" if m is None else
-                             f"{_g(m.max_err_deg)}° · {m.ns_per_sample:,.0f} · "
-                             f"{_g(m.ratio_vs_reference)}×")
+                m = next(
+                    (m for m in meas if m.scene == key and m.case == c.name and m.rate_hz == r),
+                    None,
+                )
+                cells.append(
+                    "—"
+                    if m is None
+                    else f"{_g(m.max_err_deg)}° · {m.ns_per_sample:,.0f} · "
+                    f"{_g(m.ratio_vs_reference)}×"
+                )
             md.append(f"| `{c.name}` | " + " | ".join(cells) + " |")
         md.append("")
     return md
@@ -639,9 +772,10 @@ def results_markdown(meas: Sequence[Measurement], cases: Sequence[Case], rounds:
 
 def summary_rows(meas: Sequence[Measurement], scene: str, rate_hz: float) -> list[Measurement]:
     """Measurements of one scene and rate, sorted by cost."""
-    return sorted((m for m in meas if m.scene == scene and m.rate_hz == rate_hz),
-                  key=lambda m: m.ns_per_sample)
-
+    return sorted(
+        (m for m in meas if m.scene == scene and m.rate_hz == rate_hz),
+        key=lambda m: m.ns_per_sample,
+    )
 
 
 #: Errors at or above this (deg) are not estimates; such cases are left off the front.
@@ -659,18 +793,23 @@ def pareto_front(rows: Sequence[Measurement]) -> list[str]:
     for a in rows:
         # Errors equal to 1e-6 relative count as equal (batch and streaming twins agree to
         # rounding, ~1e-15), so the cheaper twin dominates.
-        dominated = any(b is not a and b.ns_per_sample <= a.ns_per_sample
-                        and b.max_err_deg <= a.max_err_deg * (1.0 + 1e-6)
-                        and (b.ns_per_sample < a.ns_per_sample
-                             or b.max_err_deg < a.max_err_deg * (1.0 - 1e-6))
-                        for b in rows)
+        dominated = any(
+            b is not a
+            and b.ns_per_sample <= a.ns_per_sample
+            and b.max_err_deg <= a.max_err_deg * (1.0 + 1e-6)
+            and (b.ns_per_sample < a.ns_per_sample or b.max_err_deg < a.max_err_deg * (1.0 - 1e-6))
+            for b in rows
+        )
         if not dominated:
             front.append(a.case)
     return front
 
 
-def summary_markdown(meas: Sequence[Measurement], scene: str = "heavy_top_1.2s",
-                     rates_hz: Sequence[float] = (2000.0, 200.0)) -> list[str]:
+def summary_markdown(
+    meas: Sequence[Measurement],
+    scene: str = "heavy_top_1.2s",
+    rates_hz: Sequence[float] = (2000.0, 200.0),
+) -> list[str]:
     """Headline tables: one scene at the measured rates nearest ``rates_hz``, sorted by cost."""
     have = sorted({m.rate_hz for m in meas if m.scene == scene})
     if not have:
@@ -680,12 +819,21 @@ def summary_markdown(meas: Sequence[Measurement], scene: str = "heavy_top_1.2s",
     for want in dict.fromkeys(min(have, key=lambda r: abs(np.log(r / w))) for w in rates_hz):
         rows = summary_rows(meas, scene, want)
         front = pareto_front(rows)
-        md += [f"## Headline: {titles.get(scene, scene)} at {want:g} Hz", "",
-               (f"On the front: no other method is both cheaper and more accurate (errors ≥ "
-               f"{FRONT_MAX_ERR_DEG:g}° excluded)."), "",
-               "| method | max error, deg | ns/sample | speed ratio vs reference | on the front |",
-               "|---|---|---|---|---|"]
-        md += [f"| `{m.case}` | {_g(m.max_err_deg)} | {m.ns_per_sample:,.0f} | "
-               f"{_g(m.ratio_vs_reference)}× | {'yes' if m.case in front else ''} |" for m in rows]
+        md += [
+            f"## Headline: {titles.get(scene, scene)} at {want:g} Hz",
+            "",
+            (
+                f"On the front: no other method is both cheaper and more accurate (errors ≥ "
+                f"{FRONT_MAX_ERR_DEG:g}° excluded)."
+            ),
+            "",
+            "| method | max error, deg | ns/sample | speed ratio vs reference | on the front |",
+            "|---|---|---|---|---|",
+        ]
+        md += [
+            f"| `{m.case}` | {_g(m.max_err_deg)} | {m.ns_per_sample:,.0f} | "
+            f"{_g(m.ratio_vs_reference)}× | {'yes' if m.case in front else ''} |"
+            for m in rows
+        ]
         md.append("")
     return md

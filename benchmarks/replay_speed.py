@@ -146,8 +146,9 @@ def write_with_camera(src: Path, dst: Path, camera_mb: float) -> Path:
                 next_cam = next(cam, None)
             if topic not in ids:
                 s = schemas[typ]
-                ids[topic] = w.register_channel(topic, "cdr",
-                                                w.register_schema(s.name, s.encoding, s.data))
+                ids[topic] = w.register_channel(
+                    topic, "cdr", w.register_schema(s.name, s.encoding, s.data)
+                )
             w.add_message(ids[topic], log_time=t, data=data, publish_time=t)
         w.finish()
     return dst
@@ -181,10 +182,16 @@ def write_hour(src: Path, dst: Path, rate_hz: float = 400.0, seconds: float = 36
     with open(dst, "wb") as f:
         w = Writer(f, chunk_size=768 * 1024)
         w.start("ros2", "bench")
-        imu = w.register_channel("/imu/data", "cdr", w.register_schema(
-            imu_schema.name, imu_schema.encoding, imu_schema.data))
-        tru = w.register_channel("/ground_truth/orientation", "cdr", w.register_schema(
-            tr_schema.name, tr_schema.encoding, tr_schema.data))
+        imu = w.register_channel(
+            "/imu/data",
+            "cdr",
+            w.register_schema(imu_schema.name, imu_schema.encoding, imu_schema.data),
+        )
+        tru = w.register_channel(
+            "/ground_truth/orientation",
+            "cdr",
+            w.register_schema(tr_schema.name, tr_schema.encoding, tr_schema.data),
+        )
         body = bytearray(imu_raw)
         tbody = bytearray(tr_raw)
         # angular_velocity sits after header (stamp 8 + frame_id "imu" 4+4 -> 20), orientation
@@ -224,19 +231,31 @@ print(n_imu, n_truth, decoded, int(hwm) * 1024)
 def peak(path: Path) -> tuple[int, int, int, int]:
     """(IMU samples, truth samples, decoded bytes, peak RSS bytes) of read_log in a subprocess."""
     env = dict(os.environ, PYTHONPATH=str(REPO))
-    out = subprocess.run([sys.executable, "-c", _PEAK, str(path)], capture_output=True,
-                         text=True, env=env, check=True).stdout.split()  # fmt: skip
+    out = subprocess.run(
+        [sys.executable, "-c", _PEAK, str(path)],
+        capture_output=True,
+        text=True,
+        env=env,
+        check=True,
+    ).stdout.split()
     return tuple(int(x) for x in out)  # type: ignore[return-value]
 
 
 # ------------------------------------------------------------------------------- main
 def main(argv: list[str] | None = None) -> int:
-    p = argparse.ArgumentParser(prog="python -m benchmarks.replay_speed", description=__doc__,
-                                formatter_class=argparse.RawDescriptionHelpFormatter)
+    p = argparse.ArgumentParser(
+        prog="python -m benchmarks.replay_speed",
+        description=__doc__,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
     p.add_argument("--bag", type=Path, default=DEFAULT_BAG, help="bag folder or .mcap")
     p.add_argument("--rounds", type=int, default=3, help="timed rounds (default 3)")
-    p.add_argument("--camera-mb", type=float, default=566.0,
-                   help="size of the added camera topic, MB (default 566; 0 skips)")
+    p.add_argument(
+        "--camera-mb",
+        type=float,
+        default=566.0,
+        help="size of the added camera topic, MB (default 566; 0 skips)",
+    )
     p.add_argument("--hour", action="store_true", help="also the one-hour 400 Hz memory case")
     args = p.parse_args(argv)
 
@@ -254,13 +273,14 @@ def main(argv: list[str] | None = None) -> int:
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore")
                 return fn()
+
         return run
 
     try:  # the replay case only where this checkout's replay runs on this reader
         from imu_dcm.replay import replay
 
         quiet(lambda: replay(args.bag))()
-    except Exception as exc:  # noqa: BLE001 (reported, the case is skipped)
+    except Exception as exc:
         print(f"(replay case skipped: {type(exc).__name__}: {exc})")
         replay = None
 
@@ -270,39 +290,64 @@ def main(argv: list[str] | None = None) -> int:
         bag1 = write_ros1(mcap_path, tmp / "trial.bag")
         topics = ("/imu/data", "/ground_truth/orientation")
         groups = {
-            "MCAP": ({
-                "decode loop (mcap + mcap_ros2)": (lambda: decode_loop(mcap_path), n_msgs),
-                "rosbags raw iteration, IMU+truth": (
-                    lambda: rosbags_raw_iteration(args.bag, topics), n_msgs),
-                "read_log": (quiet(lambda: read_log(args.bag)), n_msgs),
-                **({"replay, no viewer": (quiet(lambda: replay(args.bag)), n_msgs)}
-                   if replay is not None else {}),
-            }, "decode loop (mcap + mcap_ros2)", TARGET_MCAP),
-            "sqlite3": ({
-                "rosbags deserialize loop": (lambda: rosbags_loop(db), n_msgs),
-                "rosbags raw iteration, IMU+truth": (
-                    lambda: rosbags_raw_iteration(db, topics), n_msgs),
-                "read_log": (quiet(lambda: read_log(db)), n_msgs),
-            }, "rosbags deserialize loop", TARGET_ROSBAGS),
-            "ROS 1": ({
-                "rosbags deserialize loop": (lambda: rosbags_loop(bag1), n_msgs),
-                "rosbags raw iteration, IMU+truth": (
-                    lambda: rosbags_raw_iteration(bag1, topics), n_msgs),
-                "read_log": (quiet(lambda: read_log(bag1)), n_msgs),
-            }, "rosbags deserialize loop", TARGET_ROSBAGS),
+            "MCAP": (
+                {
+                    "decode loop (mcap + mcap_ros2)": (lambda: decode_loop(mcap_path), n_msgs),
+                    "rosbags raw iteration, IMU+truth": (
+                        lambda: rosbags_raw_iteration(args.bag, topics),
+                        n_msgs,
+                    ),
+                    "read_log": (quiet(lambda: read_log(args.bag)), n_msgs),
+                    **(
+                        {"replay, no viewer": (quiet(lambda: replay(args.bag)), n_msgs)}
+                        if replay is not None
+                        else {}
+                    ),
+                },
+                "decode loop (mcap + mcap_ros2)",
+                TARGET_MCAP,
+            ),
+            "sqlite3": (
+                {
+                    "rosbags deserialize loop": (lambda: rosbags_loop(db), n_msgs),
+                    "rosbags raw iteration, IMU+truth": (
+                        lambda: rosbags_raw_iteration(db, topics),
+                        n_msgs,
+                    ),
+                    "read_log": (quiet(lambda: read_log(db)), n_msgs),
+                },
+                "rosbags deserialize loop",
+                TARGET_ROSBAGS,
+            ),
+            "ROS 1": (
+                {
+                    "rosbags deserialize loop": (lambda: rosbags_loop(bag1), n_msgs),
+                    "rosbags raw iteration, IMU+truth": (
+                        lambda: rosbags_raw_iteration(bag1, topics),
+                        n_msgs,
+                    ),
+                    "read_log": (quiet(lambda: read_log(bag1)), n_msgs),
+                },
+                "rosbags deserialize loop",
+                TARGET_ROSBAGS,
+            ),
         }
         shown = args.bag.resolve()
         shown = shown.relative_to(REPO) if shown.is_relative_to(REPO) else args.bag
-        print(f"bag: {shown} ({n_msgs} messages, {mcap_path.stat().st_size / 1e6:.1f} MB); "
-              f"median of {args.rounds} interleaved rounds after a warm-up, 1 thread")
+        print(
+            f"bag: {shown} ({n_msgs} messages, {mcap_path.stat().st_size / 1e6:.1f} MB); "
+            f"median of {args.rounds} interleaved rounds after a warm-up, 1 thread"
+        )
         for group, (cases, ref, target) in groups.items():
             with single_thread():
                 res = interleaved_medians(cases, rounds=args.rounds, warmup=1)
             base = res[ref]
             print(f"\n{group}\n{'case':<36} {'median s':>9} {'msgs/s':>12} {'vs ref':>8}")
             for name, t in res.items():
-                print(f"{name:<36} {t.median_s:>9.3f} {t.items_per_s:>12,.0f} "
-                      f"{base.median_s / t.median_s:>7.1f}x")  # fmt: skip
+                print(
+                    f"{name:<36} {t.median_s:>9.3f} {t.items_per_s:>12,.0f} "
+                    f"{base.median_s / t.median_s:>7.1f}x"
+                )
             ratio = base.median_s / res["read_log"].median_s
             verdict = "meets" if ratio >= target else "MISSES"
             print(f"read_log is {ratio:.1f}x the {ref} ({verdict} the >= {target:.0f}x target)")
@@ -315,18 +360,22 @@ def main(argv: list[str] | None = None) -> int:
                 cam = write_with_camera(mcap_path, tmp / "camera.mcap", args.camera_mb)
                 _, _, _, pk1 = peak(cam)
                 rise = pk1 / pk0 - 1.0
-                print(f"trial + {args.camera_mb:.0f} MB camera: file {cam.stat().st_size / 1e6:.0f}"
-                      f" MB, peak {pk1 / 1e6:.0f} MB ({100 * rise:+.1f} %; "
-                      f"{'meets' if rise <= 0.2 else 'MISSES'} the <= +20 % target)")
+                print(
+                    f"trial + {args.camera_mb:.0f} MB camera: file {cam.stat().st_size / 1e6:.0f}"
+                    f" MB, peak {pk1 / 1e6:.0f} MB ({100 * rise:+.1f} %; "
+                    f"{'meets' if rise <= 0.2 else 'MISSES'} the <= +20 % target)"
+                )
                 cam.unlink()
             if args.hour:
                 hour = write_hour(mcap_path, tmp / "hour.mcap")
                 n_imu, n_truth, dec, pk = peak(hour)
                 bound = 3 * dec + 300e6
-                print(f"one hour at 400 Hz:  {n_imu} IMU, {n_truth} truth, file "
-                      f"{hour.stat().st_size / 1e6:.0f} MB, decoded arrays {dec / 1e6:.0f} MB, "
-                      f"peak {pk / 1e6:.0f} MB ({'meets' if pk <= bound else 'MISSES'} the "
-                      f"<= 3x arrays + 300 MB = {bound / 1e6:.0f} MB target)")  # fmt: skip
+                print(
+                    f"one hour at 400 Hz:  {n_imu} IMU, {n_truth} truth, file "
+                    f"{hour.stat().st_size / 1e6:.0f} MB, decoded arrays {dec / 1e6:.0f} MB, "
+                    f"peak {pk / 1e6:.0f} MB ({'meets' if pk <= bound else 'MISSES'} the "
+                    f"<= 3x arrays + 300 MB = {bound / 1e6:.0f} MB target)"
+                )
     return 0
 
 

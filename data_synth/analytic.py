@@ -55,6 +55,7 @@ def zxz_quat(phi: ArrayLike, theta: ArrayLike, psi: ArrayLike) -> NDArray[np.flo
 # Pure coning
 # --------------------------------------------------------------------------------------------
 
+
 def coning_attitude(t_s: ArrayLike, half_angle_rad: float, freq_hz: float) -> NDArray[np.float64]:
     """``q_w_b(t)`` of pure coning, ``R_w_b(t) = Rz(Ωt) Rx(β) Rz(−Ωt)``, ``Ω = 2π freq_hz``.
 
@@ -88,8 +89,11 @@ class ConingTrajectory(Trajectory):
     """
 
     def __init__(self, duration_s: float, half_angle_deg: float = 10.0, freq_hz: float = 5.0):
-        for name, v in (("duration_s", duration_s), ("half_angle_deg", half_angle_deg),
-                        ("freq_hz", freq_hz)):
+        for name, v in (
+            ("duration_s", duration_s),
+            ("half_angle_deg", half_angle_deg),
+            ("freq_hz", freq_hz),
+        ):
             if not math.isfinite(v):
                 raise InputError(f"Expected finite `{name}`, got {v!r}")
         if duration_s <= 0:
@@ -100,13 +104,17 @@ class ConingTrajectory(Trajectory):
         self.duration_s = float(duration_s)
         self.half_angle_rad = math.radians(half_angle_deg)
         self.freq_hz = float(freq_hz)
-        self.params: dict[str, Any] = {"half_angle_deg": float(half_angle_deg),
-                                       "freq_hz": float(freq_hz)}
+        self.params: dict[str, Any] = {
+            "half_angle_deg": float(half_angle_deg),
+            "freq_hz": float(freq_hz),
+        }
 
     def at(self, t_s: ArrayLike) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
         t = self._check_times(t_s)
-        return (coning_attitude(t, self.half_angle_rad, self.freq_hz),
-                coning_rates(t, self.half_angle_rad, self.freq_hz))
+        return (
+            coning_attitude(t, self.half_angle_rad, self.freq_hz),
+            coning_rates(t, self.half_angle_rad, self.freq_hz),
+        )
 
     def delta_angles(self, t_s: ArrayLike) -> NDArray[np.float64]:
         t = self._check_times(t_s, increasing=True)
@@ -117,14 +125,20 @@ class ConingTrajectory(Trajectory):
         # product form so that short intervals do not lose digits to cancellation.
         s_half = np.sin(0.5 * (b - a))
         mid = 0.5 * (a + b)
-        return np.stack([-2.0 * sb * np.sin(mid) * s_half,
-                         2.0 * sb * np.cos(mid) * s_half,
-                         (cb - 1.0) * om * (t[1:] - t[:-1])], axis=-1)
+        return np.stack(
+            [
+                -2.0 * sb * np.sin(mid) * s_half,
+                2.0 * sb * np.cos(mid) * s_half,
+                (cb - 1.0) * om * (t[1:] - t[:-1]),
+            ],
+            axis=-1,
+        )
 
 
 # --------------------------------------------------------------------------------------------
 # Torque-free symmetric top (I1 = I2)
 # --------------------------------------------------------------------------------------------
+
 
 def symmetric_free_top(
     t_s: ArrayLike, i1_kg_m2: float, i3_kg_m2: float, omega0_b: ArrayLike, q0_w_b: ArrayLike
@@ -162,8 +176,9 @@ def symmetric_free_top(
     q_l = exp_quat(t[:, None] * rate_l * n_w[None, :])
     q = quat_multiply(quat_multiply(q_l, q0), axis_quat(2, -omega_body_axis * t))
     c, s = np.cos(omega_body_axis * t), np.sin(omega_body_axis * t)
-    omega = np.stack([c * w0[0] - s * w0[1], s * w0[0] + c * w0[1], np.full_like(t, w0[2])],
-                     axis=-1)
+    omega = np.stack(
+        [c * w0[0] - s * w0[1], s * w0[0] + c * w0[1], np.full_like(t, w0[2])], axis=-1
+    )
     return q, omega
 
 
@@ -188,8 +203,10 @@ def _box_side(inertia_kg_m2: ArrayLike, omega0_b: ArrayLike) -> bool:
     two_e = float(np.sum(inertia * w * w))
     m2 = float(np.sum((inertia * w) ** 2))
     if abs(m2 - two_e * inertia[1]) <= 1e-12 * m2:
-        raise InputError(f"Expected M² != 2 E I2 (not on the separatrix), got M² = {m2}, "
-                         f"2 E I2 = {two_e * inertia[1]}")
+        raise InputError(
+            f"Expected M² != 2 E I2 (not on the separatrix), got M² = {m2}, "
+            f"2 E I2 = {two_e * inertia[1]}"
+        )
     return m2 < two_e * inertia[1]
 
 
@@ -217,19 +234,36 @@ def _box_elements(inertia: NDArray, w: NDArray) -> dict[str, float]:
     am0 = math.atan2(w[1] / (s2 * a2), w[0] / (s1 * a1))
     k = round(am0 / math.pi)
     tau0 = 2.0 * k * float(ellipk(m)) + float(ellipkinc(am0 - k * math.pi, m))
-    return {"i1": i1, "i2": i2, "i3": i3, "m2": m2, "a1sq": a1sq, "a2sq": a2sq,
-            "a1": a1, "a2": a2, "a3": math.sqrt(a3sq), "lam": lam, "m": m,
-            "s1": s1, "s2": s2, "s3": s3, "am0": am0, "tau0": tau0}
+    return {
+        "i1": i1,
+        "i2": i2,
+        "i3": i3,
+        "m2": m2,
+        "a1sq": a1sq,
+        "a2sq": a2sq,
+        "a1": a1,
+        "a2": a2,
+        "a3": math.sqrt(a3sq),
+        "lam": lam,
+        "m": m,
+        "s1": s1,
+        "s2": s2,
+        "s3": s3,
+        "am0": am0,
+        "tau0": tau0,
+    }
 
 
 def _omega_core(t: NDArray, e: dict[str, float]) -> NDArray[np.float64]:
     sn, cn, dn, _ = ellipj(e["lam"] * t + e["tau0"], e["m"])
-    return np.stack([e["s1"] * e["a1"] * cn, e["s2"] * e["a2"] * sn, e["s3"] * e["a3"] * dn],
-                    axis=-1)
+    return np.stack(
+        [e["s1"] * e["a1"] * cn, e["s2"] * e["a2"] * sn, e["s3"] * e["a3"] * dn], axis=-1
+    )
 
 
-def box_omega_elliptic(t_s: ArrayLike, inertia_kg_m2: ArrayLike,
-                       omega0_b: ArrayLike) -> NDArray[np.float64]:
+def box_omega_elliptic(
+    t_s: ArrayLike, inertia_kg_m2: ArrayLike, omega0_b: ArrayLike
+) -> NDArray[np.float64]:
     """Body rate of a torque-free asymmetric body by Jacobi elliptic functions (docs/design.md,
     "Ground truth").
 
@@ -269,13 +303,14 @@ def _legendre_pi(n: float, phi: NDArray, m: float) -> NDArray:
     p = phi - k * np.pi
     s, c = np.sin(p), np.cos(p)
     a, b = c * c, 1.0 - m * s * s
-    inc = s * elliprf(a, b, 1.0) + n / 3.0 * s ** 3 * elliprj(a, b, 1.0, 1.0 - n * s * s)
+    inc = s * elliprf(a, b, 1.0) + n / 3.0 * s**3 * elliprj(a, b, 1.0, 1.0 - n * s * s)
     complete = float(elliprf(0.0, 1.0 - m, 1.0) + n / 3.0 * elliprj(0.0, 1.0 - m, 1.0, 1.0 - n))
     return inc + 2.0 * k * complete
 
 
-def _attitude_core(t: NDArray, e: dict[str, float], w0: NDArray,
-                   q0: NDArray) -> NDArray[np.float64]:
+def _attitude_core(
+    t: NDArray, e: dict[str, float], w0: NDArray, q0: NDArray
+) -> NDArray[np.float64]:
     i1, i2, i3 = e["i1"], e["i2"], e["i3"]
     big_m = math.sqrt(e["m2"])
     a, b = i1 * e["a1sq"], i2 * e["a2sq"] - i1 * e["a1sq"]
@@ -283,7 +318,8 @@ def _attitude_core(t: NDArray, e: dict[str, float], w0: NDArray,
     _, _, _, am = ellipj(e["lam"] * t + e["tau0"], e["m"])
     n = -d / c  # c + d sn² > 0 everywhere, so 1 − n sn² > 0: Π has no pole on the path
     phi = big_m * b / d * t + big_m * (a - b * c / d) / (c * e["lam"]) * (
-        _legendre_pi(n, am, e["m"]) - _legendre_pi(n, np.array([e["am0"]]), e["m"])[0])
+        _legendre_pi(n, am, e["m"]) - _legendre_pi(n, np.array([e["am0"]]), e["m"])[0]
+    )
     w = _omega_core(t, e)
     theta = np.arccos(np.clip(i3 * w[:, 2] / big_m, -1.0, 1.0))
     psi = np.arctan2(i1 * w[:, 0], i2 * w[:, 1])
@@ -295,8 +331,9 @@ def _attitude_core(t: NDArray, e: dict[str, float], w0: NDArray,
     return quat_multiply(q_w_l, q_l_b)
 
 
-def box_attitude_elliptic(t_s: ArrayLike, inertia_kg_m2: ArrayLike, omega0_b: ArrayLike,
-                          q0_w_b: ArrayLike) -> NDArray[np.float64]:
+def box_attitude_elliptic(
+    t_s: ArrayLike, inertia_kg_m2: ArrayLike, omega0_b: ArrayLike, q0_w_b: ArrayLike
+) -> NDArray[np.float64]:
     """Attitude of a torque-free asymmetric body in closed form (elliptic integrals).
 
     In a frame ``L`` with z along the angular momentum, the z-x-z Euler angles of the body are
@@ -329,8 +366,7 @@ def box_attitude_elliptic(t_s: ArrayLike, inertia_kg_m2: ArrayLike, omega0_b: Ar
     q0 = np.asarray(q0_w_b, dtype=float)
     if _box_side(inertia, w):
         w_p = _SWAP @ w  # body rates in the relabelled frame; q_w_b' = q_w_b ⊗ q_swap
-        q_p = _attitude_core(t, _box_elements(inertia[::-1], w_p), w_p,
-                             quat_multiply(q0, _Q_SWAP))
+        q_p = _attitude_core(t, _box_elements(inertia[::-1], w_p), w_p, quat_multiply(q0, _Q_SWAP))
         return quat_multiply(q_p, quat_conjugate(_Q_SWAP))
     return _attitude_core(t, _box_elements(inertia, w), w, q0)
 
@@ -339,8 +375,10 @@ def box_attitude_elliptic(t_s: ArrayLike, inertia_kg_m2: ArrayLike, omega0_b: Ar
 # Heavy symmetric top
 # --------------------------------------------------------------------------------------------
 
-def steady_precession_rates(i1_kg_m2: float, i3_kg_m2: float, omega3_rad_s: float,
-                            mgl_n_m: float, tilt_rad: float) -> tuple[float, float]:
+
+def steady_precession_rates(
+    i1_kg_m2: float, i3_kg_m2: float, omega3_rad_s: float, mgl_n_m: float, tilt_rad: float
+) -> tuple[float, float]:
     """Steady-precession rates ``φ̇`` (slow, fast), rad/s, of a heavy symmetric top.
 
     Roots of ``I1 cosθ0 φ̇² − I3 ω3 φ̇ + M g l = 0``; real when
@@ -358,8 +396,10 @@ def steady_precession_rates(i1_kg_m2: float, i3_kg_m2: float, omega3_rad_s: floa
         return mgl_n_m / p, math.inf
     disc = p * p - 4.0 * i1_kg_m2 * mgl_n_m * c
     if disc < 0:
-        raise InputError(f"Expected (I3 ω3)² >= 4 I1 M g l cos(tilt) for steady precession, got "
-                         f"{p * p:.6g} < {4.0 * i1_kg_m2 * mgl_n_m * c:.6g}")
+        raise InputError(
+            f"Expected (I3 ω3)² >= 4 I1 M g l cos(tilt) for steady precession, got "
+            f"{p * p:.6g} < {4.0 * i1_kg_m2 * mgl_n_m * c:.6g}"
+        )
     r = math.sqrt(disc)
     # Numerically stable pair: the small root as 2c/(−b ± √disc).
     big = (p + math.copysign(r, p)) / (2.0 * i1_kg_m2 * c)
@@ -395,24 +435,32 @@ class HeavyTopInvariants:
     roots: tuple[float, float, float]
 
 
-def heavy_top_invariants(i1_kg_m2: float, i3_kg_m2: float, mgl_n_m: float, tilt_rad: float,
-                         omega3_rad_s: float, precession0_rad_s: float,
-                         nutation0_rad_s: float = 0.0) -> HeavyTopInvariants:
+def heavy_top_invariants(
+    i1_kg_m2: float,
+    i3_kg_m2: float,
+    mgl_n_m: float,
+    tilt_rad: float,
+    omega3_rad_s: float,
+    precession0_rad_s: float,
+    nutation0_rad_s: float = 0.0,
+) -> HeavyTopInvariants:
     """Constants of motion and turning points from the initial Euler-angle state."""
     u0 = math.cos(tilt_rad)
     s2 = 1.0 - u0 * u0
     a = i3_kg_m2 * omega3_rad_s / i1_kg_m2
     beta = 2.0 * mgl_n_m / i1_kg_m2
     b = precession0_rad_s * s2 + a * u0
-    alpha = nutation0_rad_s ** 2 + precession0_rad_s ** 2 * s2 + beta * u0
+    alpha = nutation0_rad_s**2 + precession0_rad_s**2 * s2 + beta * u0
     # f(u) = β u³ − (α + a²) u² + (2ab − β) u + (α − b²)
     roots = np.sort(np.roots([beta, -(alpha + a * a), 2.0 * a * b - beta, alpha - b * b]).real)
-    return HeavyTopInvariants(a, b, alpha, beta, (float(roots[0]), float(roots[1]),
-                                                  float(roots[2])))
+    return HeavyTopInvariants(
+        a, b, alpha, beta, (float(roots[0]), float(roots[1]), float(roots[2]))
+    )
 
 
-def heavy_top_cos_theta(t_s: ArrayLike, inv: HeavyTopInvariants,
-                        start_at_upper: bool = True) -> NDArray[np.float64]:
+def heavy_top_cos_theta(
+    t_s: ArrayLike, inv: HeavyTopInvariants, start_at_upper: bool = True
+) -> NDArray[np.float64]:
     """``cos θ(t)`` of the heavy top by Jacobi's ``sn``: ``u = u1 + (u2 − u1) sn²(λ(t−t0) | m)``.
 
     ``λ = ½ √(β (u3 − u1))``, ``m = (u2 − u1)/(u3 − u1)``. The top starts at rest in ``θ``

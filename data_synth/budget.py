@@ -83,8 +83,14 @@ def format_seconds(s: float) -> str:
     return f"{s / 86400:.3g} days"
 
 
-def estimate_ode_steps(rhs: Callable, y0: np.ndarray, duration_s: float, rtol: float,
-                       atol: float, probe_steps: int = PROBE_STEPS) -> float:
+def estimate_ode_steps(
+    rhs: Callable,
+    y0: np.ndarray,
+    duration_s: float,
+    rtol: float,
+    atol: float,
+    probe_steps: int = PROBE_STEPS,
+) -> float:
     """Estimated number of DOP853 steps to solve ``y' = rhs(t, y)`` over ``[0, duration_s]``.
 
     Takes up to ``probe_steps`` steps and extrapolates linearly in time; returns the exact count
@@ -99,8 +105,10 @@ def estimate_ode_steps(rhs: Callable, y0: np.ndarray, duration_s: float, rtol: f
         with np.errstate(all="ignore"):
             message = solver.step()
         if solver.status == "failed" or not np.all(np.isfinite(solver.y)):
-            raise InputError(f"Expected the rigid-body ODE to solve from its initial state, got "
-                             f"{message or 'a non-finite state'} at t = {solver.t:.3g} s")
+            raise InputError(
+                f"Expected the rigid-body ODE to solve from its initial state, got "
+                f"{message or 'a non-finite state'} at t = {solver.t:.3g} s"
+            )
         if solver.status == "finished":
             return float(k)
     if not solver.t > 0:

@@ -49,13 +49,14 @@ def heavy_top_checks(motion: str, duration_s: float, n: int = 20001) -> dict[str
     out["resolve_deg"] = float(np.degrees(quat_angle_rad(q, q13)).max())
     if motion in ("cusp", "wavy", "looping"):
         precession0, tilt = heavy_top_initial_rates(p, motion)
-        inv = heavy_top_invariants(p.i1_kg_m2, p.i3_kg_m2, p.mgl_n_m, tilt, p.omega3_rad_s,
-                                   precession0)
-        out["cos_theta_vs_elliptic"] = float(np.abs(R[:, 2, 2]
-                                                    - heavy_top_cos_theta(t, inv)).max())
+        inv = heavy_top_invariants(
+            p.i1_kg_m2, p.i3_kg_m2, p.mgl_n_m, tilt, p.omega3_rad_s, precession0
+        )
+        out["cos_theta_vs_elliptic"] = float(np.abs(R[:, 2, 2] - heavy_top_cos_theta(t, inv)).max())
     if motion == "steady":
-        out["cos_theta_vs_steady"] = float(np.abs(R[:, 2, 2]
-                                                  - math.cos(math.radians(p.tilt_deg))).max())
+        out["cos_theta_vs_steady"] = float(
+            np.abs(R[:, 2, 2] - math.cos(math.radians(p.tilt_deg))).max()
+        )
     return out
 
 
@@ -74,15 +75,19 @@ def free_body_checks(case: str, duration_s: float, n: int = 20001) -> dict[str, 
         "L_world/|L|": float(np.abs(l_w - l_w[0]).max() / np.linalg.norm(l_w[0])),
         "resolve_deg": float(np.degrees(quat_angle_rad(q, q13)).max()),
         "omega_vs_jacobi_rad_s": float(np.abs(w - box_omega_elliptic(t, inertia, w0)).max()),
-        "attitude_vs_elliptic_deg": float(np.degrees(quat_angle_rad(
-            q, box_attitude_elliptic(t, inertia, w0, [0.0, 0.0, 0.0, 1.0]))).max()),
+        "attitude_vs_elliptic_deg": float(
+            np.degrees(
+                quat_angle_rad(q, box_attitude_elliptic(t, inertia, w0, [0.0, 0.0, 0.0, 1.0]))
+            ).max()
+        ),
     }
 
 
 def main(argv: list[str] | None = None) -> int:
     """Print the figures (max over the run) for every heavy-top motion and both boxes."""
-    ap = argparse.ArgumentParser(prog="python -m data_synth.checks",
-                                 description=__doc__.splitlines()[0])
+    ap = argparse.ArgumentParser(
+        prog="python -m data_synth.checks", description=__doc__.splitlines()[0]
+    )
     ap.add_argument("--duration", type=float, default=10.0, help="length, s (default 10)")
     args = ap.parse_args(argv)
     print(f"max over {args.duration:g} s (20001 instants); drifts relative; angles in degrees")

@@ -46,6 +46,7 @@ PROG = "python -m data_synth"
 
 def _number(bound: str):
     """argparse type: a finite float, with ``bound`` one of ``"> 0"``, ``">= 0"`` or ``""``."""
+
     def parse(text: str) -> float:
         try:
             v = float(text)
@@ -54,7 +55,8 @@ def _number(bound: str):
         ok = math.isfinite(v) and {"> 0": v > 0, ">= 0": v >= 0}.get(bound, True)
         if not ok:
             raise argparse.ArgumentTypeError(
-                f"expected a finite number{' ' + bound if bound else ''}, got {text!r}")
+                f"expected a finite number{' ' + bound if bound else ''}, got {text!r}"
+            )
         return v
 
     return parse
@@ -65,6 +67,7 @@ _positive, _non_negative, _finite = _number("> 0"), _number(">= 0"), _number("")
 
 def _integer(lo: int, hi: int | None = None):
     """argparse type: an integer in ``[lo, hi)`` (``hi`` None: no upper bound)."""
+
     def parse(text: str) -> int:
         try:
             v = int(text)
@@ -91,73 +94,157 @@ def _vector3(text: str) -> tuple[float, float, float]:
 
 def _add_common(p: argparse.ArgumentParser, scheme: bool) -> None:
     g = p.add_argument_group("sampling and output")
-    g.add_argument("--rate", type=_positive, required=True, metavar="HZ",
-                   help="gyro sample rate, Hz")
-    g.add_argument("--duration", type=_positive, required=True, metavar="S",
-                   help="length of the log, s")
-    g.add_argument("--out", type=Path, required=True, metavar="DIR",
-                   help="bag folder to create (rosbag2, MCAP storage)")
+    g.add_argument(
+        "--rate", type=_positive, required=True, metavar="HZ", help="gyro sample rate, Hz"
+    )
+    g.add_argument(
+        "--duration", type=_positive, required=True, metavar="S", help="length of the log, s"
+    )
+    g.add_argument(
+        "--out",
+        type=Path,
+        required=True,
+        metavar="DIR",
+        help="bag folder to create (rosbag2, MCAP storage)",
+    )
     g.add_argument("--force", action="store_true", help="replace an existing DIR")
-    g.add_argument("--epoch-ns", type=_integer(0, MAX_STAMP_NS), default=DEFAULT_EPOCH_NS,
-                   metavar="NS", help=f"stamp of t = 0, ns since the Unix epoch (default "
-                   f"{DEFAULT_EPOCH_NS}; stamps must stay below 2^31 s: header.stamp.sec is int32)")
-    g.add_argument("--max-memory-gib", type=_positive, default=2.0, metavar="GIB",
-                   help="refuse a job estimated to need more memory, GiB (default 2)")
-    g.add_argument("--max-minutes", type=_positive, default=30.0, metavar="MIN",
-                   help="refuse a job estimated to run longer, minutes (default 30)")
+    g.add_argument(
+        "--epoch-ns",
+        type=_integer(0, MAX_STAMP_NS),
+        default=DEFAULT_EPOCH_NS,
+        metavar="NS",
+        help=f"stamp of t = 0, ns since the Unix epoch (default "
+        f"{DEFAULT_EPOCH_NS}; stamps must stay below 2^31 s: header.stamp.sec is int32)",
+    )
+    g.add_argument(
+        "--max-memory-gib",
+        type=_positive,
+        default=2.0,
+        metavar="GIB",
+        help="refuse a job estimated to need more memory, GiB (default 2)",
+    )
+    g.add_argument(
+        "--max-minutes",
+        type=_positive,
+        default=30.0,
+        metavar="MIN",
+        help="refuse a job estimated to run longer, minutes (default 30)",
+    )
     if scheme:
-        g.add_argument("--scheme", choices=("exact", "reference"), default="exact",
-                       help="truth: exact (DOP853 1e-12, default) or the coupled RK4 + DCM "
-                            "scheme of Xiaoliang (2014) stepped at --rate")
+        g.add_argument(
+            "--scheme",
+            choices=("exact", "reference"),
+            default="exact",
+            help="truth: exact (DOP853 1e-12, default) or the coupled RK4 + DCM "
+            "scheme of Xiaoliang (2014) stepped at --rate",
+        )
     m = p.add_argument_group("gyro model (each term off unless given)")
-    m.add_argument("--gyro-output", choices=OUTPUTS, default="rate",
-                   help="rate: omega_b(t_k) (default); delta-angle: exact integral over each "
-                        "interval, written as its mean rate")
-    m.add_argument("--gyro-noise-density", type=_non_negative, metavar="RAD_S_SQRT_HZ",
-                   help="white rate noise density, rad/s/sqrt(Hz)")
-    m.add_argument("--gyro-bias", type=_vector3, metavar="X,Y,Z",
-                   help="constant bias, rad/s (write --gyro-bias=-x,y,z when x < 0)")
-    m.add_argument("--gyro-bias-walk", type=_non_negative, metavar="RAD_S2_SQRT_HZ",
-                   help="bias random walk density, rad/s^2/sqrt(Hz)")
-    m.add_argument("--gyro-quantization", type=_positive, metavar="RAD_S",
-                   help="output step, rad/s")
-    m.add_argument("--gyro-range", type=_positive, metavar="RAD_S",
-                   help="full-scale range, rad/s (saturates)")
-    m.add_argument("--stamp-jitter", type=_non_negative, metavar="S",
-                   help="standard deviation of the sample instants about the grid, s")
-    m.add_argument("--seed", type=_integer(0), default=0,
-                   help="seed of the random terms, an integer >= 0 (default 0)")
+    m.add_argument(
+        "--gyro-output",
+        choices=OUTPUTS,
+        default="rate",
+        help="rate: omega_b(t_k) (default); delta-angle: exact integral over each "
+        "interval, written as its mean rate",
+    )
+    m.add_argument(
+        "--gyro-noise-density",
+        type=_non_negative,
+        metavar="RAD_S_SQRT_HZ",
+        help="white rate noise density, rad/s/sqrt(Hz)",
+    )
+    m.add_argument(
+        "--gyro-bias",
+        type=_vector3,
+        metavar="X,Y,Z",
+        help="constant bias, rad/s (write --gyro-bias=-x,y,z when x < 0)",
+    )
+    m.add_argument(
+        "--gyro-bias-walk",
+        type=_non_negative,
+        metavar="RAD_S2_SQRT_HZ",
+        help="bias random walk density, rad/s^2/sqrt(Hz)",
+    )
+    m.add_argument(
+        "--gyro-quantization", type=_positive, metavar="RAD_S", help="output step, rad/s"
+    )
+    m.add_argument(
+        "--gyro-range", type=_positive, metavar="RAD_S", help="full-scale range, rad/s (saturates)"
+    )
+    m.add_argument(
+        "--stamp-jitter",
+        type=_non_negative,
+        metavar="S",
+        help="standard deviation of the sample instants about the grid, s",
+    )
+    m.add_argument(
+        "--seed",
+        type=_integer(0),
+        default=0,
+        help="seed of the random terms, an integer >= 0 (default 0)",
+    )
 
 
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser (sub-commands ``heavy-top``, ``free-body``, ``coning``)."""
-    ap = OneLineArgumentParser(prog=PROG, description="Simulate a rigid body, sample it with a "
-                        "synthetic gyro and write a ROS 2 bag (MCAP) with its ground truth.")
-    sub = ap.add_subparsers(dest="scene", required=True, metavar="SCENE",
-                            parser_class=OneLineArgumentParser)
+    ap = OneLineArgumentParser(
+        prog=PROG,
+        description="Simulate a rigid body, sample it with a "
+        "synthetic gyro and write a ROS 2 bag (MCAP) with its ground truth.",
+    )
+    sub = ap.add_subparsers(
+        dest="scene", required=True, metavar="SCENE", parser_class=OneLineArgumentParser
+    )
     top = sub.add_parser("heavy-top", help="the heavy symmetric top of Xiaoliang (2014)")
-    top.add_argument("--motion", choices=MOTIONS, default="cusp",
-                     help="initial precession rate: cusp (0), wavy (+1/2 slow steady), looping "
-                          "(-1/2 slow steady), steady, sleeping (tilt 0)")
-    top.add_argument("--branch", choices=BRANCHES, default="slow",
-                     help="steady precession root (default slow)")
-    top.add_argument("--tilt-deg", type=_non_negative, metavar="DEG",
-                     help="initial tilt from the vertical, deg (default 54.57)")
-    top.add_argument("--spin-hz", type=_positive, metavar="HZ",
-                     help="spin omega_3 / 2 pi, Hz (default 20)")
+    top.add_argument(
+        "--motion",
+        choices=MOTIONS,
+        default="cusp",
+        help="initial precession rate: cusp (0), wavy (+1/2 slow steady), looping "
+        "(-1/2 slow steady), steady, sleeping (tilt 0)",
+    )
+    top.add_argument(
+        "--branch", choices=BRANCHES, default="slow", help="steady precession root (default slow)"
+    )
+    top.add_argument(
+        "--tilt-deg",
+        type=_non_negative,
+        metavar="DEG",
+        help="initial tilt from the vertical, deg (default 54.57)",
+    )
+    top.add_argument(
+        "--spin-hz", type=_positive, metavar="HZ", help="spin omega_3 / 2 pi, Hz (default 20)"
+    )
     _add_common(top, scheme=True)
     fb = sub.add_parser("free-body", help="the torque-free box of Shuijing (n.d.)")
-    fb.add_argument("--case", choices=FREE_BODY_CASES, default="diagonal",
-                    help="omega_b(0) = (1,1,1)/sqrt(3) rad/s (diagonal) or (0.05, 3, 0.05) "
-                         "(intermediate: flips)")
-    fb.add_argument("--omega", type=_vector3, metavar="X,Y,Z",
-                    help="initial body rate, rad/s (overrides --case; --omega=-x,y,z when x < 0)")
+    fb.add_argument(
+        "--case",
+        choices=FREE_BODY_CASES,
+        default="diagonal",
+        help="omega_b(0) = (1,1,1)/sqrt(3) rad/s (diagonal) or (0.05, 3, 0.05) "
+        "(intermediate: flips)",
+    )
+    fb.add_argument(
+        "--omega",
+        type=_vector3,
+        metavar="X,Y,Z",
+        help="initial body rate, rad/s (overrides --case; --omega=-x,y,z when x < 0)",
+    )
     _add_common(fb, scheme=False)
     co = sub.add_parser("coning", help="pure coning, closed form")
-    co.add_argument("--half-angle-deg", type=_non_negative, default=10.0, metavar="DEG",
-                    help="cone half-angle, deg (default 10)")
-    co.add_argument("--freq-hz", type=_finite, default=5.0, metavar="HZ",
-                    help="coning frequency, Hz (default 5)")
+    co.add_argument(
+        "--half-angle-deg",
+        type=_non_negative,
+        default=10.0,
+        metavar="DEG",
+        help="cone half-angle, deg (default 10)",
+    )
+    co.add_argument(
+        "--freq-hz",
+        type=_finite,
+        default=5.0,
+        metavar="HZ",
+        help="coning frequency, Hz (default 5)",
+    )
     _add_common(co, scheme=False)
     return ap
 
@@ -186,20 +273,30 @@ def _check_output(out: Path, force: bool) -> None:
     if not (out.exists() or out.is_symlink()):
         return
     if not force:
-        raise LogError(f"Expected output {str(out)!r} not to exist (use --force), got an "
-                       f"existing {'folder' if out.is_dir() else 'file'}")
+        raise LogError(
+            f"Expected output {str(out)!r} not to exist (use --force), got an "
+            f"existing {'folder' if out.is_dir() else 'file'}"
+        )
     if out.is_symlink() or not out.is_dir():
         kind = "symlink" if out.is_symlink() else "file" if out.is_file() else "special file"
-        raise LogError(f"Expected --out to be a bag folder written by {PROG} (to replace with "
-                       f"--force), got a {kind}: {str(out)!r}")
+        raise LogError(
+            f"Expected --out to be a bag folder written by {PROG} (to replace with "
+            f"--force), got a {kind}: {str(out)!r}"
+        )
     names = sorted(p.name for p in out.iterdir())
     meta = out / "metadata.yaml"
-    ours = (names == sorted(["metadata.yaml", f"{out.name}.mcap"]) and meta.is_file()
-            and not meta.is_symlink() and "data_synth.command" in meta.read_text(errors="replace"))
+    ours = (
+        names == sorted(["metadata.yaml", f"{out.name}.mcap"])
+        and meta.is_file()
+        and not meta.is_symlink()
+        and "data_synth.command" in meta.read_text(errors="replace")
+    )
     if not ours:
-        raise LogError(f"Expected --out to be a bag folder written by {PROG} (metadata.yaml and "
-                       f"{out.name}.mcap only) to replace with --force, got {str(out)!r} holding "
-                       f"{names[:3]}{' ...' if len(names) > 3 else ''}")
+        raise LogError(
+            f"Expected --out to be a bag folder written by {PROG} (metadata.yaml and "
+            f"{out.name}.mcap only) to replace with --force, got {str(out)!r} holding "
+            f"{names[:3]}{' ...' if len(names) > 3 else ''}"
+        )
 
 
 def _refuse(args: argparse.Namespace, est: budget.JobEstimate, what: str) -> budget.JobTooLarge:
@@ -207,7 +304,8 @@ def _refuse(args: argparse.Namespace, est: budget.JobEstimate, what: str) -> bud
         f"Expected a job within {args.max_memory_gib:g} GiB and {args.max_minutes:g} min "
         f"(--max-memory-gib, --max-minutes), got an estimated "
         f"{budget.format_bytes(est.memory_bytes)} and {budget.format_seconds(est.seconds)} for "
-        f"{what}")
+        f"{what}"
+    )
 
 
 def _budget_steps(args: argparse.Namespace, est: budget.JobEstimate, per_step_s: float) -> float:
@@ -221,21 +319,27 @@ def _sample_cost(args: argparse.Namespace) -> budget.JobEstimate:
     n = math.floor(args.duration * args.rate * (1.0 + 1e-12)) + 1
     est = budget.JobEstimate(n, 0.0, n * budget.BYTES_PER_SAMPLE, n * budget.SECONDS_PER_SAMPLE)
     if getattr(args, "scheme", "exact") == "reference":  # a Python RK4 step per sample
-        est = budget.JobEstimate(n, n, est.memory_bytes,
-                                 est.seconds + n * budget.SECONDS_PER_REFERENCE_STEP)
+        est = budget.JobEstimate(
+            n, n, est.memory_bytes, est.seconds + n * budget.SECONDS_PER_REFERENCE_STEP
+        )
     if est.memory_bytes > args.max_memory_gib * 2.0**30 or est.seconds > args.max_minutes * 60:
-        raise _refuse(args, est, f"{n:.3g} samples (--rate {args.rate:g} Hz x --duration "
-                                 f"{args.duration:g} s)")
+        raise _refuse(
+            args, est, f"{n:.3g} samples (--rate {args.rate:g} Hz x --duration {args.duration:g} s)"
+        )
     return est
 
 
 def _check_values(args: argparse.Namespace) -> None:
     """Checks that need two options together (each option alone is checked by argparse)."""
     last_s = args.epoch_ns * 1e-9 + args.duration
-    if last_s >= MAX_STAMP_NS * 1e-9 or args.epoch_ns + math.ceil(args.duration * 1e9) \
-            >= MAX_STAMP_NS:
-        raise InputError(f"Expected --epoch-ns + --duration below 2^31 s (header.stamp.sec is an "
-                         f"int32), got stamps up to {last_s:.10g} s")
+    if (
+        last_s >= MAX_STAMP_NS * 1e-9
+        or args.epoch_ns + math.ceil(args.duration * 1e9) >= MAX_STAMP_NS
+    ):
+        raise InputError(
+            f"Expected --epoch-ns + --duration below 2^31 s (header.stamp.sec is an "
+            f"int32), got stamps up to {last_s:.10g} s"
+        )
 
 
 def make_log(args: argparse.Namespace, argv: list[str]) -> Path:
@@ -262,10 +366,12 @@ def make_log(args: argparse.Namespace, argv: list[str]) -> Path:
         from data_synth.reference_scheme import SampledTrajectory, reference_top
 
         if args.gyro_output != "rate" or args.stamp_jitter:
-            raise InputError("Expected --gyro-output rate and no --stamp-jitter with --scheme "
-                              "reference (it exists only on its own time grid), got "
-                              f"--gyro-output {args.gyro_output}, --stamp-jitter "
-                              f"{args.stamp_jitter}")
+            raise InputError(
+                "Expected --gyro-output rate and no --stamp-jitter with --scheme "
+                "reference (it exists only on its own time grid), got "
+                f"--gyro-output {args.gyro_output}, --stamp-jitter "
+                f"{args.stamp_jitter}"
+            )
         run = reference_top(args.duration, args.rate, **params)
         traj = SampledTrajectory(run, args.rate)
     elif args.scene == "coning":  # closed form: the samples are the whole cost
@@ -276,14 +382,28 @@ def make_log(args: argparse.Namespace, argv: list[str]) -> Path:
             traj = simulate(args.scene, args.duration, max_steps=max_steps, **params)
         except budget.JobTooLarge as exc:
             steps = getattr(exc, "steps", math.inf)
-            total = budget.JobEstimate(est.samples, steps,
-                                       est.memory_bytes + steps * budget.BYTES_PER_STEP,
-                                       est.seconds + steps * budget.SECONDS_PER_STEP)
-            raise _refuse(args, total, f"{steps:.3g} ODE steps (the motion over --duration "
-                                       f"{args.duration:g} s) and {est.samples:.3g} "
-                                       f"samples") from None
-    rec = synthetic_gyro(traj, args.rate, args.duration, model, output=args.gyro_output,
-                         seed=args.seed, epoch_ns=args.epoch_ns)
+            total = budget.JobEstimate(
+                est.samples,
+                steps,
+                est.memory_bytes + steps * budget.BYTES_PER_STEP,
+                est.seconds + steps * budget.SECONDS_PER_STEP,
+            )
+            raise _refuse(
+                args,
+                total,
+                f"{steps:.3g} ODE steps (the motion over --duration "
+                f"{args.duration:g} s) and {est.samples:.3g} "
+                f"samples",
+            ) from None
+    rec = synthetic_gyro(
+        traj,
+        args.rate,
+        args.duration,
+        model,
+        output=args.gyro_output,
+        seed=args.seed,
+        epoch_ns=args.epoch_ns,
+    )
     if args.gyro_output == "rate":
         t_truth_s, t_truth_ns = rec.t_s, rec.t_ns
         rates = rec.values
@@ -303,12 +423,13 @@ def make_log(args: argparse.Namespace, argv: list[str]) -> Path:
         "data_synth.duration_s": repr(float(args.duration)),
         "data_synth.epoch_ns": str(args.epoch_ns),
         "data_synth.frames": "q_w_b [x,y,z,w] body to world (world ENU, z up); omega_b rad/s "
-                             "body axes; /imu/data frame 'imu' = body",
+        "body axes; /imu/data frame 'imu' = body",
         "data_synth.command": "python -m data_synth " + shlex.join(argv),
     }
     if args.gyro_output == "delta-angle":
-        custom["data_synth.gyro.note"] = ("angular_velocity = delta angle / interval: mean "
-                                          "rate over (t_k-1, t_k], stamped t_k")
+        custom["data_synth.gyro.note"] = (
+            "angular_velocity = delta angle / interval: mean rate over (t_k-1, t_k], stamped t_k"
+        )
     out.parent.mkdir(parents=True, exist_ok=True)  # e.g. --out out/top in a fresh checkout
     return write_bag(
         out,

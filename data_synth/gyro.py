@@ -74,8 +74,7 @@ class GyroModel:
     stamp_jitter_s: float | None = None
 
     def __post_init__(self) -> None:
-        for name in ("noise_density_rad_s_sqrt_hz", "bias_walk_rad_s2_sqrt_hz",
-                     "stamp_jitter_s"):
+        for name in ("noise_density_rad_s_sqrt_hz", "bias_walk_rad_s2_sqrt_hz", "stamp_jitter_s"):
             v = getattr(self, name)
             if v is not None and not (math.isfinite(v) and v >= 0):
                 raise InputError(f"Expected `{name}` >= 0 or None, got {v!r}")
@@ -83,19 +82,25 @@ class GyroModel:
             v = getattr(self, name)
             # > the smallest normal float: 1 / step of a subnormal step overflows
             if v is not None and not (math.isfinite(v) and v >= sys.float_info.min):
-                raise InputError(f"Expected `{name}` >= {sys.float_info.min:.4g} (a normal "
-                                 f"positive float) or None, got {v!r}")
+                raise InputError(
+                    f"Expected `{name}` >= {sys.float_info.min:.4g} (a normal "
+                    f"positive float) or None, got {v!r}"
+                )
         if self.bias_rad_s is not None:
             b = tuple(float(x) for x in self.bias_rad_s)
             if len(b) != 3 or not all(math.isfinite(x) for x in b):
                 raise InputError(
-                    f"Expected `bias_rad_s` three finite rates, got {self.bias_rad_s!r}")
+                    f"Expected `bias_rad_s` three finite rates, got {self.bias_rad_s!r}"
+                )
             object.__setattr__(self, "bias_rad_s", b)
 
     def as_dict(self) -> dict[str, Any]:
         """The terms that are on, by field name (for log metadata)."""
-        return {k: (list(v) if isinstance(v, tuple) else v)
-                for k, v in asdict(self).items() if v is not None}
+        return {
+            k: (list(v) if isinstance(v, tuple) else v)
+            for k, v in asdict(self).items()
+            if v is not None
+        }
 
 
 @dataclass(frozen=True)
@@ -149,8 +154,13 @@ class GyroRecord:
         return self.values / dt[:, None]
 
 
-def _sample_times(rate_hz: float, duration_s: float, jitter_s: float | None,
-                  rng: np.random.Generator, epoch_ns: int) -> tuple[NDArray, NDArray]:
+def _sample_times(
+    rate_hz: float,
+    duration_s: float,
+    jitter_s: float | None,
+    rng: np.random.Generator,
+    epoch_ns: int,
+) -> tuple[NDArray, NDArray]:
     n = math.floor(duration_s * rate_hz * (1.0 + 1e-12)) + 1
     k = np.arange(n)
     t_nom_ns = np.round(k * (1e9 / rate_hz)).astype(np.int64)
@@ -161,8 +171,10 @@ def _sample_times(rate_hz: float, duration_s: float, jitter_s: float | None,
         t_rel_ns = t_nom_ns + np.round(j).astype(np.int64)
         t_rel_ns = np.clip(t_rel_ns, 0, round(duration_s * 1e9))
         if np.any(np.diff(t_rel_ns) <= 0):  # only possible at ns resolution for huge rates
-            raise InputError(f"Expected stamp jitter to keep the order at {rate_hz} Hz, got "
-                             f"repeated stamps with stamp_jitter_s = {jitter_s}")
+            raise InputError(
+                f"Expected stamp jitter to keep the order at {rate_hz} Hz, got "
+                f"repeated stamps with stamp_jitter_s = {jitter_s}"
+            )
     else:
         t_rel_ns = t_nom_ns
     return t_rel_ns * 1e-9, epoch_ns + t_rel_ns
@@ -210,15 +222,20 @@ def synthetic_gyro(
     if duration_s is None:
         duration_s = traj.duration_s
     if not (math.isfinite(duration_s) and 0 < duration_s <= traj.duration_s + 1e-12):
-        raise InputError(f"Expected `duration_s` in (0, {traj.duration_s}] (the trajectory's "
-                         f"length), got {duration_s!r}")
+        raise InputError(
+            f"Expected `duration_s` in (0, {traj.duration_s}] (the trajectory's "
+            f"length), got {duration_s!r}"
+        )
     if duration_s * rate_hz < 1:
-        raise InputError(f"Expected at least two samples, got duration {duration_s} s at "
-                         f"{rate_hz} Hz")
+        raise InputError(
+            f"Expected at least two samples, got duration {duration_s} s at {rate_hz} Hz"
+        )
     if not 0 <= int(epoch_ns) <= MAX_STAMP_NS - math.ceil(duration_s * 1e9):
-        raise InputError(f"Expected `epoch_ns` in [0, {MAX_STAMP_NS - math.ceil(duration_s * 1e9)}]"
-                         f" (stamps end before header.stamp.sec, an int32, overflows), got "
-                         f"{epoch_ns!r}")
+        raise InputError(
+            f"Expected `epoch_ns` in [0, {MAX_STAMP_NS - math.ceil(duration_s * 1e9)}]"
+            f" (stamps end before header.stamp.sec, an int32, overflows), got "
+            f"{epoch_ns!r}"
+        )
     if not (isinstance(seed, (int, np.integer)) and seed >= 0):
         raise InputError(f"Expected `seed` an integer >= 0, got {seed!r}")
     rng = np.random.default_rng(seed)
@@ -262,9 +279,11 @@ def synthetic_gyro(
         with np.errstate(over="ignore"):  # a step far below the rates: refused just below
             counts = (values if dt_scale is None else np.cumsum(values, axis=0)) / step
         if not np.all(np.isfinite(counts)):
-            raise InputError(f"Expected `quantization_rad_s` large enough that rate / step is "
-                             f"finite, got {model.quantization_rad_s!r} for rates up to "
-                             f"{float(np.max(np.abs(values))):.3g}")
+            raise InputError(
+                f"Expected `quantization_rad_s` large enough that rate / step is "
+                f"finite, got {model.quantization_rad_s!r} for rates up to "
+                f"{float(np.max(np.abs(values))):.3g}"
+            )
         if dt_scale is None:
             values = np.round(counts) * step
         else:
@@ -273,8 +292,19 @@ def synthetic_gyro(
             total = np.round(counts)
             values = np.diff(np.concatenate([np.zeros((1, 3)), total]), axis=0) * step
     if not np.all(np.isfinite(values)):
-        raise InputError("Expected a finite gyro output, got "
-                         f"{np.count_nonzero(~np.isfinite(values))}"
-                         f" non-finite values from the model {model.as_dict()}")
-    return GyroRecord(t_s=t_s, t_ns=t_ns, values=values, output=output, rate_hz=float(rate_hz),
-                      epoch_ns=int(epoch_ns), model=model, seed=int(seed), bias_b_rad_s=bias)
+        raise InputError(
+            "Expected a finite gyro output, got "
+            f"{np.count_nonzero(~np.isfinite(values))}"
+            f" non-finite values from the model {model.as_dict()}"
+        )
+    return GyroRecord(
+        t_s=t_s,
+        t_ns=t_ns,
+        values=values,
+        output=output,
+        rate_hz=float(rate_hz),
+        epoch_ns=int(epoch_ns),
+        model=model,
+        seed=int(seed),
+        bias_b_rad_s=bias,
+    )

@@ -78,9 +78,16 @@ class ReferenceRun:
     params: dict
 
 
-def reference_top(duration_s: float, rate_hz: float, motion: str = "cusp", *,
-                  branch: str = "slow", params: HeavyTopParams | None = None,
-                  tilt_deg: float | None = None, spin_hz: float | None = None) -> ReferenceRun:
+def reference_top(
+    duration_s: float,
+    rate_hz: float,
+    motion: str = "cusp",
+    *,
+    branch: str = "slow",
+    params: HeavyTopParams | None = None,
+    tilt_deg: float | None = None,
+    spin_hz: float | None = None,
+) -> ReferenceRun:
     """Run the coupled RK4 + DCM scheme of Xiaoliang (2014) for the heavy top.
 
     Parameters
@@ -96,8 +103,9 @@ def reference_top(duration_s: float, rate_hz: float, motion: str = "cusp", *,
     -------
     ReferenceRun
     """
-    p, q0, omega0, record = heavy_top_initial_state(motion, branch=branch, params=params,
-                                                    tilt_deg=tilt_deg, spin_hz=spin_hz)
+    p, q0, omega0, record = heavy_top_initial_state(
+        motion, branch=branch, params=params, tilt_deg=tilt_deg, spin_hz=spin_hz
+    )
     if not (math.isfinite(rate_hz) and rate_hz > 0):
         raise InputError(f"Expected `rate_hz` > 0, got {rate_hz!r}")
     if not (math.isfinite(duration_s) and duration_s > 0):
@@ -135,12 +143,21 @@ def reference_top(duration_s: float, rate_hz: float, motion: str = "cusp", *,
         track = track @ exp_matrix((w1 * h, w2 * h, w3 * h))  # CK(ω(t_{i+1}) h), eq. 19
         R[i] = track
         W[i] = (w1, w2, w3)
-    return ReferenceRun(np.arange(n + 1) * h, R, W, {**record, "scheme": "reference",
-                                                      "scheme_rate_hz": float(rate_hz)})
+    return ReferenceRun(
+        np.arange(n + 1) * h,
+        R,
+        W,
+        {**record, "scheme": "reference", "scheme_rate_hz": float(rate_hz)},
+    )
 
 
-def euler_angle_top(t_s: ArrayLike, motion: str = "cusp", *, branch: str = "slow",
-                    params: HeavyTopParams | None = None) -> NDArray[np.float64]:
+def euler_angle_top(
+    t_s: ArrayLike,
+    motion: str = "cusp",
+    *,
+    branch: str = "slow",
+    params: HeavyTopParams | None = None,
+) -> NDArray[np.float64]:
     """Symmetry axis of the heavy top from its Euler-angle equations (Xiaoliang's check).
 
     z-x-z angles, ``R_w_b = Rz(φ) Rx(θ) Rz(ψ)``; with the first integrals ``ω3`` and
@@ -169,8 +186,15 @@ def euler_angle_top(t_s: ArrayLike, motion: str = "cusp", *, branch: str = "slow
         return [thd, thdd, phid]
 
     t = np.asarray(t_s, dtype=float)
-    sol = solve_ivp(rhs, (0.0, float(t.max())), [tilt, 0.0, 0.0], method="DOP853",
-                    rtol=1e-12, atol=1e-12, t_eval=t)
+    sol = solve_ivp(
+        rhs,
+        (0.0, float(t.max())),
+        [tilt, 0.0, 0.0],
+        method="DOP853",
+        rtol=1e-12,
+        atol=1e-12,
+        t_eval=t,
+    )
     th, ph = sol.y[0], sol.y[2]
     return np.stack([np.sin(ph) * np.sin(th), -np.cos(ph) * np.sin(th), np.cos(th)], axis=-1)
 
@@ -210,12 +234,14 @@ class ReferenceComparison:
 
 def _axis_angle_deg(a: NDArray, b: NDArray) -> NDArray:
     """Angle between unit vectors, deg (atan2 form, accurate for small angles)."""
-    return np.degrees(np.arctan2(np.linalg.norm(np.cross(a, b), axis=-1),
-                                 np.einsum("...i,...i->...", a, b)))
+    return np.degrees(
+        np.arctan2(np.linalg.norm(np.cross(a, b), axis=-1), np.einsum("...i,...i->...", a, b))
+    )
 
 
-def compare_reference(rate_hz: float = 2500.0, duration_s: float = 1.2,
-                      motion: str = "cusp") -> ReferenceComparison:
+def compare_reference(
+    rate_hz: float = 2500.0, duration_s: float = 1.2, motion: str = "cusp"
+) -> ReferenceComparison:
     """Reproduce Xiaoliang's (2014) comparison and measure the scheme against the exact truth."""
     run = reference_top(duration_s, rate_hz, motion)
     axis_ref = run.R_w_b[:, :, 2]
@@ -251,8 +277,13 @@ class SampledTrajectory(Trajectory):
     scheme has no dense solution).
     """
 
-    def __init__(self, run: ReferenceRun, rate_hz: float, scene: str = "heavy-top",
-                 params: dict | None = None) -> None:
+    def __init__(
+        self,
+        run: ReferenceRun,
+        rate_hz: float,
+        scene: str = "heavy-top",
+        params: dict | None = None,
+    ) -> None:
         self._run = run
         self._q = Rotation.from_matrix(run.R_w_b).as_quat()
         self.rate_hz = float(rate_hz)
@@ -266,34 +297,48 @@ class SampledTrajectory(Trajectory):
         off = np.abs(k / self.rate_hz - t)
         if np.any(off > 1e-9):
             i = int(np.argmax(off))
-            raise InputError(f"Expected times on the {self.rate_hz} Hz grid of the reference "
-                             f"scheme, got t_s[{i}] = {float(t[i])!r}")
+            raise InputError(
+                f"Expected times on the {self.rate_hz} Hz grid of the reference "
+                f"scheme, got t_s[{i}] = {float(t[i])!r}"
+            )
         return self._q[k].copy(), self._run.omega_b[k].copy()
 
     def delta_angles(self, t_s: ArrayLike) -> NDArray[np.float64]:
-        raise InputError("Expected the exact scheme for delta angles, got the reference scheme "
-                         "(it has no dense solution)")
+        raise InputError(
+            "Expected the exact scheme for delta angles, got the reference scheme "
+            "(it has no dense solution)"
+        )
 
 
 def main(argv: list[str] | None = None) -> int:
     """Print the comparison numbers: ``python -m data_synth.reference_scheme``."""
-    ap = argparse.ArgumentParser(prog="python -m data_synth.reference_scheme",
-                                 description=__doc__.splitlines()[0])
-    ap.add_argument("--rate", type=float, nargs="+", default=[2500.0, 2000.0],
-                    help="step rates, Hz (default: 2500 = its Figure 11, 2000 = its listed code)")
+    ap = argparse.ArgumentParser(
+        prog="python -m data_synth.reference_scheme", description=__doc__.splitlines()[0]
+    )
+    ap.add_argument(
+        "--rate",
+        type=float,
+        nargs="+",
+        default=[2500.0, 2000.0],
+        help="step rates, Hz (default: 2500 = its Figure 11, 2000 = its listed code)",
+    )
     ap.add_argument("--duration", type=float, default=1.2, help="length, s (default 1.2)")
     args = ap.parse_args(argv)
     print("heavy top, cusp, Xiaoliang (2014) Figure 11 parameters; max over the run, degrees")
-    print("coupled scheme (RK4 + CK(w(t_i+1) h)):  axis vs Euler-angle | axis vs exact | "
-          "attitude vs exact")
+    print(
+        "coupled scheme (RK4 + CK(w(t_i+1) h)):  axis vs Euler-angle | axis vs exact | "
+        "attitude vs exact"
+    )
     print("strapdown on exact samples (same CK):    axis vs exact | attitude vs exact")
     print("Euler-angle solution vs exact:           axis")
     for r in args.rate:
         c = compare_reference(r, args.duration)
-        print(f"{c.rate_hz:6.0f} Hz  coupled {c.axis_vs_euler_deg:.4f} | "
-              f"{c.axis_vs_truth_deg:.4f} | {c.attitude_vs_truth_deg:.4f}   "
-              f"strapdown {c.strapdown_axis_deg:.4f} | {c.strapdown_attitude_deg:.4f}   "
-              f"Euler-angle {c.euler_vs_truth_axis_deg:.1e}")
+        print(
+            f"{c.rate_hz:6.0f} Hz  coupled {c.axis_vs_euler_deg:.4f} | "
+            f"{c.axis_vs_truth_deg:.4f} | {c.attitude_vs_truth_deg:.4f}   "
+            f"strapdown {c.strapdown_axis_deg:.4f} | {c.strapdown_attitude_deg:.4f}   "
+            f"Euler-angle {c.euler_vs_truth_axis_deg:.1e}"
+        )
     return 0
 
 

@@ -122,8 +122,15 @@ class SolvedTrajectory(Trajectory):
     centre of mass for a free body).
     """
 
-    def __init__(self, sol, scene: str, params: dict[str, Any], duration_s: float,
-                 inertia_kg_m2: NDArray[np.float64], nfev: int) -> None:
+    def __init__(
+        self,
+        sol,
+        scene: str,
+        params: dict[str, Any],
+        duration_s: float,
+        inertia_kg_m2: NDArray[np.float64],
+        nfev: int,
+    ) -> None:
         self._sol = sol
         self.scene = scene
         self.params = params
@@ -231,14 +238,17 @@ def solve_rigid_body(
 
         steps = estimate_ode_steps(rhs, y0, duration_s, rtol, atol)
         if steps > max_steps:
-            exc = JobTooLarge(f"Expected at most {max_steps:.3g} ODE steps, got an estimated "
-                              f"{steps:.3g} (~{format_bytes(steps * BYTES_PER_STEP)}) over "
-                              f"{duration_s:g} s from |omega_b(0)| = "
-                              f"{float(np.linalg.norm(w0)):.3g} rad/s")
+            exc = JobTooLarge(
+                f"Expected at most {max_steps:.3g} ODE steps, got an estimated "
+                f"{steps:.3g} (~{format_bytes(steps * BYTES_PER_STEP)}) over "
+                f"{duration_s:g} s from |omega_b(0)| = "
+                f"{float(np.linalg.norm(w0)):.3g} rad/s"
+            )
             exc.steps = steps
             raise exc
-    sol = solve_ivp(rhs, (0.0, float(duration_s)), y0, method="DOP853", rtol=rtol, atol=atol,
-                    dense_output=True)
+    sol = solve_ivp(
+        rhs, (0.0, float(duration_s)), y0, method="DOP853", rtol=rtol, atol=atol, dense_output=True
+    )
     if not sol.success:
         raise InputError(f"Expected the rigid-body ODE to solve, got: {sol.message}")
     return SolvedTrajectory(sol.sol, scene, dict(params or {}), duration_s, inertia, sol.nfev)

@@ -117,8 +117,9 @@ class HeavyTopParams:
             raise InputError(f"Expected `tilt_deg` in [0, 180), got {self.tilt_deg!r}")
 
 
-def heavy_top_initial_rates(p: HeavyTopParams, motion: str,
-                            branch: str = "slow") -> tuple[float, float]:
+def heavy_top_initial_rates(
+    p: HeavyTopParams, motion: str, branch: str = "slow"
+) -> tuple[float, float]:
     """Initial precession rate ``φ̇(0)`` (rad/s) and tilt (rad) for a motion of the top.
 
     See the module docstring for the table of motions. ``sleeping`` forces the tilt to 0.
@@ -227,12 +228,22 @@ def heavy_top(
         ``scene = "heavy-top"``; ``params`` holds every physical parameter, the motion and the
         initial state.
     """
-    p, q0, omega0, record = heavy_top_initial_state(motion, branch=branch, params=params,
-                                                    tilt_deg=tilt_deg, spin_hz=spin_hz)
+    p, q0, omega0, record = heavy_top_initial_state(
+        motion, branch=branch, params=params, tilt_deg=tilt_deg, spin_hz=spin_hz
+    )
     inertia = (p.i1_kg_m2, p.i1_kg_m2, p.i3_kg_m2)
-    return solve_rigid_body(inertia, q0, omega0, duration_s, torque=heavy_top_torque(p),
-                            scene="heavy-top", params=record, rtol=rtol, atol=atol,
-                            max_steps=max_steps)
+    return solve_rigid_body(
+        inertia,
+        q0,
+        omega0,
+        duration_s,
+        torque=heavy_top_torque(p),
+        scene="heavy-top",
+        params=record,
+        rtol=rtol,
+        atol=atol,
+        max_steps=max_steps,
+    )
 
 
 def box_inertia(edges_m: ArrayLike, mass_kg: float) -> np.ndarray:
@@ -280,20 +291,35 @@ def free_body(
     if not (math.isfinite(mass_kg) and mass_kg > 0):
         raise InputError(f"Expected `mass_kg` > 0, got {mass_kg!r}")
     if omega0_b is None:
-        w0 = (np.ones(3) / math.sqrt(3.0) if case == "diagonal" else np.array([0.05, 3.0, 0.05]))
+        w0 = np.ones(3) / math.sqrt(3.0) if case == "diagonal" else np.array([0.05, 3.0, 0.05])
     else:
         w0 = np.asarray(omega0_b, dtype=float)
     inertia = box_inertia(edges, mass_kg)
     q0 = np.array([0.0, 0.0, 0.0, 1.0])
-    record = {"case": case, "edges_m": edges.tolist(), "mass_kg": float(mass_kg),
-              "inertia_kg_m2": inertia.tolist(), "q0_w_b": q0.tolist(),
-              "omega0_b_rad_s": np.asarray(w0, dtype=float).tolist()}
-    return solve_rigid_body(inertia, q0, w0, duration_s, scene="free-body", params=record,
-                            rtol=rtol, atol=atol, max_steps=max_steps)
+    record = {
+        "case": case,
+        "edges_m": edges.tolist(),
+        "mass_kg": float(mass_kg),
+        "inertia_kg_m2": inertia.tolist(),
+        "q0_w_b": q0.tolist(),
+        "omega0_b_rad_s": np.asarray(w0, dtype=float).tolist(),
+    }
+    return solve_rigid_body(
+        inertia,
+        q0,
+        w0,
+        duration_s,
+        scene="free-body",
+        params=record,
+        rtol=rtol,
+        atol=atol,
+        max_steps=max_steps,
+    )
 
 
-def coning(duration_s: float, half_angle_deg: float = 10.0,
-           freq_hz: float = 5.0) -> ConingTrajectory:
+def coning(
+    duration_s: float, half_angle_deg: float = 10.0, freq_hz: float = 5.0
+) -> ConingTrajectory:
     """Pure coning, ``R_w_b(t) = Rz(Ωt) Rx(β) Rz(−Ωt)`` (closed form; docs/design.md, coning)."""
     return ConingTrajectory(duration_s, half_angle_deg=half_angle_deg, freq_hz=freq_hz)
 

@@ -79,9 +79,9 @@ MSG_DEFINITIONS: dict[str, str] = {
 
 #: REP 2011 type hashes (RIHS01) of the message types, as in rosbag2 metadata (Humble+ types).
 TYPE_HASHES: dict[str, str] = {
-    "sensor_msgs/msg/Imu": "RIHS01_7d9a00ff131080897a5ec7e26e315954b8eae3353c3f995c55faf71574000b5b",
-    "geometry_msgs/msg/QuaternionStamped": "RIHS01_381add86c6c3160644d228ca342182c7fd6c7fab11c7a85ad817a9cc22dbac6e",
-    "geometry_msgs/msg/Vector3Stamped": "RIHS01_d4829622288cbb443886e7ea94ea5671a3b1be6bab4ad04224432a65f7d7887a",
+    "sensor_msgs/msg/Imu": "RIHS01_7d9a00ff131080897a5ec7e26e315954b8eae3353c3f995c55faf71574000b5b",  # noqa: E501
+    "geometry_msgs/msg/QuaternionStamped": "RIHS01_381add86c6c3160644d228ca342182c7fd6c7fab11c7a85ad817a9cc22dbac6e",  # noqa: E501
+    "geometry_msgs/msg/Vector3Stamped": "RIHS01_d4829622288cbb443886e7ea94ea5671a3b1be6bab4ad04224432a65f7d7887a",  # noqa: E501
 }
 
 _QOS_YAML = """- avoid_ros_namespace_conventions: false
@@ -296,7 +296,7 @@ def _write_mcap(
         flat = rec.tobytes()
         step = 31 + size
         records.append([flat[k : k + step] for k in range(0, n * step, step)])
-    body = b"".join([records[c][j] for c, j in zip(chan.tolist(), row.tolist())])
+    body = b"".join([records[c][j] for c, j in zip(chan.tolist(), row.tolist(), strict=False)])
 
     # Chunk boundaries: close a chunk once its records reach chunk_size bytes.
     bounds = [0]

@@ -70,6 +70,7 @@ GAP_FACTOR = 5.0
 # Input checks
 # ----------------------------------------------------------------------------------------------
 
+
 def _as_float_array(a: ArrayLike, name: str) -> NDArray[np.float64]:
     arr = np.asarray(a)
     if arr.dtype.kind not in "iuf":
@@ -77,8 +78,9 @@ def _as_float_array(a: ArrayLike, name: str) -> NDArray[np.float64]:
     return np.asarray(arr, dtype=np.float64)
 
 
-def check_samples(values: ArrayLike, t_s: ArrayLike, name: str = "omega_b",
-                  n_extra_stamps: int = 0) -> tuple[NDArray, NDArray, NDArray]:
+def check_samples(
+    values: ArrayLike, t_s: ArrayLike, name: str = "omega_b", n_extra_stamps: int = 0
+) -> tuple[NDArray, NDArray, NDArray]:
     """Validate ``(N, 3)`` samples and their stamps; return float64 arrays and the steps.
 
     Parameters
@@ -120,8 +122,10 @@ def check_samples(values: ArrayLike, t_s: ArrayLike, name: str = "omega_b",
         raise InputError(f"Expected `t_s` of shape (N,), got {t.shape}")
     if len(t) != len(v) + n_extra_stamps:
         want = "N" if n_extra_stamps == 0 else f"N + {n_extra_stamps}"
-        raise InputError(f"Expected `t_s` of length {want} = {len(v) + n_extra_stamps} "
-                         f"for `{name}` of shape {v.shape}, got {len(t)}")
+        raise InputError(
+            f"Expected `t_s` of length {want} = {len(v) + n_extra_stamps} "
+            f"for `{name}` of shape {v.shape}, got {len(t)}"
+        )
     if len(t) < 2 or len(v) < 1:
         raise InputError(f"Expected at least 2 stamps, got {len(t)}")
     from imu_dcm import kernel
@@ -133,9 +137,11 @@ def check_samples(values: ArrayLike, t_s: ArrayLike, name: str = "omega_b",
     if stamp >= 0:
         raise InputError(f"Expected finite `t_s`, got t_s[{stamp}] = {float(t[stamp])}")
     if order >= 0:
-        raise InputError(f"Expected `t_s` strictly increasing, got t_s[{order}] = "
-                         f"{float(t[order])!r} s after t_s[{order - 1}] = "
-                         f"{float(t[order - 1])!r} s")
+        raise InputError(
+            f"Expected `t_s` strictly increasing, got t_s[{order}] = "
+            f"{float(t[order])!r} s after t_s[{order - 1}] = "
+            f"{float(t[order - 1])!r} s"
+        )
     if dt_max > GAP_FACTOR * dt_min:  # else no step can exceed GAP_FACTOR x the median
         _warn_gaps(t)
     return v, t, np.diff(t)
@@ -187,8 +193,12 @@ def _check_method(method: str, allowed: tuple[str, ...]) -> None:
 
 
 def _warn_rotvec_sum() -> None:
-    warnings.warn("method 'rotvec_sum' adds rotation vectors (q_0 ⊗ exp(Σ dt ω)); it is wrong "
-                  "whenever the rotation axis moves in the body", ImuDcmWarning, stacklevel=3)
+    warnings.warn(
+        "method 'rotvec_sum' adds rotation vectors (q_0 ⊗ exp(Σ dt ω)); it is wrong "
+        "whenever the rotation axis moves in the body",
+        ImuDcmWarning,
+        stacklevel=3,
+    )
 
 
 def _to_rotation(q: NDArray) -> Rotation:
@@ -199,8 +209,9 @@ def _to_rotation(q: NDArray) -> Rotation:
     return Rotation(q, normalize=False, copy=False)
 
 
-def _rate_run(omega: NDArray, t: NDArray, q_first: NDArray, method: str,
-              emit_phi: bool = False) -> NDArray:
+def _rate_run(
+    omega: NDArray, t: NDArray, q_first: NDArray, method: str, emit_phi: bool = False
+) -> NDArray:
     """Feed a checked record through the kernel and close it: ``N`` rows (``q0`` first), or
     the ``N - 1`` increments when ``emit_phi``."""
     from imu_dcm import kernel
@@ -210,12 +221,13 @@ def _rate_run(omega: NDArray, t: NDArray, q_first: NDArray, method: str,
     out[0] = q_first
     rows = out[1:]
     k = kernel.feed(state, omega, t, rows, emit_phi)
-    rows[k:] = state[kernel.ROWS:kernel.ROWS + 4 * kernel.close(state, emit_phi)].reshape(-1, 4)
+    rows[k:] = state[kernel.ROWS : kernel.ROWS + 4 * kernel.close(state, emit_phi)].reshape(-1, 4)
     return rows[:, :3] if emit_phi else out
 
 
-def integrate(omega_b: ArrayLike, t_s: ArrayLike, q0: ArrayLike | Rotation,
-              method: str = "magnus4") -> Rotation:
+def integrate(
+    omega_b: ArrayLike, t_s: ArrayLike, q0: ArrayLike | Rotation, method: str = "magnus4"
+) -> Rotation:
     """Attitude ``q_w_b`` at every sample time from body angular rates (batch).
 
     Parameters
@@ -275,12 +287,14 @@ def increments(omega_b: ArrayLike, t_s: ArrayLike, method: str = "magnus4") -> N
     """
     _check_method(method, METHODS[:-1])
     omega, t, _dt = check_samples(omega_b, t_s)
-    return np.ascontiguousarray(_rate_run(omega, t, np.array([0.0, 0.0, 0.0, 1.0]), method,
-                                          emit_phi=True))
+    return np.ascontiguousarray(
+        _rate_run(omega, t, np.array([0.0, 0.0, 0.0, 1.0]), method, emit_phi=True)
+    )
 
 
-def integrate_delta(dtheta_b: ArrayLike, t_s: ArrayLike, q0: ArrayLike | Rotation,
-                    method: str = "one_plus_previous") -> Rotation:
+def integrate_delta(
+    dtheta_b: ArrayLike, t_s: ArrayLike, q0: ArrayLike | Rotation, method: str = "one_plus_previous"
+) -> Rotation:
     """Attitude from delta angles (integrated gyro increments), as many IMUs output.
 
     Parameters
@@ -315,15 +329,20 @@ def integrate_delta(dtheta_b: ArrayLike, t_s: ArrayLike, q0: ArrayLike | Rotatio
     dtheta, _t, dt = check_samples(dtheta_b, t_s, name="dtheta_b", n_extra_stamps=1)
     m = {"two_sample": 2, "three_sample": 3}.get(method, 1)
     if len(dtheta) % m:
-        raise InputError(f"Expected the number of intervals to be a multiple of {m} for "
-                         f"method {method!r}, got {len(dtheta)}")
+        raise InputError(
+            f"Expected the number of intervals to be a multiple of {m} for "
+            f"method {method!r}, got {len(dtheta)}"
+        )
     if method == "three_sample":
         sets = dt.reshape(-1, 3)
         spread = float(np.max(np.ptp(sets, axis=1) / sets.mean(axis=1)))
         if spread > 0.01:
-            warnings.warn(f"method 'three_sample' assumes equal intervals within a set; they "
-                          f"differ by up to {100 * spread:.3g} % here", ImuDcmWarning,
-                          stacklevel=2)
+            warnings.warn(
+                f"method 'three_sample' assumes equal intervals within a set; they "
+                f"differ by up to {100 * spread:.3g} % here",
+                ImuDcmWarning,
+                stacklevel=2,
+            )
     from imu_dcm import kernel
 
     out = np.empty((len(dtheta) // m + 1, 4))

@@ -12,10 +12,10 @@ in body axes; stamps ``t`` s; increments multiply on the right. The formulas (in
 exponential, the product) are written out here, inline, on purpose: :mod:`imu_dcm.so3` holds the
 vectorised versions of the same maths.
 
-Importing this module imports numba; :mod:`imu_dcm.integrate` imports it on its first call. Compiled code is cached next to this file (``__pycache__``) or, when that folder is
-read-only, in numba's user cache folder (``NUMBA_CACHE_DIR`` overrides both); when no folder is
-writable the kernel is compiled in every process and :class:`imu_dcm.errors.ImuDcmWarning`
-says so once.
+Importing this module imports numba; :mod:`imu_dcm.integrate` imports it on its first call. Compiled
+code is cached next to this file (``__pycache__``) or, when that folder is read-only, in numba's
+user cache folder (``NUMBA_CACHE_DIR`` overrides both); when no folder is writable the kernel is
+compiled in every process and :class:`imu_dcm.errors.ImuDcmWarning` says so once.
 """
 
 from __future__ import annotations
@@ -57,17 +57,18 @@ C0, C1, C2, C3, C4, C5, C6 = COS_HALF_SERIES
 OK, NOT_FINITE, NOT_INCREASING, MAYBE_GAP, IS_CLOSED = 0, 1, 2, 3, 4
 
 
-
 def _jit(fn=None, **options):
     """``numba.njit(cache=True, error_model="numpy", **options)``: inputs are checked before they
     get here, so no Python-style division checks. Without any writable cache folder (see the
     module doc), compile uncached and warn once."""
+
     def decorate(f):
         try:
             return numba.njit(cache=True, error_model="numpy", **options)(f)
         except RuntimeError:  # numba: "cannot cache function ...: no locator available"
             _warn_uncached()
             return numba.njit(error_model="numpy", **options)(f)
+
     return decorate if fn is None else decorate(fn)
 
 
@@ -77,13 +78,17 @@ _warned_uncached = []
 def _warn_uncached() -> None:
     if not _warned_uncached:
         _warned_uncached.append(True)
-        warnings.warn("Expected a writable folder to cache imu_dcm's compiled kernel, got none "
-                      "(package folder and user cache read-only): it is compiled in every "
-                      "process; set NUMBA_CACHE_DIR to a writable folder", ImuDcmWarning,
-                      stacklevel=4)
+        warnings.warn(
+            "Expected a writable folder to cache imu_dcm's compiled kernel, got none "
+            "(package folder and user cache read-only): it is compiled in every "
+            "process; set NUMBA_CACHE_DIR to a writable folder",
+            ImuDcmWarning,
+            stacklevel=4,
+        )
 
 
 # -- the maths of one step ---------------------------------------------------------------------
+
 
 @_jit
 def exp_quat(px: float, py: float, pz: float) -> tuple:
@@ -106,10 +111,12 @@ def quat_mul(p: tuple, q: tuple) -> tuple:
     """Hamilton product ``p ⊗ q`` of ``[x, y, z, w]`` tuples."""
     px, py, pz, pw = p
     qx, qy, qz, qw = q
-    return (pw * qx + px * qw + py * qz - pz * qy,
-            pw * qy - px * qz + py * qw + pz * qx,
-            pw * qz + px * qy - py * qx + pz * qw,
-            pw * qw - px * qx - py * qy - pz * qz)
+    return (
+        pw * qx + px * qw + py * qz - pz * qy,
+        pw * qy - px * qz + py * qw + pz * qx,
+        pw * qz + px * qy - py * qx + pz * qw,
+        pw * qw - px * qx - py * qy - pz * qz,
+    )
 
 
 @_jit
@@ -125,8 +132,9 @@ def step(q: tuple, px: float, py: float, pz: float) -> tuple:
 
 
 @_jit
-def increment(method: int, wm: tuple, w0: tuple, w1: tuple, w2: tuple,
-              h_m: float, h_0: float, h_p: float) -> tuple:
+def increment(
+    method: int, wm: tuple, w0: tuple, w1: tuple, w2: tuple, h_m: float, h_0: float, h_p: float
+) -> tuple:
     """Rotation vector ``φ_i`` (rad, body) of step ``[t_i, t_{i+1}]`` of length ``h_0``.
 
     ``wm, w0, w1, w2`` are ``ω_{i-1}, ω_i, ω_{i+1}, ω_{i+2}``; ``h_m, h_p`` the steps before and
@@ -158,26 +166,31 @@ def increment(method: int, wm: tuple, w0: tuple, w1: tuple, w2: tuple,
         c_0 = h6 + p * h_p * s_m0 * s_all * r
         c_1 = h6 + p * h_m * s_0p * s_all * r
         k = h_0 * h_0 * (1.0 / 12.0)
-        return (c_0 * x0 + c_1 * x1 - c_m * xm - c_2 * x2 + k * (y0 * z1 - z0 * y1),
-                c_0 * y0 + c_1 * y1 - c_m * ym - c_2 * y2 + k * (z0 * x1 - x0 * z1),
-                c_0 * z0 + c_1 * z1 - c_m * zm - c_2 * z2 + k * (x0 * y1 - y0 * x1))
+        return (
+            c_0 * x0 + c_1 * x1 - c_m * xm - c_2 * x2 + k * (y0 * z1 - z0 * y1),
+            c_0 * y0 + c_1 * y1 - c_m * ym - c_2 * y2 + k * (z0 * x1 - x0 * z1),
+            c_0 * z0 + c_1 * z1 - c_m * zm - c_2 * z2 + k * (x0 * y1 - y0 * x1),
+        )
     if method == TRAPEZOID:
         u = 0.5 * h_0
         return u * (x0 + x1), u * (y0 + y1), u * (z0 + z1)
     if method == CONING:
         u = 0.5 * h_0
         k = h_0 * h_0 * (1.0 / 12.0)
-        return (u * (x0 + x1) + k * (y0 * z1 - z0 * y1),
-                u * (y0 + y1) + k * (z0 * x1 - x0 * z1),
-                u * (z0 + z1) + k * (x0 * y1 - y0 * x1))
+        return (
+            u * (x0 + x1) + k * (y0 * z1 - z0 * y1),
+            u * (y0 + y1) + k * (z0 * x1 - x0 * z1),
+            u * (z0 + z1) + k * (x0 * y1 - y0 * x1),
+        )
     if method == START:
         return h_0 * x0, h_0 * y0, h_0 * z0
     return h_0 * x1, h_0 * y1, h_0 * z1  # END
 
 
 @_jit
-def newest_step(method: int, a: tuple, b: tuple, c: tuple, d: tuple,
-                ta: float, tb: float, tc: float, td: float) -> tuple:
+def newest_step(
+    method: int, a: tuple, b: tuple, c: tuple, d: tuple, ta: float, tb: float, tc: float, td: float
+) -> tuple:
     """``φ`` of the step that the newest of four samples ``(ω_a, t_a) .. (ω_d, t_d)`` completes:
     ``[t_b, t_c]`` for ``magnus4`` (one sample of look-ahead), ``[t_c, t_d]`` for the others."""
     if method == MAGNUS4:
@@ -188,11 +201,12 @@ def newest_step(method: int, a: tuple, b: tuple, c: tuple, d: tuple,
 
 # -- the state -----------------------------------------------------------------------------------
 
+
 def new_state(q0: np.ndarray, method: int) -> np.ndarray:
     """A fresh state: attitude ``q0`` (unit ``[x, y, z, w]``), no sample yet."""
     state = np.zeros(STATE_SIZE)
-    state[Q:Q + 4] = q0
-    state[Q0:Q0 + 4] = q0
+    state[Q : Q + 4] = q0
+    state[Q0 : Q0 + 4] = q0
     state[METHOD] = method
     return state
 
@@ -255,8 +269,7 @@ def _push(state, x: float, y: float, z: float, t: float, out, k: int, emit_phi: 
         sy = state[PHI_SUM + 1] + h * c[1]
         sz = state[PHI_SUM + 2] + h * c[2]
         state[PHI_SUM], state[PHI_SUM + 1], state[PHI_SUM + 2] = sx, sy, sz
-        q = quat_mul((state[Q0], state[Q0 + 1], state[Q0 + 2], state[Q0 + 3]),
-                     exp_quat(sx, sy, sz))
+        q = quat_mul((state[Q0], state[Q0 + 1], state[Q0 + 2], state[Q0 + 3]), exp_quat(sx, sy, sz))
         out[k, 0], out[k, 1], out[k, 2], out[k, 3] = q
         state[Q], state[Q + 1], state[Q + 2], state[Q + 3] = q
         return k + 1
@@ -266,8 +279,7 @@ def _push(state, x: float, y: float, z: float, t: float, out, k: int, emit_phi: 
         if n == 4.0:  # the first step, with a ghost sample before the record
             h = tb - ta
             ghost = _ghost(state, 4, ta - h)
-            k = _commit(state, increment(MAGNUS4, ghost, a, b, c, h, h, tc - tb), out, k,
-                        emit_phi)
+            k = _commit(state, increment(MAGNUS4, ghost, a, b, c, h, h, tc - tb), out, k, emit_phi)
     return _commit(state, newest_step(method, a, b, c, d, ta, tb, tc, td), out, k, emit_phi)
 
 
@@ -356,7 +368,7 @@ def push(state, omega, t: float) -> int:
                 shortest = min(shortest, state[T + r + 1] - state[T + r])
             if h > GAP_FACTOR * shortest:
                 code = MAYBE_GAP
-    _push(state, x, y, z, t, state[ROWS:ROWS + 8].reshape((2, 4)), 0, False)
+    _push(state, x, y, z, t, state[ROWS : ROWS + 8].reshape((2, 4)), 0, False)
     return code
 
 
@@ -366,7 +378,7 @@ def close(state, emit_phi: bool = False) -> int:
     last one (and before the first, for records of 2 or 3 samples) on the polynomial through
     the last (up to four) samples. Other methods: nothing. Returns the rows written to
     ``state[ROWS:ROWS + 8]`` (two rows of four)."""
-    out = state[ROWS:ROWS + 8].reshape((2, 4))
+    out = state[ROWS : ROWS + 8].reshape((2, 4))
     state[CLOSED] = 1.0
     n = int(state[N])
     if int(state[METHOD]) != MAGNUS4 or n < 2:
@@ -378,23 +390,34 @@ def close(state, emit_phi: bool = False) -> int:
     c, d = _rate(state, 2), _rate(state, 3)
     if n >= 4:
         b = _rate(state, 1)
-        return _commit(state, increment(MAGNUS4, b, c, d, ghost_end, tc - state[T + 1], h_end,
-                                        h_end), out, 0, emit_phi)
+        return _commit(
+            state,
+            increment(MAGNUS4, b, c, d, ghost_end, tc - state[T + 1], h_end, h_end),
+            out,
+            0,
+            emit_phi,
+        )
     if n == 2:
         ghost_start = _ghost(state, 2, tc - h_end)
-        return _commit(state, increment(MAGNUS4, ghost_start, c, d, ghost_end, h_end, h_end,
-                                        h_end), out, 0, emit_phi)
+        return _commit(
+            state,
+            increment(MAGNUS4, ghost_start, c, d, ghost_end, h_end, h_end, h_end),
+            out,
+            0,
+            emit_phi,
+        )
     b = _rate(state, 1)  # n == 3
     tb = state[T + 1]
     h0 = tc - tb
     ghost_start = _ghost(state, 3, tb - h0)
-    k = _commit(state, increment(MAGNUS4, ghost_start, b, c, d, h0, h0, h_end), out, 0,
-                emit_phi)
-    return _commit(state, increment(MAGNUS4, b, c, d, ghost_end, h0, h_end, h_end), out, k,
-                   emit_phi)
+    k = _commit(state, increment(MAGNUS4, ghost_start, b, c, d, h0, h0, h_end), out, 0, emit_phi)
+    return _commit(
+        state, increment(MAGNUS4, b, c, d, ghost_end, h0, h_end, h_end), out, k, emit_phi
+    )
 
 
 # -- input checks ------------------------------------------------------------------------------
+
 
 @_jit
 def check_record(values, t, t_before: float) -> tuple:
@@ -407,8 +430,11 @@ def check_record(values, t, t_before: float) -> tuple:
     """
     row = -1
     for i in range(values.shape[0]):
-        if not (math.isfinite(values[i, 0]) and math.isfinite(values[i, 1])
-                and math.isfinite(values[i, 2])):
+        if not (
+            math.isfinite(values[i, 0])
+            and math.isfinite(values[i, 1])
+            and math.isfinite(values[i, 2])
+        ):
             row = i
             break
     stamp = -1
@@ -432,6 +458,7 @@ def check_record(values, t, t_before: float) -> tuple:
 
 # -- delta angles --------------------------------------------------------------------------------
 
+
 @_jit
 def delta_rotvec(method: int, d1: tuple, d2: tuple, d3: tuple, a: float, b: float) -> tuple:
     """Rotation vector of one attitude update from delta angles (rad, body).
@@ -445,21 +472,25 @@ def delta_rotvec(method: int, d1: tuple, d2: tuple, d3: tuple, a: float, b: floa
     x2, y2, z2 = d2
     if method == PLAIN:
         return d2
-    if method == ONE_PLUS_PREVIOUS or method == TWO_SAMPLE:
+    if method in (ONE_PLUS_PREVIOUS, TWO_SAMPLE):
         if method == ONE_PLUS_PREVIOUS:
             k = b * b / (6.0 * a * (a + b))
             bx, by, bz = x2, y2, z2
         else:
             k = (a + b) * (a + b) / (6.0 * a * b)
             bx, by, bz = x1 + x2, y1 + y2, z1 + z2
-        return (bx + k * (y1 * z2 - z1 * y2),
-                by + k * (z1 * x2 - x1 * z2),
-                bz + k * (x1 * y2 - y1 * x2))
+        return (
+            bx + k * (y1 * z2 - z1 * y2),
+            by + k * (z1 * x2 - x1 * z2),
+            bz + k * (x1 * y2 - y1 * x2),
+        )
     x3, y3, z3 = d3  # THREE_SAMPLE
     ex, ey, ez = x3 - x1, y3 - y1, z3 - z1
-    return (x1 + x2 + x3 + 0.45 * (y1 * z3 - z1 * y3) + 0.675 * (y2 * ez - z2 * ey),
-            y1 + y2 + y3 + 0.45 * (z1 * x3 - x1 * z3) + 0.675 * (z2 * ex - x2 * ez),
-            z1 + z2 + z3 + 0.45 * (x1 * y3 - y1 * x3) + 0.675 * (x2 * ey - y2 * ex))
+    return (
+        x1 + x2 + x3 + 0.45 * (y1 * z3 - z1 * y3) + 0.675 * (y2 * ez - z2 * ey),
+        y1 + y2 + y3 + 0.45 * (z1 * x3 - x1 * z3) + 0.675 * (z2 * ex - x2 * ez),
+        z1 + z2 + z3 + 0.45 * (x1 * y3 - y1 * x3) + 0.675 * (x2 * ey - y2 * ex),
+    )
 
 
 @_jit

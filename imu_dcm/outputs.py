@@ -100,7 +100,9 @@ def check_output_file(
     except FileNotFoundError:
         st = None
     except OSError as exc:
-        raise OutputError(f"Expected a usable path for {what}, got {exc.strerror}: {str(out)!r}")
+        raise OutputError(
+            f"Expected a usable path for {what}, got {exc.strerror}: {str(out)!r}"
+        ) from None
     if st is not None and not stat.S_ISREG(st.st_mode):
         raise OutputError(
             f"Expected {what} to be a regular file or new, got a {_kind(st.st_mode)} {str(out)!r}"
@@ -149,7 +151,9 @@ def check_output_dir(
     except FileNotFoundError:
         st = None
     except OSError as exc:
-        raise OutputError(f"Expected a usable path for {what}, got {exc.strerror}: {str(out)!r}")
+        raise OutputError(
+            f"Expected a usable path for {what}, got {exc.strerror}: {str(out)!r}"
+        ) from None
     if st is not None:
         if not force:
             raise OutputError(

@@ -50,10 +50,11 @@ _SMALL_ANGLE_RAD = 1e-3
 #: and θ¹⁴/(4⁷ 14!) < 5e-20, are far below double rounding. Above, sin and cos.
 SERIES_THETA2 = 0.25
 #: Coefficients of θ^(2k), k = 0..6, of sin(θ/2)/θ = Σ (-1)^k θ^(2k) / (2^(2k+1) (2k+1)!).
-SINC_HALF_SERIES = tuple((-1) ** k / (2 ** (2 * k + 1) * math.factorial(2 * k + 1))
-                         for k in range(7))
+SINC_HALF_SERIES = tuple(
+    (-1) ** k / (2 ** (2 * k + 1) * math.factorial(2 * k + 1)) for k in range(7)
+)
 #: Coefficients of θ^(2k), k = 0..6, of cos(θ/2) = Σ (-1)^k θ^(2k) / (4^k (2k)!).
-COS_HALF_SERIES = tuple((-1) ** k / (4 ** k * math.factorial(2 * k)) for k in range(7))
+COS_HALF_SERIES = tuple((-1) ** k / (4**k * math.factorial(2 * k)) for k in range(7))
 
 
 def _horner(t2: NDArray, coefs: tuple) -> NDArray:
@@ -131,8 +132,9 @@ def exp_matrix(phi: ArrayLike) -> NDArray[np.float64]:
     small = theta < _SMALL_ANGLE_RAD
     safe = np.where(small, 1.0, theta)
     a = np.where(small, 1.0 - theta2 / 6.0 + theta2 * theta2 / 120.0, np.sin(safe) / safe)
-    b = np.where(small, 0.5 - theta2 / 24.0 + theta2 * theta2 / 720.0,
-                 (1.0 - np.cos(safe)) / (safe * safe))
+    b = np.where(
+        small, 0.5 - theta2 / 24.0 + theta2 * theta2 / 720.0, (1.0 - np.cos(safe)) / (safe * safe)
+    )
     K = hat(phi)
     return np.eye(3) + a[..., None, None] * K + b[..., None, None] * (K @ K)
 

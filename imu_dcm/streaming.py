@@ -93,8 +93,9 @@ class DcmIntegrator:
     (array([0.      , 0.      , 0.707107, 0.707107]), 1.0)
     """
 
-    def __init__(self, q0: ArrayLike | Rotation, method: str = "magnus4",
-                 t0_s: float | None = None) -> None:
+    def __init__(
+        self, q0: ArrayLike | Rotation, method: str = "magnus4", t0_s: float | None = None
+    ) -> None:
         _check_method(method, METHODS)
         try:
             t0 = None if t0_s is None else float(t0_s)
@@ -105,7 +106,7 @@ class DcmIntegrator:
         self._method = method
         self._t0_s = t0
         self._state = kernel.new_state(as_quat_xyzw(q0), METHODS.index(method))
-        self._q = self._state[kernel.Q:kernel.Q + 4]  # a view: the attitude, updated in place
+        self._q = self._state[kernel.Q : kernel.Q + 4]  # a view: the attitude, updated in place
         self._finished = False
         self._t0_pending = t0 is not None
         if method == "rotvec_sum":
@@ -195,24 +196,27 @@ class DcmIntegrator:
         except (TypeError, ValueError):
             w = None
         if w is None or w.shape != (3,):
-            raise InputError(f"Expected `omega_b` 3 numbers (rad/s) and `t_s` a number, got "
-                             f"{omega_b!r} and {t_s!r} (sample {self.n_samples})")
+            raise InputError(
+                f"Expected `omega_b` 3 numbers (rad/s) and `t_s` a number, got "
+                f"{omega_b!r} and {t_s!r} (sample {self.n_samples})"
+            )
         return w
 
     def _as_stamp(self, omega_b: object, t_s: object) -> float:
         try:
             return float(t_s)
         except (TypeError, ValueError):
-            raise InputError(f"Expected `omega_b` 3 numbers (rad/s) and `t_s` a number, got "
-                             f"{omega_b!r} and {t_s!r} (sample {self.n_samples})") from None
+            raise InputError(
+                f"Expected `omega_b` 3 numbers (rad/s) and `t_s` a number, got "
+                f"{omega_b!r} and {t_s!r} (sample {self.n_samples})"
+            ) from None
 
     def _start_at_t0(self, w: NDArray, t: float) -> None:
         """First sample with ``t0_s``: its rate enters at ``t0_s`` too."""
         if self._finished:
             raise InputError("Expected no samples after finish(), got one")
         if not t > self._t0_s:
-            raise InputError(f"Expected the first `t_s` after t0_s = {self._t0_s!r} s, got "
-                             f"{t!r} s")
+            raise InputError(f"Expected the first `t_s` after t0_s = {self._t0_s!r} s, got {t!r} s")
         code = _push(self._state, w, self._t0_s)
         if code:
             self._not_ok(code, w, self._t0_s)
@@ -224,13 +228,16 @@ class DcmIntegrator:
         if code == kernel.IS_CLOSED:
             raise InputError("Expected no samples after finish(), got one")
         if code == kernel.NOT_FINITE:
-            raise InputError(f"Expected finite `omega_b` and `t_s`, got {w.tolist()} at "
-                             f"t_s = {t} (sample {n})")
+            raise InputError(
+                f"Expected finite `omega_b` and `t_s`, got {w.tolist()} at t_s = {t} (sample {n})"
+            )
         if code == kernel.NOT_INCREASING:
             last = float(self._state[kernel.T + 3])
-            raise InputError(f"Expected `t_s` strictly increasing, got t_s[{n}] = {t!r} s "
-                             f"after t_s[{n - 1}] = {last!r} s")
-        gaps = find_gaps(self._state[kernel.T + max(0, 4 - n):kernel.T + 4])
+            raise InputError(
+                f"Expected `t_s` strictly increasing, got t_s[{n}] = {t!r} s "
+                f"after t_s[{n - 1}] = {last!r} s"
+            )
+        gaps = find_gaps(self._state[kernel.T + max(0, 4 - n) : kernel.T + 4])
         if gaps:
             warnings.warn(gap_message(gaps), GapWarning, stacklevel=3)
 
@@ -274,8 +281,9 @@ class DcmIntegrator:
         w = np.asarray(omega_b)
         t = np.asarray(t_s)
         if w.ndim != 2 or w.shape[1] != 3 or t.shape != (len(w),):
-            raise InputError(f"Expected `omega_b` (n, 3) and `t_s` (n,), got {w.shape} and "
-                             f"{t.shape}")
+            raise InputError(
+                f"Expected `omega_b` (n, 3) and `t_s` (n,), got {w.shape} and {t.shape}"
+            )
         if len(w) == 0:
             raise InputError("Expected at least one sample, got 0")
         if self._finished:
@@ -311,20 +319,24 @@ class DcmIntegrator:
         junction, gaps among the buffered and new stamps); one compiled pass."""
         n = self.n_samples
         w = np.ascontiguousarray(w)
-        stamps = self._state[kernel.T + 4 - min(n, 4):kernel.T + 4]  # buffered, oldest first
+        stamps = self._state[kernel.T + 4 - min(n, 4) : kernel.T + 4]  # buffered, oldest first
         t_before = stamps[-1] if n else -math.inf
         row, stamp, order, dt_min, dt_max = kernel.check_record(w, t, t_before)
         if row >= 0:
-            raise InputError(f"Expected finite `omega_b`, got {w[row].tolist()} at row {row} "
-                             f"(sample {n + row})")
+            raise InputError(
+                f"Expected finite `omega_b`, got {w[row].tolist()} at row {row} (sample {n + row})"
+            )
         if stamp >= 0:
-            raise InputError(f"Expected finite `t_s`, got t_s[{stamp}] = {float(t[stamp])} "
-                             f"(sample {n + stamp})")
+            raise InputError(
+                f"Expected finite `t_s`, got t_s[{stamp}] = {float(t[stamp])} (sample {n + stamp})"
+            )
         if order >= 0:
             before = t[order - 1] if order else t_before
-            raise InputError(f"Expected `t_s` strictly increasing, got t_s[{n + order}] = "
-                             f"{float(t[order])!r} s after t_s[{n + order - 1}] = "
-                             f"{float(before)!r} s")
+            raise InputError(
+                f"Expected `t_s` strictly increasing, got t_s[{n + order}] = "
+                f"{float(t[order])!r} s after t_s[{n + order - 1}] = "
+                f"{float(before)!r} s"
+            )
         old = stamps.tolist()
         for a, b in itertools.pairwise(old):
             dt_min = min(dt_min, b - a)

@@ -9,7 +9,9 @@ import pytest
 
 REPO_ROOT = Path(__file__).resolve().parents[1]
 # The BROAD bags live beside the repository (../shared/data/broad); IMU_DCM_BROAD_DIR overrides.
-BROAD_DIR = Path(os.environ.get("IMU_DCM_BROAD_DIR", REPO_ROOT.parent / "shared" / "data" / "broad"))
+BROAD_DIR = Path(
+    os.environ.get("IMU_DCM_BROAD_DIR", REPO_ROOT.parent / "shared" / "data" / "broad")
+)
 BROAD_TRIALS = (
     "02_undisturbed_slow_rotation_B",
     "05_undisturbed_slow_rotation_with_breaks_B",

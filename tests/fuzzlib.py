@@ -38,9 +38,21 @@ from collections.abc import Callable
 from pathlib import Path
 
 MAGIC = b"\x89MCAP0\r\n"
-OP = {"header": 0x01, "footer": 0x02, "schema": 0x03, "channel": 0x04, "message": 0x05,
-      "chunk": 0x06, "message_index": 0x07, "chunk_index": 0x08, "statistics": 0x0B,
-      "metadata": 0x0C, "metadata_index": 0x0D, "summary_offset": 0x0E, "data_end": 0x0F}
+OP = {
+    "header": 0x01,
+    "footer": 0x02,
+    "schema": 0x03,
+    "channel": 0x04,
+    "message": 0x05,
+    "chunk": 0x06,
+    "message_index": 0x07,
+    "chunk_index": 0x08,
+    "statistics": 0x0B,
+    "metadata": 0x0C,
+    "metadata_index": 0x0D,
+    "summary_offset": 0x0E,
+    "data_end": 0x0F,
+}
 OP_NAME = {v: k for k, v in OP.items()}
 PROG_PREFIX = "imu-dcm-replay: "
 #: Peak resident memory a case may add over the worker's baseline (the logs are < 1 MB).
@@ -140,26 +152,44 @@ def chunk_info(buf: bytes, rec: Rec) -> ChunkInfo:
     p += 4 + clen
     (dlen,) = struct.unpack_from("<Q", buf, p)
     raw = _decompress(compression, buf[p + 8 : p + 8 + dlen], size)
-    msgs = tuple((struct.unpack_from("<H", raw, s + 9)[0], s, e)
-                 for op, s, e in inner_records(raw) if op == OP["message"])  # fmt: skip
+    msgs = tuple(
+        (struct.unpack_from("<H", raw, s + 9)[0], s, e)
+        for op, s, e in inner_records(raw)
+        if op == OP["message"]
+    )
     return ChunkInfo(rec, size_at, compression, p + 8, dlen, raw, msgs)
 
 
-def chunk_record(start_ns: int, end_ns: int, raw: bytes, compression: str,
-                 declared_size: int | None = None, crc: int | None = None,
-                 data: bytes | None = None) -> bytes:
+def chunk_record(
+    start_ns: int,
+    end_ns: int,
+    raw: bytes,
+    compression: str,
+    declared_size: int | None = None,
+    crc: int | None = None,
+    data: bytes | None = None,
+) -> bytes:
     """A chunk record holding ``raw`` (compressed here unless ``data`` is given)."""
     data = compress(compression, raw) if data is None else data
-    body = (struct.pack("<QQQI", start_ns, end_ns,
-                        len(raw) if declared_size is None else declared_size,
-                        zlib.crc32(raw) if crc is None else crc)
-            + struct.pack("<I", len(compression)) + compression.encode()
-            + struct.pack("<Q", len(data)) + data)  # fmt: skip
+    body = (
+        struct.pack(
+            "<QQQI",
+            start_ns,
+            end_ns,
+            len(raw) if declared_size is None else declared_size,
+            zlib.crc32(raw) if crc is None else crc,
+        )
+        + struct.pack("<I", len(compression))
+        + compression.encode()
+        + struct.pack("<Q", len(data))
+        + data
+    )
     return struct.pack("<BQ", OP["chunk"], len(body)) + body
 
 
-def without_summary(buf: bytes, replace: dict[int, bytes] | None = None,
-                    insert: bytes = b"") -> bytes:
+def without_summary(
+    buf: bytes, replace: dict[int, bytes] | None = None, insert: bytes = b""
+) -> bytes:
     """The file rebuilt as a data section only (summary dropped, footer zeroed): records
     ``replace``d by index, ``insert`` placed before DataEnd. Valid MCAP (a streamed file)."""
     replace = replace or {}
@@ -185,20 +215,26 @@ def _record(op: str, body: bytes) -> bytes:
     return struct.pack("<BQ", OP[op], len(body)) + body
 
 
-def json_log(payloads: list[bytes], t_ns: list[int], per_chunk: int = 40,
-             topic: str = "/imu/json") -> bytes:
+def json_log(
+    payloads: list[bytes], t_ns: list[int], per_chunk: int = 40, topic: str = "/imu/json"
+) -> bytes:
     """An MCAP file of one schema-less JSON channel, ``per_chunk`` messages to a zstd chunk
     (so message j sits in chunk j // per_chunk); data section only."""
     parts = [MAGIC, _record("header", _str("") + _str("fuzzlib"))]
-    channel = _record("channel", struct.pack("<HH", 1, 0) + _str(topic) + _str("json")
-                      + struct.pack("<I", 0))  # fmt: skip
+    channel = _record(
+        "channel", struct.pack("<HH", 1, 0) + _str(topic) + _str("json") + struct.pack("<I", 0)
+    )
     for a in range(0, len(payloads), per_chunk):
         recs = [channel] if a == 0 else []
         for j in range(a, min(a + per_chunk, len(payloads))):
-            recs.append(_record("message", struct.pack("<HIQQ", 1, j, t_ns[j], t_ns[j])
-                                + payloads[j]))  # fmt: skip
-        parts.append(chunk_record(t_ns[a], t_ns[min(a + per_chunk, len(payloads)) - 1],
-                                  b"".join(recs), "zstd"))
+            recs.append(
+                _record("message", struct.pack("<HIQQ", 1, j, t_ns[j], t_ns[j]) + payloads[j])
+            )
+        parts.append(
+            chunk_record(
+                t_ns[a], t_ns[min(a + per_chunk, len(payloads)) - 1], b"".join(recs), "zstd"
+            )
+        )
     parts.append(_record("data_end", struct.pack("<I", 0)))
     parts.append(_record("footer", struct.pack("<QQI", 0, 0, 0)) + MAGIC)
     return b"".join(parts)
@@ -251,16 +287,25 @@ METADATA = """rosbag2_bagfile_information:
 """
 
 
-def rewrite_bag(src_mcap: Path, dst: Path, *, t_end_ns: int | None, chunk_size: int,
-                compression: str, source: str, schema_hook: Callable | None = None) -> Path:
+def rewrite_bag(
+    src_mcap: Path,
+    dst: Path,
+    *,
+    t_end_ns: int | None,
+    chunk_size: int,
+    compression: str,
+    source: str,
+    schema_hook: Callable | None = None,
+) -> Path:
     """Copy the messages of ``src_mcap`` up to ``t_end_ns`` (log time) into a new bag folder
     ``dst`` with small chunks (so damage can hit one chunk of several). ``schema_hook(name,
     encoding, data) -> (name, encoding, data)`` may rewrite the schemas."""
     from mcap.reader import make_reader
     from mcap.writer import CompressionType, Writer
 
-    ctype = {"zstd": CompressionType.ZSTD, "lz4": CompressionType.LZ4,
-             "": CompressionType.NONE}[compression]  # fmt: skip
+    ctype = {"zstd": CompressionType.ZSTD, "lz4": CompressionType.LZ4, "": CompressionType.NONE}[
+        compression
+    ]
     dst.mkdir(parents=True)
     out = dst / f"{dst.name}.mcap"
     count, first, last = 0, None, None
@@ -269,23 +314,29 @@ def rewrite_bag(src_mcap: Path, dst: Path, *, t_end_ns: int | None, chunk_size: 
         w = Writer(g, chunk_size=chunk_size, compression=ctype)
         w.start(profile="ros2", library="fuzzlib")
         schema_ids, channel_ids = {}, {}
-        for schema, channel, msg in reader.iter_messages(ending_at=t_end_ns,
-                                                         log_time_order=False):
+        for schema, channel, msg in reader.iter_messages(ending_at=t_end_ns, log_time_order=False):
             if schema.id not in schema_ids:
                 fields = (schema.name, schema.encoding, schema.data)
                 schema_ids[schema.id] = w.register_schema(*(schema_hook or _same)(*fields))
             if channel.id not in channel_ids:
                 channel_ids[channel.id] = w.register_channel(
-                    channel.topic, channel.message_encoding, schema_ids[schema.id],
-                    dict(channel.metadata))
-            w.add_message(channel_ids[channel.id], msg.log_time, msg.data, msg.publish_time,
-                          msg.sequence)  # fmt: skip
+                    channel.topic,
+                    channel.message_encoding,
+                    schema_ids[schema.id],
+                    dict(channel.metadata),
+                )
+            w.add_message(
+                channel_ids[channel.id], msg.log_time, msg.data, msg.publish_time, msg.sequence
+            )
             count += 1
             first = msg.log_time if first is None else min(first, msg.log_time)
             last = msg.log_time if last is None else max(last, msg.log_time)
         w.finish()
-    (dst / "metadata.yaml").write_text(METADATA.format(
-        name=dst.name, duration=last - first, start=first, count=count, source=source))
+    (dst / "metadata.yaml").write_text(
+        METADATA.format(
+            name=dst.name, duration=last - first, start=first, count=count, source=source
+        )
+    )
     return dst
 
 
@@ -300,7 +351,7 @@ def load_base(name: str, folder: Path, imu_topic: str = "/imu/data") -> Base:
     chunks = [chunk_info(buf, r) for r in recs if r.op == OP["chunk"]]
     imu_channel = None
     for c in chunks:
-        for op, s, e in inner_records(c.raw):
+        for op, s, _e in inner_records(c.raw):
             if op == OP["channel"]:
                 cid, _sid, tlen = struct.unpack_from("<HHI", c.raw, s + 9)
                 if c.raw[s + 17 : s + 17 + tlen].decode() == imu_topic:
@@ -369,20 +420,29 @@ class Verdict:
 
     def line(self) -> str:
         r = self.result
-        got = (f"exit {r.get('rc')}" if self.kind == "cli"
-               else f"{r.get('exc_type') or 'ok'}")  # fmt: skip
+        got = f"exit {r.get('rc')}" if self.kind == "cli" else f"{r.get('exc_type') or 'ok'}"
         msg = (r.get("stderr") or r.get("exc_msg") or "").strip().splitlines()
         tail = f" | {msg[-1][:160]}" if msg else ""
         return f"{self.case.id} [{self.kind}] {got}: {'; '.join(self.violations)}{tail}"
 
 
-def judge(case: Case, kind: str, r: dict, base: Base | None, before_in: dict,
-          after_in: dict, before_out: dict, after_out: dict, summary: Path | None) -> list[str]:
+def judge(
+    case: Case,
+    kind: str,
+    r: dict,
+    base: Base | None,
+    before_in: dict,
+    after_in: dict,
+    before_out: dict,
+    after_out: dict,
+    summary: Path | None,
+) -> list[str]:
     """The rules every case must keep (see tests/test_fuzz.py)."""
     v: list[str] = []
     if r.get("hang"):
-        return [f"hang (> {CASE_TIMEOUT_S:g} s)"] + (["input changed"] if before_in != after_in
-                                                      else [])  # fmt: skip
+        return [f"hang (> {CASE_TIMEOUT_S:g} s)"] + (
+            ["input changed"] if before_in != after_in else []
+        )
     if r.get("peak_bytes", 0) > MEMORY_LIMIT_BYTES:
         v.append(f"memory {r['peak_bytes'] / 2**20:.0f} MiB > {MEMORY_LIMIT_BYTES / 2**20:.0f}")
     if r.get("escaped"):
@@ -390,8 +450,9 @@ def judge(case: Case, kind: str, r: dict, base: Base | None, before_in: dict,
     changed = sorted(k for k in before_in if after_in.get(k) != before_in[k])
     if changed:
         v.append(f"input changed: {changed[:3]}")
-    replaced = sorted(k for k, node in before_out.items()
-                      if node[0] == "special" and after_out.get(k) != node)  # fmt: skip
+    replaced = sorted(
+        k for k, node in before_out.items() if node[0] == "special" and after_out.get(k) != node
+    )
     if replaced:
         v.append(f"special file replaced or removed: {replaced}")
     samples = None
@@ -405,7 +466,8 @@ def judge(case: Case, kind: str, r: dict, base: Base | None, before_in: dict,
                 v.append(f"exit 2 with {len(lines)} stderr lines (expected one error line)")
             if after_out != before_out:
                 extra = sorted(set(after_out) - set(before_out)) or sorted(
-                    k for k in before_out if after_out.get(k) != before_out[k])
+                    k for k in before_out if after_out.get(k) != before_out[k]
+                )
                 v.append(f"output left behind or changed on exit 2: {extra[:3]}")
         elif rc == 0:
             bad = [ln for ln in lines if not ln.startswith(PROG_PREFIX + "warning:")]
@@ -433,11 +495,18 @@ def judge(case: Case, kind: str, r: dict, base: Base | None, before_in: dict,
         floor = (base.clean.get(kind) or base.imu_total) - case.lost
         if ok and samples is not None and samples < floor:
             v.append(f"kept {samples} samples, expected >= {floor} (damage held {case.lost})")
-        warned = r.get("reported") if kind != "cli" else any(
-            ln.startswith(PROG_PREFIX + "warning:") for ln in r.get("stderr", "").splitlines())
+        warned = (
+            r.get("reported")
+            if kind != "cli"
+            else any(
+                ln.startswith(PROG_PREFIX + "warning:") for ln in r.get("stderr", "").splitlines()
+            )
+        )
         if ok and samples is not None and samples < (base.clean.get(kind) or 0) and not warned:
-            v.append("samples lost without a warning" + (" or a damage record"
-                                                         if kind == "read_log" else ""))
+            v.append(
+                "samples lost without a warning"
+                + (" or a damage record" if kind == "read_log" else "")
+            )
         if not ok and not r.get("hang") and floor > 0:
             v.append(f"refused a log with {floor} intact IMU samples")
     return v
@@ -460,8 +529,8 @@ def _run_case(op: dict) -> dict:
     # The one import line of the reader: repoint when the reader moves (imu_dcm.logio).
     import warnings
 
-    from imu_dcm.logio import read_log
     from imu_dcm.errors import ImuDcmError
+    from imu_dcm.logio import read_log
     from imu_dcm.replay import replay
     from imu_dcm.replay.__main__ import main as replay_main
 
@@ -469,8 +538,11 @@ def _run_case(op: dict) -> dict:
     r: dict = {}
     out, err = io.StringIO(), io.StringIO()
     try:
-        with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err), \
-                warnings.catch_warnings(record=True) as caught:
+        with (
+            contextlib.redirect_stdout(out),
+            contextlib.redirect_stderr(err),
+            warnings.catch_warnings(record=True) as caught,
+        ):
             warnings.simplefilter("always")
             if kind == "cli":
                 try:
@@ -480,25 +552,35 @@ def _run_case(op: dict) -> dict:
             elif kind == "read_log":
                 data = read_log(op["path"])
                 r["samples"] = len(data.imu.t_ns)
-                r["reported"] = bool(getattr(data, "damage", ()) or getattr(data, "stopped_at",
-                                                                            None))
+                r["reported"] = bool(
+                    getattr(data, "damage", ()) or getattr(data, "stopped_at", None)
+                )
             else:
                 res = replay(op["path"])
                 r["samples"] = len(res.t_ns)
                 s = res.summary
-                rms = s.get("rms_error_deg") if isinstance(s, dict) else getattr(
-                    s, "rms_error_deg", None)
-                r["nonfinite_score"] = rms is not None and not (float(rms) == float(rms)
-                                                                and abs(float(rms)) < 1e300)
+                rms = (
+                    s.get("rms_error_deg")
+                    if isinstance(s, dict)
+                    else getattr(s, "rms_error_deg", None)
+                )
+                r["nonfinite_score"] = rms is not None and not (
+                    float(rms) == float(rms) and abs(float(rms)) < 1e300
+                )
             r["reported"] = r.get("reported", False) or bool(caught)
     except _Hang:
         r["hang"] = True
     except ImuDcmError as exc:
         r.update(exc_type=type(exc).__name__, exc_msg=str(exc)[:300], is_imu_dcm_error=True)
-    except BaseException as exc:  # noqa: BLE001 - everything else is a finding
-        r.update(exc_type=type(exc).__name__, exc_msg=str(exc)[:300], escaped=True,
-                 traceback=traceback.format_exc()[-2000:], is_imu_dcm_error=False)
-    r["stdout"], r["stderr"] = out.getvalue()[-2000:], err.getvalue()[:1 << 20]
+    except BaseException as exc:
+        r.update(
+            exc_type=type(exc).__name__,
+            exc_msg=str(exc)[:300],
+            escaped=True,
+            traceback=traceback.format_exc()[-2000:],
+            is_imu_dcm_error=False,
+        )
+    r["stdout"], r["stderr"] = out.getvalue()[-2000:], err.getvalue()[: 1 << 20]
     return r
 
 
@@ -545,13 +627,25 @@ class Worker:
     """A worker subprocess (started and killed only by this object, by its own pid)."""
 
     def __init__(self, repo: Path):
-        env = dict(os.environ, PYTHONPATH=os.pathsep.join([str(repo), str(repo / "tests")]),
-                   OMP_NUM_THREADS="1", OPENBLAS_NUM_THREADS="1", MKL_NUM_THREADS="1",
-                   NUMBA_NUM_THREADS="1", MALLOC_ARENA_MAX="2", PYTHONWARNINGS="ignore")
+        env = dict(
+            os.environ,
+            PYTHONPATH=os.pathsep.join([str(repo), str(repo / "tests")]),
+            OMP_NUM_THREADS="1",
+            OPENBLAS_NUM_THREADS="1",
+            MKL_NUM_THREADS="1",
+            NUMBA_NUM_THREADS="1",
+            MALLOC_ARENA_MAX="2",
+            PYTHONWARNINGS="ignore",
+        )
         self.proc = subprocess.Popen(
             [sys.executable, "-c", "import fuzzlib; fuzzlib.worker_main()"],
-            stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL,
-            env=env, cwd=str(repo), text=True)
+            stdin=subprocess.PIPE,
+            stdout=subprocess.PIPE,
+            stderr=subprocess.DEVNULL,
+            env=env,
+            cwd=str(repo),
+            text=True,
+        )
 
     def ask(self, op: dict, timeout_s: float) -> dict:
         """Send one case; the answer, or ``{"hang": True}`` after killing a stuck worker."""
@@ -596,8 +690,9 @@ class Pool:
         for t in threads:
             t.join()
 
-    def run(self, jobs: list[tuple[Case, str]], workdir: Path,
-            bases: dict[str, Base]) -> list[Verdict]:
+    def run(
+        self, jobs: list[tuple[Case, str]], workdir: Path, bases: dict[str, Base]
+    ) -> list[Verdict]:
         q: queue.Queue = queue.Queue()
         for i, job in enumerate(jobs):
             q.put((i, job))
@@ -644,20 +739,27 @@ def run_one(w: Worker, case: Case, kind: str, d: Path, base: Base | None) -> Ver
     op["timeout"] = CASE_TIMEOUT_S
     r = w.ask(op, CASE_TIMEOUT_S + 20.0)
     if kind == "cli" and r.get("rc") == 0 and "--summary-json" not in extra:
-        try:  # the CLI's count of samples replayed
-            r["samples"] = int(json.loads(summary.read_text())["samples"])
-        except (OSError, ValueError, KeyError, TypeError):
-            pass
+        with contextlib.suppress(OSError, ValueError, KeyError, TypeError):
+            r["samples"] = int(json.loads(summary.read_text())["samples"])  # as the CLI counted
     after_in, after_out = snapshot(d / "in"), snapshot(d / "out")
-    v = judge(case, kind, r, base, before_in, after_in, before_out, after_out,
-              summary if kind == "cli" and "--summary-json" not in extra else None)
+    v = judge(
+        case,
+        kind,
+        r,
+        base,
+        before_in,
+        after_in,
+        before_out,
+        after_out,
+        summary if kind == "cli" and "--summary-json" not in extra else None,
+    )
     _rmtree(d)
     return Verdict(case, kind, r, v)
 
 
 def _rmtree(d: Path) -> None:
     """Remove a case folder, read-only folders included (never follows links)."""
-    for dirpath, dirnames, filenames in os.walk(d, topdown=True):
+    for dirpath, dirnames, _filenames in os.walk(d, topdown=True):
         os.chmod(dirpath, 0o755)
         for n in dirnames:
             p = Path(dirpath) / n

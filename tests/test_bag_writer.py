@@ -64,10 +64,10 @@ def test_round_trip_mcap_ros2_bit_identical(tmp_path):
         reader = make_reader(f, decoder_factories=[DecoderFactory()])
         assert reader.get_header().profile == "ros2"
         summary = reader.get_summary()
-        assert {s.name: s.encoding for s in summary.schemas.values()} == {
-            k: "ros2msg" for k in MSG_DEFINITIONS
-        }
-        for schema, channel, message, decoded in reader.iter_decoded_messages():
+        assert {s.name: s.encoding for s in summary.schemas.values()} == dict.fromkeys(
+            MSG_DEFINITIONS, "ros2msg"
+        )
+        for _schema, channel, message, decoded in reader.iter_decoded_messages():
             assert channel.message_encoding == "cdr"
             stamp = decoded.header.stamp.sec * 1_000_000_000 + decoded.header.stamp.nanosec
             # log time = publish time = header stamp (like the BROAD bags)

@@ -23,7 +23,7 @@ import pytest
 
 from data_synth.cli import main as synth_main
 from imu_dcm.replay import replay, replay_many
-from imu_dcm.replay.batch import find_logs, row_from_result
+from imu_dcm.replay.batch import find_logs
 from imu_dcm.replay.batch_cli import main as batch_main
 from imu_dcm.replay.table import COLUMNS, LogRow, append_rows, read_table
 
@@ -31,14 +31,38 @@ REPO_ROOT = Path(__file__).resolve().parents[1]
 SHIPPED = sorted(p for p in (REPO_ROOT / "replay").iterdir() if (p / "metadata.yaml").is_file())
 SYNTH = {  # short logs: a closed-form coning, a noisy biased top, a delta-angle tumbling box
     "coning": ["coning", "--rate", "200", "--duration", "2"],
-    "top_noisy": ["heavy-top", "--motion", "wavy", "--rate", "200", "--duration", "3",
-                  "--gyro-noise-density", "2e-4", "--gyro-bias", "0.002,-0.003,0.001",
-                  "--seed", "3"],
-    "box_delta": ["free-body", "--case", "intermediate", "--rate", "100", "--duration", "3",
-                  "--gyro-output", "delta-angle"],
-}  # fmt: skip
-NUMBERS = [n for n in COLUMNS if n not in ("path", "imu_topic", "truth_topic", "warnings",
-                                            "error", "elapsed_s")]  # fmt: skip
+    "top_noisy": [
+        "heavy-top",
+        "--motion",
+        "wavy",
+        "--rate",
+        "200",
+        "--duration",
+        "3",
+        "--gyro-noise-density",
+        "2e-4",
+        "--gyro-bias",
+        "0.002,-0.003,0.001",
+        "--seed",
+        "3",
+    ],
+    "box_delta": [
+        "free-body",
+        "--case",
+        "intermediate",
+        "--rate",
+        "100",
+        "--duration",
+        "3",
+        "--gyro-output",
+        "delta-angle",
+    ],
+}
+NUMBERS = [
+    n
+    for n in COLUMNS
+    if n not in ("path", "imu_topic", "truth_topic", "warnings", "error", "elapsed_s")
+]
 
 
 @pytest.fixture(scope="module")
@@ -64,14 +88,18 @@ def test_rows_are_the_bare_replay_bit_for_bit_sequential_pool_and_dask(logs, tmp
     pool = replay_many(logs, tmp_path / "pool.csv", jobs=2, chart=None)
     assert [r.path for r in seq.rows] == [os.path.abspath(p) for p in logs]
     assert seq.failed == 0 and pool.failed == 0
-    for path, row in zip(logs, seq.rows):
+    for path, row in zip(logs, seq.rows, strict=False):
         s = replay(path).summary  # independent of the batch machinery
         for key in NUMBERS:
             if key.startswith("bias_"):
                 want = s.bias_rad_s["xyz".index(key[5])]
             elif key == "dropped":
-                want = (s.dropped_nonfinite + s.dropped_implausible + s.dropped_duplicate
-                        + s.dropped_backward)
+                want = (
+                    s.dropped_nonfinite
+                    + s.dropped_implausible
+                    + s.dropped_duplicate
+                    + s.dropped_backward
+                )
             elif key == "gaps":
                 want = len(s.gaps)
             else:
@@ -84,10 +112,12 @@ def test_rows_are_the_bare_replay_bit_for_bit_sequential_pool_and_dask(logs, tmp
     assert read_table(tmp_path / "pool.csv") == list(pool.rows)
 
     distributed = pytest.importorskip("distributed")
-    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
-                                  host="127.0.0.1", dashboard_address=None) as cluster:  # fmt: skip
-        on_dask = replay_many(logs, tmp_path / "dask.csv", dask=cluster.scheduler_address,
-                              chart=None)  # fmt: skip
+    with distributed.LocalCluster(
+        n_workers=2, threads_per_worker=1, processes=True, host="127.0.0.1", dashboard_address=None
+    ) as cluster:
+        on_dask = replay_many(
+            logs, tmp_path / "dask.csv", dask=cluster.scheduler_address, chart=None
+        )
     assert [_numbers(r) for r in on_dask.rows] == [_numbers(r) for r in seq.rows]
     assert read_table(tmp_path / "dask.csv") == list(on_dask.rows)
 
@@ -100,8 +130,9 @@ def test_bad_logs_get_error_rows_and_the_others_complete(logs, tmp_path):
     (tmp_path / "half.mcap").write_bytes(data[: len(data) // 2])  # readable up to the cut
     (tmp_path / "notes.csv").write_text("t,x\n0,1\n")
     bad = [tmp_path / "header_only.mcap", tmp_path / "notes.csv", tmp_path / "missing.mcap"]
-    res = replay_many([good[0], *bad, tmp_path / "half.mcap", *good[1:]], tmp_path / "t.csv",
-                      jobs=2, chart=None)  # fmt: skip
+    res = replay_many(
+        [good[0], *bad, tmp_path / "half.mcap", *good[1:]], tmp_path / "t.csv", jobs=2, chart=None
+    )
     by = {Path(r.path).name: r for r in res.rows}
     assert res.failed == 3 and len(res.rows) == 7
     for p in bad:
@@ -129,8 +160,10 @@ def test_markdown_summary_and_chart(logs, tmp_path):
         cells = list(csv.DictReader(f))
     rms = [float(c["rms_error_deg"]) for c in cells if c["rms_error_deg"]]
     assert len(cells) == 4 and len(rms) == 3
-    want = (f"4 logs, 1 failed; RMS error over 3 logs with truth: mean "
-            f"{statistics.fmean(rms):.4g}°, median {statistics.median(rms):.4g}°")  # fmt: skip
+    want = (
+        f"4 logs, 1 failed; RMS error over 3 logs with truth: mean "
+        f"{statistics.fmean(rms):.4g}°, median {statistics.median(rms):.4g}°"
+    )
     assert res.summary == want
     md = (tmp_path / "out.md").read_text()
     table_lines = [line for line in md.splitlines() if line.startswith("|")]
@@ -149,16 +182,24 @@ def test_find_logs_searches_folders_and_lists(synth_dir, tmp_path):
     (root / ".hidden").mkdir()
     shutil.copy(synth_dir / "coning" / "coning.mcap", root / ".hidden" / "x.mcap")
     listing = tmp_path / "logs.txt"
-    listing.write_text("# the same loose log again, and one more\n\ndata/b/loose.mcap\n"
-                       f"{synth_dir / 'top_noisy'}  # absolute\n")  # fmt: skip
+    listing.write_text(
+        "# the same loose log again, and one more\n\ndata/b/loose.mcap\n"
+        f"{synth_dir / 'top_noisy'}  # absolute\n"
+    )
     found = find_logs([root, listing, root / "a" / "bag"])
     assert found == [str(root / "a" / "bag"), str(loose), str(synth_dir / "top_noisy")]
 
 
 def _cli(*args: str, **kw) -> subprocess.Popen:
     env = {**os.environ, "PYTHONPATH": str(REPO_ROOT)}
-    return subprocess.Popen([sys.executable, "-m", "imu_dcm.replay", "batch", *args], env=env,
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, **kw)  # fmt: skip
+    return subprocess.Popen(
+        [sys.executable, "-m", "imu_dcm.replay", "batch", *args],
+        env=env,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        **kw,
+    )
 
 
 def _lines(path: Path) -> list[str]:
@@ -187,8 +228,9 @@ def test_sigterm_halfway_then_resume_gives_the_complete_table(tmp_path, jobs):
     assert 3 <= rows_at_kill < 24  # really halfway
     assert all(line.endswith("\n") for line in _lines(out))  # no torn row
 
-    again = _cli(str(tmp_path / "logs"), "--table", str(out), "--resume", "--jobs", "2",
-                 "--no-chart")  # fmt: skip
+    again = _cli(
+        str(tmp_path / "logs"), "--table", str(out), "--resume", "--jobs", "2", "--no-chart"
+    )
     stdout, err = again.communicate(timeout=120)
     assert again.returncode == 0, err
     assert f"resumed    {rows_at_kill} rows" in stdout
@@ -232,8 +274,17 @@ def test_cli_bad_input_is_one_line_and_exit_2(logs, tmp_path, capsys, monkeypatc
 
 def test_failed_logs_give_exit_code_1(logs, tmp_path, capsys):
     (tmp_path / "bad.mcap").write_bytes(b"nope")
-    code = batch_main([logs[-1], str(tmp_path / "bad.mcap"), "--table", str(tmp_path / "t.csv"),
-                       "--jobs", "1", "--no-chart"])  # fmt: skip
+    code = batch_main(
+        [
+            logs[-1],
+            str(tmp_path / "bad.mcap"),
+            "--table",
+            str(tmp_path / "t.csv"),
+            "--jobs",
+            "1",
+            "--no-chart",
+        ]
+    )
     out = capsys.readouterr().out
     assert code == 1 and "failed     " in out and "2 logs, 1 failed" in out
     assert np.isfinite(read_table(tmp_path / "t.csv")[0].rms_error_deg)

@@ -51,8 +51,17 @@ BROAD = REPO_ROOT / "replay" / "broad_07_undisturbed_fast_rotation_B"
 SLICE_S = 8.0
 RANDOM_TRUNCATIONS = 8
 RANDOM_FLIPS = 16
-CLASSES = ("truncation", "flip", "repacked_flip", "lying_size", "schema", "metadata",
-           "json_message", "special_input", "output_path")  # fmt: skip
+CLASSES = (
+    "truncation",
+    "flip",
+    "repacked_flip",
+    "lying_size",
+    "schema",
+    "metadata",
+    "json_message",
+    "special_input",
+    "output_path",
+)
 #: The two largest classes run the CLI (which calls replay() in-process: an exception other than
 #: ImuDcmError escapes it too) and the reader; the others also call replay() directly.
 BULK_KINDS = ("cli", "read_log")
@@ -79,7 +88,7 @@ def _with(base: Base, mcap: bytes | None = None, meta: bytes | None = None):
 
 
 def _patch(buf: bytes, at: int, new: bytes) -> bytes:
-    return buf[:at] + new + buf[at + len(new):]
+    return buf[:at] + new + buf[at + len(new) :]
 
 
 def _lost_after(base: Base, offset: int) -> int:
@@ -95,9 +104,17 @@ def truncation_cases(base: Base, rng: np.random.Generator) -> list[Case]:
     out = []
     for x in sorted(cuts):
         rec = next((r.name for r in base.records if r.start == x), "random")
-        out.append(Case("truncation", f"at{x}-{rec}", base.name, _with(base, buf[:x]),
-                        lost=_lost_after(base, x), kinds=BULK_KINDS,
-                        fix="reader: keep whole chunks before the cut"))
+        out.append(
+            Case(
+                "truncation",
+                f"at{x}-{rec}",
+                base.name,
+                _with(base, buf[:x]),
+                lost=_lost_after(base, x),
+                kinds=BULK_KINDS,
+                fix="reader: keep whole chunks before the cut",
+            )
+        )
     return out
 
 
@@ -116,10 +133,19 @@ def flip_cases(base: Base, rng: np.random.Generator) -> list[Case]:
     out = []
     for x, what in sorted(targets.items()):
         k = base.chunk_at(x)
-        lost = (None if x < first_data else base.lost_in(k) if k is not None else 0)
+        lost = None if x < first_data else base.lost_in(k) if k is not None else 0
         flipped = _patch(buf, x, bytes([buf[x] ^ int(rng.integers(1, 256))]))
-        out.append(Case("flip", f"at{x}-{what}", base.name, _with(base, flipped), lost=lost,
-                        kinds=BULK_KINDS, fix="reader: skip the damaged chunk, go on with the next"))
+        out.append(
+            Case(
+                "flip",
+                f"at{x}-{what}",
+                base.name,
+                _with(base, flipped),
+                lost=lost,
+                kinds=BULK_KINDS,
+                fix="reader: skip the damaged chunk, go on with the next",
+            )
+        )
     return out
 
 
@@ -131,24 +157,44 @@ def _repack(base: Base, k: int, raw: bytes, **kw) -> bytes:
 
 
 def repacked_flip_cases(base: Base, rng: np.random.Generator) -> list[Case]:
-    out = [Case("repacked_flip", "no-summary-undamaged", base.name,
-                _with(base, without_summary(base.bytes)), lost=0, fix="reader: summary-less MCAP")]
+    out = [
+        Case(
+            "repacked_flip",
+            "no-summary-undamaged",
+            base.name,
+            _with(base, without_summary(base.bytes)),
+            lost=0,
+            fix="reader: summary-less MCAP",
+        )
+    ]
     for k in range(len(base.chunks)):
         c = base.chunks[k]
         imu = [(s, e) for ch, s, e in c.messages if ch == base.imu_channel]
         s, e = imu[int(rng.integers(0, len(imu)))]
         # message record: op u8, len u64, channel u16, seq u32, log u64, pub u64, then CDR:
         # encapsulation 4, stamp sec 4 + nanosec 4, frame_id ...; angular_velocity near the end
-        spots = {"msg-length": s + 8, "msg-channel": s + 9, "log-time": s + 22,
-                 "stamp-sec": s + 31 + 7, "payload": int(rng.integers(s + 35, e)),
-                 "rate-exponent": e - 48 - 72 - 8 * int(rng.integers(0, 3)) - 1}
+        spots = {
+            "msg-length": s + 8,
+            "msg-channel": s + 9,
+            "log-time": s + 22,
+            "stamp-sec": s + 31 + 7,
+            "payload": int(rng.integers(s + 35, e)),
+            "rate-exponent": e - 48 - 72 - 8 * int(rng.integers(0, 3)) - 1,
+        }
         what = list(spots)[k % len(spots)]
         at = spots[what]
         raw = bytearray(c.raw)
         raw[at] ^= 0x7F if what == "rate-exponent" else int(rng.integers(1, 256))
-        out.append(Case("repacked_flip", f"chunk{k}-{what}", base.name,
-                        _with(base, _repack(base, k, bytes(raw))), lost=base.lost_in(k),
-                        fix="replay: implausible samples/stamps cost one sample (issue §5)"))
+        out.append(
+            Case(
+                "repacked_flip",
+                f"chunk{k}-{what}",
+                base.name,
+                _with(base, _repack(base, k, bytes(raw))),
+                lost=base.lost_in(k),
+                fix="replay: implausible samples/stamps cost one sample (issue §5)",
+            )
+        )
     return out
 
 
@@ -175,7 +221,10 @@ def lying_size_cases(base: Base, rng: np.random.Generator) -> list[Case]:
     k = len(base.chunks) // 2
     c = base.chunks[k]
     lost = base.lost_in(k)
-    u64 = lambda v: struct.pack("<Q", v)
+
+    def u64(v):
+        return struct.pack("<Q", v)
+
     lies = {
         "record-length-max": (c.rec.start + 1, u64(2**64 - 1)),
         "record-length-2^63": (c.rec.start + 1, u64(2**63)),
@@ -192,8 +241,10 @@ def lying_size_cases(base: Base, rng: np.random.Generator) -> list[Case]:
         "compression-length-max": (c.size_at + 12, struct.pack("<I", 2**32 - 1)),
     }
     for r in base.records:
-        if r.op == OP["chunk_index"] and struct.unpack_from("<Q", buf, r.body + 16)[0] == \
-                c.rec.start:
+        if (
+            r.op == OP["chunk_index"]
+            and struct.unpack_from("<Q", buf, r.body + 16)[0] == c.rec.start
+        ):
             lies["index-chunk-offset-past-end"] = (r.body + 16, u64(len(buf) * 2))
             lies["index-chunk-length-max"] = (r.body + 24, u64(2**64 - 1))
         if r.op == OP["message_index"] and "message-index-length-max" not in lies:
@@ -205,24 +256,47 @@ def lying_size_cases(base: Base, rng: np.random.Generator) -> list[Case]:
             lies["statistics-message-count-max"] = (r.body, u64(2**64 - 1))
     index_lies = ("index-", "message-index", "footer-", "statistics-")
     for name, (at, new) in lies.items():
-        out.append(Case("lying_size", name, base.name, _with(base, _patch(buf, at, new)),
-                        lost=0 if name.startswith(index_lies) else lost,
-                        fix="reader: bound sizes by the file, skip the chunk"))
+        out.append(
+            Case(
+                "lying_size",
+                name,
+                base.name,
+                _with(base, _patch(buf, at, new)),
+                lost=0 if name.startswith(index_lies) else lost,
+                fix="reader: bound sizes by the file, skip the chunk",
+            )
+        )
     # A message record inside a chunk claiming to run past the chunk (re-packed, valid CRC).
     s = next(s for ch, s, e in c.messages if ch == base.imu_channel)
     raw = _patch(c.raw, s + 1, u64(2**63 - 1))
-    out.append(Case("lying_size", "inner-message-length", base.name,
-                    _with(base, _repack(base, k, raw)), lost=lost, fix="reader: bound records"))
+    out.append(
+        Case(
+            "lying_size",
+            "inner-message-length",
+            base.name,
+            _with(base, _repack(base, k, raw)),
+            lost=lost,
+            fix="reader: bound records",
+        )
+    )
     # Decompression bombs on the last chunk's place: 1 GiB of zeros claiming 1000 bytes, and the
     # same truthfully declared (nothing of it is replayed: it holds no IMU message).
     t0, t1 = struct.unpack_from("<QQ", buf, base.chunks[-1].rec.body)
     data = _bomb(c.compression or "zstd", 1 << 30)
     for name, declared in (("bomb-declared-1000", 1000), ("bomb-declared-truthfully", 1 << 30)):
-        rec = chunk_record(t0, t1, b"", c.compression or "zstd", declared_size=declared, crc=0,
-                           data=data)
-        out.append(Case("lying_size", name, base.name,
-                        _with(base, without_summary(buf, insert=rec)), lost=0,
-                        fix="reader: never inflate past the declared size; bound it by the file"))
+        rec = chunk_record(
+            t0, t1, b"", c.compression or "zstd", declared_size=declared, crc=0, data=data
+        )
+        out.append(
+            Case(
+                "lying_size",
+                name,
+                base.name,
+                _with(base, without_summary(buf, insert=rec)),
+                lost=0,
+                fix="reader: never inflate past the declared size; bound it by the file",
+            )
+        )
     return out
 
 
@@ -231,12 +305,12 @@ def _schema_variant(base: Base, hook):
     chunks (re-packed with a valid CRC; summary dropped, so the chunks' copies are the only)."""
     buf = base.bytes
     replace = {}
-    for k, c in enumerate(base.chunks):
+    for _k, c in enumerate(base.chunks):
         parts, changed = [], False
         for op, s, e in fuzzlib.inner_records(c.raw):
             rec = c.raw[s:e]
             if op == OP["schema"]:
-                sid, = struct.unpack_from("<H", rec, 9)
+                (sid,) = struct.unpack_from("<H", rec, 9)
                 fields, p = [], 11
                 for width in ("<I", "<I", "<I"):
                     (n,) = struct.unpack_from(width, rec, p)
@@ -246,13 +320,15 @@ def _schema_variant(base: Base, hook):
                 if (name, enc, data) != (fields[0].decode(), fields[1].decode(), fields[2]):
                     changed = True
                     body = struct.pack("<H", sid) + b"".join(
-                        struct.pack("<I", len(x)) + x for x in (name.encode(), enc.encode(), data))
+                        struct.pack("<I", len(x)) + x for x in (name.encode(), enc.encode(), data)
+                    )
                     rec = struct.pack("<BQ", OP["schema"], len(body)) + body
             parts.append(rec)
         if changed:
             t0, t1 = struct.unpack_from("<QQ", buf, c.rec.body)
-            replace[base.records.index(c.rec)] = chunk_record(t0, t1, b"".join(parts),
-                                                              c.compression)
+            replace[base.records.index(c.rec)] = chunk_record(
+                t0, t1, b"".join(parts), c.compression
+            )
     return _with(base, without_summary(buf, replace))
 
 
@@ -271,14 +347,26 @@ def schema_cases(base: Base, rng: np.random.Generator) -> list[Case]:
         "empty": lambda n, e, d: (n, e, b""),
         "garbage": lambda n, e, d: (n, e, b"%% not a message definition {[(\n" * 3),
         "bad-field-type": lambda n, e, d: (n, e, d.replace(b"float64[9]", b"float64[9", 1)),
-        "bad-resource-name": lambda n, e, d: (n, e, d.replace(b"MSG: std_msgs/Header",
-                                                              b"MSG: 9bad-name//Header", 1)),
-        "self-recursive": lambda n, e, d: (n, e, d.replace(
-            b"MSG: geometry_msgs/Vector3\n", b"MSG: geometry_msgs/Vector3\n"
-            b"geometry_msgs/Vector3 again\n", 1)),
+        "bad-resource-name": lambda n, e, d: (
+            n,
+            e,
+            d.replace(b"MSG: std_msgs/Header", b"MSG: 9bad-name//Header", 1),
+        ),
+        "self-recursive": lambda n, e, d: (
+            n,
+            e,
+            d.replace(
+                b"MSG: geometry_msgs/Vector3\n",
+                b"MSG: geometry_msgs/Vector3\ngeometry_msgs/Vector3 again\n",
+                1,
+            ),
+        ),
         "nested-3000": lambda n, e, d: (n, e, nested(3000)),
-        "unbounded-covariance": lambda n, e, d: (n, e, d.replace(
-            b"float64[9] orientation_covariance", b"float64[] orientation_covariance", 1)),
+        "unbounded-covariance": lambda n, e, d: (
+            n,
+            e,
+            d.replace(b"float64[9] orientation_covariance", b"float64[] orientation_covariance", 1),
+        ),
         "encoding-unknown": lambda n, e, d: (n, "no-such-encoding", d),
         "encoding-ros1msg": lambda n, e, d: (n, "ros1msg", d),
         "name-empty": lambda n, e, d: ("", e, d),
@@ -286,11 +374,20 @@ def schema_cases(base: Base, rng: np.random.Generator) -> list[Case]:
     }
     out = []
     for name, fn in variants.items():
+
         def hook(n, e, d, fn=fn):
             return fn(n, e, d) if n == imu else (n, e, d)
 
-        out.append(Case("schema", name, base.name, _schema_variant(base, hook), lost=None,
-                        fix="reader: schema errors are LogError (decode, parse, depth)"))
+        out.append(
+            Case(
+                "schema",
+                name,
+                base.name,
+                _schema_variant(base, hook),
+                lost=None,
+                fix="reader: schema errors are LogError (decode, parse, depth)",
+            )
+        )
     return out
 
 
@@ -300,8 +397,10 @@ def metadata_cases(base: Base, rng: np.random.Generator) -> list[Case]:
         laughs.append(f"a{i}: &a{i} [" + ", ".join([f"*a{i - 1}"] * 10) + "]")
     good = base.folder.joinpath("metadata.yaml").read_bytes()
     variants = {
-        "alias-bomb": ("rosbag2_bagfile_information:\n  custom_data:\n"
-                       + "".join(f"    {ln}\n" for ln in laughs)).encode(),
+        "alias-bomb": (
+            "rosbag2_bagfile_information:\n  custom_data:\n"
+            + "".join(f"    {ln}\n" for ln in laughs)
+        ).encode(),
         "alias-bomb-top": "\n".join(laughs).encode() + b"\n",
         "list": b"- 1\n- 2\n",
         "scalar": b"just a string\n",
@@ -317,9 +416,17 @@ def metadata_cases(base: Base, rng: np.random.Generator) -> list[Case]:
         "missing-file": good.replace(base.mcap.name.encode(), b"missing.mcap"),
         "large": b"# pad\n" * 2_000_000 + good,
     }
-    return [Case("metadata", name, base.name, _with(base, meta=text), lost=None,
-                 fix="reader: bounded YAML parse, mapping check, UTF-8 errors as LogError")
-            for name, text in variants.items()]
+    return [
+        Case(
+            "metadata",
+            name,
+            base.name,
+            _with(base, meta=text),
+            lost=None,
+            fix="reader: bounded YAML parse, mapping check, UTF-8 errors as LogError",
+        )
+        for name, text in variants.items()
+    ]
 
 
 def _json_payloads() -> tuple[list[bytes], list[int]]:
@@ -328,9 +435,17 @@ def _json_payloads() -> tuple[list[bytes], list[int]]:
     out = []
     for k, t in enumerate(t_ns):
         w = (0.3 * np.sin(0.05 * k), 0.2, 0.5 * np.cos(0.03 * k))
-        out.append(json.dumps({"header": {"stamp": {"sec": t // 10**9, "nanosec": t % 10**9},
-                                          "frame_id": "imu"},
-                               "angular_velocity": dict(zip("xyz", w))}).encode())
+        out.append(
+            json.dumps(
+                {
+                    "header": {
+                        "stamp": {"sec": t // 10**9, "nanosec": t % 10**9},
+                        "frame_id": "imu",
+                    },
+                    "angular_velocity": dict(zip("xyz", w, strict=False)),
+                }
+            ).encode()
+        )
     return out, t_ns
 
 
@@ -373,10 +488,16 @@ def json_cases(base: Base) -> list[Case]:
         msgs = list(good)
         msgs[j] = payload
         mcap = fuzzlib.json_log(msgs, t_ns, JSON_PER_CHUNK)
-        out.append(Case("json_message", name, base.name, _with(base, mcap),
-                        lost=base.lost_in(j // JSON_PER_CHUNK),
-                        fix="reader: a bad JSON message costs itself (bounded parse, checked "
-                            "stamp range)"))
+        out.append(
+            Case(
+                "json_message",
+                name,
+                base.name,
+                _with(base, mcap),
+                lost=base.lost_in(j // JSON_PER_CHUNK),
+                fix="reader: a bad JSON message costs itself (bounded parse, checked stamp range)",
+            )
+        )
     return out
 
 
@@ -432,23 +553,40 @@ def special_input_cases(base: Base) -> list[Case]:
         os.mkfifo(bag / "metadata.yaml")
         return bag, []
 
-    makers = {"fifo-log": fifo_log, "fifo-in-bag": fifo_in_bag, "zero-device-log": zero_log,
-              "zero-device-in-bag": zero_in_bag, "empty-folder": empty_dir, "missing": missing,
-              "symlink-loop": link_loop, "metadata-fifo": metadata_fifo}
-    return [Case("special_input", name, base.name, make, lost=None,
-                 fix="reader: regular files and folders only")
-            for name, make in makers.items()]
+    makers = {
+        "fifo-log": fifo_log,
+        "fifo-in-bag": fifo_in_bag,
+        "zero-device-log": zero_log,
+        "zero-device-in-bag": zero_in_bag,
+        "empty-folder": empty_dir,
+        "missing": missing,
+        "symlink-loop": link_loop,
+        "metadata-fifo": metadata_fifo,
+    }
+    return [
+        Case(
+            "special_input",
+            name,
+            base.name,
+            make,
+            lost=None,
+            fix="reader: regular files and folders only",
+        )
+        for name, make in makers.items()
+    ]
 
 
 def output_path_cases(base: Base) -> list[Case]:
     """Hostile outputs for the CLI; every one must be refused (exit 2) and change nothing."""
+
     def case(name, extra, refuse=True, fix="replay CLI: shared output-safety helper"):
         def make(d):
             bag = _bag(d, base)
             return bag, extra(d, bag)
 
-        return Case("output_path", name, base.name, make, lost=None, kinds=("cli",),
-                    refuse=refuse, fix=fix)
+        return Case(
+            "output_path", name, base.name, make, lost=None, kinds=("cli",), refuse=refuse, fix=fix
+        )
 
     def dev(minor):
         def extra(d, bag):
@@ -484,10 +622,10 @@ def output_path_cases(base: Base) -> list[Case]:
         return ["--summary-json", str(d / "out" / "file" / "s.json")]
 
     return [
-        case("summary-json-is-input-mcap", lambda d, b: ["--summary-json",
-                                                         str(b / base.mcap.name)]),
-        case("summary-json-is-metadata", lambda d, b: ["--summary-json",
-                                                       str(b / "metadata.yaml")]),
+        case(
+            "summary-json-is-input-mcap", lambda d, b: ["--summary-json", str(b / base.mcap.name)]
+        ),
+        case("summary-json-is-metadata", lambda d, b: ["--summary-json", str(b / "metadata.yaml")]),
         case("summary-json-is-input-folder", lambda d, b: ["--summary-json", str(b)]),
         case("summary-json-symlink-to-input", link_to_input),
         case("out-is-input", lambda d, b: ["--out", str(b), "--force"]),
@@ -501,12 +639,16 @@ def output_path_cases(base: Base) -> list[Case]:
         case("summary-json-parent-is-file", parent_is_file),
         # root writes into a read-only folder: then exit 0 is right too
         case("summary-json-read-only-folder", readonly, refuse=os.geteuid() != 0),
-        case("rerun-bad-with-outputs", lambda d, b: ["--rerun", "bogus", "--out",
-                                                     str(d / "out" / "est")],
-             fix="replay CLI: validate every option before any output"),
-        case("rerun-save-unwritable", lambda d, b: [
-            "--rerun", f"save:{d / 'out' / 'nofolder' / 'x' / 'v.rrd'}"],
-            fix="replay CLI: check --rerun save: before any output"),
+        case(
+            "rerun-bad-with-outputs",
+            lambda d, b: ["--rerun", "bogus", "--out", str(d / "out" / "est")],
+            fix="replay CLI: validate every option before any output",
+        ),
+        case(
+            "rerun-save-unwritable",
+            lambda d, b: ["--rerun", f"save:{d / 'out' / 'nofolder' / 'x' / 'v.rrd'}"],
+            fix="replay CLI: check --rerun save: before any output",
+        ),
     ]
 
 
@@ -516,19 +658,47 @@ def _bases(tmp: Path) -> dict[str, Base]:
 
     start = 1_700_000_000_000_000_000
     (mcap,) = BROAD.glob("*.mcap")
-    broad = fuzzlib.rewrite_bag(mcap, tmp / "broad07", t_end_ns=start + int(SLICE_S * 1e9),
-                                chunk_size=160_000, compression="zstd", source="broad 07 slice")
-    assert synth_main(["coning", "--rate", "200", "--duration", "3", "--gyro-noise-density",
-                       "1e-3", "--gyro-bias=0.01,-0.02,0.005", "--out",
-                       str(tmp / "synth-src")]) == 0
+    broad = fuzzlib.rewrite_bag(
+        mcap,
+        tmp / "broad07",
+        t_end_ns=start + int(SLICE_S * 1e9),
+        chunk_size=160_000,
+        compression="zstd",
+        source="broad 07 slice",
+    )
+    assert (
+        synth_main(
+            [
+                "coning",
+                "--rate",
+                "200",
+                "--duration",
+                "3",
+                "--gyro-noise-density",
+                "1e-3",
+                "--gyro-bias=0.01,-0.02,0.005",
+                "--out",
+                str(tmp / "synth-src"),
+            ]
+        )
+        == 0
+    )
     (src,) = (tmp / "synth-src").glob("*.mcap")
-    synth = fuzzlib.rewrite_bag(src, tmp / "coning", t_end_ns=None, chunk_size=48_000,
-                                compression="lz4", source="data_synth coning")
+    synth = fuzzlib.rewrite_bag(
+        src,
+        tmp / "coning",
+        t_end_ns=None,
+        chunk_size=48_000,
+        compression="lz4",
+        source="data_synth coning",
+    )
     (tmp / "json").mkdir()
     (tmp / "json" / "json.mcap").write_bytes(fuzzlib.json_log(*_json_payloads(), JSON_PER_CHUNK))
-    return {"broad07": fuzzlib.load_base("broad07", broad),
-            "coning": fuzzlib.load_base("coning", synth),
-            "json": fuzzlib.load_base("json", tmp / "json", imu_topic="/imu/json")}
+    return {
+        "broad07": fuzzlib.load_base("broad07", broad),
+        "coning": fuzzlib.load_base("coning", synth),
+        "json": fuzzlib.load_base("json", tmp / "json", imu_topic="/imu/json"),
+    }
 
 
 class Campaign:
@@ -540,19 +710,27 @@ class Campaign:
         rng = np.random.default_rng(SEED)
         self.cases: dict[str, list[Case]] = defaultdict(list)
         for base in (self.bases["broad07"], self.bases["coning"]):
-            for gen in (truncation_cases, flip_cases, repacked_flip_cases, lying_size_cases,
-                        schema_cases, metadata_cases):
+            for gen in (
+                truncation_cases,
+                flip_cases,
+                repacked_flip_cases,
+                lying_size_cases,
+                schema_cases,
+                metadata_cases,
+            ):
                 for c in gen(base, rng):
                     self.cases[c.cls].append(c)
         self.cases["json_message"] = json_cases(self.bases["json"])
         self.cases["special_input"] = special_input_cases(self.bases["broad07"])
         self.cases["output_path"] = output_path_cases(self.bases["broad07"])
         broad = self.bases["broad07"]
-        self.pool = fuzzlib.Pool(REPO_ROOT, n=2, warmup={"kind": "replay",
-                                                         "path": str(broad.folder)})
+        self.pool = fuzzlib.Pool(
+            REPO_ROOT, n=2, warmup={"kind": "replay", "path": str(broad.folder)}
+        )
         clean = [Case("clean", "clean", b.name, _with(b), lost=None) for b in self.bases.values()]
-        self.clean = self.pool.run([(c, k) for c in clean for k in c.kinds], tmp / "clean",
-                                   self.bases)
+        self.clean = self.pool.run(
+            [(c, k) for c in clean for k in c.kinds], tmp / "clean", self.bases
+        )
         for v in self.clean:  # the floor of each rule: what the clean log gives
             self.bases[v.case.base].clean[v.kind] = v.result.get("samples")
         self._done: dict[str, list[fuzzlib.Verdict]] = {}
@@ -593,7 +771,8 @@ def test_fuzz_class(campaign, cls):
     by_fix = defaultdict(list)
     for v in bad:
         by_fix[v.case.fix].append(f"{v.case.base}/{v.case.name}[{v.kind}]")
-    fixes = "\n".join(f"  needs {fix}: {len(ids)} runs, e.g. {', '.join(ids[:3])}"
-                      for fix, ids in by_fix.items())  # fmt: skip
+    fixes = "\n".join(
+        f"  needs {fix}: {len(ids)} runs, e.g. {', '.join(ids[:3])}" for fix, ids in by_fix.items()
+    )
     report = "\n".join(v.line() for v in bad)
     assert not bad, f"{len(bad)} of {len(verdicts)} {cls} runs broke a rule\n{fixes}\n{report}"

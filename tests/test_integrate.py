@@ -19,6 +19,8 @@ def rounding_bound(n_steps: int) -> float:
     """Bound on the rounding a chain of ``n`` steps collects: two roundings of ~eps per step
     (the exponential and the product), summed linearly (measured 0.02-0.3 n eps here)."""
     return 2.0 * n_steps * EPS
+
+
 Q0 = Rotation.from_euler("xyz", [0.4, -0.7, 2.0]).as_quat()
 
 
@@ -33,6 +35,7 @@ def uneven_stamps(n: int, dt: float, seed: int) -> np.ndarray:
 
 
 # -- analytic truth ---------------------------------------------------------------------------
+
 
 @pytest.mark.parametrize("method", METHODS)
 @pytest.mark.parametrize("uneven", [False, True])
@@ -75,19 +78,26 @@ def coning_truth(t: np.ndarray, beta: float, om: float) -> tuple[Rotation, np.nd
     """Pure coning: R(t) = Rz(Ωt) Rx(β) Rz(−Ωt) and its body rate."""
     rz = Rotation.from_rotvec(np.outer(om * t, [0.0, 0.0, 1.0]))
     r = rz * Rotation.from_rotvec([beta, 0.0, 0.0]) * rz.inv()
-    omega_b = om * np.column_stack([-np.sin(beta) * np.sin(om * t),
-                                    np.sin(beta) * np.cos(om * t),
-                                    np.full_like(t, np.cos(beta) - 1.0)])
+    omega_b = om * np.column_stack(
+        [
+            -np.sin(beta) * np.sin(om * t),
+            np.sin(beta) * np.cos(om * t),
+            np.full_like(t, np.cos(beta) - 1.0),
+        ]
+    )
     return r, omega_b
 
 
-@pytest.mark.parametrize("method, order, rates_hz", [
-    ("start", 1, (50, 100, 200, 400)),
-    ("end", 1, (50, 100, 200, 400)),
-    ("trapezoid", 2, (50, 100, 200, 400)),
-    ("coning", 2, (50, 100, 200, 400)),
-    ("magnus4", 4, (25, 50, 100, 200)),
-])
+@pytest.mark.parametrize(
+    "method, order, rates_hz",
+    [
+        ("start", 1, (50, 100, 200, 400)),
+        ("end", 1, (50, 100, 200, 400)),
+        ("trapezoid", 2, (50, 100, 200, 400)),
+        ("coning", 2, (50, 100, 200, 400)),
+        ("magnus4", 4, (25, 50, 100, 200)),
+    ],
+)
 def test_coning_convergence_order(method, order, rates_hz):
     # Half-angle 0.3 rad at 2 Hz for 1 s. The chosen rates are in the asymptotic range (the
     # measured orders are stable to ±0.05 there) and the smallest error (magnus4, 200 Hz,
@@ -119,15 +129,16 @@ def test_coning_term_halves_trapezoid_error_and_rotvec_sum_fails():
 
 # -- conventions ----------------------------------------------------------------------------
 
+
 @pytest.mark.parametrize("method", STEP_METHODS)
 def test_90_deg_about_z_is_scalar_last(method):
     t = np.linspace(0.0, 1.0, 101)
     got = integrate(np.tile([0.0, 0.0, np.pi / 2], (101, 1)), t, [0, 0, 0, 1], method)
-    np.testing.assert_allclose(got.as_quat()[-1], [0.0, 0.0, np.sqrt(0.5), np.sqrt(0.5)],
-                               atol=rounding_bound(100))
+    np.testing.assert_allclose(
+        got.as_quat()[-1], [0.0, 0.0, np.sqrt(0.5), np.sqrt(0.5)], atol=rounding_bound(100)
+    )
     # Columns of R_w_b are the body axes in world: body x now points along world y.
-    np.testing.assert_allclose(got.as_matrix()[-1][:, 0], [0.0, 1.0, 0.0],
-                               atol=rounding_bound(100))
+    np.testing.assert_allclose(got.as_matrix()[-1][:, 0], [0.0, 1.0, 0.0], atol=rounding_bound(100))
 
 
 def test_increments_multiply_on_the_right_like_scipy():
@@ -183,12 +194,14 @@ def test_magnus4_interior_weights_are_classic():
     h = 0.01
     phi = increments(w, h * np.arange(12), "magnus4")
     i = np.arange(1, 10)
-    want = h / 24 * (-w[i - 1] + 13 * w[i] + 13 * w[i + 1] - w[i + 2]) \
-        + h * h / 12 * np.cross(w[i], w[i + 1])
+    want = h / 24 * (-w[i - 1] + 13 * w[i] + 13 * w[i + 1] - w[i + 2]) + h * h / 12 * np.cross(
+        w[i], w[i + 1]
+    )
     np.testing.assert_allclose(phi[1:10], want, rtol=0, atol=1e-15)
 
 
 # -- orthonormality ---------------------------------------------------------------------------
+
 
 def test_orthonormal_after_ten_million_random_steps():
     # 10^7 random steps (10 chained batches of 10^6, to keep memory near 1 GB at most): the
@@ -212,17 +225,21 @@ def test_orthonormal_after_ten_million_random_steps():
 
 # -- delta angles ---------------------------------------------------------------------------
 
+
 def coning_delta(tb: np.ndarray, beta: float, om: float) -> np.ndarray:
     """Exact ∫ω_b over [tb_k, tb_{k+1}] for pure coning (closed form)."""
     c0, c1 = np.cos(om * tb[:-1]), np.cos(om * tb[1:])
     s0, s1 = np.sin(om * tb[:-1]), np.sin(om * tb[1:])
     sb = np.sin(beta)
-    return np.column_stack([sb * (c1 - c0), sb * (s1 - s0),
-                            om * (np.cos(beta) - 1.0) * (tb[1:] - tb[:-1])])
+    return np.column_stack(
+        [sb * (c1 - c0), sb * (s1 - s0), om * (np.cos(beta) - 1.0) * (tb[1:] - tb[:-1])]
+    )
 
 
-@pytest.mark.parametrize("method, order", [("plain", 1), ("one_plus_previous", 2),
-                                           ("two_sample", 2), ("three_sample", 2)])
+@pytest.mark.parametrize(
+    "method, order",
+    [("plain", 1), ("one_plus_previous", 2), ("two_sample", 2), ("three_sample", 2)],
+)
 def test_delta_angle_methods_converge_on_coning(method, order):
     # Delta angles are exact integrals, so the error is only the coning (non-commutativity)
     # error: first order without correction, higher with. The drift per step is the cone-axis
@@ -267,16 +284,19 @@ T5 = np.arange(5) * 0.01
 W5 = np.zeros((5, 3))
 
 
-@pytest.mark.parametrize("omega, t, match", [
-    (np.zeros((5, 2)), T5, r"shape \(N, 3\), got \(5, 2\)"),
-    (np.zeros(5), T5, r"shape \(N, 3\), got \(5,\)"),
-    (W5, T5[:4], r"length N = 5"),
-    (W5, T5[:, None], r"`t_s` of shape \(N,\)"),
-    (np.zeros((1, 3)), T5[:1], r"at least 2 stamps"),
-    (np.array([["a", "b", "c"]] * 5), T5, r"real numbers"),
-    (W5.astype(complex), T5, r"real numbers"),
-    (W5, T5.astype(object), r"real numbers"),
-])
+@pytest.mark.parametrize(
+    "omega, t, match",
+    [
+        (np.zeros((5, 2)), T5, r"shape \(N, 3\), got \(5, 2\)"),
+        (np.zeros(5), T5, r"shape \(N, 3\), got \(5,\)"),
+        (W5, T5[:4], r"length N = 5"),
+        (W5, T5[:, None], r"`t_s` of shape \(N,\)"),
+        (np.zeros((1, 3)), T5[:1], r"at least 2 stamps"),
+        (np.array([["a", "b", "c"]] * 5), T5, r"real numbers"),
+        (W5.astype(complex), T5, r"real numbers"),
+        (W5, T5.astype(object), r"real numbers"),
+    ],
+)
 def test_bad_shapes_and_dtypes(omega, t, match):
     with pytest.raises(InputError, match=match):
         integrate(omega, t, [0, 0, 0, 1])
@@ -321,7 +341,9 @@ def test_unknown_method_and_bad_q0():
 def test_gap_warns_with_its_time():
     t = np.concatenate([np.arange(100) * 0.01, 1.5 + np.arange(100) * 0.01])
     w = np.zeros((200, 3))
-    with pytest.warns(GapWarning, match=r"1 gap\(s\) longer than 5x the median step at 0.990 s \(\+0.510 s\)"):
+    with pytest.warns(
+        GapWarning, match=r"1 gap\(s\) longer than 5x the median step at 0.990 s \(\+0.510 s\)"
+    ):
         integrate(w, t, [0, 0, 0, 1])
     # 4x the median is not a gap.
     t2 = np.concatenate([np.arange(100) * 0.01, 1.03 + np.arange(100) * 0.01])
@@ -335,8 +357,7 @@ def test_three_sample_warns_on_uneven_intervals():
     tb[1] += 2e-5  # intervals differ by 0.4 %: no warning
     integrate_delta(d, tb, [0, 0, 0, 1], "three_sample")
     with pytest.warns(ImuDcmWarning, match="equal intervals"):
-        integrate_delta(d, [0.0, 0.01, 0.02, 0.04, 0.05, 0.06, 0.07], [0, 0, 0, 1],
-                        "three_sample")
+        integrate_delta(d, [0.0, 0.01, 0.02, 0.04, 0.05, 0.06, 0.07], [0, 0, 0, 1], "three_sample")
 
 
 def test_delta_input_checks():

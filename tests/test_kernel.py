@@ -1,8 +1,8 @@
 """The compiled kernel against a plain per-sample reference loop written here, independently.
 
-The reference evaluates each method's formula as written (magnus4: Simpson's rule with the
-mid-step rate read off the cubic through four samples in Lagrange form, not the kernel's
-weight form; ghost samples on the same kind of polynomial) and composes the steps with a textbook Hamilton product, in
+The reference evaluates each method's formula as written (magnus4: Simpson's rule with the mid-step
+rate read off the cubic through four samples in Lagrange form, not the kernel's weight form; ghost
+samples on the same kind of polynomial) and composes the steps with a textbook Hamilton product, in
 Python floats. Random rates and uneven stamps; record lengths that the earlier blocked product
 split unevenly (1, 2, 3, 17, 5003 and 10^5 steps).
 """
@@ -46,15 +46,19 @@ def poly_value(ts: list[float], ws: list[list[float]], t: float) -> list[float]:
     out = [0.0, 0.0, 0.0]
     for j, tj in enumerate(ts):
         lj = math.prod((t - ti) / (tj - ti) for i, ti in enumerate(ts) if i != j)
-        out = [o + lj * v for o, v in zip(out, ws[j])]
+        out = [o + lj * v for o, v in zip(out, ws[j], strict=False)]
     return out
 
 
 def qmul(p, q):
     px, py, pz, pw = p
     qx, qy, qz, qw = q
-    return (pw * qx + px * qw + py * qz - pz * qy, pw * qy - px * qz + py * qw + pz * qx,
-            pw * qz + px * qy - py * qx + pz * qw, pw * qw - px * qx - py * qy - pz * qz)
+    return (
+        pw * qx + px * qw + py * qz - pz * qy,
+        pw * qy - px * qz + py * qw + pz * qx,
+        pw * qz + px * qy - py * qx + pz * qw,
+        pw * qw - px * qx - py * qy - pz * qz,
+    )
 
 
 def qexp(phi):
@@ -88,8 +92,11 @@ def reference(omega: np.ndarray, t: np.ndarray, q0, method: str) -> np.ndarray:
     head = [x - ts[0] for x in ts[:m]]
     tail = [x - ts[-1] for x in ts[-m:]]
     tx = [ts[0] - (ts[1] - ts[0])] + ts + [ts[-1] + (ts[-1] - ts[-2])]
-    wx = ([poly_value(head, w[:m], -(ts[1] - ts[0]))] + w
-          + [poly_value(tail, w[-m:], ts[-1] - ts[-2])])
+    wx = (
+        [poly_value(head, w[:m], -(ts[1] - ts[0]))]
+        + w
+        + [poly_value(tail, w[-m:], ts[-1] - ts[-2])]
+    )
     for i in range(n - 1):
         h = ts[i + 1] - ts[i]
         w0, w1 = w[i], w[i + 1]
@@ -98,17 +105,25 @@ def reference(omega: np.ndarray, t: np.ndarray, q0, method: str) -> np.ndarray:
         elif method == "end":
             phi = [h * v for v in w1]
         elif method == "trapezoid":
-            phi = [0.5 * h * (a + b) for a, b in zip(w0, w1)]
+            phi = [0.5 * h * (a + b) for a, b in zip(w0, w1, strict=False)]
         elif method == "coning":
             c = cross(w0, w1)
-            phi = [0.5 * h * (a + b) + h * h / 12.0 * cc for a, b, cc in zip(w0, w1, c)]
+            phi = [
+                0.5 * h * (a + b) + h * h / 12.0 * cc for a, b, cc in zip(w0, w1, c, strict=False)
+            ]
         else:  # magnus4: Simpson with the mid-step rate of the cubic through ω_{i-1..i+2}
-            nodes = [tx[i] - ts[i] if i == 0 else ts[i - 1] - ts[i], 0.0, h,
-                     tx[i + 3] - ts[i] if i == n - 2 else ts[i + 2] - ts[i]]
-            w_mid = poly_value(nodes, wx[i:i + 4], 0.5 * h)
+            nodes = [
+                tx[i] - ts[i] if i == 0 else ts[i - 1] - ts[i],
+                0.0,
+                h,
+                tx[i + 3] - ts[i] if i == n - 2 else ts[i + 2] - ts[i],
+            ]
+            w_mid = poly_value(nodes, wx[i : i + 4], 0.5 * h)
             c = cross(w0, w1)
-            phi = [h / 6.0 * (a + 4.0 * b + d) + h * h / 12.0 * cc
-                   for a, b, d, cc in zip(w0, w_mid, w1, c)]
+            phi = [
+                h / 6.0 * (a + 4.0 * b + d) + h * h / 12.0 * cc
+                for a, b, d, cc in zip(w0, w_mid, w1, c, strict=False)
+            ]
         q = qmul(q, qexp(phi))
         out.append(q)
     return np.array(out)
@@ -127,8 +142,7 @@ def test_kernel_equals_reference_loop(method, n_steps):
     assert quat_angle_rad(got, ref).max() <= tolerance_rad(n_steps)
 
 
-@pytest.mark.parametrize("method", ["plain", "one_plus_previous", "two_sample",
-                                    "three_sample"])
+@pytest.mark.parametrize("method", ["plain", "one_plus_previous", "two_sample", "three_sample"])
 def test_delta_kernel_equals_reference_loop(method):
     # Delta-angle rules as written (equal intervals: 1/12, 2/3, 9/20 and 27/40).
     rng = np.random.default_rng(7)
@@ -144,16 +158,18 @@ def test_delta_kernel_equals_reference_loop(method):
             phi = d[k]
         elif method == "one_plus_previous":
             c = cross(d[k - 1], d[k]) if k else (0.0, 0.0, 0.0)
-            phi = [a + cc / 12.0 for a, cc in zip(d[k], c)]
+            phi = [a + cc / 12.0 for a, cc in zip(d[k], c, strict=False)]
         elif method == "two_sample":
             c = cross(d[k], d[k + 1])
-            phi = [a + b + 2.0 / 3.0 * cc for a, b, cc in zip(d[k], d[k + 1], c)]
+            phi = [a + b + 2.0 / 3.0 * cc for a, b, cc in zip(d[k], d[k + 1], c, strict=False)]
         else:
             d1, d2, d3 = d[k], d[k + 1], d[k + 2]
             c13 = cross(d1, d3)
-            c2 = cross(d2, [a - b for a, b in zip(d3, d1)])
-            phi = [a + b + e + 9.0 / 20.0 * x + 27.0 / 40.0 * y
-                   for a, b, e, x, y in zip(d1, d2, d3, c13, c2)]
+            c2 = cross(d2, [a - b for a, b in zip(d3, d1, strict=False)])
+            phi = [
+                a + b + e + 9.0 / 20.0 * x + 27.0 / 40.0 * y
+                for a, b, e, x, y in zip(d1, d2, d3, c13, c2, strict=False)
+            ]
         q = qmul(q, qexp(phi))
         ref.append(q)
     got = integrate_delta(np.array(d), tb, q0, method).as_quat()
@@ -172,14 +188,23 @@ def test_no_writable_cache_folder_warns_once_and_still_imports(tmp_path):
     # numba's NUMBA_CACHE_DIR locator and pointing it below a regular file.
     blocker = tmp_path / "file"
     blocker.write_text("")
-    env = {**os.environ, "NUMBA_CACHE_LOCATOR_CLASSES": "UserProvidedCacheLocator",
-           "NUMBA_CACHE_DIR": str(blocker / "cache"),
-           "PYTHONPATH": os.pathsep.join([str(Path(kernel.__file__).parents[1]),
-                                          os.environ.get("PYTHONPATH", "")])}
+    env = {
+        **os.environ,
+        "NUMBA_CACHE_LOCATOR_CLASSES": "UserProvidedCacheLocator",
+        "NUMBA_CACHE_DIR": str(blocker / "cache"),
+        "PYTHONPATH": os.pathsep.join(
+            [str(Path(kernel.__file__).parents[1]), os.environ.get("PYTHONPATH", "")]
+        ),
+    }
     code = "import warnings; warnings.simplefilter('always'); import imu_dcm.kernel"
-    res = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True,
-                         check=False,
-                         timeout=300)
+    res = subprocess.run(
+        [sys.executable, "-c", code],
+        env=env,
+        capture_output=True,
+        text=True,
+        check=False,
+        timeout=300,
+    )
     assert res.returncode == 0, res.stderr
     assert res.stderr.count("Expected a writable folder to cache") == 1
 

@@ -72,8 +72,9 @@ def test_record_after_a_normal_stop_websocket(trial, tmp_path):
     pub = Publisher(trial["schemas"])
     bag = tmp_path / "live_bag"
     try:
-        th, said, out, _ = start_live(f"ws://127.0.0.1:{pub.port}", bias="none", record=bag,
-                                      idle_stop_s=1.0)
+        th, said, out, _ = start_live(
+            f"ws://127.0.0.1:{pub.port}", bias="none", record=bag, idle_stop_s=1.0
+        )
         pub.wait_subscribed()
         pub.publish(msgs, speed=10.0)
         th.join(60)
@@ -104,9 +105,26 @@ def test_record_after_sigterm_to_the_command(trial, tmp_path):
     port = _free_udp_port()
     env = {**os.environ, "PYTHONPATH": str(REPO)}
     proc = subprocess.Popen(
-        [sys.executable, "-m", "imu_dcm.live", f"udp://127.0.0.1:{port}", "--rerun", "off",
-         "--bias", "none", "--record", str(bag), "--summary-json", str(summary), "--no-status"],
-        stdout=subprocess.PIPE, stderr=subprocess.PIPE, env=env, cwd=tmp_path)
+        [
+            sys.executable,
+            "-m",
+            "imu_dcm.live",
+            f"udp://127.0.0.1:{port}",
+            "--rerun",
+            "off",
+            "--bias",
+            "none",
+            "--record",
+            str(bag),
+            "--summary-json",
+            str(summary),
+            "--no-status",
+        ],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        env=env,
+        cwd=tmp_path,
+    )
     try:
         deadline = time.monotonic() + 30
         while not (bag / "metadata.yaml").is_file():  # the bag exists once the run is up
@@ -137,8 +155,9 @@ def test_record_closed_cleanly_when_the_source_is_lost(trial, tmp_path):
     pub = Publisher(trial["schemas"])
     bag = tmp_path / "lost_bag"
     try:
-        th, said, out, _ = start_live(f"ws://127.0.0.1:{pub.port}", bias="none", record=bag,
-                                      give_up_s=1.0)
+        th, said, out, _ = start_live(
+            f"ws://127.0.0.1:{pub.port}", bias="none", record=bag, give_up_s=1.0
+        )
         pub.wait_subscribed()
         pub.publish(msgs, speed=10.0)
         time.sleep(0.3)

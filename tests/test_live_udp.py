@@ -56,8 +56,11 @@ def sample_lines(messages: list) -> list[bytes]:
 def send(lines: list[bytes], address, tmp_path, rate_hz: float) -> None:
     f = tmp_path / "lines.txt"
     f.write_bytes(b"\n".join(lines))
-    subprocess.run([sys.executable, "-c", SENDER, str(f), address[0], str(address[1]),
-                    str(rate_hz)], check=True, timeout=120)
+    subprocess.run(
+        [sys.executable, "-c", SENDER, str(f), address[0], str(address[1]), str(rate_hz)],
+        check=True,
+        timeout=120,
+    )
 
 
 def run_udp(lines, tmp_path, rate_hz=1500.0, **kw):
@@ -71,8 +74,15 @@ def run_udp(lines, tmp_path, rate_hz=1500.0, **kw):
         ready.set()
 
     def target():
-        out["result"] = run("udp://127.0.0.1:0", rerun="off", status=False, say=said.append,
-                            idle_stop_s=1.0, on_ready=on_ready, **kw)
+        out["result"] = run(
+            "udp://127.0.0.1:0",
+            rerun="off",
+            status=False,
+            say=said.append,
+            idle_stop_s=1.0,
+            on_ready=on_ready,
+            **kw,
+        )
 
     th = threading.Thread(target=target, daemon=True)
     th.start()
@@ -97,8 +107,8 @@ def test_udp_lines_equal_replay_with_bad_lines_counted(trial, tmp_path):
     back = b",".join([str(int(sec) - 1).encode() + b"." + frac] + t300[1:])
     lines.insert(imu_rows[300] + 1, back)
     k200 = imu_rows[200]
-    lines[k200 + 1:k200 + 1] = [clean[r] for r in imu_rows[196:201]]
-    lines[imu_rows[100] + 1:imu_rows[100] + 1] = [b"garbage", b"1.0,2.0,3.0", b'{"t_s": 1, ']
+    lines[k200 + 1 : k200 + 1] = [clean[r] for r in imu_rows[196:201]]
+    lines[imu_rows[100] + 1 : imu_rows[100] + 1] = [b"garbage", b"1.0,2.0,3.0", b'{"t_s": 1, ']
     res, _ = run_udp(lines, tmp_path, method="magnus4", bias="none")
     s = res.summary
     assert s["malformed"] == 3

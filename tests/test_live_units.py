@@ -39,8 +39,7 @@ def test_reorder_window_puts_late_samples_in_order_and_counts_the_rest():
     # one 200 ms late: backward
     stamps = [0, 10, 20, 50, 40, 30, 60, 60, 70, 80, 90, 100, 150, 200, 300, 100, 300, 305]
     got = push_all(buf, [t * ms for t in stamps])
-    assert got == [t * ms for t in [0, 10, 20, 30, 40, 50, 60, 70, 80, 90, 100, 150, 200, 300,
-                                    305]]
+    assert got == [t * ms for t in [0, 10, 20, 30, 40, 50, 60, 70, 80, 90, 100, 150, 200, 300, 305]]
     assert buf.reordered == 2  # 40 and 30
     assert buf.dropped_duplicate == 2  # 60 held, 300 held
     assert buf.dropped_backward == 1  # 100 after 150, 200 were released
@@ -119,15 +118,18 @@ def test_causal_rest_bias_ends_each_segment_on_replays_value():
     w, t = rest_motion_log()
     batch = estimate_bias(w, t, "auto")
     live = CausalRestBias()
-    applied = np.array([live.update(tuple(x), s) for x, s in zip(w.tolist(), t.tolist())])
+    applied = np.array(
+        [live.update(tuple(x), s) for x, s in zip(w.tolist(), t.tolist(), strict=False)]
+    )
     live.finish()
     assert len(live.segments) == len(batch.segments) == 3
     # segments that end before the log does: the last causal update is replay's segment mean
     # (a sum of n samples: relative rounding <= n eps)
-    for seg_live, seg in zip(live.segments[:2], batch.segments[:2]):
+    for seg_live, seg in zip(live.segments[:2], batch.segments[:2], strict=False):
         n = seg.stop - seg.start
-        assert seg_live["bias_rad_s"] == pytest.approx(seg.bias_rad_s,
-                                                       abs=4 * n * np.finfo(float).eps * 0.01)
+        assert seg_live["bias_rad_s"] == pytest.approx(
+            seg.bias_rad_s, abs=4 * n * np.finfo(float).eps * 0.01
+        )
         assert seg_live["start_s"] == seg.start_s and seg_live["end_s"] == seg.end_s
     # causal: the bias uses samples one window behind the newest, so the first sample with a
     # bias is number win (the first still window ends at win - 1 and holds nothing older)
@@ -138,17 +140,39 @@ def test_causal_rest_bias_ends_each_segment_on_replays_value():
 
 def run_cli(args: list[str], stdin: bytes = b"", timeout: float = 60):
     env = {**os.environ, "PYTHONPATH": str(REPO)}
-    return subprocess.run([sys.executable, "-m", "imu_dcm.live", *args], input=stdin,
-                          capture_output=True, env=env, timeout=timeout, check=False)
+    return subprocess.run(
+        [sys.executable, "-m", "imu_dcm.live", *args],
+        input=stdin,
+        capture_output=True,
+        env=env,
+        timeout=timeout,
+        check=False,
+    )
 
 
 def test_stdin_constant_rate_gives_90_deg_about_z(tmp_path):
     # 1 s at 90 deg/s about body z, in deg/s with millisecond stamps
     lines = "".join(f"{k * 10},0,0,90\n" for k in range(101)).encode()
     out = tmp_path / "summary.json"
-    r = run_cli(["-", "--rerun", "off", "--bias", "none", "--gyro-units", "deg/s",
-                 "--time-units", "ms", "--method", "trapezoid", "--no-status",
-                 "--summary-json", str(out)], lines)
+    r = run_cli(
+        [
+            "-",
+            "--rerun",
+            "off",
+            "--bias",
+            "none",
+            "--gyro-units",
+            "deg/s",
+            "--time-units",
+            "ms",
+            "--method",
+            "trapezoid",
+            "--no-status",
+            "--summary-json",
+            str(out),
+        ],
+        lines,
+    )
     assert r.returncode == 0, r.stderr.decode()
     text = r.stdout.decode()
     assert "stopped    end of input" in text
@@ -161,13 +185,16 @@ def test_stdin_constant_rate_gives_90_deg_about_z(tmp_path):
     assert summary["final_t_s"] == 1.0 and summary["samples"] == 101
 
 
-@pytest.mark.parametrize("args, needle", [
-    (["tcp://x:1"], "Expected SOURCE"),
-    (["-", "--rerun", "window"], "Expected --rerun"),
-    (["-", "--bias", "1,2"], "Expected bias"),
-    (["-", "--init-quat", "0,0,0"], "init"),
-    (["-", "--method", "rk4"], "invalid choice"),
-])
+@pytest.mark.parametrize(
+    "args, needle",
+    [
+        (["tcp://x:1"], "Expected SOURCE"),
+        (["-", "--rerun", "window"], "Expected --rerun"),
+        (["-", "--bias", "1,2"], "Expected bias"),
+        (["-", "--init-quat", "0,0,0"], "init"),
+        (["-", "--method", "rk4"], "invalid choice"),
+    ],
+)
 def test_cli_bad_input_one_line_exit_2(args, needle):
     r = run_cli([*args, "--no-status"], b"")
     assert r.returncode == 2
@@ -177,16 +204,18 @@ def test_cli_bad_input_one_line_exit_2(args, needle):
 
 def test_stdin_bias_auto_reports_replays_rest_segments(tmp_path):
     w, t = rest_motion_log()
-    lines = "".join(f"{s!r},{a!r},{b!r},{c!r}\n" for s, (a, b, c) in
-                    zip(t.tolist(), w.tolist())).encode()
+    lines = "".join(
+        f"{s!r},{a!r},{b!r},{c!r}\n" for s, (a, b, c) in zip(t.tolist(), w.tolist(), strict=False)
+    ).encode()
     out = tmp_path / "s.json"
     r = run_cli(["-", "--rerun", "off", "--no-status", "--summary-json", str(out)], lines)
     assert r.returncode == 0, r.stderr.decode()
     s = json.loads(out.read_text())
     batch = estimate_bias(w, t, "auto")
     assert s["bias_mode"] == "auto" and len(s["bias_segments"]) == len(batch.segments)
-    for seg_live, seg in zip(s["bias_segments"][:2], batch.segments[:2]):
+    for seg_live, seg in zip(s["bias_segments"][:2], batch.segments[:2], strict=False):
         n = seg.stop - seg.start
-        assert seg_live["bias_rad_s"] == pytest.approx(seg.bias_rad_s,
-                                                       abs=4 * n * np.finfo(float).eps * 0.01)
+        assert seg_live["bias_rad_s"] == pytest.approx(
+            seg.bias_rad_s, abs=4 * n * np.finfo(float).eps * 0.01
+        )
     assert "bias       auto: 3 rest segments" in r.stdout.decode()

@@ -7,6 +7,7 @@ Skips where Chromium, node or tests/e2e/node_modules/playwright-core is missing.
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 import re
@@ -48,9 +49,19 @@ def test_web_viewer_shows_the_live_run(tmp_path):
     said2: list[str] = []
     try:
         res: dict = {}
-        th = threading.Thread(target=lambda: res.update(r=run(
-            f"ws://127.0.0.1:{pub.port}", rerun="serve", bias="none", status=False,
-            say=said2.append, idle_stop_s=1.0)), daemon=True)
+        th = threading.Thread(
+            target=lambda: res.update(
+                r=run(
+                    f"ws://127.0.0.1:{pub.port}",
+                    rerun="serve",
+                    bias="none",
+                    status=False,
+                    say=said2.append,
+                    idle_stop_s=1.0,
+                )
+            ),
+            daemon=True,
+        )
         th.start()
         pub.wait_subscribed()
         pub.publish(trial["messages"])
@@ -66,9 +77,22 @@ def test_web_viewer_shows_the_live_run(tmp_path):
         shot = tmp_path / "live_view.png"
         for _attempt in range(2):  # a loaded machine can time out Chromium's own screenshot
             proc = subprocess.run(
-                ["node", str(E2E / "screenshot.mjs"), url, str(shot), "--timeout-s", "150",
-                 "--chromium", str(CHROMIUM)],
-                check=False, capture_output=True, text=True, timeout=240, cwd=E2E)
+                [
+                    "node",
+                    str(E2E / "screenshot.mjs"),
+                    url,
+                    str(shot),
+                    "--timeout-s",
+                    "150",
+                    "--chromium",
+                    str(CHROMIUM),
+                ],
+                check=False,
+                capture_output=True,
+                text=True,
+                timeout=240,
+                cwd=E2E,
+            )
             out = proc.stdout.strip()
             report = json.loads(out.splitlines()[-1]) if out else {}
             if report:
@@ -90,7 +114,5 @@ def test_web_viewer_shows_the_live_run(tmp_path):
     finally:
         pub.stop()
         if pid is not None:
-            try:
+            with contextlib.suppress(ProcessLookupError):
                 os.killpg(pid, signal.SIGTERM)
-            except ProcessLookupError:
-                pass

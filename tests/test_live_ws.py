@@ -72,16 +72,18 @@ def decode_slice(messages: list) -> tuple:
         else:
             tr_t.append(t)
             tr_q.append(struct.unpack_from("<4d", p, off))
-    return (np.array(imu_t, np.int64), np.array(imu_w), np.array(tr_t, np.int64),
-            np.array(tr_q))
+    return (np.array(imu_t, np.int64), np.array(imu_w), np.array(tr_t, np.int64), np.array(tr_q))
 
 
 def replay_of(messages: list, tmp: Path, method: str, bias) -> np.ndarray:
     """Replay's final attitude on these messages (written as a bag with the project's writer)."""
     imu_t, imu_w, tr_t, tr_q = decode_slice(messages)
     bag = tmp / f"slice_{len(messages)}_{method}"
-    write_bag(bag, imu=StampedSeries(imu_t, imu_w, "imu"),
-              quaternions={TRUTH: StampedSeries(tr_t, tr_q, "world")})
+    write_bag(
+        bag,
+        imu=StampedSeries(imu_t, imu_w, "imu"),
+        quaternions={TRUTH: StampedSeries(tr_t, tr_q, "world")},
+    )
     res = replay(bag, method=method, bias=bias)
     return res.q_est[-1], res
 
@@ -94,14 +96,18 @@ class Publisher:
         self.channels = {}
         for topic, sc in schemas.items():
             self.channels[topic] = foxglove.Channel(
-                topic, schema=foxglove.Schema(name=sc.name, encoding=sc.encoding, data=sc.data),
-                message_encoding="cdr", context=self.ctx)
+                topic,
+                schema=foxglove.Schema(name=sc.name, encoding=sc.encoding, data=sc.data),
+                message_encoding="cdr",
+                context=self.ctx,
+            )
         self.server = None
         self.start(port)
 
     def start(self, port: int = 0) -> None:
-        self.server = foxglove.start_server(host="127.0.0.1", port=port, context=self.ctx,
-                                            message_backlog_size=1 << 16)
+        self.server = foxglove.start_server(
+            host="127.0.0.1", port=port, context=self.ctx, message_backlog_size=1 << 16
+        )
         self.port = self.server.port
 
     def stop(self) -> None:
@@ -153,8 +159,9 @@ def test_ws_live_equals_replay_on_the_same_messages(trial, tmp_path, method):
     msgs = trial["messages"]
     pub = Publisher(trial["schemas"])
     try:
-        th, said, out, _ = start_live(f"ws://127.0.0.1:{pub.port}", method=method, bias="none",
-                                      idle_stop_s=1.5)
+        th, said, out, _ = start_live(
+            f"ws://127.0.0.1:{pub.port}", method=method, bias="none", idle_stop_s=1.5
+        )
         pub.wait_subscribed()
         pub.publish(msgs)
         th.join(60)
@@ -187,8 +194,9 @@ def test_ws_server_killed_and_restarted_reconnects_reports_the_gap(trial, tmp_pa
     pub = Publisher(trial["schemas"])
     port = pub.port
     try:
-        th, said, out, _ = start_live(f"ws://127.0.0.1:{port}", method="magnus4", bias="none",
-                                      idle_stop_s=4.0)
+        th, said, out, _ = start_live(
+            f"ws://127.0.0.1:{port}", method="magnus4", bias="none", idle_stop_s=4.0
+        )
         pub.wait_subscribed()
         pub.publish(msgs[:cut])
         time.sleep(0.3)  # let the last frames reach the client
@@ -220,5 +228,6 @@ def test_ws_server_killed_and_restarted_reconnects_reports_the_gap(trial, tmp_pa
     with pytest.warns(GapWarning, match=r"1 gap\(s\)"):  # replay sees the same gap
         q_replay, rep = replay_of(published, tmp_path, "magnus4", "none")
     assert [(g["t_s"], g["length_s"]) for g in s["gaps"]] == pytest.approx(
-        [(g["t_s"], g["length_s"]) for g in rep.summary.to_dict()["gaps"]], rel=1e-12)
+        [(g["t_s"], g["length_s"]) for g in rep.summary.to_dict()["gaps"]], rel=1e-12
+    )
     assert angle_deg(out["result"].q_w_b, q_replay) <= TOL_DEG

@@ -76,24 +76,41 @@ WRAPPER_DEF = (
     "sensor_msgs/Imu imu\nfloat32 temperature\n" + IMU_SECTION + HEADER + QUAT + VEC3
 )
 QSTAMPED_DEF = "std_msgs/Header header\ngeometry_msgs/Quaternion quaternion\n" + HEADER + QUAT
-POSE_STAMPED_DEF = "std_msgs/Header header\ngeometry_msgs/Pose pose\n" + HEADER + POSE + POINT + QUAT
+POSE_STAMPED_DEF = (
+    "std_msgs/Header header\ngeometry_msgs/Pose pose\n" + HEADER + POSE + POINT + QUAT
+)
 TRANSFORM_DEF = (
     "std_msgs/Header header\nstring child_frame_id\ngeometry_msgs/Transform transform\n"
     + HEADER
-    + "\n" + "=" * 80 + "\nMSG: geometry_msgs/Transform\nVector3 translation\n"
+    + "\n"
+    + "=" * 80
+    + "\nMSG: geometry_msgs/Transform\nVector3 translation\n"
     "Quaternion rotation\n" + VEC3 + QUAT
 )
 ODOM_DEF = (
     "std_msgs/Header header\nstring child_frame_id\ngeometry_msgs/PoseWithCovariance pose\n"
-    "geometry_msgs/TwistWithCovariance twist\n" + HEADER
-    + "\n" + "=" * 80 + "\nMSG: geometry_msgs/PoseWithCovariance\nPose pose\n"
-    "float64[36] covariance\n" + POSE + POINT + QUAT
-    + "\n" + "=" * 80 + "\nMSG: geometry_msgs/TwistWithCovariance\nTwist twist\n"
+    "geometry_msgs/TwistWithCovariance twist\n"
+    + HEADER
+    + "\n"
+    + "=" * 80
+    + "\nMSG: geometry_msgs/PoseWithCovariance\nPose pose\n"
     "float64[36] covariance\n"
-    + "\n" + "=" * 80 + "\nMSG: geometry_msgs/Twist\nVector3 linear\nVector3 angular\n" + VEC3
+    + POSE
+    + POINT
+    + QUAT
+    + "\n"
+    + "=" * 80
+    + "\nMSG: geometry_msgs/TwistWithCovariance\nTwist twist\n"
+    "float64[36] covariance\n"
+    + "\n"
+    + "=" * 80
+    + "\nMSG: geometry_msgs/Twist\nVector3 linear\nVector3 angular\n"
+    + VEC3
 )
-MAG_DEF = "std_msgs/Header header\ngeometry_msgs/Vector3 magnetic_field\nfloat64[9] " \
+MAG_DEF = (
+    "std_msgs/Header header\ngeometry_msgs/Vector3 magnetic_field\nfloat64[9] "
     "magnetic_field_covariance\n" + HEADER + VEC3
+)
 
 T0_NS = 1_700_000_000_000_000_000
 
@@ -105,9 +122,9 @@ def _stamp(t_ns: int) -> dict:
 def _imu_msg(t_ns: int, w, frame: str = "imu", q=(0.0, 0.0, 0.0, 1.0), cov0: float = -1.0):
     return {
         "header": {"stamp": _stamp(t_ns), "frame_id": frame},
-        "orientation": dict(zip("xyzw", map(float, q))),
+        "orientation": dict(zip("xyzw", map(float, q), strict=False)),
         "orientation_covariance": [cov0] + [0.0] * 8,
-        "angular_velocity": dict(zip("xyz", map(float, w))),
+        "angular_velocity": dict(zip("xyz", map(float, w), strict=False)),
         "angular_velocity_covariance": [0.0] * 9,
         "linear_acceleration": {"x": 0.0, "y": 0.0, "z": 9.81},
         "linear_acceleration_covariance": [0.0] * 9,
@@ -120,8 +137,9 @@ def _samples(n: int = 50, seed: int = 0):
     return t_ns, rng.normal(0.0, 1.0, (n, 3))
 
 
-def write_imu_bag(path: Path, t_ns, omega, frames=None, extra=None, quats=None, cov0=-1.0,
-                  log_offset_ns: int = 0):  # fmt: skip
+def write_imu_bag(
+    path: Path, t_ns, omega, frames=None, extra=None, quats=None, cov0=-1.0, log_offset_ns: int = 0
+):
     """An MCAP with /imu/data (Imu); ``frames`` varies frame_id length per message."""
     with open(path, "wb") as f:
         w = Ros2Writer(f)
@@ -129,8 +147,13 @@ def write_imu_bag(path: Path, t_ns, omega, frames=None, extra=None, quats=None, 
         for i, t in enumerate(t_ns):
             frame = frames[i % len(frames)] if frames else "imu"
             q = quats[i] if quats is not None else (0.0, 0.0, 0.0, 1.0)
-            w.write_message("/imu/data", schema, _imu_msg(int(t), omega[i], frame, q, cov0),
-                            log_time=int(t) + log_offset_ns, publish_time=int(t))  # fmt: skip
+            w.write_message(
+                "/imu/data",
+                schema,
+                _imu_msg(int(t), omega[i], frame, q, cov0),
+                log_time=int(t) + log_offset_ns,
+                publish_time=int(t),
+            )
         if extra:
             extra(w)
         w.finish()
@@ -178,9 +201,13 @@ def test_vendor_wrapper_with_imu_field(tmp_path):
         w = Ros2Writer(f)
         schema = w.register_msgdef("acme_msgs/msg/ImuPacket", WRAPPER_DEF)
         for i, t in enumerate(t_ns):
-            msg = {"header": {"stamp": _stamp(0), "frame_id": "base"},
-                   "device_name": "dev" * (i % 4), "status": 1,
-                   "imu": _imu_msg(int(t), omega[i], "imu" * (i % 3)), "temperature": 25.0}
+            msg = {
+                "header": {"stamp": _stamp(0), "frame_id": "base"},
+                "device_name": "dev" * (i % 4),
+                "status": 1,
+                "imu": _imu_msg(int(t), omega[i], "imu" * (i % 3)),
+                "temperature": 25.0,
+            }
             w.write_message("/acme/imu", schema, msg, log_time=int(t), publish_time=int(t))
         w.finish()
     log = read_log(p)
@@ -198,10 +225,13 @@ def test_json_channel(tmp_path):
         sid = w.register_schema("Imu", "jsonschema", b"{}")
         cid = w.register_channel("/phone/gyro", "json", sid)
         for i, t in enumerate(t_ns):
-            msg = {"header": {"stamp": _stamp(int(t))},
-                   "angular_velocity": dict(zip("xyz", omega[i].tolist()))}
-            w.add_message(cid, log_time=int(t) + 7, data=json.dumps(msg).encode(),
-                          publish_time=int(t))  # fmt: skip
+            msg = {
+                "header": {"stamp": _stamp(int(t))},
+                "angular_velocity": dict(zip("xyz", omega[i].tolist(), strict=False)),
+            }
+            w.add_message(
+                cid, log_time=int(t) + 7, data=json.dumps(msg).encode(), publish_time=int(t)
+            )
         w.finish()
     log = read_log(p)
     np.testing.assert_allclose(log.imu.omega_b, omega, rtol=0, atol=1e-15)
@@ -212,8 +242,13 @@ def test_json_channel(tmp_path):
 def _write_truth(w: Ros2Writer, topic: str, typ: str, definition: str, t_ns, q, make):
     schema = w.register_msgdef(typ, definition)
     for i, t in enumerate(t_ns):
-        w.write_message(topic, schema, make(int(t), dict(zip("xyzw", q[i].tolist()))),
-                        log_time=int(t), publish_time=int(t))  # fmt: skip
+        w.write_message(
+            topic,
+            schema,
+            make(int(t), dict(zip("xyzw", q[i].tolist(), strict=False))),
+            log_time=int(t),
+            publish_time=int(t),
+        )
 
 
 def _rand_quats(n, seed=1):
@@ -231,25 +266,47 @@ def _pose(q):
 
 ZERO_COV = [0.0] * 36
 TRUTH_CASES = {
-    "geometry_msgs/msg/QuaternionStamped": (QSTAMPED_DEF,
-                                            lambda t, q: {"header": _h(t), "quaternion": q}),
-    "geometry_msgs/msg/PoseStamped": (POSE_STAMPED_DEF,
-                                      lambda t, q: {"header": _h(t), "pose": _pose(q)}),
+    "geometry_msgs/msg/QuaternionStamped": (
+        QSTAMPED_DEF,
+        lambda t, q: {"header": _h(t), "quaternion": q},
+    ),
+    "geometry_msgs/msg/PoseStamped": (
+        POSE_STAMPED_DEF,
+        lambda t, q: {"header": _h(t), "pose": _pose(q)},
+    ),
     "geometry_msgs/msg/PoseWithCovarianceStamped": (
-        "std_msgs/Header header\ngeometry_msgs/PoseWithCovariance pose\n" + HEADER
-        + "\n" + "=" * 80 + "\nMSG: geometry_msgs/PoseWithCovariance\nPose pose\n"
+        "std_msgs/Header header\ngeometry_msgs/PoseWithCovariance pose\n"
+        + HEADER
+        + "\n"
+        + "=" * 80
+        + "\nMSG: geometry_msgs/PoseWithCovariance\nPose pose\n"
         "float64[36] covariance\n" + POSE + POINT + QUAT,
-        lambda t, q: {"header": _h(t), "pose": {"pose": _pose(q), "covariance": ZERO_COV}}),
-    "geometry_msgs/msg/TransformStamped": (TRANSFORM_DEF, lambda t, q: {
-        "header": _h(t), "child_frame_id": "imu_link",
-        "transform": {"translation": {"x": 0.0, "y": 0.0, "z": 0.0}, "rotation": q}}),
-    "nav_msgs/msg/Odometry": (ODOM_DEF, lambda t, q: {
-        "header": _h(t), "child_frame_id": "base_link",
-        "pose": {"pose": _pose(q), "covariance": ZERO_COV},
-        "twist": {"twist": {"linear": {"x": 0.0, "y": 0.0, "z": 0.0},
-                            "angular": {"x": 0.0, "y": 0.0, "z": 0.0}},
-                  "covariance": ZERO_COV}}),
-}  # fmt: skip
+        lambda t, q: {"header": _h(t), "pose": {"pose": _pose(q), "covariance": ZERO_COV}},
+    ),
+    "geometry_msgs/msg/TransformStamped": (
+        TRANSFORM_DEF,
+        lambda t, q: {
+            "header": _h(t),
+            "child_frame_id": "imu_link",
+            "transform": {"translation": {"x": 0.0, "y": 0.0, "z": 0.0}, "rotation": q},
+        },
+    ),
+    "nav_msgs/msg/Odometry": (
+        ODOM_DEF,
+        lambda t, q: {
+            "header": _h(t),
+            "child_frame_id": "base_link",
+            "pose": {"pose": _pose(q), "covariance": ZERO_COV},
+            "twist": {
+                "twist": {
+                    "linear": {"x": 0.0, "y": 0.0, "z": 0.0},
+                    "angular": {"x": 0.0, "y": 0.0, "z": 0.0},
+                },
+                "covariance": ZERO_COV,
+            },
+        },
+    ),
+}
 
 
 @pytest.mark.parametrize("typ", sorted(TRUTH_CASES))
@@ -257,8 +314,12 @@ def test_truth_types(tmp_path, typ):
     t_ns, omega = _samples(20)
     q = _rand_quats(20)
     definition, make = TRUTH_CASES[typ]
-    p = write_imu_bag(tmp_path / "t.mcap", t_ns, omega,
-                      extra=lambda w: _write_truth(w, "/truth", typ, definition, t_ns, q, make))
+    p = write_imu_bag(
+        tmp_path / "t.mcap",
+        t_ns,
+        omega,
+        extra=lambda w: _write_truth(w, "/truth", typ, definition, t_ns, q, make),
+    )
     log = read_log(p)
     assert log.truth.topic == "/truth" and log.truth.type == typ
     np.testing.assert_array_equal(log.truth.q_w_b, q)
@@ -313,9 +374,16 @@ def test_no_imu_channel_lists_channels(tmp_path):
     with open(p, "wb") as f:
         w = Ros2Writer(f)
         schema = w.register_msgdef("sensor_msgs/msg/MagneticField", MAG_DEF)
-        w.write_message("/imu/mag", schema, {"header": _h(T0_NS), "magnetic_field": {
-            "x": 1e-5, "y": 0.0, "z": 0.0}, "magnetic_field_covariance": [0.0] * 9},
-            log_time=T0_NS)  # fmt: skip
+        w.write_message(
+            "/imu/mag",
+            schema,
+            {
+                "header": _h(T0_NS),
+                "magnetic_field": {"x": 1e-5, "y": 0.0, "z": 0.0},
+                "magnetic_field_covariance": [0.0] * 9,
+            },
+            log_time=T0_NS,
+        )
         w.finish()
     with pytest.raises(LogError, match=r"Expected an IMU channel.*/imu/mag \(sensor_msgs/msg/Magn"):
         read_log(p)
@@ -389,8 +457,13 @@ def _chunk_messages(path: Path) -> list[list[tuple[str, int]]]:
             if isinstance(rec, Chunk):
                 inner = breakup_chunk(rec)
                 topics.update({r.id: r.topic for r in inner if isinstance(r, Channel)})
-                chunks.append([(topics[r.channel_id], r.log_time) for r in inner
-                               if hasattr(r, "channel_id") and hasattr(r, "log_time")])
+                chunks.append(
+                    [
+                        (topics[r.channel_id], r.log_time)
+                        for r in inner
+                        if hasattr(r, "channel_id") and hasattr(r, "log_time")
+                    ]
+                )
     return chunks
 
 
@@ -406,8 +479,11 @@ def test_corrupt_chunk_costs_only_itself(tmp_path):
     data[mid : mid + 64] = bytes(range(64))
     bad = tmp_path / "bad.mcap"
     bad.write_bytes(bytes(data))
-    with pytest.warns(ImuDcmWarning, match=rf"truncated or corrupt: .*file offset "
-                      rf"{chunk.chunk_start_offset}\b"):  # fmt: skip
+    with pytest.warns(
+        ImuDcmWarning,
+        match=rf"truncated or corrupt: .*file offset "
+        rf"{chunk.chunk_start_offset}\b",
+    ):
         log = read_log(bad)
     full = read_log(SHIPPED)
     # Oracle: the mcap library's own chunk walker lists the messages of the 16th chunk.
@@ -498,16 +574,18 @@ def test_live_batch_decode_matches_the_file_reader():
     kind = classify_schema(schema.name, schema.encoding, schema.data.decode())
     assert kind == ("imu", "")
     payloads[7] = payloads[7][:20]
-    dec = decode_cdr_batch(kind, schema.name, schema.encoding, schema.data.decode(), payloads,
-                           "/imu/data")  # fmt: skip
+    dec = decode_cdr_batch(
+        kind, schema.name, schema.encoding, schema.data.decode(), payloads, "/imu/data"
+    )
     assert not dec.good[7] and dec.good.sum() == 299
     np.testing.assert_array_equal(dec.values, np.delete(full.imu.omega_b[:300], 7, axis=0))
     np.testing.assert_array_equal(dec.t_ns, np.delete(full.imu.t_ns[:300], 7))
     schema, payloads = by_topic["/ground_truth/orientation"]
     kind = classify_schema(schema.name, schema.encoding, schema.data.decode())
     assert kind == ("truth", "quaternion")
-    dec = decode_cdr_batch(kind, schema.name, schema.encoding, schema.data.decode(), payloads,
-                           "/truth")  # fmt: skip
+    dec = decode_cdr_batch(
+        kind, schema.name, schema.encoding, schema.data.decode(), payloads, "/truth"
+    )
     np.testing.assert_array_equal(dec.values, full.truth.q_w_b[:300])
     schema, _ = by_topic["/imu/mag"]
     assert classify_schema(schema.name, schema.encoding, schema.data.decode()) is None
@@ -522,8 +600,15 @@ def test_vector3stamped_is_the_gyro_only_when_its_name_says_so_or_it_is_named(tm
             w = Ros2Writer(f)
             schema = w.register_msgdef("geometry_msgs/msg/Vector3Stamped", vec_def)
             for i, t in enumerate(t_ns):
-                w.write_message(topic, schema, {"header": _h(int(t)), "vector": dict(
-                    zip("xyz", omega[i].tolist()))}, log_time=int(t))  # fmt: skip
+                w.write_message(
+                    topic,
+                    schema,
+                    {
+                        "header": _h(int(t)),
+                        "vector": dict(zip("xyz", omega[i].tolist(), strict=False)),
+                    },
+                    log_time=int(t),
+                )
             w.finish()
         if auto:
             np.testing.assert_array_equal(read_log(p).imu.omega_b, omega)

@@ -30,8 +30,9 @@ def msgs():
         reader = make_reader(f)
         start = reader.get_summary().statistics.message_start_time
         for schema, channel, m in reader.iter_messages(ending_before=start + SLICE_NS // 2):
-            out.append((channel.topic, schema.name, schema.data, m.log_time, m.publish_time,
-                        m.data))  # fmt: skip
+            out.append(
+                (channel.topic, schema.name, schema.data, m.log_time, m.publish_time, m.data)
+            )
     return out
 
 
@@ -46,8 +47,13 @@ def chunk_messages(path: Path) -> list[list[str]]:
             if isinstance(rec, Chunk):
                 inner = breakup_chunk(rec)
                 topics.update({r.id: r.topic for r in inner if isinstance(r, Channel)})
-                chunks.append([topics[r.channel_id] for r in inner if hasattr(r, "channel_id")
-                               and hasattr(r, "log_time")])  # fmt: skip
+                chunks.append(
+                    [
+                        topics[r.channel_id]
+                        for r in inner
+                        if hasattr(r, "channel_id") and hasattr(r, "log_time")
+                    ]
+                )
     return chunks
 
 
@@ -104,9 +110,9 @@ def test_flipped_byte_in_chunk_k_with_crc_costs_only_that_chunk(tmp_path, msgs):
 
 @pytest.mark.parametrize("field", ["length", "channel"])
 def test_flipped_byte_in_a_message_record_costs_only_that_message(tmp_path, msgs, field):
-    # No CRC (rosbag2's default), uncompressed: a flipped byte in a message record's
-    # length or channel id (the first IMU message of chunk K). The message indexes locate every other record: only
-    # that message is lost, and the warning names the chunk's file offset.
+    # No CRC (rosbag2's default), uncompressed: a flipped byte in a message record's length or
+    # channel id (the first IMU message of chunk K). The message indexes locate every other record:
+    # only that message is lost, and the warning names the chunk's file offset.
     p, base, per_chunk = make(tmp_path, msgs, crc=False, compression=CompressionType.NONE)
     ci = chunk_index(p)[K]
     raw = p.read_bytes()
@@ -154,7 +160,9 @@ def test_truncated_file_keeps_every_complete_chunk(tmp_path, msgs):
     ci = chunk_index(p)[K]
     cut = tmp_path / "cut.mcap"
     cut.write_bytes(p.read_bytes()[: ci.chunk_start_offset + ci.chunk_length // 2])
-    with pytest.warns(ImuDcmWarning, match=rf"ends inside a record at byte {ci.chunk_start_offset}"):
+    with pytest.warns(
+        ImuDcmWarning, match=rf"ends inside a record at byte {ci.chunk_start_offset}"
+    ):
         log = read_log(cut)
     n = sum(c.count(IMU) for c in per_chunk[:K])
     np.testing.assert_array_equal(log.imu.omega_b, base.imu.omega_b[:n])
@@ -193,8 +201,11 @@ def test_a_chunk_declaring_gigabytes_from_a_small_file_is_refused(tmp_path):
     data = _zeros_zstd(2_200 << 20)
     assert len(data) < 200_000
     p = _bomb_file(tmp_path, "zstd", 2_200 << 20, data)
-    with pytest.raises(LogError, match=r"got none readable .*declares 2306867200 bytes "
-                       r"uncompressed from \d+ \(refused"):
+    with pytest.raises(
+        LogError,
+        match=r"got none readable .*declares 2306867200 bytes "
+        r"uncompressed from \d+ \(refused",
+    ):
         read_log(p)
 
 
@@ -215,8 +226,9 @@ def test_zstd_frame_larger_than_the_chunk_declares_is_refused(tmp_path):
 
 
 # ------------------------------------------------------------ hostile schemas, JSON, YAML
-def _one_channel(tmp_path: Path, name: str, enc: str, text: bytes, payloads: list[bytes],
-                 msg_enc: str = "cdr") -> Path:  # fmt: skip
+def _one_channel(
+    tmp_path: Path, name: str, enc: str, text: bytes, payloads: list[bytes], msg_enc: str = "cdr"
+) -> Path:
     from mcap.writer import Writer
 
     p = tmp_path / "h.mcap"
@@ -231,8 +243,14 @@ def _one_channel(tmp_path: Path, name: str, enc: str, text: bytes, payloads: lis
     return p
 
 
-@pytest.mark.parametrize("text", [b"\xff\xfe not utf-8 \x80", b"float64 x y z\n!!! ???",
-                                  b"std_msgs/Header header\nfloat64[9 orientation_covariance"])
+@pytest.mark.parametrize(
+    "text",
+    [
+        b"\xff\xfe not utf-8 \x80",
+        b"float64 x y z\n!!! ???",
+        b"std_msgs/Header header\nfloat64[9 orientation_covariance",
+    ],
+)
 def test_corrupt_imu_schema_is_one_line_error(tmp_path, text):
     p = _one_channel(tmp_path, "sensor_msgs/msg/Imu", "ros2msg", text, [b"\x00\x01\x00\x00"])
     with pytest.raises(LogError, match=r"^/imu/data: |Expected a readable ros2msg definition"):
@@ -248,8 +266,11 @@ def test_self_containing_and_very_deep_types_are_refused(tmp_path):
     p = _one_channel(tmp_path, "acme_msgs/msg/Rec", "ros2msg", rec.encode(), [b"\x00\x01\0\0"])
     with pytest.raises(LogError):
         read_log(p)
-    deep = "acme_msgs/T1 t\n" + "".join(f"{sep}MSG: acme_msgs/T{i}\nacme_msgs/T{i + 1} t\n"
-                                        for i in range(1, 3000)) + f"{sep}MSG: acme_msgs/T3000\nint8 x\n"
+    deep = (
+        "acme_msgs/T1 t\n"
+        + "".join(f"{sep}MSG: acme_msgs/T{i}\nacme_msgs/T{i + 1} t\n" for i in range(1, 3000))
+        + f"{sep}MSG: acme_msgs/T3000\nint8 x\n"
+    )
     p = _one_channel(tmp_path, "sensor_msgs/msg/Imu", "ros2msg", deep.encode(), [b"\0\1\0\0"])
     with pytest.raises(LogError):
         read_log(p)
@@ -261,21 +282,28 @@ def test_empty_covariance_sequence_keeps_the_gyro(tmp_path):
     from rosbags.typesys import Stores, get_types_from_msg, get_typestore
     from test_logio import HEADER, QUAT, VEC3
 
-    fields = ("std_msgs/Header header\ngeometry_msgs/Quaternion orientation\n"
-              "float64[] orientation_covariance\ngeometry_msgs/Vector3 angular_velocity\n")
+    fields = (
+        "std_msgs/Header header\ngeometry_msgs/Quaternion orientation\n"
+        "float64[] orientation_covariance\ngeometry_msgs/Vector3 angular_velocity\n"
+    )
     text = fields + HEADER + QUAT + VEC3
     store = get_typestore(Stores.EMPTY)
     types = get_types_from_msg(text, "sensor_msgs/msg/Imu")
     types["builtin_interfaces/msg/Time"] = get_typestore(Stores.ROS2_HUMBLE).fielddefs[
-        "builtin_interfaces/msg/Time"]
+        "builtin_interfaces/msg/Time"
+    ]
     store.register(types)
     T = store.types
     omega = np.random.default_rng(3).normal(size=(5, 3))
     payloads = []
     for i, w in enumerate(omega):
         hdr = T["std_msgs/msg/Header"](T["builtin_interfaces/msg/Time"](1, i), "imu")
-        m = T["sensor_msgs/msg/Imu"](hdr, T["geometry_msgs/msg/Quaternion"](0.0, 0.0, 0.0, 1.0),
-                                   np.zeros(0), T["geometry_msgs/msg/Vector3"](*w))
+        m = T["sensor_msgs/msg/Imu"](
+            hdr,
+            T["geometry_msgs/msg/Quaternion"](0.0, 0.0, 0.0, 1.0),
+            np.zeros(0),
+            T["geometry_msgs/msg/Vector3"](*w),
+        )
         payloads.append(bytes(store.serialize_cdr(m, "sensor_msgs/msg/Imu")))
     p = _one_channel(tmp_path, "sensor_msgs/msg/Imu", "ros2msg", text.encode(), payloads)
     log = read_log(p, imu_topic="/imu/data")
@@ -284,10 +312,15 @@ def test_empty_covariance_sequence_keeps_the_gyro(tmp_path):
 
 @pytest.mark.parametrize("stamp", ["1e300", str(2**70), "Infinity", "NaN"])
 def test_json_stamps_beyond_int64_drop_that_message(tmp_path, stamp):
-    good = [b'{"header": {"stamp": {"sec": %d, "nanosec": 0}}, "angular_velocity": '
-            b'{"x": 1.0, "y": 2.0, "z": 3.0}}' % i for i in range(1, 4)]
-    bad = ('{"header": {"stamp": {"sec": ' + stamp + ', "nanosec": 0}}, "angular_velocity": '
-           '{"x": 1.0, "y": 2.0, "z": 3.0}}').encode()
+    good = [
+        b'{"header": {"stamp": {"sec": %d, "nanosec": 0}}, "angular_velocity": '
+        b'{"x": 1.0, "y": 2.0, "z": 3.0}}' % i
+        for i in range(1, 4)
+    ]
+    bad = (
+        '{"header": {"stamp": {"sec": ' + stamp + ', "nanosec": 0}}, "angular_velocity": '
+        '{"x": 1.0, "y": 2.0, "z": 3.0}}'
+    ).encode()
     p = _one_channel(tmp_path, "Imu", "jsonschema", b"{}", good + [bad], msg_enc="json")
     with pytest.warns(ImuDcmWarning, match="dropped 1 messages"):
         log = read_log(p)
@@ -296,23 +329,37 @@ def test_json_stamps_beyond_int64_drop_that_message(tmp_path, stamp):
 
 def test_json_nested_100000_deep_is_dropped(tmp_path):
     good = b'{"angular_velocity": {"x": 1.0, "y": 2.0, "z": 3.0}}'
-    deep = b'{"angular_velocity": {"x": 1.0, "y": 2.0, "z": 3.0}, "a": ' + b"[" * 100_000 + \
-        b"]" * 100_000 + b"}"
+    deep = (
+        b'{"angular_velocity": {"x": 1.0, "y": 2.0, "z": 3.0}, "a": '
+        + b"[" * 100_000
+        + b"]" * 100_000
+        + b"}"
+    )
     p = _one_channel(tmp_path, "Imu", "jsonschema", b"{}", [good, deep, good], msg_enc="json")
     with pytest.warns(ImuDcmWarning, match="dropped 1 messages"):
         assert len(read_log(p).imu.t_ns) == 2
 
 
-@pytest.mark.parametrize("text, match", [
-    (b"- just\n- a list\n", "Expected a rosbag2_bagfile_information mapping"),
-    (b"rosbag2_bagfile_information: \xff\xfe\n", "Expected a UTF-8 metadata.yaml"),
-    (b"rosbag2_bagfile_information: [unclosed\n", "Expected a YAML metadata.yaml"),
-    ((b"a: &a [x, x, x, x, x, x, x, x, x]\nb: &b [*a, *a, *a, *a, *a, *a, *a, *a, *a]\n"
-      b"c: &c [*b, *b, *b, *b, *b, *b, *b, *b, *b]\nrosbag2_bagfile_information: [*c, *c, *c]\n"),
-     "without YAML aliases"),
-    (b"rosbag2_bagfile_information:\n  storage_identifier: mcap\n  relative_file_paths: 3\n",
-     "Expected relative_file_paths"),
-])  # fmt: skip
+@pytest.mark.parametrize(
+    "text, match",
+    [
+        (b"- just\n- a list\n", "Expected a rosbag2_bagfile_information mapping"),
+        (b"rosbag2_bagfile_information: \xff\xfe\n", "Expected a UTF-8 metadata.yaml"),
+        (b"rosbag2_bagfile_information: [unclosed\n", "Expected a YAML metadata.yaml"),
+        (
+            (
+                b"a: &a [x, x, x, x, x, x, x, x, x]\nb: &b [*a, *a, *a, *a, *a, *a, *a, *a, *a]\n"
+                b"c: &c [*b, *b, *b, *b, *b, *b, *b, *b, *b]\n"
+                b"rosbag2_bagfile_information: [*c, *c, *c]\n"
+            ),
+            "without YAML aliases",
+        ),
+        (
+            b"rosbag2_bagfile_information:\n  storage_identifier: mcap\n  relative_file_paths: 3\n",
+            "Expected relative_file_paths",
+        ),
+    ],
+)
 def test_bad_metadata_yaml_is_one_line_error(tmp_path, text, match):
     bag = tmp_path / "bag"
     bag.mkdir()
@@ -346,8 +393,10 @@ def _ros1_chunks(path: Path) -> list[tuple[int, int]]:
 
     with Reader(path) as r:
         imu = next(c.id for c in r.connections if c.topic == IMU)
-        return [(ci.pos, ci.connection_counts.get(imu, 0))
-                for ci in sorted(r.chunk_infos, key=lambda c: c.pos)]  # fmt: skip
+        return [
+            (ci.pos, ci.connection_counts.get(imu, 0))
+            for ci in sorted(r.chunk_infos, key=lambda c: c.pos)
+        ]
 
 
 @pytest.mark.parametrize("compression, lie", [("bz2", "flip"), ("lz4", "size")])

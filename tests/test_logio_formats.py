@@ -39,14 +39,24 @@ def msgs():
         reader = make_reader(f)
         start = reader.get_summary().statistics.message_start_time
         for schema, channel, m in reader.iter_messages(ending_before=start + SLICE_NS):
-            out.append((channel.topic, schema.name, schema.data, m.log_time, m.publish_time,
-                        m.data))  # fmt: skip
+            out.append(
+                (channel.topic, schema.name, schema.data, m.log_time, m.publish_time, m.data)
+            )
     return out
 
 
-def write_mcap(path: Path, msgs, *, schema_of=None, chunk_size: int = 64 * 1024,
-               channel_of=None, profile: str = "ros2", encoding: str = "cdr",
-               compression=None, crc: bool = False) -> Path:  # fmt: skip
+def write_mcap(
+    path: Path,
+    msgs,
+    *,
+    schema_of=None,
+    chunk_size: int = 64 * 1024,
+    channel_of=None,
+    profile: str = "ros2",
+    encoding: str = "cdr",
+    compression=None,
+    crc: bool = False,
+) -> Path:
     """Raw copy of ``msgs`` into an MCAP; ``schema_of(name, text) -> (name, enc, data)``."""
     from mcap.writer import CompressionType
 
@@ -59,8 +69,9 @@ def write_mcap(path: Path, msgs, *, schema_of=None, chunk_size: int = 64 * 1024,
         schemas, channels = {}, {}
         for i, (topic, sname, sdata, lt, pt, data) in enumerate(msgs):
             if sname not in schemas:
-                name, enc, text = schema_of(sname, sdata) if schema_of else (sname, "ros2msg",
-                                                                               sdata)
+                name, enc, text = (
+                    schema_of(sname, sdata) if schema_of else (sname, "ros2msg", sdata)
+                )
                 schemas[sname] = w.register_schema(name, enc, text)
             key = channel_of(topic, i) if channel_of else topic
             if key not in channels:
@@ -72,9 +83,14 @@ def write_mcap(path: Path, msgs, *, schema_of=None, chunk_size: int = 64 * 1024,
 
 
 def write_metadata(folder: Path, files: list[str], storage: str = "mcap", mode: str = "") -> None:
-    info = {"version": 5, "storage_identifier": storage, "relative_file_paths": files,
-            "compression_format": "zstd" if mode else "", "compression_mode": mode,
-            "custom_data": {"made.by": "test_logio_formats"}}  # fmt: skip
+    info = {
+        "version": 5,
+        "storage_identifier": storage,
+        "relative_file_paths": files,
+        "compression_format": "zstd" if mode else "",
+        "compression_mode": mode,
+        "custom_data": {"made.by": "test_logio_formats"},
+    }
     (folder / "metadata.yaml").write_text(yaml.safe_dump({"rosbag2_bagfile_information": info}))
 
 
@@ -177,8 +193,9 @@ def test_ros1_profile_mcap(msgs, base, tmp_path):
         short = name.replace("/msg/", "/")
         return short, "ros1msg", ros1.generate_msgdef(name)[0].encode()
 
-    p = write_mcap(tmp_path / "r1.mcap", ros1_msgs, schema_of=schema, profile="ros1",
-                   encoding="ros1")  # fmt: skip
+    p = write_mcap(
+        tmp_path / "r1.mcap", ros1_msgs, schema_of=schema, profile="ros1", encoding="ros1"
+    )
     log = read_log(p)
     assert log.container == "ros1 mcap"
     assert_same(log, base)
@@ -242,11 +259,14 @@ IDL = {
     geometry_msgs::msg::Quaternion quaternion; }; }; };""",
 }
 DEPS = {
-    "sensor_msgs/msg/Imu": ["std_msgs/msg/Header", "geometry_msgs/msg/Quaternion",
-                            "geometry_msgs/msg/Vector3"],
+    "sensor_msgs/msg/Imu": [
+        "std_msgs/msg/Header",
+        "geometry_msgs/msg/Quaternion",
+        "geometry_msgs/msg/Vector3",
+    ],
     "sensor_msgs/msg/MagneticField": ["std_msgs/msg/Header", "geometry_msgs/msg/Vector3"],
     "geometry_msgs/msg/QuaternionStamped": ["std_msgs/msg/Header", "geometry_msgs/msg/Quaternion"],
-}  # fmt: skip
+}
 
 
 def test_ros2idl_schemas(msgs, base, tmp_path):
@@ -254,8 +274,11 @@ def test_ros2idl_schemas(msgs, base, tmp_path):
         names = [name, "builtin_interfaces/msg/Time", *DEPS[name]]
         parts = [IDL[n] for n in names]  # the root first, as rosbag2 writes it
         sep = "=" * 80 + "\n"
-        return name, "ros2idl", "".join(f"{sep}IDL: {n}\n{t}\n"
-                                        for n, t in zip(names, parts)).encode()  # fmt: skip
+        return (
+            name,
+            "ros2idl",
+            "".join(f"{sep}IDL: {n}\n{t}\n" for n, t in zip(names, parts, strict=False)).encode(),
+        )
 
     assert_same(read_log(write_mcap(tmp_path / "idl.mcap", msgs, schema_of=schema)), base)
 
@@ -294,20 +317,29 @@ def test_tf_truth_and_truth_frame(msgs, base, tmp_path):
 
     def tf(store, m):
         moving = types["geometry_msgs/msg/TransformStamped"](
-            m.header, "imu", types["geometry_msgs/msg/Transform"](zero, m.quaternion))
+            m.header, "imu", types["geometry_msgs/msg/Transform"](zero, m.quaternion)
+        )
         return types["tf2_msgs/msg/TFMessage"]([moving])
 
     got = _restamp(msgs, TRUTH, "/tf", "tf2_msgs/msg/TFMessage", tf)
     # a static transform world -> map on /tf_static, and a second moving child on /tf
     hdr = types["std_msgs/msg/Header"](types["builtin_interfaces/msg/Time"](0, 0), "world")
-    static = types["tf2_msgs/msg/TFMessage"]([types["geometry_msgs/msg/TransformStamped"](
-        hdr, "map", types["geometry_msgs/msg/Transform"](zero, still))])  # fmt: skip
+    static = types["tf2_msgs/msg/TFMessage"](
+        [
+            types["geometry_msgs/msg/TransformStamped"](
+                hdr, "map", types["geometry_msgs/msg/Transform"](zero, still)
+            )
+        ]
+    )
     text = store.generate_msgdef("tf2_msgs/msg/TFMessage", ros_version=2)[0].encode()
     raw = bytes(store.serialize_cdr(static, "tf2_msgs/msg/TFMessage"))
     got.insert(0, ("/tf_static", "tf2_msgs/msg/TFMessage", text, got[0][3], got[0][3], raw))
     log = read_log(write_mcap(tmp_path / "tf.mcap", got))
-    assert (log.truth.topic, log.truth.child_frame_id, log.truth.auto) == ("/tf//tf_static",
-                                                                          "imu", True)
+    assert (log.truth.topic, log.truth.child_frame_id, log.truth.auto) == (
+        "/tf//tf_static",
+        "imu",
+        True,
+    )
     assert log.truth.frame_id == "world"
     assert_same(log, base)
     asked = read_log(tmp_path / "tf.mcap", truth_frame="map").truth
@@ -316,8 +348,11 @@ def test_tf_truth_and_truth_frame(msgs, base, tmp_path):
 
 def test_two_channels_on_one_topic_are_merged(msgs, base, tmp_path):
     # /imu/data on two channel ids, alternating: every sample, in file order.
-    p = write_mcap(tmp_path / "two.mcap", msgs,
-                   channel_of=lambda topic, i: (topic, i % 2 if topic == IMU else 0))
+    p = write_mcap(
+        tmp_path / "two.mcap",
+        msgs,
+        channel_of=lambda topic, i: (topic, i % 2 if topic == IMU else 0),
+    )
     log = read_log(p)
     assert [c.topic for c in log.channels].count(IMU) == 2
     assert_same(log, base)
@@ -384,8 +419,13 @@ def _peak_kib(path: Path) -> tuple[int, int]:
     import sys
 
     env = dict(os.environ, PYTHONPATH=str(Path(__file__).resolve().parents[1]))
-    out = subprocess.run([sys.executable, "-c", _PEAK, str(path)], capture_output=True,
-                         text=True, env=env, check=True).stdout.split()  # fmt: skip
+    out = subprocess.run(
+        [sys.executable, "-c", _PEAK, str(path)],
+        capture_output=True,
+        text=True,
+        env=env,
+        check=True,
+    ).stdout.split()
     return int(out[0]), int(out[1])
 
 
@@ -395,13 +435,24 @@ def test_a_camera_topic_does_not_raise_peak_memory(tmp_path):
     # the same 768 KiB chunks as the IMU, as rosbag2 records): peak RSS (VmHWM) rises <= 20 %.
     with open(_shipped_mcap(), "rb") as f:
         reader = make_reader(f)
-        msgs = [(c.topic, s.name, s.data, m.log_time, m.publish_time, m.data)
-                for s, c, m in reader.iter_messages()]  # fmt: skip
+        msgs = [
+            (c.topic, s.name, s.data, m.log_time, m.publish_time, m.data)
+            for s, c, m in reader.iter_messages()
+        ]
     plain = write_mcap(tmp_path / "plain.mcap", msgs, chunk_size=768 * 1024)
     rng = np.random.default_rng(0)
     t0, t1 = msgs[0][3], msgs[-1][3]
-    cam = [("/camera/image_raw", "sensor_msgs/msg/Image", b"uint8[] data\n", int(t), int(t),
-            b"\x00\x01\x00\x00" + rng.bytes(48_000)) for t in range(t0, t1, 100_000_000)]
+    cam = [
+        (
+            "/camera/image_raw",
+            "sensor_msgs/msg/Image",
+            b"uint8[] data\n",
+            int(t),
+            int(t),
+            b"\x00\x01\x00\x00" + rng.bytes(48_000),
+        )
+        for t in range(t0, t1, 100_000_000)
+    ]
     mixed = sorted(msgs + cam, key=lambda m: m[3])
     with_cam = write_mcap(tmp_path / "cam.mcap", mixed, chunk_size=768 * 1024)
     del msgs, mixed, cam
@@ -428,8 +479,12 @@ def test_file_order_and_both_time_bases_are_kept(msgs, base, tmp_path):
     np.testing.assert_array_equal(log.imu.t_ns, base.imu.t_ns[perm])
     np.testing.assert_array_equal(log.imu.log_t_ns, base.imu.log_t_ns[perm])
     np.testing.assert_array_equal(log.imu.omega_b, base.imu.omega_b[perm])
-    zeroed = [(t, s, sd, lt, pt, d[:4] + bytes(8) + d[12:]) if t in (IMU, TRUTH) else
-              (t, s, sd, lt, pt, d) for t, s, sd, lt, pt, d in msgs]  # fmt: skip
+    zeroed = [
+        (t, s, sd, lt, pt, d[:4] + bytes(8) + d[12:])
+        if t in (IMU, TRUTH)
+        else (t, s, sd, lt, pt, d)
+        for t, s, sd, lt, pt, d in msgs
+    ]
     log = read_log(write_mcap(tmp_path / "zero.mcap", zeroed))
     assert not log.imu.t_ns.any() and not log.truth.t_ns.any()
     np.testing.assert_array_equal(log.imu.log_t_ns, base.imu.log_t_ns)

@@ -23,9 +23,11 @@ unit = st.floats(-1.0, 1.0, allow_nan=False)
 
 def directions(shape):
     """Non-zero direction vectors of a leading shape, normalised."""
-    return arrays(float, shape + (3,), elements=unit).filter(
-        lambda v: np.all(np.linalg.norm(v, axis=-1) > 1e-3)).map(
-        lambda v: v / np.linalg.norm(v, axis=-1, keepdims=True))
+    return (
+        arrays(float, shape + (3,), elements=unit)
+        .filter(lambda v: np.all(np.linalg.norm(v, axis=-1) > 1e-3))
+        .map(lambda v: v / np.linalg.norm(v, axis=-1, keepdims=True))
+    )
 
 
 @st.composite
@@ -104,10 +106,14 @@ def test_quat_multiply_is_scipy_composition(phi_a, phi_b):
     qa = exp_quat(phi_a)
     qb = np.broadcast_to(exp_quat(phi_b).reshape(-1, 4)[0], qa.shape)  # a's shape, any b
     got = quat_multiply(qa, qb)
-    ref = (Rotation.from_quat(qa.reshape(-1, 4)) * Rotation.from_quat(qb.reshape(-1, 4)))
+    ref = Rotation.from_quat(qa.reshape(-1, 4)) * Rotation.from_quat(qb.reshape(-1, 4))
     assert np.all(quat_angle_rad(got.reshape(-1, 4), ref.as_quat()) <= 1e-14)
-    qk = np.array([kernel.quat_mul(tuple(a), tuple(b))
-                   for a, b in zip(qa.reshape(-1, 4).tolist(), qb.reshape(-1, 4).tolist())])
+    qk = np.array(
+        [
+            kernel.quat_mul(tuple(a), tuple(b))
+            for a, b in zip(qa.reshape(-1, 4).tolist(), qb.reshape(-1, 4).tolist(), strict=False)
+        ]
+    )
     assert np.all(quat_angle_rad(qk, ref.as_quat()) <= 1e-14)
 
 
@@ -139,6 +145,6 @@ def test_trapezoid_record_splits_at_any_sample(n, seed):
     w = rng.normal(size=(n, 3))
     k = int(rng.integers(1, n - 1))
     whole = integrate(w, t, [0, 0, 0, 1], "trapezoid").as_quat()
-    first = integrate(w[:k + 1], t[:k + 1], [0, 0, 0, 1], "trapezoid").as_quat()
+    first = integrate(w[: k + 1], t[: k + 1], [0, 0, 0, 1], "trapezoid").as_quat()
     second = integrate(w[k:], t[k:], first[-1], "trapezoid").as_quat()
     assert np.all(quat_angle_rad(whole[k:], second) <= 2 * n * EPS)

@@ -44,8 +44,14 @@ def test_broad_movement_rms_with_bias_auto(broad_dir):
         none = replay(broad_dir / trial, bias="none")
         # every bag starts with seconds of rest before the truth appears: rest is found there
         assert auto.bias.segments and auto.bias.segments[0].start_s == 0.0, trial
-        rows.append((trial, len(auto.bias.segments), movement_rms_deg(auto, broad_dir / trial),
-                     movement_rms_deg(none, broad_dir / trial)))  # fmt: skip
+        rows.append(
+            (
+                trial,
+                len(auto.bias.segments),
+                movement_rms_deg(auto, broad_dir / trial),
+                movement_rms_deg(none, broad_dir / trial),
+            )
+        )
     mean_auto = float(np.mean([r[2] for r in rows]))
     mean_none = float(np.mean([r[3] for r in rows]))
     print("\n| trial | rest segments | RMS, --bias auto | RMS, --bias none |")

@@ -67,8 +67,10 @@ def test_update_many_equals_batch(method, chunk):
     with quiet(method):
         batch = integrate(omega, t, Q0, method).as_quat()
         integ = DcmIntegrator(Q0, method)
-    rows = [integ.update_many(omega[i:i + chunk], t[i:i + chunk]).as_quat()
-            for i in range(0, n, chunk)]
+    rows = [
+        integ.update_many(omega[i : i + chunk], t[i : i + chunk]).as_quat()
+        for i in range(0, n, chunk)
+    ]
     got = np.vstack(rows)
     idx = [lagged_index(k, method) for k in range(n)]
     assert got.shape == (n, 4)
@@ -174,5 +176,5 @@ def test_readme_usage_example_runs(repo_root, capsys):
     text = (repo_root / "README.md").read_text(encoding="utf-8")
     section = text.split("<!-- section: usage -->", 1)[1].split("<!-- end: usage -->", 1)[0]
     code = section.split("```python", 1)[1].split("```", 1)[0]
-    exec(compile(code, "README usage", "exec"), {})  # noqa: S102 (our own README)
+    exec(compile(code, "README usage", "exec"), {})
     assert capsys.readouterr().out.count("0.7071 0.7071]") == 2

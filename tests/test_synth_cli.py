@@ -32,8 +32,9 @@ def _read(folder):
     (mcap_file,) = folder.glob("*.mcap")
     out: dict[str, tuple[list, list]] = {t: ([], []) for t in TOPICS}
     with open(mcap_file, "rb") as f:
-        for _, ch, _, m in make_reader(f, decoder_factories=[DecoderFactory()]) \
-                .iter_decoded_messages():
+        for _, ch, _, m in make_reader(
+            f, decoder_factories=[DecoderFactory()]
+        ).iter_decoded_messages():
             st = m.header.stamp.sec * 1_000_000_000 + m.header.stamp.nanosec
             if ch.topic == "/imu/data":
                 v = m.angular_velocity
@@ -58,8 +59,17 @@ def _custom_data(folder) -> dict[str, str]:
 
 def test_heavy_top_log_holds_gyro_truth_and_metadata(tmp_path, capsys):
     out = tmp_path / "top"
-    argv = ["heavy-top", "--motion", "wavy", "--rate", "500", "--duration", "0.5",
-            "--out", str(out)]
+    argv = [
+        "heavy-top",
+        "--motion",
+        "wavy",
+        "--rate",
+        "500",
+        "--duration",
+        "0.5",
+        "--out",
+        str(out),
+    ]
     assert main(argv) == 0
     assert capsys.readouterr().out.strip() == str(out)
     got = _read(out)
@@ -86,18 +96,35 @@ def test_log_is_readable_by_rosbags(tmp_path):
     assert main(["coning", "--rate", "200", "--duration", "0.2", "--out", str(out)]) == 0
     with AnyReader([out], default_typestore=get_typestore(Stores.ROS2_HUMBLE)) as reader:
         counts = {c.topic: c.msgcount for c in reader.connections}
-        imu = [reader.deserialize(raw, c.msgtype) for c, _, raw in reader.messages()
-               if c.topic == "/imu/data"]
-    assert counts == {t: 41 for t in TOPICS}
+        imu = [
+            reader.deserialize(raw, c.msgtype)
+            for c, _, raw in reader.messages()
+            if c.topic == "/imu/data"
+        ]
+    assert counts == dict.fromkeys(TOPICS, 41)
     assert imu[0].orientation_covariance[0] == -1.0
     assert imu[0].linear_acceleration_covariance[0] == -1.0
     assert imu[0].header.frame_id == "imu"
 
 
 def test_same_seed_same_bytes_other_seed_other_bytes(tmp_path):
-    common = ["free-body", "--case", "intermediate", "--rate", "200", "--duration", "1",
-              "--gyro-noise-density", "1e-3", "--gyro-bias-walk", "1e-4",
-              "--stamp-jitter", "1e-4", "--gyro-quantization", "1e-4"]
+    common = [
+        "free-body",
+        "--case",
+        "intermediate",
+        "--rate",
+        "200",
+        "--duration",
+        "1",
+        "--gyro-noise-density",
+        "1e-3",
+        "--gyro-bias-walk",
+        "1e-4",
+        "--stamp-jitter",
+        "1e-4",
+        "--gyro-quantization",
+        "1e-4",
+    ]
 
     def digest(name, seed):
         out = tmp_path / name
@@ -115,8 +142,22 @@ def test_same_seed_same_bytes_other_seed_other_bytes(tmp_path):
 
 def test_delta_angle_log_writes_mean_rates_and_initial_truth(tmp_path):
     out = tmp_path / "da"
-    assert main(["coning", "--rate", "100", "--duration", "1", "--gyro-output", "delta-angle",
-                 "--out", str(out)]) == 0
+    assert (
+        main(
+            [
+                "coning",
+                "--rate",
+                "100",
+                "--duration",
+                "1",
+                "--gyro-output",
+                "delta-angle",
+                "--out",
+                str(out),
+            ]
+        )
+        == 0
+    )
     got = _read(out)
     traj = data_synth.simulate("coning", duration_s=1.0)
     t = np.arange(101) / 100.0
@@ -129,26 +170,50 @@ def test_delta_angle_log_writes_mean_rates_and_initial_truth(tmp_path):
 
 def test_reference_scheme_log_holds_the_scheme_output(tmp_path):
     out = tmp_path / "ref"
-    assert main(["heavy-top", "--scheme", "reference", "--rate", "1000", "--duration", "0.2",
-                 "--out", str(out)]) == 0
+    assert (
+        main(
+            [
+                "heavy-top",
+                "--scheme",
+                "reference",
+                "--rate",
+                "1000",
+                "--duration",
+                "0.2",
+                "--out",
+                str(out),
+            ]
+        )
+        == 0
+    )
     got = _read(out)
     run = reference_top(0.2, 1000.0)
     assert np.array_equal(got["/imu/data"][1], run.omega_b)
     assert _custom_data(out)["data_synth.scheme"] == "reference"
 
 
-@pytest.mark.parametrize("argv, needle", [
-    (["heavy-top", "--rate", "-5", "--duration", "1", "--out", "x"], "--rate"),
-    (["heavy-top", "--rate", "abc", "--duration", "1", "--out", "x"], "--rate"),
-    (["heavy-top", "--motion", "wobbly", "--rate", "5", "--duration", "1", "--out", "x"],
-     "--motion"),
-    (["spinning-plate", "--rate", "5"], "SCENE"),
-    (["coning", "--rate", "5", "--duration", "1"], "--out"),
-    (["free-body", "--omega", "1,2", "--rate", "5", "--duration", "1", "--out", "x"], "--omega"),
-    (["coning", "--gyro-bias", "0,0,nan", "--rate", "5", "--duration", "1", "--out", "x"],
-     "--gyro-bias"),
-    (["heavy-top", "--bogus", "--rate", "5", "--duration", "1", "--out", "x"], "--bogus"),
-])
+@pytest.mark.parametrize(
+    "argv, needle",
+    [
+        (["heavy-top", "--rate", "-5", "--duration", "1", "--out", "x"], "--rate"),
+        (["heavy-top", "--rate", "abc", "--duration", "1", "--out", "x"], "--rate"),
+        (
+            ["heavy-top", "--motion", "wobbly", "--rate", "5", "--duration", "1", "--out", "x"],
+            "--motion",
+        ),
+        (["spinning-plate", "--rate", "5"], "SCENE"),
+        (["coning", "--rate", "5", "--duration", "1"], "--out"),
+        (
+            ["free-body", "--omega", "1,2", "--rate", "5", "--duration", "1", "--out", "x"],
+            "--omega",
+        ),
+        (
+            ["coning", "--gyro-bias", "0,0,nan", "--rate", "5", "--duration", "1", "--out", "x"],
+            "--gyro-bias",
+        ),
+        (["heavy-top", "--bogus", "--rate", "5", "--duration", "1", "--out", "x"], "--bogus"),
+    ],
+)
 def test_bad_option_one_line_exit_2(tmp_path, capsys, argv, needle):
     with pytest.raises(SystemExit) as exc:
         main(argv)
@@ -157,15 +222,44 @@ def test_bad_option_one_line_exit_2(tmp_path, capsys, argv, needle):
     assert err.count("\n") == 1 and needle in err and "Traceback" not in err
 
 
-@pytest.mark.parametrize("argv, needle", [
-    (["coning", "--half-angle-deg", "95", "--rate", "5", "--duration", "1"], "half_angle_deg"),
-    (["heavy-top", "--motion", "steady", "--spin-hz", "1", "--rate", "5", "--duration", "1"],
-     "steady precession"),
-    (["heavy-top", "--motion", "sleeping", "--tilt-deg", "5", "--rate", "5", "--duration", "1"],
-     "sleeping"),
-    (["heavy-top", "--scheme", "reference", "--gyro-output", "delta-angle", "--rate", "5",
-      "--duration", "1"], "--scheme reference"),
-])
+@pytest.mark.parametrize(
+    "argv, needle",
+    [
+        (["coning", "--half-angle-deg", "95", "--rate", "5", "--duration", "1"], "half_angle_deg"),
+        (
+            ["heavy-top", "--motion", "steady", "--spin-hz", "1", "--rate", "5", "--duration", "1"],
+            "steady precession",
+        ),
+        (
+            [
+                "heavy-top",
+                "--motion",
+                "sleeping",
+                "--tilt-deg",
+                "5",
+                "--rate",
+                "5",
+                "--duration",
+                "1",
+            ],
+            "sleeping",
+        ),
+        (
+            [
+                "heavy-top",
+                "--scheme",
+                "reference",
+                "--gyro-output",
+                "delta-angle",
+                "--rate",
+                "5",
+                "--duration",
+                "1",
+            ],
+            "--scheme reference",
+        ),
+    ],
+)
 def test_bad_value_one_line_exit_2_and_no_output(tmp_path, capsys, argv, needle):
     out = tmp_path / "never"
     assert main([*argv, "--out", str(out)]) == 2
@@ -189,38 +283,72 @@ def test_existing_output_not_overwritten_without_force(tmp_path, capsys):
 
 
 def test_python_dash_m_entry_point(tmp_path):
-    ok = subprocess.run([sys.executable, "-m", "data_synth", "coning", "--rate", "20",
-                         "--duration", "0.5", "--out", str(tmp_path / "c")],
-                        check=False, capture_output=True, text=True, timeout=120)
+    ok = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "data_synth",
+            "coning",
+            "--rate",
+            "20",
+            "--duration",
+            "0.5",
+            "--out",
+            str(tmp_path / "c"),
+        ],
+        check=False,
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
     assert ok.returncode == 0, ok.stderr
-    bad = subprocess.run([sys.executable, "-m", "data_synth", "coning", "--rate", "0"],
-                         check=False, capture_output=True, text=True, timeout=120)
+    bad = subprocess.run(
+        [sys.executable, "-m", "data_synth", "coning", "--rate", "0"],
+        check=False,
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
     assert bad.returncode == 2
     assert bad.stderr.count("\n") == 1 and "--rate" in bad.stderr
 
 
 # Jobs that cannot finish, bad integers, file-system errors: refused up front, one line, exit 2.
-@pytest.mark.parametrize("argv, needles", [
-    # 1e9 samples: ~3 kB each while the bag is written (data_synth.budget) -> TiB
-    (["coning", "--rate", "1e9", "--duration", "1"], ["1e+09 samples", "TiB"]),
-    (["coning", "--rate", "1e6", "--duration", "100"], ["1e+08 samples", "GiB"]),
-    (["heavy-top", "--scheme", "reference", "--rate", "1e6", "--duration", "100"], ["h for"]),
-    # the ODE would need ~1e10 (spin) and ~1e30 (|omega|) steps: measured by a 200-step probe
-    (["heavy-top", "--spin-hz", "1e9", "--rate", "100", "--duration", "1"], ["ODE steps", "days"]),
-    (["free-body", "--omega=1e30,0,0", "--rate", "100", "--duration", "1"], ["ODE steps"]),
-    (["free-body", "--omega=1e300,0,0", "--rate", "100", "--duration", "1"], ["ODE"]),
-    (["heavy-top", "--rate", "100", "--duration", "1e9"], ["2^31 s"]),
-    (["coning", "--rate", "1e-300", "--duration", "1e300"], ["2^31 s"]),
-    (["coning", "--rate", "100", "--duration", "1", "--epoch-ns", "2147483647500000000"],
-     ["2^31 s"]),
-    (["coning", "--rate", "100", "--duration", "1", "--gyro-quantization", "3e-308"],
-     ["quantization_rad_s"]),
-    (["coning", "--rate", "100", "--duration", "1", "--gyro-quantization", "5e-324"],
-     ["quantization_rad_s"]),
-    (["coning", "--rate", "100", "--duration", "1", "--gyro-noise-density", "1e308"],
-     ["finite gyro output"]),
-    (["coning", "--rate", "100", "--duration", "1", "--max-memory-gib", "1e-6"], ["samples"]),
-])
+@pytest.mark.parametrize(
+    "argv, needles",
+    [
+        # 1e9 samples: ~3 kB each while the bag is written (data_synth.budget) -> TiB
+        (["coning", "--rate", "1e9", "--duration", "1"], ["1e+09 samples", "TiB"]),
+        (["coning", "--rate", "1e6", "--duration", "100"], ["1e+08 samples", "GiB"]),
+        (["heavy-top", "--scheme", "reference", "--rate", "1e6", "--duration", "100"], ["h for"]),
+        # the ODE would need ~1e10 (spin) and ~1e30 (|omega|) steps: measured by a 200-step probe
+        (
+            ["heavy-top", "--spin-hz", "1e9", "--rate", "100", "--duration", "1"],
+            ["ODE steps", "days"],
+        ),
+        (["free-body", "--omega=1e30,0,0", "--rate", "100", "--duration", "1"], ["ODE steps"]),
+        (["free-body", "--omega=1e300,0,0", "--rate", "100", "--duration", "1"], ["ODE"]),
+        (["heavy-top", "--rate", "100", "--duration", "1e9"], ["2^31 s"]),
+        (["coning", "--rate", "1e-300", "--duration", "1e300"], ["2^31 s"]),
+        (
+            ["coning", "--rate", "100", "--duration", "1", "--epoch-ns", "2147483647500000000"],
+            ["2^31 s"],
+        ),
+        (
+            ["coning", "--rate", "100", "--duration", "1", "--gyro-quantization", "3e-308"],
+            ["quantization_rad_s"],
+        ),
+        (
+            ["coning", "--rate", "100", "--duration", "1", "--gyro-quantization", "5e-324"],
+            ["quantization_rad_s"],
+        ),
+        (
+            ["coning", "--rate", "100", "--duration", "1", "--gyro-noise-density", "1e308"],
+            ["finite gyro output"],
+        ),
+        (["coning", "--rate", "100", "--duration", "1", "--max-memory-gib", "1e-6"], ["samples"]),
+    ],
+)
 def test_impossible_job_refused_up_front_one_line_exit_2(tmp_path, capsys, argv, needles):
     out = tmp_path / "never"
     with warnings.catch_warnings():
@@ -231,12 +359,15 @@ def test_impossible_job_refused_up_front_one_line_exit_2(tmp_path, capsys, argv,
     assert list(tmp_path.iterdir()) == []
 
 
-@pytest.mark.parametrize("flag, value", [("--seed", "-1"), ("--epoch-ns", str(2**63)),
-                                         ("--epoch-ns", "-1"), ("--seed", "1.5")])
+@pytest.mark.parametrize(
+    "flag, value",
+    [("--seed", "-1"), ("--epoch-ns", str(2**63)), ("--epoch-ns", "-1"), ("--seed", "1.5")],
+)
 def test_bad_integer_option_one_line_exit_2(tmp_path, capsys, flag, value):
     with pytest.raises(SystemExit) as exc:
-        main(["coning", "--rate", "10", "--duration", "1", flag, value,
-              "--out", str(tmp_path / "x")])
+        main(
+            ["coning", "--rate", "10", "--duration", "1", flag, value, "--out", str(tmp_path / "x")]
+        )
     assert exc.value.code == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and flag in err and "Traceback" not in err
@@ -270,11 +401,14 @@ def test_force_replaces_only_a_bag_data_synth_wrote(tmp_path, capsys):
     assert main([*argv, str(ours)]) == 0 and main([*argv, str(ours)]) == 0  # its own bag: ok
 
 
-@pytest.mark.parametrize("scene, kw, duration_s", [
-    ("heavy-top", {"motion": "looping"}, 3.0),
-    ("heavy-top", {"motion": "cusp", "spin_hz": 60.0}, 1.0),
-    ("free-body", {"case": "intermediate"}, 20.0),
-])
+@pytest.mark.parametrize(
+    "scene, kw, duration_s",
+    [
+        ("heavy-top", {"motion": "looping"}, 3.0),
+        ("heavy-top", {"motion": "cusp", "spin_hz": 60.0}, 1.0),
+        ("free-body", {"case": "intermediate"}, 20.0),
+    ],
+)
 def test_ode_step_estimate_tracks_the_real_solve(scene, kw, duration_s):
     # The refusal rests on the 200-step probe's extrapolation: it must track the real solve.
     # DOP853 spends 12 right-hand-side calls per accepted step (plus rejections), so nfev / 12

@@ -38,8 +38,9 @@ def test_ideal_gyro_samples_the_truth_exactly(top):
 def test_white_noise_density_by_allan_deviation(still, output):
     density = 2e-3  # rad/s/√Hz
     rate_hz = 100.0
-    rec = synthetic_gyro(still, rate_hz, model=GyroModel(noise_density_rad_s_sqrt_hz=density),
-                         output=output, seed=11)
+    rec = synthetic_gyro(
+        still, rate_hz, model=GyroModel(noise_density_rad_s_sqrt_hz=density), output=output, seed=11
+    )
     # Allan deviation of white rate noise: σ(τ) = N / √τ (imu_dcm.allan); 1e5 samples pin N to
     # ~1%, so the 10% bound is met with a wide margin on every axis.
     est = noise_density_from_allan(rec.rate_rad_s(), rate_hz)
@@ -72,8 +73,9 @@ def test_quantization_steps_and_error(top):
 
 def test_delta_angle_quantization_carries_the_residual(top):
     step = 1e-2  # rad/s → 1e-5 rad per sample at 1000 Hz
-    rec = synthetic_gyro(top, 1000.0, model=GyroModel(quantization_rad_s=step),
-                         output="delta-angle")
+    rec = synthetic_gyro(
+        top, 1000.0, model=GyroModel(quantization_rad_s=step), output="delta-angle"
+    )
     grid = np.concatenate([[0.0], rec.t_s])
     exact = top.delta_angles(grid)
     # The accumulated angle never drifts more than half a step from the truth: rounding error
@@ -126,8 +128,9 @@ def test_delta_angle_output_of_constant_rate_is_rate_times_dt():
 
 
 def test_same_seed_same_samples_other_seed_other_samples(top):
-    model = GyroModel(noise_density_rad_s_sqrt_hz=1e-3, bias_walk_rad_s2_sqrt_hz=1e-3,
-                      stamp_jitter_s=1e-5)
+    model = GyroModel(
+        noise_density_rad_s_sqrt_hz=1e-3, bias_walk_rad_s2_sqrt_hz=1e-3, stamp_jitter_s=1e-5
+    )
     a = synthetic_gyro(top, 1000.0, model=model, seed=7)
     b = synthetic_gyro(top, 1000.0, model=model, seed=7)
     c = synthetic_gyro(top, 1000.0, model=model, seed=8)
@@ -140,12 +143,15 @@ def test_terms_are_off_unless_given(top):
     assert GyroModel(bias_rad_s=(1, 2, 3)).as_dict() == {"bias_rad_s": [1.0, 2.0, 3.0]}
 
 
-@pytest.mark.parametrize("kwargs, match", [
-    ({"noise_density_rad_s_sqrt_hz": -1.0}, "noise_density"),
-    ({"quantization_rad_s": 0.0}, "quantization"),
-    ({"range_rad_s": float("nan")}, "range"),
-    ({"bias_rad_s": (1.0, 2.0)}, "bias_rad_s"),
-])
+@pytest.mark.parametrize(
+    "kwargs, match",
+    [
+        ({"noise_density_rad_s_sqrt_hz": -1.0}, "noise_density"),
+        ({"quantization_rad_s": 0.0}, "quantization"),
+        ({"range_rad_s": float("nan")}, "range"),
+        ({"bias_rad_s": (1.0, 2.0)}, "bias_rad_s"),
+    ],
+)
 def test_model_rejects_bad_values(kwargs, match):
     with pytest.raises(InputError, match=match):
         GyroModel(**kwargs)

@@ -123,15 +123,24 @@ def test_box_attitude_matches_elliptic_integral_solution(case):
     traj = data_synth.free_body(20.0, case)
     t = np.linspace(0.0, 20.0, 2001)
     q, _ = traj.at(t)
-    q_el = box_attitude_elliptic(t, traj.inertia_kg_m2, traj.params["omega0_b_rad_s"],
-                                 [0.0, 0.0, 0.0, 1.0])
+    q_el = box_attitude_elliptic(
+        t, traj.inertia_kg_m2, traj.params["omega0_b_rad_s"], [0.0, 0.0, 0.0, 1.0]
+    )
     # Carlson-form Π vs the ODE: measured ~1e-9 deg over 20 s; 1e-6 deg leaves room for the
     # conditioning of the phase near the separatrix.
     assert _deg(q, q_el).max() < 1e-6
 
 
-@pytest.mark.parametrize("omega0_b", [(-0.3, 0.5, -1.0), (-1.0, -1.0, 1.5),  # M² > 2EI2
-                                      (0.4, -2.0, 0.3), (2.0, 0.1, 0.1), (-2.0, 0.5, -0.3)])
+@pytest.mark.parametrize(
+    "omega0_b",
+    [
+        (-0.3, 0.5, -1.0),
+        (-1.0, -1.0, 1.5),  # M² > 2EI2
+        (0.4, -2.0, 0.3),
+        (2.0, 0.1, 0.1),
+        (-2.0, 0.5, -0.3),
+    ],
+)
 def test_box_elliptic_solution_from_a_general_state(omega0_b):
     # Any signs of the rates, any initial attitude (the phase τ0 and the frame of L), and both
     # sides of the separatrix (the last three turn about the minor axis: M² < 2 E I2).
@@ -163,8 +172,7 @@ def test_intermediate_axis_flips():
 @pytest.mark.parametrize("motion", ["cusp", "wavy", "looping"])
 def test_heavy_top_cos_theta_matches_elliptic_solution(motion):
     precession0, tilt = heavy_top_initial_rates(P, motion)
-    inv = heavy_top_invariants(P.i1_kg_m2, P.i3_kg_m2, P.mgl_n_m, tilt, P.omega3_rad_s,
-                               precession0)
+    inv = heavy_top_invariants(P.i1_kg_m2, P.i3_kg_m2, P.mgl_n_m, tilt, P.omega3_rad_s, precession0)
     # The top starts at rest in θ at its upper turning point (it falls): u2 = cos θ0.
     assert abs(inv.roots[1] - math.cos(tilt)) < 1e-9
     traj = data_synth.heavy_top(2.0, motion)
@@ -189,8 +197,9 @@ def test_wavy_and_looping_are_what_their_names_say():
     t = np.linspace(0.0, 2.0, 20001)
     for motion in ("wavy", "looping"):
         precession0, tilt = heavy_top_initial_rates(P, motion)
-        inv = heavy_top_invariants(P.i1_kg_m2, P.i3_kg_m2, P.mgl_n_m, tilt, P.omega3_rad_s,
-                                   precession0)
+        inv = heavy_top_invariants(
+            P.i1_kg_m2, P.i3_kg_m2, P.mgl_n_m, tilt, P.omega3_rad_s, precession0
+        )
         u1, u2, _ = inv.roots
         ustar = inv.b / inv.a  # where φ̇ = (b − a u)/(1 − u²) changes sign
         rate = _precession_rate(data_synth.heavy_top(2.0, motion), t)
@@ -210,8 +219,9 @@ def test_steady_precession_keeps_theta(branch):
     u = Rotation.from_quat(q).as_matrix()[:, 2, 2]
     # Any nutation would swing cos θ by ~0.1 (the cusp's amplitude); steady: round-off only.
     assert np.abs(u - math.cos(math.radians(54.57))).max() < 1e-8
-    slow, fast = steady_precession_rates(P.i1_kg_m2, P.i3_kg_m2, P.omega3_rad_s, P.mgl_n_m,
-                                         math.radians(54.57))
+    slow, fast = steady_precession_rates(
+        P.i1_kg_m2, P.i3_kg_m2, P.omega3_rad_s, P.mgl_n_m, math.radians(54.57)
+    )
     expected = slow if branch == "slow" else fast
     rate = _precession_rate(traj, np.linspace(0.0, 2.0, 40001))
     assert np.abs(rate / expected - 1.0).max() < 1e-6
@@ -219,7 +229,7 @@ def test_steady_precession_keeps_theta(branch):
     c = math.cos(math.radians(54.57))
     # Three terms of up to ~8 (fast branch) cancel: the residual is round-off of the terms and
     # of the root, a few eps of their magnitudes (16 eps margin), not a fixed 1e-12.
-    terms = (P.i1_kg_m2 * c * expected ** 2, -P.i3_kg_m2 * P.omega3_rad_s * expected, P.mgl_n_m)
+    terms = (P.i1_kg_m2 * c * expected**2, -P.i3_kg_m2 * P.omega3_rad_s * expected, P.mgl_n_m)
     assert abs(sum(terms)) < 16 * EPS * sum(abs(x) for x in terms)
 
 
@@ -240,9 +250,11 @@ def test_coning_closed_form_against_scipy_and_kinematics():
     t = np.linspace(0.0, 1.0, 501)
     q, w = traj.at(t)
     om = 2 * math.pi * f
-    ref = (Rotation.from_rotvec(np.outer(om * t, [0, 0, 1]))
-           * Rotation.from_rotvec([math.radians(beta), 0, 0])
-           * Rotation.from_rotvec(np.outer(-om * t, [0, 0, 1])))
+    ref = (
+        Rotation.from_rotvec(np.outer(om * t, [0, 0, 1]))
+        * Rotation.from_rotvec([math.radians(beta), 0, 0])
+        * Rotation.from_rotvec(np.outer(-om * t, [0, 0, 1]))
+    )
     # Both evaluate sin/cos of Ωt (up to 31 rad here): rounding the argument costs eps·Ωt rad,
     # twice (Rz(Ωt), Rz(-Ωt)), plus a few eps for products and conversions (measured 1 eps).
     bound_rad = 8 * EPS * (1.0 + om * t.max())
@@ -252,17 +264,28 @@ def test_coning_closed_form_against_scipy_and_kinematics():
     def rhs(tt, y):
         wx, wy, wz = coning_rates(np.array([tt]), math.radians(beta), f)[0]
         x, yy, z, s = y
-        return 0.5 * np.array([s * wx + yy * wz - z * wy, s * wy - x * wz + z * wx,
-                               s * wz + x * wy - yy * wx, -x * wx - yy * wy - z * wz])
+        return 0.5 * np.array(
+            [
+                s * wx + yy * wz - z * wy,
+                s * wy - x * wz + z * wx,
+                s * wz + x * wy - yy * wx,
+                -x * wx - yy * wy - z * wz,
+            ]
+        )
 
     sol = solve_ivp(rhs, (0, 1.0), q[0], method="DOP853", rtol=1e-12, atol=1e-12, t_eval=t)
     assert _deg(sol.y.T, coning_attitude(t, math.radians(beta), f)).max() < 1e-8
     assert np.allclose(w, coning_rates(t, math.radians(beta), f), rtol=0, atol=0)
 
 
-@pytest.mark.parametrize("scene, kw", [("heavy-top", {"motion": "looping"}),
-                                       ("free-body", {"case": "intermediate"}),
-                                       ("coning", {"half_angle_deg": 30.0, "freq_hz": 7.0})])
+@pytest.mark.parametrize(
+    "scene, kw",
+    [
+        ("heavy-top", {"motion": "looping"}),
+        ("free-body", {"case": "intermediate"}),
+        ("coning", {"half_angle_deg": 30.0, "freq_hz": 7.0}),
+    ],
+)
 def test_delta_angles_are_the_integral_of_the_rate(scene, kw):
     traj = data_synth.simulate(scene, duration_s=1.0, **kw)
     t = np.linspace(0.0, 1.0, 201)

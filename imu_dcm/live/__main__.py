@@ -33,37 +33,81 @@ def build_parser() -> argparse.ArgumentParser:
         description="Integrate a live gyro stream with the DCM integrator as it arrives, show it "
         "in rerun, record it, and print a summary on Ctrl-C / SIGTERM / end of input.",
     )
-    p.add_argument("source", help="ws://HOST:PORT (Foxglove WebSocket, e.g. foxglove_bridge), "
-                   "udp://HOST:PORT (lines) or - (lines on stdin)")
+    p.add_argument(
+        "source",
+        help="ws://HOST:PORT (Foxglove WebSocket, e.g. foxglove_bridge), "
+        "udp://HOST:PORT (lines) or - (lines on stdin)",
+    )
     p.add_argument("--imu-topic", help="IMU channel (default: the one Imu-typed channel)")
-    p.add_argument("--truth-topic", help="truth channel (default: by type, as replay; "
-                   "'none' to ignore truth)")
-    p.add_argument("--method", choices=METHODS, default="magnus4",
-                   help="integrator increment (default magnus4)")
-    p.add_argument("--bias", default="auto",
-                   help="gyro bias: auto (from rest as it happens, default), none, or x,y,z rad/s")
-    p.add_argument("--gyro-units", choices=("rad/s", "deg/s"), default="rad/s",
-                   help="unit of the incoming rates (default rad/s)")
-    p.add_argument("--time-units", choices=("s", "ms", "us", "ns"), default="s",
-                   help="unit of CSV line stamps (default s)")
-    p.add_argument("--init-quat", metavar="X,Y,Z,W",
-                   help="start attitude q_world_body (scalar last) instead of the truth")
-    p.add_argument("--reorder-window", type=float, default=50.0, metavar="MS",
-                   help="reorder window in source time, ms (default 50); later samples are "
-                   "dropped and counted")
-    p.add_argument("--view-interval", type=float, default=50.0, metavar="MS",
-                   help="send the view and the recording in batches every MS ms (default 50; "
-                   "each rerun send_columns call costs ~0.5 ms)")
-    p.add_argument("--rerun", metavar="MODE",
-                   help="spawn | serve | save:PATH.rrd | off (default: spawn with a display, "
-                   "else serve the web viewer on 127.0.0.1)")
+    p.add_argument(
+        "--truth-topic", help="truth channel (default: by type, as replay; 'none' to ignore truth)"
+    )
+    p.add_argument(
+        "--method",
+        choices=METHODS,
+        default="magnus4",
+        help="integrator increment (default magnus4)",
+    )
+    p.add_argument(
+        "--bias",
+        default="auto",
+        help="gyro bias: auto (from rest as it happens, default), none, or x,y,z rad/s",
+    )
+    p.add_argument(
+        "--gyro-units",
+        choices=("rad/s", "deg/s"),
+        default="rad/s",
+        help="unit of the incoming rates (default rad/s)",
+    )
+    p.add_argument(
+        "--time-units",
+        choices=("s", "ms", "us", "ns"),
+        default="s",
+        help="unit of CSV line stamps (default s)",
+    )
+    p.add_argument(
+        "--init-quat",
+        metavar="X,Y,Z,W",
+        help="start attitude q_world_body (scalar last) instead of the truth",
+    )
+    p.add_argument(
+        "--reorder-window",
+        type=float,
+        default=50.0,
+        metavar="MS",
+        help="reorder window in source time, ms (default 50); later samples are "
+        "dropped and counted",
+    )
+    p.add_argument(
+        "--view-interval",
+        type=float,
+        default=50.0,
+        metavar="MS",
+        help="send the view and the recording in batches every MS ms (default 50; "
+        "each rerun send_columns call costs ~0.5 ms)",
+    )
+    p.add_argument(
+        "--rerun",
+        metavar="MODE",
+        help="spawn | serve | save:PATH.rrd | off (default: spawn with a display, "
+        "else serve the web viewer on 127.0.0.1)",
+    )
     p.add_argument("--record", metavar="DIR", help="record as a ROS 2 bag as it goes")
     p.add_argument("--force", action="store_true", help="replace an existing --record bag")
     p.add_argument("--summary-json", metavar="PATH", help="write the summary as JSON at stop")
-    p.add_argument("--give-up", type=float, default=30.0, metavar="S",
-                   help="WebSocket: stop after S s without a connection (default 30)")
-    p.add_argument("--idle-stop", type=float, metavar="S",
-                   help="stop after S s without a sample (default: never)")
+    p.add_argument(
+        "--give-up",
+        type=float,
+        default=30.0,
+        metavar="S",
+        help="WebSocket: stop after S s without a connection (default 30)",
+    )
+    p.add_argument(
+        "--idle-stop",
+        type=float,
+        metavar="S",
+        help="stop after S s without a sample (default: never)",
+    )
     p.add_argument("--no-status", action="store_true", help="no status line on stderr")
     p.add_argument("--quiet", action="store_true", help="print no summary")
     return p
@@ -80,19 +124,25 @@ def format_summary(s: dict) -> str:
     rate = f"{s['rate_hz']:.1f} Hz" if s["rate_hz"] else "n/a"
     lines = [
         f"source     {s['source']}",
-        (f"imu        {s['imu_topic']} ({s['imu_type']}): {s['samples']} samples, "
-        f"{s['duration_s']:.3f} s, {rate}, units {s['gyro_units']}"),
+        (
+            f"imu        {s['imu_topic']} ({s['imu_type']}): {s['samples']} samples, "
+            f"{s['duration_s']:.3f} s, {rate}, units {s['gyro_units']}"
+        ),
     ]
     if s["truth_topic"]:
-        lines.append(f"truth      {s['truth_topic']} ({s['truth_type']}): "
-                     f"{s['truth_samples_used']} estimates compared")
+        lines.append(
+            f"truth      {s['truth_topic']} ({s['truth_type']}): "
+            f"{s['truth_samples_used']} estimates compared"
+        )
     else:
         lines.append("truth      none (no error can be measured)")
     gaps = len(s["gaps"])
-    lines.append(f"dropped    {s['dropped_nonfinite']} NaN/Inf, {s['dropped_duplicate']} duplicate, "
-                 f"{s['dropped_backward']} late/backward stamps, {s['malformed']} malformed; "
-                 f"{s['reordered']} put back in order; {gaps} gap{'s' if gaps != 1 else ''} over "
-                 f"5x the median step; {s['reconnects']} reconnects")
+    lines.append(
+        f"dropped    {s['dropped_nonfinite']} NaN/Inf, {s['dropped_duplicate']} duplicate, "
+        f"{s['dropped_backward']} late/backward stamps, {s['malformed']} malformed; "
+        f"{s['reordered']} put back in order; {gaps} gap{'s' if gaps != 1 else ''} over "
+        f"5x the median step; {s['reconnects']} reconnects"
+    )
     b = np.asarray(s["bias_rad_s"])
     bias = f"({b[0]:+.5f}, {b[1]:+.5f}, {b[2]:+.5f}) rad/s"
     if s["bias_mode"] == "auto" and not s["bias_segments"]:
@@ -100,8 +150,10 @@ def format_summary(s: dict) -> str:
     elif s["bias_mode"] == "auto":
         n = len(s["bias_segments"])
         bd = np.degrees(b)
-        lines.append(f"bias       auto: {n} rest segment{'s' if n != 1 else ''}, mean applied "
-                     f"{bias} = ({bd[0]:+.3f}, {bd[1]:+.3f}, {bd[2]:+.3f}) °/s")
+        lines.append(
+            f"bias       auto: {n} rest segment{'s' if n != 1 else ''}, mean applied "
+            f"{bias} = ({bd[0]:+.3f}, {bd[1]:+.3f}, {bd[2]:+.3f}) °/s"
+        )
     else:
         lines.append(f"bias       {s['bias_mode']}: {bias}")
     start = "never started" if s["start_time_s"] is None else f"t = {s['start_time_s']:.3f} s"
@@ -110,14 +162,18 @@ def format_summary(s: dict) -> str:
         q = ", ".join(f"{v:+.6f}" for v in s["final_quat_xyzw"])
         lines.append(f"final      q_w_b [x, y, z, w] = [{q}] at t = {s['final_t_s']:.3f} s")
     if s["rms_error_deg"] is not None:
-        lines.append(f"error      total RMS {_fmt(s['rms_error_deg'])}, max "
-                     f"{_fmt(s['max_error_deg'])}; inclination RMS "
-                     f"{_fmt(s['rms_inclination_deg'])}, max {_fmt(s['max_inclination_deg'])}; "
-                     f"heading RMS {_fmt(s['rms_heading_deg'])}, max "
-                     f"{_fmt(s['max_heading_deg'])}")  # fmt: skip
+        lines.append(
+            f"error      total RMS {_fmt(s['rms_error_deg'])}, max "
+            f"{_fmt(s['max_error_deg'])}; inclination RMS "
+            f"{_fmt(s['rms_inclination_deg'])}, max {_fmt(s['max_inclination_deg'])}; "
+            f"heading RMS {_fmt(s['rms_heading_deg'])}, max "
+            f"{_fmt(s['max_heading_deg'])}"
+        )
     if s["latency_p50_ms"] is not None:
-        lines.append(f"latency    receive -> view: p50 {s['latency_p50_ms']:.1f} ms, "
-                     f"p99 {s['latency_p99_ms']:.1f} ms")
+        lines.append(
+            f"latency    receive -> view: p50 {s['latency_p50_ms']:.1f} ms, "
+            f"p99 {s['latency_p99_ms']:.1f} ms"
+        )
     if s["record"]:
         lines.append(f"record     {s['record']}")
     lines.append(f"stopped    {s['stopped']}")

@@ -1,11 +1,12 @@
 """Line samples for the UDP and stdin sources: CSV ``t,gx,gy,gz`` or JSON lines.
 
 CSV: ``t,gx,gy,gz`` with the stamp in ``time_units`` (s, ms, us or ns) and the rates in
-``gyro_units`` (rad/s or deg/s), body axes. A first line with letters (a header) is skipped.
-JSON: an object with the stamp as ``t_ns`` (int, ns) or ``t_s`` (s), the rates as ``omega_b``
-(or ``gyro``) ``[x, y, z]`` or ``gx``, ``gy``, ``gz`` in ``gyro_units``, and optionally a truth
-``q_w_b`` ``[x, y, z, w]`` (a line with a stamp and ``q_w_b`` only is a truth sample). Stamps are parsed as exact decimals (``1700000026.505500000`` s is
-exactly 1700000026505500000 ns; a float64 would round it to ~0.2 µs).
+``gyro_units`` (rad/s or deg/s), body axes. A first line with letters (a header) is skipped. JSON:
+an object with the stamp as ``t_ns`` (int, ns) or ``t_s`` (s), the rates as ``omega_b`` (or
+``gyro``) ``[x, y, z]`` or ``gx``, ``gy``, ``gz`` in ``gyro_units``, and optionally a truth
+``q_w_b`` ``[x, y, z, w]`` (a line with a stamp and ``q_w_b`` only is a truth sample). Stamps are
+parsed as exact decimals (``1700000026.505500000`` s is exactly 1700000026505500000 ns; a float64
+would round it to ~0.2 µs).
 
 Anything else — wrong field count, not a number, non-finite values — is a malformed line:
 :func:`parse_lines` counts it and goes on.
@@ -71,8 +72,9 @@ def _parse_json(obj, gyro_scale: float) -> tuple[int, list[float], list[float] |
     return t_ns, omega, q
 
 
-def parse_lines(lines: list[bytes], *, gyro_units: str = "rad/s", time_units: str = "s",
-                first: bool = False) -> tuple[NDArray, NDArray, NDArray, NDArray, int]:
+def parse_lines(
+    lines: list[bytes], *, gyro_units: str = "rad/s", time_units: str = "s", first: bool = False
+) -> tuple[NDArray, NDArray, NDArray, NDArray, int]:
     """Parse sample lines.
 
     Parameters
@@ -137,5 +139,10 @@ def parse_lines(lines: list[bytes], *, gyro_units: str = "rad/s", time_units: st
                 ws.append(omega)
         except (ValueError, KeyError, TypeError, UnicodeDecodeError, OverflowError):
             bad += 1
-    return (np.array(ts, dtype=np.int64), np.array(ws, dtype=float).reshape(-1, 3),
-            np.array(tts, dtype=np.int64), np.array(qs, dtype=float).reshape(-1, 4), bad)
+    return (
+        np.array(ts, dtype=np.int64),
+        np.array(ws, dtype=float).reshape(-1, 3),
+        np.array(tts, dtype=np.int64),
+        np.array(qs, dtype=float).reshape(-1, 4),
+        bad,
+    )

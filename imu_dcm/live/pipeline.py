@@ -88,13 +88,28 @@ class _Stats:
 class Pipeline:
     """Per-sample state of a live run (see the module doc), fed by :func:`imu_dcm.live.run`."""
 
-    def __init__(self, *, method: str, bias, init_q: NDArray | None, window_ns: int,
-                 truth_wait_s: float, lines: bool, view, recorder, say) -> None:
+    def __init__(
+        self,
+        *,
+        method: str,
+        bias,
+        init_q: NDArray | None,
+        window_ns: int,
+        truth_wait_s: float,
+        lines: bool,
+        view,
+        recorder,
+        say,
+    ) -> None:
         self.method = method
-        self.bias_mode = "auto" if isinstance(bias, str) and bias == "auto" else (
-            "none" if isinstance(bias, str) else "fixed")
-        self.fixed_bias = (tuple(float(v) for v in bias) if self.bias_mode == "fixed"
-                           else (0.0, 0.0, 0.0))  # fmt: skip
+        self.bias_mode = (
+            "auto"
+            if isinstance(bias, str) and bias == "auto"
+            else ("none" if isinstance(bias, str) else "fixed")
+        )
+        self.fixed_bias = (
+            tuple(float(v) for v in bias) if self.bias_mode == "fixed" else (0.0, 0.0, 0.0)
+        )
         self.rest = CausalRestBias() if self.bias_mode == "auto" else None
         self.init_q = init_q
         self.reorder = ReorderBuffer(window_ns)
@@ -145,7 +160,9 @@ class Pipeline:
     def on_imu(self, rec: Received) -> None:
         out: list = []
         push = self.reorder.push
-        for t, w, a in zip(rec.t_ns.tolist(), rec.values.tolist(), rec.arrival_ns.tolist()):
+        for t, w, a in zip(
+            rec.t_ns.tolist(), rec.values.tolist(), rec.arrival_ns.tolist(), strict=False
+        ):
             push(t, w, a, out)
         if out:
             self._process(out)
@@ -185,8 +202,10 @@ class Pipeline:
                 h = t_s - prev
                 if h > GAP_FACTOR * self._median and len(self._steps) >= 3:
                     self.gaps.append((prev, h))
-                    self.say(f"gap of {h:.3f} s after t = {prev:.3f} s "
-                             f"(> {GAP_FACTOR:g}x the median step {self._median * 1e3:.3f} ms)")
+                    self.say(
+                        f"gap of {h:.3f} s after t = {prev:.3f} s "
+                        f"(> {GAP_FACTOR:g}x the median step {self._median * 1e3:.3f} ms)"
+                    )
                 self._steps.append(h)
                 self._since_median += 1
                 if self._since_median >= 16 or len(self._steps) < 16:
@@ -200,8 +219,10 @@ class Pipeline:
                 if len(rest.segments) > n_seg:
                     seg = rest.segments[-1]
                     v = seg["bias_rad_s"]
-                    self.say(f"bias from rest {seg['start_s']:.3f}-{seg['end_s']:.3f} s: "
-                             f"({v[0]:+.5f}, {v[1]:+.5f}, {v[2]:+.5f}) rad/s")
+                    self.say(
+                        f"bias from rest {seg['start_s']:.3f}-{seg['end_s']:.3f} s: "
+                        f"({v[0]:+.5f}, {v[1]:+.5f}, {v[2]:+.5f}) rad/s"
+                    )
             else:
                 b = fixed
             wc = (w[0] - b[0], w[1] - b[1], w[2] - b[2])
@@ -244,9 +265,12 @@ class Pipeline:
             covered = stamps <= self.truth_max_ns
             if not covered.any():
                 if stamps[-1] - stamps[0] >= 10 * self.truth_wait_ns:  # the truth stalled
-                    self._start(0, np.array([0.0, 0.0, 0.0, 1.0]),
-                                f"the truth stopped {(stamps[-1] - self.truth_max_ns) * 1e-9:.3f} s "
-                                f"before the gyro: starting from the identity attitude")
+                    self._start(
+                        0,
+                        np.array([0.0, 0.0, 0.0, 1.0]),
+                        f"the truth stopped {(stamps[-1] - self.truth_max_ns) * 1e-9:.3f} s "
+                        f"before the gyro: starting from the identity attitude",
+                    )
                 return
             q = _slerp(tt, tq, stamps[covered])
             ok = np.flatnonzero(np.all(np.isfinite(q), axis=1))
@@ -261,9 +285,12 @@ class Pipeline:
             self._start(0, np.array([0.0, 0.0, 0.0, 1.0]), None)
             return
         if waiting[-1][0] - waiting[0][0] >= self.truth_wait_ns:
-            self._start(0, np.array([0.0, 0.0, 0.0, 1.0]),
-                        f"no truth within {self.truth_wait_ns * 1e-9:g} s of source time: "
-                        f"starting from the identity attitude")  # fmt: skip
+            self._start(
+                0,
+                np.array([0.0, 0.0, 0.0, 1.0]),
+                f"no truth within {self.truth_wait_ns * 1e-9:g} s of source time: "
+                f"starting from the identity attitude",
+            )
 
     def _ns_of(self, t_s: float) -> int:
         for ts, tn in reversed(self._recent_ns):
@@ -369,17 +396,21 @@ class Pipeline:
         if self.view is not None and t0 is not None:
             tr_s = (np.array(tr_t, np.int64) - t0) * 1e-9 if tr_t else np.zeros(0)
             self.view.log(
-                gyro_t_s=np.array(g_t), omega_b=np.array(g_w).reshape(-1, 3),
+                gyro_t_s=np.array(g_t),
+                omega_b=np.array(g_w).reshape(-1, 3),
                 est_t_s=np.array([r[1] for r in est]),
                 q_est=np.array([r[2] for r in est]).reshape(-1, 4),
-                truth_t_s=tr_s, q_truth=tr_q,
-                err_t_s=np.array(err_t), err_deg=err,
-            )  # fmt: skip
+                truth_t_s=tr_s,
+                q_truth=tr_q,
+                err_t_s=np.array(err_t),
+                err_deg=err,
+            )
         elif t0 is None and tr_t:  # no gyro sample yet: keep the truth rows for later
             self.tr_rows_t, self.tr_rows_q = tr_t, [tr_q]
         if g_arr:
             now = time.perf_counter_ns()
             self.latency.append((now - np.array(g_arr, np.int64)) * 1e-6)
         if self.recorder is not None and est:
-            self.recorder.add_estimate(np.array([r[0] for r in est], np.int64),
-                                       np.array([r[2] for r in est]))  # fmt: skip
+            self.recorder.add_estimate(
+                np.array([r[0] for r in est], np.int64), np.array([r[2] for r in est])
+            )

@@ -57,8 +57,10 @@ class LiveRecorder:
 
         out = Path(path)
         if (out.exists() or out.is_symlink()) and not force:
-            raise LogError(f"Expected --record {str(out)!r} not to exist (use --force), got an "
-                           f"existing {'folder' if out.is_dir() else 'file'}")  # fmt: skip
+            raise LogError(
+                f"Expected --record {str(out)!r} not to exist (use --force), got an "
+                f"existing {'folder' if out.is_dir() else 'file'}"
+            )
         if not out.parent.is_dir():
             raise LogError(f"Expected the parent folder of {str(out)!r} to exist, got none")
         if out.is_dir() and not out.is_symlink():
@@ -70,8 +72,7 @@ class LiveRecorder:
         self.mcap_name = f"{out.name}.mcap"
         self.custom = {str(k): str(v) for k, v in (custom_data or {}).items()}
         self._file = open(out / self.mcap_name, "wb")  # noqa: SIM115 - closed in close()
-        self._writer = Writer(self._file, chunk_size=256 * 1024,
-                              compression=CompressionType.ZSTD)  # fmt: skip
+        self._writer = Writer(self._file, chunk_size=256 * 1024, compression=CompressionType.ZSTD)
         self._writer.start(profile="ros2", library="imu_dcm.live")
         self._schemas: dict[tuple[str, str], int] = {}
         self._channels: dict[str, int] = {}  # kind -> channel id
@@ -79,7 +80,9 @@ class LiveRecorder:
         self._t_range = [None, None]
         self._last_flush = time.monotonic()
         self._closed = False
-        self._channel("estimate", _EST_TOPIC, _QUAT_TYPE, "ros2msg", _bw.MSG_DEFINITIONS[_QUAT_TYPE])
+        self._channel(
+            "estimate", _EST_TOPIC, _QUAT_TYPE, "ros2msg", _bw.MSG_DEFINITIONS[_QUAT_TYPE]
+        )
         self._write_metadata()
 
     def _channel(self, kind: str, topic: str, type_name: str, encoding: str, text: str) -> int:
@@ -88,8 +91,9 @@ class LiveRecorder:
         if sid is None:
             sid = self._writer.register_schema(type_name, encoding, text.encode("utf-8"))
             self._schemas[key] = sid
-        cid = self._writer.register_channel(topic, "cdr", sid,
-                                            {"offered_qos_profiles": _bw._QOS_YAML})  # fmt: skip
+        cid = self._writer.register_channel(
+            topic, "cdr", sid, {"offered_qos_profiles": _bw._QOS_YAML}
+        )
         self._channels[kind] = cid
         self._topics[cid] = [topic, type_name, 0]
         return cid
@@ -102,7 +106,7 @@ class LiveRecorder:
 
     def _write(self, cid: int, log_ns: NDArray, t_ns: NDArray, payloads) -> None:
         add = self._writer.add_message
-        for lt, data in zip(log_ns.tolist(), payloads):
+        for lt, data in zip(log_ns.tolist(), payloads, strict=False):
             add(channel_id=cid, log_time=lt, data=data, publish_time=lt)
         info = self._topics[cid]
         info[2] += len(log_ns)
@@ -126,12 +130,17 @@ class LiveRecorder:
             return
         if rec.kind == "imu":
             cid = self._channels.get("imu") or self._channel(
-                "imu", "/imu/data", _IMU_TYPE, "ros2msg", _bw.MSG_DEFINITIONS[_IMU_TYPE])
+                "imu", "/imu/data", _IMU_TYPE, "ros2msg", _bw.MSG_DEFINITIONS[_IMU_TYPE]
+            )
             rows = _bw._cdr_messages(t, "imu", _bw._imu_doubles(rec.values[ok], None, None))
         else:
             cid = self._channels.get("truth") or self._channel(
-                "truth", "/ground_truth/orientation", _QUAT_TYPE, "ros2msg",
-                _bw.MSG_DEFINITIONS[_QUAT_TYPE])
+                "truth",
+                "/ground_truth/orientation",
+                _QUAT_TYPE,
+                "ros2msg",
+                _bw.MSG_DEFINITIONS[_QUAT_TYPE],
+            )
             rows = _bw._cdr_messages(t, "world", rec.values[ok])
         self._write(cid, rec.wall_ns[ok], t, [r.tobytes() for r in rows])
 
@@ -181,17 +190,24 @@ class LiveRecorder:
         else:
             lines.append("custom_data: {}")
         lines += [
-            "duration:", f"  nanoseconds: {end - start}",
-            "files:", "- duration:", f"    nanoseconds: {end - start}",
-            f"  message_count: {total}", f"  path: {self.mcap_name}",
-            "  starting_time:", f"    nanoseconds_since_epoch: {start}",
+            "duration:",
+            f"  nanoseconds: {end - start}",
+            "files:",
+            "- duration:",
+            f"    nanoseconds: {end - start}",
+            f"  message_count: {total}",
+            f"  path: {self.mcap_name}",
+            "  starting_time:",
+            f"    nanoseconds_since_epoch: {start}",
             f"message_count: {total}",
-            "relative_file_paths:", f"- {self.mcap_name}",
+            "relative_file_paths:",
+            f"- {self.mcap_name}",
             "ros_distro: rosbags",
-            "starting_time:", f"  nanoseconds_since_epoch: {start}",
+            "starting_time:",
+            f"  nanoseconds_since_epoch: {start}",
             "storage_identifier: mcap",
             "topics_with_message_count:",
-        ]  # fmt: skip
+        ]
         qos = "\n".join("    " + ln for ln in _bw._QOS_YAML.splitlines())
         for name, msgtype, count in topics:
             lines += [

@@ -42,8 +42,7 @@ class ReorderBuffer:
     def __len__(self) -> int:
         return len(self._heap)
 
-    def push(self, t_ns: int, omega: tuple[float, float, float], item: object,
-             out: list) -> None:
+    def push(self, t_ns: int, omega: tuple[float, float, float], item: object, out: list) -> None:
         """Add one sample; append the released ``(t_ns, omega, item)`` to ``out`` in order."""
         x, y, z = omega
         if not (math.isfinite(x) and math.isfinite(y) and math.isfinite(z)):

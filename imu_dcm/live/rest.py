@@ -39,8 +39,13 @@ class CausalRestBias:
     updates : int — how many times the estimate changed.
     """
 
-    def __init__(self, min_duration_s: float = 0.5, max_rate_rad_s: float = 0.035,
-                 max_std_rad_s: float = 0.01, probe: int = 64) -> None:
+    def __init__(
+        self,
+        min_duration_s: float = 0.5,
+        max_rate_rad_s: float = 0.035,
+        max_std_rad_s: float = 0.01,
+        probe: int = 64,
+    ) -> None:
         self.min_duration_s = min_duration_s
         self.max_rate = max_rate_rad_s
         self.max_var = max_std_rad_s**2
@@ -64,7 +69,7 @@ class CausalRestBias:
         self._last_t = 0.0
 
     def _set_window(self) -> None:
-        steps = sorted(b - a for a, b in zip(self._ts, self._ts[1:]))
+        steps = sorted(b - a for a, b in zip(self._ts, self._ts[1:], strict=False))
         dt = steps[len(steps) // 2] if steps else 1.0
         self.win = max(2, math.ceil(self.min_duration_s / dt))
 
@@ -110,8 +115,9 @@ class CausalRestBias:
             n = self.win
             m = [s[i] / n for i in range(3)]
             var = [max(q[i] / n - m[i] * m[i], 0.0) for i in range(3)]
-            still = (math.sqrt(m[0] ** 2 + m[1] ** 2 + m[2] ** 2) < self.max_rate
-                     and all(v < self.max_var for v in var))  # fmt: skip
+            still = math.sqrt(m[0] ** 2 + m[1] ** 2 + m[2] ** 2) < self.max_rate and all(
+                v < self.max_var for v in var
+            )
         if still:
             if self._seg_start < 0:
                 # a segment starts with the first sample of this still window
@@ -142,8 +148,9 @@ class CausalRestBias:
             self._close_segment()
 
     def _close_segment(self) -> None:
-        self.segments.append({"start_s": self._seg_t0, "end_s": self._seg_end_t,
-                              "bias_rad_s": list(self.bias_rad_s)})  # fmt: skip
+        self.segments.append(
+            {"start_s": self._seg_t0, "end_s": self._seg_end_t, "bias_rad_s": list(self.bias_rad_s)}
+        )
         self._seg_start = -1
         self.at_rest = False
 

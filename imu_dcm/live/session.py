@@ -144,8 +144,10 @@ def run(
     if time_units not in TIME_UNITS:
         raise InputError(f"Expected time units in {tuple(TIME_UNITS)}, got {time_units!r}")
     if not reorder_window_s >= 0 or not view_interval_s > 0:
-        raise InputError(f"Expected reorder window >= 0 s and view interval > 0 s, got "
-                         f"{reorder_window_s!r} and {view_interval_s!r}")  # fmt: skip
+        raise InputError(
+            f"Expected reorder window >= 0 s and view interval > 0 s, got "
+            f"{reorder_window_s!r} and {view_interval_s!r}"
+        )
     bias_v = _parse_bias(bias)
     init_q = None
     if init_quat is not None:
@@ -156,31 +158,64 @@ def run(
                 raise InputError(f"Expected init quaternion x,y,z,w, got {init_quat!r}") from None
         init_q = as_quat_xyzw(np.asarray(init_quat, dtype=float), "init_quat")
     if say is None:
+
         def say(text: str) -> None:
             print(f"imu-dcm-live: {text}", file=sys.stderr, flush=True)
+
     from imu_dcm.live.view import LiveView, check_mode
 
     check_mode(rerun)
-    src: Source = open_source(spec, imu_topic=imu_topic, truth_topic=truth_topic,
-                              gyro_units=gyro_units, time_units=time_units, give_up_s=give_up_s,
-                              stdin_fd=stdin_fd)  # fmt: skip
+    src: Source = open_source(
+        spec,
+        imu_topic=imu_topic,
+        truth_topic=truth_topic,
+        gyro_units=gyro_units,
+        time_units=time_units,
+        give_up_s=give_up_s,
+        stdin_fd=stdin_fd,
+    )
     recorder = view = None
     try:
         if record is not None:
             from imu_dcm.live.recorder import LiveRecorder
 
-            recorder = LiveRecorder(record, force=force, custom_data={
-                "imu_dcm.live.source": source, "imu_dcm.method": method,
-                "imu_dcm.bias_mode": bias_v if isinstance(bias_v, str) else "fixed"})
+            recorder = LiveRecorder(
+                record,
+                force=force,
+                custom_data={
+                    "imu_dcm.live.source": source,
+                    "imu_dcm.method": method,
+                    "imu_dcm.bias_mode": bias_v if isinstance(bias_v, str) else "fixed",
+                },
+            )
         if rerun != "off":
             view = LiveView(rerun, title=f"live {source}", say=say)
-        pipe = Pipeline(method=method, bias=bias_v, init_q=init_q,
-                         window_ns=round(reorder_window_s * 1e9), truth_wait_s=truth_wait_s,
-                         lines=spec.kind != "ws", view=view, recorder=recorder, say=say)
+        pipe = Pipeline(
+            method=method,
+            bias=bias_v,
+            init_q=init_q,
+            window_ns=round(reorder_window_s * 1e9),
+            truth_wait_s=truth_wait_s,
+            lines=spec.kind != "ws",
+            view=view,
+            recorder=recorder,
+            say=say,
+        )
         gyro_scale = DEG if (gyro_units == "deg/s" and spec.kind == "ws") else 1.0
         stop_event = stop or threading.Event()
-        reason = _loop(src, pipe, stop_event, gyro_scale, view_interval_s, status, say,
-                       idle_stop_s, recorder, on_ready, spec)  # fmt: skip
+        reason = _loop(
+            src,
+            pipe,
+            stop_event,
+            gyro_scale,
+            view_interval_s,
+            status,
+            say,
+            idle_stop_s,
+            recorder,
+            on_ready,
+            spec,
+        )
     finally:
         src.stop()
         if view is not None:
@@ -188,13 +223,14 @@ def run(
                 line = view.close()
                 if line:
                     say(line)
-            except Exception as exc:  # noqa: BLE001 - the view never loses the run
+            except Exception as exc:
                 say(f"rerun view failed: {type(exc).__name__}: {exc}")
         if recorder is not None:
             recorder.close()
     lat = np.concatenate(pipe.latency) if pipe.latency else np.zeros(0)
-    summary = _summary(pipe, src, spec, source, method, bias_v, gyro_units, reason, lat,
-                       recorder, started)  # fmt: skip
+    summary = _summary(
+        pipe, src, spec, source, method, bias_v, gyro_units, reason, lat, recorder, started
+    )
     if summary_json is not None:
         from imu_dcm.live.__main__ import write_json
 
@@ -203,9 +239,19 @@ def run(
     return LiveResult(summary, q, pipe.t_last_ns, lat)
 
 
-def _loop(src: Source, pipe: Pipeline, stop: threading.Event, gyro_scale: float,
-          interval_s: float, status: bool | None, say, idle_stop_s, recorder, on_ready,
-          spec) -> str:
+def _loop(
+    src: Source,
+    pipe: Pipeline,
+    stop: threading.Event,
+    gyro_scale: float,
+    interval_s: float,
+    status: bool | None,
+    say,
+    idle_stop_s,
+    recorder,
+    on_ready,
+    spec,
+) -> str:
     """Receive until stopped; returns why it stopped."""
     import queue
 
@@ -248,8 +294,14 @@ def _loop(src: Source, pipe: Pipeline, stop: threading.Event, gyro_scale: float,
                         rec: Received = ev[1]
                         if rec.kind == "imu":
                             if gyro_scale != 1.0:
-                                rec = Received(rec.kind, rec.t_ns, rec.values * gyro_scale,
-                                               rec.arrival_ns, rec.wall_ns, rec.raw)  # fmt: skip
+                                rec = Received(
+                                    rec.kind,
+                                    rec.t_ns,
+                                    rec.values * gyro_scale,
+                                    rec.arrival_ns,
+                                    rec.wall_ns,
+                                    rec.raw,
+                                )
                             pipe.on_imu(rec)
                             idle_since = time.monotonic()
                         else:
@@ -296,8 +348,14 @@ def _loop(src: Source, pipe: Pipeline, stop: threading.Event, gyro_scale: float,
                     rec = ev[1]
                     if rec.kind == "imu":
                         if gyro_scale != 1.0:
-                            rec = Received(rec.kind, rec.t_ns, rec.values * gyro_scale,
-                                           rec.arrival_ns, rec.wall_ns, rec.raw)  # fmt: skip
+                            rec = Received(
+                                rec.kind,
+                                rec.t_ns,
+                                rec.values * gyro_scale,
+                                rec.arrival_ns,
+                                rec.wall_ns,
+                                rec.raw,
+                            )
                         pipe.on_imu(rec)
                     else:
                         pipe.on_truth(rec)
@@ -324,14 +382,27 @@ def _status(pipe: Pipeline, src: Source, tty: bool) -> None:
     p50 = f"{np.median(lat):.1f}" if len(lat) else "-"
     b = pipe.rest.bias_rad_s if pipe.rest is not None else pipe.fixed_bias
     rest = " (at rest)" if pipe.rest is not None and pipe.rest.at_rest else ""
-    line = (f"{rate:7.1f} Hz  {pipe.n} samples  {dropped} dropped  latency {p50} ms  "
-            f"bias ({b[0]:+.4f}, {b[1]:+.4f}, {b[2]:+.4f}) rad/s{rest}")
+    line = (
+        f"{rate:7.1f} Hz  {pipe.n} samples  {dropped} dropped  latency {p50} ms  "
+        f"bias ({b[0]:+.4f}, {b[1]:+.4f}, {b[2]:+.4f}) rad/s{rest}"
+    )
     sys.stderr.write(("\r" + line) if tty else (line + "\n"))
     sys.stderr.flush()
 
 
-def _summary(pipe: Pipeline, src: Source, spec, source: str, method: str, bias_v, gyro_units,
-             reason: str, lat: NDArray, recorder, started: float) -> dict:
+def _summary(
+    pipe: Pipeline,
+    src: Source,
+    spec,
+    source: str,
+    method: str,
+    bias_v,
+    gyro_units,
+    reason: str,
+    lat: NDArray,
+    recorder,
+    started: float,
+) -> dict:
     r = pipe.reorder
     chans = getattr(pipe, "channels", {})
     imu_ch, truth_ch = chans.get("imu"), chans.get("truth")
@@ -349,8 +420,9 @@ def _summary(pipe: Pipeline, src: Source, spec, source: str, method: str, bias_v
         "source": source,
         "imu_topic": imu_ch.topic if imu_ch else None,
         "imu_type": (imu_ch.name or imu_ch.message_encoding) if imu_ch else None,
-        "truth_topic": truth_ch.topic if truth_ch else ("lines (q_w_b)" if pipe.truth_count
-                                                       else None),
+        "truth_topic": truth_ch.topic
+        if truth_ch
+        else ("lines (q_w_b)" if pipe.truth_count else None),
         "truth_type": truth_ch.name if truth_ch else None,
         "samples": int(pipe.n),
         "samples_estimated": int(pipe.n - pipe.samples_before_start) if pipe.integ else 0,
@@ -373,7 +445,8 @@ def _summary(pipe: Pipeline, src: Source, spec, source: str, method: str, bias_v
         "start_time_s": pipe.start_t_s,
         "initial_quat_xyzw": None if pipe.q0 is None else [float(v) for v in pipe.q0],
         "final_quat_xyzw": None if pipe.q_last is None else [float(v) for v in pipe.q_last],
-        "final_t_s": None if pipe.t_last_ns is None or pipe.t0_ns is None
+        "final_t_s": None
+        if pipe.t_last_ns is None or pipe.t0_ns is None
         else (pipe.t_last_ns - pipe.t0_ns) * 1e-9,
         "truth_samples_used": int(pipe.truth_used),
         "rms_error_deg": float(rms_v[0]) if have else None,

@@ -39,8 +39,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from imu_dcm.errors import InputError
-from imu_dcm.logio.batch import classify_schema, decode_cdr_batch
 from imu_dcm.live.lines import parse_lines
+from imu_dcm.logio.batch import classify_schema, decode_cdr_batch
 
 __all__ = ["Channel", "Received", "Source", "SourceSpec", "open_source", "parse_source"]
 
@@ -118,8 +118,7 @@ class Source:
     def __init__(self) -> None:
         self.events: queue.Queue = queue.Queue()
         self._stop = threading.Event()
-        self._thread = threading.Thread(target=self._guarded, name=type(self).__name__,
-                                        daemon=True)  # fmt: skip
+        self._thread = threading.Thread(target=self._guarded, name=type(self).__name__, daemon=True)
 
     def start(self) -> Source:
         self._thread.start()
@@ -138,7 +137,7 @@ class Source:
     def _guarded(self) -> None:
         try:
             self._run()
-        except Exception as exc:  # noqa: BLE001 - reported to the pipeline, which stops cleanly
+        except Exception as exc:
             self.events.put(("end", f"source failed: {type(exc).__name__}: {exc}"))
 
     def _run(self) -> None:  # pragma: no cover - abstract
@@ -153,19 +152,36 @@ class _LineSource(Source):
         self._first = True
 
     def _emit_lines(self, lines: list[bytes], arrival_ns: int, wall_ns: int) -> None:
-        t, w, tt, q, bad = parse_lines(lines, gyro_units=self.gyro_units,
-                                       time_units=self.time_units, first=self._first)  # fmt: skip
+        t, w, tt, q, bad = parse_lines(
+            lines, gyro_units=self.gyro_units, time_units=self.time_units, first=self._first
+        )
         self._first = False
         if bad:
             self.events.put(("malformed", bad))
         if len(tt):
             m = len(tt)
-            self.events.put(("data", Received("truth", tt, q, np.full(m, arrival_ns, np.int64),
-                                              np.full(m, wall_ns, np.int64))))  # fmt: skip
+            self.events.put(
+                (
+                    "data",
+                    Received(
+                        "truth",
+                        tt,
+                        q,
+                        np.full(m, arrival_ns, np.int64),
+                        np.full(m, wall_ns, np.int64),
+                    ),
+                )
+            )
         if len(t):
             n = len(t)
-            self.events.put(("data", Received("imu", t, w, np.full(n, arrival_ns, np.int64),
-                                              np.full(n, wall_ns, np.int64))))  # fmt: skip
+            self.events.put(
+                (
+                    "data",
+                    Received(
+                        "imu", t, w, np.full(n, arrival_ns, np.int64), np.full(n, wall_ns, np.int64)
+                    ),
+                )
+            )
 
 
 class UdpSource(_LineSource):
@@ -245,8 +261,13 @@ class StdinSource(_LineSource):
 class WsSource(Source):
     """A Foxglove WebSocket client (see the module doc)."""
 
-    def __init__(self, url: str, imu_topic: str | None, truth_topic: str | None,
-                 give_up_s: float | None = 30.0) -> None:
+    def __init__(
+        self,
+        url: str,
+        imu_topic: str | None,
+        truth_topic: str | None,
+        give_up_s: float | None = 30.0,
+    ) -> None:
         super().__init__()
         self.url = url
         self.imu_topic = imu_topic
@@ -264,13 +285,18 @@ class WsSource(Source):
         while not self._stop.is_set():
             why = ""
             try:
-                with connect(self.url, subprotocols=list(_SUBPROTOCOLS), max_size=None,
-                             compression=None, proxy=None, open_timeout=5,
-                             close_timeout=1) as ws:  # fmt: skip
+                with connect(
+                    self.url,
+                    subprotocols=list(_SUBPROTOCOLS),
+                    max_size=None,
+                    compression=None,
+                    proxy=None,
+                    open_timeout=5,
+                    close_timeout=1,
+                ) as ws:
                     if ever:
                         self.reconnects += 1
-                        self.events.put(("info", (f"reconnected to {self.url} "
-                                                 f"({ws.subprotocol})")))  # fmt: skip
+                        self.events.put(("info", (f"reconnected to {self.url} ({ws.subprotocol})")))
                     else:
                         self.events.put(("info", f"connected to {self.url} ({ws.subprotocol})"))
                     ever = True
@@ -295,8 +321,12 @@ class WsSource(Source):
                 lost_at = time.monotonic()
             waited = time.monotonic() - lost_at
             if self.give_up_s is not None and waited > self.give_up_s:
-                self.events.put(("end", (f"source lost: no connection to {self.url} for "
-                                        f"{waited:.1f} s ({why})")))  # fmt: skip
+                self.events.put(
+                    (
+                        "end",
+                        (f"source lost: no connection to {self.url} for {waited:.1f} s ({why})"),
+                    )
+                )
                 return
             self.events.put(("info", f"{why}; reconnecting to {self.url} in {delay:.1f} s"))
             self._stop.wait(delay)
@@ -334,8 +364,7 @@ class WsSource(Source):
                 if left <= 0:
                     break
                 try:
-                    frames.append((ws.recv(timeout=left), time.perf_counter_ns(),
-                                   time.time_ns()))
+                    frames.append((ws.recv(timeout=left), time.perf_counter_ns(), time.time_ns()))
                 except TimeoutError:
                     break
             for data, arrival, wall in frames:
@@ -346,8 +375,11 @@ class WsSource(Source):
                         for ch in msg.get("channels", []):
                             enc = ch.get("schemaEncoding", "")
                             text = ch.get("schema", "")
-                            kind = (classify_schema(ch.get("schemaName", ""), enc, text)
-                                    if ch.get("encoding") == "cdr" else None)  # fmt: skip
+                            kind = (
+                                classify_schema(ch.get("schemaName", ""), enc, text)
+                                if ch.get("encoding") == "cdr"
+                                else None
+                            )
                             channels[int(ch["id"])] = {**ch, "kind": kind}
                         for kind, topic in (("imu", self.imu_topic), ("truth", self.truth_topic)):
                             if kind in picked or topic == "none":
@@ -356,40 +388,68 @@ class WsSource(Source):
                             if topic is not None and ids:
                                 ch = channels[ids[0]]
                                 if ch["kind"] is None or ch["kind"][0] != kind:
-                                    return (f"Expected {kind} messages (CDR) on {topic}, got "
-                                            f"{ch.get('schemaName')} ({ch.get('encoding')})")
+                                    return (
+                                        f"Expected {kind} messages (CDR) on {topic}, got "
+                                        f"{ch.get('schemaName')} ({ch.get('encoding')})"
+                                    )
                             if len(ids) > 1:
                                 names = ", ".join(sorted(channels[i]["topic"] for i in ids))
                                 flag = "--imu-topic" if kind == "imu" else "--truth-topic"
-                                return (f"Expected one {kind} channel, got {len(ids)}: {names} "
-                                        f"(choose with {flag})")  # fmt: skip
+                                return (
+                                    f"Expected one {kind} channel, got {len(ids)}: {names} "
+                                    f"(choose with {flag})"
+                                )
                             if ids:
                                 cid = ids[0]
                                 ch = channels[cid]
                                 picked[kind] = cid
                                 subs[next_sub] = (kind, ch)
-                                ws.send(json.dumps({"op": "subscribe", "subscriptions": [
-                                    {"id": next_sub, "channelId": cid}]}))
+                                ws.send(
+                                    json.dumps(
+                                        {
+                                            "op": "subscribe",
+                                            "subscriptions": [{"id": next_sub, "channelId": cid}],
+                                        }
+                                    )
+                                )
                                 next_sub += 1
-                                self.events.put(("channel", Channel(
-                                    kind, ch["topic"], ch.get("schemaName", ""),
-                                    ch.get("schemaEncoding", ""), ch.get("schema", ""), "cdr")))
-                                self.events.put(("info", (f"subscribed to {ch['topic']} "
-                                                         f"({ch.get('schemaName')}) as {kind}")))
+                                self.events.put(
+                                    (
+                                        "channel",
+                                        Channel(
+                                            kind,
+                                            ch["topic"],
+                                            ch.get("schemaName", ""),
+                                            ch.get("schemaEncoding", ""),
+                                            ch.get("schema", ""),
+                                            "cdr",
+                                        ),
+                                    )
+                                )
+                                self.events.put(
+                                    (
+                                        "info",
+                                        (
+                                            f"subscribed to {ch['topic']} "
+                                            f"({ch.get('schemaName')}) as {kind}"
+                                        ),
+                                    )
+                                )
                     elif op == "unadvertise":
                         gone = set(msg.get("channelIds", []))
                         for kind, cid in list(picked.items()):
                             if cid in gone:
                                 del picked[kind]
-                                self.events.put(("info", (f"{channels[cid]['topic']} was "
-                                                         f"unadvertised")))  # fmt: skip
+                                self.events.put(
+                                    ("info", (f"{channels[cid]['topic']} was unadvertised"))
+                                )
                         for sid, (_, ch) in list(subs.items()):
                             if int(ch["id"]) in gone:
                                 del subs[sid]
                 elif len(data) >= _MSG_HEAD.size and data[0] == _BIN_MESSAGE:
                     _, sid, _ = _MSG_HEAD.unpack_from(data)
                     if sid in subs:
-                        pending.setdefault(sid, []).append((data[_MSG_HEAD.size:], arrival, wall))
+                        pending.setdefault(sid, []).append((data[_MSG_HEAD.size :], arrival, wall))
             for sid, items in pending.items():
                 if items and sid in subs:
                     self._decode(subs[sid], items)
@@ -399,8 +459,14 @@ class WsSource(Source):
     def _decode(self, sub: tuple[str, dict], items: list) -> None:
         kind, ch = sub
         payloads = [p for p, _, _ in items]
-        dec = decode_cdr_batch(ch["kind"], ch.get("schemaName", ""), ch.get("schemaEncoding", ""),
-                               ch.get("schema", ""), payloads, ch["topic"])  # fmt: skip
+        dec = decode_cdr_batch(
+            ch["kind"],
+            ch.get("schemaName", ""),
+            ch.get("schemaEncoding", ""),
+            ch.get("schema", ""),
+            payloads,
+            ch["topic"],
+        )
         bad = int(len(payloads) - dec.good.sum())
         if bad:
             self.events.put(("malformed", bad))
@@ -412,10 +478,16 @@ class WsSource(Source):
             self.events.put(("data", Received(kind, dec.t_ns, dec.values, arrival, wall, raw)))
 
 
-def open_source(spec: SourceSpec, *, imu_topic: str | None = None,
-                truth_topic: str | None = None, gyro_units: str = "rad/s",
-                time_units: str = "s", give_up_s: float | None = 30.0,
-                stdin_fd: int | None = None) -> Source:
+def open_source(
+    spec: SourceSpec,
+    *,
+    imu_topic: str | None = None,
+    truth_topic: str | None = None,
+    gyro_units: str = "rad/s",
+    time_units: str = "s",
+    give_up_s: float | None = 30.0,
+    stdin_fd: int | None = None,
+) -> Source:
     """Create (not start) the source for ``spec``."""
     if spec.kind == "ws":
         return WsSource(spec.url, imu_topic, truth_topic, give_up_s)

@@ -45,8 +45,12 @@ def check_mode(mode: str | None) -> None:
     """Raise InputError for a mode other than None, spawn, serve, off or save:PATH.rrd."""
     if mode is None or mode in ("spawn", "serve", "off"):
         return
-    if isinstance(mode, str) and mode.startswith("save:") and mode.endswith(".rrd") \
-            and len(mode) > len("save:.rrd"):
+    if (
+        isinstance(mode, str)
+        and mode.startswith("save:")
+        and mode.endswith(".rrd")
+        and len(mode) > len("save:.rrd")
+    ):
         return
     raise InputError(f"Expected --rerun spawn, serve, save:PATH.rrd or off, got {mode!r}")
 
@@ -64,8 +68,9 @@ def _spawn_detached(cmd: list[str]) -> int:
     if hasattr(os, "posix_spawn"):
         actions = [(os.POSIX_SPAWN_OPEN, fd, os.devnull, os.O_RDWR, 0) for fd in (0, 1, 2)]
         return os.posix_spawn(cmd[0], cmd, env, file_actions=actions, setsid=True)
-    proc = subprocess.Popen(cmd, stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL,
-                            stderr=subprocess.DEVNULL, env=env)  # pragma: no cover - Windows
+    proc = subprocess.Popen(
+        cmd, stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, env=env
+    )  # pragma: no cover - Windows
     proc.returncode = 0  # left running on purpose: no "still running" warning when dropped
     return proc.pid
 
@@ -94,19 +99,35 @@ class LiveView:
         self.entity = viz.ENTITY
         self.timeline = viz.TIMELINE
         nan4 = np.full((1, 4), np.nan)
-        self._blank = viz.ViewData(t_s=np.zeros(1), q_est=nan4, q_truth=nan4,
-                                   omega_b=np.zeros((1, 3)), error_total_deg=np.full(1, np.nan),
-                                   error_inclination_deg=np.full(1, np.nan),
-                                   error_heading_deg=np.full(1, np.nan), title=title)
+        self._blank = viz.ViewData(
+            t_s=np.zeros(1),
+            q_est=nan4,
+            q_truth=nan4,
+            omega_b=np.zeros((1, 3)),
+            error_total_deg=np.full(1, np.nan),
+            error_inclination_deg=np.full(1, np.nan),
+            error_heading_deg=np.full(1, np.nan),
+            title=title,
+        )
         blueprint = viz.make_blueprint(self._blank)
         rec = rr.RecordingStream("imu_dcm", recording_id=uuid.uuid4())
         if mode == "spawn":
             if not viz.has_display():
-                raise InputError("Expected a display (DISPLAY or WAYLAND_DISPLAY) for rerun mode "
-                                 "'spawn', got none; use 'serve' or 'save:PATH.rrd'")
+                raise InputError(
+                    "Expected a display (DISPLAY or WAYLAND_DISPLAY) for rerun mode "
+                    "'spawn', got none; use 'serve' or 'save:PATH.rrd'"
+                )
             port = _free_port()
-            pid = _spawn_detached([str(viz.rerun_binary()), "--bind", "127.0.0.1", "--port",
-                                   str(port), "--expect-data-soon"])
+            pid = _spawn_detached(
+                [
+                    str(viz.rerun_binary()),
+                    "--bind",
+                    "127.0.0.1",
+                    "--port",
+                    str(port),
+                    "--expect-data-soon",
+                ]
+            )
             self.viewer_pid = pid
             deadline = time.monotonic() + 20.0
             while True:
@@ -115,8 +136,10 @@ class LiveView:
                         break
                 except OSError:
                     if time.monotonic() > deadline:
-                        raise InputError(f"Expected the rerun viewer on 127.0.0.1:{port}, got "
-                                         f"none within 20 s (pid {pid})") from None
+                        raise InputError(
+                            f"Expected the rerun viewer on 127.0.0.1:{port}, got "
+                            f"none within 20 s (pid {pid})"
+                        ) from None
                     time.sleep(0.05)
             rec.connect_grpc(f"rerun+http://127.0.0.1:{port}/proxy", default_blueprint=blueprint)
             say(f"rerun: viewer started (pid {pid}, listening on 127.0.0.1:{port})")
@@ -125,7 +148,7 @@ class LiveView:
             rec.connect_grpc(self.served.grpc_url, default_blueprint=blueprint)
             say(f"rerun: open {self.served.url} (web viewer, 127.0.0.1 only)")
         else:
-            rec.save(mode[len("save:"):], default_blueprint=blueprint)
+            rec.save(mode[len("save:") :], default_blueprint=blueprint)
         rec.send_recording_name(title)
         self.rec = rec
         self._static()
@@ -143,8 +166,9 @@ class LiveView:
             self.rec.log("/world", rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
 
     def _time(self, t_s: NDArray):
-        return self.rr.TimeColumn(self.timeline,
-                                  duration=np.rint(t_s * 1e9).astype("timedelta64[ns]"))
+        return self.rr.TimeColumn(
+            self.timeline, duration=np.rint(t_s * 1e9).astype("timedelta64[ns]")
+        )
 
     def _send(self, path: str, t_s: NDArray, columns) -> None:
         self.rec.send_columns(path, indexes=[self._time(t_s)], columns=columns)
@@ -166,8 +190,11 @@ class LiveView:
         ax = _axes(q[idx])
         n = len(idx)
         rgb, radius = (_EST_RGB, 0.018) if key == "est" else (_TRUTH_RGB, 0.035)
-        fields = {"vectors": ax.reshape(-1, 3), "colors": np.tile(rgb, (n, 1)),
-                  "radii": np.full(3 * n, radius, dtype=np.float32)}
+        fields = {
+            "vectors": ax.reshape(-1, 3),
+            "colors": np.tile(rgb, (n, 1)),
+            "radii": np.full(3 * n, radius, dtype=np.float32),
+        }
         if key == "truth":
             fields["labels"] = np.tile(np.array(["x", "y", "z"]), n)
         cols = self.rr.Arrows3D.columns(**fields).partition(np.full(n, 3))
@@ -175,7 +202,7 @@ class LiveView:
         self._send(path, t_s[idx], cols)
         # z-tip trail: the last _TRAIL_S seconds, one strip per call
         tips = self._tips[key]
-        for t, z in zip(t_s.tolist(), _axes(q)[:, 2].tolist()):
+        for t, z in zip(t_s.tolist(), _axes(q)[:, 2].tolist(), strict=False):
             tips.append((t, z))
         while tips and tips[0][0] < t_s[-1] - _TRAIL_S:
             tips.popleft()
@@ -185,18 +212,28 @@ class LiveView:
         color = (240, 150, 0) if key == "est" else (150, 70, 220)
         radius = 0.004 if key == "est" else 0.007
         cols = self.rr.LineStrips3D.columns(strips=[pts], colors=[color], radii=[radius])
-        self._send(self.entity["estimate_trail" if key == "est" else "truth_trail"],
-                   t_s[-1:], cols)  # fmt: skip
+        self._send(self.entity["estimate_trail" if key == "est" else "truth_trail"], t_s[-1:], cols)
 
-    def log(self, *, gyro_t_s: NDArray, omega_b: NDArray, est_t_s: NDArray, q_est: NDArray,
-            truth_t_s: NDArray, q_truth: NDArray, err_t_s: NDArray, err_deg: NDArray) -> None:
+    def log(
+        self,
+        *,
+        gyro_t_s: NDArray,
+        omega_b: NDArray,
+        est_t_s: NDArray,
+        q_est: NDArray,
+        truth_t_s: NDArray,
+        q_truth: NDArray,
+        err_t_s: NDArray,
+        err_deg: NDArray,
+    ) -> None:
         """Send one batch: times in s since the first sample; rates (n, 3) rad/s body axes;
         ``q_*`` (n, 4) ``[x, y, z, w]`` body to world; errors (n, 3) deg (total, incl., head)."""
         rr = self.rr
         if len(gyro_t_s):
             for k, a in enumerate("xyz"):
-                self._send(self.entity[f"gyro_{a}"], gyro_t_s,
-                           rr.Scalars.columns(scalars=omega_b[:, k]))
+                self._send(
+                    self.entity[f"gyro_{a}"], gyro_t_s, rr.Scalars.columns(scalars=omega_b[:, k])
+                )
         if len(est_t_s):
             self._axes_rows("est", est_t_s, q_est)
         if len(truth_t_s):
@@ -210,8 +247,10 @@ class LiveView:
         self.rec.flush(timeout_sec=_FLUSH_TIMEOUT_S)
         self.rec.disconnect()
         if self.served is not None:
-            return (f"rerun: the web viewer stays at {self.served.url} (127.0.0.1 only; stop it "
-                    f"with: kill {self.served.process.pid})")
+            return (
+                f"rerun: the web viewer stays at {self.served.url} (127.0.0.1 only; stop it "
+                f"with: kill {self.served.process.pid})"
+            )
         if self.viewer_pid is not None:
             return f"rerun: viewer running (pid {self.viewer_pid})"
-        return f"rerun: saved {self.mode[len('save:'):]}"
+        return f"rerun: saved {self.mode[len('save:') :]}"

@@ -45,8 +45,10 @@ def _damage_summary(name: str, damage: list[Damage]) -> str:
     when = ""
     if first.t_start_ns is not None and first.t_end_ns is not None:
         when = f", log time {first.t_start_ns}..{first.t_end_ns} ns"
-    return (f"{first.what} (file offset {first.offset}{when}){more}; {n_lost} messages of the "
-            f"read channels lost in {len(damage)} damaged part{'s' if len(damage) > 1 else ''}")
+    return (
+        f"{first.what} (file offset {first.offset}{when}){more}; {n_lost} messages of the "
+        f"read channels lost in {len(damage)} damaged part{'s' if len(damage) > 1 else ''}"
+    )
 
 
 def read_log(
@@ -103,29 +105,38 @@ def read_log(
     """
     source, shown, custom = open_source(path, progress)
     got = source.read(Sink(plan(imu_topic, truth_topic)))
-    channels = tuple(ChannelInfo(c.topic, c.msgtype, c.encoding, int(c.count or 0))
-                     for c in got.conns)  # fmt: skip
+    channels = tuple(
+        ChannelInfo(c.topic, c.msgtype, c.encoding, int(c.count or 0)) for c in got.conns
+    )
     stopped_at = _damage_summary(shown.name, got.damage) if got.damage else None
     if not channels or sum(c.count for c in channels) == 0 and not got.payloads:
         if stopped_at:  # one line: the damage is why nothing was read
-            raise LogError(f"Expected messages in the log, got none readable in {shown}: "
-                           f"{stopped_at}")  # fmt: skip
-        raise LogError(f"Expected messages in the log, got an empty log "
-                       f"({describe(got.conns)}): {shown}")  # fmt: skip
+            raise LogError(
+                f"Expected messages in the log, got none readable in {shown}: {stopped_at}"
+            )
+        raise LogError(
+            f"Expected messages in the log, got an empty log ({describe(got.conns)}): {shown}"
+        )
     topic, conns = pick_imu(got, imu_topic)
     imu, undecodable = read_imu(got, topic, conns)
     if len(imu.t_ns) == 0:
-        raise LogError(f"Expected IMU samples on {imu.topic}, got none that decode "
-                       f"({undecodable} messages)")  # fmt: skip
+        raise LogError(
+            f"Expected IMU samples on {imu.topic}, got none that decode ({undecodable} messages)"
+        )
     truth = _read_truth(got, imu, truth_topic, truth_frame)
     # Warnings only once the log is known to be usable: an error is then the only line.
     if stopped_at:
-        warnings.warn(f"{shown.name} is truncated or corrupt: {stopped_at}", ImuDcmWarning,
-                      stacklevel=2)  # fmt: skip
+        warnings.warn(
+            f"{shown.name} is truncated or corrupt: {stopped_at}", ImuDcmWarning, stacklevel=2
+        )
     if undecodable:
-        warnings.warn(f"{imu.topic}: dropped {undecodable} messages that do not decode",
-                      ImuDcmWarning, stacklevel=2)  # fmt: skip
+        warnings.warn(
+            f"{imu.topic}: dropped {undecodable} messages that do not decode",
+            ImuDcmWarning,
+            stacklevel=2,
+        )
     if progress is not None:
         progress(1.0)
-    return LogData(shown, imu, truth, channels, custom, got.kind or source.kind,
-                   tuple(got.damage), stopped_at)  # fmt: skip
+    return LogData(
+        shown, imu, truth, channels, custom, got.kind or source.kind, tuple(got.damage), stopped_at
+    )

@@ -58,8 +58,9 @@ def classify_schema(name: str, encoding: str, text: str) -> tuple[str, str] | No
     return None
 
 
-def decode_cdr_batch(kind: tuple[str, str], name: str, encoding: str, text: str,
-                     payloads: list[bytes], topic: str) -> Decoded:  # fmt: skip
+def decode_cdr_batch(
+    kind: tuple[str, str], name: str, encoding: str, text: str, payloads: list[bytes], topic: str
+) -> Decoded:
     """Decode CDR payloads of one channel in bulk.
 
     Parameters
@@ -86,8 +87,13 @@ def decode_cdr_batch(kind: tuple[str, str], name: str, encoding: str, text: str,
     n = len(payloads)
     lengths = np.fromiter(map(len, payloads), np.int64, n)
     starts = np.concatenate([[0], np.cumsum(lengths)[:-1]]).astype(np.int64)
-    raw = Payloads(np.frombuffer(b"".join(payloads), np.uint8), starts, lengths,
-                   np.zeros(n, np.int64), np.arange(n, dtype=np.int64))  # fmt: skip
+    raw = Payloads(
+        np.frombuffer(b"".join(payloads), np.uint8),
+        starts,
+        lengths,
+        np.zeros(n, np.int64),
+        np.arange(n, dtype=np.int64),
+    )
     what, path = kind
     conn = Conn(0, topic, name, "cdr", encoding, text)
     cols = _Decoder(conn, "imu", path)(raw) if what == "imu" else _Decoder(conn, "truth")(raw)

@@ -45,8 +45,19 @@ def gather(buf: NDArray[np.uint8], pos: NDArray[np.int64], dtype: str, n: int = 
     return view[pos[:, None] + dt.itemsize * np.arange(n)]
 
 
-def _walk(defs: Defs, type_name: str, buf, base, off, end, want: Want, out: dict, align: bool,
-          prefix: str = "", depth: int = 0):  # fmt: skip
+def _walk(
+    defs: Defs,
+    type_name: str,
+    buf,
+    base,
+    off,
+    end,
+    want: Want,
+    out: dict,
+    align: bool,
+    prefix: str = "",
+    depth: int = 0,
+):
     """Advance per-message offsets ``off`` through ``type_name``; gather wanted leaves.
 
     ``base`` is each payload body's byte position (CDR aligns relative to it); ``end`` the
@@ -96,8 +107,9 @@ def _walk(defs: Defs, type_name: str, buf, base, off, end, want: Want, out: dict
     return off
 
 
-def decode(conn: Conn, defs: Defs, root: str, raw: Payloads,
-           want: Want) -> tuple[dict[str, NDArray], NDArray[np.bool_]]:  # fmt: skip
+def decode(
+    conn: Conn, defs: Defs, root: str, raw: Payloads, want: Want
+) -> tuple[dict[str, NDArray], NDArray[np.bool_]]:
     """Decode the wanted leaves of every message of ``raw``.
 
     Returns
@@ -107,8 +119,9 @@ def decode(conn: Conn, defs: Defs, root: str, raw: Payloads,
     """
     n = len(raw)
     if n == 0:
-        return {k: np.zeros((0, c) if c > 1 else 0, dtype=d) for k, (d, c) in want.items()}, \
-            np.zeros(0, bool)
+        return {
+            k: np.zeros((0, c) if c > 1 else 0, dtype=d) for k, (d, c) in want.items()
+        }, np.zeros(0, bool)
     ros1 = conn.encoding == "ros1"
     if ros1:
         good = np.ones(n, bool)
@@ -146,17 +159,20 @@ def _leaf(msg, path: str):
     return v
 
 
-def decode_slow(conn: Conn, raw: Payloads, want: Want) -> tuple[dict[str, NDArray],
-                                                               NDArray[np.bool_]]:  # fmt: skip
+def decode_slow(
+    conn: Conn, raw: Payloads, want: Want
+) -> tuple[dict[str, NDArray], NDArray[np.bool_]]:
     """Per-message fallback with rosbags' deserialiser (layouts the walker cannot follow)."""
     try:
         store, root = typestore_for(conn)
         store.get_msgdef(root)
-    except Exception:  # noqa: BLE001 (the schema already parsed once; this is the fallback)
+    except Exception:
         store = None
     n = len(raw)
-    out = {k: np.full((n, c) if c > 1 else n, np.nan if np.dtype(d).kind == "f" else 0, dtype=d)
-           for k, (d, c) in want.items()}  # fmt: skip
+    out = {
+        k: np.full((n, c) if c > 1 else n, np.nan if np.dtype(d).kind == "f" else 0, dtype=d)
+        for k, (d, c) in want.items()
+    }
     good = np.zeros(n, dtype=bool)
     if store is None:
         return out, good
@@ -165,7 +181,7 @@ def decode_slow(conn: Conn, raw: Payloads, want: Want) -> tuple[dict[str, NDArra
         try:
             msg = deser(raw.payload(i), root)
             vals = {k: _leaf(msg, k) for k in want}
-        except Exception:  # noqa: BLE001, S112 (a corrupt payload: counted as dropped)
+        except Exception:
             continue
         for k, (_, c) in want.items():
             v = vals[k]

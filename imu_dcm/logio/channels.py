@@ -2,11 +2,11 @@
 
 IMU: ``sensor_msgs/Imu`` (ROS 1 or ROS 2), a vendor type holding an ``Imu`` field, a JSON
 channel with ``angular_velocity {x, y, z}``, or - when there is none of these - a
-``geometry_msgs/Vector3Stamped`` topic whose name says gyro ("gyr", "angular_vel" or "imu";
-any other one when named with ``imu_topic``). Truth: a ``geometry_msgs`` quaternion, pose or
-transform type or ``nav_msgs/Odometry``; else the transform in ``/tf`` / ``/tf_static`` whose child frame moves
-(``truth_frame`` chooses where several do); else the Imu's own orientation. Several channels of
-one topic are merged in file order.
+``geometry_msgs/Vector3Stamped`` topic whose name says gyro ("gyr", "angular_vel" or "imu"; any
+other one when named with ``imu_topic``). Truth: a ``geometry_msgs`` quaternion, pose or transform
+type or ``nav_msgs/Odometry``; else the transform in ``/tf`` / ``/tf_static`` whose child frame
+moves (``truth_frame`` chooses where several do); else the Imu's own orientation. Several channels
+of one topic are merged in file order.
 """
 
 from __future__ import annotations
@@ -43,6 +43,8 @@ _GYRO_NAME = re.compile(r"gyr|angular_vel|imu", re.IGNORECASE)
 
 def _gyro_name(topic: str) -> bool:
     return bool(_GYRO_NAME.search(topic)) and not topic.startswith(_NOT_GYRO)
+
+
 _INT64 = 2**63
 
 
@@ -132,23 +134,31 @@ class _Decoder:
 
         if self.role == "truth":
             q = TRUTH_TYPES[root]
-            fields = {"t_ns": rows(_stamp(out, "header.")),
-                      "q": rows(np.stack([out[f"{q}.{a}"] for a in "xyzw"], axis=1))}
+            fields = {
+                "t_ns": rows(_stamp(out, "header.")),
+                "q": rows(np.stack([out[f"{q}.{a}"] for a in "xyzw"], axis=1)),
+            }
         elif self.path == "vec3":
-            fields = {"t_ns": rows(_stamp(out, "header.")),
-                      "omega": rows(np.stack([out["vector." + a] for a in "xyz"], axis=1))}
+            fields = {
+                "t_ns": rows(_stamp(out, "header.")),
+                "omega": rows(np.stack([out["vector." + a] for a in "xyz"], axis=1)),
+            }
         else:
             pre = self.path + "." if self.path else ""
-            fields = {"t_ns": rows(_stamp(out, pre + "header.")),
-                      "omega": rows(np.stack([out[pre + "angular_velocity." + a] for a in "xyz"],
-                                             axis=1))}  # fmt: skip
+            fields = {
+                "t_ns": rows(_stamp(out, pre + "header.")),
+                "omega": rows(
+                    np.stack([out[pre + "angular_velocity." + a] for a in "xyz"], axis=1)
+                ),
+            }
             flagged = out[pre + "orientation_covariance"] == -1.0
             if not flagged.all():
                 quat = np.stack([out[pre + "orientation." + a] for a in "xyzw"], axis=1)
                 quat[flagged] = np.nan
                 fields["quat"] = rows(quat)
-        return Columns(rows(p.order), rows(p.log_time), fields, frames, None,
-                       int(len(p) - good.sum()))  # fmt: skip
+        return Columns(
+            rows(p.order), rows(p.log_time), fields, frames, None, int(len(p) - good.sum())
+        )
 
 
 def plan(imu_topic: str | None, truth_topic: str | None) -> Callable[[Conn], object]:
@@ -167,8 +177,9 @@ def plan(imu_topic: str | None, truth_topic: str | None) -> Callable[[Conn], obj
             return _raw if imu_ok else None
         if imu_ok:
             path = imu_path(c)
-            if path is not None and (path != "vec3" or imu_topic is not None
-                                     or _gyro_name(c.topic)):  # fmt: skip
+            if path is not None and (
+                path != "vec3" or imu_topic is not None or _gyro_name(c.topic)
+            ):
                 return _Decoder(c, "imu", path)
         if truth_ok and is_truth(c):
             if norm_type(c.msgtype) == TF_TYPE:
@@ -184,8 +195,9 @@ def plan(imu_topic: str | None, truth_topic: str | None) -> Callable[[Conn], obj
 def describe(conns: list[Conn]) -> str:
     if not conns:
         return "no channels"
-    return ", ".join(f"{c.topic} ({c.msgtype or 'no schema'}, {c.encoding}, {c.count})"
-                     for c in conns)  # fmt: skip
+    return ", ".join(
+        f"{c.topic} ({c.msgtype or 'no schema'}, {c.encoding}, {c.count})" for c in conns
+    )
 
 
 def _by_topic(got: Collected) -> dict[str, list[Conn]]:
@@ -231,15 +243,30 @@ def _imu_columns(c: Conn, data):
     """(order, t_ns, log_t_ns, omega, quat or None, dropped, type, frame) of one channel."""
     if c.encoding == "json":
         t_ns, omega, _, good, typ, frame = json_imu_columns(c, data)
-        return (data.order[good], t_ns[good], data.log_time[good], omega[good], None,
-                int(len(data) - good.sum()), typ, frame)  # fmt: skip
+        return (
+            data.order[good],
+            t_ns[good],
+            data.log_time[good],
+            omega[good],
+            None,
+            int(len(data) - good.sum()),
+            typ,
+            frame,
+        )
     if data.error is not None:
         raise data.error
     f = data.fields
     n = len(data)
-    return (data.order, f.get("t_ns", np.zeros(n, np.int64)), data.log_time,
-            f.get("omega", np.zeros((n, 3))), f.get("quat"), data.dropped,
-            data.frames.get("type", ""), data.frames.get("frame_id", ""))
+    return (
+        data.order,
+        f.get("t_ns", np.zeros(n, np.int64)),
+        data.log_time,
+        f.get("omega", np.zeros((n, 3))),
+        f.get("quat"),
+        data.dropped,
+        data.frames.get("type", ""),
+        data.frames.get("frame_id", ""),
+    )
 
 
 def _merge(rows: list[tuple[NDArray[np.int64], list[NDArray]]]) -> list[NDArray]:
@@ -261,17 +288,22 @@ def pick_imu(got: Collected, imu_topic: str | None) -> tuple[str, list[tuple[Con
     if imu_topic is not None:
         conns = topics.get(imu_topic)
         if not conns:
-            raise LogError(f"Expected IMU topic {imu_topic!r} in the log, got "
-                           f"{describe(got.conns)}")  # fmt: skip
+            raise LogError(
+                f"Expected IMU topic {imu_topic!r} in the log, got {describe(got.conns)}"
+            )
         out = []
         for c in conns:
             if c.encoding not in KNOWN_ENCODINGS:
-                raise LogError(f"Expected message encoding cdr, ros1 or json on {imu_topic}, got "
-                               f"{c.encoding!r}")  # fmt: skip
+                raise LogError(
+                    f"Expected message encoding cdr, ros1 or json on {imu_topic}, got "
+                    f"{c.encoding!r}"
+                )
             path = "json" if c.encoding == "json" else imu_path(c)
             if path is None:
-                raise LogError(f"Expected IMU messages on {imu_topic}, got "
-                               f"{c.msgtype or 'no schema'} ({c.encoding})")  # fmt: skip
+                raise LogError(
+                    f"Expected IMU messages on {imu_topic}, got "
+                    f"{c.msgtype or 'no schema'} ({c.encoding})"
+                )
             out.append((c, path))
         return imu_topic, out
     found: dict[str, list[tuple[Conn, str]]] = {}
@@ -293,14 +325,20 @@ def pick_imu(got: Collected, imu_topic: str | None) -> tuple[str, list[tuple[Con
     if not found:
         unknown = [c for c in got.conns if c.encoding not in KNOWN_ENCODINGS]
         if unknown:
-            raise LogError(f"Expected message encoding cdr or json, got {unknown[0].encoding!r} "
-                           f"on {unknown[0].topic}")  # fmt: skip
-        raise LogError(f"Expected an IMU channel (sensor_msgs/msg/Imu or a type with an Imu "
-                       f"field; a geometry_msgs/msg/Vector3Stamped gyro named with --imu-topic), "
-                       f"got {describe(got.conns)}")  # fmt: skip
+            raise LogError(
+                f"Expected message encoding cdr or json, got {unknown[0].encoding!r} "
+                f"on {unknown[0].topic}"
+            )
+        raise LogError(
+            f"Expected an IMU channel (sensor_msgs/msg/Imu or a type with an Imu "
+            f"field; a geometry_msgs/msg/Vector3Stamped gyro named with --imu-topic), "
+            f"got {describe(got.conns)}"
+        )
     if len(found) > 1:
-        raise LogError(f"Expected one IMU channel, got {len(found)}: {', '.join(sorted(found))} "
-                       f"(choose with --imu-topic)")  # fmt: skip
+        raise LogError(
+            f"Expected one IMU channel, got {len(found)}: {', '.join(sorted(found))} "
+            f"(choose with --imu-topic)"
+        )
     topic = next(iter(found))
     return topic, found[topic]
 
@@ -311,8 +349,11 @@ def read_imu(got: Collected, topic: str, conns: list[tuple[Conn, str]]) -> tuple
     for c, path in conns:
         data = got.payloads.get(c.id)
         if data is None:
-            data = Payloads.empty() if c.encoding == "json" else _Decoder(c, "imu", path)(
-                Payloads.empty())
+            data = (
+                Payloads.empty()
+                if c.encoding == "json"
+                else _Decoder(c, "imu", path)(Payloads.empty())
+            )
         order, t_ns, log_t, omega, quat, drop, typ_c, frame_c = _imu_columns(c, data)
         dropped += drop
         typ, frame = typ or typ_c, frame or frame_c
@@ -322,8 +363,15 @@ def read_imu(got: Collected, topic: str, conns: list[tuple[Conn, str]]) -> tuple
     t_ns, log_t, omega, quat = _merge(rows)
     if quat is not None and not np.isfinite(quat).any():
         quat = None
-    return ImuSeries(t_ns.astype(np.int64, copy=False), log_t.astype(np.int64, copy=False),
-                     omega, quat, topic, typ, frame), dropped  # fmt: skip
+    return ImuSeries(
+        t_ns.astype(np.int64, copy=False),
+        log_t.astype(np.int64, copy=False),
+        omega,
+        quat,
+        topic,
+        typ,
+        frame,
+    ), dropped
 
 
 # ----------------------------------------------------------------------------- truth
@@ -336,14 +384,30 @@ def _read_truth_topic(got: Collected, topic: str, conns: list[Conn], auto: bool)
         if data.error is not None:
             raise data.error
         n = len(data)
-        rows.append((data.order, [data.fields.get("t_ns", np.zeros(n, np.int64)), data.log_time,
-                                  data.fields.get("q", np.zeros((n, 4)))]))  # fmt: skip
+        rows.append(
+            (
+                data.order,
+                [
+                    data.fields.get("t_ns", np.zeros(n, np.int64)),
+                    data.log_time,
+                    data.fields.get("q", np.zeros((n, 4))),
+                ],
+            )
+        )
         typ = typ or data.frames.get("type") or norm_type(c.msgtype)
         frame = frame or data.frames.get("frame_id", "")
         child = child or data.frames.get("child_frame_id", "")
     t_ns, log_t, q = _merge(rows)
-    return TruthSeries(t_ns.astype(np.int64, copy=False), log_t.astype(np.int64, copy=False), q,
-                       topic, typ, frame, child, auto)  # fmt: skip
+    return TruthSeries(
+        t_ns.astype(np.int64, copy=False),
+        log_t.astype(np.int64, copy=False),
+        q,
+        topic,
+        typ,
+        frame,
+        child,
+        auto,
+    )
 
 
 def imu_truth(imu: ImuSeries, required: bool) -> TruthSeries | None:
@@ -351,8 +415,10 @@ def imu_truth(imu: ImuSeries, required: bool) -> TruthSeries | None:
     q = imu.orientation_xyzw
     if q is None:
         if required:
-            raise LogError(f"Expected an orientation on {imu.topic} (orientation_covariance[0] "
-                           f"!= -1), got none")  # fmt: skip
+            raise LogError(
+                f"Expected an orientation on {imu.topic} (orientation_covariance[0] "
+                f"!= -1), got none"
+            )
         return None
     norm = np.linalg.norm(q, axis=1)
     ok = np.isfinite(norm) & (np.abs(norm - 1.0) < 1e-3)  # all-zero quaternions are not truth
@@ -364,12 +430,21 @@ def imu_truth(imu: ImuSeries, required: bool) -> TruthSeries | None:
         # A constant quaternion (typically the default 0,0,0,1 behind a garbage covariance
         # instead of the -1 flag) is no estimate; it is used only when asked for by topic.
         return None
-    return TruthSeries(imu.t_ns[ok], imu.log_t_ns[ok], q[ok] / norm[ok, None], imu.topic,
-                       imu.type, imu.frame_id, "", not required)  # fmt: skip
+    return TruthSeries(
+        imu.t_ns[ok],
+        imu.log_t_ns[ok],
+        q[ok] / norm[ok, None],
+        imu.topic,
+        imu.type,
+        imu.frame_id,
+        "",
+        not required,
+    )
 
 
-def read_truth(got: Collected, imu: ImuSeries, truth_topic: str | None,
-               truth_frame: str | None) -> TruthSeries | None:  # fmt: skip
+def read_truth(
+    got: Collected, imu: ImuSeries, truth_topic: str | None, truth_frame: str | None
+) -> TruthSeries | None:
     """The truth series chosen by the policy in the module docstring (None when there is none)."""
     if truth_topic == "none":
         return None
@@ -379,12 +454,15 @@ def read_truth(got: Collected, imu: ImuSeries, truth_topic: str | None,
     if truth_topic is not None:
         conns = topics.get(truth_topic)
         if not conns:
-            raise LogError(f"Expected truth topic {truth_topic!r} in the log, got "
-                           f"{describe(got.conns)}")  # fmt: skip
+            raise LogError(
+                f"Expected truth topic {truth_topic!r} in the log, got {describe(got.conns)}"
+            )
         for c in conns:
             if not is_truth(c):
-                raise LogError(f"Expected truth messages on {truth_topic}, got "
-                               f"{c.msgtype or 'no schema'} ({c.encoding})")  # fmt: skip
+                raise LogError(
+                    f"Expected truth messages on {truth_topic}, got "
+                    f"{c.msgtype or 'no schema'} ({c.encoding})"
+                )
         if all(norm_type(c.msgtype) == TF_TYPE for c in conns):
             tf = tf_truth(got, conns, imu.frame_id, truth_frame, auto=False)
             if tf is None:
@@ -394,14 +472,22 @@ def read_truth(got: Collected, imu: ImuSeries, truth_topic: str | None,
     tf = [c for c in got.conns if c.encoding in ("cdr", "ros1") and norm_type(c.msgtype) == TF_TYPE]
     if truth_frame is not None:  # a frame names a transform
         if not tf:
-            raise LogError(f"Expected /tf or /tf_static for truth frame {truth_frame!r}, got "
-                           f"{describe(got.conns)}")  # fmt: skip
+            raise LogError(
+                f"Expected /tf or /tf_static for truth frame {truth_frame!r}, got "
+                f"{describe(got.conns)}"
+            )
         return tf_truth(got, tf, imu.frame_id, truth_frame, auto=False)
-    auto = {t: cs for t, cs in topics.items() if not t.startswith("/estimate")
-            and all(is_truth(c) and norm_type(c.msgtype) != TF_TYPE for c in cs)}  # fmt: skip
+    auto = {
+        t: cs
+        for t, cs in topics.items()
+        if not t.startswith("/estimate")
+        and all(is_truth(c) and norm_type(c.msgtype) != TF_TYPE for c in cs)
+    }
     if len(auto) > 1:
-        raise LogError(f"Expected one truth channel, got {len(auto)}: {', '.join(sorted(auto))} "
-                       f"(choose with --truth-topic)")  # fmt: skip
+        raise LogError(
+            f"Expected one truth channel, got {len(auto)}: {', '.join(sorted(auto))} "
+            f"(choose with --truth-topic)"
+        )
     if auto:
         topic = next(iter(auto))
         return _read_truth_topic(got, topic, auto[topic], auto=True)

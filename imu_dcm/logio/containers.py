@@ -30,10 +30,14 @@ SQLITE_MAGIC = b"SQLite format 3\x00"
 ZSTD_MAGIC = b"\x28\xb5\x2f\xfd"
 STORAGES = ("mcap", "sqlite3")
 _FOREIGN = {  # magic -> (what it is, how to convert it)
-    b"\x89HDF": ("an HDF5 file", ("export the gyro as CSV and run "
-                                  "`python -m imu_dcm.replay convert-csv gyro.csv`")),
-    b"ULog": ("a PX4 ULog", ("`ulog2csv x.ulg` then `python -m imu_dcm.replay convert-csv "
-                             "x_sensor_gyro_0.csv`")),
+    b"\x89HDF": (
+        "an HDF5 file",
+        ("export the gyro as CSV and run `python -m imu_dcm.replay convert-csv gyro.csv`"),
+    ),
+    b"ULog": (
+        "a PX4 ULog",
+        ("`ulog2csv x.ulg` then `python -m imu_dcm.replay convert-csv x_sensor_gyro_0.csv`"),
+    ),
     b"\x1f\x8b": ("a gzip file", "`gunzip` it first"),
     b"BZh": ("a bzip2 file", "`bunzip2` it first"),
     b"PK\x03\x04": ("a zip archive", "`unzip` it first"),
@@ -41,8 +45,12 @@ _FOREIGN = {  # magic -> (what it is, how to convert it)
 
 
 def _kind_of(mode: int) -> str:
-    for test, name in ((stat.S_ISFIFO, "a FIFO"), (stat.S_ISCHR, "a character device"),
-                       (stat.S_ISBLK, "a block device"), (stat.S_ISSOCK, "a socket")):
+    for test, name in (
+        (stat.S_ISFIFO, "a FIFO"),
+        (stat.S_ISCHR, "a character device"),
+        (stat.S_ISBLK, "a block device"),
+        (stat.S_ISSOCK, "a socket"),
+    ):
         if test(mode):
             return name
     return "not a regular file"
@@ -53,8 +61,9 @@ def check_regular(p: Path) -> bool:
     try:
         st = p.stat()
     except FileNotFoundError:
-        raise LogError(f"Expected an existing log path, got {str(p)!r} (no such file or folder)") \
-            from None
+        raise LogError(
+            f"Expected an existing log path, got {str(p)!r} (no such file or folder)"
+        ) from None
     except OSError as exc:
         raise LogError(f"Expected a readable log path, got {p} ({exc.strerror})") from None
     if stat.S_ISDIR(st.st_mode):
@@ -105,8 +114,10 @@ def source_for_file(p: Path, storage: str = "", progress=None):
         if head.startswith(b"#ROSBAG V2.0"):
             return Ros1Source(p, progress)
         version = head[9:12].decode("ascii", "replace")
-        raise LogError(f"Expected a ROS 1 bag of version 2.0, got version {version} in {p}; "
-                       f"`rosbag fix {p.name} out.bag` rewrites it as 2.0")  # fmt: skip
+        raise LogError(
+            f"Expected a ROS 1 bag of version 2.0, got version {version} in {p}; "
+            f"`rosbag fix {p.name} out.bag` rewrites it as 2.0"
+        )
     if not head:
         what = "an MCAP file" if p.suffix == ".mcap" else "a log file"
         raise LogError(f"Expected {what}, got an empty file: {p}")
@@ -116,10 +127,14 @@ def source_for_file(p: Path, storage: str = "", progress=None):
     if p.suffix == ".mcap" or storage == "mcap":
         raise LogError(f"Expected an MCAP file (magic \\x89MCAP0), got {head[:8]!r} in {p}")
     if p.suffix in (".csv", ".txt", ".tsv"):
-        raise LogError(f"Expected a ROS bag or an MCAP file, got a text table: {p}; "
-                       f"`python -m imu_dcm.replay convert-csv {p.name}` converts it")  # fmt: skip
-    raise LogError(f"Expected a ROS 2 bag (MCAP or sqlite3), a ROS 1 bag (.bag v2.0) or an MCAP "
-                   f"file, got a file starting {head[:8]!r}: {p}")  # fmt: skip
+        raise LogError(
+            f"Expected a ROS bag or an MCAP file, got a text table: {p}; "
+            f"`python -m imu_dcm.replay convert-csv {p.name}` converts it"
+        )
+    raise LogError(
+        f"Expected a ROS 2 bag (MCAP or sqlite3), a ROS 1 bag (.bag v2.0) or an MCAP "
+        f"file, got a file starting {head[:8]!r}: {p}"
+    )
 
 
 def open_source(path: str | Path, progress=None):
@@ -139,9 +154,11 @@ def open_source(path: str | Path, progress=None):
         info = meta.load_metadata(p)
         storage = str(info.get("storage_identifier") or "")
         if storage not in STORAGES:
-            raise LogError(f"Expected rosbag2 storage mcap or sqlite3, got {storage!r} in "
-                           f"{p / 'metadata.yaml'}; `ros2 bag convert -i {p.name} -o out.yaml` "
-                           f"with storage_id mcap rewrites it")  # fmt: skip
+            raise LogError(
+                f"Expected rosbag2 storage mcap or sqlite3, got {storage!r} in "
+                f"{p / 'metadata.yaml'}; `ros2 bag convert -i {p.name} -o out.yaml` "
+                f"with storage_id mcap rewrites it"
+            )
         files = meta.file_list(info, p)
         for f in files:
             check_regular(f)
@@ -160,8 +177,9 @@ def open_source(path: str | Path, progress=None):
         names = ", ".join(sorted(x.name for x in p.iterdir())[:8]) or "nothing"
         raise LogError(f"Expected a bag folder with a .mcap file, got {p} holding {names}")
     if len(found) > 1:
-        raise LogError(f"Expected one .mcap file in {p}, got {len(found)}: "
-                       + ", ".join(f.name for f in found))  # fmt: skip
+        raise LogError(
+            f"Expected one .mcap file in {p}, got {len(found)}: " + ", ".join(f.name for f in found)
+        )
     return source_for_file(found[0], "", progress), found[0], {}
 
 

@@ -36,8 +36,10 @@ def json_stamp(m: dict) -> int | None:
     if not isinstance(st, dict):
         return None
     sec, nsec = st.get("sec", 0), st.get("nanosec", st.get("nsec", 0))
-    if not all(isinstance(v, int | float) and not isinstance(v, bool) and math.isfinite(v)
-               for v in (sec, nsec)):  # fmt: skip
+    if not all(
+        isinstance(v, int | float) and not isinstance(v, bool) and math.isfinite(v)
+        for v in (sec, nsec)
+    ):
         raise ValueError("stamp not a finite number")
     t = int(sec) * 1_000_000_000 + int(nsec)
     if not -_INT64 <= t < _INT64:

@@ -48,7 +48,7 @@ def compact(d: np.ndarray, start: np.ndarray, length: np.ndarray) -> tuple:
     """Copy the byte ranges ``d[start:start+length]`` into one buffer, in order; returns
     (buffer, new starts, lengths)."""
     mv = memoryview(d)
-    buf = b"".join([mv[s : s + n] for s, n in zip(start.tolist(), length.tolist())])
+    buf = b"".join([mv[s : s + n] for s, n in zip(start.tolist(), length.tolist(), strict=False)])
     out_start = np.concatenate([[0], np.cumsum(length)[:-1]]).astype(np.int64)
     return np.frombuffer(buf, np.uint8), out_start, length.astype(np.int64)
 
@@ -89,8 +89,10 @@ def decompress(compression: str, data: bytes, size: int) -> bytes:
     else:
         raise LogError(f"Expected chunk compression zstd, lz4 or none, got {compression!r}")
     if len(out) != size:
-        raise _Bad(f"it decompresses to {len(out)}{'+' if len(out) > size else ''} bytes, "
-                   f"not its declared {size}")  # fmt: skip
+        raise _Bad(
+            f"it decompresses to {len(out)}{'+' if len(out) > size else ''} bytes, "
+            f"not its declared {size}"
+        )
     return out
 
 
@@ -138,8 +140,9 @@ class McapSource:
             text = "\x00"  # corrupt schema: fails to parse later, naming the topic
         if enc == "ros1":
             senc = senc or "ros1msg"
-        return Conn(cid, topic, name, enc, senc, text,
-                    self.counts.get(cid, self.counts_seen.get(cid, 0)))
+        return Conn(
+            cid, topic, name, enc, senc, text, self.counts.get(cid, self.counts_seen.get(cid, 0))
+        )
 
     def _is_kept(self, cid: int) -> bool:
         k = self._kept.get(cid)
@@ -153,8 +156,9 @@ class McapSource:
         try:
             f = open(self.path, "rb")  # noqa: SIM115
         except OSError as exc:
-            raise LogError(f"Expected a readable MCAP file, got {self.path} ({exc.strerror})") \
-                from None
+            raise LogError(
+                f"Expected a readable MCAP file, got {self.path} ({exc.strerror})"
+            ) from None
         with f:
             self.size = f.seek(0, 2)
             f.seek(0)
@@ -162,8 +166,9 @@ class McapSource:
             if not head:
                 raise LogError(f"Expected an MCAP file, got an empty file: {self.path}")
             if head != MAGIC:
-                raise LogError(f"Expected an MCAP file (magic \\x89MCAP0), got {head!r} in "
-                               f"{self.path}")  # fmt: skip
+                raise LogError(
+                    f"Expected an MCAP file (magic \\x89MCAP0), got {head!r} in {self.path}"
+                )
             self.profile = self._header_profile(f)
             index = self._summary(f)
             if index is not None:
@@ -171,9 +176,16 @@ class McapSource:
             else:
                 self._scan(f)
         for pos, n in sorted(self.unknown.items()):
-            self.damage.append(Damage(pos, f"{n} messages in the chunk at byte {pos} name a "
-                                      f"channel id that is not defined; they are lost", None,
-                                      None, n))  # fmt: skip
+            self.damage.append(
+                Damage(
+                    pos,
+                    f"{n} messages in the chunk at byte {pos} name a "
+                    f"channel id that is not defined; they are lost",
+                    None,
+                    None,
+                    n,
+                )
+            )
         if self.kind == "mcap" and self.profile in ("ros1", "ros2"):
             self.kind = f"{self.profile} mcap"
         conns = [self.conn(c) for c in sorted(self.channels)]
@@ -199,8 +211,10 @@ class McapSource:
             return None
         summary_start, _, summary_crc = struct.unpack_from("<QQI", tail, 9)
         end = self.size - 8 - 29
-        if summary_start == 0 or not 8 <= summary_start <= end or end - summary_start > (
-            MAX_META_RECORD
+        if (
+            summary_start == 0
+            or not 8 <= summary_start <= end
+            or end - summary_start > (MAX_META_RECORD)
         ):
             return None
         f.seek(summary_start)
@@ -272,10 +286,12 @@ class McapSource:
                     raise _Bad("its index does not point at a chunk record")
                 self._chunk(f, start, length, k, entries)
             except _Bad as exc:
-                lost = sum(len(e[0]) for c, e in entries.items() if c in wanted) if (
-                    entries) else None
-                self.damage.append(Damage(start, f"chunk {k + 1} of {len(index)} is damaged: "
-                                          f"{exc}", t0, t1, lost))  # fmt: skip
+                lost = (
+                    sum(len(e[0]) for c, e in entries.items() if c in wanted) if (entries) else None
+                )
+                self.damage.append(
+                    Damage(start, f"chunk {k + 1} of {len(index)} is damaged: {exc}", t0, t1, lost)
+                )
 
     def _message_index(self, f, offsets: dict[int, int], wanted: set[int]) -> dict:
         """Message index entries (log times, offsets) of the kept channels of one chunk."""
@@ -287,8 +303,12 @@ class McapSource:
             f.seek(off)
             head = f.read(15)
             op, length, c, nbytes = struct.unpack("<BQHI", head)
-            if op != _MSG_INDEX or c != cid or nbytes != length - 6 or nbytes % 16 or (
-                off + 9 + length > self.size
+            if (
+                op != _MSG_INDEX
+                or c != cid
+                or nbytes != length - 6
+                or nbytes % 16
+                or (off + 9 + length > self.size)
             ):
                 continue
             pairs = np.frombuffer(f.read(nbytes), "<u8").reshape(-1, 2).astype(np.int64)
@@ -306,8 +326,9 @@ class McapSource:
         if p + 8 + n != length:
             raise _Bad(f"its records size {n} does not match its record length {length}")
         if usize > size_bound(n):
-            raise _Bad(f"it declares {usize} bytes uncompressed from {n} (refused, beyond "
-                       f"{size_bound(n)})")  # fmt: skip
+            raise _Bad(
+                f"it declares {usize} bytes uncompressed from {n} (refused, beyond {size_bound(n)})"
+            )
         if comp == "" and usize != n:
             raise _Bad(f"it is uncompressed but declares {usize} bytes for {n}")
         f.seek(pos + 9 + p + 8)
@@ -316,8 +337,14 @@ class McapSource:
             raise _Bad("it fails its CRC check")
         self._take(data, pos, seq, entries, (_t0, _t1))
 
-    def _take(self, data: bytes, pos: int, seq: int, entries: dict | None,
-              span: tuple[int, int] = (None, None)) -> None:  # fmt: skip
+    def _take(
+        self,
+        data: bytes,
+        pos: int,
+        seq: int,
+        entries: dict | None,
+        span: tuple[int, int] = (None, None),
+    ) -> None:
         """Locate the messages in a decompressed chunk; keep payloads of kept channels.
 
         With message indexes, every indexed record is checked (opcode, length, channel, no
@@ -351,7 +378,7 @@ class McapSource:
             self._n_kept = 0
             gs = np.concatenate([[0], ends[valid]])
             ge = np.concatenate([offs[valid], [size]])
-            for a, b in zip(gs[ge > gs].tolist(), ge[ge > gs].tolist()):
+            for a, b in zip(gs[ge > gs].tolist(), ge[ge > gs].tolist(), strict=False):
                 self._walk(data, a, b, pos, seq, span=span, quiet=not all_valid)
             if not all_valid:
                 bad = ~valid
@@ -359,17 +386,26 @@ class McapSource:
                 lost = max(expected - self._n_kept, 0)
                 if lost:
                     first = int(offs[bad][0])
-                    self.damage.append(Damage(pos, f"{int(bad.sum())} message records in the "
-                                              f"chunk at byte {pos} are damaged or misindexed "
-                                              f"(the first at byte {first} of its {size} "
-                                              f"decompressed bytes)", span[0], span[1], lost))
+                    self.damage.append(
+                        Damage(
+                            pos,
+                            f"{int(bad.sum())} message records in the "
+                            f"chunk at byte {pos} are damaged or misindexed "
+                            f"(the first at byte {first} of its {size} "
+                            f"decompressed bytes)",
+                            span[0],
+                            span[1],
+                            lost,
+                        )
+                    )
             self._keep_spans(d, offs[valid], length[valid], cid[valid], lt[valid], seq, pos)
             return
         self._n_kept = 0
         self._walk(data, 0, size, pos, seq, span=span, expected=None)
 
-    def _keep_spans(self, d, offs, length, cid, log_time, seq: int, pos: int = -1,
-                    note_unknown: bool = True) -> None:  # fmt: skip
+    def _keep_spans(
+        self, d, offs, length, cid, log_time, seq: int, pos: int = -1, note_unknown: bool = True
+    ) -> None:
         for c in np.unique(cid).tolist():
             m = cid == c
             if c not in self.channels:
@@ -387,8 +423,17 @@ class McapSource:
             buf = (d, s, n) if 2 * int(n.sum()) >= len(d) else compact(d, s, n)
             self.sink.add(c, Payloads(*buf, log_time[m], (seq << 32) + offs[m]))
 
-    def _walk(self, data: bytes, a: int, b: int, pos: int, seq: int, span=(None, None),
-              expected: int | None = None, quiet: bool = False) -> None:
+    def _walk(
+        self,
+        data: bytes,
+        a: int,
+        b: int,
+        pos: int,
+        seq: int,
+        span=(None, None),
+        expected: int | None = None,
+        quiet: bool = False,
+    ) -> None:
         """Walk the records in ``data[a:b]`` of one chunk (chunk at file offset ``pos``)."""
         offs, lens, cids, times = [], [], [], []
         p = a
@@ -413,15 +458,29 @@ class McapSource:
             p = end
         if offs:
             d = np.frombuffer(data, np.uint8)
-            self._keep_spans(d, np.asarray(offs, np.int64), np.asarray(lens, np.int64),
-                             np.asarray(cids, np.int64), np.asarray(times, np.int64), seq, pos,
-                             note_unknown=not quiet)  # fmt: skip
+            self._keep_spans(
+                d,
+                np.asarray(offs, np.int64),
+                np.asarray(lens, np.int64),
+                np.asarray(cids, np.int64),
+                np.asarray(times, np.int64),
+                seq,
+                pos,
+                note_unknown=not quiet,
+            )
         if p < b and not quiet:  # (a gap around damaged indexed records is reported once)
             lost = None if expected is None else max(expected - self._n_kept, 0)
-            self.damage.append(Damage(pos, f"a record inside the chunk at byte {pos} is damaged "
-                                      f"(at byte {p} of its {len(data)} decompressed bytes); "
-                                      f"the rest of that chunk is lost", span[0], span[1],
-                                      lost))  # fmt: skip
+            self.damage.append(
+                Damage(
+                    pos,
+                    f"a record inside the chunk at byte {pos} is damaged "
+                    f"(at byte {p} of its {len(data)} decompressed bytes); "
+                    f"the rest of that chunk is lost",
+                    span[0],
+                    span[1],
+                    lost,
+                )
+            )
 
     # ------------------------------------------------------------------ forward scan
     def _scan(self, f) -> None:
@@ -437,10 +496,18 @@ class McapSource:
                 return
             if end > self.size or op == 0 or op > 0x0F:
                 nxt = self._resync(f, pos + 1)
-                what = ("the file ends inside a record" if nxt is None and end > self.size
-                        else "a record is damaged")  # fmt: skip
-                self.damage.append(Damage(pos, f"{what} at byte {pos} of {self.size}"
-                                          + ("" if nxt is None else f"; resumed at byte {nxt}")))
+                what = (
+                    "the file ends inside a record"
+                    if nxt is None and end > self.size
+                    else "a record is damaged"
+                )
+                self.damage.append(
+                    Damage(
+                        pos,
+                        f"{what} at byte {pos} of {self.size}"
+                        + ("" if nxt is None else f"; resumed at byte {nxt}"),
+                    )
+                )
                 if nxt is None:
                     return
                 pos = nxt
@@ -463,10 +530,14 @@ class McapSource:
                 except _Bad as exc:
                     lost = None
                     if entries is not None:
-                        lost = sum(len(e[0]) for c, e in entries.items()
-                                   if c not in self.channels or self._is_kept(c))  # fmt: skip
-                    self.damage.append(Damage(pos, f"the chunk at byte {pos} is damaged: {exc}",
-                                              t0, t1, lost))  # fmt: skip
+                        lost = sum(
+                            len(e[0])
+                            for c, e in entries.items()
+                            if c not in self.channels or self._is_kept(c)
+                        )
+                    self.damage.append(
+                        Damage(pos, f"the chunk at byte {pos} is damaged: {exc}", t0, t1, lost)
+                    )
                 seq += 1
                 pos = after
                 continue
@@ -474,10 +545,12 @@ class McapSource:
                 buf = f.read(length)
                 try:
                     (_schema if op == _SCHEMA else _channel)(
-                        buf, 0, self.schemas if op == _SCHEMA else self.channels)
+                        buf, 0, self.schemas if op == _SCHEMA else self.channels
+                    )
                 except (struct.error, _Bad):
-                    self.damage.append(Damage(pos, f"a schema or channel record at byte {pos} "
-                                              f"is damaged"))  # fmt: skip
+                    self.damage.append(
+                        Damage(pos, f"a schema or channel record at byte {pos} is damaged")
+                    )
             elif op == _MESSAGE and length >= 22:
                 head = f.read(22)
                 cid, _, lt, _ = struct.unpack_from("<HIQQ", head)
@@ -485,15 +558,27 @@ class McapSource:
                 if self._is_kept(cid):
                     payload = np.frombuffer(f.read(length - 22), np.uint8)
                     one = np.array([0], np.int64)
-                    self.sink.add(cid, Payloads(
-                        payload, one, np.array([len(payload)], np.int64),
-                        np.array([lt], np.int64), np.array([(seq << 32) + 0], np.int64)))
+                    self.sink.add(
+                        cid,
+                        Payloads(
+                            payload,
+                            one,
+                            np.array([len(payload)], np.int64),
+                            np.array([lt], np.int64),
+                            np.array([(seq << 32) + 0], np.int64),
+                        ),
+                    )
                 seq += 1
             pos = end
         # no data-end record: the file was cut (at a record boundary or inside a header)
         where = "inside a record " if pos < self.size else ""
-        self.damage.append(Damage(pos, f"the file ends {where}at byte {pos} of {self.size} "
-                                  f"without its data-end record; anything after it is lost"))
+        self.damage.append(
+            Damage(
+                pos,
+                f"the file ends {where}at byte {pos} of {self.size} "
+                f"without its data-end record; anything after it is lost",
+            )
+        )
 
     def _following_index(self, f, pos: int) -> tuple[dict | None, int, bool]:
         """Message index records right after a chunk: ({channel: (offsets, log times)}, the
@@ -508,8 +593,12 @@ class McapSource:
             if len(head) < 15:
                 return (entries or None), pos, False
             _, length, cid, nbytes = struct.unpack("<BQHI", head)
-            if (pos + 9 + length > self.size or nbytes != length - 6 or nbytes % 16
-                    or nbytes > MAX_META_RECORD):  # fmt: skip
+            if (
+                pos + 9 + length > self.size
+                or nbytes != length - 6
+                or nbytes % 16
+                or nbytes > MAX_META_RECORD
+            ):
                 return (entries or None), pos, False
             pairs = np.frombuffer(f.read(nbytes), "<u8").reshape(-1, 2).astype(np.int64)
             entries[cid] = (pairs[:, 1], pairs[:, 0])
@@ -528,8 +617,10 @@ class McapSource:
                     _, length = _REC.unpack_from(buf, i)
                     comp, p = _str(buf, i + 9 + 28)
                     (n,) = struct.unpack_from("<Q", buf, p)
-                    if comp in ("", "zstd", "lz4") and p - i - 9 + 8 + n == length and (
-                        pos + i + 9 + length <= self.size
+                    if (
+                        comp in ("", "zstd", "lz4")
+                        and p - i - 9 + 8 + n == length
+                        and (pos + i + 9 + length <= self.size)
                     ):
                         return pos + i
                 except (struct.error, _Bad):

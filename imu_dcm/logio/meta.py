@@ -27,16 +27,20 @@ def _yaml_load(text: str, where: Path) -> Any:
         # Events first: an alias is refused before anything is built from it.
         for event in yaml.parse(text, Loader=loader_cls):
             if isinstance(event, yaml.AliasEvent):
-                raise LogError(f"Expected a rosbag2 metadata.yaml without YAML aliases, got an "
-                               f"alias in {where}")  # fmt: skip
+                raise LogError(
+                    f"Expected a rosbag2 metadata.yaml without YAML aliases, got an "
+                    f"alias in {where}"
+                )
         return yaml.load(text, Loader=loader_cls)
     except yaml.YAMLError as exc:
         line = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
-        raise LogError(f"Expected a YAML metadata.yaml, got a syntax error in {where}: "
-                       f"{line}") from None  # fmt: skip
+        raise LogError(
+            f"Expected a YAML metadata.yaml, got a syntax error in {where}: {line}"
+        ) from None
     except RecursionError:
-        raise LogError(f"Expected a rosbag2 metadata.yaml, got nesting too deep in {where}") \
-            from None
+        raise LogError(
+            f"Expected a rosbag2 metadata.yaml, got nesting too deep in {where}"
+        ) from None
 
 
 def _check_nesting(raw: bytes, where: Path) -> None:
@@ -47,8 +51,9 @@ def _check_nesting(raw: bytes, where: Path) -> None:
     step = ((b == 0x5B) | (b == 0x7B)).astype(np.int32) - ((b == 0x5D) | (b == 0x7D))
     depth = int(np.cumsum(step).max()) if len(b) else 0
     if depth > MAX_NESTING:
-        raise LogError(f"Expected a rosbag2 metadata.yaml, got brackets nested {depth} deep in "
-                       f"{where}")  # fmt: skip
+        raise LogError(
+            f"Expected a rosbag2 metadata.yaml, got brackets nested {depth} deep in {where}"
+        )
 
 
 def load_metadata(folder: Path) -> dict[str, Any]:
@@ -63,23 +68,29 @@ def load_metadata(folder: Path) -> dict[str, Any]:
     try:
         size = meta.stat().st_size
         if size > MAX_METADATA_BYTES:
-            raise LogError(f"Expected a metadata.yaml of at most {MAX_METADATA_BYTES} bytes, got "
-                           f"{size} bytes in {folder}")  # fmt: skip
+            raise LogError(
+                f"Expected a metadata.yaml of at most {MAX_METADATA_BYTES} bytes, got "
+                f"{size} bytes in {folder}"
+            )
         raw = meta.read_bytes()
     except OSError as exc:
-        raise LogError(f"Expected a readable metadata.yaml in {folder}, got {exc.strerror}") \
-            from None
+        raise LogError(
+            f"Expected a readable metadata.yaml in {folder}, got {exc.strerror}"
+        ) from None
     try:
         text = raw.decode("utf-8")
     except UnicodeDecodeError as exc:
-        raise LogError(f"Expected a UTF-8 metadata.yaml, got a non-UTF-8 byte at {exc.start} in "
-                       f"{meta}") from None  # fmt: skip
+        raise LogError(
+            f"Expected a UTF-8 metadata.yaml, got a non-UTF-8 byte at {exc.start} in {meta}"
+        ) from None
     _check_nesting(raw, meta)
     doc = _yaml_load(text, meta)
     info = doc.get("rosbag2_bagfile_information") if isinstance(doc, dict) else None
     if not isinstance(info, dict):
-        raise LogError(f"Expected a rosbag2_bagfile_information mapping in {meta}, got "
-                       f"{type(doc).__name__ if not isinstance(doc, dict) else 'none'}")  # fmt: skip
+        raise LogError(
+            f"Expected a rosbag2_bagfile_information mapping in {meta}, got "
+            f"{type(doc).__name__ if not isinstance(doc, dict) else 'none'}"
+        )
     return info
 
 
@@ -106,14 +117,18 @@ def file_list(info: dict[str, Any], folder: Path) -> list[Path]:
     """The bag's storage files in recording order (``relative_file_paths``), checked."""
     rel = info.get("relative_file_paths")
     if not isinstance(rel, list) or not rel or not all(isinstance(x, str) for x in rel):
-        raise LogError(f"Expected relative_file_paths (a list of file names) in "
-                       f"{folder / 'metadata.yaml'}, got {rel!r:.80}")  # fmt: skip
+        raise LogError(
+            f"Expected relative_file_paths (a list of file names) in "
+            f"{folder / 'metadata.yaml'}, got {rel!r:.80}"
+        )
     out = []
     for name in rel:
         p = folder / Path(name).name  # never outside the folder
         if not p.is_file():
-            raise LogError(f"Expected the bag file {p.name} listed in metadata.yaml, got no such "
-                           f"file in {folder}")  # fmt: skip
+            raise LogError(
+                f"Expected the bag file {p.name} listed in metadata.yaml, got no such "
+                f"file in {folder}"
+            )
         out.append(p)
     return out
 

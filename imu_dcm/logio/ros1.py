@@ -42,13 +42,17 @@ def _decompress(compression: str, data: bytes, size: int) -> bytes:
 
             out = lz4.frame.LZ4FrameDecompressor().decompress(data, max_length=size + 1)
         else:
-            raise LogError(f"Expected ROS 1 chunk compression none, bz2 or lz4, got "
-                           f"{compression!r}; `rosbag decompress x.bag` rewrites it")  # fmt: skip
+            raise LogError(
+                f"Expected ROS 1 chunk compression none, bz2 or lz4, got "
+                f"{compression!r}; `rosbag decompress x.bag` rewrites it"
+            )
     except (OSError, RuntimeError, ValueError, EOFError) as exc:
         raise _Bad(f"it does not decompress ({str(exc)[:60]})") from None
     if len(out) != size:
-        raise _Bad(f"it decompresses to {len(out)}{'+' if len(out) > size else ''} bytes, "
-                   f"not its declared {size}")  # fmt: skip
+        raise _Bad(
+            f"it decompresses to {len(out)}{'+' if len(out) > size else ''} bytes, "
+            f"not its declared {size}"
+        )
     return out
 
 
@@ -111,14 +115,19 @@ class Ros1Source:
             if "not indexed" in msg or "index looks damaged" in msg:
                 fix = f"; `rosbag reindex {self.path.name}` rebuilds its index"
             elif "version" in msg:
-                fix = (f"; `rosbag fix {self.path.name} out.bag` rewrites it as v2.0, then "
-                       f"read out.bag")  # fmt: skip
-            raise LogError(f"Expected a readable ROS 1 bag (v2.0), got {msg.rstrip('.')} in "
-                           f"{self.path}{fix}") from None  # fmt: skip
+                fix = (
+                    f"; `rosbag fix {self.path.name} out.bag` rewrites it as v2.0, then "
+                    f"read out.bag"
+                )
+            raise LogError(
+                f"Expected a readable ROS 1 bag (v2.0), got {msg.rstrip('.')} in {self.path}{fix}"
+            ) from None
         except (OSError, ValueError, KeyError, AssertionError, IndexError) as exc:
-            raise LogError(f"Expected a readable ROS 1 bag, got a damaged index in {self.path} "
-                           f"({type(exc).__name__}); `rosbag reindex {self.path.name}` rebuilds "
-                           f"it") from None  # fmt: skip
+            raise LogError(
+                f"Expected a readable ROS 1 bag, got a damaged index in {self.path} "
+                f"({type(exc).__name__}); `rosbag reindex {self.path.name}` rebuilds "
+                f"it"
+            ) from None
         try:
             return self._read(reader, sink)
         finally:
@@ -129,8 +138,9 @@ class Ros1Source:
 
         conns = []
         for c in reader.connections:
-            conns.append(Conn(c.id, c.topic, c.msgtype, "ros1", "ros1msg", c.msgdef.data,
-                              c.msgcount))  # fmt: skip
+            conns.append(
+                Conn(c.id, c.topic, c.msgtype, "ros1", "ros1msg", c.msgdef.data, c.msgcount)
+            )
         kept = {c.id for c in conns if sink.wants(c)}
         # index entries of kept connections, grouped by chunk: (offsets, times)
         by_chunk: dict[int, dict[int, tuple[list, list]]] = defaultdict(dict)
@@ -154,7 +164,7 @@ class Ros1Source:
                     head = Header.read(bio, RecordType.CHUNK)
                     compression = head.get_string("compression")
                     size = head.get_uint32("size")
-                except Exception as exc:  # noqa: BLE001 (rosbags raises several kinds)
+                except Exception as exc:
                     raise _Bad(f"its header is damaged ({type(exc).__name__})") from None
                 chunk = reader.chunks[info.pos]
                 bio.seek(chunk.datapos)
@@ -162,9 +172,15 @@ class Ros1Source:
                 self._take(np.frombuffer(data, np.uint8), entries, k, sink)
             except _Bad as exc:
                 lost = sum(len(e[0]) for e in entries.values())
-                damage.append(Damage(info.pos, f"ROS 1 chunk {k + 1} of {len(infos)} at byte "
-                                     f"{info.pos} is damaged: {exc}", info.start_time,
-                                     info.end_time, lost))  # fmt: skip
+                damage.append(
+                    Damage(
+                        info.pos,
+                        f"ROS 1 chunk {k + 1} of {len(infos)} at byte {info.pos} is damaged: {exc}",
+                        info.start_time,
+                        info.end_time,
+                        lost,
+                    )
+                )
         payloads = sink.finish()
         return Collected(self.kind, conns, payloads, damage)
 

@@ -34,8 +34,12 @@ class SqliteSource:
 
     kind = "ros2 sqlite3"
 
-    def __init__(self, path: Path, progress: Callable[[float], None] | None = None,
-                 counts: dict[str, int] | None = None):  # fmt: skip
+    def __init__(
+        self,
+        path: Path,
+        progress: Callable[[float], None] | None = None,
+        counts: dict[str, int] | None = None,
+    ):
         self.path = path
         self.progress = progress
         self.counts = counts  # message count per topic from metadata.yaml (saves a table scan)
@@ -49,17 +53,21 @@ class SqliteSource:
         try:
             return self._read(db, sink)
         except sqlite3.DatabaseError as exc:
-            raise LogError(f"Expected a rosbag2 sqlite3 database, got {str(exc).rstrip('.')} in "
-                           f"{self.path}; `sqlite3 {self.path.name} .recover | sqlite3 fixed.db3` "
-                           f"may rescue it") from None  # fmt: skip
+            raise LogError(
+                f"Expected a rosbag2 sqlite3 database, got {str(exc).rstrip('.')} in "
+                f"{self.path}; `sqlite3 {self.path.name} .recover | sqlite3 fixed.db3` "
+                f"may rescue it"
+            ) from None
         finally:
             db.close()
 
     def _read(self, db: sqlite3.Connection, sink: Sink) -> Collected:
         tables = {r[0] for r in db.execute("SELECT name FROM sqlite_master WHERE type='table'")}
         if not {"topics", "messages"} <= tables:
-            raise LogError(f"Expected a rosbag2 sqlite3 database (tables topics, messages), got "
-                           f"{', '.join(sorted(tables)) or 'no tables'} in {self.path}")  # fmt: skip
+            raise LogError(
+                f"Expected a rosbag2 sqlite3 database (tables topics, messages), got "
+                f"{', '.join(sorted(tables)) or 'no tables'} in {self.path}"
+            )
         defs: dict[str, tuple[str, str]] = {}
         if "message_definitions" in tables:
             for typ, enc, text in db.execute(
@@ -67,8 +75,9 @@ class SqliteSource:
             ):
                 if text:
                     defs[typ] = (enc, text)
-        topics = list(db.execute(
-            "SELECT id, name, type, serialization_format FROM topics ORDER BY id"))
+        topics = list(
+            db.execute("SELECT id, name, type, serialization_format FROM topics ORDER BY id")
+        )
         if self.counts is not None and all(str(t[1]) in self.counts for t in topics):
             counts = {t[0]: self.counts[str(t[1])] for t in topics}
         else:
@@ -76,13 +85,17 @@ class SqliteSource:
         conns = []
         for tid, name, typ, fmt in topics:
             enc, text = defs.get(typ, ("", ""))
-            conns.append(Conn(int(tid), str(name), str(typ), str(fmt), enc, text,
-                              int(counts.get(tid, 0))))  # fmt: skip
+            conns.append(
+                Conn(int(tid), str(name), str(typ), str(fmt), enc, text, int(counts.get(tid, 0)))
+            )
         kept = [c.id for c in conns if sink.wants(c)]
         if kept:
             marks = ",".join("?" * len(kept))
-            rows = db.execute(f"SELECT topic_id, timestamp, data FROM messages "
-                              f"WHERE topic_id IN ({marks}) ORDER BY id", kept)  # fmt: skip
+            rows = db.execute(
+                f"SELECT topic_id, timestamp, data FROM messages "
+                f"WHERE topic_id IN ({marks}) ORDER BY id",
+                kept,
+            )
             total = max(sum(c.count or 0 for c in conns if c.id in kept), 1)
             done = 0
             while batch := rows.fetchmany(20_000):
@@ -91,15 +104,23 @@ class SqliteSource:
                 done += len(batch)
                 if self.progress is not None:
                     self.progress(min(done / total, 1.0))
-                tids, stamps, datas = zip(*batch)
+                tids, stamps, datas = zip(*batch, strict=False)
                 tids = np.array(tids, np.int64)
                 for tid in np.unique(tids).tolist():
                     sel = np.flatnonzero(tids == tid)
                     rs = datas if len(sel) == len(datas) else [datas[i] for i in sel.tolist()]
                     lens = np.fromiter(map(len, rs), np.int64, len(rs))
                     starts = np.concatenate([[0], np.cumsum(lens)[:-1]]).astype(np.int64)
-                    sink.add(tid, Payloads(np.frombuffer(b"".join(rs), np.uint8), starts, lens,
-                                           np.array(stamps, np.int64)[sel], ids[sel]))
+                    sink.add(
+                        tid,
+                        Payloads(
+                            np.frombuffer(b"".join(rs), np.uint8),
+                            starts,
+                            lens,
+                            np.array(stamps, np.int64)[sel],
+                            ids[sel],
+                        ),
+                    )
         payloads = sink.finish()
         return Collected(self.kind, conns, payloads, [])
 
@@ -120,16 +141,28 @@ def decompress_messages(p: Payloads, where: str, damage: list[Damage]) -> Payloa
                 raise ValueError(f"declares {size} bytes")
             m = dec.decompress(data, max_output_size=cap)
         except (zstandard.ZstdError, ValueError) as exc:
-            damage.append(Damage(-1, f"{where}: message {i} does not decompress ({exc})",
-                                 int(p.log_time[i]), int(p.log_time[i]), 1))  # fmt: skip
+            damage.append(
+                Damage(
+                    -1,
+                    f"{where}: message {i} does not decompress ({exc})",
+                    int(p.log_time[i]),
+                    int(p.log_time[i]),
+                    1,
+                )
+            )
             continue
         starts.append(len(out))
         lens.append(len(m))
         keep.append(i)
         out += m
     k = np.asarray(keep, np.int64)
-    return Payloads(np.frombuffer(bytes(out), np.uint8), np.asarray(starts, np.int64),
-                    np.asarray(lens, np.int64), p.log_time[k], p.order[k])  # fmt: skip
+    return Payloads(
+        np.frombuffer(bytes(out), np.uint8),
+        np.asarray(starts, np.int64),
+        np.asarray(lens, np.int64),
+        p.log_time[k],
+        p.order[k],
+    )
 
 
 def decompress_file(src: Path, dst_dir: Path) -> Path:
@@ -137,8 +170,11 @@ def decompress_file(src: Path, dst_dir: Path) -> Path:
     import zstandard
 
     dst = dst_dir / src.name.removesuffix(".zstd")
-    cap = size_bound(src.stat().st_size) if src.stat().st_size < (1 << 21) else (
-        1024 * src.stat().st_size)  # fmt: skip
+    cap = (
+        size_bound(src.stat().st_size)
+        if src.stat().st_size < (1 << 21)
+        else (1024 * src.stat().st_size)
+    )
     written = 0
     try:
         with open(src, "rb") as fin, open(dst, "wb") as fout:
@@ -146,8 +182,10 @@ def decompress_file(src: Path, dst_dir: Path) -> Path:
             while block := reader.read(1 << 20):
                 written += len(block)
                 if written > cap:
-                    raise LogError(f"Expected {src.name} to decompress to at most {cap} bytes, "
-                                   f"got more (refused)")  # fmt: skip
+                    raise LogError(
+                        f"Expected {src.name} to decompress to at most {cap} bytes, "
+                        f"got more (refused)"
+                    )
                 fout.write(block)
     except zstandard.ZstdError as exc:
         raise LogError(f"Expected a zstd-compressed bag file, got {exc} in {src}") from None
@@ -157,8 +195,13 @@ def decompress_file(src: Path, dst_dir: Path) -> Path:
 class Rosbag2Folder:
     """A rosbag2 folder: ``metadata.yaml`` and one or more storage files."""
 
-    def __init__(self, folder: Path, info: dict, files: list[Path],
-                 progress: Callable[[float], None] | None = None):  # fmt: skip
+    def __init__(
+        self,
+        folder: Path,
+        info: dict,
+        files: list[Path],
+        progress: Callable[[float], None] | None = None,
+    ):
         self.folder = folder
         self.info = info
         self.files = files
@@ -168,11 +211,15 @@ class Rosbag2Folder:
         self.mode = "" if mode == "none" else mode
         fmt = str(info.get("compression_format") or "")
         if self.mode and fmt != "zstd":
-            raise LogError(f"Expected compression format zstd in {folder / 'metadata.yaml'}, got "
-                           f"{fmt!r}; `ros2 bag convert` can rewrite it uncompressed")  # fmt: skip
+            raise LogError(
+                f"Expected compression format zstd in {folder / 'metadata.yaml'}, got "
+                f"{fmt!r}; `ros2 bag convert` can rewrite it uncompressed"
+            )
         if self.mode not in ("", "file", "message"):
-            raise LogError(f"Expected compression_mode file, message or none, got {mode!r} in "
-                           f"{folder / 'metadata.yaml'}")  # fmt: skip
+            raise LogError(
+                f"Expected compression_mode file, message or none, got {mode!r} in "
+                f"{folder / 'metadata.yaml'}"
+            )
 
     @property
     def kind(self) -> str:
@@ -199,18 +246,34 @@ class Rosbag2Folder:
                 name = self.files[k].name
                 transform = None
                 if self.mode == "message":
+
                     def transform(p, name=name):
                         return decompress_messages(p, name, damage)
+
                 got = src.read(Sink(sink.plan, transform))
                 for d in got.damage:
-                    damage.append(Damage(d.offset, f"{self.files[k].name}: {d.what}",
-                                         d.t_start_ns, d.t_end_ns, d.messages_lost))
+                    damage.append(
+                        Damage(
+                            d.offset,
+                            f"{self.files[k].name}: {d.what}",
+                            d.t_start_ns,
+                            d.t_end_ns,
+                            d.messages_lost,
+                        )
+                    )
                 for c in got.conns:
                     key = (c.topic, c.msgtype, c.encoding)
                     g = merged.get(key)
                     if g is None:
-                        g = merged[key] = Conn(len(merged) + 1, c.topic, c.msgtype, c.encoding,
-                                               c.schema_encoding, c.schema_text, 0)
+                        g = merged[key] = Conn(
+                            len(merged) + 1,
+                            c.topic,
+                            c.msgtype,
+                            c.encoding,
+                            c.schema_encoding,
+                            c.schema_text,
+                            0,
+                        )
                     g.count = (g.count or 0) + (c.count or 0)
                     p = got.payloads.get(c.id)
                     if p is not None and len(p):

@@ -18,10 +18,21 @@ from imu_dcm.logio.types import Conn
 
 #: Primitive ROS types and their little-endian numpy dtypes.
 PRIM = {
-    "bool": "u1", "byte": "u1", "char": "u1", "octet": "u1", "int8": "i1", "uint8": "u1",
-    "int16": "i2", "uint16": "u2", "int32": "i4", "uint32": "u4", "int64": "i8",
-    "uint64": "u8", "float32": "f4", "float64": "f8",
-}  # fmt: skip
+    "bool": "u1",
+    "byte": "u1",
+    "char": "u1",
+    "octet": "u1",
+    "int8": "i1",
+    "uint8": "u1",
+    "int16": "i2",
+    "uint16": "u2",
+    "int32": "i4",
+    "uint32": "u4",
+    "int64": "i8",
+    "uint64": "u8",
+    "float32": "f4",
+    "float64": "f8",
+}
 #: Deepest type nesting followed (real messages nest < 10 levels).
 MAX_DEPTH = 64
 #: Largest schema text parsed (bytes).
@@ -71,8 +82,14 @@ def _convert(typesdict) -> Defs:
                 out.append(Field(fname, _base_name(desc), None, 0))
             else:  # 3 ARRAY ((sub), count) / 4 SEQUENCE ((sub), bound)
                 sub, num = desc[1]
-                out.append(Field(fname, _base_name(sub), "fixed" if kind == 3 else "seq",
-                                 int(num) if kind == 3 else 0))  # fmt: skip
+                out.append(
+                    Field(
+                        fname,
+                        _base_name(sub),
+                        "fixed" if kind == 3 else "seq",
+                        int(num) if kind == 3 else 0,
+                    )
+                )
         defs[tname] = out
     for builtin in ("builtin_interfaces/msg/Time", "builtin_interfaces/msg/Duration"):
         defs.setdefault(builtin, [Field(n, t, None, 0) for n, t in _TIME])
@@ -86,8 +103,9 @@ def _check_depth(defs: Defs, root: str) -> None:
     while stack:
         name, d, seen = stack.pop()
         if d > MAX_DEPTH:
-            raise LogError(f"Expected message types nested at most {MAX_DEPTH} deep, got deeper "
-                           f"in {root}")  # fmt: skip
+            raise LogError(
+                f"Expected message types nested at most {MAX_DEPTH} deep, got deeper in {root}"
+            )
         if depth.get(name, -1) >= d:
             continue
         depth[name] = d
@@ -95,8 +113,10 @@ def _check_depth(defs: Defs, root: str) -> None:
             if f.base in defs:
                 if f.base in seen or f.base == name:
                     if f.array is None:
-                        raise LogError(f"Expected a message type that does not contain itself, "
-                                       f"got {f.base} inside {name}")  # fmt: skip
+                        raise LogError(
+                            f"Expected a message type that does not contain itself, "
+                            f"got {f.base} inside {name}"
+                        )
                     continue
                 stack.append((f.base, d + 1, seen | {name}))
 
@@ -121,8 +141,10 @@ def _parse(msgtype: str, encoding: str, text: str, serialization: str) -> tuple[
 
     root = norm_type(msgtype)
     if len(text.encode("utf-8", "surrogatepass")) > MAX_SCHEMA_BYTES:
-        raise LogError(f"Expected a message definition of at most {MAX_SCHEMA_BYTES} bytes for "
-                       f"{msgtype}, got {len(text)} characters")  # fmt: skip
+        raise LogError(
+            f"Expected a message definition of at most {MAX_SCHEMA_BYTES} bytes for "
+            f"{msgtype}, got {len(text)} characters"
+        )
     if text.strip():
         if encoding in ("ros2idl", "omgidl"):
             typesdict = _idl_types(text)
@@ -131,16 +153,19 @@ def _parse(msgtype: str, encoding: str, text: str, serialization: str) -> tuple[
     else:
         from rosbags.typesys import Stores, get_typestore
 
-        store = get_typestore(Stores.ROS1_NOETIC if serialization == "ros1"
-                              else Stores.ROS2_HUMBLE)  # fmt: skip
+        store = get_typestore(Stores.ROS1_NOETIC if serialization == "ros1" else Stores.ROS2_HUMBLE)
         if root not in store.fielddefs:
-            raise LogError(f"Expected a message definition for {msgtype} (the bag stores none "
-                           f"and rosbags does not know the type), got none")  # fmt: skip
+            raise LogError(
+                f"Expected a message definition for {msgtype} (the bag stores none "
+                f"and rosbags does not know the type), got none"
+            )
         typesdict = store.fielddefs
     defs = _convert(typesdict)
     if root not in defs:
-        raise LogError(f"Expected the definition of {msgtype} in its schema, got only "
-                       f"{', '.join(sorted(defs)[:4]) or 'nothing'}")  # fmt: skip
+        raise LogError(
+            f"Expected the definition of {msgtype} in its schema, got only "
+            f"{', '.join(sorted(defs)[:4]) or 'nothing'}"
+        )
     _check_depth(defs, root)
     return defs, root
 
@@ -158,13 +183,16 @@ def definitions(conn: Conn) -> tuple[Defs, str]:
     except LogError as exc:
         raise LogError(f"{conn.topic}: {exc}") from None
     except RecursionError:
-        raise LogError(f"Expected a readable {conn.schema_encoding or 'message'} definition of "
-                       f"{conn.msgtype} on {conn.topic}, got nesting too deep") from None
-    except Exception as exc:  # noqa: BLE001 (rosbags' parser raises TypesysError and builtins)
+        raise LogError(
+            f"Expected a readable {conn.schema_encoding or 'message'} definition of "
+            f"{conn.msgtype} on {conn.topic}, got nesting too deep"
+        ) from None
+    except Exception as exc:
         msg = str(exc).splitlines()[0][:120] if str(exc) else type(exc).__name__
-        raise LogError(f"Expected a readable {conn.schema_encoding or 'message'} definition of "
-                       f"{conn.msgtype} on {conn.topic}, got {type(exc).__name__}: {msg}") \
-            from None
+        raise LogError(
+            f"Expected a readable {conn.schema_encoding or 'message'} definition of "
+            f"{conn.msgtype} on {conn.topic}, got {type(exc).__name__}: {msg}"
+        ) from None
 
 
 def typestore_for(conn: Conn):
@@ -173,8 +201,9 @@ def typestore_for(conn: Conn):
 
     root = norm_type(conn.msgtype)
     if not conn.schema_text.strip():
-        return get_typestore(Stores.ROS1_NOETIC if conn.encoding == "ros1"
-                             else Stores.ROS2_HUMBLE), root  # fmt: skip
+        return get_typestore(
+            Stores.ROS1_NOETIC if conn.encoding == "ros1" else Stores.ROS2_HUMBLE
+        ), root
     store = get_typestore(Stores.EMPTY)
     if conn.schema_encoding in ("ros2idl", "omgidl"):
         types = _idl_types(conn.schema_text)

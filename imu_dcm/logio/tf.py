@@ -24,8 +24,11 @@ def child_frame(c: Conn, p: Payloads, good) -> str:
     if not len(idx):
         return ""
     try:
-        rows = tf_rows(p.buf[int(p.start[idx[0]]):int(p.start[idx[0]] + p.length[idx[0]])]
-                        .tobytes(), c.encoding == "ros1", single=True)  # fmt: skip
+        rows = tf_rows(
+            p.buf[int(p.start[idx[0]]) : int(p.start[idx[0]] + p.length[idx[0]])].tobytes(),
+            c.encoding == "ros1",
+            single=True,
+        )
         return rows[0][2] if rows else ""
     except (struct.error, ValueError):
         return ""
@@ -75,8 +78,9 @@ def tf_rows(raw: bytes, ros1: bool, single: bool = False) -> list[tuple]:
     return out
 
 
-def tf_truth(got: Collected, conns: list[Conn], imu_frame: str, truth_frame: str | None,
-              auto: bool) -> TruthSeries | None:  # fmt: skip
+def tf_truth(
+    got: Collected, conns: list[Conn], imu_frame: str, truth_frame: str | None, auto: bool
+) -> TruthSeries | None:
     t, lt, order, parent, child, q = [], [], [], [], [], []
     for c in conns:
         p = got.payloads.get(c.id) or Payloads.empty()
@@ -101,8 +105,10 @@ def tf_truth(got: Collected, conns: list[Conn], imu_frame: str, truth_frame: str
     topics = "/".join(sorted({c.topic for c in conns}))
     if truth_frame is not None:
         if truth_frame not in children:
-            raise LogError(f"Expected a transform to child frame {truth_frame!r} in {topics}, got "
-                           f"children {', '.join(children)}")  # fmt: skip
+            raise LogError(
+                f"Expected a transform to child frame {truth_frame!r} in {topics}, got "
+                f"children {', '.join(children)}"
+            )
         pick = truth_frame
     elif not moving:
         return None
@@ -111,11 +117,21 @@ def tf_truth(got: Collected, conns: list[Conn], imu_frame: str, truth_frame: str
     elif imu_frame.strip("/") in [m.strip("/") for m in moving]:
         pick = next(m for m in moving if m.strip("/") == imu_frame.strip("/"))
     else:
-        raise LogError(f"Expected one moving frame in {topics}, got {len(moving)}: "
-                       f"{', '.join(moving)} (choose with --truth-frame)")  # fmt: skip
+        raise LogError(
+            f"Expected one moving frame in {topics}, got {len(moving)}: "
+            f"{', '.join(moving)} (choose with --truth-frame)"
+        )
     m = child_arr == pick
     idx = np.flatnonzero(m)
     idx = idx[np.argsort(np.asarray(order)[idx], kind="stable")]
     par = parent[int(idx[0])]
-    return TruthSeries(np.asarray(t, np.int64)[idx], np.asarray(lt, np.int64)[idx], q_arr[idx],
-                       topics, TF_TYPE, par, pick, auto)  # fmt: skip
+    return TruthSeries(
+        np.asarray(t, np.int64)[idx],
+        np.asarray(lt, np.int64)[idx],
+        q_arr[idx],
+        topics,
+        TF_TYPE,
+        par,
+        pick,
+        auto,
+    )

@@ -165,7 +165,7 @@ def join_payloads(parts: list[Payloads]) -> Payloads:
         return parts[0]
     shift = np.cumsum([0] + [len(p.buf) for p in parts[:-1]])
     buf = np.concatenate([p.buf for p in parts])
-    start = np.concatenate([p.start + s for p, s in zip(parts, shift)])
+    start = np.concatenate([p.start + s for p, s in zip(parts, shift, strict=False)])
     length = np.concatenate([p.length for p in parts])
     log_time = np.concatenate([p.log_time for p in parts])
     order = np.concatenate([p.order for p in parts])
@@ -217,11 +217,20 @@ def join_columns(parts: list[Columns]) -> Columns:
     fields = {}
     for k in sorted({k for p in parts for k in p.fields}):
         proto = next(p.fields[k] for p in parts if k in p.fields)
-        fields[k] = joined([p.fields.pop(k) if k in p.fields else
-                            np.full((len(p),) + proto.shape[1:], np.nan) for p in parts])
-    return Columns(order if idx is None else order[idx], joined([p.log_time for p in parts]),
-                   fields, frames, next((p.error for p in parts if p.error is not None), None),
-                   sum(p.dropped for p in parts))  # fmt: skip
+        fields[k] = joined(
+            [
+                p.fields.pop(k) if k in p.fields else np.full((len(p),) + proto.shape[1:], np.nan)
+                for p in parts
+            ]
+        )
+    return Columns(
+        order if idx is None else order[idx],
+        joined([p.log_time for p in parts]),
+        fields,
+        frames,
+        next((p.error for p in parts if p.error is not None), None),
+        sum(p.dropped for p in parts),
+    )
 
 
 def join_any(parts: list) -> Payloads | Columns:

@@ -172,13 +172,15 @@ def replay_one(path: str, options: Mapping[str, Any]) -> tuple[LogRow, Curve | N
             from imu_dcm.replay.core import replay
 
             result = replay(path, **options)
-            row = row_from_result(path, result, (str(w.message) for w in caught),
-                                  time.perf_counter() - t0)  # fmt: skip
-        except Exception as exc:  # noqa: BLE001 - one bad log never stops the batch
+            row = row_from_result(
+                path, result, (str(w.message) for w in caught), time.perf_counter() - t0
+            )
+        except Exception as exc:
             said = tuple(dict.fromkeys(one_line(str(w.message)) for w in caught))
             error = f"{type(exc).__name__}: {one_line(str(exc))}"
-            return LogRow(path, warnings=said, elapsed_s=time.perf_counter() - t0,
-                          error=error), None  # fmt: skip
+            return LogRow(
+                path, warnings=said, elapsed_s=time.perf_counter() - t0, error=error
+            ), None
     curve = None
     if row.rms_error_deg is not None:
         curve = decimate_curve(path, result.t_s, result.error.total_deg)
@@ -253,20 +255,25 @@ def replay_many(
         if table is not None and chart_available():
             chart_path = Path(table).with_suffix(".png")
         elif table is not None:
-            warnings.warn(f"no chart: matplotlib is not installed ({INSTALL_HINT})",
-                          ImuDcmWarning, stacklevel=2)  # fmt: skip
+            warnings.warn(
+                f"no chart: matplotlib is not installed ({INSTALL_HINT})",
+                ImuDcmWarning,
+                stacklevel=2,
+            )
     elif chart is not None:
         if not chart_available():
-            raise InputError(f"Expected matplotlib for the chart, got it not installed: "
-                             f"{INSTALL_HINT}")  # fmt: skip
+            raise InputError(
+                f"Expected matplotlib for the chart, got it not installed: {INSTALL_HINT}"
+            )
         chart_path = Path(chart)
 
     old: dict[str, LogRow] = {}
     if table is not None:
         table = Path(table)
         if table.exists() and table.stat().st_size and not (resume or overwrite):
-            raise InputError(f"Expected a new table, got an existing {table} (resume or "
-                             f"overwrite it)")  # fmt: skip
+            raise InputError(
+                f"Expected a new table, got an existing {table} (resume or overwrite it)"
+            )
         if overwrite and not resume:
             for p in (table, curves_path(table)):
                 p.unlink(missing_ok=True)
@@ -311,8 +318,15 @@ def replay_many(
         md = write_markdown(table, rows + others)
     if chart_path is not None:
         chart_path = write_chart(chart_path, rows + others, curves)
-    return BatchResult(tuple(rows), sum(r.failed for r in rows), resumed, table, md, chart_path,
-                       summary_line(rows + others))  # fmt: skip
+    return BatchResult(
+        tuple(rows),
+        sum(r.failed for r in rows),
+        resumed,
+        table,
+        md,
+        chart_path,
+        summary_line(rows + others),
+    )
 
 
 # ------------------------------------------------------------------------------- CLI

@@ -52,11 +52,17 @@ def write_chart(path: str | Path, rows: Sequence[LogRow], curves: dict[str, Curv
     if named:
         y = np.arange(len(rows))[::-1]
         has = np.isfinite(rms) & (rms > 0)
-        ax_rms.barh(y[has], rms[has], color=[c for c, h in zip(colors, has) if h])
-        for yi, r, v in zip(y, rows, rms):
+        ax_rms.barh(y[has], rms[has], color=[c for c, h in zip(colors, has, strict=False) if h])
+        for yi, r, v in zip(y, rows, rms, strict=False):
             if r.failed:
-                ax_rms.text(floor, yi, "  failed: " + r.error[:90], va="center", fontsize=7,
-                            color="firebrick")  # fmt: skip
+                ax_rms.text(
+                    floor,
+                    yi,
+                    "  failed: " + r.error[:90],
+                    va="center",
+                    fontsize=7,
+                    color="firebrick",
+                )
             elif not np.isfinite(v):
                 ax_rms.text(floor, yi, "  no truth", va="center", fontsize=7, color="gray")
             else:
@@ -66,8 +72,9 @@ def write_chart(path: str | Path, rows: Sequence[LogRow], curves: dict[str, Curv
     else:
         order = np.sort(good)
         ax_rms.plot(np.arange(1, len(order) + 1), order, ".", ms=3)
-        ax_rms.set_xlabel(f"logs sorted by RMS error ({len(rows) - len(good)} failed or "
-                          f"without truth not shown)")  # fmt: skip
+        ax_rms.set_xlabel(
+            f"logs sorted by RMS error ({len(rows) - len(good)} failed or without truth not shown)"
+        )
     top = float(good.max()) if len(good) else 1.0
     if named:
         ax_rms.set_xscale("log")
@@ -79,7 +86,7 @@ def write_chart(path: str | Path, rows: Sequence[LogRow], curves: dict[str, Curv
     ax_rms.grid(True, which="major", alpha=0.3)
 
     segs, seg_colors, labels = [], [], []
-    for k, (name, r) in enumerate(zip(names, rows)):
+    for k, (name, r) in enumerate(zip(names, rows, strict=False)):
         c = curves.get(r.path)
         if c is None or not len(c.t_s):
             continue
@@ -104,13 +111,21 @@ def write_chart(path: str | Path, rows: Sequence[LogRow], curves: dict[str, Curv
     else:
         ax_t.set_xlim(0, 1)
         ax_t.set_ylim(1e-3, 1)
-        ax_t.text(0.5, 0.5, "no log with an error curve", ha="center", va="center",
-                  transform=ax_t.transAxes, color="gray")  # fmt: skip
+        ax_t.text(
+            0.5,
+            0.5,
+            "no log with an error curve",
+            ha="center",
+            va="center",
+            transform=ax_t.transAxes,
+            color="gray",
+        )
     ax_t.set_yscale("log")
     ax_t.set_xlabel("time since the log's first sample, s")
     ax_t.set_ylabel("total attitude error, deg")
-    ax_t.set_title("error over time, every log (largest error per time bin)", fontsize=10,
-                   loc="left")  # fmt: skip
+    ax_t.set_title(
+        "error over time, every log (largest error per time bin)", fontsize=10, loc="left"
+    )
     ax_t.grid(True, which="major", alpha=0.3)
     out = Path(path)
     fig.savefig(out, dpi=110)

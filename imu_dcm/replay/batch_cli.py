@@ -14,7 +14,6 @@ import sys
 import threading
 import time
 import warnings
-from typing import Any
 
 from imu_dcm.errors import ImuDcmError, InputError
 from imu_dcm.replay.batch import replay_many
@@ -34,18 +33,30 @@ def build_parser() -> argparse.ArgumentParser:
         "cluster, and tabulate one row per log (CSV, markdown, chart). Exit code: 0 all logs "
         "replayed, 1 some failed (their rows say why), 2 bad input.",
     )
-    p.add_argument("paths", nargs="+", metavar="PATH",
-                   help="a log (bag folder or .mcap), a folder searched for logs, or a .txt "
-                   "file listing them, one a line")  # fmt: skip
-    p.add_argument("--table", required=True, metavar="OUT.csv",
-                   help="CSV table, one row per log, appended as logs finish; OUT.md (markdown "
-                   "and summary), OUT.png (chart) and OUT.curves.jsonl are written beside it")  # fmt: skip
+    p.add_argument(
+        "paths",
+        nargs="+",
+        metavar="PATH",
+        help="a log (bag folder or .mcap), a folder searched for logs, or a .txt "
+        "file listing them, one a line",
+    )
+    p.add_argument(
+        "--table",
+        required=True,
+        metavar="OUT.csv",
+        help="CSV table, one row per log, appended as logs finish; OUT.md (markdown "
+        "and summary), OUT.png (chart) and OUT.curves.jsonl are written beside it",
+    )
     where = p.add_mutually_exclusive_group()
-    where.add_argument("--jobs", type=int, metavar="N",
-                       help="worker processes (default: the number of cores)")  # fmt: skip
-    where.add_argument("--dask", metavar="ADDRESS",
-                       help="run on a Dask cluster, e.g. tcp://HOST:8786 (workers must see the "
-                       "logs at the same paths)")  # fmt: skip
+    where.add_argument(
+        "--jobs", type=int, metavar="N", help="worker processes (default: the number of cores)"
+    )
+    where.add_argument(
+        "--dask",
+        metavar="ADDRESS",
+        help="run on a Dask cluster, e.g. tcp://HOST:8786 (workers must see the "
+        "logs at the same paths)",
+    )
     p.add_argument(
         "--resume",
         action="store_true",
@@ -80,8 +91,10 @@ class _Bar:
         width = 30
         fill = round(width * done / total)
         s = int(time.monotonic() - self.t0)
-        self.stream.write(f"\rlogs [{'#' * fill}{'.' * (width - fill)}] {done}/{total}, "
-                          f"{self.failed} failed, {s // 60}:{s % 60:02d} ")  # fmt: skip
+        self.stream.write(
+            f"\rlogs [{'#' * fill}{'.' * (width - fill)}] {done}/{total}, "
+            f"{self.failed} failed, {s // 60}:{s % 60:02d} "
+        )
         self.stream.flush()
 
     def close(self) -> None:
@@ -117,10 +130,17 @@ def main(argv: list[str] | None = None) -> int:
             bar = _Bar()
             t0 = time.perf_counter()
             try:
-                result = replay_many(args.paths, args.table, jobs=args.jobs, dask=args.dask,
-                                     resume=args.resume, overwrite=args.force,
-                                     chart=None if args.no_chart else (args.chart or "auto"),
-                                     progress=bar, **options)  # fmt: skip
+                result = replay_many(
+                    args.paths,
+                    args.table,
+                    jobs=args.jobs,
+                    dask=args.dask,
+                    resume=args.resume,
+                    overwrite=args.force,
+                    chart=None if args.no_chart else (args.chart or "auto"),
+                    progress=bar,
+                    **options,
+                )
             finally:
                 bar.close()
             if not args.quiet:

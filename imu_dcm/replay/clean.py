@@ -4,10 +4,10 @@ and reported with its time, so one bad byte costs one sample, never the answer.
 Rules, in order (all on the rates in rad/s, in file order until the sort):
 
 1. **Non-finite** rates (NaN, Inf) are dropped.
-2. **Implausible** rates are dropped: a component above :data:`MAX_RATE_RAD_S` (10⁴ rad/s, far
-   above any MEMS full scale, ±4000 °/s = 70 rad/s, even read as deg/s), and isolated spikes: a sample
-   whose ``|ω|`` exceeds :data:`SPIKE_RATIO` times both the log's 99.9th percentile of ``|ω|``
-   and every neighbour within :data:`SPIKE_NEIGHBOURS` samples (and 1 rad/s). A flipped
+2. **Implausible** rates are dropped: a component above :data:`MAX_RATE_RAD_S` (10⁴ rad/s,
+   far above any MEMS full scale, ±4000 °/s = 70 rad/s, even read as deg/s), and isolated
+   spikes: a sample whose ``|ω|`` exceeds :data:`SPIKE_RATIO` times both the log's 99.9th
+   percentile of ``|ω|`` and every neighbour within :data:`SPIKE_NEIGHBOURS` samples (and 1 rad/s). A flipped
    exponent bit gives such a sample; real motion never does (the six BROAD trials peak at 1.84,
    the tapping trial).
 3. **Wild stamps** are dropped: a stamp further than :data:`WILD_STAMP_STEPS` median steps from
@@ -41,7 +41,8 @@ __all__ = ["MAX_RATE_RAD_S", "SPIKE_RATIO", "CleanedImu", "clean_imu"]
 FULL_SCALE_RAD_S = 2000.0 * np.pi / 180.0
 #: Rates above this are no gyro's (rad/s): 10⁴ rad/s = 5.7e5 °/s.
 MAX_RATE_RAD_S = 1.0e4
-#: An isolated sample this many times above the log's 99.9th percentile and its neighbours is a spike.
+#: An isolated sample this many times above the log's 99.9th percentile and its neighbours is
+#: a spike.
 SPIKE_RATIO = 8.0
 #: Neighbours on each side compared with a candidate spike.
 SPIKE_NEIGHBOURS = 2

@@ -24,9 +24,9 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from imu_dcm.logio import read_log
 from imu_dcm.errors import GapWarning, ImuDcmWarning, LogError
 from imu_dcm.integrate import integrate
+from imu_dcm.logio import read_log
 from imu_dcm.metrics import AttitudeError, attitude_error_deg, rms
 from imu_dcm.replay.bias import RestConfig, estimate_bias
 from imu_dcm.replay.clean import CleanedImu, _deg_evidence, clean_imu

@@ -26,8 +26,13 @@ __all__ = ["DASK_HINT", "LOST", "run_dask", "run_local"]
 #: In the error of a row whose worker died (not the log's fault: ``resume`` retries it).
 LOST = "worker lost"
 DASK_HINT = "pip install 'imu_dcm[dask]' (or pip install 'dask[distributed]')"
-_BLAS_ENV = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS",
-             "VECLIB_MAXIMUM_THREADS", "NUMEXPR_NUM_THREADS")  # fmt: skip
+_BLAS_ENV = (
+    "OMP_NUM_THREADS",
+    "OPENBLAS_NUM_THREADS",
+    "MKL_NUM_THREADS",
+    "VECLIB_MAXIMUM_THREADS",
+    "NUMEXPR_NUM_THREADS",
+)
 
 Outcome = tuple[LogRow, "Curve | None"]
 PerLog = Callable[[str, Mapping[str, Any]], Outcome]
@@ -82,8 +87,9 @@ def _lost(path: str, exc: BaseException) -> Outcome:
     return LogRow(path, error=f"{type(exc).__name__}: {LOST}: {one_line(str(exc))}"), None
 
 
-def run_local(fn: PerLog, paths: list[str], options: Mapping[str, Any],
-              jobs: int) -> Iterator[Outcome]:  # fmt: skip
+def run_local(
+    fn: PerLog, paths: list[str], options: Mapping[str, Any], jobs: int
+) -> Iterator[Outcome]:
     """Yield ``fn(path, options)`` per log as each finishes: in this process for one job (with
     one BLAS thread, the workers' arithmetic), else in a pool of ``jobs`` worker processes."""
     if jobs == 1 or len(paths) == 1:
@@ -97,8 +103,9 @@ def run_local(fn: PerLog, paths: list[str], options: Mapping[str, Any],
             for p in paths:
                 yield fn(p, options)
         return
-    pool = ProcessPoolExecutor(min(jobs, len(paths)), mp_context=_pool_context(),
-                               initializer=_worker_init)  # fmt: skip
+    pool = ProcessPoolExecutor(
+        min(jobs, len(paths)), mp_context=_pool_context(), initializer=_worker_init
+    )
     finished = False
     try:
         with _env(dict.fromkeys(_BLAS_ENV, "1")):  # spawned workers start as tasks are submitted
@@ -119,8 +126,7 @@ def run_local(fn: PerLog, paths: list[str], options: Mapping[str, Any],
                     proc.terminate()
 
 
-def run_dask(fn: PerLog, paths: list[str], options: Mapping[str, Any],
-             dask) -> Iterator[Outcome]:  # fmt: skip
+def run_dask(fn: PerLog, paths: list[str], options: Mapping[str, Any], dask) -> Iterator[Outcome]:
     """Yield ``fn(path, options)`` per log as each finishes on a Dask cluster.
 
     ``dask`` is a ``distributed.Client`` (left open) or a scheduler address such as
@@ -130,8 +136,9 @@ def run_dask(fn: PerLog, paths: list[str], options: Mapping[str, Any],
         from distributed import Client
         from distributed import as_completed as dask_completed
     except ImportError:
-        raise InputError(f"Expected dask.distributed for --dask, got it not installed: "
-                         f"{DASK_HINT}") from None  # fmt: skip
+        raise InputError(
+            f"Expected dask.distributed for --dask, got it not installed: {DASK_HINT}"
+        ) from None
     own = isinstance(dask, str)
     try:
         client = Client(dask) if own else dask
@@ -142,9 +149,12 @@ def run_dask(fn: PerLog, paths: list[str], options: Mapping[str, Any],
         workers = client.scheduler_info().get("workers", {}).values()
         threaded = sum(w.get("nthreads", 1) > 1 for w in workers)
         if threaded:
-            warnings.warn(f"{threaded} Dask workers run several threads, but a process replays "
-                          f"one log at a time: start workers with --nthreads 1 --nworkers N",
-                          ImuDcmWarning, stacklevel=3)  # fmt: skip
+            warnings.warn(
+                f"{threaded} Dask workers run several threads, but a process replays "
+                f"one log at a time: start workers with --nthreads 1 --nworkers N",
+                ImuDcmWarning,
+                stacklevel=3,
+            )
         client.run(pin_threads)
         futures = {client.submit(fn, p, dict(options), pure=False): p for p in paths}
         for fut in dask_completed(list(futures)):

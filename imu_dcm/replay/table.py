@@ -121,8 +121,9 @@ def one_line(text: str) -> str:
     return (text.splitlines() or [""])[0].replace("\r", " ").strip()
 
 
-def decimate_curve(path: str, t_s: ArrayLike, error_deg: ArrayLike,
-                   points: int = CURVE_POINTS) -> Curve:  # fmt: skip
+def decimate_curve(
+    path: str, t_s: ArrayLike, error_deg: ArrayLike, points: int = CURVE_POINTS
+) -> Curve:
     """Keep the largest error in each of ``points`` equal-count bins (peaks survive); 4 digits.
 
     ``t_s`` (N,) s and ``error_deg`` (N,) deg, NaN where no error was measured.
@@ -135,8 +136,9 @@ def decimate_curve(path: str, t_s: ArrayLike, error_deg: ArrayLike,
     finite = np.where(np.isfinite(e), e, -np.inf)
     peak = np.maximum.reduceat(finite, edges)
     peak = np.where(np.isfinite(peak), peak, np.nan)
-    return Curve(path, tuple(float(f"{x:.4g}") for x in t[edges]),
-                 tuple(float(f"{x:.4g}") for x in peak))  # fmt: skip
+    return Curve(
+        path, tuple(float(f"{x:.4g}") for x in t[edges]), tuple(float(f"{x:.4g}") for x in peak)
+    )
 
 
 # --------------------------------------------------------------------------- CSV cells
@@ -169,7 +171,7 @@ def format_lines(rows: Iterable[LogRow], header: bool = False) -> str:
     if header:
         w.writerow(COLUMNS)
     for r in rows:
-        w.writerow([_cell(n, v) for n, v in zip(COLUMNS, astuple(r))])
+        w.writerow([_cell(n, v) for n, v in zip(COLUMNS, astuple(r), strict=False)])
     return buf.getvalue()
 
 
@@ -241,13 +243,15 @@ def read_table(table: str | Path) -> list[LogRow]:
     if not lines:
         return []
     if tuple(lines[0]) != COLUMNS:
-        raise InputError(f"Expected a batch table with columns {','.join(COLUMNS[:3])},..., got "
-                         f"{','.join(lines[0][:3])},... in {p}")  # fmt: skip
+        raise InputError(
+            f"Expected a batch table with columns {','.join(COLUMNS[:3])},..., got "
+            f"{','.join(lines[0][:3])},... in {p}"
+        )
     rows = []
     for k, cells in enumerate(lines[1:], start=2):
         if len(cells) != len(COLUMNS):
             raise InputError(f"Expected {len(COLUMNS)} cells on line {k} of {p}, got {len(cells)}")
-        rows.append(LogRow(*(_parse(n, c) for n, c in zip(COLUMNS, cells))))
+        rows.append(LogRow(*(_parse(n, c) for n, c in zip(COLUMNS, cells, strict=False))))
     return rows
 
 
@@ -270,8 +274,9 @@ def read_curves(table: str | Path) -> dict[str, Curve]:
 
 
 def write_curves(table: str | Path, curves: Iterable[Curve]) -> None:
-    _replace(curves_path(table),
-             "".join(json.dumps(c.__dict__, allow_nan=True) + "\n" for c in curves))  # fmt: skip
+    _replace(
+        curves_path(table), "".join(json.dumps(c.__dict__, allow_nan=True) + "\n" for c in curves)
+    )
 
 
 # ---------------------------------------------------------------------------- markdown
@@ -286,8 +291,10 @@ def summary_line(rows: Sequence[LogRow]) -> str:
     head = f"{len(rows)} log{'s' if len(rows) != 1 else ''}, {failed} failed"
     if not rms:
         return f"{head}; no log with truth, no RMS error"
-    return (f"{head}; RMS error over {len(rms)} log{'s' if len(rms) != 1 else ''} with truth: "
-            f"mean {statistics.fmean(rms):.4g}°, median {statistics.median(rms):.4g}°")  # fmt: skip
+    return (
+        f"{head}; RMS error over {len(rms)} log{'s' if len(rms) != 1 else ''} with truth: "
+        f"mean {statistics.fmean(rms):.4g}°, median {statistics.median(rms):.4g}°"
+    )
 
 
 def short_names(paths: Sequence[str]) -> list[str]:
@@ -303,16 +310,27 @@ def short_names(paths: Sequence[str]) -> list[str]:
 
 def markdown(rows: Sequence[LogRow]) -> str:
     """The table for people: one line per log, errors in degrees, and the summary line."""
-    head = ("| log | samples | duration s | rate Hz | RMS ° | max ° | RMS incl. ° | "
-            "RMS heading ° | dropped | gaps | warnings | elapsed s | error |")  # fmt: skip
+    head = (
+        "| log | samples | duration s | rate Hz | RMS ° | max ° | RMS incl. ° | "
+        "RMS heading ° | dropped | gaps | warnings | elapsed s | error |"
+    )
     lines = [head, "|" + "---|" * head.count(" | ") + "---|"]
-    for name, r in zip(short_names([r.path for r in rows]), rows):
-        cells = [name, "" if r.samples is None else str(r.samples), _num(r.duration_s, 4),
-                 _num(r.rate_hz, 4), _num(r.rms_error_deg), _num(r.max_error_deg),
-                 _num(r.rms_inclination_deg), _num(r.rms_heading_deg),
-                 "" if r.dropped is None else str(r.dropped),
-                 "" if r.gaps is None else str(r.gaps), str(len(r.warnings)),
-                 _num(r.elapsed_s, 2), r.error or ""]  # fmt: skip
+    for name, r in zip(short_names([r.path for r in rows]), rows, strict=False):
+        cells = [
+            name,
+            "" if r.samples is None else str(r.samples),
+            _num(r.duration_s, 4),
+            _num(r.rate_hz, 4),
+            _num(r.rms_error_deg),
+            _num(r.max_error_deg),
+            _num(r.rms_inclination_deg),
+            _num(r.rms_heading_deg),
+            "" if r.dropped is None else str(r.dropped),
+            "" if r.gaps is None else str(r.gaps),
+            str(len(r.warnings)),
+            _num(r.elapsed_s, 2),
+            r.error or "",
+        ]
         lines.append("| " + " | ".join(c.replace("|", "\\|") for c in cells) + " |")
     return "\n".join(lines) + "\n\n" + summary_line(rows) + "\n"
 
