@@ -7,9 +7,9 @@ Rules, in order (all on the rates in rad/s, in file order until the sort):
 2. **Implausible** rates are dropped: a component above :data:`MAX_RATE_RAD_S` (10⁴ rad/s,
    far above any MEMS full scale, ±4000 °/s = 70 rad/s, even read as deg/s), and isolated
    spikes: a sample whose ``|ω|`` exceeds :data:`SPIKE_RATIO` times both the log's 99.9th
-   percentile of ``|ω|`` and every neighbour within :data:`SPIKE_NEIGHBOURS` samples (and 1 rad/s). A flipped
-   exponent bit gives such a sample; real motion never does (the six BROAD trials peak at 1.84,
-   the tapping trial).
+   percentile of ``|ω|`` and every neighbour within :data:`SPIKE_NEIGHBOURS` samples (and
+   1 rad/s). A flipped exponent bit gives such a sample; real motion never does (the six BROAD
+   trials peak at 1.84, the tapping trial).
 3. **Wild stamps** are dropped: a stamp further than :data:`WILD_STAMP_STEPS` median steps from
    the median of its :data:`WILD_STAMP_WINDOW` file-order neighbours (one stamp glitched a day
    ahead costs that sample, not every later one). A monotone sequence, gaps included, is never
