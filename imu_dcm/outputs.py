@@ -47,6 +47,18 @@ def _resolved(path: str | os.PathLike) -> Path:
     return Path(os.path.abspath(os.path.realpath(os.fspath(path))))
 
 
+def _stat(out: Path, what: str) -> os.stat_result | None:
+    """``os.stat(out)``, None when nothing is there; any other failure is one OutputError line."""
+    try:
+        return os.stat(out)
+    except FileNotFoundError:
+        return None
+    except OSError as exc:
+        raise OutputError(
+            f"Expected a usable path for {what}, got {exc.strerror}: {str(out)!r}"
+        ) from None
+
+
 def check_not_input(out: Path, inputs: Iterable[str | os.PathLike], what: str) -> None:
     """Refuse ``out`` (resolved) when it is an input, holds one, or lies inside an input folder."""
     for item in inputs:
@@ -95,14 +107,7 @@ def check_output_file(
     """
     out = _resolved(path)
     check_not_input(out, inputs, what)
-    try:
-        st = os.stat(out)
-    except FileNotFoundError:
-        st = None
-    except OSError as exc:
-        raise OutputError(
-            f"Expected a usable path for {what}, got {exc.strerror}: {str(out)!r}"
-        ) from None
+    st = _stat(out, what)
     if st is not None and not stat.S_ISREG(st.st_mode):
         raise OutputError(
             f"Expected {what} to be a regular file or new, got a {_kind(st.st_mode)} {str(out)!r}"
@@ -146,14 +151,7 @@ def check_output_dir(
     raw = Path(os.path.abspath(os.fspath(path)))
     if raw.is_symlink():
         raise OutputError(f"Expected {what} that is not a symbolic link, got {str(raw)!r}")
-    try:
-        st = os.stat(out)
-    except FileNotFoundError:
-        st = None
-    except OSError as exc:
-        raise OutputError(
-            f"Expected a usable path for {what}, got {exc.strerror}: {str(out)!r}"
-        ) from None
+    st = _stat(out, what)
     if st is not None:
         if not force:
             raise OutputError(

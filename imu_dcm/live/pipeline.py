@@ -8,7 +8,7 @@ stamp order:
    quiet for longer than the window (wall time), the held samples are released;
 2. reports a gap when the step exceeds ``GAP_FACTOR`` times the median of the recent steps
    (replay's rule, on the steps seen so far);
-3. subtracts the bias (``auto``: :class:`imu_dcm.live.rest.CausalRestBias`; ``none``; a vector);
+3. subtracts the bias (``auto``: :class:`imu_dcm.rest.CausalRestBias`; ``none``; a vector);
 4. integrates it with :class:`imu_dcm.DcmIntegrator`, starting — as replay does — at the first
    sample inside the truth's coverage, from the truth slerped there (or from ``init_quat`` /
    identity when there is no truth).
@@ -33,9 +33,9 @@ from numpy.typing import NDArray
 from imu_dcm.errors import GapWarning
 from imu_dcm.integrate import GAP_FACTOR, integrate
 from imu_dcm.live.reorder import ReorderBuffer
-from imu_dcm.live.rest import CausalRestBias
 from imu_dcm.live.sources import Received
 from imu_dcm.metrics import attitude_error_deg
+from imu_dcm.rest import CausalRestBias
 from imu_dcm.streaming import DcmIntegrator
 
 __all__ = ["LiveResult", "Pipeline"]

@@ -10,6 +10,7 @@ processed, the integrator closes its last step, the recording is finished and th
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import signal
 import sys
@@ -28,6 +29,13 @@ from imu_dcm.live.sources import Received, Source, open_source, parse_source
 from imu_dcm.so3 import as_quat_xyzw
 
 __all__ = ["run"]
+
+
+def _scaled(rec: Received, gyro_scale: float) -> Received:
+    """The IMU sample with its rates converted to rad/s (``gyro_scale`` rad/s per unit)."""
+    if gyro_scale == 1.0:
+        return rec
+    return dataclasses.replace(rec, values=rec.values * gyro_scale)
 
 
 def _parse_bias(bias) -> str | tuple:
@@ -293,16 +301,7 @@ def _loop(
                     if kind == "data":
                         rec: Received = ev[1]
                         if rec.kind == "imu":
-                            if gyro_scale != 1.0:
-                                rec = Received(
-                                    rec.kind,
-                                    rec.t_ns,
-                                    rec.values * gyro_scale,
-                                    rec.arrival_ns,
-                                    rec.wall_ns,
-                                    rec.raw,
-                                )
-                            pipe.on_imu(rec)
+                            pipe.on_imu(_scaled(rec, gyro_scale))
                             idle_since = time.monotonic()
                         else:
                             pipe.on_truth(rec)
@@ -347,16 +346,7 @@ def _loop(
                 if ev[0] == "data":
                     rec = ev[1]
                     if rec.kind == "imu":
-                        if gyro_scale != 1.0:
-                            rec = Received(
-                                rec.kind,
-                                rec.t_ns,
-                                rec.values * gyro_scale,
-                                rec.arrival_ns,
-                                rec.wall_ns,
-                                rec.raw,
-                            )
-                        pipe.on_imu(rec)
+                        pipe.on_imu(_scaled(rec, gyro_scale))
                     else:
                         pipe.on_truth(rec)
                     if recorder is not None:
