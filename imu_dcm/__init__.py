@@ -5,21 +5,45 @@ quaternions are Hamilton ``[x, y, z, w]``; ``omega_b`` is the body rate relative
 body axes, rad/s; increments multiply on the right, ``R_{i+1} = R_i · exp([φ_i×])``; time ``t_s``
 in seconds.
 
-``import imu_dcm`` is cheap (numpy only): scipy and numba are imported on first use (the
-streaming integrator on first access, the compiled kernel on the first integration), so command
-lines that only print their help start fast.
+``import imu_dcm`` is cheap (no numpy, scipy or numba): the names below load on first use, so
+command lines that only print their help start fast.
 """
 
-from __future__ import annotations
-
-import importlib
-from typing import TYPE_CHECKING
+import sys as _sys
+import types as _types
 
 from imu_dcm.errors import GapWarning, ImuDcmError, ImuDcmWarning, InputError, LogError
-from imu_dcm.integrate import DELTA_METHODS, METHODS, integrate, integrate_delta
 
-if TYPE_CHECKING:
-    from imu_dcm.streaming import DcmIntegrator
+_LAZY = {  # loaded on first use, so a command's --help does not import the numerical stack
+    "DELTA_METHODS": "imu_dcm.integrate",
+    "METHODS": "imu_dcm.integrate",
+    "integrate": "imu_dcm.integrate",
+    "integrate_delta": "imu_dcm.integrate",
+    "DcmIntegrator": "imu_dcm.streaming",
+}
+
+
+def __getattr__(name: str):
+    if name in _LAZY:
+        import importlib
+
+        value = getattr(importlib.import_module(_LAZY[name]), name)
+        globals()[name] = value
+        return value
+    raise AttributeError(f"module 'imu_dcm' has no attribute {name!r}")
+
+
+class _Package(_types.ModuleType):
+    """``imu_dcm.integrate`` names the function, also after the submodule of the same name is
+    imported (the import system then sets the package attribute to the module)."""
+
+    def __setattr__(self, name: str, value) -> None:
+        if name == "integrate" and isinstance(value, _types.ModuleType):
+            value = value.integrate
+        super().__setattr__(name, value)
+
+
+_sys.modules[__name__].__class__ = _Package
 
 __all__ = [
     "DELTA_METHODS",
@@ -34,19 +58,3 @@ __all__ = [
     "integrate_delta",
 ]
 __version__ = "0.1.0"
-
-# Loaded on first access (module __getattr__): streaming imports the compiled kernel (numba).
-_LAZY = {"DcmIntegrator": "imu_dcm.streaming"}
-
-
-def __getattr__(name: str):
-    module = _LAZY.get(name)
-    if module is None:
-        raise AttributeError(f"module 'imu_dcm' has no attribute {name!r}")
-    value = getattr(importlib.import_module(module), name)
-    globals()[name] = value  # later look-ups skip this function
-    return value
-
-
-def __dir__() -> list[str]:
-    return sorted(set(globals()) | set(__all__))

@@ -662,6 +662,9 @@ class Worker:
         if self.proc.poll() is None:
             self.proc.kill()
         self.proc.wait()
+        for pipe in (self.proc.stdin, self.proc.stdout):
+            with contextlib.suppress(OSError):
+                pipe.close()  # closed here, not left to the garbage collector mid-test
 
     @property
     def alive(self) -> bool:
@@ -706,6 +709,8 @@ class Pool:
                     return
                 w = self.workers[slot]
                 if w is None or not w.alive:
+                    if w is not None:
+                        w.close()
                     self._start([slot])
                     w = self.workers[slot]
                 verdicts[i] = run_one(w, case, kind, workdir / f"c{i}", bases.get(case.base))

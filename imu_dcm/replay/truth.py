@@ -269,7 +269,9 @@ def check_truth(
     g = np.linalg.norm(np.diff(angle, axis=0), axis=1) / np.diff(te)
     # truth: rotation angle over each grid step
     q = slerp_truth(tt, q_w_b, edges)
-    h = np.radians(angle_between_deg(q[:-1], q[1:])) / np.diff(te)
+    both = np.all(np.isfinite(q[:-1]), axis=1) & np.all(np.isfinite(q[1:]), axis=1)
+    h = np.full(len(q) - 1, np.nan)  # NaN where the truth does not cover the grid step
+    h[both] = np.radians(angle_between_deg(q[:-1][both], q[1:][both])) / np.diff(te)[both]
     valid = np.isfinite(h)
     if valid.sum() < 20:
         return TruthCheck(False, True)
