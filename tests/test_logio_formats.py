@@ -10,9 +10,8 @@ bit-identical gyro samples, stamps and truth.
 
 from __future__ import annotations
 
-import warnings
-
 import shutil
+import warnings
 from pathlib import Path
 
 import numpy as np
