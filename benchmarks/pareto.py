@@ -560,7 +560,7 @@ def plot_pareto(
     by_case = {c.name: c for c in cases}
     scenes = list(dict.fromkeys(m.scene for m in meas))
     titles = {s.key: s.title for s in SCENES}
-    fig, axes = plt.subplots(2, 2, figsize=(15, 10.5))
+    fig, axes = plt.subplots(2, 2, figsize=(17, 10.5))
     for ax, key in zip(axes.flat, scenes, strict=False):
         for c in cases:
             if c.name in skip:
@@ -618,7 +618,7 @@ def plot_pareto(
         title="method (higher rate → lower error)",
     )
     fig.suptitle("Speed against accuracy: lower-left is better" + title_note, fontsize=14)
-    fig.tight_layout(rect=(0, 0, 0.78, 0.97))
+    fig.tight_layout(rect=(0, 0, 0.73, 0.97))
     fig.savefig(path, dpi=100)
     plt.close(fig)
 
