@@ -157,13 +157,9 @@ class LiveView:
         self.log_calls = 0
 
     def _static(self) -> None:
-        rr = self.rr
-        try:
-            from imu_dcm import viz
+        from imu_dcm import viz
 
-            viz._send_static(self._blank, self.rec)  # replay's styles (colours, names, widths)
-        except (ImportError, AttributeError):
-            self.rec.log("/world", rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
+        viz.send_styles(self._blank, self.rec)  # replay's styles (colours, names, widths)
 
     def _time(self, t_s: NDArray):
         return self.rr.TimeColumn(

@@ -52,7 +52,7 @@ logged: entities, colours, blueprint, :func:`send_view`) and ``viewer`` (how it 
 
 from __future__ import annotations
 
-from imu_dcm.viz.log import ENTITY, TIMELINE, make_blueprint, send_view
+from imu_dcm.viz.log import ENTITY, TIMELINE, make_blueprint, send_styles, send_view
 from imu_dcm.viz.view_data import (
     TRACE_MAX_POINTS,
     TRACE_MAX_S,
@@ -86,6 +86,7 @@ __all__ = [
     "make_blueprint",
     "rerun_binary",
     "save_rrd",
+    "send_styles",
     "send_view",
     "serve_rrd",
     "show_replay",

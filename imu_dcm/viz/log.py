@@ -237,7 +237,7 @@ def _entities(view: ViewData) -> list[_Entity]:
     return out
 
 
-def _send_static(view: ViewData, rec) -> None:
+def send_styles(view: ViewData, rec) -> None:
     """View coordinates, series styles and the faint full z-tip traces (static, sent once)."""
     import rerun as rr
 
@@ -302,7 +302,7 @@ def send_view(view: ViewData, rec, *, realtime: bool = False, chunk_s: float = 0
     """
     if realtime and not chunk_s > 0:
         raise InputError(f"Expected `chunk_s` > 0, got {chunk_s!r}")
-    _send_static(view, rec)
+    send_styles(view, rec)
     entities = _entities(view)
     if not realtime:
         for e in entities:
