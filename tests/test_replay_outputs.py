@@ -14,6 +14,7 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
+from data_synth.analytic import coning_attitude, coning_rates
 from imu_dcm.bag_writer import StampedSeries, write_bag
 from imu_dcm.outputs import OutputError, check_output_dir, is_own_bag
 from imu_dcm.replay.__main__ import main
@@ -22,21 +23,8 @@ T0_NS = 1_700_000_000_000_000_000
 
 
 def _coning(t):
-    beta, big = np.radians(10.0), 2 * np.pi * 2.0
-    q = (
-        Rotation.from_rotvec(np.outer(big * t, [0, 0, 1]))
-        * Rotation.from_rotvec([beta, 0, 0])
-        * Rotation.from_rotvec(np.outer(-big * t, [0, 0, 1]))
-    ).as_quat()
-    w = (
-        big
-        * np.c_[
-            -np.sin(beta) * np.sin(big * t),
-            np.sin(beta) * np.cos(big * t),
-            np.full_like(t, np.cos(beta) - 1),
-        ]
-    )
-    return q, w
+    """Pure coning, half-angle 10°, 2 Hz: the closed forms of data_synth.analytic."""
+    return coning_attitude(t, np.radians(10.0), 2.0), coning_rates(t, np.radians(10.0), 2.0)
 
 
 @pytest.fixture
