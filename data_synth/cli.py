@@ -37,7 +37,8 @@ from data_synth.gyro import DEFAULT_EPOCH_NS, MAX_STAMP_NS, OUTPUTS, GyroModel, 
 from data_synth.scenes import BRANCHES, FREE_BODY_CASES, MOTIONS, simulate
 from imu_dcm.bag_writer import StampedSeries, write_bag
 from imu_dcm.cli import OneLineArgumentParser
-from imu_dcm.errors import ImuDcmError, InputError, LogError
+from imu_dcm.errors import ImuDcmError, InputError
+from imu_dcm.outputs import check_output_dir
 
 __all__ = ["build_parser", "main", "make_log"]
 
@@ -265,40 +266,6 @@ def _scene_params(args: argparse.Namespace) -> dict:
     return {"half_angle_deg": args.half_angle_deg, "freq_hz": args.freq_hz}
 
 
-def _check_output(out: Path, force: bool) -> None:
-    """Refuse an output that exists (without ``force``), that is not a folder, or a folder that
-    is not a bag this tool wrote: ``--force`` replaces only data_synth's own bags."""
-    # The shared output-safety rules (never an input, never a special file) belong in one helper
-    # of imu_dcm; data_synth has no input, so only its own output is checked here.
-    if not (out.exists() or out.is_symlink()):
-        return
-    if not force:
-        raise LogError(
-            f"Expected output {str(out)!r} not to exist (use --force), got an "
-            f"existing {'folder' if out.is_dir() else 'file'}"
-        )
-    if out.is_symlink() or not out.is_dir():
-        kind = "symlink" if out.is_symlink() else "file" if out.is_file() else "special file"
-        raise LogError(
-            f"Expected --out to be a bag folder written by {PROG} (to replace with "
-            f"--force), got a {kind}: {str(out)!r}"
-        )
-    names = sorted(p.name for p in out.iterdir())
-    meta = out / "metadata.yaml"
-    ours = (
-        names == sorted(["metadata.yaml", f"{out.name}.mcap"])
-        and meta.is_file()
-        and not meta.is_symlink()
-        and "data_synth.command" in meta.read_text(errors="replace")
-    )
-    if not ours:
-        raise LogError(
-            f"Expected --out to be a bag folder written by {PROG} (metadata.yaml and "
-            f"{out.name}.mcap only) to replace with --force, got {str(out)!r} holding "
-            f"{names[:3]}{' ...' if len(names) > 3 else ''}"
-        )
-
-
 def _refuse(args: argparse.Namespace, est: budget.JobEstimate, what: str) -> budget.JobTooLarge:
     return budget.JobTooLarge(
         f"Expected a job within {args.max_memory_gib:g} GiB and {args.max_minutes:g} min "
@@ -350,7 +317,7 @@ def make_log(args: argparse.Namespace, argv: list[str]) -> Path:
     """
     out = Path(args.out)
     _check_values(args)
-    _check_output(out, args.force)  # fail before simulating
+    check_output_dir(out, (), force=args.force, what="--out bag", writer=PROG)  # before simulating
     est = _sample_cost(args)
     model = GyroModel(
         noise_density_rad_s_sqrt_hz=args.gyro_noise_density,

@@ -1,6 +1,6 @@
-"""Command-line plumbing shared by ``python -m imu_dcm.replay`` and ``python -m data_synth``:
-a one-line argument parser and a terminal progress line (standard library only, so ``--help``
-stays fast)."""
+"""Command-line plumbing shared by the project's commands: a one-line argument parser, the
+parsing of ``"a,b,c"`` option values and a terminal progress line (standard library only, so
+``--help`` stays fast)."""
 
 from __future__ import annotations
 
@@ -54,3 +54,16 @@ class Progress:
         if self._drawn:
             self.stream.write("\r" + " " * 60 + "\r")
             self.stream.flush()
+
+
+def parse_numbers(text: str, n: int, name: str) -> list[float]:
+    """``"a,b,c"`` -> n finite floats; raises InputError "Expected {name} as n ... numbers"."""
+    from imu_dcm.errors import InputError
+
+    try:
+        values = [float(x) for x in text.split(",")]
+    except ValueError:
+        raise InputError(f"Expected {name} as {n} comma-separated numbers, got {text!r}") from None
+    if len(values) != n or not all(abs(v) < float("inf") for v in values):
+        raise InputError(f"Expected {name} as {n} finite numbers, got {text!r}")
+    return values

@@ -140,11 +140,13 @@ def check_output_dir(
     *,
     force: bool = False,
     what: str = "output folder",
+    writer: str = "imu_dcm",
 ) -> Path:
     """Check a bag-folder output before anything is written; returns the resolved path.
 
     A missing path is fine (its parent must be a writable folder). An existing one needs
-    ``force`` and must be a bag folder this project wrote (:func:`is_own_bag`).
+    ``force`` and must be a bag folder this project wrote (:func:`is_own_bag`); ``writer``
+    names the command in the refusal.
     """
     out = _resolved(path)
     check_not_input(out, inputs, what)
@@ -160,8 +162,8 @@ def check_output_dir(
             )
         if not is_own_bag(out):
             raise OutputError(
-                f"Expected --force to replace only a bag this tool wrote, got "
-                f"{_kind(st.st_mode)} {str(out)!r} (remove it yourself)"
+                f"Expected --force to replace only a bag this tool wrote (written by "
+                f"{writer}), got {_kind(st.st_mode)} {str(out)!r} (remove it yourself)"
             )
     _parent_writable(out, what)
     return out

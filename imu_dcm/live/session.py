@@ -22,6 +22,7 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from imu_dcm.cli import parse_numbers
 from imu_dcm.errors import GapWarning, InputError
 from imu_dcm.integrate import METHODS
 from imu_dcm.live.pipeline import DEG, LiveResult, Pipeline
@@ -59,10 +60,7 @@ def _parse_bias(bias) -> str | tuple:
     if isinstance(bias, str):
         if bias in ("auto", "none"):
             return bias
-        try:
-            bias = [float(v) for v in bias.split(",")]
-        except ValueError:
-            raise InputError(f"Expected bias auto, none or x,y,z in rad/s, got {bias!r}") from None
+        bias = parse_numbers(bias, 3, "bias auto, none or x,y,z in rad/s")
     b = np.asarray(bias, dtype=float)
     if b.shape != (3,) or not np.all(np.isfinite(b)):
         raise InputError(f"Expected bias auto, none or 3 finite numbers (rad/s), got {bias!r}")
@@ -177,10 +175,7 @@ def run(
     init_q = None
     if init_quat is not None:
         if isinstance(init_quat, str):
-            try:
-                init_quat = [float(v) for v in init_quat.split(",")]
-            except ValueError:
-                raise InputError(f"Expected init quaternion x,y,z,w, got {init_quat!r}") from None
+            init_quat = parse_numbers(init_quat, 4, "init quaternion x,y,z,w")
         init_q = as_quat_xyzw(np.asarray(init_quat, dtype=float), "init_quat")
     if say is None:
 

@@ -19,7 +19,7 @@ import sys
 import warnings
 from pathlib import Path
 
-from imu_dcm.cli import OneLineArgumentParser, Progress
+from imu_dcm.cli import OneLineArgumentParser, Progress, parse_numbers
 
 PROG = "imu-dcm-replay"
 TIME_BASES = ("auto", "header", "log")
@@ -133,19 +133,6 @@ def add_replay_options(g) -> None:
         metavar="RAD_S2",
         help="pre-filter: angular-acceleration scale, rad/s² (default: fitted)",
     )
-
-
-def parse_numbers(text: str, n: int, name: str) -> list[float]:
-    """``"a,b,c"`` -> n finite floats; raises InputError "Expected {name} as n ... numbers"."""
-    from imu_dcm.errors import InputError
-
-    try:
-        values = [float(x) for x in text.split(",")]
-    except ValueError:
-        raise InputError(f"Expected {name} as {n} comma-separated numbers, got {text!r}") from None
-    if len(values) != n or not all(abs(v) < float("inf") for v in values):
-        raise InputError(f"Expected {name} as {n} finite numbers, got {text!r}")
-    return values
 
 
 def _write_out(out: Path, result, force: bool, inputs: tuple) -> Path:

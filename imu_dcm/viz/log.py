@@ -161,6 +161,30 @@ class _Entity:
         return cols.partition(self.lengths[a:b])
 
 
+def _axes_entity(
+    path: str,
+    t_rel: NDArray,
+    axes: NDArray,
+    has: NDArray,
+    rgb: NDArray,
+    radius: float,
+    labelled: bool = False,
+) -> _Entity:
+    """Body axes as Arrows3D, three per row that has an attitude; rows without one hold no
+    arrows (an empty row clears the previous axes)."""
+    import rerun as rr
+
+    n = int(has.sum())
+    fields = {
+        "vectors": axes[has].reshape(-1, 3),
+        "colors": np.tile(rgb, (n, 1)),
+        "radii": np.full(3 * n, radius, dtype=np.float32),
+    }
+    if labelled:
+        fields["labels"] = np.tile(np.array(["x", "y", "z"]), n)
+    return _Entity(path, t_rel, rr.Arrows3D, fields, np.where(has, 3, 0).astype(np.intp))
+
+
 def _entities(view: ViewData) -> list[_Entity]:
     """Every time-varying entity of the view."""
     import rerun as rr
@@ -168,32 +192,9 @@ def _entities(view: ViewData) -> list[_Entity]:
     t_rel = view.t_s - view.t_s[0]
     est_axes, has_est = _body_axes_w(view.q_est)  # (N, 3 axes, 3)
     true_axes, has_truth = _body_axes_w(view.q_truth)
-    n_est, m = int(has_est.sum()), int(has_truth.sum())
-    # Rows without an attitude hold no arrows (an empty row clears the previous axes).
     out = [
-        _Entity(
-            ENTITY["estimate_axes"],
-            t_rel,
-            rr.Arrows3D,
-            {
-                "vectors": est_axes[has_est].reshape(-1, 3),
-                "colors": np.tile(_EST_RGB, (n_est, 1)),
-                "radii": np.full(3 * n_est, 0.018, dtype=np.float32),
-            },
-            np.where(has_est, 3, 0).astype(np.intp),
-        ),
-        _Entity(
-            ENTITY["truth_axes"],
-            t_rel,
-            rr.Arrows3D,
-            {
-                "vectors": true_axes[has_truth].reshape(-1, 3),
-                "colors": np.tile(_TRUTH_RGB, (m, 1)),
-                "radii": np.full(3 * m, 0.035, dtype=np.float32),
-                "labels": np.tile(np.array(["x", "y", "z"]), m),
-            },
-            np.where(has_truth, 3, 0).astype(np.intp),
-        ),
+        _axes_entity(ENTITY["estimate_axes"], t_rel, est_axes, has_est, _EST_RGB, 0.018),
+        _axes_entity(ENTITY["truth_axes"], t_rel, true_axes, has_truth, _TRUTH_RGB, 0.035, True),
     ]
     frames = _trail_frames(view.t_s)
     tips = {
