@@ -29,6 +29,7 @@ __all__ = [
     "OutputError",
     "check_not_input",
     "check_output_dir",
+    "file_kind",
     "check_output_file",
     "is_own_bag",
     "write_text_atomic",
@@ -75,7 +76,8 @@ def check_not_input(out: Path, inputs: Iterable[str | os.PathLike], what: str) -
             )
 
 
-def _kind(mode: int) -> str:
+def file_kind(mode: int) -> str:
+    """What a ``st_mode`` is, in words: "FIFO", "character device", "folder", ..."""
     for test, name in (
         (stat.S_ISCHR, "character device"),
         (stat.S_ISBLK, "block device"),
@@ -110,7 +112,8 @@ def check_output_file(
     st = _stat(out, what)
     if st is not None and not stat.S_ISREG(st.st_mode):
         raise OutputError(
-            f"Expected {what} to be a regular file or new, got a {_kind(st.st_mode)} {str(out)!r}"
+            f"Expected {what} to be a regular file or new, got a {file_kind(st.st_mode)} "
+            f"{str(out)!r}"
         )
     _parent_writable(out, what)
     return out
@@ -158,12 +161,12 @@ def check_output_dir(
         if not force:
             raise OutputError(
                 f"Expected {what} {str(out)!r} not to exist (use --force), got an "
-                f"existing {_kind(st.st_mode)}"
+                f"existing {file_kind(st.st_mode)}"
             )
         if not is_own_bag(out):
             raise OutputError(
                 f"Expected --force to replace only a bag this tool wrote (written by "
-                f"{writer}), got {_kind(st.st_mode)} {str(out)!r} (remove it yourself)"
+                f"{writer}), got {file_kind(st.st_mode)} {str(out)!r} (remove it yourself)"
             )
     _parent_writable(out, what)
     return out

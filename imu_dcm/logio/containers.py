@@ -25,6 +25,7 @@ from imu_dcm.logio.ros1 import MAGIC as ROS1_MAGIC
 from imu_dcm.logio.ros1 import Ros1Source
 from imu_dcm.logio.rosbag2 import Rosbag2Folder, SqliteSource, decompress_file
 from imu_dcm.logio.types import Collected, Sink
+from imu_dcm.outputs import file_kind
 
 SQLITE_MAGIC = b"SQLite format 3\x00"
 ZSTD_MAGIC = b"\x28\xb5\x2f\xfd"
@@ -44,18 +45,6 @@ _FOREIGN = {  # magic -> (what it is, how to convert it)
 }
 
 
-def _kind_of(mode: int) -> str:
-    for test, name in (
-        (stat.S_ISFIFO, "a FIFO"),
-        (stat.S_ISCHR, "a character device"),
-        (stat.S_ISBLK, "a block device"),
-        (stat.S_ISSOCK, "a socket"),
-    ):
-        if test(mode):
-            return name
-    return "not a regular file"
-
-
 def check_regular(p: Path) -> bool:
     """True for a folder, False for a regular file; LogError for anything else or missing."""
     try:
@@ -69,7 +58,10 @@ def check_regular(p: Path) -> bool:
     if stat.S_ISDIR(st.st_mode):
         return True
     if not stat.S_ISREG(st.st_mode):
-        raise LogError(f"Expected a regular file or a folder, got {_kind_of(st.st_mode)}: {p}")
+        raise LogError(
+            f"Expected a regular file or a folder, got a {file_kind(st.st_mode)} (a special "
+            f"file): {p}"
+        )
     return False
 
 
