@@ -58,6 +58,10 @@ class ImuSeries:
     orientation_xyzw : float64 (N, 4) or None — the message's own orientation ``q_w_b``
         ``[x, y, z, w]``; NaN rows where ``orientation_covariance[0] == -1`` (none given).
     topic, type, frame_id : where the samples came from.
+    accel_b : float64 (N, 3) or None — specific force (accelerometer), body (sensor) axes,
+        m/s², on the same rows as ``omega_b``; None where the log has none. Used to judge rest.
+    gyro_absent : bool — the messages mark the angular velocity as absent (ROS
+        ``angular_velocity_covariance[0] == -1`` on every message).
     """
 
     t_ns: NDArray[np.int64]
@@ -67,6 +71,8 @@ class ImuSeries:
     topic: str
     type: str
     frame_id: str
+    accel_b: NDArray[np.float64] | None = None
+    gyro_absent: bool = False
 
 
 @dataclass(frozen=True)
@@ -80,6 +86,9 @@ class TruthSeries:
     topic, type, frame_id : where the samples came from (``frame_id`` is the parent frame).
     child_frame_id : the body frame of a transform or odometry, "" otherwise.
     auto : True when the truth was picked automatically (not named by the caller).
+    estimate_of : "" for an independent reference (motion capture, simulation); otherwise who
+        estimated it, said to the user ("PX4's own estimate", "ArduPilot's own estimate",
+        "wheel odometry", "the IMU's own orientation").
     """
 
     t_ns: NDArray[np.int64]
@@ -90,14 +99,19 @@ class TruthSeries:
     frame_id: str = ""
     child_frame_id: str = ""
     auto: bool = False
+    estimate_of: str = ""
 
 
 @dataclass(frozen=True)
 class LogData:
     """What :func:`imu_dcm.logio.read_log` found: IMU series, truth (or None), channels.
 
-    ``container`` names what was read ("ros2 mcap", "ros2 sqlite3", "ros1 bag", ...);
-    ``damage`` lists the damaged parts skipped; ``stopped_at`` summarises them (None if none).
+    ``container`` names what was read ("ros2 mcap", "ros2 sqlite3", "ros1 bag", "px4 ulog",
+    ...); ``damage`` lists the damaged parts skipped; ``stopped_at`` summarises them (None if
+    none). ``truth_candidates`` holds every other attitude series the log offered (the picked
+    one is ``truth``), for the replay to judge which follows the gyro; ``notes`` are one-line
+    findings of the reader for the user ("sensor_gyro_0: 6 samples at 1 Hz; used
+    sensor_combined at 250 Hz").
     """
 
     path: Path
@@ -108,6 +122,8 @@ class LogData:
     container: str = ""
     damage: tuple[Damage, ...] = ()
     stopped_at: str | None = None
+    truth_candidates: tuple[TruthSeries, ...] = ()
+    notes: tuple[str, ...] = ()
 
 
 # ---------------------------------------------------------------- between containers and decoders
