@@ -92,16 +92,10 @@ def euler_prefilter(
     """
     omega_b, t_s = _check_rates(omega_b, t_s)
     _check_mode(mode)
-    inertia = np.asarray(inertia_kg_m2, dtype=float)
-    if inertia.shape != (3,) or not (np.isfinite(inertia).all() and (inertia > 0).all()):
-        raise InputError(f"Expected `inertia_kg_m2` three finite values > 0, got {inertia_kg_m2!r}")
+    inertia = _vector3("inertia_kg_m2", inertia_kg_m2, positive=True)
     _check_positive("noise_density_rad_s_sqrt_hz", noise_density_rad_s_sqrt_hz, allow_none=False)
     _check_positive("torque_noise_n_m_sqrt_hz", torque_noise_n_m_sqrt_hz, allow_none=False)
-    tau = None
-    if torque_b is not None:
-        tau = np.asarray(torque_b, dtype=float)
-        if tau.shape != (3,) or not np.isfinite(tau).all():
-            raise InputError(f"Expected `torque_b` three finite values, got {torque_b!r}")
+    tau = None if torque_b is None else _vector3("torque_b", torque_b, positive=False)
     body = _Body(inertia, tau, (torque_noise_n_m_sqrt_hz / inertia) ** 2)
     X, P, Xm, Pm, C = _ukf_forward(omega_b, t_s, body, noise_density_rad_s_sqrt_hz)
     if mode == "rts":
@@ -126,6 +120,15 @@ def euler_prefilter(
         config=PrefilterConfig(noise_density_rad_s_sqrt_hz=float(noise_density_rad_s_sqrt_hz)),
         summary=summary,
     )
+
+
+def _vector3(name: str, value: ArrayLike, positive: bool) -> NDArray:
+    """``value`` as three finite floats (all > 0 when ``positive``), else InputError."""
+    v = np.asarray(value, dtype=float)
+    if v.shape != (3,) or not np.isfinite(v).all() or (positive and not (v > 0).all()):
+        what = "three finite values > 0" if positive else "three finite values"
+        raise InputError(f"Expected `{name}` {what}, got {value!r}")
+    return v
 
 
 @dataclass(frozen=True)
