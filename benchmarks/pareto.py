@@ -251,28 +251,16 @@ def method_cases(streaming: bool = True) -> list[Case]:
         for m in imu_dcm.METHODS
     ]
     if streaming and _integrator_class() is not None:
-        methods = _streaming_methods()
-        cases += [
-            Case(
-                f"stream_{m}",
-                _streaming_per_sample(m),
-                "streaming",
-                f"DcmIntegrator({m!r}).update per sample",
-                _ORDER.get(m, "?"),
-            )
-            for m in methods
-        ]
+        # (name prefix, callable of a method, description) per streaming form
+        forms = [("stream_", _streaming_per_sample, "DcmIntegrator({!r}).update per sample")]
         if hasattr(_integrator_class(), "update_many"):
-            cases += [
-                Case(
-                    f"stream_many_{m}",
-                    _streaming_blocks(m),
-                    "streaming",
-                    f"DcmIntegrator({m!r}).update_many, blocks of 256",
-                    _ORDER.get(m, "?"),
-                )
-                for m in methods
-            ]
+            many = "DcmIntegrator({!r}).update_many, blocks of 256"
+            forms.append(("stream_many_", _streaming_blocks, many))
+        cases += [
+            Case(f"{prefix}{m}", make(m), "streaming", text.format(m), _ORDER.get(m, "?"))
+            for prefix, make, text in forms
+            for m in _streaming_methods()
+        ]
     for m in getattr(imu_dcm, "DELTA_METHODS", ()):
         cases.append(
             Case(
