@@ -41,7 +41,7 @@ from imu_dcm.replay.table import (
     write_table,
 )
 
-__all__ = ["BatchResult", "find_logs", "main", "replay_many", "replay_one", "row_from_result"]
+__all__ = ["BatchResult", "find_logs", "replay_many", "replay_one", "row_from_result"]
 
 #: Files read as lists of logs (one path a line, relative to the list; ``#`` comments).
 LIST_SUFFIXES = (".txt", ".list", ".lst")
@@ -317,11 +317,3 @@ def replay_many(
         chart_path,
         summary_line(rows + others),
     )
-
-
-# ------------------------------------------------------------------------------- CLI
-def main(argv: list[str] | None = None) -> int:
-    """``python -m imu_dcm.replay batch ...``: see :mod:`imu_dcm.replay.batch_cli`."""
-    from imu_dcm.replay.batch_cli import main as cli_main
-
-    return cli_main(argv)
