@@ -63,15 +63,15 @@ QOS_YAML = """- avoid_ros_namespace_conventions: false
 _YAML_WORDS = {"y", "n", "yes", "no", "true", "false", "on", "off", "null", "~"}
 
 
-def _alias_refusal(expanded: int, written: int, where: Path) -> LogError:
+def _alias_refusal(expanded: int, written: int, where: Path, what: str) -> LogError:
     limit = max(MIN_ALIAS_NODES, MAX_ALIAS_GROWTH * written)
     return LogError(
-        f"Expected a rosbag2 metadata.yaml without YAML aliases expanding it past {limit} "
-        f"nodes ({MAX_ALIAS_GROWTH}x the {written} written), got {expanded}+ nodes in {where}"
+        f"Expected a {what} without YAML aliases expanding it past {limit} nodes "
+        f"({MAX_ALIAS_GROWTH}x the {written} written), got {expanded}+ nodes in {where}"
     )
 
 
-def _check_aliases(events, where: Path) -> None:
+def _check_aliases(events, where: Path, what: str) -> None:
     """Count the nodes the document expands to (aliases included) without expanding it.
 
     ``events`` are the parser's events. An anchored node's expanded size is known at its end;
@@ -108,26 +108,32 @@ def _check_aliases(events, where: Path) -> None:
         if stack:
             stack[-1][1] += size
         if expanded > max(MIN_ALIAS_NODES, MAX_ALIAS_GROWTH * written):
-            raise _alias_refusal(expanded, written, where)
+            raise _alias_refusal(expanded, written, where, what)
 
 
-def _yaml_load(text: str, where: Path) -> Any:
+def load_yaml(text: str, where: Path, what: str = "rosbag2 metadata.yaml") -> Any:
+    """The YAML document ``text`` (from the file ``where``), aliases bounded (module doc).
+
+    Raises
+    ------
+    LogError
+        A syntax error, nesting too deep for the parser, or aliases expanding past the bound;
+        the message names ``what`` and ``where``.
+    """
     import yaml
 
     loader_cls = getattr(yaml, "CSafeLoader", yaml.SafeLoader)
     try:
         # Events first: aliases are counted before anything is built from them.
-        _check_aliases(yaml.parse(text, Loader=loader_cls), where)
+        _check_aliases(yaml.parse(text, Loader=loader_cls), where, what)
         return yaml.load(text, Loader=loader_cls)
     except yaml.YAMLError as exc:
         line = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
         raise LogError(
-            f"Expected a YAML metadata.yaml, got a syntax error in {where}: {line}"
+            f"Expected a YAML {what.split()[-1]}, got a syntax error in {where}: {line}"
         ) from None
     except RecursionError:
-        raise LogError(
-            f"Expected a rosbag2 metadata.yaml, got nesting too deep in {where}"
-        ) from None
+        raise LogError(f"Expected a {what}, got nesting too deep in {where}") from None
 
 
 def _check_nesting(raw: bytes, where: Path) -> None:
@@ -171,7 +177,7 @@ def load_metadata(folder: Path) -> dict[str, Any]:
             f"Expected a UTF-8 metadata.yaml, got a non-UTF-8 byte at {exc.start} in {meta}"
         ) from None
     _check_nesting(raw, meta)
-    doc = _yaml_load(text, meta)
+    doc = load_yaml(text, meta)
     info = doc.get("rosbag2_bagfile_information") if isinstance(doc, dict) else None
     if not isinstance(info, dict):
         raise LogError(
