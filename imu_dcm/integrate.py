@@ -41,6 +41,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from imu_dcm.errors import GapWarning, ImuDcmWarning, InputError
+from imu_dcm.methods import DELTA_METHODS, GAP_FACTOR, METHODS, DeltaMethod, Method
 from imu_dcm.so3 import as_quat_xyzw
 
 if TYPE_CHECKING:
@@ -57,13 +58,6 @@ __all__ = [
     "integrate",
     "integrate_delta",
 ]
-
-#: Rate-input methods, in order of increasing accuracy (``rotvec_sum`` last: a counter-example).
-METHODS = ("start", "end", "trapezoid", "coning", "magnus4", "rotvec_sum")
-#: Delta-angle methods of :func:`integrate_delta`.
-DELTA_METHODS = ("plain", "one_plus_previous", "two_sample", "three_sample")
-#: A step longer than this many median steps is a gap (:func:`find_gaps`, GapWarning).
-GAP_FACTOR = 5.0
 
 
 # ----------------------------------------------------------------------------------------------
@@ -131,6 +125,7 @@ def check_samples(
     from imu_dcm import kernel
 
     v = np.ascontiguousarray(v)
+    t = np.ascontiguousarray(t)
     row, stamp, order, dt_min, dt_max = kernel.check_record(v, t, -math.inf)
     if row >= 0:
         raise InputError(f"Expected finite `{name}`, got {v[row].tolist()} at row {row}")
@@ -216,7 +211,7 @@ def _rate_run(
     the ``N - 1`` increments when ``emit_phi``."""
     from imu_dcm import kernel
 
-    state = kernel.new_state(q_first, METHODS.index(method))
+    state = kernel.new_state(q_first, int(Method[method.upper()]))
     out = np.empty((len(t), 4))
     out[0] = q_first
     rows = out[1:]
@@ -346,5 +341,6 @@ def integrate_delta(
     from imu_dcm import kernel
 
     out = np.empty((len(dtheta) // m + 1, 4))
-    kernel.feed_delta(as_quat_xyzw(q0), dtheta, dt, DELTA_METHODS.index(method), out)
+    q_first = np.ascontiguousarray(as_quat_xyzw(q0), dtype=np.float64)
+    kernel.feed_delta(q_first, dtheta, dt, int(DeltaMethod[method.upper()]), out)
     return _to_rotation(out)
