@@ -103,6 +103,17 @@ def read_log(
         Damaged parts were skipped (one warning naming the first file offset and the messages
         lost), or messages did not decode.
     """
+    p = Path(path)
+    if p.is_file():  # the drone containers' rows, until the container table reads them all
+        from imu_dcm.logio import ulog
+        from imu_dcm.logio.source import ReadRequest
+
+        with open(p, "rb") as f:
+            head = f.read(64)
+        for entry in (ulog.ENTRY,):
+            if entry.probe(p, head):
+                request = ReadRequest(imu_topic, truth_topic, truth_frame, progress)
+                return entry.open(p, progress).read(request)
     source, shown, custom = open_source(path, progress)
     got = source.read(Sink(plan(imu_topic, truth_topic)))
     channels = tuple(

@@ -41,14 +41,17 @@ message and is listed in :attr:`LogData.damage`.
 
 from __future__ import annotations
 
+import contextlib
+import io
 import re
+import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 from numpy.typing import NDArray
 
-from imu_dcm.errors import LogError
+from imu_dcm.errors import ImuDcmWarning, LogError
 from imu_dcm.kernel import _jit
 from imu_dcm.logio.source import Progress, ReadRequest, SourceEntry
 from imu_dcm.logio.types import ChannelInfo, Damage, ImuSeries, LogData, TruthSeries
@@ -334,7 +337,8 @@ def _scan_fast(path: Path, wanted: frozenset[str], progress: Progress | None) ->
 def _scan_pyulog(path: Path, wanted: frozenset[str], why: str) -> Scanned:
     """The same through pyulog's parser (for what the fast scan leaves to it)."""
     ulog_cls = _pyulog()
-    log = ulog_cls(str(path), sorted(wanted))
+    with contextlib.redirect_stdout(io.StringIO()):  # pyulog prints what it recovers from
+        log = ulog_cls(str(path), sorted(wanted))
     topics = [Topic(d.name, d.multi_id, dict(d.data)) for d in log.data_list]
     counts = {(t.name, t.multi_id, t.name): len(t) for t in topics}
     info = {k: v for k, v in log.msg_info_dict.items() if isinstance(v, str)}
@@ -598,6 +602,13 @@ class UlogSource:
         channels = tuple(
             ChannelInfo(label(n, i), fmt, "ulog", c) for (n, i, fmt), c in sorted(s.counts.items())
         )
+        if s.damage:  # once the log is known to be usable: an error is then the only line
+            warnings.warn(
+                f"{self.path.name} is truncated or corrupt: {s.damage[0].what}"
+                + (f" (and {len(s.damage) - 1} more)" if len(s.damage) > 1 else ""),
+                ImuDcmWarning,
+                stacklevel=3,
+            )
         if progress is not None:
             progress(1.0)
         return LogData(
