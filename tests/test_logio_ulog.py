@@ -10,7 +10,7 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from imu_dcm.errors import ImuDcmWarning, LogError
-from imu_dcm.logio import read_log, ulog
+from imu_dcm.logio import ned, read_log, ulog
 from imu_dcm.logio.source import ReadRequest
 from imu_dcm.so3 import angle_between_deg
 from tests.drone_logs import (
@@ -47,20 +47,20 @@ def _wxyz(r: Rotation) -> np.ndarray:
 
 # ------------------------------------------------------------------------------ frames
 def test_px4_facing_north_is_90_deg_about_z_in_enu():
-    q = ulog.q_enu_flu(np.array([1.0, 0, 0, 0]))  # PX4 yaw 0: x forward = north
+    q = ned.q_enu_flu(np.array([1.0, 0, 0, 0]))  # PX4 yaw 0: x forward = north
     s = np.sqrt(0.5)
     assert np.allclose(q * np.sign(q[3]), [0, 0, s, s], atol=1e-15)
 
 
 def test_px4_facing_east_is_identity_in_enu():
     q_ned_frd = _wxyz(Rotation.from_euler("z", 90, degrees=True))  # yaw 90 deg: nose east
-    q = ulog.q_enu_flu(q_ned_frd)
+    q = ned.q_enu_flu(q_ned_frd)
     assert angle_between_deg(q, [0, 0, 0, 1.0]) < 1e-12
 
 
 def test_quaternion_conversion_matches_scipy_matrices():
     r = Rotation.random(200, random_state=1)
-    got = Rotation.from_quat(ulog.q_enu_flu(_wxyz(r))).as_matrix()
+    got = Rotation.from_quat(ned.q_enu_flu(_wxyz(r))).as_matrix()
     want = M_ENU_NED @ r.as_matrix() @ M_FRD_FLU
     assert np.max(np.abs(got - want)) < 1e-14
 
@@ -72,8 +72,8 @@ def test_gyro_and_truth_conversions_agree_on_the_kinematics():
     w_frd = rng.normal(0, 2, (50, 3))
     dt = 0.01
     r1 = r0 * Rotation.from_rotvec(w_frd * dt)
-    q0, q1 = ulog.q_enu_flu(_wxyz(r0)), ulog.q_enu_flu(_wxyz(r1))
-    w_flu = w_frd * ulog.FLU_FROM_FRD
+    q0, q1 = ned.q_enu_flu(_wxyz(r0)), ned.q_enu_flu(_wxyz(r1))
+    w_flu = w_frd * ned.FLU_FROM_FRD
     pred = Rotation.from_quat(q0) * Rotation.from_rotvec(w_flu * dt)
     assert np.max(angle_between_deg(pred.as_quat(), q1)) < 1e-9
 

@@ -18,15 +18,9 @@ What is read
 
 Frames
 ------
-PX4 states body vectors in FRD (x forward, y right, z down), the world in NED, and ``q`` as
-``[w, x, y, z]`` rotating FRD into NED. The toolkit's conventions are body FLU, world ENU and
-``[x, y, z, w]``; the reader converts both the gyro and the truth, so they stay consistent:
-
-* ``omega_flu = (x, -y, -z)`` of ``omega_frd`` (the same for the accelerometer);
-* ``q_enu_flu = q_enu_ned ⊗ q_ned_frd ⊗ q_frd_flu`` with ``q_enu_ned = [√½, √½, 0, 0]``
-  (180° about the north-east bisector) and ``q_frd_flu = [1, 0, 0, 0]`` (180° about x).
-
-A vehicle facing north (PX4 yaw 0) is therefore 90° about z in ENU.
+PX4 states body vectors in FRD, the world in NED and ``q`` as ``[w, x, y, z]`` (FRD to NED).
+The reader converts the gyro, the accelerometer and the truth into body FLU, world ENU and
+``[x, y, z, w]`` (:mod:`imu_dcm.logio.ned`): a vehicle facing north is 90° about z in ENU.
 
 How it is read
 --------------
@@ -53,9 +47,9 @@ from numpy.typing import NDArray
 
 from imu_dcm.errors import ImuDcmWarning, LogError
 from imu_dcm.kernel import _jit
+from imu_dcm.logio.ned import FLU_FROM_FRD, q_enu_flu
 from imu_dcm.logio.source import Progress, ReadRequest, SourceEntry
 from imu_dcm.logio.types import ChannelInfo, Damage, ImuSeries, LogData, TruthSeries
-from imu_dcm.so3 import quat_multiply
 
 MAGIC = b"ULog\x01\x12\x35"
 KIND = "px4 ulog"
@@ -65,10 +59,6 @@ PX4_ESTIMATE = "PX4's own estimate"
 BLOCK_BYTES = 8 << 20
 #: PX4's RELATIVE_TIMESTAMP_INVALID in ``sensor_combined.accelerometer_timestamp_relative``.
 _ACCEL_INVALID = 0x7FFFFFFF
-_HALF = np.sqrt(0.5)
-Q_ENU_NED = np.array([_HALF, _HALF, 0.0, 0.0])  # [x, y, z, w]
-Q_FRD_FLU = np.array([1.0, 0.0, 0.0, 0.0])
-FLU_FROM_FRD = np.array([1.0, -1.0, -1.0])
 _BASIC = {
     "int8_t": "i1",
     "uint8_t": "u1",
@@ -490,13 +480,6 @@ def imu_series(gyro: Topic, topics: list[Topic], label) -> ImuSeries:
         frame_id="body",
         accel_b=_accel(gyro, topics, t_ns),
     )
-
-
-def q_enu_flu(q_wxyz_ned_frd: NDArray) -> NDArray[np.float64]:
-    """PX4's ``q`` (``[w, x, y, z]``, FRD to NED) as ``q_w_b`` ``[x, y, z, w]``, FLU to ENU."""
-    q = np.asarray(q_wxyz_ned_frd, dtype=np.float64)
-    q_ned_frd = np.concatenate([q[..., 1:4], q[..., :1]], axis=-1)
-    return quat_multiply(quat_multiply(Q_ENU_NED, q_ned_frd), Q_FRD_FLU)
 
 
 def truth_series(t: Topic, label, auto: bool) -> TruthSeries:
