@@ -153,3 +153,81 @@ def trial_ulog(path: Path, ctype: str = "double") -> Path:
         },
     )
     return write_ulog(path, ULogSpec([gyro, truth], start_us=int(a.t_ns[0] // 1000)))
+
+
+# ------------------------------------------------------------------------- DataFlash
+@dataclass
+class DFMessage:
+    """One DataFlash message type: name, pymavlink format characters, columns, rows."""
+
+    name: str
+    format: str
+    columns: list[str]
+    rows: list[tuple]  # one tuple of values per record, in column order
+
+
+def write_dataflash(path: Path, messages: list[DFMessage], order_by: str = "TimeUS") -> Path:
+    """A binary DataFlash log written with pymavlink's own record builders
+    (``DFReader_binary.make_format_msgbuf`` / ``make_msgbuf``): the FMT of FMT, one FMT per
+    type, then the records of every type merged by ``TimeUS``."""
+    from pymavlink.DFReader import DFFormat, DFReader_binary
+
+    fmt_fmt = DFFormat(0x80, "FMT", 89, "BBnNZ", "Type,Length,Name,Format,Columns")
+
+    class _Writer:  # what the two builders use of a reader: its FMT format
+        formats = {0x80: fmt_fmt}
+
+    w = _Writer()
+    out = bytearray(DFReader_binary.make_format_msgbuf(w, fmt_fmt))
+    recs = []
+    for type_id, m in enumerate(messages, start=0x81):
+        fmt = DFFormat(type_id, m.name, 0, m.format, ",".join(m.columns))
+        out += DFReader_binary.make_format_msgbuf(w, fmt)
+        col = m.columns.index(order_by)
+        for i, row in enumerate(m.rows):
+            recs.append((row[col], type_id, i, DFReader_binary.make_msgbuf(w, fmt, row)))
+    recs.sort(key=lambda r: r[:3])
+    for r in recs:
+        out += r[3]
+    path.write_bytes(bytes(out))
+    return path
+
+
+def to_ardupilot_euler_deg(q_w_b_xyzw: np.ndarray) -> np.ndarray:
+    """q_w_b (FLU -> ENU) as ArduPilot's roll, pitch, yaw in degrees (FRD -> NED, 3-2-1), by
+    scipy; yaw in [0, 360) as ArduPilot logs it."""
+    from scipy.spatial.transform import Rotation
+
+    m_ned_enu = np.array([[0.0, 1, 0], [1, 0, 0], [0, 0, -1]])
+    m_flu_frd = np.diag([1.0, -1, -1])
+    r = (
+        Rotation.from_matrix(m_ned_enu)
+        * Rotation.from_quat(q_w_b_xyzw)
+        * Rotation.from_matrix(m_flu_frd)
+    )
+    yaw, pitch, roll = r.as_euler("ZYX", degrees=True).T
+    return np.stack([roll, pitch, np.mod(yaw, 360.0)], axis=1)
+
+
+def trial_dataflash(path: Path, real: str = "d") -> Path:
+    """The trial as a DataFlash log: IMU (gyro, no accelerometer) and ATT. ``real`` is the
+    format character of the values: ``d`` (double) or ``f`` (float, as ArduPilot logs)."""
+    a = trial_arrays()
+    assert np.all(a.t_ns % 1000 == 0) and np.all(a.truth_t_ns % 1000 == 0), "µs stamps"
+    w = a.omega_b * np.array([1.0, -1, -1])
+    imu_rows = [
+        (int(t // 1000), 0, float(x), float(y), float(z))
+        for t, (x, y, z) in zip(a.t_ns, w, strict=True)
+    ]
+    rpy = to_ardupilot_euler_deg(a.q_w_b)
+    att_rows = [
+        (int(t // 1000), float(r), float(p), float(y))
+        for t, (r, p, y) in zip(a.truth_t_ns, rpy, strict=True)
+    ]
+    return write_dataflash(
+        path,
+        [
+            DFMessage("IMU", "QB" + real * 3, ["TimeUS", "I", "GyrX", "GyrY", "GyrZ"], imu_rows),
+            DFMessage("ATT", "Q" + real * 3, ["TimeUS", "Roll", "Pitch", "Yaw"], att_rows),
+        ],
+    )

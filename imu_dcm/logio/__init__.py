@@ -105,12 +105,12 @@ def read_log(
     """
     p = Path(path)
     if p.is_file():  # the drone containers' rows, until the container table reads them all
-        from imu_dcm.logio import ulog
+        from imu_dcm.logio import ardupilot, ulog
         from imu_dcm.logio.source import ReadRequest
 
         with open(p, "rb") as f:
             head = f.read(64)
-        for entry in (ulog.ENTRY,):
+        for entry in (ulog.ENTRY, ardupilot.ENTRY):
             if entry.probe(p, head):
                 request = ReadRequest(imu_topic, truth_topic, truth_frame, progress)
                 return entry.open(p, progress).read(request)
