@@ -310,7 +310,7 @@ def test_probe():
     assert not ulog.probe(None, b"\x89MCAP0\r\n")
     assert not ulog.probe(None, b"")
     entry = ulog.ENTRY
-    assert entry.name == "px4 ulog"
+    assert entry.name == "PX4 ULog (.ulg)"
 
 
 def test_read_request_through_the_entry(trial_ulg):

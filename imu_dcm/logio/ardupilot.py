@@ -306,4 +306,4 @@ def open_dataflash(path: Path, progress: Progress | None = None) -> DataFlashSou
     return DataFlashSource(path, progress)
 
 
-ENTRY = SourceEntry(KIND, probe, open_dataflash)
+ENTRY = SourceEntry("ArduPilot DataFlash log (.bin)", probe, open_dataflash)

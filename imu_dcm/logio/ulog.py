@@ -46,7 +46,6 @@ import numpy as np
 from numpy.typing import NDArray
 
 from imu_dcm.errors import ImuDcmWarning, LogError
-from imu_dcm.kernel import _jit
 from imu_dcm.logio.ned import FLU_FROM_FRD, q_enu_flu
 from imu_dcm.logio.source import Progress, ReadRequest, SourceEntry
 from imu_dcm.logio.types import ChannelInfo, Damage, ImuSeries, LogData, TruthSeries
@@ -83,8 +82,7 @@ def probe(path: Path, head: bytes) -> bool:
     return head.startswith(MAGIC)
 
 
-@_jit
-def _chain(b: NDArray[np.uint8], pos: int):  # pragma: no cover - compiled
+def _chain_py(b: NDArray[np.uint8], pos: int):  # pragma: no cover - compiled
     """Follow the ``[uint16 size][uint8 type]`` chain of ``b`` from ``pos``: the position and
     type of every whole message, and where the first incomplete one starts."""
     n = len(b)
@@ -100,6 +98,18 @@ def _chain(b: NDArray[np.uint8], pos: int):  # pragma: no cover - compiled
         k += 1
         pos = end
     return at[:k], typ[:k], pos
+
+
+_compiled: list = []
+
+
+def _chain(b: NDArray[np.uint8], pos: int):
+    """:func:`_chain_py` compiled (by the kernel's numba settings) on first use."""
+    if not _compiled:
+        from imu_dcm.kernel import _jit
+
+        _compiled.append(_jit(_chain_py))
+    return _compiled[0](b, pos)
 
 
 class _Irregular(Exception):
@@ -612,4 +622,4 @@ def open_ulog(path: Path, progress: Progress | None = None) -> UlogSource:
     return UlogSource(path, progress)
 
 
-ENTRY = SourceEntry(KIND, probe, open_ulog)
+ENTRY = SourceEntry("PX4 ULog (.ulg)", probe, open_ulog)
