@@ -37,6 +37,7 @@ import imu_dcm
 from benchmarks.peers import PEERS
 from benchmarks.timing import interleaved_medians
 from imu_dcm.metrics import attitude_error_deg
+from imu_dcm.outputs import save_figure
 
 __all__ = [
     "FULL_RATES_HZ",
@@ -619,7 +620,7 @@ def plot_pareto(
     )
     fig.suptitle("Speed against accuracy: lower-left is better" + title_note, fontsize=14)
     fig.tight_layout(rect=(0, 0, 0.73, 0.97))
-    fig.savefig(path, dpi=100)
+    save_figure(fig, path, dpi=100)
     plt.close(fig)
 
 
@@ -679,7 +680,7 @@ def plot_convergence(conv: dict[str, dict[str, NDArray]], path: str | Path) -> N
         "Convergence: max error against step, with theoretical slopes (dashed)", fontsize=14
     )
     fig.tight_layout(rect=(0, 0.08, 1, 0.97))
-    fig.savefig(path, dpi=100)
+    save_figure(fig, path, dpi=100)
     plt.close(fig)
 
 

@@ -397,7 +397,6 @@ def make_log(args: argparse.Namespace, argv: list[str]) -> Path:
         custom["data_synth.gyro.note"] = (
             "angular_velocity = delta angle / interval: mean rate over (t_k-1, t_k], stamped t_k"
         )
-    out.parent.mkdir(parents=True, exist_ok=True)  # e.g. --out out/top in a fresh checkout
     return write_bag(
         out,
         imu=StampedSeries(rec.t_ns, rates, "imu"),

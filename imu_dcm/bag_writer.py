@@ -47,7 +47,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from imu_dcm.errors import InputError
-from imu_dcm.outputs import OutputError, check_output_dir
+from imu_dcm.outputs import OutputError, check_output_dir, ensure_parent
 
 __all__ = ["MSG_DEFINITIONS", "TYPE_HASHES", "StampedSeries", "write_bag"]
 
@@ -579,6 +579,7 @@ def write_bag(
     tmp = out.parent / f".{out.name}.tmp-{os.getpid()}-{uuid.uuid4().hex[:8]}"
     mcap_name = f"{out.name}.mcap"
     try:
+        ensure_parent(out, "output bag")  # e.g. --out out/top in a fresh checkout
         tmp.mkdir()
     except OSError as exc:
         raise OutputError(

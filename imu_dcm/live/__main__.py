@@ -10,12 +10,8 @@ Bad input gives one line on stderr and exit code 2.
 from __future__ import annotations
 
 import argparse
-import json
-import os
 import sys
-import tempfile
 import warnings
-from pathlib import Path
 
 import numpy as np
 
@@ -179,28 +175,6 @@ def format_summary(s: dict) -> str:
     lines.append(f"stopped    {s['stopped']}")
     lines.append(f"elapsed    {s['elapsed_s']:.3f} s")
     return "\n".join(lines)
-
-
-def _json_default(o):
-    if isinstance(o, np.ndarray):
-        return o.tolist()
-    if isinstance(o, (np.floating, np.integer, np.bool_)):
-        return o.item()
-    return str(o)
-
-
-def write_json(path: Path, data: dict) -> None:
-    """Write ``data`` as JSON atomically (temporary file + rename)."""
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    try:
-        with os.fdopen(fd, "w") as f:
-            json.dump(data, f, indent=2, default=_json_default)
-            f.write("\n")
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
 
 
 def _main(argv: list[str]) -> int:

@@ -67,6 +67,16 @@ def _parse_bias(bias) -> str | tuple:
     return tuple(b.tolist())
 
 
+def _check_outputs(record, force: bool, summary_json) -> None:
+    """The output paths, before the source is opened (imu_dcm.outputs' rule)."""
+    from imu_dcm.outputs import check_output_dir, check_output_file
+
+    if record is not None:
+        check_output_dir(record, force=force, what="--record bag")
+    if summary_json is not None:
+        check_output_file(summary_json, (), "--summary-json file")
+
+
 def _pct(a: NDArray, p: float) -> float | None:
     return float(np.percentile(a, p)) if len(a) else None
 
@@ -185,6 +195,7 @@ def run(
     from imu_dcm.live.view import LiveView, check_mode
 
     check_mode(rerun)
+    _check_outputs(record, force, summary_json)
     _warm_up(method)
     src: Source = open_source(
         spec,
@@ -253,9 +264,9 @@ def run(
         pipe, src, spec, source, method, bias_v, gyro_units, reason, lat, recorder, started
     )
     if summary_json is not None:
-        from imu_dcm.live.__main__ import write_json
+        from imu_dcm.outputs import write_json
 
-        write_json(Path(summary_json), summary)
+        write_json(summary_json, summary, what="--summary-json file")
     q = None if pipe.q_last is None else np.asarray(pipe.q_last, dtype=float)
     return LiveResult(summary, q, pipe.t_last_ns, lat)
 

@@ -17,6 +17,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from imu_dcm.errors import ImuDcmError, InputError
+from imu_dcm.outputs import atomic_path
 from imu_dcm.viz.log import _new_recording, make_blueprint, send_view
 from imu_dcm.viz.view_data import ViewData
 
@@ -41,19 +42,13 @@ def save_rrd(view: ViewData, path: str | os.PathLike) -> Path:
     path = Path(path)
     if path.suffix != ".rrd":
         raise InputError(f"Expected an .rrd path, got {str(path)!r}")
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
     rec = _new_recording(view)
-    try:
+    with atomic_path(path, "--rerun save: file") as tmp:
         rec.save(tmp, default_blueprint=make_blueprint(view))
         rec.send_recording_name(view.title)
         send_view(view, rec)
         rec.flush()
         rec.disconnect()
-        os.replace(tmp, path)
-    finally:
-        if tmp.exists():
-            tmp.unlink()
     return path
 
 
