@@ -41,6 +41,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from imu_dcm.errors import GapWarning, ImuDcmWarning, InputError
+from imu_dcm.methods import DELTA_METHODS, METHODS
 from imu_dcm.so3 import as_quat_xyzw
 
 if TYPE_CHECKING:
@@ -58,10 +59,6 @@ __all__ = [
     "integrate_delta",
 ]
 
-#: Rate-input methods, in order of increasing accuracy (``rotvec_sum`` last: a counter-example).
-METHODS = ("start", "end", "trapezoid", "coning", "magnus4", "rotvec_sum")
-#: Delta-angle methods of :func:`integrate_delta`.
-DELTA_METHODS = ("plain", "one_plus_previous", "two_sample", "three_sample")
 #: A step longer than this many median steps is a gap (:func:`find_gaps`, GapWarning).
 GAP_FACTOR = 5.0
 

@@ -169,7 +169,7 @@ def test_bad_inputs_one_line_exit_2(tmp_path, capsys):
     )
     _assert_one_line_error(capsys, [str(late), "--rerun", "off"], "to overlap the gyro")
     _assert_one_line_error(
-        capsys, [str(late), "--rerun", "off", "--init-quat", "1,2"], "init quaternion"
+        capsys, [str(late), "--rerun", "off", "--init-quat", "1,2"], "--init-quat x,y,z,w"
     )
     _assert_one_line_error(capsys, [str(late), "--rerun", "bogus"], "--rerun")
     _assert_one_line_error(capsys, [str(late), "--rerun", "off", "--imu-topic", "/x"], "'/x'")
