@@ -169,7 +169,7 @@ def test_bad_inputs_one_line_exit_2(tmp_path, capsys):
     )
     _assert_one_line_error(capsys, [str(late), "--rerun", "off"], "to overlap the gyro")
     _assert_one_line_error(
-        capsys, [str(late), "--rerun", "off", "--init-quat", "1,2"], "init quaternion"
+        capsys, [str(late), "--rerun", "off", "--init-quat", "1,2"], "--init-quat x,y,z,w"
     )
     _assert_one_line_error(capsys, [str(late), "--rerun", "bogus"], "--rerun")
     _assert_one_line_error(capsys, [str(late), "--rerun", "off", "--imu-topic", "/x"], "'/x'")
@@ -286,7 +286,7 @@ def test_subprocess_replays_shipped_trial(tmp_path):
 def test_progress_bar_only_on_a_terminal():
     import io
 
-    from imu_dcm.replay.__main__ import Progress
+    from imu_dcm.cli import Progress
 
     class Terminal(io.StringIO):
         def isatty(self) -> bool:

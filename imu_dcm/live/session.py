@@ -22,7 +22,6 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from imu_dcm.cli import parse_numbers
 from imu_dcm.errors import GapWarning, InputError
 from imu_dcm.integrate import METHODS
 from imu_dcm.live.pipeline import DEG, LiveResult, Pipeline
@@ -56,15 +55,36 @@ def _scaled(rec: Received, gyro_scale: float) -> Received:
     return dataclasses.replace(rec, values=rec.values * gyro_scale)
 
 
-def _parse_bias(bias) -> str | tuple:
+def _check_bias(bias) -> str | tuple:
+    """``"auto"``, ``"none"`` or 3 finite numbers (rad/s); text is parsed by the command line
+    (:func:`imu_dcm.cli.parse_bias`)."""
     if isinstance(bias, str):
         if bias in ("auto", "none"):
             return bias
-        bias = parse_numbers(bias, 3, "bias auto, none or x,y,z in rad/s")
-    b = np.asarray(bias, dtype=float)
+        raise InputError(f"Expected bias 'auto', 'none' or 3 numbers (rad/s), got {bias!r}")
+    try:
+        b = np.asarray(bias, dtype=float)
+    except (TypeError, ValueError):
+        raise InputError(f"Expected bias as 3 finite numbers (rad/s), got {bias!r}") from None
     if b.shape != (3,) or not np.all(np.isfinite(b)):
         raise InputError(f"Expected bias auto, none or 3 finite numbers (rad/s), got {bias!r}")
     return tuple(b.tolist())
+
+
+def _has_display() -> bool:
+    from imu_dcm.viz import has_display
+
+    return has_display()
+
+
+def _check_outputs(record, force: bool, summary_json) -> None:
+    """The output paths, before the source is opened (imu_dcm.outputs' rule)."""
+    from imu_dcm.outputs import check_output_dir, check_output_file
+
+    if record is not None:
+        check_output_dir(record, force=force, what="--record bag")
+    if summary_json is not None:
+        check_output_file(summary_json, (), "--summary-json file")
 
 
 def _pct(a: NDArray, p: float) -> float | None:
@@ -84,6 +104,7 @@ def run(
     reorder_window_s: float = 0.05,
     view_interval_s: float = 0.05,
     rerun: str | None = None,
+    keep_viewer: bool = True,
     record: str | Path | None = None,
     force: bool = False,
     summary_json: str | Path | None = None,
@@ -107,20 +128,23 @@ def run(
         ignores any truth.
     method : str
         Integrator method (:data:`imu_dcm.integrate.METHODS`), default ``magnus4``.
-    bias : "auto", "none", "x,y,z" or array_like (3,)
+    bias : "auto", "none" or array_like (3,)
         ``auto``: from rest as it happens (replay's rest rule, causal); a vector: rad/s.
     gyro_units : {"rad/s", "deg/s"}
         Unit of the rates (line sources and WebSocket alike).
     time_units : {"s", "ms", "us", "ns"}
         Unit of CSV stamps.
-    init_quat : array_like (4,) or "x,y,z,w", optional
+    init_quat : array_like (4,), optional
         Start attitude ``q_w_b`` ``[x, y, z, w]`` at the first sample (instead of the truth).
     reorder_window_s : float
         Reorder window in source time, s (default 0.05).
     view_interval_s : float
         Batching interval of the view and the recording (display rate), s.
     rerun : {None, "spawn", "serve", "save:PATH.rrd", "off"}
-        ``None``: spawn with a display, else serve the web viewer on 127.0.0.1.
+        ``None``: spawn with a display, else no view (one line names ``serve`` and ``save:``).
+    keep_viewer : bool
+        ``serve``: leave the web viewer running after the run (default True; the command line
+        stops it unless ``--keep-viewer``).
     record : path, optional
         ROS 2 bag folder to write as it goes (received messages + ``/estimate/orientation``).
     force : bool
@@ -171,11 +195,9 @@ def run(
             f"Expected reorder window >= 0 s and view interval > 0 s, got "
             f"{reorder_window_s!r} and {view_interval_s!r}"
         )
-    bias_v = _parse_bias(bias)
+    bias_v = _check_bias(bias)
     init_q = None
     if init_quat is not None:
-        if isinstance(init_quat, str):
-            init_quat = parse_numbers(init_quat, 4, "init quaternion x,y,z,w")
         init_q = as_quat_xyzw(np.asarray(init_quat, dtype=float), "init_quat")
     if say is None:
 
@@ -185,6 +207,7 @@ def run(
     from imu_dcm.live.view import LiveView, check_mode
 
     check_mode(rerun)
+    _check_outputs(record, force, summary_json)
     _warm_up(method)
     src: Source = open_source(
         spec,
@@ -209,6 +232,11 @@ def run(
                     "imu_dcm.bias_mode": bias_v if isinstance(bias_v, str) else "fixed",
                 },
             )
+        if rerun is None and not _has_display():
+            from imu_dcm.viz import HEADLESS_HINT
+
+            say(HEADLESS_HINT)
+            rerun = "off"
         if rerun != "off":
             view = LiveView(rerun, title=f"live {source}", say=say)
         pipe = Pipeline(
@@ -242,6 +270,9 @@ def run(
         if view is not None:
             try:
                 line = view.close()
+                if view.served is not None and not keep_viewer:
+                    view.served.stop()
+                    line = "rerun: web viewer stopped (--keep-viewer leaves it running)"
                 if line:
                     say(line)
             except Exception as exc:
@@ -253,9 +284,9 @@ def run(
         pipe, src, spec, source, method, bias_v, gyro_units, reason, lat, recorder, started
     )
     if summary_json is not None:
-        from imu_dcm.live.__main__ import write_json
+        from imu_dcm.outputs import write_json
 
-        write_json(Path(summary_json), summary)
+        write_json(summary_json, summary, what="--summary-json file")
     q = None if pipe.q_last is None else np.asarray(pipe.q_last, dtype=float)
     return LiveResult(summary, q, pipe.t_last_ns, lat)
 
