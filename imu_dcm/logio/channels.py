@@ -151,6 +151,10 @@ class _Decoder:
                     np.stack([out[pre + "angular_velocity." + a] for a in "xyz"], axis=1)
                 ),
             }
+            accel = np.stack([out[pre + "linear_acceleration." + a] for a in "xyz"], axis=1)
+            accel[out[pre + "linear_acceleration_covariance"] == -1.0] = np.nan
+            fields["accel"] = rows(accel)
+            fields["gyro_cov0"] = rows(out[pre + "angular_velocity_covariance"])
             flagged = out[pre + "orientation_covariance"] == -1.0
             if not flagged.all():
                 quat = np.stack([out[pre + "orientation." + a] for a in "xyzw"], axis=1)
@@ -235,21 +239,31 @@ def _imu_want(path: str) -> dict[str, tuple[str, int]]:
     want = {p + "header.stamp.sec": ("i8", 1), p + "header.stamp.nanosec": ("i8", 1)}
     want.update({p + "orientation." + a: ("f8", 1) for a in "xyzw"})
     want[p + "orientation_covariance"] = ("f8", 1)  # first element only
+    want[p + "angular_velocity_covariance"] = ("f8", 1)  # first element: -1 marks no gyro
     want.update({p + "angular_velocity." + a: ("f8", 1) for a in "xyz"})
+    want[p + "linear_acceleration_covariance"] = ("f8", 1)  # first element: -1 marks none
+    want.update({p + "linear_acceleration." + a: ("f8", 1) for a in "xyz"})
     return want
 
 
 def _imu_columns(c: Conn, data):
-    """(order, t_ns, log_t_ns, omega, quat or None, dropped, type, frame) of one channel."""
+    """(order, t_ns, log_t_ns, omega, quat, accel, gyro_cov0, dropped, type, frame) of a channel.
+
+    ``quat`` and ``accel`` are None where the channel has none; ``gyro_cov0`` is the first
+    element of ``angular_velocity_covariance`` (-1 marks an absent gyro), NaN when unknown.
+    """
     if c.encoding == "json":
         t_ns, omega, _, good, typ, frame = json_imu_columns(c, data)
+        n = int(good.sum())
         return (
             data.order[good],
             t_ns[good],
             data.log_time[good],
             omega[good],
             None,
-            int(len(data) - good.sum()),
+            None,
+            np.full(n, np.nan),
+            int(len(data) - n),
             typ,
             frame,
         )
@@ -263,6 +277,8 @@ def _imu_columns(c: Conn, data):
         data.log_time,
         f.get("omega", np.zeros((n, 3))),
         f.get("quat"),
+        f.get("accel"),
+        f.get("gyro_cov0", np.full(n, np.nan)),
         data.dropped,
         data.frames.get("type", ""),
         data.frames.get("frame_id", ""),
@@ -354,15 +370,19 @@ def read_imu(got: Collected, topic: str, conns: list[tuple[Conn, str]]) -> tuple
                 if c.encoding == "json"
                 else _Decoder(c, "imu", path)(Payloads.empty())
             )
-        order, t_ns, log_t, omega, quat, drop, typ_c, frame_c = _imu_columns(c, data)
+        order, t_ns, log_t, omega, quat, accel, cov0, drop, typ_c, frame_c = _imu_columns(c, data)
         dropped += drop
         typ, frame = typ or typ_c, frame or frame_c
         if quat is None and len(conns) > 1:
             quat = np.full((len(t_ns), 4), np.nan)
-        rows.append((order, [t_ns, log_t, omega, quat]))
-    t_ns, log_t, omega, quat = _merge(rows)
+        if accel is None and len(conns) > 1:
+            accel = np.full((len(t_ns), 3), np.nan)
+        rows.append((order, [t_ns, log_t, omega, quat, accel, cov0]))
+    t_ns, log_t, omega, quat, accel, cov0 = _merge(rows)
     if quat is not None and not np.isfinite(quat).any():
         quat = None
+    if accel is not None and not np.isfinite(accel).any():
+        accel = None
     return ImuSeries(
         t_ns.astype(np.int64, copy=False),
         log_t.astype(np.int64, copy=False),
@@ -371,6 +391,8 @@ def read_imu(got: Collected, topic: str, conns: list[tuple[Conn, str]]) -> tuple
         topic,
         typ,
         frame,
+        accel_b=accel,
+        gyro_absent=bool(len(cov0)) and bool(np.all(cov0 == -1.0)),
     ), dropped
 
 

@@ -28,7 +28,7 @@ from imu_dcm.errors import GapWarning, ImuDcmWarning, LogError
 from imu_dcm.integrate import integrate
 from imu_dcm.logio import read_log
 from imu_dcm.metrics import AttitudeError, attitude_error_deg, rms
-from imu_dcm.replay.bias import RestConfig, estimate_bias
+from imu_dcm.replay.bias import BIAS_RULE, RestConfig, estimate_bias
 from imu_dcm.replay.clean import CleanedImu, _deg_evidence, clean_imu
 from imu_dcm.replay.options import check_options
 from imu_dcm.replay.summary import ReplayResult, ReplaySummary
@@ -143,6 +143,21 @@ def _warn(notes: list[str], msg: str) -> None:
     warnings.warn(msg, ImuDcmWarning, stacklevel=3)
 
 
+def _accel(imu, clean: CleanedImu, notes: list[str]) -> NDArray | None:
+    """The accelerometer on the cleaned gyro rows, m/s², or None (absent or incomplete)."""
+    if imu.accel_b is None:
+        return None
+    acc = np.asarray(imu.accel_b, dtype=float)[clean.index]
+    if not np.all(np.isfinite(acc)):
+        bad = int(np.count_nonzero(~np.all(np.isfinite(acc), axis=1)))
+        notes.append(
+            f"{imu.topic}: accelerometer missing on {bad} of {len(acc)} samples; rest judged "
+            f"from the gyro alone"
+        )
+        return None
+    return acc
+
+
 def _replay(
     path,
     imu_topic,
@@ -214,7 +229,8 @@ def _replay(
         q0 = q_init if q_init is not None else np.array([0.0, 0.0, 0.0, 1.0])
 
     report("bias", 0.0)
-    bias_est = estimate_bias(omega_raw, t_s, bias, rest_config)
+    accel = _accel(imu, clean, notes)
+    bias_est = estimate_bias(omega_raw, t_s, bias, rest_config, accel)
     omega = omega_raw - bias_est.bias_b
     pf_summary = None
     if prefilter is not None:
@@ -302,6 +318,9 @@ def _replay(
         damage=tuple(_record(d) for d in getattr(log, "damage", ())),
         channels=tuple(_record(c) for c in log.channels),
         truth_rejected=aligned.rejected,
+        bias_rule=BIAS_RULE if bias_est.mode == "auto" else "",
+        rest_confirmed=bias_est.confirmed,
+        no_rest=bias_est.no_rest,
     )
     return ReplayResult(
         t_ns,

@@ -70,6 +70,10 @@ class ReplaySummary:
     truth_rejected: str | None = None
     warnings: tuple[str, ...] = ()
     elapsed_s: float = 0.0
+    bias_rule: str = ""
+    rest_confirmed: bool = False
+    no_rest: str = ""
+    judgements: tuple[dict, ...] = ()
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready dict: tuples become lists, gaps ``{"t_s", "length_s"}`` objects, NaN None."""
@@ -178,12 +182,17 @@ def format_summary(s: ReplaySummary) -> str:
     bias = f"({b[0]:+.5f}, {b[1]:+.5f}, {b[2]:+.5f}) rad/s"
     bdeg = np.degrees(b)
     if s.bias_mode == "auto" and not s.bias_segments:
-        lines.append("bias       auto: no rest segment found, no bias removed")
+        lines.append(f"bias       auto: no rest found ({s.no_rest}); no bias removed")
     elif s.bias_mode == "auto":
         nseg = len(s.bias_segments)
+        how = (
+            "still by the accelerometer"
+            if s.rest_confirmed
+            else "unconfirmed: no accelerometer, mean rate under 2 °/s"
+        )
         lines.append(
-            f"bias       auto: {nseg} rest segment{'s' if nseg != 1 else ''}, mean "
-            f"{bias} = ({bdeg[0]:+.3f}, {bdeg[1]:+.3f}, {bdeg[2]:+.3f}) °/s"
+            f"bias       auto: {nseg} rest segment{'s' if nseg != 1 else ''} ({how}; "
+            f"{s.bias_rule}), mean {bias} = ({bdeg[0]:+.3f}, {bdeg[1]:+.3f}, {bdeg[2]:+.3f}) °/s"
         )
     else:
         lines.append(f"bias       {s.bias_mode}: {bias}")
