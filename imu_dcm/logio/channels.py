@@ -107,7 +107,7 @@ class _Decoder:
             want = {"header.stamp.sec": ("i8", 1), "header.stamp.nanosec": ("i8", 1)}
             want.update({"vector." + a: ("f8", 1) for a in "xyz"})
         else:
-            want = _imu_want(self.path)
+            want = _imu_want(self.path, _field_names(defs, root, self.path))
         return defs, root, want
 
     def __call__(self, p: Payloads) -> Columns:
@@ -151,10 +151,12 @@ class _Decoder:
                     np.stack([out[pre + "angular_velocity." + a] for a in "xyz"], axis=1)
                 ),
             }
-            accel = np.stack([out[pre + "linear_acceleration." + a] for a in "xyz"], axis=1)
-            accel[out[pre + "linear_acceleration_covariance"] == -1.0] = np.nan
-            fields["accel"] = rows(accel)
-            fields["gyro_cov0"] = rows(out[pre + "angular_velocity_covariance"])
+            if pre + "linear_acceleration.x" in out:
+                accel = np.stack([out[pre + "linear_acceleration." + a] for a in "xyz"], axis=1)
+                accel[out[pre + "linear_acceleration_covariance"] == -1.0] = np.nan
+                fields["accel"] = rows(accel)
+            if pre + "angular_velocity_covariance" in out:
+                fields["gyro_cov0"] = rows(out[pre + "angular_velocity_covariance"])
             flagged = out[pre + "orientation_covariance"] == -1.0
             if not flagged.all():
                 quat = np.stack([out[pre + "orientation." + a] for a in "xyzw"], axis=1)
@@ -234,15 +236,29 @@ def _stamp(out: dict, prefix: str) -> NDArray[np.int64]:
     return sec * 1_000_000_000 + nsec
 
 
-def _imu_want(path: str) -> dict[str, tuple[str, int]]:
+def _field_names(defs: Defs, root: str, path: str) -> set[str]:
+    """Field names of the message type at ``path`` inside ``root`` (empty when unknown)."""
+    t = root
+    for part in path.split(".") if path else ():
+        t = next((f.base for f in defs.get(t, ()) if f.name == part), "")
+    return {f.name for f in defs.get(t, ())}
+
+
+#: Imu fields decoded when the message's definition has them (vendor Imu types may not).
+_OPTIONAL = ("angular_velocity_covariance", "linear_acceleration", "linear_acceleration_covariance")
+
+
+def _imu_want(path: str, names: set[str]) -> dict[str, tuple[str, int]]:
     p = path + "." if path else ""
     want = {p + "header.stamp.sec": ("i8", 1), p + "header.stamp.nanosec": ("i8", 1)}
     want.update({p + "orientation." + a: ("f8", 1) for a in "xyzw"})
     want[p + "orientation_covariance"] = ("f8", 1)  # first element only
-    want[p + "angular_velocity_covariance"] = ("f8", 1)  # first element: -1 marks no gyro
     want.update({p + "angular_velocity." + a: ("f8", 1) for a in "xyz"})
-    want[p + "linear_acceleration_covariance"] = ("f8", 1)  # first element: -1 marks none
-    want.update({p + "linear_acceleration." + a: ("f8", 1) for a in "xyz"})
+    if "angular_velocity_covariance" in names:
+        want[p + "angular_velocity_covariance"] = ("f8", 1)  # first element: -1 marks no gyro
+    if all(f in names for f in _OPTIONAL[1:]):
+        want[p + "linear_acceleration_covariance"] = ("f8", 1)  # first element: -1 marks none
+        want.update({p + "linear_acceleration." + a: ("f8", 1) for a in "xyz"})
     return want
 
 

@@ -73,7 +73,11 @@ class ReplaySummary:
     bias_rule: str = ""
     rest_confirmed: bool = False
     no_rest: str = ""
-    judgements: tuple[dict, ...] = ()
+    mounting: dict | None = None
+    mounting_applied: bool = False
+    truth_jumps: tuple[dict, ...] = ()
+    scored_segments: tuple[dict, ...] = ()
+    truth_estimate_of: str = ""
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready dict: tuples become lists, gaps ``{"t_s", "length_s"}`` objects, NaN None."""
