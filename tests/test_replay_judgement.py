@@ -136,3 +136,33 @@ def test_truth_jumps_are_named_and_segments_score_as_clean(log, clean):
         assert ok.sum() > 0.9 * (b - a)
         # same rates, same start, same steps: equal to rounding (1e-9° over 1e4 steps)
         assert np.max(np.abs(mine[ok] - theirs[ok])) < 1e-6
+
+
+def test_truth_is_picked_among_candidates_by_how_it_follows_the_gyro(log, clean, tmp_path):
+    # Two attitude topics: the optical truth and another body's (the truth played backwards).
+    # The reader offers both; the replay scores the one that follows the gyro, whatever the
+    # reader's order, and lists the other with its fit.
+    from imu_dcm.bag_writer import StampedSeries, write_bag
+
+    t = log.truth
+    other = StampedSeries(t.t_ns, t.q_w_b[::-1].copy(), "world")
+    path = write_bag(
+        tmp_path / "two",
+        imu=StampedSeries(log.imu.t_ns, log.imu.omega_b, "imu"),
+        quaternions={"/a_other_body": other, "/b_mocap": StampedSeries(t.t_ns, t.q_w_b, "world")},
+    )
+    read = read_log(path)
+    assert read.truth.topic == "/a_other_body"  # the reader's first, by name
+    assert [c.topic for c in read.truth_candidates] == ["/b_mocap"]
+    res = _quiet_replay(read)
+    s = res.summary
+    assert s.truth_topic == "/b_mocap"
+    picked = [c for c in s.truth_candidates if c["picked"]]
+    assert [c["topic"] for c in picked] == ["/b_mocap"] and picked[0]["follows"]
+    rejected = next(c for c in s.truth_candidates if not c["picked"])
+    assert (
+        rejected["topic"] == "/a_other_body" and rejected["correlation"] < picked[0]["correlation"]
+    )
+    # the same figure as the log with the optical truth alone (gyro only: the bag has no accel)
+    alone = _quiet_replay(dataclasses.replace(log, imu=dataclasses.replace(log.imu, accel_b=None)))
+    assert abs(s.rms_error_deg - alone.summary.rms_error_deg) < 1e-6

@@ -19,7 +19,7 @@ from pathlib import Path
 
 from imu_dcm.errors import ImuDcmWarning, LogError
 from imu_dcm.logio.channels import TRUTH_TYPES, describe, pick_imu, plan, read_imu
-from imu_dcm.logio.channels import read_truth as _read_truth
+from imu_dcm.logio.channels import read_truths as _read_truths
 from imu_dcm.logio.containers import open_source, resolve_mcap_path
 from imu_dcm.logio.meta import read_custom_data
 from imu_dcm.logio.types import ChannelInfo, Damage, ImuSeries, LogData, Sink, TruthSeries
@@ -123,7 +123,7 @@ def read_log(
         raise LogError(
             f"Expected IMU samples on {imu.topic}, got none that decode ({undecodable} messages)"
         )
-    truth = _read_truth(got, imu, truth_topic, truth_frame)
+    truth, candidates = _read_truths(got, imu, truth_topic, truth_frame)
     # Warnings only once the log is known to be usable: an error is then the only line.
     if stopped_at:
         warnings.warn(
@@ -138,5 +138,13 @@ def read_log(
     if progress is not None:
         progress(1.0)
     return LogData(
-        shown, imu, truth, channels, custom, got.kind or source.kind, tuple(got.damage), stopped_at
+        shown,
+        imu,
+        truth,
+        channels,
+        custom,
+        got.kind or source.kind,
+        tuple(got.damage),
+        stopped_at,
+        truth_candidates=candidates,
     )

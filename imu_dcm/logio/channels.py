@@ -14,6 +14,7 @@ from __future__ import annotations
 import re
 import struct
 from collections.abc import Callable
+from dataclasses import replace
 
 import numpy as np
 from numpy.typing import NDArray
@@ -22,7 +23,7 @@ from imu_dcm.errors import LogError
 from imu_dcm.logio.cdr import decode
 from imu_dcm.logio.json_imu import is_json_imu, json_imu_columns, json_msg
 from imu_dcm.logio.schema import Defs, definitions, norm_type
-from imu_dcm.logio.tf import TF_TYPE, child_frame, tf_truth
+from imu_dcm.logio.tf import TF_TYPE, child_frame, tf_rows, tf_truth
 from imu_dcm.logio.types import Collected, Columns, Conn, ImuSeries, Payloads, TruthSeries
 
 IMU_TYPE = "sensor_msgs/msg/Imu"
@@ -484,29 +485,28 @@ def read_truth(
     got: Collected, imu: ImuSeries, truth_topic: str | None, truth_frame: str | None
 ) -> TruthSeries | None:
     """The truth series chosen by the policy in the module docstring (None when there is none)."""
+    return read_truths(got, imu, truth_topic, truth_frame)[0]
+
+
+#: Who estimated a truth of this type (its ``estimate_of``), when it is no independent reference.
+_ESTIMATED_BY = {"nav_msgs/msg/Odometry": "odometry (an estimate, often wheels and the IMU)"}
+IMU_ESTIMATE = "the IMU's own orientation"
+
+
+def read_truths(
+    got: Collected, imu: ImuSeries, truth_topic: str | None, truth_frame: str | None
+) -> tuple[TruthSeries | None, tuple[TruthSeries, ...]]:
+    """The truth and, when it was picked automatically, every other attitude candidate.
+
+    Candidates, in the order of preference of the module docstring: the truth topics (not under
+    ``/estimate``), each moving frame of ``/tf``, the Imu's own orientation. Odometry and the
+    Imu's orientation carry ``estimate_of``. The replay judges which one follows the gyro.
+    """
     if truth_topic == "none":
-        return None
+        return None, ()
     topics = _by_topic(got)
-    if truth_topic is not None and truth_topic == imu.topic:
-        return imu_truth(imu, required=True)
     if truth_topic is not None:
-        conns = topics.get(truth_topic)
-        if not conns:
-            raise LogError(
-                f"Expected truth topic {truth_topic!r} in the log, got {describe(got.conns)}"
-            )
-        for c in conns:
-            if not is_truth(c):
-                raise LogError(
-                    f"Expected truth messages on {truth_topic}, got "
-                    f"{c.msgtype or 'no schema'} ({c.encoding})"
-                )
-        if all(norm_type(c.msgtype) == TF_TYPE for c in conns):
-            tf = tf_truth(got, conns, imu.frame_id, truth_frame, auto=False)
-            if tf is None:
-                raise LogError(f"Expected a moving transform in {truth_topic}, got none")
-            return tf
-        return _read_truth_topic(got, truth_topic, conns, auto=False)
+        return _named_truth(got, imu, topics, truth_topic, truth_frame), ()
     tf = [c for c in got.conns if c.encoding in ("cdr", "ros1") and norm_type(c.msgtype) == TF_TYPE]
     if truth_frame is not None:  # a frame names a transform
         if not tf:
@@ -514,23 +514,65 @@ def read_truth(
                 f"Expected /tf or /tf_static for truth frame {truth_frame!r}, got "
                 f"{describe(got.conns)}"
             )
-        return tf_truth(got, tf, imu.frame_id, truth_frame, auto=False)
-    auto = {
-        t: cs
-        for t, cs in topics.items()
+        return tf_truth(got, tf, imu.frame_id, truth_frame, auto=False), ()
+    found = [
+        _marked(_read_truth_topic(got, t, cs, auto=True))
+        for t, cs in sorted(topics.items())
         if not t.startswith("/estimate")
         and all(is_truth(c) and norm_type(c.msgtype) != TF_TYPE for c in cs)
-    }
-    if len(auto) > 1:
-        raise LogError(
-            f"Expected one truth channel, got {len(auto)}: {', '.join(sorted(auto))} "
-            f"(choose with --truth-topic)"
-        )
-    if auto:
-        topic = next(iter(auto))
-        return _read_truth_topic(got, topic, auto[topic], auto=True)
+    ]
     if tf:
-        truth = tf_truth(got, tf, imu.frame_id, truth_frame, auto=True)
-        if truth is not None:
-            return truth
-    return imu_truth(imu, required=False)
+        found += [
+            tf_truth(got, tf, imu.frame_id, ch, auto=True) for ch in _moving_children(got, tf)
+        ]
+    own = imu_truth(imu, required=False)
+    if own is not None:
+        found.append(replace(own, estimate_of=IMU_ESTIMATE))
+    if not found:
+        return None, ()
+    return found[0], tuple(found[1:])
+
+
+def _marked(t: TruthSeries) -> TruthSeries:
+    who = _ESTIMATED_BY.get(t.type, "")
+    return replace(t, estimate_of=who) if who else t
+
+
+def _moving_children(got: Collected, conns: list[Conn]) -> list[str]:
+    """Child frames of the transforms in ``conns`` whose rotation changes, sorted."""
+    rot: dict[str, list] = {}
+    for c in conns:
+        p = got.payloads.get(c.id) or Payloads.empty()
+        for i in range(len(p)):
+            try:
+                rows = tf_rows(p.payload(i), c.encoding == "ros1")
+            except (struct.error, ValueError):
+                continue
+            for _stamp, _parent, child, quat in rows:
+                rot.setdefault(child, []).append(quat)
+    return sorted(
+        ch for ch, qs in rot.items() if np.ptp(np.asarray(qs, dtype=float), axis=0).max() > 1e-12
+    )
+
+
+def _named_truth(got, imu, topics, truth_topic: str, truth_frame: str | None):
+    """The truth the caller named by topic (its type checked)."""
+    if truth_topic == imu.topic:
+        return replace(imu_truth(imu, required=True), estimate_of=IMU_ESTIMATE)
+    conns = topics.get(truth_topic)
+    if not conns:
+        raise LogError(
+            f"Expected truth topic {truth_topic!r} in the log, got {describe(got.conns)}"
+        )
+    for c in conns:
+        if not is_truth(c):
+            raise LogError(
+                f"Expected truth messages on {truth_topic}, got "
+                f"{c.msgtype or 'no schema'} ({c.encoding})"
+            )
+    if all(norm_type(c.msgtype) == TF_TYPE for c in conns):
+        tf = tf_truth(got, conns, imu.frame_id, truth_frame, auto=False)
+        if tf is None:
+            raise LogError(f"Expected a moving transform in {truth_topic}, got none")
+        return tf
+    return _marked(_read_truth_topic(got, truth_topic, conns, auto=False))

@@ -105,6 +105,14 @@ def add_replay_options(g) -> None:
         help="gyro bias: auto (from rest segments, default), none, or x,y,z in rad/s",
     )
     g.add_argument(
+        "--mounting",
+        default="auto",
+        metavar="MODE",
+        help="rotation from the gyro's frame into the truth's body frame: auto (estimated from "
+        "the rates, applied when determined and above 3°; default), none (reported only), or "
+        "x,y,z,w",
+    )
+    g.add_argument(
         "--gyro-units",
         choices=("rad/s", "deg/s"),
         default="rad/s",
@@ -242,6 +250,9 @@ def replay_keywords(args) -> dict:
     bias = args.bias
     if bias not in ("auto", "none"):
         bias = parse_numbers(bias, 3, "bias (rad/s)")
+    mounting = args.mounting
+    if mounting not in ("auto", "none"):
+        mounting = parse_numbers(mounting, 4, "mounting x,y,z,w")
     init = None
     if args.init_quat is not None:
         init = parse_numbers(args.init_quat, 4, "init quaternion x,y,z,w")
@@ -275,6 +286,7 @@ def replay_keywords(args) -> dict:
         "prefilter": None if args.prefilter == "none" else args.prefilter,
         "prefilter_config": config,
         "truth_offset_s": offset,
+        "mounting": mounting,
     }
 
 

@@ -37,7 +37,14 @@ from imu_dcm.replay.mounting import APPLY_DEG, Mounting, estimate_mounting, from
 from imu_dcm.replay.options import check_options
 from imu_dcm.replay.settings import ReplaySettings, check_mounting
 from imu_dcm.replay.summary import ReplayResult, ReplaySummary
-from imu_dcm.replay.truth import AlignedTruth, align_truth, choose_time, find_jumps, slerp_truth
+from imu_dcm.replay.truth import (
+    AlignedTruth,
+    align_truth,
+    check_truth,
+    choose_time,
+    find_jumps,
+    slerp_truth,
+)
 
 __all__ = ["CleanedImu", "ReplayResult", "ReplaySummary", "clean_imu", "replay", "slerp_truth"]
 
@@ -313,6 +320,35 @@ def _choose_mounting(mode, est: Mounting | None, imu_frame: str, truth, notes) -
     return est, False
 
 
+def _pick_truth(log: LogData, g: _Gyro, omega: NDArray) -> tuple[LogData, tuple[dict, ...]]:
+    """Among an automatically picked truth and the log's other attitude candidates, the one
+    whose rate follows the gyro best: independent references before estimates (odometry, the
+    IMU's own orientation, an autopilot's), then the higher rate-norm correlation."""
+    if log.truth is None or not log.truth.auto or not log.truth_candidates:
+        return log, ()
+    rows = []
+    for cand in (log.truth, *log.truth_candidates):
+        tt = cand.t_ns if g.base == "header" else cand.log_t_ns
+        chk = check_truth(g.t_ns, omega, tt, cand.q_w_b)
+        corr = chk.correlation if chk.correlation is not None else -1.0
+        rows.append(((chk.checked and chk.follows, not cand.estimate_of, corr), cand, chk))
+    best = max(range(len(rows)), key=lambda i: rows[i][0])
+    described = tuple(
+        {
+            "topic": cand.topic,
+            "type": cand.type,
+            "child_frame_id": cand.child_frame_id,
+            "estimate_of": cand.estimate_of,
+            "follows": bool(chk.checked and chk.follows),
+            "correlation": chk.correlation,
+            "residual_rad_s": chk.residual_rad_s,
+            "picked": i == best,
+        }
+        for i, (_key, cand, chk) in enumerate(rows)
+    )
+    return dataclasses.replace(log, truth=rows[best][1]), described
+
+
 def _remove_bias(s: ReplaySettings, g: _Gyro) -> tuple[BiasEstimate, NDArray]:
     bias_est = estimate_bias(g.omega, g.t_s, s.bias, s.rest_config, g.accel)
     return bias_est, g.omega - bias_est.bias_b
@@ -382,6 +418,7 @@ def _replay(path, s: ReplaySettings, report, notes: list[str]) -> ReplayResult:
     g = _gyro(log, s, notes)
     report("bias", 0.0)
     bias_est, omega = _remove_bias(s, g)
+    log, candidates = _pick_truth(log, g, omega)
     judged = _judge_truth(log, s, g, omega, notes)
     if judged.mounting_applied:
         from scipy.spatial.transform import Rotation
@@ -394,6 +431,7 @@ def _replay(path, s: ReplaySettings, report, notes: list[str]) -> ReplayResult:
     report("integrate", 1.0)
     error, both = _score(q_est, q_truth)
     summary = _summary(log, s, g, bias_est, judged, pf_summary, anchors, error, both)
+    summary = dataclasses.replace(summary, truth_candidates=candidates)
     start = anchors[0]
     return ReplayResult(
         g.t_ns, g.t_s, g.omega, omega, bias_est.bias_b, q_est, q_truth, error, start,

@@ -78,6 +78,7 @@ class ReplaySummary:
     truth_jumps: tuple[dict, ...] = ()
     scored_segments: tuple[dict, ...] = ()
     truth_estimate_of: str = ""
+    truth_candidates: tuple[dict, ...] = ()
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready dict: tuples become lists, gaps ``{"t_s", "length_s"}`` objects, NaN None."""
@@ -140,6 +141,52 @@ def _fmt(x: float | None, unit: str = "°") -> str:
     return f"{x:.2f}{unit}" if x == 0.0 or abs(x) >= 0.01 else f"{x:.2g}{unit}"
 
 
+def _candidates_line(cands: tuple[dict, ...]) -> str:
+    def one(c: dict) -> str:
+        name = c["topic"] + (f" [{c['child_frame_id']}]" if c.get("child_frame_id") else "")
+        corr = "n/a" if c["correlation"] is None else f"{c['correlation']:.2f}"
+        who = f", {c['estimate_of']}" if c["estimate_of"] else ""
+        follows = "" if c["follows"] else ", does not follow"
+        return f"{name} (correlation {corr}{who}{follows})"
+
+    picked = next(c for c in cands if c["picked"])
+    others = "; ".join(one(c) for c in cands if not c["picked"])
+    return (
+        f"truth pick {one(picked)} of {len(cands)} attitude candidates, by how its rate follows "
+        f"the gyro (independent references first); others: {others}"
+    )
+
+
+def _judgement_lines(s: ReplaySummary) -> list[str]:
+    """The mounting, the truth's own nature and its jumps, one line each."""
+    lines = []
+    if s.truth_candidates:
+        lines.append(_candidates_line(s.truth_candidates))
+    if s.truth_topic and s.truth_estimate_of:
+        lines.append(
+            f"truth is   {s.truth_estimate_of}, not an independent reference: the error is the "
+            f"difference between two estimates"
+        )
+    m = s.mounting
+    if m and (s.mounting_applied or m["angle_deg"] > 3.0):
+        from imu_dcm.replay.mounting import Mounting
+
+        fields = {f.name for f in dataclasses.fields(Mounting)}
+        text = Mounting(**{k: v for k, v in m.items() if k in fields}).describe()
+        verdict = "applied" if s.mounting_applied else "NOT applied"
+        lines.append(f"mounting   {text}: {verdict}")
+    if s.truth_jumps:
+        seg = ", ".join(
+            f"{x['start_s']:.1f}..{x['end_s']:.1f} s {_fmt(x['rms_error_deg'])}"
+            for x in s.scored_segments
+        )
+        lines.append(
+            f"truth jump {len(s.truth_jumps)} step{'s' if len(s.truth_jumps) != 1 else ''} the "
+            f"gyro does not show; re-anchored after each, segments scored: {seg}"
+        )
+    return lines
+
+
 def format_summary(s: ReplaySummary) -> str:
     """The summary for a person, one fact per line."""
     lines = [
@@ -176,6 +223,7 @@ def format_summary(s: ReplaySummary) -> str:
             f"{check['shift_s'] * 1e3:+.1f} ms, residual {check['residual_rad_s']:.3f} "
             f"rad/s"
         )
+    lines.extend(_judgement_lines(s))
     n_gaps = len(s.gaps)
     lines.append(
         f"dropped    {s.dropped_nonfinite} NaN/Inf, {s.dropped_implausible} implausible, "
