@@ -18,7 +18,7 @@ from collections.abc import Callable
 from pathlib import Path
 
 from imu_dcm.errors import ImuDcmWarning, LogError
-from imu_dcm.logio.channels import TRUTH_TYPES, describe, pick_imu, plan, read_imu
+from imu_dcm.logio.channels import TRUTH_TYPES, describe, pick_imu_judged, plan, read_imu
 from imu_dcm.logio.channels import read_truths as _read_truths
 from imu_dcm.logio.containers import open_source, resolve_mcap_path
 from imu_dcm.logio.meta import read_custom_data
@@ -117,7 +117,7 @@ def read_log(
         raise LogError(
             f"Expected messages in the log, got an empty log ({describe(got.conns)}): {shown}"
         )
-    topic, conns = pick_imu(got, imu_topic)
+    topic, conns, notes = pick_imu_judged(got, imu_topic)
     imu, undecodable = read_imu(got, topic, conns)
     if len(imu.t_ns) == 0:
         raise LogError(
@@ -147,4 +147,5 @@ def read_log(
         tuple(got.damage),
         stopped_at,
         truth_candidates=candidates,
+        notes=notes,
     )

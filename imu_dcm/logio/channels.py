@@ -25,6 +25,7 @@ from imu_dcm.logio.json_imu import is_json_imu, json_imu_columns, json_msg
 from imu_dcm.logio.schema import Defs, definitions, norm_type
 from imu_dcm.logio.tf import TF_TYPE, child_frame, tf_rows, tf_truth
 from imu_dcm.logio.types import Collected, Columns, Conn, ImuSeries, Payloads, TruthSeries
+from imu_dcm.rest import GRAVITY_M_S2
 
 IMU_TYPE = "sensor_msgs/msg/Imu"
 VEC3_TYPE = "geometry_msgs/msg/Vector3Stamped"
@@ -315,46 +316,78 @@ def _merge(rows: list[tuple[NDArray[np.int64], list[NDArray]]]) -> list[NDArray]
     return out
 
 
+def gyro_doubt(got: Collected, conns: list[tuple[Conn, str]]) -> str | None:
+    """Why the decoded samples of a gyro candidate are no gyro's, or None when they may be.
+
+    Refused: messages that all mark the angular velocity absent (Imu
+    ``angular_velocity_covariance[0] = -1``), and rates whose norm stays at g (9.81, within 1)
+    with a spread under 10 %: an accelerometer published as a Vector3Stamped.
+    """
+    omegas, covs = [], []
+    for c, _path in conns:
+        data = got.payloads.get(c.id)
+        if not isinstance(data, Columns) or data.error is not None:
+            continue
+        omegas.append(data.fields.get("omega", np.zeros((0, 3))))
+        covs.append(data.fields.get("gyro_cov0", np.full(len(data), np.nan)))
+    cov = np.concatenate(covs) if covs else np.zeros(0)
+    if len(cov) and np.all(cov == -1.0):
+        return "its messages mark the angular velocity absent (angular_velocity_covariance[0] = -1)"
+    w = np.concatenate(omegas) if omegas else np.zeros((0, 3))
+    norm = np.linalg.norm(w[np.all(np.isfinite(w), axis=1)], axis=1)
+    if len(norm) < 10:
+        return None
+    med = float(np.median(norm))
+    spread = float(np.subtract(*np.percentile(norm, [75, 25])))
+    if abs(med - GRAVITY_M_S2) < 1.0 and spread < 0.1 * med:
+        return (
+            f"|omega| stays at {med:.2f} (interquartile {spread:.2f}), the 9.81 m/s² of gravity: "
+            f"an accelerometer, not a gyro"
+        )
+    return None
+
+
+def _alternatives(got: Collected, usable: list[str], refused: set[str]) -> str:
+    """The channels that could be the gyro instead, for a refusal's line."""
+    if usable:
+        return f"; {', '.join(usable)} would work"
+    vec = sorted(
+        {c.topic for c in got.conns if norm_type(c.msgtype) == VEC3_TYPE and c.topic not in refused}
+    )
+    vec = [t for t in vec if not t.startswith(_NOT_GYRO)]
+    if vec:
+        return f"; try {', '.join(vec)} with --imu-topic"
+    return "; no other channel of the log holds angular rates"
+
+
 def pick_imu(got: Collected, imu_topic: str | None) -> tuple[str, list[tuple[Conn, str]]]:
     """The IMU topic and its channels with their Imu field paths (LogError when unclear)."""
-    topics = _by_topic(got)
+    return pick_imu_judged(got, imu_topic)[:2]
+
+
+def pick_imu_judged(
+    got: Collected, imu_topic: str | None
+) -> tuple[str, list[tuple[Conn, str]], tuple[str, ...]]:
+    """:func:`pick_imu` with the gyro judgement: candidates that are no gyro are refused with
+    one line each (returned as notes when another channel serves, a LogError otherwise)."""
     if imu_topic is not None:
-        conns = topics.get(imu_topic)
-        if not conns:
+        out = _named_imu(got, imu_topic)
+        doubt = gyro_doubt(got, out)
+        if doubt:
             raise LogError(
-                f"Expected IMU topic {imu_topic!r} in the log, got {describe(got.conns)}"
+                f"Expected a gyro on {imu_topic}, got {doubt}" + _alternatives(got, [], {imu_topic})
             )
-        out = []
-        for c in conns:
-            if c.encoding not in KNOWN_ENCODINGS:
-                raise LogError(
-                    f"Expected message encoding cdr, ros1 or json on {imu_topic}, got "
-                    f"{c.encoding!r}"
-                )
-            path = "json" if c.encoding == "json" else imu_path(c)
-            if path is None:
-                raise LogError(
-                    f"Expected IMU messages on {imu_topic}, got "
-                    f"{c.msgtype or 'no schema'} ({c.encoding})"
-                )
-            out.append((c, path))
-        return imu_topic, out
-    found: dict[str, list[tuple[Conn, str]]] = {}
-    gyro: dict[str, list[tuple[Conn, str]]] = {}
-    for topic, conns in topics.items():
-        for c in conns:
-            if c.encoding == "json":
-                p = got.payloads.get(c.id)
-                if p is not None and len(p) and is_json_imu(json_msg(p.payload(0))):
-                    found.setdefault(topic, []).append((c, "json"))
-                continue
-            path = imu_path(c)
-            if path == "vec3":
-                if _gyro_name(topic):
-                    gyro.setdefault(topic, []).append((c, path))
-            elif path is not None:
-                found.setdefault(topic, []).append((c, path))
+        return imu_topic, out, ()
+    found, gyro = _imu_candidates(got)
+    refused = {t: d for t, cs in {**gyro, **found}.items() if (d := gyro_doubt(got, cs))}
+    found = {t: cs for t, cs in found.items() if t not in refused}
+    gyro = {t: cs for t, cs in gyro.items() if t not in refused}
     found = found or gyro
+    if not found and refused:
+        topic, why = next(iter(sorted(refused.items())))
+        raise LogError(
+            f"Expected a gyro channel, got {topic}: {why}" + _alternatives(got, [], set(refused))
+        )
     if not found:
         unknown = [c for c in got.conns if c.encoding not in KNOWN_ENCODINGS]
         if unknown:
@@ -373,7 +406,50 @@ def pick_imu(got: Collected, imu_topic: str | None) -> tuple[str, list[tuple[Con
             f"(choose with --imu-topic)"
         )
     topic = next(iter(found))
-    return topic, found[topic]
+    notes = tuple(
+        f"{t}: refused as the gyro: {d}; using {topic}" for t, d in sorted(refused.items())
+    )
+    return topic, found[topic], notes
+
+
+def _named_imu(got: Collected, imu_topic: str) -> list[tuple[Conn, str]]:
+    conns = _by_topic(got).get(imu_topic)
+    if not conns:
+        raise LogError(f"Expected IMU topic {imu_topic!r} in the log, got {describe(got.conns)}")
+    out = []
+    for c in conns:
+        if c.encoding not in KNOWN_ENCODINGS:
+            raise LogError(
+                f"Expected message encoding cdr, ros1 or json on {imu_topic}, got {c.encoding!r}"
+            )
+        path = "json" if c.encoding == "json" else imu_path(c)
+        if path is None:
+            raise LogError(
+                f"Expected IMU messages on {imu_topic}, got "
+                f"{c.msgtype or 'no schema'} ({c.encoding})"
+            )
+        out.append((c, path))
+    return out
+
+
+def _imu_candidates(got: Collected) -> tuple[dict, dict]:
+    """IMU-typed channels and gyro-named Vector3Stamped channels, by topic."""
+    found: dict[str, list[tuple[Conn, str]]] = {}
+    gyro: dict[str, list[tuple[Conn, str]]] = {}
+    for topic, conns in _by_topic(got).items():
+        for c in conns:
+            if c.encoding == "json":
+                p = got.payloads.get(c.id)
+                if p is not None and len(p) and is_json_imu(json_msg(p.payload(0))):
+                    found.setdefault(topic, []).append((c, "json"))
+                continue
+            path = imu_path(c)
+            if path == "vec3":
+                if _gyro_name(topic):
+                    gyro.setdefault(topic, []).append((c, path))
+            elif path is not None:
+                found.setdefault(topic, []).append((c, path))
+    return found, gyro
 
 
 def read_imu(got: Collected, topic: str, conns: list[tuple[Conn, str]]) -> tuple[ImuSeries, int]:

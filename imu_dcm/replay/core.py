@@ -415,6 +415,8 @@ def _score(q_est: NDArray, q_truth: NDArray) -> tuple[AttitudeError, NDArray]:
 
 def _replay(path, s: ReplaySettings, report, notes: list[str]) -> ReplayResult:
     log = path if isinstance(path, LogData) else _read(path, s, report)
+    for note in log.notes:  # the reader's findings (a refused channel, a better one used)
+        _warn(notes, note)
     g = _gyro(log, s, notes)
     report("bias", 0.0)
     bias_est, omega = _remove_bias(s, g)
