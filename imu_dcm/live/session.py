@@ -217,12 +217,12 @@ def run(
             init_q=init_q,
             window_ns=round(reorder_window_s * 1e9),
             truth_wait_s=truth_wait_s,
-            lines=spec.kind != "ws",
+            lines=not src.announces_truth,
             view=view,
             recorder=recorder,
             say=say,
         )
-        gyro_scale = DEG if (gyro_units == "deg/s" and spec.kind == "ws") else 1.0
+        gyro_scale = DEG if (gyro_units == "deg/s" and not src.converts_gyro_units) else 1.0
         stop_event = stop or threading.Event()
         reason = _loop(
             src,
