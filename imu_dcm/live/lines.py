@@ -21,11 +21,37 @@ from decimal import Decimal, InvalidOperation
 import numpy as np
 from numpy.typing import NDArray
 
-__all__ = ["TIME_UNITS", "parse_lines"]
+__all__ = ["TIME_UNITS", "parse_lines", "time_unit_hint"]
 
 #: Nanoseconds per unit of a CSV stamp.
 TIME_UNITS = {"s": 1_000_000_000, "ms": 1_000_000, "us": 1_000, "ns": 1}
 DEG = math.pi / 180.0
+
+
+def time_unit_hint(median_step_s: float, max_step_s: float, time_units: str | None) -> str | None:
+    """One line when the steps are of no IMU (a rate below 1 Hz or above 100 kHz, or a step of
+    hours), naming the likely stamp unit; None when they look like an IMU's.
+
+    ``time_units``: the unit the stamps were declared in (None: the source's own stamps). The
+    likely unit is the one that makes the median step 0.1-100 ms (10 Hz to 10 kHz).
+    """
+    if median_step_s > 1.0 or median_step_s < 1e-5:
+        got = f"a median step of {median_step_s:.6g} s ({1.0 / median_step_s:.6g} Hz)"
+    elif max_step_s > 3600.0:
+        got = f"a step of {max_step_s / 3600.0:.3g} h"
+    else:
+        return None
+    line = f"Expected the steps of an IMU (1 Hz to 100 kHz, no step of hours), got {got}"
+    if time_units is None:
+        return f"{line}: the source's stamps are not an IMU's"
+    fits = [
+        u
+        for u, ns in TIME_UNITS.items()
+        if u != time_units and 1e-4 <= median_step_s * ns / TIME_UNITS[time_units] <= 0.1
+    ]
+    if not fits:
+        return f"{line}: check the unit of the stamps (--time-unit)"
+    return f"{line}: stamps in {fits[0]} declared as {time_units}? (--time-unit {fits[0]})"
 
 
 def _stamp_ns(text, scale: int) -> int:
