@@ -82,7 +82,9 @@ def test_reorder_batches_release_what_sample_by_sample_releases(window_ms):
     ref.append(one.flush())
     edges = np.unique(np.concatenate([[0, 400], rng.integers(0, 400, 60)]))
     many = ReorderBuffer(window_ms * ms)
-    got = [many.push(t[a:b], w[a:b], arrival[a:b]) for a, b in zip(edges[:-1], edges[1:])]
+    got = [
+        many.push(t[a:b], w[a:b], arrival[a:b]) for a, b in zip(edges[:-1], edges[1:], strict=True)
+    ]
     got.append(many.flush())
     for k in range(3):
         np.testing.assert_array_equal(
