@@ -1,8 +1,8 @@
 """Noise study report: the chart ``noise_study.png`` and the markdown tables.
 
 The figures come from :mod:`benchmarks.noise_study` (``run`` calls :func:`plot` and
-:func:`markdown` with what it measured); the chart's panel (c) draws a heavy-top excerpt from
-:func:`example_series`.
+:func:`markdown` with what it measured, in the records of :mod:`benchmarks.noise_cases`); the
+chart's panel (c) draws a heavy-top excerpt from :func:`example_series`.
 """
 
 from __future__ import annotations
@@ -12,7 +12,7 @@ from pathlib import Path
 
 import numpy as np
 
-from benchmarks.noise_study import (
+from benchmarks.noise_cases import (
     COLORS,
     EULER_MODES,
     EULER_TORQUE_NOISE,
@@ -20,7 +20,7 @@ from benchmarks.noise_study import (
     SCENES,
     BroadResult,
     Condition,
-    _att_err_deg,
+    att_err_deg,
 )
 from imu_dcm.prefilter import PrefilterConfig, prefilter
 
@@ -57,7 +57,7 @@ def example_series(quick: bool) -> dict:
         "density": density,
         "sigma": density * math.sqrt(1000.0),
         "clean": clean,
-        "att": {m: _att_err_deg(rates[m], rec.t_s, q_true) for m in MODES},
+        "att": {m: att_err_deg(rates[m], rec.t_s, q_true) for m in MODES},
         "t_all": rec.t_s,
     }
     return out

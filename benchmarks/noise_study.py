@@ -36,72 +36,29 @@ import math
 import sys
 import time
 from collections.abc import Callable
-from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 from numpy.typing import NDArray
 
+from benchmarks.noise_cases import (
+    EULER_MODES,
+    EULER_TORQUE_NOISE,
+    MODES,
+    SCENES,
+    BroadResult,
+    Condition,
+    ModeStats,
+    att_err_deg,
+)
 from imu_dcm.integrate import integrate
 from imu_dcm.metrics import attitude_error_deg
 from imu_dcm.prefilter import PrefilterConfig, euler_prefilter, prefilter
 
-MODES = ("none", "kalman", "rts")
-#: model-based modes (``euler_prefilter``), run on the free box only (its inertia is known)
-EULER_MODES = ("euler-kalman", "euler-rts")
-#: unmodelled-torque density told to the model-based filter, N·m/√Hz (the box is torque-free)
-EULER_TORQUE_NOISE = 1e-4
-#: scene label -> (data_synth scene, parameters, duration s, quick duration s)
-SCENES: dict[str, tuple[str, dict, float, float]] = {
-    "heavy top, cusp": ("heavy-top", {"motion": "cusp"}, 4.0, 2.0),
-    "free box, intermediate axis": ("free-body", {"case": "intermediate"}, 20.0, 10.0),
-    "coning 10°, 1 Hz": ("coning", {"half_angle_deg": 10.0, "freq_hz": 1.0}, 10.0, 5.0),
-    "coning 10°, 5 Hz": ("coning", {"half_angle_deg": 10.0, "freq_hz": 5.0}, 10.0, 5.0),
-}
 DENSITIES = (1e-4, 1e-3, 1e-2)
 RATES_HZ = (200.0, 1000.0)
 QUANT_STEP_RAD_S = math.radians(0.061)
 BROAD_DIR = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "broad"
-COLORS = {
-    "none": "#444444",
-    "kalman": "#d95f02",
-    "rts": "#1b9e77",
-    "euler-kalman": "#e7298a",
-    "euler-rts": "#7570b3",
-}
-
-
-@dataclass(frozen=True)
-class ModeStats:
-    """Pooled figures of one pre-filter mode in one condition (over seeds)."""
-
-    rate_rms_rad_s: float
-    att_rms_deg: float
-    att_max_deg: float
-    lag_samples: float
-    distortion_rate_rms_rad_s: float  # rate error when the same filter runs on the exact rates
-    distortion_att_rms_deg: float  # attitude error from the exact rates through the same filter
-
-
-@dataclass(frozen=True)
-class Condition:
-    scene: str
-    density: float
-    rate_hz: float
-    seeds: int
-    accel_rad_s2: float
-    modes: dict[str, ModeStats]
-    t_s: NDArray  # sample times of the seeds' common grid, s
-    att_rms_series_deg: dict[str, NDArray]  # attitude error RMS over the seeds at each t_s, deg
-    # nothing given (the scenes never rest): N from the log's spectrum, then rts with it
-    noise_est_rad_s_sqrt_hz: float = math.nan  # mean over seeds
-    rts_est_rate_rms_rad_s: float = math.nan
-    rts_est_att_rms_deg: float = math.nan
-
-
-def _att_err_deg(omega_b: NDArray, t_s: NDArray, q_true: NDArray) -> NDArray:
-    q = integrate(omega_b, t_s, q_true[0], "magnus4").as_quat()
-    return attitude_error_deg(q, q_true).total_deg
 
 
 def _lag_samples(err: NDArray, accel: NDArray, rate_hz: float) -> float:
@@ -140,7 +97,7 @@ def synthetic_condition(
         t = rec.t_s
         q_true, w_true = traj.at(t)
         w_dot = np.gradient(w_true, t, axis=0)
-        att_ref = _att_err_deg(w_true, t, q_true)
+        att_ref = att_err_deg(w_true, t, q_true)
         res_k = prefilter(
             rec.values, t, "kalman", PrefilterConfig(noise_density_rad_s_sqrt_hz=density)
         )
@@ -173,15 +130,15 @@ def synthetic_condition(
             res_e = prefilter(rec.values, t, "rts")
             est_density.append(res_e.config.noise_density_rad_s_sqrt_hz)
             est_rate.append(float(np.mean((res_e.omega_b - w_true) ** 2)))
-            est_att.append(float(np.mean(_att_err_deg(res_e.omega_b, t, q_true) ** 2)))
+            est_att.append(float(np.mean(att_err_deg(res_e.omega_b, t, q_true) ** 2)))
         for m in modes_here:
             e = outs[m] - w_true
-            a = _att_err_deg(outs[m], t, q_true)
+            a = att_err_deg(outs[m], t, q_true)
             series.setdefault(m, []).append(a * a)
             d = (
                 att_ref
                 if m == "none"
-                else _att_err_deg(clean[m], t, q_true)
+                else att_err_deg(clean[m], t, q_true)
                 if clean[m] is not None
                 else np.nan
             )
@@ -223,16 +180,6 @@ def synthetic_condition(
 
 # ------------------------------------------------------------------------------------------------
 # BROAD
-
-
-@dataclass(frozen=True)
-class BroadResult:
-    trial: str
-    n_samples: int
-    summary: dict
-    att_rms_deg: dict[str, float]
-    att_max_deg: dict[str, float]
-    rate_change_rms_rad_s: dict[str, float]  # |filtered - raw| RMS: how much the filter moved
 
 
 def broad_trial(path: Path) -> BroadResult:

@@ -19,6 +19,7 @@ from pathlib import Path
 import numpy as np
 
 from imu_dcm.errors import LogError
+from imu_dcm.logio.ros import RosSource
 from imu_dcm.logio.types import Collected, Conn, Damage, Payloads, Sink
 
 MAGIC = b"\x89MCAP0\r\n"
@@ -111,8 +112,8 @@ def _channel(buf, pos: int, out: dict) -> None:
     out[cid] = (sid, topic, enc)
 
 
-class McapSource:
-    """One MCAP file. ``read(sink)`` returns every channel and the data of kept ones."""
+class McapSource(RosSource):
+    """One MCAP file. ``collect(sink)`` returns every channel and the data of kept ones."""
 
     kind = "mcap"
 
@@ -151,7 +152,7 @@ class McapSource:
         return k
 
     # ------------------------------------------------------------------ reading
-    def read(self, sink: Sink) -> Collected:
+    def collect(self, sink: Sink) -> Collected:
         self.sink = sink
         try:
             f = open(self.path, "rb")  # noqa: SIM115

@@ -373,9 +373,9 @@ def main(argv: list[str] | None = None) -> int:
 
     argv = list(sys.argv[1:] if argv is None else argv)
     if argv and argv[0] == "batch":
-        from imu_dcm.replay import batch
+        from imu_dcm.replay import batch_cli
 
-        return batch.main(argv[1:])
+        return batch_cli.main(argv[1:])
     message = ""
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")

@@ -23,6 +23,7 @@ from pathlib import Path
 from typing import Any
 
 from imu_dcm.errors import ImuDcmWarning, InputError
+from imu_dcm.logio import find_logs as find_logs_in
 from imu_dcm.replay.runners import LOST, run_dask, run_local
 from imu_dcm.replay.table import (
     Curve,
@@ -40,10 +41,8 @@ from imu_dcm.replay.table import (
     write_table,
 )
 
-__all__ = ["BatchResult", "find_logs", "main", "replay_many", "replay_one", "row_from_result"]
+__all__ = ["BatchResult", "find_logs", "replay_many", "replay_one", "row_from_result"]
 
-#: Files taken as logs when a folder is searched (a folder with metadata.yaml is a bag itself).
-LOG_SUFFIXES = (".mcap", ".db3", ".bag")
 #: Files read as lists of logs (one path a line, relative to the list; ``#`` comments).
 LIST_SUFFIXES = (".txt", ".list", ".lst")
 _ONE_AT_A_TIME = threading.Lock()  # warnings are process-global: one replay per process
@@ -71,26 +70,17 @@ class BatchResult:
 
 # ------------------------------------------------------------------------------ inputs
 def _search(folder: Path) -> Iterator[Path]:
-    if (folder / "metadata.yaml").is_file():
-        yield folder
-        return
-    for p in sorted(folder.iterdir()):
-        if p.name.startswith("."):
-            continue
-        if p.is_dir():
-            yield from _search(p)
-        elif p.suffix in LOG_SUFFIXES:
-            yield p
+    yield from find_logs_in(folder)
 
 
 def find_logs(paths: Iterable[str | Path]) -> list[str]:
     """The logs named by ``paths``, as absolute paths, each once, in the order found.
 
-    A folder holding ``metadata.yaml`` is a bag; another folder is searched (sorted, hidden
-    entries skipped) for bags and ``.mcap`` / ``.db3`` / ``.bag`` files; a ``.txt`` / ``.list``
-    file lists paths, one a line (relative to the list's folder; blank lines and ``#`` comments
-    skipped); anything else, including a path that does not exist, is taken as a log (and gets
-    an error row if it is not one).
+    A folder the reader takes as one log (a bag, a EuRoC dataset) is a log; another folder is
+    searched (sorted, hidden entries skipped) by :func:`imu_dcm.logio.find_logs`; a ``.txt`` /
+    ``.list`` file lists paths, one a line (relative to the list's folder; blank lines and
+    ``#`` comments skipped); anything else, including a path that does not exist, is taken as a
+    log (and gets an error row if it is not one).
     """
     out: dict[str, None] = {}
 
@@ -327,11 +317,3 @@ def replay_many(
         chart_path,
         summary_line(rows + others),
     )
-
-
-# ------------------------------------------------------------------------------- CLI
-def main(argv: list[str] | None = None) -> int:
-    """``python -m imu_dcm.replay batch ...``: see :mod:`imu_dcm.replay.batch_cli`."""
-    from imu_dcm.replay.batch_cli import main as cli_main
-
-    return cli_main(argv)

@@ -32,7 +32,8 @@ from imu_dcm.replay.bias import RestConfig, estimate_bias
 from imu_dcm.replay.clean import CleanedImu, _deg_evidence, clean_imu
 from imu_dcm.replay.options import check_options
 from imu_dcm.replay.summary import ReplayResult, ReplaySummary
-from imu_dcm.replay.truth import align_truth, choose_time, slerp_truth
+from imu_dcm.replay.truth import align_truth, choose_time
+from imu_dcm.resample import slerp_truth
 
 __all__ = ["CleanedImu", "ReplayResult", "ReplaySummary", "clean_imu", "replay", "slerp_truth"]
 
