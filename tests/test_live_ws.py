@@ -16,9 +16,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from imu_dcm.bag_writer import StampedSeries, write_bag
 from imu_dcm.errors import GapWarning
 from imu_dcm.live import run
+from imu_dcm.logio.writer import StampedSeries, write_bag
 from imu_dcm.metrics import attitude_error_deg
 from imu_dcm.replay import replay
 

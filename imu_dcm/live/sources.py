@@ -67,13 +67,18 @@ def parse_source(text: str) -> SourceSpec:
     """``ws://HOST:PORT``, ``udp://HOST:PORT`` or ``-`` (stdin); raises InputError otherwise."""
     if text == "-":
         return SourceSpec("stdin")
+    if text.startswith("mavlink:"):  # a pymavlink-style connection: imu_dcm.live.mavlink
+        return SourceSpec("mavlink", url=text)
     parts = urlsplit(text)
     try:
         port = parts.port
     except ValueError:
         port = None
     if parts.scheme not in ("ws", "udp") or not parts.hostname or port is None:
-        raise InputError(f"Expected SOURCE ws://HOST:PORT, udp://HOST:PORT or -, got {text!r}")
+        raise InputError(
+            f"Expected SOURCE ws://HOST:PORT, udp://HOST:PORT, mavlink:udpin:HOST:PORT or -, "
+            f"got {text!r}"
+        )
     return SourceSpec(parts.scheme, parts.hostname, port, text)
 
 
@@ -493,4 +498,8 @@ def open_source(
         return WsSource(spec.url, imu_topic, truth_topic, give_up_s)
     if spec.kind == "udp":
         return UdpSource(spec.host, spec.port, gyro_units, time_units)
+    if spec.kind == "mavlink":
+        from imu_dcm.live.mavlink import MavlinkSource
+
+        return MavlinkSource(spec.url, imu_topic, truth_topic)
     return StdinSource(gyro_units, time_units, stdin_fd)

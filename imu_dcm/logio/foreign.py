@@ -52,11 +52,6 @@ REFUSALS: tuple[SourceEntry, ...] = (
         b"\x89HDF",
         "export the gyro as CSV and run `python -m imu_dcm.replay convert-csv gyro.csv`",
     ),
-    _refusal(
-        "a PX4 ULog",
-        b"ULog",
-        "`ulog2csv x.ulg` then `python -m imu_dcm.replay convert-csv x_sensor_gyro_0.csv`",
-    ),
     _refusal("a gzip file", b"\x1f\x8b", "`gunzip` it first"),
     _refusal("a bzip2 file", b"BZh", "`bunzip2` it first"),
     _refusal("a zip archive", b"PK\x03\x04", "`unzip` it first"),

@@ -15,7 +15,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from imu_dcm.errors import LogError
-from imu_dcm.logio import meta
+from imu_dcm.logio import ardupilot, euroc, meta, ulog
 from imu_dcm.logio.foreign import REFUSALS
 from imu_dcm.logio.mcap import MAGIC as MCAP_MAGIC
 from imu_dcm.logio.mcap import McapSource
@@ -74,7 +74,7 @@ def _open_inside(folder: Path, progress: Progress | None) -> LogSource:
 
 SOURCES: tuple[SourceEntry, ...] = (
     SourceEntry("rosbag2 folder (metadata.yaml + storage files)", is_bag_folder, open_folder),
-    # euroc.ENTRY,
+    euroc.ENTRY,
     SourceEntry("MCAP file (.mcap)", _magic(MCAP_MAGIC), _in_bag(McapSource)),
     SourceEntry("rosbag2 sqlite3 file (.db3)", _magic(SQLITE_MAGIC), _in_bag(SqliteSource)),
     SourceEntry(
@@ -83,8 +83,8 @@ SOURCES: tuple[SourceEntry, ...] = (
         _in_bag(ZstdFile),
     ),
     SourceEntry("ROS 1 bag (.bag, v2.0)", _magic(ROS1_MAGIC), open_bag),
-    # ulog.ENTRY,
-    # ardupilot.ENTRY,
+    ulog.ENTRY,
+    ardupilot.ENTRY,
     SourceEntry("folder holding one log file", _is_folder, _open_inside, search=False),
     *REFUSALS,
 )

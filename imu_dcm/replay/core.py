@@ -25,7 +25,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from imu_dcm.errors import GapWarning, ImuDcmWarning, LogError
-from imu_dcm.integrate import integrate
+from imu_dcm.integrate import integrate_quat
 from imu_dcm.logio import read_log
 from imu_dcm.metrics import AttitudeError, attitude_error_deg, rms
 from imu_dcm.replay.bias import RestConfig, estimate_bias
@@ -232,7 +232,7 @@ def _replay(
     if n - start >= 2:
         with warnings.catch_warnings():  # gaps were reported once, by clean_imu
             warnings.simplefilter("ignore", GapWarning)
-            q_est[start:] = integrate(omega[start:], t_s[start:], q0, method).as_quat()
+            q_est[start:] = integrate_quat(omega[start:], t_s[start:], q0, method)
     else:
         q_est[start:] = q0
     report("integrate", 1.0)
