@@ -29,6 +29,7 @@ from datetime import datetime, timezone
 from pathlib import Path
 
 from benchmarks.timing import single_thread
+from imu_dcm.outputs import OutputError, check_output_folder, write_text_atomic
 
 
 def _progress_printer() -> Callable[[str], None]:
@@ -93,12 +94,11 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     out: Path = args.out
     try:
+        check_output_folder(out)
         out.mkdir(parents=True, exist_ok=True)
-    except OSError as exc:
-        print(
-            f"benchmarks: Expected a writable output folder, got {out} ({exc.strerror})",
-            file=sys.stderr,
-        )
+    except (OutputError, OSError) as exc:
+        text = getattr(exc, "strerror", None) or exc
+        print(f"benchmarks: Expected a writable output folder, got {out} ({text})", file=sys.stderr)
         return 2
 
     import numpy as np  # noqa: F401  (after the thread limit)
@@ -136,9 +136,9 @@ def main(argv: list[str] | None = None) -> int:
     md += pareto.convergence_markdown(conv)
     md += stab_md
     md += extra
-    (out / "results.md").write_text("\n".join(md) + "\n", encoding="utf-8")
-    (out / "pareto.json").write_text(
-        json.dumps([dataclasses.asdict(m) for m in meas], indent=0) + "\n", encoding="utf-8"
+    write_text_atomic(out / "results.md", "\n".join(md) + "\n")
+    write_text_atomic(
+        out / "pareto.json", json.dumps([dataclasses.asdict(m) for m in meas], indent=0) + "\n"
     )
     progress(f"done: {out / 'results.md'} ({elapsed:.0f} s)")
     if failed:

@@ -22,6 +22,7 @@ from benchmarks.noise_cases import (
     Condition,
     att_err_deg,
 )
+from imu_dcm.outputs import save_figure
 from imu_dcm.prefilter import PrefilterConfig, prefilter
 
 __all__ = ["example_series", "markdown", "plot"]
@@ -79,7 +80,7 @@ def plot(
     _plot_fast_motion(axs[1, 0], ex["top"])
     _plot_broad(axs[1, 1], broad)
     fig.tight_layout()
-    fig.savefig(path, dpi=100)
+    save_figure(fig, path, dpi=100)
     plt.close(fig)
 
 

@@ -37,6 +37,7 @@ import imu_dcm
 from benchmarks.peers import PEERS
 from benchmarks.timing import interleaved_medians
 from imu_dcm.metrics import attitude_error_deg
+from imu_dcm.outputs import save_figure
 
 __all__ = [
     "FULL_RATES_HZ",
@@ -548,7 +549,7 @@ def _finish_grid(fig, axes, used: int, path, suptitle: str, rect: tuple, **legen
     fig.legend(handles, labels, **legend)
     fig.suptitle(suptitle, fontsize=14)
     fig.tight_layout(rect=rect)
-    fig.savefig(path, dpi=100)
+    save_figure(fig, path, dpi=100)
     plt.close(fig)
 
 

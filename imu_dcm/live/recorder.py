@@ -21,15 +21,14 @@ from __future__ import annotations
 import os
 import shutil
 import time
-from pathlib import Path
 
 import numpy as np
 from numpy.typing import NDArray
 
-from imu_dcm.errors import LogError
 from imu_dcm.live.sources import Channel, Received
 from imu_dcm.logio import meta
 from imu_dcm.logio.writer import MSG_DEFINITIONS, cdr_messages, imu_doubles
+from imu_dcm.outputs import check_output_dir, ensure_parent
 
 __all__ = ["FLUSH_S", "LiveRecorder"]
 
@@ -46,9 +45,10 @@ class LiveRecorder:
     Parameters
     ----------
     path : path-like
-        Bag folder to create. Its parent must exist.
+        Bag folder to create (missing parent folders are created).
     force : bool
-        Replace an existing folder.
+        Replace an existing bag folder this project wrote (:func:`imu_dcm.outputs.is_own_bag`);
+        anything else is refused with :class:`imu_dcm.outputs.OutputError`.
     custom_data : dict of str -> str
         Stored in ``metadata.yaml`` ``custom_data``.
     """
@@ -56,18 +56,10 @@ class LiveRecorder:
     def __init__(self, path, force: bool = False, custom_data: dict | None = None) -> None:
         from mcap.writer import CompressionType, Writer
 
-        out = Path(path)
-        if (out.exists() or out.is_symlink()) and not force:
-            raise LogError(
-                f"Expected --record {str(out)!r} not to exist (use --force), got an "
-                f"existing {'folder' if out.is_dir() else 'file'}"
-            )
-        if not out.parent.is_dir():
-            raise LogError(f"Expected the parent folder of {str(out)!r} to exist, got none")
-        if out.is_dir() and not out.is_symlink():
+        out = check_output_dir(path, force=force, what="--record bag")
+        ensure_parent(out, "--record bag")
+        if out.exists():  # with force, a bag this project wrote (check_output_dir)
             shutil.rmtree(out)
-        elif out.exists() or out.is_symlink():
-            out.unlink()
         out.mkdir()
         self.path = out
         self.mcap_name = f"{out.name}.mcap"

@@ -49,7 +49,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from imu_dcm.errors import InputError
 from imu_dcm.logio.meta import QOS_YAML, TYPE_HASHES, metadata_body, metadata_document
-from imu_dcm.outputs import OutputError, check_output_dir
+from imu_dcm.outputs import OutputError, check_output_dir, ensure_parent
 
 __all__ = [
     "MSG_DEFINITIONS",
@@ -504,6 +504,7 @@ def _write_atomic(out: Path, topics: list[_Topic], custom: dict, inputs: tuple, 
     """Write the bag under a temporary sibling name, then swap it in (whole or not at all)."""
     tmp = out.parent / f".{out.name}.tmp-{os.getpid()}-{uuid.uuid4().hex[:8]}"
     try:
+        ensure_parent(out, "output bag")  # e.g. --out out/top in a fresh checkout
         tmp.mkdir()
     except OSError as exc:
         raise OutputError(

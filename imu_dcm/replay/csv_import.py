@@ -210,7 +210,12 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("out", help="output bag folder")
     p.add_argument("--time-col", required=True, help="time column name")
     p.add_argument(
-        "--time-unit", required=True, choices=tuple(TIME_UNITS_NS), help="unit of the time column"
+        "--time-units",
+        "--time-unit",
+        dest="time_unit",
+        required=True,
+        choices=tuple(TIME_UNITS_NS),
+        help="unit of the time column (as live's --time-units; --time-unit is the same)",
     )
     p.add_argument(
         "--gyro-cols", required=True, metavar="X,Y,Z", help="body-rate column names, x,y,z"
