@@ -53,8 +53,6 @@ if TYPE_CHECKING:
 
 __all__ = ["DcmIntegrator"]
 
-_ndarray = np.ndarray
-_F64 = np.dtype(np.float64)
 
 
 class DcmIntegrator:
@@ -176,18 +174,16 @@ class DcmIntegrator:
         GapWarning
             The step is a gap (:func:`imu_dcm.integrate.find_gaps`) among the last four steps.
         """
-        # The usual sample, a float64 (3,) array and a float stamp, goes straight to the
-        # kernel, which checks it (finite, increasing, not closed) and returns a code.
-        if type(omega_b) is not _ndarray or omega_b.dtype is not _F64 or omega_b.ndim != 1:
-            omega_b = self._as_rate(omega_b, t_s)
-        if type(t_s) is not float:
-            t_s = self._as_stamp(omega_b, t_s)
+        # The sample goes straight to the compiled push, which takes a float64 (3,) contiguous
+        # array and a number (numba refuses any other type with a TypeError: only then is the
+        # sample converted here) and checks it (finite, increasing, not closed): a code.
         if self._t0_pending:
+            omega_b, t_s = self._as_rate(omega_b, t_s), self._as_stamp(omega_b, t_s)
             self._start_at_t0(omega_b, t_s)
         try:
             code = self._push(self._state, omega_b, t_s)
-        except TypeError:  # a strided array: the compiled push takes contiguous ones
-            omega_b = np.ascontiguousarray(omega_b)
+        except TypeError:
+            omega_b, t_s = self._as_rate(omega_b, t_s), self._as_stamp(omega_b, t_s)
             code = self._push(self._state, omega_b, t_s)
         if code:
             self._not_ok(code, omega_b, t_s)
@@ -195,7 +191,7 @@ class DcmIntegrator:
 
     def _as_rate(self, omega_b: ArrayLike, t_s: object) -> NDArray[np.float64]:
         try:
-            w = np.asarray(omega_b, dtype=float)
+            w = np.ascontiguousarray(omega_b, dtype=np.float64)
         except (TypeError, ValueError):
             w = None
         if w is None or w.shape != (3,):
@@ -220,7 +216,7 @@ class DcmIntegrator:
             raise InputError("Expected no samples after finish(), got one")
         if not t > self._t0_s:
             raise InputError(f"Expected the first `t_s` after t0_s = {self._t0_s!r} s, got {t!r} s")
-        code = self._push(self._state, np.ascontiguousarray(w), self._t0_s)
+        code = self._push(self._state, w, self._t0_s)
         if code:
             self._not_ok(code, w, self._t0_s)
         self._t0_pending = False
