@@ -169,7 +169,7 @@ def _entry(signature: str):
 
 
 #: CPU seconds to compile every entry point a replay uses (measured: see docs/integrator.md).
-COMPILE_S = 4
+COMPILE_S = 3
 
 
 class _CompileNotice(numba_event.Listener):
