@@ -76,8 +76,8 @@ class DcmIntegrator:
     -----
     Feeding ``omega_b[k], t_s[k]`` for ``k = 0..N-1`` and calling :meth:`finish` reproduces
     ``integrate(omega_b, t_s, q0, method)`` sample by sample (``t0_s=None``): both run the same
-    compiled kernel. The first integrator of a process loads the kernel (numba; see the README
-    for its cache).
+    compiled kernel. The first integrator of a process loads the kernel (numba;
+    see docs/integrator.md for its cache).
 
     Examples
     --------
