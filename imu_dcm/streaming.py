@@ -54,7 +54,6 @@ if TYPE_CHECKING:
 __all__ = ["DcmIntegrator"]
 
 
-
 class DcmIntegrator:
     """Streaming strapdown integrator ``q_w_b <- q_w_b ⊗ exp(φ)``, the twin of
     :func:`imu_dcm.integrate`.
@@ -277,6 +276,16 @@ class DcmIntegrator:
         GapWarning
             A gap (:func:`imu_dcm.integrate.find_gaps`) in the chunk with the buffered stamps.
         """
+        return _to_rotation(self._many(omega_b, t_s))
+
+    def update_many_quat(self, omega_b: ArrayLike, t_s: ArrayLike) -> NDArray[np.float64]:
+        """:meth:`update_many` as an ``(n, 4)`` array of ``[x, y, z, w]`` attitudes, without
+        building a scipy ``Rotation`` (which costs more than integrating a short chunk)."""
+        return self._many(omega_b, t_s)
+
+    def _many(self, omega_b: ArrayLike, t_s: ArrayLike) -> NDArray[np.float64]:
+        """The body of :meth:`update_many` and :meth:`update_many_quat` (warnings name their
+        caller's caller)."""
         w = np.asarray(omega_b)
         t = np.asarray(t_s)
         if w.ndim != 2 or w.shape[1] != 3 or t.shape != (len(w),):
@@ -300,12 +309,12 @@ class DcmIntegrator:
         out = np.empty((len(t) + 1, 4))
         k = kernel.feed(self._state, w, t, out, False)
         if n0 >= (4 if self._method == "magnus4" else 1) and k == n_user:
-            return _to_rotation(out[:k])  # steady state: one committed row per sample
+            return out[:k]  # steady state: one committed row per sample
         # Warm-up: row j is the attitude committed by then (the start attitude before any).
         n_after = n0 + np.arange(1, len(t) + 1)
         rows = np.vstack([q_before, out[:k]])
         idx = self._committed(n_after) - self._committed(np.array([n0]))
-        return _to_rotation(np.ascontiguousarray(rows[idx][-n_user:]))
+        return np.ascontiguousarray(rows[idx][-n_user:])
 
     def _committed(self, n: NDArray) -> NDArray:
         """Rows committed after ``n`` samples in all."""
@@ -317,7 +326,7 @@ class DcmIntegrator:
         """Check a chunk as the continuation of the record (finite, increasing across the
         junction, gaps among the buffered and new stamps); one compiled pass."""
         n = self.n_samples
-        w = np.ascontiguousarray(w)
+        w, t = np.ascontiguousarray(w), np.ascontiguousarray(t)
         stamps = self._state[kernel.T + 4 - min(n, 4) : kernel.T + 4]  # buffered, oldest first
         t_before = stamps[-1] if n else -math.inf
         row, stamp, order, dt_min, dt_max = kernel.check_record(w, t, t_before)
@@ -342,5 +351,5 @@ class DcmIntegrator:
         if dt_max > GAP_FACTOR * dt_min:  # else no step can exceed GAP_FACTOR x the median
             gaps = find_gaps(np.concatenate([stamps, t]))
             if gaps:
-                warnings.warn(gap_message(gaps), GapWarning, stacklevel=3)
+                warnings.warn(gap_message(gaps), GapWarning, stacklevel=4)
         return w, t
