@@ -127,6 +127,11 @@ class DcmIntegrator:
 
         return Rotation.from_quat(self._q)
 
+    def state(self) -> dict[str, NDArray[np.float64]]:
+        """A copy of the kernel state, field by field (:data:`imu_dcm.kernel.STATE_FIELDS`:
+        the attitude, the last four rates and stamps, the sample count, ...)."""
+        return kernel.state_fields(self._state.copy())
+
     @property
     def n_samples(self) -> int:
         """Samples received (a ``t0_s`` start counts as one)."""

@@ -209,3 +209,15 @@ def test_update_many_quat_is_update_many_as_an_array():
             a.update_many_quat(omega[i:j], t[i:j]),
             b.update_many(omega[i:j], t[i:j]).as_quat(canonical=False),
         )
+
+
+def test_state_is_a_copy_by_field():
+    integ = DcmIntegrator([0, 0, 0, 1], method="trapezoid")
+    integ.update(np.array([0.0, 0.0, 1.0]), 0.0)
+    integ.update(np.array([0.0, 0.0, 1.0]), 0.01)
+    state = integ.state()
+    # 1 rad/s about z for 10 ms: 0.01 rad, q = [0, 0, sin 0.005, cos 0.005].
+    assert np.allclose(state["q"], [0, 0, np.sin(0.005), np.cos(0.005)], rtol=0, atol=1e-15)
+    assert state["n"][0] == 2 and state["t"][-2:].tolist() == [0.0, 0.01]
+    state["q"][:] = 0.0
+    assert integ.q_w_b[3] > 0.99  # a copy: the integrator is unchanged
