@@ -36,17 +36,16 @@ __all__ = ["LiveOptions", "run"]
 def _warm_up(method: str) -> None:
     """Load numba and the compiled kernel before the source opens, so the first samples do not
     wait for them (about 0.7 s with a warm cache, measured as the first second's latency)."""
-    from imu_dcm.integrate import integrate
+    from imu_dcm.integrate import integrate_quat
     from imu_dcm.resample import slerp_truth  # noqa: F401 - the truth slerp's modules
     from imu_dcm.streaming import DcmIntegrator
 
     q0, w, t = [0.0, 0.0, 0.0, 1.0], np.zeros((5, 3)), 0.001 * np.arange(5)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # rotvec_sum's warning belongs to the real run
-        integrate(w, t, q0, method)  # the pipeline's start-up uses the batch form (and scipy)
+        integrate_quat(w, t, q0, method)  # the pipeline's start-up uses the batch form
         integ = DcmIntegrator(q0, method)
-        for wk, tk in zip(w, t, strict=True):
-            integ.update(wk, float(tk))
+        integ.update_many_quat(w, t)  # the pipeline feeds arrays (the kernel's feed)
         integ.finish()
 
 
