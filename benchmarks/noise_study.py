@@ -96,71 +96,17 @@ def synthetic_condition(
         rec = data_synth.synthetic_gyro(traj, rate_hz, model=model, seed=seed)
         t = rec.t_s
         q_true, w_true = traj.at(t)
-        w_dot = np.gradient(w_true, t, axis=0)
-        att_ref = att_err_deg(w_true, t, q_true)
-        res_k = prefilter(
-            rec.values, t, "kalman", PrefilterConfig(noise_density_rad_s_sqrt_hz=density)
-        )
-        cfg = res_k.config  # the fitted process noise, reused by rts and the noise-free runs
-        accels.append(cfg.angular_accel_rad_s2)
-        outs = {
-            "none": rec.values,
-            "kalman": res_k.omega_b,
-            "rts": prefilter(rec.values, t, "rts", cfg).omega_b,
-        }
-        clean = {
-            "none": w_true,
-            "kalman": prefilter(w_true, t, "kalman", cfg).omega_b,
-            "rts": prefilter(w_true, t, "rts", cfg).omega_b,
-        }
-        if euler:
-            inertia = traj.params["inertia_kg_m2"]
-            for m in EULER_MODES:
-                outs[m] = euler_prefilter(
-                    rec.values,
-                    t,
-                    inertia,
-                    m.split("-")[1],
-                    noise_density_rad_s_sqrt_hz=density,
-                    torque_noise_n_m_sqrt_hz=EULER_TORQUE_NOISE,
-                ).omega_b
-                clean[m] = None  # not run on exact rates (costly); reported as "–"
+        outs, clean, accel = _filter_runs(rec.values, t, w_true, density, euler, traj)
+        accels.append(accel)
         if not quantize:
             # nothing given: these scenes never rest, so N comes from the log's spectrum
             res_e = prefilter(rec.values, t, "rts")
             est_density.append(res_e.config.noise_density_rad_s_sqrt_hz)
             est_rate.append(float(np.mean((res_e.omega_b - w_true) ** 2)))
             est_att.append(float(np.mean(att_err_deg(res_e.omega_b, t, q_true) ** 2)))
+        truth = (t, q_true, w_true, rate_hz)
         for m in modes_here:
-            e = outs[m] - w_true
-            a = att_err_deg(outs[m], t, q_true)
-            series.setdefault(m, []).append(a * a)
-            d = (
-                att_ref
-                if m == "none"
-                else att_err_deg(clean[m], t, q_true)
-                if clean[m] is not None
-                else np.nan
-            )
-            acc[m]["rate_rms_rad_s"].append(float(np.mean(e * e)))
-            acc[m]["att_rms_deg"].append(float(np.mean(a * a)))
-            acc[m]["att_max_deg"].append(float(a.max()))
-            acc[m]["lag_samples"].append(_lag_samples(e, w_dot, rate_hz))
-            acc[m]["distortion_rate_rms_rad_s"].append(
-                float(np.mean((clean[m] - w_true) ** 2)) if clean[m] is not None else np.nan
-            )
-            acc[m]["distortion_att_rms_deg"].append(float(np.mean(d * d)))
-    modes = {}
-    for m in modes_here:
-        v = acc[m]
-        modes[m] = ModeStats(
-            rate_rms_rad_s=math.sqrt(np.mean(v["rate_rms_rad_s"])),
-            att_rms_deg=math.sqrt(np.mean(v["att_rms_deg"])),
-            att_max_deg=float(np.mean(v["att_max_deg"])),
-            lag_samples=float(np.mean(v["lag_samples"])),
-            distortion_rate_rms_rad_s=math.sqrt(np.mean(v["distortion_rate_rms_rad_s"])),
-            distortion_att_rms_deg=math.sqrt(np.mean(v["distortion_att_rms_deg"])),
-        )
+            series.setdefault(m, []).append(_score(acc[m], outs[m], clean[m], truth))
     n = min(len(v) for a in series.values() for v in a)  # stamps may jitter in count
     rms_series = {m: np.sqrt(np.mean([v[:n] for v in a], axis=0)) for m, a in series.items()}
     return Condition(
@@ -169,12 +115,73 @@ def synthetic_condition(
         rate_hz,
         seeds,
         float(np.median(accels)),
-        modes,
+        {m: _pooled(acc[m]) for m in modes_here},
         t[:n],
         rms_series,
         float(np.mean(est_density)) if est_density else math.nan,
         math.sqrt(np.mean(est_rate)) if est_rate else math.nan,
         math.sqrt(np.mean(est_att)) if est_att else math.nan,
+    )
+
+
+def _filter_runs(
+    z: NDArray, t: NDArray, w_true: NDArray, density: float, euler: bool, traj
+) -> tuple[dict[str, NDArray], dict[str, NDArray | None], float]:
+    """Each mode on the measured rates ``z`` and on the exact rates ``w_true`` (the model-based
+    modes on the measured ones only: costly), with kalman's fitted process noise for all; and
+    that fitted angular acceleration, rad/s²."""
+    res_k = prefilter(z, t, "kalman", PrefilterConfig(noise_density_rad_s_sqrt_hz=density))
+    cfg = res_k.config  # the fitted process noise, reused by rts and the noise-free runs
+    outs = {"none": z, "kalman": res_k.omega_b, "rts": prefilter(z, t, "rts", cfg).omega_b}
+    clean = {
+        "none": w_true,
+        "kalman": prefilter(w_true, t, "kalman", cfg).omega_b,
+        "rts": prefilter(w_true, t, "rts", cfg).omega_b,
+    }
+    if euler:
+        inertia = traj.params["inertia_kg_m2"]
+        for m in EULER_MODES:
+            outs[m] = euler_prefilter(
+                z,
+                t,
+                inertia,
+                m.split("-")[1],
+                noise_density_rad_s_sqrt_hz=density,
+                torque_noise_n_m_sqrt_hz=EULER_TORQUE_NOISE,
+            ).omega_b
+            clean[m] = None  # not run on exact rates (costly); reported as "–"
+    return outs, clean, cfg.angular_accel_rad_s2
+
+
+def _score(
+    acc: dict[str, list[float]], out: NDArray, clean: NDArray | None, truth: tuple
+) -> NDArray:
+    """Add one seed's figures of one mode to ``acc`` (mean squares, max, lag); return its squared
+    attitude error over time. ``truth``: (t_s, q_true, w_true, rate_hz)."""
+    t, q_true, w_true, rate_hz = truth
+    e = out - w_true
+    a = att_err_deg(out, t, q_true)
+    d = att_err_deg(clean, t, q_true) if clean is not None else np.nan
+    acc["rate_rms_rad_s"].append(float(np.mean(e * e)))
+    acc["att_rms_deg"].append(float(np.mean(a * a)))
+    acc["att_max_deg"].append(float(a.max()))
+    acc["lag_samples"].append(_lag_samples(e, np.gradient(w_true, t, axis=0), rate_hz))
+    acc["distortion_rate_rms_rad_s"].append(
+        float(np.mean((clean - w_true) ** 2)) if clean is not None else np.nan
+    )
+    acc["distortion_att_rms_deg"].append(float(np.mean(d * d)))
+    return a * a
+
+
+def _pooled(v: dict[str, list[float]]) -> ModeStats:
+    """One mode's figures over the seeds: RMS of the mean squares, mean of the rest."""
+    return ModeStats(
+        rate_rms_rad_s=math.sqrt(np.mean(v["rate_rms_rad_s"])),
+        att_rms_deg=math.sqrt(np.mean(v["att_rms_deg"])),
+        att_max_deg=float(np.mean(v["att_max_deg"])),
+        lag_samples=float(np.mean(v["lag_samples"])),
+        distortion_rate_rms_rad_s=math.sqrt(np.mean(v["distortion_rate_rms_rad_s"])),
+        distortion_att_rms_deg=math.sqrt(np.mean(v["distortion_att_rms_deg"])),
     )
 
 

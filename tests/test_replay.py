@@ -11,8 +11,8 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from imu_dcm.bag_writer import StampedSeries, write_bag
 from imu_dcm.errors import GapWarning, ImuDcmWarning, InputError, LogError
+from imu_dcm.logio.writer import StampedSeries, write_bag
 from imu_dcm.replay import ReplayResult, replay
 from imu_dcm.replay.bias import RestConfig, detect_rest, estimate_bias
 from imu_dcm.replay.clean import clean_imu
@@ -144,8 +144,8 @@ def test_data_synth_heavy_top_log_matches_truth(tmp_path):
         == 0
     )
     good = replay(out, bias="none", method="magnus4")
-    # magnus4 (fourth order) is about 6e-5° off after 1.2 s on this top (the README's accuracy
-    # table); stamps rounded to ns add < 1e-6°
+    # magnus4 (fourth order) is about 6e-5° off after 1.2 s on this top (docs/benchmarks.md,
+    # speed against accuracy); stamps rounded to ns add < 1e-6°
     assert good.summary.max_error_deg < 1e-3
     assert good.summary.samples == 2401 and good.summary.truth_samples_used == 2401
     first = replay(out, bias="none", method="end")
@@ -227,7 +227,7 @@ def test_bad_options():
     with pytest.raises(InputError, match="Expected truth offset 'auto' or seconds"):
         replay("whatever", truth_offset_s="soon")
     # text is parsed by the command line only, with the same one-line messages
-    from imu_dcm.replay.__main__ import parse_numbers
+    from imu_dcm.cli import parse_numbers
 
     with pytest.raises(InputError, match="Expected init quaternion x,y,z,w as 4"):
         parse_numbers("1,0,0", 4, "init quaternion x,y,z,w")

@@ -3,7 +3,8 @@
 Containers (the table :data:`imu_dcm.logio.registry.SOURCES`): ROS 2 bags with MCAP or sqlite3
 storage (split, ``file``- or ``message``-compressed), single ``.mcap`` files (``ros2`` or ``ros1``
 profile; ``ros2msg``, ``ros2idl`` or ``ros1msg`` schemas; CDR, ROS 1 or JSON messages),
-single ``.db3`` files and ROS 1 ``.bag`` files (v2.0; uncompressed, bz2 or lz4 chunks).
+single ``.db3`` files, ROS 1 ``.bag`` files (v2.0; uncompressed, bz2 or lz4 chunks) and
+EuRoC/ASL dataset folders (CSVs).
 Only the channels that can be the IMU or the truth are read (a camera topic is never
 decompressed); their payloads are decoded in bulk with numpy (:mod:`imu_dcm.logio.cdr`).
 
@@ -54,8 +55,9 @@ def read_log(
     ----------
     path : str or Path
         A rosbag2 folder (``metadata.yaml`` + ``.mcap`` / ``.db3`` files), a ``.mcap``,
-        ``.mcap.zstd`` or ``.db3`` file, or a ROS 1 ``.bag``. Regular files and folders only.
-        Never modified.
+        ``.mcap.zstd`` or ``.db3`` file, a ROS 1 ``.bag``, a EuRoC/ASL dataset folder (or its
+        ``mav0``; :mod:`imu_dcm.logio.euroc`), or any other container of
+        :data:`imu_dcm.logio.registry.SOURCES`. Regular files and folders only. Never modified.
     imu_topic : str, optional
         The IMU topic. By default the one topic of ``sensor_msgs/Imu``, of a type containing an
         ``Imu`` field (vendor wrappers), or JSON with ``angular_velocity {x, y, z}``; failing

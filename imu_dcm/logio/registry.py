@@ -15,7 +15,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from imu_dcm.errors import LogError
-from imu_dcm.logio import ardupilot, meta, ulog
+from imu_dcm.logio import ardupilot, euroc, meta, ulog
 from imu_dcm.logio.foreign import REFUSALS
 from imu_dcm.logio.mcap import MAGIC as MCAP_MAGIC
 from imu_dcm.logio.mcap import McapSource
@@ -74,7 +74,7 @@ def _open_inside(folder: Path, progress: Progress | None) -> LogSource:
 
 SOURCES: tuple[SourceEntry, ...] = (
     SourceEntry("rosbag2 folder (metadata.yaml + storage files)", is_bag_folder, open_folder),
-    # euroc.ENTRY,
+    euroc.ENTRY,
     SourceEntry("MCAP file (.mcap)", _magic(MCAP_MAGIC), _in_bag(McapSource)),
     SourceEntry("rosbag2 sqlite3 file (.db3)", _magic(SQLITE_MAGIC), _in_bag(SqliteSource)),
     SourceEntry(

@@ -14,7 +14,7 @@ import warnings
 from pathlib import Path
 
 from imu_dcm.errors import ImuDcmWarning, LogError
-from imu_dcm.logio.channels import describe, pick_imu, plan, read_imu, read_truth
+from imu_dcm.logio.channels import describe, pick_imu_judged, plan, read_imu, read_truths
 from imu_dcm.logio.source import Progress, ReadRequest
 from imu_dcm.logio.types import ChannelInfo, Collected, Damage, LogData, Sink
 
@@ -83,13 +83,13 @@ def read_ros(source: RosSource, request: ReadRequest) -> LogData:
     )
     stopped_at = damage_summary(got.damage) if got.damage else None
     _check_not_empty(got, channels, shown, stopped_at)
-    topic, conns = pick_imu(got, request.imu_topic)
+    topic, conns, notes = pick_imu_judged(got, request.imu_topic)
     imu, undecodable = read_imu(got, topic, conns)
     if len(imu.t_ns) == 0:
         raise LogError(
             f"Expected IMU samples on {imu.topic}, got none that decode ({undecodable} messages)"
         )
-    truth = read_truth(got, imu, request.truth_topic, request.truth_frame)
+    truth, candidates = read_truths(got, imu, request.truth_topic, request.truth_frame)
     if stopped_at:
         warnings.warn(
             f"{shown.name} is truncated or corrupt: {stopped_at}", ImuDcmWarning, stacklevel=4
@@ -111,4 +111,6 @@ def read_ros(source: RosSource, request: ReadRequest) -> LogData:
         got.kind or source.kind,
         tuple(got.damage),
         stopped_at,
+        truth_candidates=candidates,
+        notes=notes,
     )
