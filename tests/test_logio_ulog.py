@@ -171,6 +171,7 @@ def test_events_log_replays_against_vehicle_attitude():
         warnings.simplefilter("ignore", ImuDcmWarning)
         s = replay(EVENTS).summary
     assert s.rms_error_deg < 1.45 + 0.6
+    assert s.truth_estimate_of == "PX4's own estimate"  # the summary says whose truth it is
 
 
 @pytest.mark.parametrize("name", ["sample_log_small.ulg", "sample_px4_events.ulg"])
