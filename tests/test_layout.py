@@ -37,6 +37,7 @@ PACKAGE = REPO / "imu_dcm"
 CORE = (
     "so3",
     "kernel",
+    "methods",
     "integrate",
     "streaming",
     "resample",

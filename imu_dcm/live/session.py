@@ -37,7 +37,7 @@ def _warm_up(method: str) -> None:
     """Load numba and the compiled kernel before the source opens, so the first samples do not
     wait for them (about 0.7 s with a warm cache, measured as the first second's latency)."""
     from imu_dcm.integrate import integrate
-    from imu_dcm.replay.core import slerp_truth  # noqa: F401 - the truth slerp's modules
+    from imu_dcm.resample import slerp_truth  # noqa: F401 - the truth slerp's modules
     from imu_dcm.streaming import DcmIntegrator
 
     q0, w, t = [0.0, 0.0, 0.0, 1.0], np.zeros((5, 3)), 0.001 * np.arange(5)
@@ -211,32 +211,16 @@ def run(
     o = LiveOptions(**options)
     spec, bias_v, init_q = _checked(source, o)
     say = say or _say_stderr
-    from imu_dcm.live.view import LiveView, check_mode
+    from imu_dcm.live.view import check_mode
 
     check_mode(o.rerun)
     _check_outputs(o.record, o.force, o.summary_json)
     _warm_up(o.method)
-    src: Source = open_source(
-        spec,
-        imu_topic=o.imu_topic,
-        truth_topic=o.truth_topic,
-        gyro_units=o.gyro_units,
-        time_units=o.time_units,
-        give_up_s=o.give_up_s,
-        stdin_fd=o.stdin_fd,
-        batch_s=min(BATCH_S, o.view_interval_s / 4),
-    )
+    src = _open_source(spec, o)
     recorder = view = None
     try:
         recorder = _open_recorder(source, o, bias_v)
-        rerun = o.rerun
-        if rerun is None and not _has_display():
-            from imu_dcm.viz import HEADLESS_HINT
-
-            say(HEADLESS_HINT)
-            rerun = "off"
-        if rerun != "off":
-            view = LiveView(rerun, title=f"live {source}", say=say)
+        view = _open_view(o.rerun, source, say)
         pipe = Pipeline(
             method=o.method,
             bias=bias_v,
@@ -260,6 +244,33 @@ def run(
         write_json(o.summary_json, summary, what="--summary-json file")
     q = None if pipe.q_last is None else np.asarray(pipe.q_last, dtype=float)
     return LiveResult(summary, q, pipe.t_last_ns, lat)
+
+
+def _open_source(spec, o: LiveOptions) -> Source:
+    """The source of ``spec``, created with the options it reads (not started)."""
+    return open_source(
+        spec,
+        imu_topic=o.imu_topic,
+        truth_topic=o.truth_topic,
+        gyro_units=o.gyro_units,
+        time_units=o.time_units,
+        give_up_s=o.give_up_s,
+        stdin_fd=o.stdin_fd,
+        batch_s=min(BATCH_S, o.view_interval_s / 4),
+    )
+
+
+def _open_view(rerun: str | None, source: str, say):
+    """The live view, or None: ``off``, or no mode given and no display (one line says how to
+    ask for one)."""
+    from imu_dcm.live.view import LiveView
+
+    if rerun is None and not _has_display():
+        from imu_dcm.viz import HEADLESS_HINT
+
+        say(HEADLESS_HINT)
+        return None
+    return None if rerun == "off" else LiveView(rerun, title=f"live {source}", say=say)
 
 
 def _open_recorder(source: str, o: LiveOptions, bias_v):
