@@ -19,6 +19,7 @@ from pathlib import Path
 
 from imu_dcm.errors import LogError
 from imu_dcm.logio import meta
+from imu_dcm.logio.lfs import lfs_pointer
 from imu_dcm.logio.mcap import MAGIC as MCAP_MAGIC
 from imu_dcm.logio.mcap import McapSource
 from imu_dcm.logio.ros1 import MAGIC as ROS1_MAGIC
@@ -113,6 +114,8 @@ def source_for_file(p: Path, storage: str = "", progress=None):
     if not head:
         what = "an MCAP file" if p.suffix == ".mcap" else "a log file"
         raise LogError(f"Expected {what}, got an empty file: {p}")
+    if lfs := lfs_pointer(p, head):
+        raise LogError(lfs)
     for magic, (what, fix) in _FOREIGN.items():
         if head.startswith(magic):
             raise LogError(f"Expected a ROS bag or an MCAP file, got {what}: {p}; {fix}")

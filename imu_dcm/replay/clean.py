@@ -273,7 +273,8 @@ def _deg_evidence(omega_b: NDArray, t_s: NDArray, q_truth: NDArray) -> str | Non
     p99 = float(np.percentile(np.linalg.norm(omega_b, axis=1), 99)) if len(omega_b) else 0.0
     if p99 > FULL_SCALE_RAD_S:
         return (
-            f"99 % of |omega| are below {p99:.0f}, above the ±2000 °/s = "
-            f"{FULL_SCALE_RAD_S:.1f} rad/s full scale of common gyros"
+            f"the 99th percentile of |omega| is {p99:.0f} rad/s, above the ±2000 °/s = "
+            f"{FULL_SCALE_RAD_S:.1f} rad/s full scale of common gyros (as deg/s it would be "
+            f"{np.radians(p99):.2f} rad/s)"
         )
     return None

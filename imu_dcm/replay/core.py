@@ -45,6 +45,7 @@ from imu_dcm.replay.truth import (
     find_jumps,
     slerp_truth,
 )
+from imu_dcm.stamps import timing_doubt
 
 __all__ = ["CleanedImu", "ReplayResult", "ReplaySummary", "clean_imu", "replay", "slerp_truth"]
 
@@ -220,6 +221,11 @@ def _gyro(log: LogData, s: ReplaySettings, notes: list[str]) -> _Gyro:
         if base == "header" and len(np.unique(imu.log_t_ns[:1000])) > 1:
             hint = "; the log times differ: try --time log"
         raise LogError(f"Expected at least 2 valid gyro samples on {imu.topic}, got {n}{hint}")
+    doubt = timing_doubt(clean.t_ns)
+    if doubt is not None:
+        clause, fix = doubt
+        hint = f"; was it converted with the wrong time unit (convert-csv --time-unit {fix})?"
+        _warn(notes, f"{imu.topic}: stamps no IMU produces: {clause}{hint if fix else ''}")
     t_s = (clean.t_ns - clean.t_ns[0]).astype(np.float64) * 1e-9
     return _Gyro(base, clean, clean.t_ns, t_s, clean.omega_b, _accel(imu, clean, notes))
 
