@@ -10,8 +10,9 @@ Wahba's problem, solved by the SVD of ``H = Σ a_k b_kᵀ`` (Kabsch, with the si
 The singular values of ``H`` say how many axes the motion determines: an axis is determined when
 its singular value is at least :data:`MIN_AXIS_SHARE` of the largest. Two or three determined
 axes fix the rotation; one (a robot that only yaws) fixes only where that axis goes, and the
-smallest rotation that takes it there is reported. The nearest signed axis permutation is named
-when it lies within :data:`PERMUTATION_DEG` ("gyro y = truth z").
+smallest rotation that takes it there is reported (and applied: the motion is about that axis,
+so the unknown turn about it hardly matters to the score). The nearest signed axis
+permutation is named when it lies within :data:`PERMUTATION_DEG` ("gyro y = truth z").
 
 Conventions: quaternions ``[x, y, z, w]``; ``q_t_g`` maps gyro-frame vectors into the truth's
 body frame (``omega_T = R(q_t_g) omega_G``), so the gyro's attitude is ``q_w_t ⊗ q_t_g``.
@@ -73,8 +74,12 @@ class Mounting:
 
     @property
     def determined(self) -> bool:
-        """The motion fixes the whole rotation (two axes or more) and the fit is good."""
-        return self.axes_determined >= 2 and self.fit >= MIN_FIT
+        """The motion determines at least one axis and the rotated gyro fits the truth.
+
+        With one axis (a robot that only yaws) the rotation about it is unknown, but it hardly
+        matters for scoring: the motion is about that axis.
+        """
+        return self.axes_determined >= 1 and self.fit >= MIN_FIT
 
     def describe(self) -> str:
         """One clause: angle, axis, permutation, axes determined, fit."""
@@ -86,9 +91,14 @@ class Mounting:
         )
         if self.source == "given":
             return f"{self.angle_deg:.1f}° about ({ax}) as given{perm}"
+        partly = (
+            " (the rotation about it is unknown: the smallest one is used)"
+            if self.axes_determined == 1
+            else ""
+        )
         return (
             f"{self.angle_deg:.1f}° about ({ax}){perm}; the motion determines "
-            f"{self.axes_determined} of 3 axes, fit {self.fit:.3f}"
+            f"{self.axes_determined} of 3 axes{partly}, fit {self.fit:.3f}"
         )
 
 
