@@ -77,36 +77,10 @@ def replay(
     path : str, Path or LogData
         ROS 2 bag folder or log file (never modified), or a log already read (then the topic
         and frame choices are those it was read with).
-    imu_topic, truth_topic : str, optional
-        Channel choices (see the log reader); ``truth_topic="none"`` ignores any truth. A truth
-        named here is scored even when its rate does not follow the gyro (the summary says so);
-        an automatically picked one that does not follow is dropped with a warning.
-    truth_frame : str, optional
-        Child frame of a transform truth (``/tf``), passed to the reader.
-    time : {"auto", "header", "log"}
-        Stamp source; ``"auto"`` (default) prefers the header stamps (see
-        :func:`imu_dcm.replay.truth.choose_time`).
-    method : str
-        Integrator method, one of :data:`imu_dcm.integrate.METHODS` (default ``"magnus4"``).
-    bias : "auto", "none" or array_like (3,)
-        Gyro bias handling, rad/s (see :func:`imu_dcm.replay.bias.estimate_bias`).
-    gyro_units : {"rad/s", "deg/s"} or None
-        Unit of the log's rates; deg/s are converted. None: rad/s (the ROS convention), with a
-        warning when the rates look like deg/s.
-    init_q_w_b : array_like (4,), optional
-        Initial ``q_w_b`` ``[x, y, z, w]`` when the log has no truth (default identity).
-    prefilter : {None, "kalman", "rts"}
-        Gyro pre-filter (:mod:`imu_dcm.prefilter`), applied after bias removal.
-    prefilter_config : PrefilterConfig, optional
-    truth_offset_s : float or "auto"
-        Added to the truth stamps, s (default 0); ``"auto"``: the shift that best aligns the
-        truth's rate with the gyro's. The best shift is reported either way.
-    rest_config : RestConfig, optional
-    mounting : "auto", "none" or array_like (4,)
-        The rotation ``q_t_g`` ``[x, y, z, w]`` from the gyro's frame into the truth's body frame
-        (:mod:`imu_dcm.replay.mounting`). ``"auto"`` (default): estimated, and applied when the
-        motion determines it and it exceeds a few degrees; ``"none"``: estimated and reported,
-        never applied; a quaternion: applied as given.
+    imu_topic, truth_topic, truth_frame, time, method, bias, gyro_units, init_q_w_b, prefilter,
+    prefilter_config, truth_offset_s, rest_config, mounting
+        How to replay: each is a field of :class:`imu_dcm.replay.settings.ReplaySettings`
+        (``init_q_w_b`` is its ``q_init``), documented there.
     progress : callable(stage, fraction), optional
         Called as work advances (for a progress bar).
 
