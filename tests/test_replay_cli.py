@@ -18,8 +18,8 @@ from mcap_ros2.decoder import DecoderFactory
 from scipy.spatial.transform import Rotation
 from test_logio import write_imu_bag  # tests/ is on sys.path (pytest rootdir conftest)
 
-from imu_dcm.bag_writer import StampedSeries, write_bag
 from imu_dcm.logio import resolve_mcap_path
+from imu_dcm.logio.writer import StampedSeries, write_bag
 from imu_dcm.replay.__main__ import main
 
 REPO = Path(__file__).resolve().parents[1]
@@ -169,7 +169,7 @@ def test_bad_inputs_one_line_exit_2(tmp_path, capsys):
     )
     _assert_one_line_error(capsys, [str(late), "--rerun", "off"], "to overlap the gyro")
     _assert_one_line_error(
-        capsys, [str(late), "--rerun", "off", "--init-quat", "1,2"], "init quaternion"
+        capsys, [str(late), "--rerun", "off", "--init-quat", "1,2"], "--init-quat x,y,z,w"
     )
     _assert_one_line_error(capsys, [str(late), "--rerun", "bogus"], "--rerun")
     _assert_one_line_error(capsys, [str(late), "--rerun", "off", "--imu-topic", "/x"], "'/x'")
@@ -286,7 +286,7 @@ def test_subprocess_replays_shipped_trial(tmp_path):
 def test_progress_bar_only_on_a_terminal():
     import io
 
-    from imu_dcm.replay.__main__ import Progress
+    from imu_dcm.cli import Progress
 
     class Terminal(io.StringIO):
         def isatty(self) -> bool:

@@ -14,9 +14,9 @@ import pytest
 from conftest import BROAD_TRIALS
 from scipy.spatial.transform import Rotation
 
-from imu_dcm.bag_writer import StampedSeries, write_bag
 from imu_dcm.errors import ImuDcmWarning, LogError
 from imu_dcm.logio import read_log
+from imu_dcm.logio.writer import StampedSeries, write_bag
 from imu_dcm.replay import replay
 from imu_dcm.replay.clean import clean_imu
 
@@ -150,7 +150,7 @@ def test_a_non_finite_estimate_is_an_error_never_a_score(trial, tmp_path, monkey
         def as_quat(self):
             return self.q
 
-    monkeypatch.setattr(core, "integrate", lambda w, t, q0, method: Broken(len(t)))
+    monkeypatch.setattr(core, "integrate_quat", lambda w, t, q0, method: Broken(len(t)).q)
     with pytest.raises(LogError, match="Expected a finite attitude estimate, got NaN/Inf"):
         _run(SHIPPED)
 

@@ -28,7 +28,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from imu_dcm.errors import GapWarning, ImuDcmWarning, LogError
-from imu_dcm.integrate import integrate
+from imu_dcm.integrate import integrate_quat
 from imu_dcm.logio import LogData, read_log
 from imu_dcm.metrics import AttitudeError, attitude_error_deg, rms
 from imu_dcm.replay.bias import BIAS_RULE, BiasEstimate, RestConfig, estimate_bias
@@ -43,8 +43,8 @@ from imu_dcm.replay.truth import (
     check_truth,
     choose_time,
     find_jumps,
-    slerp_truth,
 )
+from imu_dcm.resample import slerp_truth
 from imu_dcm.stamps import timing_doubt
 
 __all__ = ["CleanedImu", "ReplayResult", "ReplaySummary", "clean_imu", "replay", "slerp_truth"]
@@ -370,7 +370,7 @@ def _integrate(s: ReplaySettings, omega, t_s, q_truth, anchors, topic: str) -> N
         if b - a >= 2:
             with warnings.catch_warnings():  # gaps were reported once, by clean_imu
                 warnings.simplefilter("ignore", GapWarning)
-                q_est[a:b] = integrate(omega[a:b], t_s[a:b], q0, s.method).as_quat()
+                q_est[a:b] = integrate_quat(omega[a:b], t_s[a:b], q0, s.method)
         else:
             q_est[a:b] = q0
     finite = np.all(np.isfinite(q_est[anchors[0] :]), axis=1)
