@@ -286,17 +286,19 @@ def _choose_mounting(mode, est: Mounting | None, imu_frame: str, truth, notes) -
             compare = f"; the motion says {est.describe()}, {diff:.1f}° from the given one"
         _warn(notes, f"mounting ({frames}): {given.describe()}, applied{compare}")
         return given, True
-    if est is None or est.angle_deg <= APPLY_DEG:
-        return est, False
-    if mode == "auto" and est.determined:
+    if est is None or not est.determined or est.angle_deg <= APPLY_DEG:
+        return est, False  # nothing to say: no turn to learn from, or no mounting to speak of
+    if mode == "auto":
         _warn(
             notes,
             f"mounting ({frames}): the gyro frame is {est.describe()}: applied to the scoring "
             f"(--mounting none to score without it)",
         )
         return est, True
-    why = "--mounting none" if mode == "none" else "the motion does not determine it"
-    _warn(notes, f"mounting ({frames}): the gyro frame is {est.describe()}: not applied ({why})")
+    _warn(
+        notes,
+        f"mounting ({frames}): the gyro frame is {est.describe()}: not applied (--mounting none)",
+    )
     return est, False
 
 
