@@ -235,7 +235,7 @@ def format_summary(s: ReplaySummary) -> str:
     bias = f"({b[0]:+.5f}, {b[1]:+.5f}, {b[2]:+.5f}) rad/s"
     bdeg = np.degrees(b)
     if s.bias_mode == "auto" and not s.bias_segments:
-        lines.append(f"bias       auto: no rest found ({s.no_rest}); no bias removed")
+        lines.append(f"bias       auto: no rest found: {s.no_rest}; no bias removed")
     elif s.bias_mode == "auto":
         nseg = len(s.bias_segments)
         how = (
