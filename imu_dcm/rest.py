@@ -246,6 +246,10 @@ def explain_no_rest(
 class CausalRestBias:
     """Online rest detector and bias estimate: the causal twin of :func:`detect_rest`.
 
+    It runs the rule without an accelerometer (a live gyro stream carries none): rate spread at
+    the noise floor and mean rate under ``max_rate_rad_s``, the same thresholds as the batch rule
+    given no ``accel_b`` (a test holds the two equal).
+
     The gyro bias from rest, estimated causally as samples arrive (replay's rule, online).
 
     Replay's rule (``imu_dcm.replay.bias``): a sample is at rest when a window of ``win`` samples

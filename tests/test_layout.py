@@ -41,6 +41,7 @@ CORE = (
     "streaming",
     "resample",
     "rest",
+    "stamps",
     "metrics",
     "allan",
     "prefilter",
