@@ -205,7 +205,7 @@ def _not_a_folder_of_logs(log: str) -> None:
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         found = find_logs([log])
-    if found and found != [os.path.abspath(log)]:
+    if len(found) > 1:  # a folder holding one log file is that log (the reader opens it)
         n = len(found)
         raise InputError(
             f"Expected one log, got a folder of {n} log{'s' if n != 1 else ''} {log!r}; "
