@@ -43,6 +43,7 @@ CORE = (
     "streaming",
     "resample",
     "rest",
+    "stamps",
     "metrics",
     "allan",
     "prefilter",
