@@ -77,7 +77,7 @@ def _has_display() -> bool:
     return has_display()
 
 
-def _check_outputs(record, force: bool, summary_json) -> None:
+def _check_outputs(record, force: bool, summary_json, rerun) -> None:
     """The output paths, before the source is opened (imu_dcm.outputs' rule)."""
     from imu_dcm.outputs import check_output_dir, check_output_file
 
@@ -85,6 +85,8 @@ def _check_outputs(record, force: bool, summary_json) -> None:
         check_output_dir(record, force=force, what="--record bag")
     if summary_json is not None:
         check_output_file(summary_json, (), "--summary-json file")
+    if isinstance(rerun, str) and rerun.startswith("save:"):
+        check_output_file(rerun[len("save:") :], (), "--rerun save: file")
 
 
 def _pct(a: NDArray, p: float) -> float | None:
@@ -207,7 +209,7 @@ def run(
     from imu_dcm.live.view import LiveView, check_mode
 
     check_mode(rerun)
-    _check_outputs(record, force, summary_json)
+    _check_outputs(record, force, summary_json, rerun)
     _warm_up(method)
     src: Source = open_source(
         spec,
