@@ -40,7 +40,7 @@ from imu_dcm.replay.table import (
     write_table,
 )
 
-__all__ = ["BatchResult", "find_logs", "main", "replay_many", "replay_one", "row_from_result"]
+__all__ = ["BatchResult", "find_logs", "replay_many", "replay_one", "row_from_result"]
 
 #: Files taken as logs when a folder is searched (a folder with metadata.yaml is a bag itself).
 LOG_SUFFIXES = (".mcap", ".db3", ".bag")
@@ -327,11 +327,3 @@ def replay_many(
         chart_path,
         summary_line(rows + others),
     )
-
-
-# ------------------------------------------------------------------------------- CLI
-def main(argv: list[str] | None = None) -> int:
-    """``python -m imu_dcm.replay batch ...``: see :mod:`imu_dcm.replay.batch_cli`."""
-    from imu_dcm.replay.batch_cli import main as cli_main
-
-    return cli_main(argv)
