@@ -162,12 +162,8 @@ def parse_numbers(text: str, n: int, name: str) -> list[float]:
     return values
 
 
-def parse_bias(text: str, name: str = "--bias") -> str | list[float]:
-    """``auto``, ``none`` or ``x,y,z`` (rad/s) -> ``"auto"``, ``"none"`` or 3 floats.
-
-    The one parser of bias text (replay, batch and live); the libraries take numbers or
-    ``"auto"``/``"none"``. A near miss such as ``atuo`` is answered with the word meant.
-    """
+def _word_or_numbers(text: str, n: int, name: str, what: str) -> str | list[float]:
+    """``auto``, ``none`` or ``n`` comma-separated numbers (``what`` names them)."""
     from imu_dcm.errors import InputError
 
     word = text.strip().lower()
@@ -175,10 +171,25 @@ def parse_bias(text: str, name: str = "--bias") -> str | list[float]:
         return word
     if any(c.isalpha() for c in word.replace("e", "")):
         raise InputError(
-            f"Expected {name} auto, none or x,y,z in rad/s, got {text!r}"
+            f"Expected {name} auto, none or {what}, got {text!r}"
             f"{did_you_mean(word, ('auto', 'none'))}"
         )
-    return parse_numbers(text, 3, f"{name} (rad/s)")
+    return parse_numbers(text, n, f"{name} ({what})")
+
+
+def parse_bias(text: str, name: str = "--bias") -> str | list[float]:
+    """``auto``, ``none`` or ``x,y,z`` (rad/s) -> ``"auto"``, ``"none"`` or 3 floats.
+
+    The one parser of bias text (replay, batch and live); the libraries take numbers or
+    ``"auto"``/``"none"``. A near miss such as ``atuo`` is answered with the word meant.
+    """
+    return _word_or_numbers(text, 3, name, "x,y,z in rad/s")
+
+
+def parse_mounting(text: str, name: str = "--mounting") -> str | list[float]:
+    """``auto``, ``none`` or ``x,y,z,w`` (the gyro-to-truth-body rotation) -> the word or 4
+    floats (normalised and checked by the replay)."""
+    return _word_or_numbers(text, 4, name, "a quaternion x,y,z,w")
 
 
 def parse_init_quat(text: str | None) -> list[float] | None:

@@ -7,7 +7,7 @@ Rules, checked before any work is done and again just before a file is replaced:
 * An existing output must be a regular file (or, for folder outputs, a folder): devices, FIFOs
   and sockets are refused (``/dev/full`` stays a device).
 * ``force`` replaces only what this project wrote: a bag folder made by
-  :func:`imu_dcm.bag_writer.write_bag` (``metadata.yaml`` plus one ``<name>.mcap`` whose MCAP
+  :func:`imu_dcm.logio.writer.write_bag` (``metadata.yaml`` plus one ``<name>.mcap`` whose MCAP
   header names ``imu_dcm.bag_writer``). Anything else is refused even with ``force``.
 * Missing parent folders of an output are created when it is written (``--out out/top``); the
   nearest existing one must be a writable folder.
@@ -150,7 +150,7 @@ def check_output_file(
 
 
 def is_own_bag(path: str | os.PathLike) -> bool:
-    """True for a bag folder written by :func:`imu_dcm.bag_writer.write_bag` and nothing else.
+    """True for a bag folder written by :func:`imu_dcm.logio.writer.write_bag` and nothing else.
 
     The folder holds exactly ``metadata.yaml`` and ``<folder name>.mcap``, and the MCAP header
     record names the library ``imu_dcm.bag_writer``.

@@ -1,10 +1,23 @@
 """Rest detection: the still segments of a gyro log, and the windowed statistics behind them.
 
-A gyro at rest measures its bias plus noise. A sample is *at rest* when it lies in a window of at
-least ``min_duration_s`` (0.5 s) whose mean rate magnitude is below ``max_rate_rad_s`` and whose
-per-axis standard deviation is below ``max_std_rad_s``. Consecutive rest samples form a rest
-segment. The bias estimate (:mod:`imu_dcm.replay.bias`) and the noise estimate of the pre-filter
-(:mod:`imu_dcm.prefilter`) both start from here.
+A gyro at rest measures its bias plus noise. Rest is stillness, judged over windows of
+``min_duration_s`` (0.5 s):
+
+* the rate is at its noise floor: every per-axis standard deviation below ``max_std_rad_s``;
+* where the log has an accelerometer (``accel_b``, m/s²), it is still too: every per-axis
+  standard deviation below ``max_accel_std_m_s2`` (vibration of smooth driving shows here,
+  not in the gyro), and ``|mean a|`` within ``max_gravity_error_m_s2`` of g. Stillness is then
+  confirmed, and the rate's mean (the bias) may be as large as ``max_bias_rad_s`` (several
+  °/s: a EuRoC ADIS16448 sits at 4.6 °/s);
+* without an accelerometer nothing tells a smooth constant turn from a bias, so the mean rate
+  must stay below ``max_rate_rad_s`` (2 °/s, above most MEMS biases): such rest is
+  *unconfirmed*, and a larger bias needs ``--bias x,y,z``.
+
+A sample is at rest when a still window covers it; consecutive rest samples form a rest segment.
+When none is found, :func:`explain_no_rest` names the condition that failed and by how much.
+The bias estimate (:mod:`imu_dcm.replay.bias`), the pre-filter's noise estimate
+(:mod:`imu_dcm.prefilter`) and the live command's causal bias (:class:`CausalRestBias`, the
+rule without accelerometer, online) all start from here.
 
 Conventions: ``omega_b`` (N, 3) body rate relative to the world in body axes, rad/s; ``t_s`` (N,)
 seconds, increasing.
@@ -13,7 +26,6 @@ seconds, increasing.
 from __future__ import annotations
 
 import math
-from collections import deque
 from dataclasses import dataclass
 
 import numpy as np
@@ -21,10 +33,15 @@ from numpy.typing import ArrayLike, NDArray
 
 from imu_dcm.errors import InputError
 
+#: Standard gravity, m/s² (a still accelerometer reads about this much).
+GRAVITY_M_S2 = 9.80665
+
 __all__ = [
+    "GRAVITY_M_S2",
     "CausalRestBias",
     "RestConfig",
     "detect_rest",
+    "explain_no_rest",
     "longest_run",
     "quietest_std",
     "runs",
@@ -44,11 +61,21 @@ class RestConfig:
         above the largest MEMS biases seen, far below deliberate motion).
     max_std_rad_s : largest per-axis standard deviation in the window, rad/s (default 0.01 ≈
         0.6 °/s; 2–5x the noise of a consumer gyro at a few hundred Hz).
+    max_bias_rad_s : largest window-mean rate magnitude when an accelerometer confirms the
+        stillness, rad/s (default 0.175 = 10 °/s: the largest biases of uncalibrated MEMS).
+    max_accel_std_m_s2 : largest per-axis accelerometer standard deviation in the window, m/s²
+        (default 0.2 ≈ 0.02 g: 3x the noise of the BROAD accelerometers at rest; vibration of a
+        driving vehicle is several times more).
+    max_gravity_error_m_s2 : largest difference between ``|mean a|`` and g, m/s² (default 0.5
+        ≈ 0.05 g: scale errors and biases of MEMS accelerometers).
     """
 
     min_duration_s: float = 0.5
     max_rate_rad_s: float = 0.035
     max_std_rad_s: float = 0.01
+    max_bias_rad_s: float = 0.175
+    max_accel_std_m_s2: float = 0.2
+    max_gravity_error_m_s2: float = 0.5
 
 
 def window_samples(t_s: NDArray, duration_s: float) -> int:
@@ -112,7 +139,50 @@ def quietest_std(omega_b: NDArray, t_s: NDArray, window_s: float) -> float:
     return float(np.sqrt(var.max(axis=1).min()))
 
 
-def detect_rest(omega_b: ArrayLike, t_s: ArrayLike, config: RestConfig | None = None) -> NDArray:
+def _checked(omega_b: ArrayLike, t_s: ArrayLike, accel_b: ArrayLike | None):
+    w = np.asarray(omega_b, dtype=float)
+    t = np.asarray(t_s, dtype=float)
+    if w.ndim != 2 or w.shape[1] != 3 or len(t) != len(w):
+        raise InputError(f"Expected omega_b (N, 3) and t_s (N,), got {w.shape} and {t.shape}")
+    acc = None if accel_b is None else np.asarray(accel_b, dtype=float)
+    if acc is not None and acc.shape != w.shape:
+        raise InputError(f"Expected accel_b of shape {w.shape}, got {acc.shape}")
+    return w, t, acc
+
+
+def _window_conditions(
+    w: NDArray, acc: NDArray | None, win: int, cfg: RestConfig
+) -> list[tuple[str, NDArray, float, str]]:
+    """Each rest condition over every window of ``win`` samples: (name, value, limit, unit).
+
+    A window passes a condition when its value is below the limit.
+    """
+    mean, var = windowed_mean_var(w, win)
+    rate = np.linalg.norm(mean, axis=1)
+    conds = [("rate std", np.sqrt(var.max(axis=1)), cfg.max_std_rad_s, "rad/s")]
+    if acc is None:
+        conds.append(("mean |omega| (no accelerometer)", rate, cfg.max_rate_rad_s, "rad/s"))
+        return conds
+    a_mean, a_var = windowed_mean_var(acc, win)
+    conds += [
+        ("mean |omega|", rate, cfg.max_bias_rad_s, "rad/s"),
+        ("accel std", np.sqrt(a_var.max(axis=1)), cfg.max_accel_std_m_s2, "m/s²"),
+        (
+            "| |a| - g |",
+            np.abs(np.linalg.norm(a_mean, axis=1) - GRAVITY_M_S2),
+            cfg.max_gravity_error_m_s2,
+            "m/s²",
+        ),
+    ]
+    return conds
+
+
+def detect_rest(
+    omega_b: ArrayLike,
+    t_s: ArrayLike,
+    config: RestConfig | None = None,
+    accel_b: ArrayLike | None = None,
+) -> NDArray:
     """Boolean mask (N,) of samples at rest (see the module docstring for the rule).
 
     Parameters
@@ -122,21 +192,19 @@ def detect_rest(omega_b: ArrayLike, t_s: ArrayLike, config: RestConfig | None = 
     t_s : array_like, shape (N,)
         Sample times, s, increasing.
     config : RestConfig, optional
+    accel_b : array_like, shape (N, 3), optional
+        Specific force on the same rows, m/s², finite; confirms stillness when given.
     """
     cfg = config or RestConfig()
-    w = np.asarray(omega_b, dtype=float)
-    t = np.asarray(t_s, dtype=float)
-    if w.ndim != 2 or w.shape[1] != 3 or len(t) != len(w):
-        raise InputError(f"Expected omega_b (N, 3) and t_s (N,), got {w.shape} and {t.shape}")
+    w, t, acc = _checked(omega_b, t_s, accel_b)
     n = len(w)
     win = window_samples(t, cfg.min_duration_s)
     rest = np.zeros(n, dtype=bool)
     if n < win:
         return rest
-    mean, var = windowed_mean_var(w, win)  # window starting at i: samples [i, i + win)
-    still = (np.linalg.norm(mean, axis=1) < cfg.max_rate_rad_s) & np.all(
-        var < cfg.max_std_rad_s**2, axis=1
-    )
+    still = np.ones(n - win + 1, dtype=bool)  # window starting at i: samples [i, i + win)
+    for _name, value, limit, _unit in _window_conditions(w, acc, win, cfg):
+        still &= value < limit
     # a sample is at rest when any still window covers it: spread each still start over win
     cover = np.zeros(n + 1, dtype=np.int64)
     starts = np.flatnonzero(still)
@@ -144,6 +212,35 @@ def detect_rest(omega_b: ArrayLike, t_s: ArrayLike, config: RestConfig | None = 
     np.add.at(cover, starts + win, -1)
     rest[:] = np.cumsum(cover[:-1]) > 0
     return rest
+
+
+def explain_no_rest(
+    omega_b: ArrayLike,
+    t_s: ArrayLike,
+    config: RestConfig | None = None,
+    accel_b: ArrayLike | None = None,
+) -> str:
+    """Why no window passed: the conditions that failed in the window closest to passing.
+
+    The closest window is the one whose worst condition (value over limit) is smallest. Returns
+    one clause, e.g. ``"the stillest 0.50 s (at 12.30 s) has rate std 0.0150 rad/s > 0.0100"``.
+    """
+    cfg = config or RestConfig()
+    w, t, acc = _checked(omega_b, t_s, accel_b)
+    win = window_samples(t, cfg.min_duration_s)
+    if len(w) < win:
+        return f"the log ({t[-1] - t[0]:.2f} s) is shorter than a {cfg.min_duration_s:.2f} s window"
+    conds = _window_conditions(w, acc, win, cfg)
+    worst = np.max([value / limit for _n, value, limit, _u in conds], axis=0)
+    i = int(np.argmin(worst))
+    failed = [
+        f"{name} {value[i]:.4g} {unit} > {limit:.4g} ({value[i] / limit:.1f}x)"
+        for name, value, limit, unit in conds
+        if value[i] >= limit
+    ]
+    return f"the stillest {cfg.min_duration_s:.2f} s (at {t[i] - t[0]:.2f} s) has " + ", ".join(
+        failed
+    )
 
 
 class CausalRestBias:
@@ -189,98 +286,118 @@ class CausalRestBias:
         self.segments: list[dict] = []
         self.updates = 0
         self.at_rest = False
-        self._ts: list[float] = []
         self.win = 0
-        self._buf: deque = deque()  # last win samples (w, t)
-        self._sum = [0.0, 0.0, 0.0]
-        self._sq = [0.0, 0.0, 0.0]
+        self._probe_w: list[NDArray] = []  # samples before the window length is known
+        self._probe_t: list[NDArray] = []
+        self._tail_w = np.zeros((0, 3))  # the last win samples
+        self._tail_t = np.zeros(0)
         self._k = -1  # index of the newest sample
         self._seg_start = -1  # a, or -1 when not in a segment
         self._seg_t0 = 0.0
-        self._acc = [0.0, 0.0, 0.0]
-        self._acc_n = 0
-        self._hist: deque = deque()  # samples of the segment not yet accumulated (w, index)
-        self._recompute = 0
-        self._last_t = 0.0
-
-    def _set_window(self) -> None:
-        steps = sorted(b - a for a, b in zip(self._ts, self._ts[1:], strict=False))
-        dt = steps[len(steps) // 2] if steps else 1.0
-        self.win = max(2, math.ceil(self.min_duration_s / dt))
+        self._seg_end_t = 0.0
+        self._lo = 0  # the segment's bias averages the samples [lo, acc_hi)
+        self._acc_hi = 0
+        self._acc = np.zeros(3)
 
     def update(self, w: tuple[float, float, float], t_s: float) -> tuple[float, float, float]:
         """Add one sample (rad/s, body axes; stamp s); return the bias to subtract from it."""
-        self._last_t = t_s
-        if not self.win:
-            self._ts.append(t_s)
-            if len(self._ts) <= self.probe:
-                self._buf.append((w, t_s))
-                if len(self._ts) < self.probe:
-                    return self.bias_rad_s
-            self._set_window()
-            replay = list(self._buf)
-            self._buf.clear()
-            self._k = -1
-            for wi, ti in replay:
-                self._step(wi, ti)
-            return self.bias_rad_s
-        self._step(w, t_s)
+        self.update_many(np.array([w], dtype=float), np.array([t_s], dtype=float))
         return self.bias_rad_s
 
-    def _step(self, w, t_s: float) -> None:
-        self._k += 1
-        k = self._k
-        buf, s, q = self._buf, self._sum, self._sq
-        buf.append((w, t_s))
-        for i in range(3):
-            s[i] += w[i]
-            q[i] += w[i] * w[i]
-        if len(buf) > self.win:
-            old, _ = buf.popleft()
-            for i in range(3):
-                s[i] -= old[i]
-                q[i] -= old[i] * old[i]
-        self._recompute += 1
-        if self._recompute >= 4096:  # bound the drift of the running sums
-            self._recompute = 0
-            s[:] = [sum(v[0][i] for v in buf) for i in range(3)]
-            q[:] = [sum(v[0][i] ** 2 for v in buf) for i in range(3)]
-        still = False
-        if len(buf) == self.win:
-            n = self.win
-            m = [s[i] / n for i in range(3)]
-            var = [max(q[i] / n - m[i] * m[i], 0.0) for i in range(3)]
-            still = math.sqrt(m[0] ** 2 + m[1] ** 2 + m[2] ** 2) < self.max_rate and all(
-                v < self.max_var for v in var
+    def update_many(self, omega_b: NDArray, t_s: NDArray) -> NDArray:
+        """Add samples in order; return the bias to subtract from each, as :meth:`update` would.
+
+        Parameters
+        ----------
+        omega_b : float64 (n, 3) — body rates, rad/s.
+        t_s : float64 (n,) — their stamps, s, increasing.
+
+        Returns
+        -------
+        float64 (n, 3) — row ``j``: the estimate available once sample ``j`` has arrived.
+        """
+        w = np.asarray(omega_b, dtype=float).reshape(-1, 3)
+        t = np.asarray(t_s, dtype=float).reshape(-1)
+        if self.win:
+            return self._steps(w, t)
+        # the window length needs the median of the first `probe` steps
+        self._probe_w.append(w)
+        self._probe_t.append(t)
+        seen = sum(len(x) for x in self._probe_t)
+        if seen < self.probe:
+            return np.tile(self.bias_rad_s, (len(w), 1))
+        pw, pt = np.concatenate(self._probe_w), np.concatenate(self._probe_t)
+        self._probe_w, self._probe_t = [], []
+        p = self.probe
+        steps = np.diff(pt[:p])
+        dt = float(np.sort(steps)[len(steps) // 2]) if len(steps) else 1.0
+        self.win = max(2, math.ceil(self.min_duration_s / dt))
+        before = np.tile(self.bias_rad_s, (p - 1 - (seen - len(w)), 1))  # this call's, held
+        out = self._steps(pw, pt)
+        return np.concatenate([before, out[p - 1 :]])[-len(w) :]
+
+    def _steps(self, w: NDArray, t: NDArray) -> NDArray:
+        """The rule over a batch: windows ending at each sample, then the segments' runs."""
+        n, m = len(w), self.win
+        X = np.concatenate([self._tail_w, w])
+        T = np.concatenate([self._tail_t, t])
+        base = self._k + 1 - len(self._tail_w)  # index of X[0]
+        k0 = self._k + 1  # index of w[0]
+        still = np.zeros(n, dtype=bool)
+        first_full = max(0, m - 1 - k0)  # the first sample whose window is full
+        if first_full < n:
+            mean, var = windowed_mean_var(X, m)
+            rows = np.arange(first_full, n) + (k0 - base) - m + 1  # window ending at sample j
+            still[first_full:] = (np.linalg.norm(mean[rows], axis=1) < self.max_rate) & np.all(
+                var[rows] < self.max_var, axis=1
             )
-        if still:
-            if self._seg_start < 0:
-                # a segment starts with the first sample of this still window
-                a = k - self.win + 1
-                self._seg_start = a
-                self._seg_t0 = buf[0][1]
-                self._acc = [0.0, 0.0, 0.0]
-                self._acc_n = 0
-                self._lo = a if a == 0 else a + self.win
-                self._hist = deque((v[0], a + j) for j, v in enumerate(buf))
-            else:
-                self._hist.append((w, k))
-            # accumulate samples with index in [lo, k + 1 - win)
-            hi = k + 1 - self.win
-            hist = self._hist
-            while hist and hist[0][1] < hi:
-                wi, i = hist.popleft()
-                if i >= self._lo:
-                    for j in range(3):
-                        self._acc[j] += wi[j]
-                    self._acc_n += 1
-            if self._acc_n:
-                self.bias_rad_s = tuple(v / self._acc_n for v in self._acc)
-                self.updates += 1
-            self.at_rest = True
-            self._seg_end_t = t_s
-        elif self._seg_start >= 0:
+        out = np.full((n, 3), np.nan)
+        before = self.bias_rad_s
+        pos = 0
+        for p, q in runs(still):
+            if self._seg_start >= 0 and p > pos:
+                self._close_segment()  # motion between the open segment and this run
+            self._run(X, T, base, k0, p, q, out)
+            pos = q
+        if self._seg_start >= 0 and pos < n:
             self._close_segment()
+        # each sample keeps the newest estimate at its arrival (forward fill)
+        have = ~np.isnan(out[:, 0])
+        if have.any():
+            last = np.maximum.accumulate(np.where(have, np.arange(n), -1))
+            filled = np.where((last >= 0)[:, None], out[np.maximum(last, 0)], before)
+        else:
+            filled = np.tile(before, (n, 1))
+        self._k += n
+        self._tail_w, self._tail_t = X[-m:], T[-m:]
+        return filled
+
+    def _run(self, X, T, base: int, k0: int, p: int, q: int, out: NDArray) -> None:
+        """Still samples ``p..q-1`` of the batch: open (or go on with) the segment and write the
+        bias after each sample into ``out`` (NaN while the segment has no sample yet)."""
+        m = self.win
+        if self._seg_start < 0 or p > 0:
+            a = k0 + p - m + 1  # a segment starts with the first sample of its first still window
+            self._seg_start, self._seg_t0 = a, float(T[a - base])
+            self._lo = a if a == 0 else a + m
+            self._acc_hi, self._acc = self._lo, np.zeros(3)
+        hi = k0 + np.arange(p, q) + 1 - m  # sample k's estimate: the mean over [lo, k + 1 - m)
+        grow = hi > self._acc_hi  # a suffix of the run: hi grows by one per sample
+        if self._acc_hi > self._lo:  # samples whose window adds nothing keep the estimate
+            keep = np.flatnonzero(~grow) + p
+            out[keep] = self._acc / (self._acc_hi - self._lo)
+            self.updates += len(keep)
+        if grow.any():
+            start = self._acc_hi - base
+            partial = np.cumsum(X[start : hi[-1] - base], axis=0)
+            sums = self._acc + partial[hi[grow] - base - start - 1]
+            out[np.flatnonzero(grow) + p] = sums / (hi[grow] - self._lo)[:, None]
+            self._acc, self._acc_hi = sums[-1], int(hi[-1])
+            self.updates += len(sums)
+        if not np.isnan(out[q - 1, 0]):
+            self.bias_rad_s = tuple(out[q - 1].tolist())
+        self.at_rest = True
+        self._seg_end_t = float(T[k0 + q - 1 - base])
 
     def _close_segment(self) -> None:
         self.segments.append(

@@ -19,7 +19,7 @@ import numpy as np
 import pytest
 from conftest import REPO_ROOT
 
-from imu_dcm.bag_writer import StampedSeries, write_bag
+from imu_dcm.logio.writer import StampedSeries, write_bag
 from imu_dcm.outputs import OutputError, atomic_path, write_json, write_text_atomic
 
 LINES = "".join(f"{k * 0.01:.2f},0.1,0,0\n" for k in range(50))  # 0.5 s at 100 Hz about x

@@ -16,9 +16,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from imu_dcm.bag_writer import StampedSeries, write_bag
 from imu_dcm.errors import GapWarning
 from imu_dcm.live import run
+from imu_dcm.logio.writer import StampedSeries, write_bag
 from imu_dcm.metrics import attitude_error_deg
 from imu_dcm.replay import replay
 
@@ -224,7 +224,7 @@ def test_ws_server_killed_and_restarted_reconnects_reports_the_gap(trial, tmp_pa
     g = s["gaps"][0]
     assert g["t_s"] == (imu_t[k] - imu_t[0]) * 1e-9
     assert g["length_s"] == pytest.approx((imu_t[k + 1] - imu_t[k]) * 1e-9, rel=1e-12)
-    assert any(line.startswith("gap of") for line in said)
+    assert any(line.startswith("1 gap(s) longer than") for line in said), said
     with pytest.warns(GapWarning, match=r"1 gap\(s\)"):  # replay sees the same gap
         q_replay, rep = replay_of(published, tmp_path, "magnus4", "none")
     rep_gaps = rep.summary.to_dict()["gaps"]

@@ -21,11 +21,37 @@ from decimal import Decimal, InvalidOperation
 import numpy as np
 from numpy.typing import NDArray
 
-__all__ = ["TIME_UNITS", "parse_lines"]
+__all__ = ["TIME_UNITS", "parse_lines", "time_unit_hint"]
 
 #: Nanoseconds per unit of a CSV stamp.
 TIME_UNITS = {"s": 1_000_000_000, "ms": 1_000_000, "us": 1_000, "ns": 1}
 DEG = math.pi / 180.0
+
+
+def time_unit_hint(median_step_s: float, max_step_s: float, time_units: str | None) -> str | None:
+    """One line when the steps are of no IMU (a rate below 1 Hz or above 100 kHz, or a step of
+    hours), naming the likely stamp unit; None when they look like an IMU's.
+
+    ``time_units``: the unit the stamps were declared in (None: the source's own stamps). The
+    likely unit is the one that makes the median step 0.1-100 ms (10 Hz to 10 kHz).
+    """
+    if median_step_s > 1.0 or median_step_s < 1e-5:
+        got = f"a median step of {median_step_s:.6g} s ({1.0 / median_step_s:.6g} Hz)"
+    elif max_step_s > 3600.0:
+        got = f"a step of {max_step_s / 3600.0:.3g} h"
+    else:
+        return None
+    line = f"Expected the steps of an IMU (1 Hz to 100 kHz, no step of hours), got {got}"
+    if time_units is None:
+        return f"{line}: the source's stamps are not an IMU's"
+    fits = [
+        u
+        for u, ns in TIME_UNITS.items()
+        if u != time_units and 1e-4 <= median_step_s * ns / TIME_UNITS[time_units] <= 0.1
+    ]
+    if not fits:
+        return f"{line}: check the unit of the stamps (--time-unit)"
+    return f"{line}: stamps in {fits[0]} declared as {time_units}? (--time-unit {fits[0]})"
 
 
 def _stamp_ns(text, scale: int) -> int:
@@ -75,7 +101,7 @@ def _parse_json(obj, gyro_scale: float) -> tuple[int, list[float], list[float] |
 def parse_lines(
     lines: list[bytes], *, gyro_units: str = "rad/s", time_units: str = "s", first: bool = False
 ) -> tuple[NDArray, NDArray, NDArray, NDArray, int]:
-    """Parse sample lines.
+    """Parse sample lines: a batch of CSV lines in one numpy pass, anything else line by line.
 
     Parameters
     ----------
@@ -96,9 +122,81 @@ def parse_lines(
     truth_q_w_b : float64 (m, 4), ``[x, y, z, w]``
     malformed : int
         Lines that are neither a CSV sample nor a JSON sample (or hold non-finite values).
+
+    Notes
+    -----
+    A batch of plain CSV lines (``digits[.digits]`` stamps, four fields each) is parsed as
+    arrays; a batch with any other line (JSON, a header, a malformed line) goes line by line, so
+    that a bad line is counted alone and the good lines around it are kept.
     """
     gyro_scale = DEG if gyro_units == "deg/s" else 1.0
     t_scale = TIME_UNITS[time_units]
+    head: list[bytes] = []
+    if first and lines:
+        head, lines = lines[:1], lines[1:]
+    lines = [ln for ln in lines if ln.strip()]
+    bulk = _parse_csv_bulk(lines, gyro_scale, t_scale) if lines else None
+    if bulk is None:
+        return _parse_each(head + lines, gyro_scale, t_scale, first=bool(head))
+    t, w, bad = bulk
+    if head:
+        t0, w0, tt, q, bad0 = _parse_each(head, gyro_scale, t_scale, first=True)
+        t, w, bad = np.concatenate([t0, t]), np.concatenate([w0, w]), bad + bad0
+        return t, w, tt, q, bad
+    return t, w, np.zeros(0, np.int64), np.zeros((0, 4)), bad
+
+
+def _parse_csv_bulk(
+    lines: list[bytes], gyro_scale: float, t_scale: int
+) -> tuple[NDArray, NDArray, int] | None:
+    """CSV lines ``t,gx,gy,gz`` as arrays (stamps exact, as :func:`_stamp_ns`), or None when a
+    line is not of that plain form (the caller then parses line by line). Rows with a
+    non-finite rate are dropped and counted."""
+    fields = b",".join(lines).split(b",")
+    n = len(lines)
+    if len(fields) != 4 * n or lines[0][:1] == b"{":
+        return None
+    cols = np.array(fields, dtype=np.bytes_).reshape(n, 4)
+    try:
+        w = cols[:, 1:].astype(np.float64)
+    except ValueError:
+        return None
+    t_ns = _stamps_bulk(np.strings.strip(cols[:, 0]), t_scale)
+    if t_ns is None:
+        return None
+    ok = np.isfinite(w).all(axis=1)
+    if gyro_scale != 1.0:
+        w *= gyro_scale
+    if ok.all():
+        return t_ns, w, 0
+    return t_ns[ok], w[ok], int(n - ok.sum())
+
+
+def _stamps_bulk(text: NDArray, scale: int) -> NDArray | None:
+    """Decimal stamps ``digits[.digits]`` (bytes array) to exact int64 ns, or None when one is
+    of another form (sign, exponent, more decimals than ns, out of range)."""
+    whole, dot, frac = np.strings.partition(text, b".")
+    digits = len(str(scale)) - 1  # decimals a stamp may carry: 9 for s, 0 for ns
+    n_frac = np.strings.str_len(frac)
+    if not (np.strings.isdigit(whole).all() and n_frac.max(initial=0) <= digits):
+        return None
+    if ((n_frac > 0) & ~np.strings.isdigit(frac)).any() or (np.strings.str_len(whole) > 18).any():
+        return None
+    t = whole.astype(np.int64)
+    if (t >= (2**63 - 1) // scale - 1).any():
+        return None
+    t = t * scale
+    has = n_frac > 0
+    if has.any():
+        f = np.where(has, frac, b"0").astype(np.int64)
+        t += f * 10 ** (digits - n_frac)
+    return t
+
+
+def _parse_each(
+    lines: list[bytes], gyro_scale: float, t_scale: int, *, first: bool
+) -> tuple[NDArray, NDArray, NDArray, NDArray, int]:
+    """:func:`parse_lines` one line at a time (JSON, headers, malformed lines)."""
     ts: list[int] = []
     ws: list[list[float]] = []
     tts: list[int] = []
@@ -109,36 +207,18 @@ def parse_lines(
         if not line:
             continue
         try:
-            if line[:1] == b"{":
-                t_ns, omega, q = _parse_json(json.loads(line), gyro_scale)
-            else:
-                parts = line.split(b",")
-                if len(parts) != 4:
-                    if i == 0 and first and any(c.isalpha() for c in line.decode(errors="replace")):
-                        continue  # a CSV header
-                    raise ValueError("not 4 fields")
-                try:
-                    t_ns = _stamp_ns(parts[0].decode("ascii"), t_scale)
-                except (ValueError, UnicodeDecodeError):
-                    if i == 0 and first:
-                        continue  # a CSV header
-                    raise
-                omega = [float(p) * gyro_scale for p in parts[1:]]
-                q = None
-            if not 0 <= t_ns < 2**63:
-                raise ValueError("stamp out of range")
-            if omega is not None and not all(math.isfinite(v) for v in omega):
-                raise ValueError("non-finite rate")
-            if q is not None:
-                if not all(math.isfinite(v) for v in q):
-                    raise ValueError("non-finite quaternion")
-                tts.append(t_ns)
-                qs.append(q)
-            if omega is not None:
-                ts.append(t_ns)
-                ws.append(omega)
+            t_ns, omega, q = _parse_one(line, gyro_scale, t_scale, header_ok=i == 0 and first)
         except (ValueError, KeyError, TypeError, UnicodeDecodeError, OverflowError):
             bad += 1
+            continue
+        if t_ns is None:
+            continue  # a CSV header
+        if q is not None:
+            tts.append(t_ns)
+            qs.append(q)
+        if omega is not None:
+            ts.append(t_ns)
+            ws.append(omega)
     return (
         np.array(ts, dtype=np.int64),
         np.array(ws, dtype=float).reshape(-1, 3),
@@ -146,3 +226,31 @@ def parse_lines(
         np.array(qs, dtype=float).reshape(-1, 4),
         bad,
     )
+
+
+def _parse_one(line: bytes, gyro_scale: float, t_scale: int, *, header_ok: bool):
+    """One stripped line -> ``(t_ns, omega or None, q or None)``; ``(None, None, None)`` for a
+    header; raises ValueError (or another parse error) for a malformed line."""
+    if line[:1] == b"{":
+        t_ns, omega, q = _parse_json(json.loads(line), gyro_scale)
+    else:
+        parts = line.split(b",")
+        if len(parts) != 4:
+            if header_ok and any(c.isalpha() for c in line.decode(errors="replace")):
+                return None, None, None
+            raise ValueError("not 4 fields")
+        try:
+            t_ns = _stamp_ns(parts[0].decode("ascii"), t_scale)
+        except (ValueError, UnicodeDecodeError):
+            if header_ok:
+                return None, None, None
+            raise
+        omega = [float(p) * gyro_scale for p in parts[1:]]
+        q = None
+    if not 0 <= t_ns < 2**63:
+        raise ValueError("stamp out of range")
+    if omega is not None and not all(math.isfinite(v) for v in omega):
+        raise ValueError("non-finite rate")
+    if q is not None and not all(math.isfinite(v) for v in q):
+        raise ValueError("non-finite quaternion")
+    return t_ns, omega, q

@@ -1,17 +1,22 @@
 """The live pipeline: reorder window -> gap check -> bias -> DcmIntegrator -> view and recording.
 
-:class:`Pipeline` handles every sample a source delivers (:func:`imu_dcm.live.run` feeds it), in
-stamp order:
+:class:`Pipeline` handles every batch of samples a source delivers (:func:`imu_dcm.live.run`
+feeds it) as arrays, in stamp order:
 
-1. puts it in order within the reorder window (:mod:`imu_dcm.live.reorder`); later samples,
-   duplicate stamps and non-finite rates are dropped and counted; when the source has been
-   quiet for longer than the window (wall time), the held samples are released;
-2. reports a gap when the step exceeds ``GAP_FACTOR`` times the median of the recent steps
-   (replay's rule, on the steps seen so far);
-3. subtracts the bias (``auto``: :class:`imu_dcm.rest.CausalRestBias`; ``none``; a vector);
-4. integrates it with :class:`imu_dcm.DcmIntegrator`, starting — as replay does — at the first
-   sample inside the truth's coverage, from the truth slerped there (or from ``init_quat`` /
-   identity when there is no truth).
+1. puts the batch in order within the reorder window (:mod:`imu_dcm.live.reorder`); later
+   samples, duplicate stamps and non-finite rates are dropped and counted; when the source has
+   been quiet for longer than the window (wall time), the held samples are released;
+2. reports gaps with replay's rule (:func:`imu_dcm.integrate.find_gaps`) over the recent steps
+   and the new ones;
+3. subtracts the bias (``auto``: :class:`imu_dcm.rest.CausalRestBias` over the batch; ``none``;
+   a vector);
+4. integrates the batch with :meth:`imu_dcm.DcmIntegrator.update_many` (the compiled kernel's
+   feed), starting — as replay does — at the first sample inside the truth's coverage, from the
+   truth slerped there (or from ``init_quat`` / identity when there is no truth). When the truth
+   starts late (its channel is announced but its first sample comes more than ``truth_wait_s``
+   after the gyro's), the estimate starts from the identity and *re-anchors* to the truth when
+   the truth first arrives, at the first sample it covers, as replay would; the start before
+   that is reported as unscored.
 
 Every ``view_interval_s`` (display rate) the new rows go to the rerun view in one batch of
 ``send_columns`` calls and to the recording; the estimate is compared with the truth where the
@@ -24,14 +29,14 @@ from __future__ import annotations
 import math
 import time
 import warnings
-from collections import deque
 from dataclasses import dataclass, field
 
 import numpy as np
 from numpy.typing import NDArray
 
 from imu_dcm.errors import GapWarning
-from imu_dcm.integrate import GAP_FACTOR, integrate
+from imu_dcm.integrate import find_gaps, gap_message, integrate
+from imu_dcm.live.lines import time_unit_hint
 from imu_dcm.live.reorder import ReorderBuffer
 from imu_dcm.live.sources import Received
 from imu_dcm.metrics import attitude_error_deg
@@ -43,6 +48,9 @@ __all__ = ["LiveResult", "Pipeline"]
 DEG = math.pi / 180.0
 _TRUTH_KEEP_NS = 5_000_000_000  # truth kept for slerp, ns behind the newest
 _ERROR_GIVE_UP_NS = 2_000_000_000  # an estimate uncovered by truth this long: no error
+_ANCHOR_KEEP_NS = 10_000_000_000  # samples kept to re-anchor on a late truth, ns
+_RECENT = 65  # stamps kept for the gap rule and the rate (64 steps)
+_IDENTITY = np.array([0.0, 0.0, 0.0, 1.0])
 
 
 @dataclass(frozen=True)
@@ -65,9 +73,38 @@ class LiveResult:
 
 
 def _slerp(truth_t: NDArray, truth_q: NDArray, t_ns: NDArray) -> NDArray:
-    from imu_dcm.replay.core import slerp_truth
+    from imu_dcm.resample import slerp_truth
 
     return slerp_truth(truth_t, truth_q, t_ns)
+
+
+class _Rows:
+    """Columns collected as a list of array chunks; :meth:`take` concatenates and empties."""
+
+    def __init__(self, *shapes: tuple) -> None:
+        self.shapes = shapes
+        self.chunks: list[tuple] = []
+
+    def add(self, *cols: NDArray) -> None:
+        if len(cols[0]):
+            self.chunks.append(cols)
+
+    def take(self) -> tuple[NDArray, ...]:
+        chunks, self.chunks = self.chunks, []
+        if not chunks:
+            return tuple(np.zeros((0, *s[1:]), s[0]) for s in self.shapes)
+        return tuple(np.concatenate([c[k] for c in chunks]) for k in range(len(self.shapes)))
+
+    def __len__(self) -> int:
+        return sum(len(c[0]) for c in self.chunks)
+
+    def trim(self, keep: int) -> None:
+        """Drop whole leading chunks older than ``keep`` (in the first column's unit) behind
+        the newest row."""
+        if len(self.chunks) > 1:
+            newest = self.chunks[-1][0][-1]
+            while len(self.chunks) > 1 and self.chunks[1][0][0] <= newest - keep:
+                del self.chunks[0]
 
 
 class _Stats:
@@ -85,8 +122,12 @@ class _Stats:
             self.max = np.maximum(self.max, err.max(axis=0))
 
 
+_SAMPLES = ((np.int64,), (float,), (float, 3))  # t_ns, t_s, omega_b (bias removed)
+_ESTIMATES = ((np.int64,), (float,), (float, 4))  # t_ns, t_s, q_w_b
+
+
 class Pipeline:
-    """Per-sample state of a live run (see the module doc), fed by :func:`imu_dcm.live.run`."""
+    """The state of a live run (see the module doc), fed by :func:`imu_dcm.live.run`."""
 
     def __init__(
         self,
@@ -100,6 +141,7 @@ class Pipeline:
         view,
         recorder,
         say,
+        time_units: str | None = None,
     ) -> None:
         self.method = method
         self.bias_mode = (
@@ -115,6 +157,7 @@ class Pipeline:
         self.reorder = ReorderBuffer(window_ns)
         self.truth_wait_ns = int(truth_wait_s * 1e9)
         self.lines = lines
+        self.time_units = time_units
         self.view = view
         self.recorder = recorder
         self.say = say
@@ -122,22 +165,24 @@ class Pipeline:
         self.n = 0
         self.malformed = 0
         self.gaps: list[tuple[float, float]] = []
-        self._steps: deque = deque(maxlen=64)
-        self._median = math.inf
-        self._since_median = 0
-        self._prev_t_s: float | None = None
+        self.recent_t_s = np.zeros(0)  # the newest stamps, s
+        self.rates_checked = False
         self.integ: DcmIntegrator | None = None
-        self._warm: list | None = None
         self.q0: NDArray | None = None
         self.start_t_s: float | None = None
-        self.waiting: list[tuple[int, float, tuple]] = []
+        self.unscored_before_s: float | None = None  # re-anchored: the start before is unscored
+        self.anchor_pending = False
+        self.waiting = _Rows(*_SAMPLES)  # before the start
+        self.history = _Rows(*_SAMPLES)  # since an identity start, to re-anchor on a late truth
         self.truth_channel = False
-        self.truth_t: deque = deque()  # arrays of truth stamps / quats, oldest first
-        self.truth_q: deque = deque()
+        self.channels: dict = {}
+        self.truth_t: list[NDArray] = []  # truth stamps / quats, oldest first
+        self.truth_q: list[NDArray] = []
         self.truth_max_ns: int | None = None
         self.truth_count = 0
-        self._recent_ns: deque = deque(maxlen=4)  # (t_s, t_ns) of the newest samples
-        self.last_est_t_s = -math.inf
+        self.fed = _Rows(*_SAMPLES)  # the last samples fed (stamps of the lagged rows)
+        self.emitted = -1  # index (since the start) of the newest estimate row
+        self.first4 = _Rows(*_SAMPLES)  # magnus4: the first four samples (its warm-up)
         self.q_last: NDArray | None = None
         self.t_last_ns: int | None = None
         self.bias_sum = np.zeros(3)
@@ -145,28 +190,19 @@ class Pipeline:
         self.stats = _Stats()
         self.truth_used = 0
         # rows since the last flush
-        self.g_t: list[float] = []
-        self.g_w: list[tuple] = []
-        self.g_arr: list[int] = []
-        self.e_rows: list[tuple[int, float, tuple]] = []  # estimate (t_ns, t_s, q)
-        self.err_pending: list[tuple[int, float, tuple]] = []
-        self.tr_rows_t: list[int] = []
-        self.tr_rows_q: list[NDArray] = []
+        self.gyro = _Rows((float,), (float, 3), (np.int64,))  # t_s, omega_b, arrival ns
+        self.est = _Rows(*_ESTIMATES)
+        self.err_pending = _Rows(*_ESTIMATES)
+        self.truth_rows = _Rows((np.int64,), (float, 4))
         self.latency: list[NDArray] = []
-        self.last_arrival_wall = time.monotonic()
         self.samples_before_start = 0
+        self.cpu_s: float | None = None
 
     # -- input -----------------------------------------------------------------------------
     def on_imu(self, rec: Received) -> None:
-        out: list = []
-        push = self.reorder.push
-        for t, w, a in zip(
-            rec.t_ns.tolist(), rec.values.tolist(), rec.arrival_ns.tolist(), strict=False
-        ):
-            push(t, w, a, out)
-        if out:
-            self._process(out)
-        self.last_arrival_wall = time.monotonic()
+        t_ns, w, arrival = self.reorder.push(rec.t_ns, rec.values, rec.arrival_ns)
+        if len(t_ns):
+            self._process(t_ns, w, arrival)
 
     def on_truth(self, rec: Received) -> None:
         ok = np.all(np.isfinite(rec.values), axis=1)
@@ -179,238 +215,288 @@ class Pipeline:
         m = int(t.max())
         self.truth_max_ns = m if self.truth_max_ns is None else max(self.truth_max_ns, m)
         while len(self.truth_t) > 1 and int(self.truth_t[0].max()) < m - _TRUTH_KEEP_NS:
-            self.truth_t.popleft()
-            self.truth_q.popleft()
-        self.tr_rows_t.extend(t.tolist())
-        self.tr_rows_q.append(q)
-        if self.integ is None and self.waiting:
+            del self.truth_t[0], self.truth_q[0]
+        self.truth_rows.add(t, q)
+        if self.integ is None and len(self.waiting):
             self._try_start()
+        elif self.anchor_pending:
+            self._try_anchor()
 
     def _truth_arrays(self) -> tuple[NDArray, NDArray]:
-        return np.concatenate(list(self.truth_t)), np.concatenate(list(self.truth_q))
-
-    # -- per sample ------------------------------------------------------------------------
-    def _process(self, released: list) -> None:
-        rest = self.rest
-        fixed = self.fixed_bias
-        for t_ns, w, arrival in released:
-            if self.t0_ns is None:
-                self.t0_ns = t_ns
-            t_s = (t_ns - self.t0_ns) * 1e-9
-            prev = self._prev_t_s
-            if prev is not None:
-                h = t_s - prev
-                if h > GAP_FACTOR * self._median and len(self._steps) >= 3:
-                    self.gaps.append((prev, h))
-                    self.say(
-                        f"gap of {h:.3f} s after t = {prev:.3f} s "
-                        f"(> {GAP_FACTOR:g}x the median step {self._median * 1e3:.3f} ms)"
-                    )
-                self._steps.append(h)
-                self._since_median += 1
-                if self._since_median >= 16 or len(self._steps) < 16:
-                    self._since_median = 0
-                    s = sorted(self._steps)
-                    self._median = s[len(s) // 2]
-            self._prev_t_s = t_s
-            if rest is not None:
-                n_seg = len(rest.segments)
-                b = rest.update(w, t_s)
-                if len(rest.segments) > n_seg:
-                    seg = rest.segments[-1]
-                    v = seg["bias_rad_s"]
-                    self.say(
-                        f"bias from rest {seg['start_s']:.3f}-{seg['end_s']:.3f} s: "
-                        f"({v[0]:+.5f}, {v[1]:+.5f}, {v[2]:+.5f}) rad/s"
-                    )
-            else:
-                b = fixed
-            wc = (w[0] - b[0], w[1] - b[1], w[2] - b[2])
-            self.n += 1
-            self.g_t.append(t_s)
-            self.g_w.append(wc)
-            self.g_arr.append(arrival)
-            self._recent_ns.append((t_s, t_ns))
-            if self.integ is None:
-                self.waiting.append((t_ns, t_s, wc))
-                self._try_start()
-            else:
-                self._step(t_ns, t_s, wc)
-            if self.integ is not None:
-                self.bias_sum += b
-                self.bias_n += 1
-
-    def _start(self, i: int, q0: NDArray, why: str | None) -> None:
-        waiting = self.waiting
-        self.samples_before_start += i
-        self.q0 = np.asarray(q0, dtype=float)
-        t_ns, t_s, _ = waiting[i]
-        self.start_t_s = t_s
-        self.integ = DcmIntegrator(self.q0, self.method)
-        self._warm = [] if self.method == "magnus4" else None
-        if why:
-            self.say(why)
-        self.waiting = []
-        for t_ns, t_s, wc in waiting[i:]:
-            self._step(t_ns, t_s, wc)
-
-    def _try_start(self) -> None:
-        waiting = self.waiting
-        if self.init_q is not None:
-            self._start(0, self.init_q, None)
-            return
-        if self.truth_max_ns is not None:
-            tt, tq = self._truth_arrays()
-            stamps = np.array([w[0] for w in waiting], dtype=np.int64)
-            covered = stamps <= self.truth_max_ns
-            if not covered.any():
-                if stamps[-1] - stamps[0] >= 10 * self.truth_wait_ns:  # the truth stalled
-                    self._start(
-                        0,
-                        np.array([0.0, 0.0, 0.0, 1.0]),
-                        f"the truth stopped {(stamps[-1] - self.truth_max_ns) * 1e-9:.3f} s "
-                        f"before the gyro: starting from the identity attitude",
-                    )
-                return
-            q = _slerp(tt, tq, stamps[covered])
-            ok = np.flatnonzero(np.all(np.isfinite(q), axis=1))
-            if len(ok):
-                self._start(int(ok[0]), q[ok[0]], None)
-            else:
-                k = int(covered.sum())  # covered but outside the truth: never estimated
-                self.samples_before_start += k
-                del waiting[:k]
-            return
-        if self.lines and not self.truth_channel:
-            self._start(0, np.array([0.0, 0.0, 0.0, 1.0]), None)
-            return
-        if waiting[-1][0] - waiting[0][0] >= self.truth_wait_ns:
-            self._start(
-                0,
-                np.array([0.0, 0.0, 0.0, 1.0]),
-                f"no truth within {self.truth_wait_ns * 1e-9:g} s of source time: "
-                f"starting from the identity attitude",
-            )
-
-    def _ns_of(self, t_s: float) -> int:
-        for ts, tn in reversed(self._recent_ns):
-            if ts == t_s:
-                return tn
-        return round(t_s * 1e9) + (self.t0_ns or 0)
-
-    def _step(self, t_ns: int, t_s: float, wc: tuple) -> None:
-        q = self.integ.update(wc, t_s)
-        te = self.integ.t_s
-        warm = self._warm
-        if warm is not None:
-            warm.append((t_ns, t_s, wc))
-            if len(warm) == 4:
-                # magnus4 commits its first two steps at once (the start stencil needs four
-                # samples): the attitude at the second stamp comes from the batch integrator on
-                # the same four samples, which is what the streaming one computes inside.
-                self._warm = None
-                W = np.array([r[2] for r in warm])
-                T = np.array([r[1] for r in warm])
-                with warnings.catch_warnings():
-                    warnings.simplefilter("ignore", GapWarning)
-                    q1 = integrate(W, T, self.q0, self.method).as_quat()[1]
-                self.e_rows.append((warm[1][0], warm[1][1], tuple(q1.tolist())))
-                self.last_est_t_s = warm[1][1]
-        if te is not None and te > self.last_est_t_s:
-            self.last_est_t_s = te
-            tn = t_ns if te == t_s else self._ns_of(te)
-            row = (tn, te, tuple(q.tolist()))
-            self.e_rows.append(row)
-            self.q_last, self.t_last_ns = q, tn
+        return np.concatenate(self.truth_t), np.concatenate(self.truth_q)
 
     def release_held(self) -> None:
         """Release every sample held by the reorder window (the source has gone quiet for
         longer than the window: nothing can arrive that would still be put in order)."""
-        out: list = []
-        self.reorder.flush(out)
-        if out:
-            self._process(out)
+        t_ns, w, arrival = self.reorder.flush()
+        if len(t_ns):
+            self._process(t_ns, w, arrival)
+
+    # -- per batch -------------------------------------------------------------------------
+    def _process(self, t_ns: NDArray, w: NDArray, arrival: NDArray) -> None:
+        if self.t0_ns is None:
+            self.t0_ns = int(t_ns[0])
+        t_s = (t_ns - self.t0_ns) * 1e-9
+        self._check_steps(t_s)
+        if self.rest is not None:
+            n_seg = len(self.rest.segments)
+            b = self.rest.update_many(w, t_s)
+            for seg in self.rest.segments[n_seg:]:
+                v = seg["bias_rad_s"]
+                self.say(
+                    f"bias from rest {seg['start_s']:.3f}-{seg['end_s']:.3f} s: "
+                    f"({v[0]:+.5f}, {v[1]:+.5f}, {v[2]:+.5f}) rad/s"
+                )
+            wc = w - b
+        else:
+            b = np.asarray(self.fixed_bias)
+            wc = w - b if self.bias_mode == "fixed" else w
+        self.n += len(t_ns)
+        self.gyro.add(t_s, wc, arrival)
+        if self.integ is None:
+            self.waiting.add(t_ns, t_s, wc)
+            self._try_start()
+        else:
+            self._feed(t_ns, t_s, wc)
+            if self.anchor_pending:
+                self.history.add(t_ns, t_s, wc)
+                self.history.trim(_ANCHOR_KEEP_NS)
+                self._try_anchor()
+        if self.integ is not None:  # the mean bias over the samples estimated
+            self.bias_sum += b.sum(axis=0) if b.ndim == 2 else b * len(t_ns)
+            self.bias_n += len(t_ns)
+
+    def _check_steps(self, t_s: NDArray) -> None:
+        """Gaps by replay's rule over the recent and the new steps; once, a rate or steps that
+        no IMU produces."""
+        stamps = np.concatenate([self.recent_t_s, t_s])
+        after = self.recent_t_s[-1] if len(self.recent_t_s) else -math.inf
+        new = tuple(g for g in find_gaps(stamps) if g[0] >= after)  # the new steps' gaps
+        if new:
+            self.gaps.extend(new)
+            self.say(gap_message(new))
+        self.recent_t_s = stamps[-_RECENT:]
+        if not self.rates_checked and len(stamps) >= 17:
+            self.rates_checked = True
+            steps = np.diff(stamps)
+            hint = time_unit_hint(float(np.median(steps)), float(steps.max()), self.time_units)
+            if hint:
+                self.say(hint)
+
+    @property
+    def median_step_s(self) -> float | None:
+        """Median of the recent steps, s (None before three samples)."""
+        if len(self.recent_t_s) < 3:
+            return None
+        return float(np.median(np.diff(self.recent_t_s)))
+
+    # -- start and re-anchoring ------------------------------------------------------------
+    def _start(self, i: int, q0: NDArray, why: str | None) -> None:
+        t_ns, t_s, wc = self.waiting.take()
+        self.samples_before_start += i
+        self.q0 = np.asarray(q0, dtype=float)
+        self.start_t_s = float(t_s[i])
+        self.integ = DcmIntegrator(self.q0, self.method)
+        self.emitted = -1
+        self.first4 = _Rows(*_SAMPLES)
+        self.fed = _Rows(*_SAMPLES)
+        if why:
+            self.say(why)
+        self._feed(t_ns[i:], t_s[i:], wc[i:])
+
+    def _try_start(self) -> None:
+        if self.init_q is not None:
+            self._start(0, self.init_q, None)
+            return
+        t_ns, t_s, wc = self.waiting.take()
+        self.waiting.add(t_ns, t_s, wc)
+        if self.truth_max_ns is not None:
+            self._start_in_truth(t_ns)
+            return
+        why = None
+        if not self.lines or self.truth_channel:  # a truth channel: wait for its first sample
+            if t_ns[-1] - t_ns[0] < self.truth_wait_ns:
+                return
+            why = (
+                f"no truth within {self.truth_wait_ns * 1e-9:g} s of source time: starting "
+                f"from the identity attitude (re-anchored to the truth when it comes)"
+            )
+        self.anchor_pending = True  # a truth that comes later re-anchors the estimate
+        self._start(0, _IDENTITY, why)
+        self.history.add(t_ns, t_s, wc)
+        self.history.trim(_ANCHOR_KEEP_NS)
+
+    def _start_in_truth(self, t_ns: NDArray) -> None:
+        covered = t_ns <= self.truth_max_ns
+        if not covered.any():
+            if t_ns[-1] - t_ns[0] >= 10 * self.truth_wait_ns:  # the truth stalled
+                self._start(
+                    0,
+                    _IDENTITY,
+                    f"the truth stopped {(t_ns[-1] - self.truth_max_ns) * 1e-9:.3f} s "
+                    f"before the gyro: starting from the identity attitude",
+                )
+            return
+        q = _slerp(*self._truth_arrays(), t_ns[covered])
+        ok = np.flatnonzero(np.all(np.isfinite(q), axis=1))
+        if len(ok):
+            self._start(int(ok[0]), q[ok[0]], None)
+            return
+        k = int(covered.sum())  # covered but outside the truth: never estimated
+        self.samples_before_start += k
+        t_ns, t_s, wc = self.waiting.take()
+        self.waiting.add(t_ns[k:], t_s[k:], wc[k:])
+
+    def _try_anchor(self) -> None:
+        """The truth came after an identity start: restart the estimate from it at the first
+        sample it covers (as replay starts there); what came before is unscored."""
+        if self.truth_max_ns is None:
+            return
+        t_ns, t_s, wc = self.history.take()
+        keep = t_ns >= t_ns[-1] - _ANCHOR_KEEP_NS
+        t_ns, t_s, wc = t_ns[keep], t_s[keep], wc[keep]
+        self.history.add(t_ns, t_s, wc)
+        covered = np.flatnonzero(t_ns <= self.truth_max_ns)
+        if not len(covered):
+            return
+        q = _slerp(*self._truth_arrays(), t_ns[covered])
+        ok = np.flatnonzero(np.all(np.isfinite(q), axis=1))
+        if not len(ok):
+            return
+        i = int(covered[ok[0]])
+        self.anchor_pending = False
+        self.history = _Rows(*_SAMPLES)
+        est = self.est.take()
+        before = est[0] < t_ns[i]
+        self.est.add(*(c[before] for c in est))  # rows from the anchor on are estimated again
+        self.unscored_before_s = float(t_s[i])
+        self.say(
+            f"the truth starts at t = {t_s[i]:.3f} s: the estimate restarts from it there "
+            f"(as replay starts); the {t_s[i] - self.start_t_s:.3f} s before are unscored"
+        )
+        self.samples_before_start += self.integ.n_samples - (len(t_ns) - i)
+        self.waiting.add(t_ns[i:], t_s[i:], wc[i:])
+        self._start(0, q[ok[0]], None)
+
+    # -- integration -----------------------------------------------------------------------
+    def _feed(self, t_ns: NDArray, t_s: NDArray, wc: NDArray) -> None:
+        """Integrate a batch; queue one estimate row per sample whose attitude is final."""
+        if not len(t_ns):
+            return
+        integ = self.integ
+        n0 = integ.n_samples
+        q = integ.update_many(wc, t_s).as_quat()
+        n_after = n0 + 1 + np.arange(len(t_ns))
+        if self.method == "magnus4":  # the attitude is one sample late (see streaming)
+            idx = np.where(n_after >= 4, n_after - 2, 0)
+            if n0 < 4:
+                self.first4.add(t_ns[: 4 - n0], t_s[: 4 - n0], wc[: 4 - n0])
+        else:
+            idx = n_after - 1
+        prev_ns, prev_s, _ = self.fed.take()
+        stamps_ns = np.concatenate([prev_ns[-1:], t_ns])
+        stamps_s = np.concatenate([prev_s[-1:], t_s])
+        self.fed.add(t_ns[-1:], t_s[-1:], wc[-1:])
+        new = idx > np.maximum.accumulate(np.concatenate([[self.emitted], idx[:-1]]))
+        if not new.any():
+            return
+        rows = idx[new] - (n0 - len(prev_ns[-1:]))  # index into stamps_*
+        qs = q[new]
+        j = 0
+        if self.method == "magnus4" and self.emitted < 2 <= idx[new][-1]:
+            j = int(np.searchsorted(idx[new], 2))  # rows before the second stamp's
+            if j:
+                self._emit(stamps_ns[rows[:j]], stamps_s[rows[:j]], qs[:j])
+            self._emit_second()
+        self._emit(stamps_ns[rows[j:]], stamps_s[rows[j:]], qs[j:])
+        self.emitted = int(idx[new][-1])
+
+    def _emit_second(self) -> None:
+        """magnus4 commits its first two steps at once (the start stencil needs four samples):
+        the attitude at the second stamp comes from the batch integrator on the same four
+        samples, which is what the streaming one computes inside."""
+        t_ns, t_s, wc = self.first4.take()
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", GapWarning)
+            q1 = integrate(wc, t_s, self.q0, self.method).as_quat()[1]
+        self._emit(t_ns[1:2], t_s[1:2], q1[None, :])
+
+    def _emit(self, t_ns: NDArray, t_s: NDArray, q: NDArray) -> None:
+        self.est.add(t_ns, t_s, q)
+        self.q_last, self.t_last_ns = q[-1].copy(), int(t_ns[-1])
 
     def finish(self) -> None:
-        out: list = []
-        self.reorder.flush(out)
-        if out:
-            self._process(out)
-        if self.integ is None and self.waiting:
-            q0 = self.init_q if self.init_q is not None else np.array([0.0, 0.0, 0.0, 1.0])
+        t_ns, w, arrival = self.reorder.flush()
+        if len(t_ns):
+            self._process(t_ns, w, arrival)
+        if self.integ is None and len(self.waiting):
+            t_ns, t_s, wc = self.waiting.take()
+            self.waiting.add(t_ns, t_s, wc)
             if self.truth_max_ns is not None:
-                tt, tq = self._truth_arrays()
-                q = _slerp(tt, tq, np.array([w[0] for w in self.waiting], np.int64))
+                q = _slerp(*self._truth_arrays(), t_ns)
                 ok = np.flatnonzero(np.all(np.isfinite(q), axis=1))
                 if len(ok):
                     self._start(int(ok[0]), q[ok[0]], None)
             if self.integ is None:
-                self._start(0, q0, None)
+                self._start(0, self.init_q if self.init_q is not None else _IDENTITY, None)
         if self.integ is not None:
             q = self.integ.finish()
-            te = self.integ.t_s
-            if te is not None and te > self.last_est_t_s:
-                self.last_est_t_s = te
-                tn = self._ns_of(te)
-                self.e_rows.append((tn, te, tuple(q.tolist())))
-                self.q_last, self.t_last_ns = q, tn
-            elif te is not None:
+            last = self.integ.n_samples - 1
+            if last > self.emitted:
+                t_ns, t_s, _ = self.fed.take()
+                self._emit(t_ns[-1:], t_s[-1:], q[None, :])
+                self.emitted = last
+            else:
                 self.q_last = q
         if self.rest is not None:
             self.rest.finish()
 
     # -- display rate ----------------------------------------------------------------------
+    def _errors(self, est: tuple, final: bool) -> tuple[NDArray, NDArray]:
+        """Errors of the estimates the truth now covers (times s, (n, 3) deg); keeps the rest
+        pending until covered or given up."""
+        self.err_pending.add(*est)
+        t_ns, t_s, q = self.err_pending.take()
+        if not self.truth_count or self.anchor_pending or not len(t_ns):
+            return np.zeros(0), np.zeros((0, 3))
+        cover = self.truth_max_ns if self.truth_max_ns is not None else -1
+        ready = t_ns <= cover
+        give_up = ~ready & (final | (t_ns < t_ns[-1] - _ERROR_GIVE_UP_NS))
+        wait = ~ready & ~give_up
+        self.err_pending.add(t_ns[wait], t_s[wait], q[wait])
+        if not ready.any():
+            return np.zeros(0), np.zeros((0, 3))
+        qt = _slerp(*self._truth_arrays(), t_ns[ready])
+        ok = np.all(np.isfinite(qt), axis=1)
+        if not ok.any():
+            return np.zeros(0), np.zeros((0, 3))
+        e = attitude_error_deg(q[ready][ok], qt[ok])
+        err = np.stack([e.total_deg, e.inclination_deg, e.heading_deg], axis=1)
+        self.stats.add(err)
+        self.truth_used += int(ok.sum())
+        return t_s[ready][ok], err
+
     def flush(self, final: bool = False) -> None:
         """Errors for covered estimates, one batch to the view and the recording, latency."""
-        est = self.e_rows
-        self.e_rows = []
-        err_t: list[float] = []
-        err: NDArray = np.zeros((0, 3))
-        if self.truth_count:
-            pend = self.err_pending + est
-            if pend:
-                stamps = np.array([r[0] for r in pend], np.int64)
-                cover = self.truth_max_ns if self.truth_max_ns is not None else -1
-                ready = stamps <= cover
-                newest = stamps[-1]
-                give_up = ~ready & (final | (stamps < newest - _ERROR_GIVE_UP_NS))
-                idx = np.flatnonzero(ready)
-                if len(idx):
-                    tt, tq = self._truth_arrays()
-                    qt = _slerp(tt, tq, stamps[idx])
-                    qe = np.array([pend[i][2] for i in idx])
-                    ok = np.all(np.isfinite(qt), axis=1)
-                    if ok.any():
-                        e = attitude_error_deg(qe[ok], qt[ok])
-                        err = np.stack([e.total_deg, e.inclination_deg, e.heading_deg], axis=1)
-                        err_t = [pend[i][1] for i in idx[ok]]
-                        self.stats.add(err)
-                        self.truth_used += int(ok.sum())
-                self.err_pending = [pend[i] for i in np.flatnonzero(~ready & ~give_up)]
-        tr_t = self.tr_rows_t
-        tr_q = np.concatenate(self.tr_rows_q) if self.tr_rows_q else np.zeros((0, 4))
-        self.tr_rows_t, self.tr_rows_q = [], []
-        g_t, g_w, g_arr = self.g_t, self.g_w, self.g_arr
-        self.g_t, self.g_w, self.g_arr = [], [], []
+        est = self.est.take()
+        err_t, err = self._errors(est, final)
+        g_t, g_w, g_arr = self.gyro.take()
         t0 = self.t0_ns
-        if self.view is not None and t0 is not None:
-            tr_s = (np.array(tr_t, np.int64) - t0) * 1e-9 if tr_t else np.zeros(0)
+        if t0 is None:  # no gyro sample yet: keep the truth rows for later
+            return
+        tr_t, tr_q = self.truth_rows.take()
+        if self.view is not None:
             self.view.log(
-                gyro_t_s=np.array(g_t),
-                omega_b=np.array(g_w).reshape(-1, 3),
-                est_t_s=np.array([r[1] for r in est]),
-                q_est=np.array([r[2] for r in est]).reshape(-1, 4),
-                truth_t_s=tr_s,
+                gyro_t_s=g_t,
+                omega_b=g_w,
+                est_t_s=est[1],
+                q_est=est[2],
+                truth_t_s=(tr_t - t0) * 1e-9,
                 q_truth=tr_q,
-                err_t_s=np.array(err_t),
+                err_t_s=err_t,
                 err_deg=err,
             )
-        elif t0 is None and tr_t:  # no gyro sample yet: keep the truth rows for later
-            self.tr_rows_t, self.tr_rows_q = tr_t, [tr_q]
-        if g_arr:
-            now = time.perf_counter_ns()
-            self.latency.append((now - np.array(g_arr, np.int64)) * 1e-6)
-        if self.recorder is not None and est:
-            self.recorder.add_estimate(
-                np.array([r[0] for r in est], np.int64), np.array([r[2] for r in est])
-            )
+        if len(g_arr):
+            self.latency.append((time.perf_counter_ns() - g_arr) * 1e-6)
+        if self.recorder is not None and len(est[0]):
+            self.recorder.add_estimate(est[0], est[2])

@@ -6,18 +6,26 @@ stamp (equal, or equal to one still held) is dropped as ``duplicate``, an earlie
 ``backward`` (out of order by more than the window, or a clock that jumped back). Non-finite
 rates are dropped as ``nonfinite``. :meth:`ReorderBuffer.flush` releases everything held (at
 stop). Stamps are the source's, never arrival times.
+
+Samples come and go as arrays (one batch per wake-up of the source). A batch in order and after
+everything seen is merged by slicing; only a batch with a sample out of order, or a duplicate, is
+judged sample by sample (the rule above depends on what the earlier samples released).
 """
 
 from __future__ import annotations
 
-import heapq
-import math
+import bisect
+
+import numpy as np
+from numpy.typing import NDArray
 
 __all__ = ["ReorderBuffer"]
 
+_EMPTY_T = np.zeros(0, np.int64)
+
 
 class ReorderBuffer:
-    """Reorder window over ``(t_ns, item)`` pairs.
+    """Reorder window over samples ``(t_ns, omega_b, arrival_ns)``.
 
     Parameters
     ----------
@@ -29,9 +37,9 @@ class ReorderBuffer:
         if window_ns < 0:
             raise ValueError(f"Expected a reorder window >= 0 ns, got {window_ns}")
         self.window_ns = int(window_ns)
-        self._heap: list[tuple[int, int, object]] = []
-        self._held: set[int] = set()
-        self._seq = 0
+        self._t = _EMPTY_T  # held, in stamp order
+        self._w = np.zeros((0, 3))
+        self._a = _EMPTY_T
         self.newest_ns: int | None = None
         self.last_released_ns: int | None = None
         self.dropped_duplicate = 0
@@ -40,48 +48,87 @@ class ReorderBuffer:
         self.reordered = 0  # samples that arrived out of order and were put back in order
 
     def __len__(self) -> int:
-        return len(self._heap)
+        return len(self._t)
 
-    def push(self, t_ns: int, omega: tuple[float, float, float], item: object, out: list) -> None:
-        """Add one sample; append the released ``(t_ns, omega, item)`` to ``out`` in order."""
-        x, y, z = omega
-        if not (math.isfinite(x) and math.isfinite(y) and math.isfinite(z)):
-            self.dropped_nonfinite += 1
-            return
-        last = self.last_released_ns
-        if last is not None and t_ns <= last:
-            if t_ns == last:
-                self.dropped_duplicate += 1
-            else:
-                self.dropped_backward += 1
-            return
-        if t_ns in self._held:
-            self.dropped_duplicate += 1
-            return
+    def push(
+        self, t_ns: NDArray[np.int64], omega_b: NDArray, arrival_ns: NDArray[np.int64]
+    ) -> tuple[NDArray[np.int64], NDArray, NDArray[np.int64]]:
+        """Add a batch of samples in arrival order; return the released ones, in stamp order.
+
+        Parameters
+        ----------
+        t_ns : int64 (n,) — stamps, ns.
+        omega_b : float64 (n, 3) — rates (any unit; only their finiteness is judged).
+        arrival_ns : int64 (n,) — carried along with each sample.
+
+        Returns
+        -------
+        t_ns, omega_b, arrival_ns of the released samples, stamps strictly increasing.
+        """
+        ok = np.isfinite(omega_b).all(axis=1)
+        if not ok.all():
+            self.dropped_nonfinite += int(len(ok) - ok.sum())
+            t_ns, omega_b, arrival_ns = t_ns[ok], omega_b[ok], arrival_ns[ok]
+        if not len(t_ns):
+            return self._release(-1)  # nothing new: nothing to release
         newest = self.newest_ns
-        if newest is None or t_ns > newest:
-            self.newest_ns = newest = t_ns
-        else:
-            self.reordered += 1
-        if self.window_ns == 0 and not self._heap:
-            self.last_released_ns = t_ns
-            out.append((t_ns, omega, item))
-            return
-        self._seq += 1
-        heapq.heappush(self._heap, (t_ns, self._seq, (omega, item)))
-        self._held.add(t_ns)
-        limit = newest - self.window_ns
-        heap = self._heap
-        while heap and heap[0][0] <= limit:
-            t, _, (w, it) = heapq.heappop(heap)
-            self._held.discard(t)
-            self.last_released_ns = t
-            out.append((t, w, it))
+        if (newest is None or t_ns[0] > newest) and bool(np.all(t_ns[1:] > t_ns[:-1])):
+            # in order, after everything seen: merged by concatenation, released by slicing
+            self.newest_ns = int(t_ns[-1])
+            self._t = np.concatenate([self._t, t_ns])
+            self._w = np.concatenate([self._w, omega_b])
+            self._a = np.concatenate([self._a, arrival_ns])
+            return self._release(self.newest_ns - self.window_ns)
+        return self._push_each(t_ns, omega_b, arrival_ns)
 
-    def flush(self, out: list) -> None:
+    def _release(self, limit_ns: int) -> tuple[NDArray[np.int64], NDArray, NDArray[np.int64]]:
+        """Release the held samples stamped at or before ``limit_ns`` (stamps are >= 0)."""
+        k = int(np.searchsorted(self._t, limit_ns, side="right"))
+        out = self._t[:k], self._w[:k], self._a[:k]
+        if k:
+            self._t, self._w, self._a = self._t[k:], self._w[k:], self._a[k:]
+            self.last_released_ns = int(out[0][-1])
+        return out
+
+    def _push_each(
+        self, t_ns: NDArray[np.int64], omega_b: NDArray, arrival_ns: NDArray[np.int64]
+    ) -> tuple[NDArray[np.int64], NDArray, NDArray[np.int64]]:
+        """The rule sample by sample (a batch with a sample out of order or a duplicate)."""
+        held_t = self._t.tolist()  # sorted
+        rows = dict(zip(held_t, zip(self._w.tolist(), self._a.tolist(), strict=True), strict=True))
+        out_t: list[int] = []
+        out_rows: list[tuple] = []
+        for t, w, a in zip(t_ns.tolist(), omega_b.tolist(), arrival_ns.tolist(), strict=True):
+            last = self.last_released_ns
+            if (last is not None and t <= last) or t in rows:
+                if t == last or t in rows:
+                    self.dropped_duplicate += 1
+                else:
+                    self.dropped_backward += 1
+                continue
+            if self.newest_ns is None or t > self.newest_ns:
+                self.newest_ns = t
+            else:
+                self.reordered += 1
+            bisect.insort(held_t, t)
+            rows[t] = (w, a)
+            k = bisect.bisect_right(held_t, self.newest_ns - self.window_ns)
+            if k:
+                out_t.extend(held_t[:k])
+                out_rows.extend(rows.pop(s) for s in held_t[:k])
+                self.last_released_ns = held_t[k - 1]
+                del held_t[:k]
+        self._t = np.array(held_t, np.int64)
+        self._w = np.array([rows[s][0] for s in held_t], float).reshape(-1, 3)
+        self._a = np.array([rows[s][1] for s in held_t], np.int64)
+        return (
+            np.array(out_t, np.int64),
+            np.array([r[0] for r in out_rows], float).reshape(-1, 3),
+            np.array([r[1] for r in out_rows], np.int64),
+        )
+
+    def flush(self) -> tuple[NDArray[np.int64], NDArray, NDArray[np.int64]]:
         """Release everything held, in order."""
-        while self._heap:
-            t, _, (w, it) = heapq.heappop(self._heap)
-            self._held.discard(t)
-            self.last_released_ns = t
-            out.append((t, w, it))
+        if not len(self._t):
+            return self._release(-1)
+        return self._release(int(self._t[-1]))

@@ -11,12 +11,13 @@ processed, the integrator closes its last step, the recording is finished and th
 from __future__ import annotations
 
 import dataclasses
-import math
+import queue
 import signal
 import sys
 import threading
 import time
 import warnings
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -24,11 +25,12 @@ from numpy.typing import ArrayLike, NDArray
 
 from imu_dcm.errors import GapWarning, InputError
 from imu_dcm.integrate import METHODS
+from imu_dcm.live.lines import TIME_UNITS
 from imu_dcm.live.pipeline import DEG, LiveResult, Pipeline
-from imu_dcm.live.sources import Received, Source, open_source, parse_source
+from imu_dcm.live.sources import BATCH_S, Received, Source, open_source, parse_source
 from imu_dcm.so3 import as_quat_xyzw
 
-__all__ = ["run"]
+__all__ = ["LiveOptions", "run"]
 
 
 def _warm_up(method: str) -> None:
@@ -93,83 +95,108 @@ def _pct(a: NDArray, p: float) -> float | None:
     return float(np.percentile(a, p)) if len(a) else None
 
 
+@dataclass(frozen=True)
+class LiveOptions:
+    """Options of a live run (the keyword arguments of :func:`run`).
+
+    Attributes
+    ----------
+    imu_topic, truth_topic : str, optional — WebSocket channel choices (default: by schema, as
+        replay); ``truth_topic="none"`` ignores any truth.
+    method : str — integrator method (:data:`imu_dcm.integrate.METHODS`), default ``magnus4``.
+    bias : "auto", "none" or array_like (3,) — ``auto``: from rest as it happens
+        (replay's rest rule, causal); a vector: rad/s.
+    gyro_units : "rad/s" or "deg/s" — unit of the rates (line sources and WebSocket alike).
+    time_units : "s", "ms", "us" or "ns" — unit of CSV stamps.
+    init_quat : array_like (4,), optional — start attitude ``q_w_b``
+        ``[x, y, z, w]`` at the first sample (instead of the truth).
+    reorder_window_s : float — reorder window in source time, s (default 0.05).
+    view_interval_s : float — batching interval of the view and the recording (display rate), s.
+    rerun : None, "spawn", "serve", "save:PATH.rrd" or "off" — ``None``: spawn with a display,
+        else no view (one line names ``serve`` and ``save:``).
+    keep_viewer : bool — ``serve``: leave the web viewer running after the run (default True;
+        the command line stops it unless ``--keep-viewer``).
+    record : path, optional — ROS 2 bag folder written as it goes (received messages +
+        ``/estimate/orientation``); ``force`` replaces an existing one.
+    summary_json : path, optional — summary written at stop.
+    truth_wait_s : float — a source with a truth channel: source time to wait for the truth's
+        first sample before starting from the identity (re-anchored when the truth comes), s.
+    give_up_s : float or None — WebSocket: stop after this long without a connection, s.
+    idle_stop_s : float or None — stop after this long without a sample (None: never), s.
+    status : bool, optional — status line on stderr (default: every 0.5 s on a terminal, else
+        every 5 s).
+    stdin_fd : int, optional — file descriptor of the ``-`` source (default 0).
+    """
+
+    imu_topic: str | None = None
+    truth_topic: str | None = None
+    method: str = "magnus4"
+    bias: str | ArrayLike = "auto"
+    gyro_units: str = "rad/s"
+    time_units: str = "s"
+    init_quat: ArrayLike | None = None
+    reorder_window_s: float = 0.05
+    view_interval_s: float = 0.05
+    rerun: str | None = None
+    keep_viewer: bool = True
+    record: str | Path | None = None
+    force: bool = False
+    summary_json: str | Path | None = None
+    truth_wait_s: float = 1.0
+    give_up_s: float | None = 30.0
+    idle_stop_s: float | None = None
+    status: bool | None = None
+    stdin_fd: int | None = None
+
+
+def _checked(source: str, o: LiveOptions) -> tuple:
+    """The options checked before any I/O: ``(spec, bias, init_q)``; raises InputError."""
+    spec = parse_source(source)
+    if o.method not in METHODS:
+        raise InputError(f"Expected method in {METHODS}, got {o.method!r}")
+    if o.gyro_units not in ("rad/s", "deg/s"):
+        raise InputError(f"Expected gyro units 'rad/s' or 'deg/s', got {o.gyro_units!r}")
+    if o.time_units not in TIME_UNITS:
+        raise InputError(f"Expected time units in {tuple(TIME_UNITS)}, got {o.time_units!r}")
+    if not o.reorder_window_s >= 0 or not o.view_interval_s > 0:
+        raise InputError(
+            f"Expected reorder window >= 0 s and view interval > 0 s, got "
+            f"{o.reorder_window_s!r} and {o.view_interval_s!r}"
+        )
+    bias_v = _check_bias(o.bias)
+    init_q = None
+    if o.init_quat is not None:
+        init_q = as_quat_xyzw(np.asarray(o.init_quat, dtype=float), "init_quat")
+    return spec, bias_v, init_q
+
+
+def _say_stderr(text: str) -> None:
+    print(f"imu-dcm-live: {text}", file=sys.stderr, flush=True)
+
+
 def run(
     source: str,
     *,
-    imu_topic: str | None = None,
-    truth_topic: str | None = None,
-    method: str = "magnus4",
-    bias: str | ArrayLike = "auto",
-    gyro_units: str = "rad/s",
-    time_units: str = "s",
-    init_quat: ArrayLike | None = None,
-    reorder_window_s: float = 0.05,
-    view_interval_s: float = 0.05,
-    rerun: str | None = None,
-    keep_viewer: bool = True,
-    record: str | Path | None = None,
-    force: bool = False,
-    summary_json: str | Path | None = None,
-    truth_wait_s: float = 1.0,
-    give_up_s: float | None = 30.0,
-    idle_stop_s: float | None = None,
     stop: threading.Event | None = None,
-    status: bool | None = None,
     say=None,
-    stdin_fd: int | None = None,
     on_ready=None,
+    **options,
 ) -> LiveResult:
     """Integrate a live gyro stream as it arrives; show, record and summarise it.
 
     Parameters
     ----------
     source : str
-        ``ws://HOST:PORT`` (Foxglove WebSocket), ``udp://HOST:PORT`` (lines) or ``-`` (stdin).
-    imu_topic, truth_topic : str, optional
-        WebSocket channel choices (default: by schema, as replay); ``truth_topic="none"``
-        ignores any truth.
-    method : str
-        Integrator method (:data:`imu_dcm.integrate.METHODS`), default ``magnus4``.
-    bias : "auto", "none" or array_like (3,)
-        ``auto``: from rest as it happens (replay's rest rule, causal); a vector: rad/s.
-    gyro_units : {"rad/s", "deg/s"}
-        Unit of the rates (line sources and WebSocket alike).
-    time_units : {"s", "ms", "us", "ns"}
-        Unit of CSV stamps.
-    init_quat : array_like (4,), optional
-        Start attitude ``q_w_b`` ``[x, y, z, w]`` at the first sample (instead of the truth).
-    reorder_window_s : float
-        Reorder window in source time, s (default 0.05).
-    view_interval_s : float
-        Batching interval of the view and the recording (display rate), s.
-    rerun : {None, "spawn", "serve", "save:PATH.rrd", "off"}
-        ``None``: spawn with a display, else no view (one line names ``serve`` and ``save:``).
-    keep_viewer : bool
-        ``serve``: leave the web viewer running after the run (default True; the command line
-        stops it unless ``--keep-viewer``).
-    record : path, optional
-        ROS 2 bag folder to write as it goes (received messages + ``/estimate/orientation``).
-    force : bool
-        Replace an existing ``record`` folder.
-    summary_json : path, optional
-        Summary written at stop.
-    truth_wait_s : float
-        WebSocket without a truth channel: source time to wait for one before starting from the
-        identity, s.
-    give_up_s : float or None
-        WebSocket: stop after this long without a connection (None: never), s.
-    idle_stop_s : float or None
-        Stop after this long without a sample (None: never), s.
+        ``ws://HOST:PORT`` (Foxglove WebSocket), ``udp://HOST:PORT`` (lines), ``-`` (stdin), or
+        another scheme of :data:`imu_dcm.live.sources.SOURCES`.
     stop : threading.Event, optional
         Set it to stop (in addition to SIGINT/SIGTERM in the main thread).
-    status : bool, optional
-        Status line on stderr (default: when stderr is a terminal, every 0.5 s; else every 5 s).
     say : callable(str), optional
         Where one-line messages go (default: stderr, prefixed ``imu-dcm-live:``).
-    stdin_fd : int, optional
-        File descriptor of the ``-`` source (default 0).
     on_ready : callable(info dict), optional
         Called once the source is open (``udp``: ``{"address": (host, port)}``).
+    **options
+        The fields of :class:`LiveOptions`.
 
     Returns
     -------
@@ -177,63 +204,34 @@ def run(
         Summary keys: ``source, imu_topic, imu_type, truth_topic, truth_type, samples,
         duration_s, rate_hz, dropped_nonfinite, dropped_duplicate, dropped_backward,
         reordered, malformed, gaps, reconnects, gyro_units, bias_mode, bias_rad_s,
-        bias_segments, method, start_time_s, initial_quat_xyzw, final_quat_xyzw, final_t_s,
-        truth_samples_used, rms/max error/inclination/heading (deg, None without truth),
-        latency_p50_ms, latency_p99_ms, stopped, record, cpu_s (process CPU time while
-        receiving, all threads), elapsed_s``.
+        bias_segments, method, start_time_s, unscored_before_s, initial_quat_xyzw,
+        final_quat_xyzw, final_t_s, truth_samples_used, rms/max error/inclination/heading (deg,
+        None without truth), latency_p50_ms, latency_p99_ms, stopped, record, cpu_s (process
+        CPU time while receiving, all threads), elapsed_s``.
     """
     started = time.perf_counter()
-    spec = parse_source(source)
-    if method not in METHODS:
-        raise InputError(f"Expected method in {METHODS}, got {method!r}")
-    if gyro_units not in ("rad/s", "deg/s"):
-        raise InputError(f"Expected gyro units 'rad/s' or 'deg/s', got {gyro_units!r}")
-    from imu_dcm.live.lines import TIME_UNITS
-
-    if time_units not in TIME_UNITS:
-        raise InputError(f"Expected time units in {tuple(TIME_UNITS)}, got {time_units!r}")
-    if not reorder_window_s >= 0 or not view_interval_s > 0:
-        raise InputError(
-            f"Expected reorder window >= 0 s and view interval > 0 s, got "
-            f"{reorder_window_s!r} and {view_interval_s!r}"
-        )
-    bias_v = _check_bias(bias)
-    init_q = None
-    if init_quat is not None:
-        init_q = as_quat_xyzw(np.asarray(init_quat, dtype=float), "init_quat")
-    if say is None:
-
-        def say(text: str) -> None:
-            print(f"imu-dcm-live: {text}", file=sys.stderr, flush=True)
-
+    o = LiveOptions(**options)
+    spec, bias_v, init_q = _checked(source, o)
+    say = say or _say_stderr
     from imu_dcm.live.view import LiveView, check_mode
 
-    check_mode(rerun)
-    _check_outputs(record, force, summary_json, rerun)
-    _warm_up(method)
+    check_mode(o.rerun)
+    _check_outputs(o.record, o.force, o.summary_json, o.rerun)
+    _warm_up(o.method)
     src: Source = open_source(
         spec,
-        imu_topic=imu_topic,
-        truth_topic=truth_topic,
-        gyro_units=gyro_units,
-        time_units=time_units,
-        give_up_s=give_up_s,
-        stdin_fd=stdin_fd,
+        imu_topic=o.imu_topic,
+        truth_topic=o.truth_topic,
+        gyro_units=o.gyro_units,
+        time_units=o.time_units,
+        give_up_s=o.give_up_s,
+        stdin_fd=o.stdin_fd,
+        batch_s=min(BATCH_S, o.view_interval_s / 4),
     )
     recorder = view = None
     try:
-        if record is not None:
-            from imu_dcm.live.recorder import LiveRecorder
-
-            recorder = LiveRecorder(
-                record,
-                force=force,
-                custom_data={
-                    "imu_dcm.live.source": source,
-                    "imu_dcm.method": method,
-                    "imu_dcm.bias_mode": bias_v if isinstance(bias_v, str) else "fixed",
-                },
-            )
+        recorder = _open_recorder(source, o, bias_v)
+        rerun = o.rerun
         if rerun is None and not _has_display():
             from imu_dcm.viz import HEADLESS_HINT
 
@@ -242,178 +240,177 @@ def run(
         if rerun != "off":
             view = LiveView(rerun, title=f"live {source}", say=say)
         pipe = Pipeline(
-            method=method,
+            method=o.method,
             bias=bias_v,
             init_q=init_q,
-            window_ns=round(reorder_window_s * 1e9),
-            truth_wait_s=truth_wait_s,
-            lines=spec.kind != "ws",
+            window_ns=round(o.reorder_window_s * 1e9),
+            truth_wait_s=o.truth_wait_s,
+            lines=not src.announces_truth,
             view=view,
             recorder=recorder,
             say=say,
+            time_units=o.time_units if src.converts_gyro_units else None,
         )
-        gyro_scale = DEG if (gyro_units == "deg/s" and spec.kind == "ws") else 1.0
-        stop_event = stop or threading.Event()
-        reason = _loop(
-            src,
-            pipe,
-            stop_event,
-            gyro_scale,
-            view_interval_s,
-            status,
-            say,
-            idle_stop_s,
-            recorder,
-            on_ready,
-            spec,
-        )
+        reason = _Loop(src, pipe, o, stop or threading.Event(), say, on_ready).run()
     finally:
-        src.stop()
-        if view is not None:
-            try:
-                line = view.close()
-                if view.served is not None and not keep_viewer:
-                    view.served.stop()
-                    line = "rerun: web viewer stopped (--keep-viewer leaves it running)"
-                if line:
-                    say(line)
-            except Exception as exc:
-                say(f"rerun view failed: {type(exc).__name__}: {exc}")
-        if recorder is not None:
-            recorder.close()
+        _close(src, view, recorder, say, o.keep_viewer)
     lat = np.concatenate(pipe.latency) if pipe.latency else np.zeros(0)
-    summary = _summary(
-        pipe, src, spec, source, method, bias_v, gyro_units, reason, lat, recorder, started
-    )
-    if summary_json is not None:
+    summary = _summary(pipe, src, source, o, bias_v, reason, lat, recorder, started)
+    if o.summary_json is not None:
         from imu_dcm.outputs import write_json
 
-        write_json(summary_json, summary, what="--summary-json file")
+        write_json(o.summary_json, summary, what="--summary-json file")
     q = None if pipe.q_last is None else np.asarray(pipe.q_last, dtype=float)
     return LiveResult(summary, q, pipe.t_last_ns, lat)
 
 
-def _loop(
-    src: Source,
-    pipe: Pipeline,
-    stop: threading.Event,
-    gyro_scale: float,
-    interval_s: float,
-    status: bool | None,
-    say,
-    idle_stop_s,
-    recorder,
-    on_ready,
-    spec,
-) -> str:
-    """Receive until stopped; returns why it stopped."""
-    import queue
+def _open_recorder(source: str, o: LiveOptions, bias_v):
+    if o.record is None:
+        return None
+    from imu_dcm.live.recorder import LiveRecorder
 
-    handlers = {}
-    reason = ["stopped"]
-
-    def on_signal(signum, frame):
-        reason[0] = f"stopped by {signal.Signals(signum).name}"
-        stop.set()
-
-    if threading.current_thread() is threading.main_thread():
-        for sig in (signal.SIGINT, signal.SIGTERM):
-            handlers[sig] = signal.signal(sig, on_signal)
-    tty = sys.stderr.isatty()
-    if status is None:
-        status = True
-    status_every = 0.5 if tty else 5.0
-    try:
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore", GapWarning)  # gaps are reported once, here
-            pipe.cpu_start = time.process_time()
-            src.start()
-            if on_ready is not None:
-                info = {"address": getattr(src, "address", None)}
-                on_ready(info)
-            events = src.events
-            next_flush = time.monotonic() + interval_s
-            next_status = time.monotonic() + status_every
-            idle_since = time.monotonic()
-            window_s = pipe.reorder.window_ns * 1e-9
-            while not stop.is_set():
-                timeout = max(0.0, next_flush - time.monotonic())
-                try:
-                    ev = events.get(timeout=timeout)
-                except queue.Empty:
-                    ev = None
-                if ev is not None:
-                    kind = ev[0]
-                    if kind == "data":
-                        rec: Received = ev[1]
-                        if rec.kind == "imu":
-                            pipe.on_imu(_scaled(rec, gyro_scale))
-                            idle_since = time.monotonic()
-                        else:
-                            pipe.on_truth(rec)
-                        if recorder is not None:
-                            recorder.add_received(rec)
-                    elif kind == "malformed":
-                        pipe.malformed += ev[1]
-                    elif kind == "channel":
-                        ch = ev[1]
-                        pipe.channels = getattr(pipe, "channels", {})
-                        pipe.channels[ch.kind] = ch
-                        if ch.kind == "truth":
-                            pipe.truth_channel = True
-                        if recorder is not None:
-                            recorder.add_channel(ch)
-                    elif kind == "info":
-                        say(ev[1])
-                    elif kind == "end":
-                        reason[0] = ev[1]
-                        break
-                now = time.monotonic()
-                if now >= next_flush:
-                    pipe.flush()
-                    if recorder is not None:
-                        recorder.maybe_flush()
-                    next_flush = now + interval_s
-                if status and now >= next_status:
-                    _status(pipe, src, tty)
-                    next_status = now + status_every
-                if len(pipe.reorder) and now - idle_since > window_s:
-                    pipe.release_held()  # the source went quiet: a sample waits <= the window
-                if idle_stop_s is not None and now - idle_since > idle_stop_s:
-                    reason[0] = f"no sample for {idle_stop_s:g} s"
-                    break
-            # drain what the source already delivered
-            src.stop()
-            while True:
-                try:
-                    ev = src.events.get_nowait()
-                except queue.Empty:
-                    break
-                if ev[0] == "data":
-                    rec = ev[1]
-                    if rec.kind == "imu":
-                        pipe.on_imu(_scaled(rec, gyro_scale))
-                    else:
-                        pipe.on_truth(rec)
-                    if recorder is not None:
-                        recorder.add_received(rec)
-                elif ev[0] == "malformed":
-                    pipe.malformed += ev[1]
-            pipe.finish()
-            pipe.flush(final=True)
-            pipe.cpu_s = time.process_time() - pipe.cpu_start
-            if tty and status:
-                sys.stderr.write("\r" + " " * 100 + "\r")
-    finally:
-        for sig, h in handlers.items():
-            signal.signal(sig, h)
-    return reason[0]
+    return LiveRecorder(
+        o.record,
+        force=o.force,
+        custom_data={
+            "imu_dcm.live.source": source,
+            "imu_dcm.method": o.method,
+            "imu_dcm.bias_mode": bias_v if isinstance(bias_v, str) else "fixed",
+        },
+    )
 
 
-def _status(pipe: Pipeline, src: Source, tty: bool) -> None:
+def _close(src: Source, view, recorder, say, keep_viewer: bool = True) -> None:
+    src.stop()
+    if view is not None:
+        try:
+            line = view.close()
+            if view.served is not None and not keep_viewer:
+                view.served.stop()
+                line = "rerun: web viewer stopped (--keep-viewer leaves it running)"
+            if line:
+                say(line)
+        except Exception as exc:
+            say(f"rerun view failed: {type(exc).__name__}: {exc}")
+    if recorder is not None:
+        recorder.close()
+
+
+class _Loop:
+    """Receive until stopped: events from the source to the pipeline, the view at display
+    rate, the status line; :meth:`run` returns why it stopped."""
+
+    def __init__(self, src: Source, pipe: Pipeline, o: LiveOptions, stop, say, on_ready) -> None:
+        self.src, self.pipe, self.stop, self.say, self.on_ready = src, pipe, stop, say, on_ready
+        self.recorder = pipe.recorder
+        self.interval_s = o.view_interval_s
+        self.idle_stop_s = o.idle_stop_s
+        scale = o.gyro_units == "deg/s" and not src.converts_gyro_units
+        self.gyro_scale = DEG if scale else 1.0
+        self.tty = sys.stderr.isatty()
+        self.status = True if o.status is None else o.status
+        self.status_every = 0.5 if self.tty else 5.0
+        self.reason = "stopped"
+        self.idle_since = time.monotonic()
+
+    def _on_signal(self, signum, frame) -> None:
+        self.reason = f"stopped by {signal.Signals(signum).name}"
+        self.stop.set()
+
+    def run(self) -> str:
+        handlers = {}
+        if threading.current_thread() is threading.main_thread():
+            for sig in (signal.SIGINT, signal.SIGTERM):
+                handlers[sig] = signal.signal(sig, self._on_signal)
+        try:
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore", GapWarning)  # gaps are reported once, here
+                cpu_start = time.process_time()
+                self.src.start()
+                if self.on_ready is not None:
+                    self.on_ready({"address": getattr(self.src, "address", None)})
+                self._receive()
+                self._drain()
+                self.pipe.finish()
+                self.pipe.flush(final=True)
+                self.pipe.cpu_s = time.process_time() - cpu_start
+                if self.tty and self.status:
+                    sys.stderr.write("\r" + " " * 100 + "\r")
+        finally:
+            for sig, h in handlers.items():
+                signal.signal(sig, h)
+        return self.reason
+
+    def _receive(self) -> None:
+        pipe, events = self.pipe, self.src.events
+        now = time.monotonic()
+        next_flush, next_status = now + self.interval_s, now + self.status_every
+        window_s = pipe.reorder.window_ns * 1e-9
+        while not self.stop.is_set():
+            try:
+                if self._handle(events.get(timeout=max(0.0, next_flush - time.monotonic()))):
+                    return
+            except queue.Empty:
+                pass
+            now = time.monotonic()
+            if now >= next_flush:
+                pipe.flush()
+                if self.recorder is not None:
+                    self.recorder.maybe_flush()
+                next_flush = now + self.interval_s
+            if self.status and now >= next_status:
+                _status(pipe, self.tty)
+                next_status = now + self.status_every
+            if len(pipe.reorder) and now - self.idle_since > window_s:
+                pipe.release_held()  # the source went quiet: a sample waits <= the window
+            if self.idle_stop_s is not None and now - self.idle_since > self.idle_stop_s:
+                self.reason = f"no sample for {self.idle_stop_s:g} s"
+                return
+
+    def _handle(self, ev: tuple) -> bool:
+        """One event from the source; True when it ends the run."""
+        kind, pipe = ev[0], self.pipe
+        if kind == "data":
+            rec: Received = ev[1]
+            if rec.kind == "imu":
+                pipe.on_imu(_scaled(rec, self.gyro_scale))
+                self.idle_since = time.monotonic()
+            else:
+                pipe.on_truth(rec)
+            if self.recorder is not None:
+                self.recorder.add_received(rec)
+        elif kind == "malformed":
+            pipe.malformed += ev[1]
+        elif kind == "channel":
+            ch = ev[1]
+            pipe.channels[ch.kind] = ch
+            pipe.truth_channel |= ch.kind == "truth"
+            if self.recorder is not None:
+                self.recorder.add_channel(ch)
+        elif kind == "info":
+            self.say(ev[1])
+        elif kind == "end":
+            self.reason = ev[1]
+            return True
+        return False
+
+    def _drain(self) -> None:
+        """What the source already delivered, once it has stopped."""
+        self.src.stop()
+        while True:
+            try:
+                ev = self.src.events.get_nowait()
+            except queue.Empty:
+                return
+            if ev[0] in ("data", "malformed"):
+                self._handle(ev)
+
+
+def _status(pipe: Pipeline, tty: bool) -> None:
     r = pipe.reorder
     dropped = r.dropped_duplicate + r.dropped_backward + r.dropped_nonfinite + pipe.malformed
-    rate = 1.0 / pipe._median if pipe._median not in (0.0, math.inf) else 0.0
+    step = pipe.median_step_s
+    rate = 1.0 / step if step else 0.0
     lat = pipe.latency[-1] if pipe.latency else np.zeros(0)
     p50 = f"{np.median(lat):.1f}" if len(lat) else "-"
     b = pipe.rest.bias_rad_s if pipe.rest is not None else pipe.fixed_bias
@@ -429,28 +426,22 @@ def _status(pipe: Pipeline, src: Source, tty: bool) -> None:
 def _summary(
     pipe: Pipeline,
     src: Source,
-    spec,
     source: str,
-    method: str,
+    o: LiveOptions,
     bias_v,
-    gyro_units,
     reason: str,
     lat: NDArray,
     recorder,
     started: float,
 ) -> dict:
     r = pipe.reorder
-    chans = getattr(pipe, "channels", {})
-    imu_ch, truth_ch = chans.get("imu"), chans.get("truth")
-    dur = pipe._prev_t_s or 0.0
-    steps = sorted(pipe._steps)
+    imu_ch, truth_ch = pipe.channels.get("imu"), pipe.channels.get("truth")
+    dur = float(pipe.recent_t_s[-1]) if len(pipe.recent_t_s) else 0.0
+    step = pipe.median_step_s
     st = pipe.stats
     have = st.n > 0
     rms_v = np.sqrt(st.sq / st.n) if have else [None] * 3
-    if pipe.rest is not None:
-        segs = list(pipe.rest.segments)
-    else:
-        segs = []
+    segs = list(pipe.rest.segments) if pipe.rest is not None else []
     bias_mean = (pipe.bias_sum / pipe.bias_n).tolist() if pipe.bias_n else [0.0, 0.0, 0.0]
     return {
         "source": source,
@@ -463,7 +454,7 @@ def _summary(
         "samples": int(pipe.n),
         "samples_estimated": int(pipe.n - pipe.samples_before_start) if pipe.integ else 0,
         "duration_s": float(dur),
-        "rate_hz": float(1.0 / steps[len(steps) // 2]) if steps else None,
+        "rate_hz": 1.0 / step if step else None,
         "dropped_nonfinite": r.dropped_nonfinite,
         "dropped_duplicate": r.dropped_duplicate,
         "dropped_backward": r.dropped_backward,
@@ -471,14 +462,15 @@ def _summary(
         "malformed": int(pipe.malformed),
         "gaps": [{"t_s": a, "length_s": d} for a, d in pipe.gaps],
         "reconnects": int(getattr(src, "reconnects", 0)),
-        "gyro_units": gyro_units,
+        "gyro_units": o.gyro_units,
         "bias_mode": pipe.bias_mode,
         "bias_rad_s": bias_mean,
         "bias_final_rad_s": list(pipe.rest.bias_rad_s) if pipe.rest else list(pipe.fixed_bias),
         "bias_segments": segs,
-        "method": method,
+        "method": o.method,
         "reorder_window_s": r.window_ns * 1e-9,
         "start_time_s": pipe.start_t_s,
+        "unscored_before_s": pipe.unscored_before_s,
         "initial_quat_xyzw": None if pipe.q0 is None else [float(v) for v in pipe.q0],
         "final_quat_xyzw": None if pipe.q_last is None else [float(v) for v in pipe.q_last],
         "final_t_s": None
@@ -495,6 +487,6 @@ def _summary(
         "latency_p99_ms": _pct(lat, 99),
         "stopped": reason,
         "record": str(recorder.path) if recorder is not None else None,
-        "cpu_s": getattr(pipe, "cpu_s", None),
+        "cpu_s": pipe.cpu_s,
         "elapsed_s": time.perf_counter() - started,
     }

@@ -20,10 +20,19 @@ doubling to 5 s), says so, and gives up after ``give_up_s`` without a connection
 
 **UDP** (``udp://HOST:PORT``): binds the address and reads datagrams of one or more lines.
 **stdin** (``-``): reads lines until end of input. Line format: :mod:`imu_dcm.live.lines`.
+
+Each wake-up of a source takes everything that has arrived by then (the datagrams queued on the
+socket, the bytes in the pipe, the frames received) and hands it on as one batch of arrays: a
+source thread wakes at most every ``batch_s`` (2-5 ms), so the per-batch costs are shared by the
+samples that arrived in between.
+
+**A new source** is one :class:`Source` subclass and one row in :data:`SOURCES` (the URL scheme
+and ``"module:Class"``, imported when a SOURCE of that scheme is opened).
 """
 
 from __future__ import annotations
 
+import importlib
 import json
 import os
 import queue
@@ -32,7 +41,7 @@ import socket
 import struct
 import threading
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from urllib.parse import urlsplit
 
 import numpy as np
@@ -42,20 +51,39 @@ from imu_dcm.errors import InputError
 from imu_dcm.live.lines import parse_lines
 from imu_dcm.logio.batch import classify_schema, decode_cdr_batch
 
-__all__ = ["Channel", "Received", "Source", "SourceSpec", "open_source", "parse_source"]
+__all__ = [
+    "SOURCES",
+    "Channel",
+    "Received",
+    "Source",
+    "SourceOptions",
+    "SourceSpec",
+    "open_source",
+    "parse_source",
+]
 
 _SUBPROTOCOLS = ("foxglove.websocket.v1", "foxglove.sdk.v1")
 _BIN_MESSAGE = 0x01
 _MSG_HEAD = struct.Struct("<BIQ")  # opcode, subscription id, log time ns
 _DRAIN_MAX = 4000  # frames (datagrams) per batch at most
-#: A batch collects what arrives within this long after its first frame, s: per-batch costs
-#: (one bulk decode, one queue event) are shared by several samples at the price of <= 2 ms.
-_DRAIN_S = 0.002
+#: A batch collects what arrives within this long after its first sample, s (default): per-batch
+#: costs (one bulk parse or decode, one queue event) are shared by the samples of a few ms.
+BATCH_S = 0.005
+
+#: SOURCE URL scheme -> the Source class that reads it, as ``"module:Class"`` (imported on
+#: open). ``-`` is stdin. A new source: one class and one row here.
+SOURCES: dict[str, str] = {
+    "ws": "imu_dcm.live.sources:WsSource",
+    "udp": "imu_dcm.live.sources:UdpSource",
+    "-": "imu_dcm.live.sources:StdinSource",
+    "mavlink": "imu_dcm.live.mavlink:MavlinkSource",
+}
 
 
 @dataclass(frozen=True)
 class SourceSpec:
-    """A parsed SOURCE argument: ``kind`` ws / udp / stdin, ``host``, ``port``, ``url``."""
+    """A parsed SOURCE argument: ``kind`` (the :data:`SOURCES` scheme; ``stdin`` for ``-``),
+    ``host``, ``port``, ``url``."""
 
     kind: str
     host: str = ""
@@ -63,17 +91,48 @@ class SourceSpec:
     url: str = "-"
 
 
+@dataclass(frozen=True)
+class SourceOptions:
+    """What a source may need besides its URL (each source reads the fields it uses).
+
+    Attributes
+    ----------
+    imu_topic, truth_topic : str or None — channel choices (``truth_topic="none"``: no truth).
+    gyro_units : "rad/s" or "deg/s" — unit of the rates the source delivers.
+    time_units : "s", "ms", "us" or "ns" — unit of line stamps.
+    give_up_s : float or None — stop after this long without a connection, s.
+    stdin_fd : int or None — file descriptor of ``-`` (default 0).
+    batch_s : float — a wake-up collects what arrives within this long, s.
+    """
+
+    imu_topic: str | None = None
+    truth_topic: str | None = None
+    gyro_units: str = "rad/s"
+    time_units: str = "s"
+    give_up_s: float | None = 30.0
+    stdin_fd: int | None = None
+    batch_s: float = BATCH_S
+
+
 def parse_source(text: str) -> SourceSpec:
-    """``ws://HOST:PORT``, ``udp://HOST:PORT`` or ``-`` (stdin); raises InputError otherwise."""
+    """``SCHEME://HOST:PORT`` for a scheme of :data:`SOURCES`, or ``-`` (stdin); raises
+    InputError otherwise."""
     if text == "-":
         return SourceSpec("stdin")
+    if text.startswith("mavlink:"):  # a pymavlink-style connection: imu_dcm.live.mavlink
+        return SourceSpec("mavlink", url=text)
     parts = urlsplit(text)
     try:
         port = parts.port
     except ValueError:
         port = None
-    if parts.scheme not in ("ws", "udp") or not parts.hostname or port is None:
-        raise InputError(f"Expected SOURCE ws://HOST:PORT, udp://HOST:PORT or -, got {text!r}")
+    if parts.scheme not in SOURCES or parts.scheme == "-" or not parts.hostname or port is None:
+        forms = ", ".join(
+            "mavlink:udpin:HOST:PORT" if k == "mavlink" else f"{k}://HOST:PORT"
+            for k in SOURCES
+            if k != "-"
+        )
+        raise InputError(f"Expected SOURCE {forms} or -, got {text!r}")
     return SourceSpec(parts.scheme, parts.hostname, port, text)
 
 
@@ -113,7 +172,21 @@ class Received:
 
 
 class Source:
-    """Base: a daemon thread putting events on ``events``; :meth:`stop` ends it."""
+    """Base: a daemon thread putting events on ``events``; :meth:`stop` ends it.
+
+    A subclass sets the class attributes below and implements :meth:`open` and :meth:`_run`.
+    """
+
+    #: The source converts rates to rad/s itself (else the session scales them by the units).
+    converts_gyro_units: bool = False
+    #: Truth arrives on a channel the source announces (``("channel", Channel("truth", ...))``):
+    #: the pipeline may wait for it; else truth comes inline with the samples, or not at all.
+    announces_truth: bool = False
+
+    @classmethod
+    def open(cls, spec: SourceSpec, options: SourceOptions) -> Source:
+        """Create (not start) the source for ``spec``."""
+        raise NotImplementedError
 
     def __init__(self) -> None:
         self.events: queue.Queue = queue.Queue()
@@ -145,10 +218,13 @@ class Source:
 
 
 class _LineSource(Source):
-    def __init__(self, gyro_units: str, time_units: str) -> None:
+    converts_gyro_units = True
+
+    def __init__(self, gyro_units: str, time_units: str, batch_s: float = BATCH_S) -> None:
         super().__init__()
         self.gyro_units = gyro_units
         self.time_units = time_units
+        self.batch_s = batch_s
         self._first = True
 
     def _emit_lines(self, lines: list[bytes], arrival_ns: int, wall_ns: int) -> None:
@@ -158,37 +234,25 @@ class _LineSource(Source):
         self._first = False
         if bad:
             self.events.put(("malformed", bad))
-        if len(tt):
-            m = len(tt)
-            self.events.put(
-                (
-                    "data",
-                    Received(
-                        "truth",
-                        tt,
-                        q,
-                        np.full(m, arrival_ns, np.int64),
-                        np.full(m, wall_ns, np.int64),
-                    ),
-                )
-            )
-        if len(t):
-            n = len(t)
-            self.events.put(
-                (
-                    "data",
-                    Received(
-                        "imu", t, w, np.full(n, arrival_ns, np.int64), np.full(n, wall_ns, np.int64)
-                    ),
-                )
-            )
+        for kind, stamps, values in (("truth", tt, q), ("imu", t, w)):
+            if len(stamps):
+                n = len(stamps)
+                arrival = np.full(n, arrival_ns, np.int64)
+                wall = np.full(n, wall_ns, np.int64)
+                self.events.put(("data", Received(kind, stamps, values, arrival, wall)))
 
 
 class UdpSource(_LineSource):
-    """Datagrams of sample lines on ``host:port`` (bound on start)."""
+    """Datagrams of sample lines on ``host:port`` (bound on open)."""
 
-    def __init__(self, host: str, port: int, gyro_units: str, time_units: str) -> None:
-        super().__init__(gyro_units, time_units)
+    @classmethod
+    def open(cls, spec: SourceSpec, options: SourceOptions) -> UdpSource:
+        return cls(spec.host, spec.port, options.gyro_units, options.time_units, options.batch_s)
+
+    def __init__(
+        self, host: str, port: int, gyro_units: str, time_units: str, batch_s: float = BATCH_S
+    ) -> None:
+        super().__init__(gyro_units, time_units, batch_s)
         self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
         self.sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 4 << 20)
         try:
@@ -197,7 +261,6 @@ class UdpSource(_LineSource):
             self.sock.close()
             raise InputError(f"Expected to bind udp://{host}:{port}, got {exc}") from None
         self.address = self.sock.getsockname()
-        self.sock.settimeout(0.2)
 
     def _close(self) -> None:
         self.sock.close()
@@ -206,36 +269,38 @@ class UdpSource(_LineSource):
         where = f"udp://{self.address[0]}:{self.address[1]}"
         self.events.put(("channel", Channel("imu", where, "", "", "", "lines")))
         self.events.put(("info", f"listening on {where}"))
+        sock = self.sock
+        sock.setblocking(False)
         try:
             while not self._stop.is_set():
-                try:
-                    data = self.sock.recv(65536)
-                except TimeoutError:
+                ready, _, _ = select.select([sock], [], [], 0.2)
+                if not ready:
                     continue
                 arrival, wall = time.perf_counter_ns(), time.time_ns()
-                chunks = [data]
-                t_end = time.perf_counter() + _DRAIN_S
+                self._stop.wait(self.batch_s)  # let the batch arrive, then take all of it
+                chunks: list[bytes] = []
                 try:
                     while len(chunks) < _DRAIN_MAX:
-                        left = t_end - time.perf_counter()
-                        if left <= 0:
-                            break
-                        self.sock.settimeout(left)
-                        chunks.append(self.sock.recv(65536))
-                except (TimeoutError, BlockingIOError, InterruptedError):
+                        chunks.append(sock.recv(65536))
+                except (BlockingIOError, InterruptedError):
                     pass
-                finally:
-                    self.sock.settimeout(0.2)
-                self._emit_lines(b"\n".join(chunks).split(b"\n"), arrival, wall)
+                if chunks:
+                    self._emit_lines(b"\n".join(chunks).split(b"\n"), arrival, wall)
         finally:
-            self.sock.close()
+            sock.close()
 
 
 class StdinSource(_LineSource):
     """Sample lines from a file descriptor (stdin by default) until end of input."""
 
-    def __init__(self, gyro_units: str, time_units: str, fd: int | None = None) -> None:
-        super().__init__(gyro_units, time_units)
+    @classmethod
+    def open(cls, spec: SourceSpec, options: SourceOptions) -> StdinSource:
+        return cls(options.gyro_units, options.time_units, options.stdin_fd, options.batch_s)
+
+    def __init__(
+        self, gyro_units: str, time_units: str, fd: int | None = None, batch_s: float = BATCH_S
+    ) -> None:
+        super().__init__(gyro_units, time_units, batch_s)
         self.fd = 0 if fd is None else fd
 
     def _run(self) -> None:
@@ -245,8 +310,9 @@ class StdinSource(_LineSource):
             ready, _, _ = select.select([self.fd], [], [], 0.2)
             if not ready:
                 continue
-            data = os.read(self.fd, 1 << 16)
             arrival, wall = time.perf_counter_ns(), time.time_ns()
+            self._stop.wait(self.batch_s)  # let the batch arrive, then take all of it
+            data = os.read(self.fd, 1 << 20)
             if not data:
                 if rest:
                     self._emit_lines([rest], arrival, wall)
@@ -258,8 +324,26 @@ class StdinSource(_LineSource):
                 self._emit_lines(lines, arrival, wall)
 
 
+@dataclass
+class _WsSession:
+    """What one WebSocket connection knows: advertised channels, subscriptions, picks."""
+
+    channels: dict[int, dict] = field(default_factory=dict)
+    subs: dict[int, tuple[str, dict]] = field(default_factory=dict)  # sub id -> (kind, channel)
+    picked: dict[str, int] = field(default_factory=dict)  # kind -> channel id
+    next_sub: int = 1
+
+
 class WsSource(Source):
     """A Foxglove WebSocket client (see the module doc)."""
+
+    announces_truth = True
+
+    @classmethod
+    def open(cls, spec: SourceSpec, options: SourceOptions) -> WsSource:
+        return cls(
+            spec.url, options.imu_topic, options.truth_topic, options.give_up_s, options.batch_s
+        )
 
     def __init__(
         self,
@@ -267,52 +351,34 @@ class WsSource(Source):
         imu_topic: str | None,
         truth_topic: str | None,
         give_up_s: float | None = 30.0,
+        batch_s: float = BATCH_S,
     ) -> None:
         super().__init__()
         self.url = url
         self.imu_topic = imu_topic
         self.truth_topic = truth_topic
         self.give_up_s = give_up_s
+        self.batch_s = batch_s
         self.reconnects = 0
+        self._connected_before = False
 
     def _run(self) -> None:
         from websockets.exceptions import ConnectionClosed, InvalidHandshake, InvalidURI
-        from websockets.sync.client import connect
 
         delay = 0.2
         lost_at = time.monotonic()
-        ever = False
         while not self._stop.is_set():
-            why = ""
             try:
-                with connect(
-                    self.url,
-                    subprotocols=list(_SUBPROTOCOLS),
-                    max_size=None,
-                    compression=None,
-                    proxy=None,
-                    open_timeout=5,
-                    close_timeout=1,
-                ) as ws:
-                    if ever:
-                        self.reconnects += 1
-                        self.events.put(("info", (f"reconnected to {self.url} ({ws.subprotocol})")))
-                    else:
-                        self.events.put(("info", f"connected to {self.url} ({ws.subprotocol})"))
-                    ever = True
-                    delay = 0.2
-                    fatal = self._session(ws)
-                    if fatal:
-                        self.events.put(("end", fatal))
-                        return
-                    if self._stop.is_set():
-                        return
-                    why = "the server closed the connection"
+                why = self._connection()
+                if why is None:
+                    return
+                delay = 0.2 if why == "the server closed the connection" else delay
             except InvalidURI as exc:
                 self.events.put(("end", f"bad WebSocket URL: {exc}"))
                 return
             except ConnectionClosed as exc:
                 why = f"connection lost ({exc})"
+                delay = 0.2
             except (OSError, InvalidHandshake, TimeoutError) as exc:
                 why = f"cannot connect ({type(exc).__name__}: {exc})"
             if self._stop.is_set():
@@ -321,16 +387,135 @@ class WsSource(Source):
                 lost_at = time.monotonic()
             waited = time.monotonic() - lost_at
             if self.give_up_s is not None and waited > self.give_up_s:
-                self.events.put(
-                    (
-                        "end",
-                        (f"source lost: no connection to {self.url} for {waited:.1f} s ({why})"),
-                    )
-                )
+                why = f"source lost: no connection to {self.url} for {waited:.1f} s ({why})"
+                self.events.put(("end", why))
                 return
             self.events.put(("info", f"{why}; reconnecting to {self.url} in {delay:.1f} s"))
             self._stop.wait(delay)
             delay = min(2 * delay, 5.0)
+
+    def _connection(self) -> str | None:
+        """Connect and receive until the connection ends: why it ended, or None when the
+        source is finished (stopped, or a fatal reason already sent)."""
+        from websockets.sync.client import connect
+
+        with connect(
+            self.url,
+            subprotocols=list(_SUBPROTOCOLS),
+            max_size=None,
+            compression=None,
+            proxy=None,
+            open_timeout=5,
+            close_timeout=1,
+        ) as ws:
+            again = "reconnected" if self._connected_before else "connected"
+            self.reconnects += self._connected_before
+            self._connected_before = True
+            self.events.put(("info", f"{again} to {self.url} ({ws.subprotocol})"))
+            fatal = self._session(ws)
+            if fatal:
+                self.events.put(("end", fatal))
+                return None
+            if self._stop.is_set():
+                return None
+            return "the server closed the connection"
+
+    def _frames(self, ws) -> list[tuple]:
+        """Every frame received within ``batch_s`` of the first: ``(data, arrival, wall)``."""
+        try:
+            first = ws.recv(timeout=0.2)
+        except TimeoutError:
+            return []
+        frames = [(first, time.perf_counter_ns(), time.time_ns())]
+        t_end = time.perf_counter() + self.batch_s
+        while len(frames) < _DRAIN_MAX:
+            left = t_end - time.perf_counter()
+            if left <= 0:
+                break
+            try:
+                frames.append((ws.recv(timeout=left), time.perf_counter_ns(), time.time_ns()))
+            except TimeoutError:
+                break
+        return frames
+
+    def _session(self, ws) -> str | None:
+        """One connection: subscribe, receive, decode. Returns a fatal reason or None."""
+        st = _WsSession()
+        while not self._stop.is_set():
+            pending: dict[int, list] = {}
+            for data, arrival, wall in self._frames(ws):
+                if isinstance(data, str):
+                    fatal = self._on_text(ws, st, json.loads(data))
+                    if fatal:
+                        return fatal
+                elif len(data) >= _MSG_HEAD.size and data[0] == _BIN_MESSAGE:
+                    _, sid, _ = _MSG_HEAD.unpack_from(data)
+                    if sid in st.subs:
+                        pending.setdefault(sid, []).append((data[_MSG_HEAD.size :], arrival, wall))
+            for sid, items in pending.items():
+                if sid in st.subs:
+                    self._decode(st.subs[sid], items)
+        return None
+
+    def _on_text(self, ws, st: _WsSession, msg) -> str | None:
+        """A JSON message: channels advertised (pick and subscribe) or withdrawn."""
+        op = msg.get("op") if isinstance(msg, dict) else None
+        if op == "advertise":
+            for ch in msg.get("channels", []):
+                enc, text = ch.get("schemaEncoding", ""), ch.get("schema", "")
+                kind = (
+                    classify_schema(ch.get("schemaName", ""), enc, text)
+                    if ch.get("encoding") == "cdr"
+                    else None
+                )
+                st.channels[int(ch["id"])] = {**ch, "kind": kind}
+            for kind, topic in (("imu", self.imu_topic), ("truth", self.truth_topic)):
+                if kind not in st.picked and topic != "none":
+                    fatal = self._pick_and_subscribe(ws, st, kind, topic)
+                    if fatal:
+                        return fatal
+        elif op == "unadvertise":
+            gone = set(msg.get("channelIds", []))
+            for kind, cid in list(st.picked.items()):
+                if cid in gone:
+                    del st.picked[kind]
+                    self.events.put(("info", f"{st.channels[cid]['topic']} was unadvertised"))
+            for sid, (_, ch) in list(st.subs.items()):
+                if int(ch["id"]) in gone:
+                    del st.subs[sid]
+        return None
+
+    def _pick_and_subscribe(self, ws, st: _WsSession, kind: str, topic: str | None) -> str | None:
+        channels = st.channels
+        ids = self._pick(channels, kind, topic)
+        if topic is not None and ids:
+            ch = channels[ids[0]]
+            if ch["kind"] is None or ch["kind"][0] != kind:
+                return (
+                    f"Expected {kind} messages (CDR) on {topic}, got "
+                    f"{ch.get('schemaName')} ({ch.get('encoding')})"
+                )
+        if len(ids) > 1:
+            names = ", ".join(sorted(channels[i]["topic"] for i in ids))
+            flag = "--imu-topic" if kind == "imu" else "--truth-topic"
+            return f"Expected one {kind} channel, got {len(ids)}: {names} (choose with {flag})"
+        if not ids:
+            return None
+        cid = ids[0]
+        ch = channels[cid]
+        st.picked[kind] = cid
+        st.subs[st.next_sub] = (kind, ch)
+        sub = {"op": "subscribe", "subscriptions": [{"id": st.next_sub, "channelId": cid}]}
+        ws.send(json.dumps(sub))
+        st.next_sub += 1
+        name, enc, text = (
+            ch.get("schemaName", ""),
+            ch.get("schemaEncoding", ""),
+            ch.get("schema", ""),
+        )
+        self.events.put(("channel", Channel(kind, ch["topic"], name, enc, text, "cdr")))
+        self.events.put(("info", f"subscribed to {ch['topic']} ({name}) as {kind}"))
+        return None
 
     def _pick(self, channels: dict[int, dict], kind: str, topic: str | None) -> list[int]:
         out = []
@@ -344,117 +529,6 @@ class WsSource(Source):
                     continue
                 out.append(cid)
         return out
-
-    def _session(self, ws) -> str | None:
-        """One connection: subscribe, receive, decode. Returns a fatal reason or None."""
-        channels: dict[int, dict] = {}
-        subs: dict[int, tuple[str, dict]] = {}  # subscription id -> (kind, channel)
-        picked: dict[str, int] = {}  # kind -> channel id
-        pending: dict[int, list] = {}
-        next_sub = 1
-        while not self._stop.is_set():
-            try:
-                first = ws.recv(timeout=0.2)
-            except TimeoutError:
-                continue
-            frames = [(first, time.perf_counter_ns(), time.time_ns())]
-            t_end = time.perf_counter() + _DRAIN_S
-            while len(frames) < _DRAIN_MAX:
-                left = t_end - time.perf_counter()
-                if left <= 0:
-                    break
-                try:
-                    frames.append((ws.recv(timeout=left), time.perf_counter_ns(), time.time_ns()))
-                except TimeoutError:
-                    break
-            for data, arrival, wall in frames:
-                if isinstance(data, str):
-                    msg = json.loads(data)
-                    op = msg.get("op") if isinstance(msg, dict) else None
-                    if op == "advertise":
-                        for ch in msg.get("channels", []):
-                            enc = ch.get("schemaEncoding", "")
-                            text = ch.get("schema", "")
-                            kind = (
-                                classify_schema(ch.get("schemaName", ""), enc, text)
-                                if ch.get("encoding") == "cdr"
-                                else None
-                            )
-                            channels[int(ch["id"])] = {**ch, "kind": kind}
-                        for kind, topic in (("imu", self.imu_topic), ("truth", self.truth_topic)):
-                            if kind in picked or topic == "none":
-                                continue
-                            ids = self._pick(channels, kind, topic)
-                            if topic is not None and ids:
-                                ch = channels[ids[0]]
-                                if ch["kind"] is None or ch["kind"][0] != kind:
-                                    return (
-                                        f"Expected {kind} messages (CDR) on {topic}, got "
-                                        f"{ch.get('schemaName')} ({ch.get('encoding')})"
-                                    )
-                            if len(ids) > 1:
-                                names = ", ".join(sorted(channels[i]["topic"] for i in ids))
-                                flag = "--imu-topic" if kind == "imu" else "--truth-topic"
-                                return (
-                                    f"Expected one {kind} channel, got {len(ids)}: {names} "
-                                    f"(choose with {flag})"
-                                )
-                            if ids:
-                                cid = ids[0]
-                                ch = channels[cid]
-                                picked[kind] = cid
-                                subs[next_sub] = (kind, ch)
-                                ws.send(
-                                    json.dumps(
-                                        {
-                                            "op": "subscribe",
-                                            "subscriptions": [{"id": next_sub, "channelId": cid}],
-                                        }
-                                    )
-                                )
-                                next_sub += 1
-                                self.events.put(
-                                    (
-                                        "channel",
-                                        Channel(
-                                            kind,
-                                            ch["topic"],
-                                            ch.get("schemaName", ""),
-                                            ch.get("schemaEncoding", ""),
-                                            ch.get("schema", ""),
-                                            "cdr",
-                                        ),
-                                    )
-                                )
-                                self.events.put(
-                                    (
-                                        "info",
-                                        (
-                                            f"subscribed to {ch['topic']} "
-                                            f"({ch.get('schemaName')}) as {kind}"
-                                        ),
-                                    )
-                                )
-                    elif op == "unadvertise":
-                        gone = set(msg.get("channelIds", []))
-                        for kind, cid in list(picked.items()):
-                            if cid in gone:
-                                del picked[kind]
-                                self.events.put(
-                                    ("info", (f"{channels[cid]['topic']} was unadvertised"))
-                                )
-                        for sid, (_, ch) in list(subs.items()):
-                            if int(ch["id"]) in gone:
-                                del subs[sid]
-                elif len(data) >= _MSG_HEAD.size and data[0] == _BIN_MESSAGE:
-                    _, sid, _ = _MSG_HEAD.unpack_from(data)
-                    if sid in subs:
-                        pending.setdefault(sid, []).append((data[_MSG_HEAD.size :], arrival, wall))
-            for sid, items in pending.items():
-                if items and sid in subs:
-                    self._decode(subs[sid], items)
-            pending.clear()
-        return None
 
     def _decode(self, sub: tuple[str, dict], items: list) -> None:
         kind, ch = sub
@@ -487,10 +561,12 @@ def open_source(
     time_units: str = "s",
     give_up_s: float | None = 30.0,
     stdin_fd: int | None = None,
+    batch_s: float = BATCH_S,
 ) -> Source:
-    """Create (not start) the source for ``spec``."""
-    if spec.kind == "ws":
-        return WsSource(spec.url, imu_topic, truth_topic, give_up_s)
-    if spec.kind == "udp":
-        return UdpSource(spec.host, spec.port, gyro_units, time_units)
-    return StdinSource(gyro_units, time_units, stdin_fd)
+    """Create (not start) the source for ``spec``: the :data:`SOURCES` class of its scheme."""
+    options = SourceOptions(
+        imu_topic, truth_topic, gyro_units, time_units, give_up_s, stdin_fd, batch_s
+    )
+    module, _, name = SOURCES["-" if spec.kind == "stdin" else spec.kind].partition(":")
+    cls = getattr(importlib.import_module(module), name)
+    return cls.open(spec, options)

@@ -74,7 +74,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def _write_out(out: Path, result, force: bool, inputs: tuple) -> Path:
-    from imu_dcm.bag_writer import StampedSeries, write_bag
+    from imu_dcm.logio.writer import StampedSeries, write_bag
 
     k = slice(result.start_index, None)
     quats = {"/estimate/orientation": StampedSeries(result.t_ns[k], result.q_est[k], "world")}
@@ -308,9 +308,9 @@ def main(argv: list[str] | None = None) -> int:
 
     argv = list(sys.argv[1:] if argv is None else argv)
     if argv and argv[0] == "batch":
-        from imu_dcm.replay.batch_cli import main as batch_main
+        from imu_dcm.replay import batch_cli
 
-        return batch_main(argv[1:])
+        return batch_cli.main(argv[1:])
     message = ""
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")

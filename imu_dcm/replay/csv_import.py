@@ -175,7 +175,7 @@ def convert_csv(
     output may not be or hold the CSV; ``force`` replaces only a bag this
     project wrote (:func:`imu_dcm.outputs.check_output_dir`).
     """
-    from imu_dcm.bag_writer import StampedSeries, write_bag
+    from imu_dcm.logio.writer import StampedSeries, write_bag
     from imu_dcm.outputs import check_output_dir
 
     check_output_dir(out_dir, (csv_path,), force=force, what="output bag")

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import math
 
-from imu_dcm.cli import parse_bias, parse_init_quat, parse_numbers
+from imu_dcm.cli import parse_bias, parse_init_quat, parse_mounting, parse_numbers
 from imu_dcm.errors import InputError
 from imu_dcm.methods import METHODS
 
@@ -134,6 +134,14 @@ def add_replay_options(g) -> None:
         "(negative numbers as they are: --bias -0.01,0,0)",
     )
     g.add_argument(
+        "--mounting",
+        default="auto",
+        metavar="auto|none|X,Y,Z,W",
+        help="rotation from the gyro's frame into the truth's body frame: auto (estimated from "
+        "the rates, applied when determined and above 3°; default), none (reported only), or "
+        "x,y,z,w",
+    )
+    g.add_argument(
         "--gyro-units",
         choices=GYRO_UNITS,
         default="rad/s",
@@ -169,6 +177,7 @@ def replay_keywords(args) -> dict:
     parsed and checked (string parsing lives here, not in the library)."""
     bias = parse_bias(args.bias)
     init = parse_init_quat(args.init_quat)
+    mounting = parse_mounting(args.mounting)
     offset: float | str = args.truth_offset
     if offset != "auto":
         offset = parse_numbers(offset, 1, "--truth-offset (auto or seconds)")[0]
@@ -197,4 +206,5 @@ def replay_keywords(args) -> dict:
         "prefilter": None if args.prefilter == "none" else args.prefilter,
         "prefilter_config": config,
         "truth_offset_s": offset,
+        "mounting": mounting,
     }
