@@ -347,11 +347,21 @@ def test_a_folder_of_logs_points_to_batch(tmp_path):
 
 
 def test_help_names_every_container_batch_and_the_method_choices(tmp_path):
+    import re
+
+    from imu_dcm.logio.foreign import REFUSALS
+    from imu_dcm.logio.registry import SOURCES
     from imu_dcm.methods import METHODS
 
     text = " ".join(run(["imu_dcm.replay", "--help"], tmp_path).stdout.split())
     for word in ("metadata.yaml", ".mcap", ".db3", "ROS 1 .bag", "imu-dcm-replay batch"):
         assert word in text, word
+    # every container of the reader table is named (by the first word in its parentheses)
+    for entry in SOURCES:
+        m = re.search(r"\(([^ ,)]+)", entry.name)
+        if entry in REFUSALS or m is None:
+            continue
+        assert m.group(1) in text, entry.name
     assert "{" + ",".join(METHODS) + "}" in text
     csv_help = run(["imu_dcm.replay", "convert-csv", "--help"], tmp_path).stdout
     assert "--time-units" in csv_help and "--time-unit " in csv_help  # one spelling, old alias
