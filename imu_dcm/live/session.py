@@ -80,9 +80,12 @@ def _has_display() -> bool:
 
 
 def _check_outputs(record, force: bool, summary_json, rerun) -> None:
-    """The output paths, before the source is opened (imu_dcm.outputs' rule)."""
+    """The view's mode and the output paths, before the source is opened (imu_dcm.outputs'
+    rule)."""
+    from imu_dcm.live.view import check_mode
     from imu_dcm.outputs import check_output_dir, check_output_file
 
+    check_mode(rerun)
     if record is not None:
         check_output_dir(record, force=force, what="--record bag")
     if summary_json is not None:
@@ -213,9 +216,8 @@ def run(
     o = LiveOptions(**options)
     spec, bias_v, init_q = _checked(source, o)
     say = say or _say_stderr
-    from imu_dcm.live.view import LiveView, check_mode
+    from imu_dcm.live.view import LiveView
 
-    check_mode(o.rerun)
     _check_outputs(o.record, o.force, o.summary_json, o.rerun)
     _warm_up(o.method)
     src: Source = open_source(
@@ -231,14 +233,7 @@ def run(
     recorder = view = None
     try:
         recorder = _open_recorder(source, o, bias_v)
-        rerun = o.rerun
-        if rerun is None and not _has_display():
-            from imu_dcm.viz import HEADLESS_HINT
-
-            say(HEADLESS_HINT)
-            rerun = "off"
-        if rerun != "off":
-            view = LiveView(rerun, title=f"live {source}", say=say)
+        view = _open_view(o.rerun, source, say, LiveView)
         pipe = Pipeline(
             method=o.method,
             bias=bias_v,
@@ -262,6 +257,17 @@ def run(
         write_json(o.summary_json, summary, what="--summary-json file")
     q = None if pipe.q_last is None else np.asarray(pipe.q_last, dtype=float)
     return LiveResult(summary, q, pipe.t_last_ns, lat)
+
+
+def _open_view(rerun, source: str, say, view_class):
+    """The live view, or None: ``off``, or the default without a display (one line says how
+    to see it: ``--rerun serve`` or ``save:``)."""
+    if rerun is None and not _has_display():
+        from imu_dcm.viz import HEADLESS_HINT
+
+        say(HEADLESS_HINT)
+        return None
+    return None if rerun == "off" else view_class(rerun, title=f"live {source}", say=say)
 
 
 def _open_recorder(source: str, o: LiveOptions, bias_v):
