@@ -270,14 +270,30 @@ def _free_udp_port() -> int:
         return s.getsockname()[1]
 
 
+def _wait_until_bound(port: int, proc, timeout_s: float = 60.0) -> None:
+    import socket
+    import time
+
+    deadline = time.monotonic() + timeout_s
+    while True:
+        assert proc.poll() is None and time.monotonic() < deadline
+        with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+            try:
+                s.bind(("127.0.0.1", port))
+            except OSError:
+                return
+        time.sleep(0.1)
+
+
 def test_live_sigint_and_sigterm_exit_130_and_143(tmp_path):
     import signal
     import time
 
     env = dict(os.environ, PYTHONPATH=str(REPO_ROOT), CI="true")
     for sig, code in ((signal.SIGINT, 130), (signal.SIGTERM, 143)):
+        port = _free_udp_port()
         proc = subprocess.Popen(
-            [sys.executable, "-m", "imu_dcm.live", f"udp://127.0.0.1:{_free_udp_port()}"]
+            [sys.executable, "-m", "imu_dcm.live", f"udp://127.0.0.1:{port}"]
             + ["--rerun", "off", "--no-status"],
             stdin=subprocess.DEVNULL,
             stdout=subprocess.PIPE,
@@ -286,7 +302,8 @@ def test_live_sigint_and_sigterm_exit_130_and_143(tmp_path):
             cwd=tmp_path,
         )
         try:
-            time.sleep(4.0)  # past start-up (imports, kernel load); nothing is sent
+            _wait_until_bound(port, proc)  # the run is up (nothing is ever sent)
+            time.sleep(1.0)
             proc.send_signal(sig)
             out, err = proc.communicate(timeout=30)
         finally:
