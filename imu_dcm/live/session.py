@@ -78,14 +78,19 @@ def _has_display() -> bool:
     return has_display()
 
 
-def _check_outputs(record, force: bool, summary_json) -> None:
-    """The output paths, before the source is opened (imu_dcm.outputs' rule)."""
+def _check_outputs(record, force: bool, summary_json, rerun) -> None:
+    """The view's mode and the output paths, before the source is opened (imu_dcm.outputs'
+    rule)."""
+    from imu_dcm.live.view import check_mode
     from imu_dcm.outputs import check_output_dir, check_output_file
 
+    check_mode(rerun)
     if record is not None:
         check_output_dir(record, force=force, what="--record bag")
     if summary_json is not None:
         check_output_file(summary_json, (), "--summary-json file")
+    if isinstance(rerun, str) and rerun.startswith("save:"):
+        check_output_file(rerun[len("save:") :], (), "--rerun save: file")
 
 
 def _pct(a: NDArray, p: float) -> float | None:
@@ -210,10 +215,7 @@ def run(
     o = LiveOptions(**options)
     spec, bias_v, init_q = _checked(source, o)
     say = say or _say_stderr
-    from imu_dcm.live.view import check_mode
-
-    check_mode(o.rerun)
-    _check_outputs(o.record, o.force, o.summary_json)
+    _check_outputs(o.record, o.force, o.summary_json, o.rerun)
     _warm_up(o.method)
     src = _open_source(spec, o)
     recorder = view = None
