@@ -200,16 +200,7 @@ def run(
 
     check_mode(o.rerun)
     _warm_up(o.method)
-    src: Source = open_source(
-        spec,
-        imu_topic=o.imu_topic,
-        truth_topic=o.truth_topic,
-        gyro_units=o.gyro_units,
-        time_units=o.time_units,
-        give_up_s=o.give_up_s,
-        stdin_fd=o.stdin_fd,
-        batch_s=min(_BATCH_MAX_S, o.view_interval_s / 4),
-    )
+    src = _open_source(spec, o)
     recorder = view = None
     try:
         recorder = _open_recorder(source, o, bias_v)
@@ -238,6 +229,19 @@ def run(
         write_json(Path(o.summary_json), summary)
     q = None if pipe.q_last is None else np.asarray(pipe.q_last, dtype=float)
     return LiveResult(summary, q, pipe.t_last_ns, lat)
+
+
+def _open_source(spec, o: LiveOptions) -> Source:
+    return open_source(
+        spec,
+        imu_topic=o.imu_topic,
+        truth_topic=o.truth_topic,
+        gyro_units=o.gyro_units,
+        time_units=o.time_units,
+        give_up_s=o.give_up_s,
+        stdin_fd=o.stdin_fd,
+        batch_s=min(_BATCH_MAX_S, o.view_interval_s / 4),
+    )
 
 
 def _open_recorder(source: str, o: LiveOptions, bias_v):
