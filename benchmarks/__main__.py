@@ -29,6 +29,7 @@ from datetime import datetime, timezone
 from pathlib import Path
 
 from benchmarks.timing import single_thread
+from imu_dcm.outputs import OutputError, check_output_folder, write_text_atomic
 
 
 def _progress_printer() -> Callable[[str], None]:
@@ -93,12 +94,11 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     out: Path = args.out
     try:
+        check_output_folder(out)
         out.mkdir(parents=True, exist_ok=True)
-    except OSError as exc:
-        print(
-            f"benchmarks: Expected a writable output folder, got {out} ({exc.strerror})",
-            file=sys.stderr,
-        )
+    except (OutputError, OSError) as exc:
+        text = getattr(exc, "strerror", None) or exc
+        print(f"benchmarks: Expected a writable output folder, got {out} ({text})", file=sys.stderr)
         return 2
 
     import numpy as np  # noqa: F401  (after the thread limit)
@@ -107,11 +107,7 @@ def main(argv: list[str] | None = None) -> int:
 
     progress = _progress_printer()
     t_start = time.perf_counter()
-    rates = pareto.QUICK_RATES_HZ if args.quick else pareto.FULL_RATES_HZ
     rounds = 3 if args.quick else 5
-    conv_rates = (
-        (50.0, 200.0, 1000.0, 5000.0, 20000.0) if args.quick else pareto.CONVERGENCE_RATES_HZ
-    )
     command = (
         "python -m benchmarks"
         + (" --quick" if args.quick else "")
@@ -119,42 +115,9 @@ def main(argv: list[str] | None = None) -> int:
         + " --out DIR"
     )
     with single_thread():
-        cases = pareto.method_cases()
-        progress(
-            f"pareto: {len(cases)} methods, {len(pareto.SCENES)} scenes, rates "
-            f"{', '.join(f'{r:g}' for r in rates)} Hz, {rounds} rounds"
-        )
-        meas = pareto.measure(pareto.SCENES, rates, cases, rounds, progress, clock=args.clock)
-        pareto.plot_pareto(
-            meas, cases, out / "pareto.png", skip=pareto.MAIN_CHART_SKIP, clock=args.clock
-        )
-        pareto.plot_pareto(
-            meas,
-            cases,
-            out / "pareto_all.png",
-            clock=args.clock,
-            title_note=" (every case, incl. all streaming methods)",
-        )
-        progress("pareto: wrote pareto.png, pareto_all.png")
-        conv = pareto.convergence(pareto.SCENES, conv_rates, progress=progress)
-        pareto.plot_convergence(conv, out / "convergence.png")
-        progress("convergence: wrote convergence.png")
+        meas, cases, conv = _pareto(out, args.quick, rounds, args.clock, progress)
         stab_md = stability.run(out, quick=args.quick, progress=progress)
-        extra: list[str] = []
-        failed = []
-        for module in ("noise_study", "core_speed"):
-            progress(f"{module}: running")
-            try:
-                status, lines = _optional_run(module, out, args.quick, progress)
-            except Exception as exc:
-                status, lines = f"FAILED ({type(exc).__name__}: {exc})", []
-                failed.append(module)
-            progress(f"{module}: {status}")
-            if lines:
-                extra += lines + [""]
-            elif status != "ran":
-                extra += [f"`benchmarks.{module}`: {status}; not part of this run.", ""]
-
+        extra, failed = _studies(out, args.quick, progress)
     elapsed = time.perf_counter() - t_start
     md = [
         "# imu_dcm benchmarks: speed against accuracy, and stability",
@@ -173,9 +136,9 @@ def main(argv: list[str] | None = None) -> int:
     md += pareto.convergence_markdown(conv)
     md += stab_md
     md += extra
-    (out / "results.md").write_text("\n".join(md) + "\n", encoding="utf-8")
-    (out / "pareto.json").write_text(
-        json.dumps([dataclasses.asdict(m) for m in meas], indent=0) + "\n", encoding="utf-8"
+    write_text_atomic(out / "results.md", "\n".join(md) + "\n")
+    write_text_atomic(
+        out / "pareto.json", json.dumps([dataclasses.asdict(m) for m in meas], indent=0) + "\n"
     )
     progress(f"done: {out / 'results.md'} ({elapsed:.0f} s)")
     if failed:
@@ -185,6 +148,56 @@ def main(argv: list[str] | None = None) -> int:
         )
         return 1
     return 0
+
+
+def _pareto(out: Path, quick: bool, rounds: int, clock: str, progress: Callable[[str], None]):
+    """Measure every method on every scene, draw ``pareto.png`` and ``pareto_all.png``; the
+    convergence runs and ``convergence.png``. Returns (measurements, cases, convergence)."""
+    from benchmarks import pareto
+
+    rates = pareto.QUICK_RATES_HZ if quick else pareto.FULL_RATES_HZ
+    conv_rates = (50.0, 200.0, 1000.0, 5000.0, 20000.0) if quick else pareto.CONVERGENCE_RATES_HZ
+    cases = pareto.method_cases()
+    progress(
+        f"pareto: {len(cases)} methods, {len(pareto.SCENES)} scenes, rates "
+        f"{', '.join(f'{r:g}' for r in rates)} Hz, {rounds} rounds"
+    )
+    meas = pareto.measure(pareto.SCENES, rates, cases, rounds, progress, clock=clock)
+    pareto.plot_pareto(meas, cases, out / "pareto.png", skip=pareto.MAIN_CHART_SKIP, clock=clock)
+    pareto.plot_pareto(
+        meas,
+        cases,
+        out / "pareto_all.png",
+        clock=clock,
+        title_note=" (every case, incl. all streaming methods)",
+    )
+    progress("pareto: wrote pareto.png, pareto_all.png")
+    conv = pareto.convergence(pareto.SCENES, conv_rates, progress=progress)
+    pareto.plot_convergence(conv, out / "convergence.png")
+    progress("convergence: wrote convergence.png")
+    return meas, cases, conv
+
+
+def _studies(
+    out: Path, quick: bool, progress: Callable[[str], None]
+) -> tuple[list[str], list[str]]:
+    """The noise and core speed studies, each when it offers a ``run``: their markdown (or a
+    line saying why a study is not part of the run) and the studies that failed."""
+    extra: list[str] = []
+    failed = []
+    for module in ("noise_study", "core_speed"):
+        progress(f"{module}: running")
+        try:
+            status, lines = _optional_run(module, out, quick, progress)
+        except Exception as exc:
+            status, lines = f"FAILED ({type(exc).__name__}: {exc})", []
+            failed.append(module)
+        progress(f"{module}: {status}")
+        if lines:
+            extra += lines + [""]
+        elif status != "ran":
+            extra += [f"`benchmarks.{module}`: {status}; not part of this run.", ""]
+    return extra, failed
 
 
 if __name__ == "__main__":

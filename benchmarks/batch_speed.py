@@ -72,6 +72,44 @@ def _same(a, b) -> bool:
     return strip(a) == strip(b)
 
 
+class _Batches:
+    """The logs, the timed calls on them, and what each call gave (rows, CPU time)."""
+
+    def __init__(self, logs: list[str]):
+        from imu_dcm.replay import replay, replay_many
+
+        self._replay, self._replay_many = replay, replay_many
+        self.logs = logs
+        self.n = len(logs)
+        self.rows: dict[str, tuple] = {}
+        self.cpu_s: dict[str, list[float]] = {}  # this process plus its reaped workers, per call
+
+    def batch(self, name: str, **kw):
+        """A call of ``replay_many`` over the logs, keeping its rows and CPU time under ``name``."""
+
+        def fn():
+            before = os.times()
+            self.rows[name] = self._replay_many(self.logs, chart=None, **kw).rows
+            after = os.times()
+            # user, sys, children's user and sys
+            used = sum(a - b for a, b in zip(after[:4], before[:4], strict=False))
+            self.cpu_s.setdefault(name, []).append(used)
+
+        return fn
+
+    def bare(self) -> None:
+        for path in self.logs:
+            self._replay(path)
+
+    def show(self, timings) -> None:
+        for name, t in timings.items():
+            print(
+                f"  {name:<16} median {t.median_s:6.3f} s  "
+                f"({1e3 * t.median_s / self.n:6.1f} ms/log; "
+                f"rounds {', '.join(f'{x:.2f}' for x in t.times_s)})"
+            )
+
+
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(
         prog="python -m benchmarks.batch_speed",
@@ -83,8 +121,6 @@ def main(argv: list[str] | None = None) -> int:
     args = p.parse_args(argv)
 
     limit_threads_env()
-    from benchmarks.timing import interleaved_medians, single_thread
-    from imu_dcm.replay import replay, replay_many
     from imu_dcm.replay.batch import find_logs
 
     logs = find_logs([args.broad, SHIPPED])
@@ -95,64 +131,51 @@ def main(argv: list[str] | None = None) -> int:
             file=sys.stderr,
         )
         return 2
-    n = len(logs)
-    tmp = Path(tempfile.mkdtemp(prefix="batch_speed_"))
-    results = {}
-
-    cpu_s: dict[str, list[float]] = {}  # CPU of this process plus its reaped workers, per call
-
-    def run(name, **kw):
-        def fn():
-            before = os.times()
-            results[name] = replay_many(logs, chart=None, **kw).rows
-            after = os.times()
-            used = sum(
-                a - b for a, b in zip(after[:4], before[:4], strict=False)
-            )  # user, sys, children's
-            cpu_s.setdefault(name, []).append(used)
-
-        return fn
-
-    def bare():
-        for path in logs:
-            replay(path)
-
+    b = _Batches(logs)
     print(
-        f"{n} logs; {os.cpu_count()} cores; load average before: "
+        f"{b.n} logs; {os.cpu_count()} cores; load average before: "
         f"{' '.join(f'{x:.2f}' for x in os.getloadavg())}"
     )
+    _machinery_and_pool(b, args.rounds)
+    modes = ["jobs 2", "table"]
+    if _dask(b, args.rounds):
+        modes.append("dask")
+    same = all(_same(b.rows[k], b.rows["jobs 1"]) for k in modes)
+    print(f"same rows in every mode (bit for bit, wall time aside): {'yes' if same else 'NO'}")
+    print(f"load average after: {' '.join(f'{x:.2f}' for x in os.getloadavg())}")
+    return 0 if same else 1
 
-    def show(timings) -> None:
-        for name, t in timings.items():
-            print(
-                f"  {name:<16} median {t.median_s:6.3f} s  ({1e3 * t.median_s / n:6.1f} ms/log; "
-                f"rounds {', '.join(f'{x:.2f}' for x in t.times_s)})"
-            )
 
+def _machinery_and_pool(b: _Batches, rounds: int) -> None:
+    """Measurements 1 and 2: the per-log cost of the machinery (CPU and wall time), and the
+    speed-up of a pool of two against one process, beside the parallelism the machine gave."""
+    from benchmarks.timing import interleaved_medians, single_thread
+
+    n, tmp = b.n, Path(tempfile.mkdtemp(prefix="batch_speed_"))
     with single_thread():
         # Per-log cost of the machinery: all in this process, so CPU time is exact even on a
         # loaded machine; wall time adds the fsync of each row.
         costs = {
-            "bare": (bare, n),
-            "jobs 1": (run("jobs 1", jobs=1), n),
-            "jobs 1 + table": (run("table", table=tmp / "t.csv", jobs=1, overwrite=True), n),
+            "bare": (b.bare, n),
+            "jobs 1": (b.batch("jobs 1", jobs=1), n),
+            "jobs 1 + table": (b.batch("table", table=tmp / "t.csv", jobs=1, overwrite=True), n),
         }
-        cpu = interleaved_medians(costs, rounds=args.rounds, clock=time.process_time)
-        wall = interleaved_medians(costs, rounds=args.rounds)
+        cpu = interleaved_medians(costs, rounds=rounds, clock=time.process_time)
+        wall = interleaved_medians(costs, rounds=rounds)
         # Parallel speed-up: wall time, the pool started inside the timed call.
         par = interleaved_medians(
             {
-                "jobs 1": (run("jobs 1", jobs=1), n),
-                "jobs 2": (run("jobs 2", jobs=2), n),
+                "jobs 1": (b.batch("jobs 1", jobs=1), n),
+                "jobs 2": (b.batch("jobs 2", jobs=2), n),
                 "spin 1 process": (lambda: _spin_units(1), 2),
                 "spin 2 processes": (lambda: _spin_units(2), 2),
             },
-            rounds=args.rounds,
+            rounds=rounds,
         )
     print("CPU time of this process:")
-    show(cpu)
+    b.show(cpu)
     print("wall time:")
-    show(wall)
+    b.show(wall)
     for label, t in (("CPU", cpu), ("wall", wall)):
         bare_s = t["bare"].median_s
         print(
@@ -162,7 +185,7 @@ def main(argv: list[str] | None = None) -> int:
             f"(bare {1e3 * bare_s / n:.0f} ms/log)"
         )
     print("parallel, wall time:")
-    show({k: v for k, v in par.items() if not k.startswith("spin")})
+    b.show({k: v for k, v in par.items() if not k.startswith("spin")})
     ratio = par["jobs 2"].median_s / par["jobs 1"].median_s
     spin = par["spin 2 processes"].median_s / par["spin 1 process"].median_s
     print(
@@ -170,18 +193,24 @@ def main(argv: list[str] | None = None) -> int:
         f"for pure CPU work split over 2 processes in the same rounds: {spin:.2f} (0.5 on two "
         f"idle cores)"
     )
-    c1, c2 = statistics.median(cpu_s["jobs 1"]), statistics.median(cpu_s["jobs 2"])
+    c1, c2 = statistics.median(b.cpu_s["jobs 1"]), statistics.median(b.cpu_s["jobs 2"])
     print(
         f"CPU time per batch (this process and its workers): jobs 1 {c1:.2f} s, jobs 2 "
         f"{c2:.2f} s ({c2 / c1:.2f}x): on two idle cores jobs 2 / jobs 1 would be about "
         f"{c2 / c1 / 2:.2f} plus the pool's start"
     )
 
+
+def _dask(b: _Batches, rounds: int) -> bool:
+    """Measurement 3: a local Dask cluster of two workers against one process; False when Dask
+    is not installed (the phase is skipped)."""
+    from benchmarks.timing import interleaved_medians, single_thread
+
     try:
         from distributed import LocalCluster
     except ImportError:
         print("dask: not installed (pip install 'imu_dcm[dask]'), phase skipped")
-        return 0
+        return False
     with (
         LocalCluster(
             n_workers=2,
@@ -196,19 +225,16 @@ def main(argv: list[str] | None = None) -> int:
         address = cluster.scheduler_address
         on_dask = interleaved_medians(
             {
-                "jobs 1": (run("jobs 1", jobs=1), n),
-                "dask 2 workers": (run("dask", dask=address), n),
+                "jobs 1": (b.batch("jobs 1", jobs=1), b.n),
+                "dask 2 workers": (b.batch("dask", dask=address), b.n),
             },
-            rounds=args.rounds,
+            rounds=rounds,
         )
     print("Dask, wall time:")
-    show(on_dask)
+    b.show(on_dask)
     dratio = on_dask["dask 2 workers"].median_s / on_dask["jobs 1"].median_s
     print(f"dask (LocalCluster, 2 worker processes) / jobs 1 wall ratio: {dratio:.2f}")
-    same = all(_same(results[k], results["jobs 1"]) for k in ("jobs 2", "table", "dask"))
-    print(f"same rows in every mode (bit for bit, wall time aside): {'yes' if same else 'NO'}")
-    print(f"load average after: {' '.join(f'{x:.2f}' for x in os.getloadavg())}")
-    return 0 if same else 1
+    return True
 
 
 if __name__ == "__main__":

@@ -36,72 +36,29 @@ import math
 import sys
 import time
 from collections.abc import Callable
-from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 from numpy.typing import NDArray
 
+from benchmarks.noise_cases import (
+    EULER_MODES,
+    EULER_TORQUE_NOISE,
+    MODES,
+    SCENES,
+    BroadResult,
+    Condition,
+    ModeStats,
+    att_err_deg,
+)
 from imu_dcm.integrate import integrate
 from imu_dcm.metrics import attitude_error_deg
 from imu_dcm.prefilter import PrefilterConfig, euler_prefilter, prefilter
 
-MODES = ("none", "kalman", "rts")
-#: model-based modes (``euler_prefilter``), run on the free box only (its inertia is known)
-EULER_MODES = ("euler-kalman", "euler-rts")
-#: unmodelled-torque density told to the model-based filter, N·m/√Hz (the box is torque-free)
-EULER_TORQUE_NOISE = 1e-4
-#: scene label -> (data_synth scene, parameters, duration s, quick duration s)
-SCENES: dict[str, tuple[str, dict, float, float]] = {
-    "heavy top, cusp": ("heavy-top", {"motion": "cusp"}, 4.0, 2.0),
-    "free box, intermediate axis": ("free-body", {"case": "intermediate"}, 20.0, 10.0),
-    "coning 10°, 1 Hz": ("coning", {"half_angle_deg": 10.0, "freq_hz": 1.0}, 10.0, 5.0),
-    "coning 10°, 5 Hz": ("coning", {"half_angle_deg": 10.0, "freq_hz": 5.0}, 10.0, 5.0),
-}
 DENSITIES = (1e-4, 1e-3, 1e-2)
 RATES_HZ = (200.0, 1000.0)
 QUANT_STEP_RAD_S = math.radians(0.061)
 BROAD_DIR = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "broad"
-COLORS = {
-    "none": "#444444",
-    "kalman": "#d95f02",
-    "rts": "#1b9e77",
-    "euler-kalman": "#e7298a",
-    "euler-rts": "#7570b3",
-}
-
-
-@dataclass(frozen=True)
-class ModeStats:
-    """Pooled figures of one pre-filter mode in one condition (over seeds)."""
-
-    rate_rms_rad_s: float
-    att_rms_deg: float
-    att_max_deg: float
-    lag_samples: float
-    distortion_rate_rms_rad_s: float  # rate error when the same filter runs on the exact rates
-    distortion_att_rms_deg: float  # attitude error from the exact rates through the same filter
-
-
-@dataclass(frozen=True)
-class Condition:
-    scene: str
-    density: float
-    rate_hz: float
-    seeds: int
-    accel_rad_s2: float
-    modes: dict[str, ModeStats]
-    t_s: NDArray  # sample times of the seeds' common grid, s
-    att_rms_series_deg: dict[str, NDArray]  # attitude error RMS over the seeds at each t_s, deg
-    # nothing given (the scenes never rest): N from the log's spectrum, then rts with it
-    noise_est_rad_s_sqrt_hz: float = math.nan  # mean over seeds
-    rts_est_rate_rms_rad_s: float = math.nan
-    rts_est_att_rms_deg: float = math.nan
-
-
-def _att_err_deg(omega_b: NDArray, t_s: NDArray, q_true: NDArray) -> NDArray:
-    q = integrate(omega_b, t_s, q_true[0], "magnus4").as_quat()
-    return attitude_error_deg(q, q_true).total_deg
 
 
 def _lag_samples(err: NDArray, accel: NDArray, rate_hz: float) -> float:
@@ -139,71 +96,17 @@ def synthetic_condition(
         rec = data_synth.synthetic_gyro(traj, rate_hz, model=model, seed=seed)
         t = rec.t_s
         q_true, w_true = traj.at(t)
-        w_dot = np.gradient(w_true, t, axis=0)
-        att_ref = _att_err_deg(w_true, t, q_true)
-        res_k = prefilter(
-            rec.values, t, "kalman", PrefilterConfig(noise_density_rad_s_sqrt_hz=density)
-        )
-        cfg = res_k.config  # the fitted process noise, reused by rts and the noise-free runs
-        accels.append(cfg.angular_accel_rad_s2)
-        outs = {
-            "none": rec.values,
-            "kalman": res_k.omega_b,
-            "rts": prefilter(rec.values, t, "rts", cfg).omega_b,
-        }
-        clean = {
-            "none": w_true,
-            "kalman": prefilter(w_true, t, "kalman", cfg).omega_b,
-            "rts": prefilter(w_true, t, "rts", cfg).omega_b,
-        }
-        if euler:
-            inertia = traj.params["inertia_kg_m2"]
-            for m in EULER_MODES:
-                outs[m] = euler_prefilter(
-                    rec.values,
-                    t,
-                    inertia,
-                    m.split("-")[1],
-                    noise_density_rad_s_sqrt_hz=density,
-                    torque_noise_n_m_sqrt_hz=EULER_TORQUE_NOISE,
-                ).omega_b
-                clean[m] = None  # not run on exact rates (costly); reported as "–"
+        outs, clean, accel = _filter_runs(rec.values, t, w_true, density, euler, traj)
+        accels.append(accel)
         if not quantize:
             # nothing given: these scenes never rest, so N comes from the log's spectrum
             res_e = prefilter(rec.values, t, "rts")
             est_density.append(res_e.config.noise_density_rad_s_sqrt_hz)
             est_rate.append(float(np.mean((res_e.omega_b - w_true) ** 2)))
-            est_att.append(float(np.mean(_att_err_deg(res_e.omega_b, t, q_true) ** 2)))
+            est_att.append(float(np.mean(att_err_deg(res_e.omega_b, t, q_true) ** 2)))
+        truth = (t, q_true, w_true, rate_hz)
         for m in modes_here:
-            e = outs[m] - w_true
-            a = _att_err_deg(outs[m], t, q_true)
-            series.setdefault(m, []).append(a * a)
-            d = (
-                att_ref
-                if m == "none"
-                else _att_err_deg(clean[m], t, q_true)
-                if clean[m] is not None
-                else np.nan
-            )
-            acc[m]["rate_rms_rad_s"].append(float(np.mean(e * e)))
-            acc[m]["att_rms_deg"].append(float(np.mean(a * a)))
-            acc[m]["att_max_deg"].append(float(a.max()))
-            acc[m]["lag_samples"].append(_lag_samples(e, w_dot, rate_hz))
-            acc[m]["distortion_rate_rms_rad_s"].append(
-                float(np.mean((clean[m] - w_true) ** 2)) if clean[m] is not None else np.nan
-            )
-            acc[m]["distortion_att_rms_deg"].append(float(np.mean(d * d)))
-    modes = {}
-    for m in modes_here:
-        v = acc[m]
-        modes[m] = ModeStats(
-            rate_rms_rad_s=math.sqrt(np.mean(v["rate_rms_rad_s"])),
-            att_rms_deg=math.sqrt(np.mean(v["att_rms_deg"])),
-            att_max_deg=float(np.mean(v["att_max_deg"])),
-            lag_samples=float(np.mean(v["lag_samples"])),
-            distortion_rate_rms_rad_s=math.sqrt(np.mean(v["distortion_rate_rms_rad_s"])),
-            distortion_att_rms_deg=math.sqrt(np.mean(v["distortion_att_rms_deg"])),
-        )
+            series.setdefault(m, []).append(_score(acc[m], outs[m], clean[m], truth))
     n = min(len(v) for a in series.values() for v in a)  # stamps may jitter in count
     rms_series = {m: np.sqrt(np.mean([v[:n] for v in a], axis=0)) for m, a in series.items()}
     return Condition(
@@ -212,7 +115,7 @@ def synthetic_condition(
         rate_hz,
         seeds,
         float(np.median(accels)),
-        modes,
+        {m: _pooled(acc[m]) for m in modes_here},
         t[:n],
         rms_series,
         float(np.mean(est_density)) if est_density else math.nan,
@@ -221,18 +124,69 @@ def synthetic_condition(
     )
 
 
+def _filter_runs(
+    z: NDArray, t: NDArray, w_true: NDArray, density: float, euler: bool, traj
+) -> tuple[dict[str, NDArray], dict[str, NDArray | None], float]:
+    """Each mode on the measured rates ``z`` and on the exact rates ``w_true`` (the model-based
+    modes on the measured ones only: costly), with kalman's fitted process noise for all; and
+    that fitted angular acceleration, rad/s²."""
+    res_k = prefilter(z, t, "kalman", PrefilterConfig(noise_density_rad_s_sqrt_hz=density))
+    cfg = res_k.config  # the fitted process noise, reused by rts and the noise-free runs
+    outs = {"none": z, "kalman": res_k.omega_b, "rts": prefilter(z, t, "rts", cfg).omega_b}
+    clean = {
+        "none": w_true,
+        "kalman": prefilter(w_true, t, "kalman", cfg).omega_b,
+        "rts": prefilter(w_true, t, "rts", cfg).omega_b,
+    }
+    if euler:
+        inertia = traj.params["inertia_kg_m2"]
+        for m in EULER_MODES:
+            outs[m] = euler_prefilter(
+                z,
+                t,
+                inertia,
+                m.split("-")[1],
+                noise_density_rad_s_sqrt_hz=density,
+                torque_noise_n_m_sqrt_hz=EULER_TORQUE_NOISE,
+            ).omega_b
+            clean[m] = None  # not run on exact rates (costly); reported as "–"
+    return outs, clean, cfg.angular_accel_rad_s2
+
+
+def _score(
+    acc: dict[str, list[float]], out: NDArray, clean: NDArray | None, truth: tuple
+) -> NDArray:
+    """Add one seed's figures of one mode to ``acc`` (mean squares, max, lag); return its squared
+    attitude error over time. ``truth``: (t_s, q_true, w_true, rate_hz)."""
+    t, q_true, w_true, rate_hz = truth
+    e = out - w_true
+    a = att_err_deg(out, t, q_true)
+    d = att_err_deg(clean, t, q_true) if clean is not None else np.nan
+    acc["rate_rms_rad_s"].append(float(np.mean(e * e)))
+    acc["att_rms_deg"].append(float(np.mean(a * a)))
+    acc["att_max_deg"].append(float(a.max()))
+    acc["lag_samples"].append(_lag_samples(e, np.gradient(w_true, t, axis=0), rate_hz))
+    acc["distortion_rate_rms_rad_s"].append(
+        float(np.mean((clean - w_true) ** 2)) if clean is not None else np.nan
+    )
+    acc["distortion_att_rms_deg"].append(float(np.mean(d * d)))
+    return a * a
+
+
+def _pooled(v: dict[str, list[float]]) -> ModeStats:
+    """One mode's figures over the seeds: RMS of the mean squares, mean of the rest."""
+    return ModeStats(
+        rate_rms_rad_s=math.sqrt(np.mean(v["rate_rms_rad_s"])),
+        att_rms_deg=math.sqrt(np.mean(v["att_rms_deg"])),
+        att_max_deg=float(np.mean(v["att_max_deg"])),
+        lag_samples=float(np.mean(v["lag_samples"])),
+        distortion_rate_rms_rad_s=math.sqrt(np.mean(v["distortion_rate_rms_rad_s"])),
+        distortion_att_rms_deg=math.sqrt(np.mean(v["distortion_att_rms_deg"])),
+    )
+
+
 # ------------------------------------------------------------------------------------------------
 # BROAD
-
-
-@dataclass(frozen=True)
-class BroadResult:
-    trial: str
-    n_samples: int
-    summary: dict
-    att_rms_deg: dict[str, float]
-    att_max_deg: dict[str, float]
-    rate_change_rms_rad_s: dict[str, float]  # |filtered - raw| RMS: how much the filter moved
 
 
 def broad_trial(path: Path) -> BroadResult:

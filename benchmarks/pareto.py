@@ -37,6 +37,7 @@ import imu_dcm
 from benchmarks.peers import PEERS
 from benchmarks.timing import interleaved_medians
 from imu_dcm.metrics import attitude_error_deg
+from imu_dcm.outputs import save_figure
 
 __all__ = [
     "FULL_RATES_HZ",
@@ -251,28 +252,16 @@ def method_cases(streaming: bool = True) -> list[Case]:
         for m in imu_dcm.METHODS
     ]
     if streaming and _integrator_class() is not None:
-        methods = _streaming_methods()
-        cases += [
-            Case(
-                f"stream_{m}",
-                _streaming_per_sample(m),
-                "streaming",
-                f"DcmIntegrator({m!r}).update per sample",
-                _ORDER.get(m, "?"),
-            )
-            for m in methods
-        ]
+        # (name prefix, callable of a method, description) per streaming form
+        forms = [("stream_", _streaming_per_sample, "DcmIntegrator({!r}).update per sample")]
         if hasattr(_integrator_class(), "update_many"):
-            cases += [
-                Case(
-                    f"stream_many_{m}",
-                    _streaming_blocks(m),
-                    "streaming",
-                    f"DcmIntegrator({m!r}).update_many, blocks of 256",
-                    _ORDER.get(m, "?"),
-                )
-                for m in methods
-            ]
+            many = "DcmIntegrator({!r}).update_many, blocks of 256"
+            forms.append(("stream_many_", _streaming_blocks, many))
+        cases += [
+            Case(f"{prefix}{m}", make(m), "streaming", text.format(m), _ORDER.get(m, "?"))
+            for prefix, make, text in forms
+            for m in _streaming_methods()
+        ]
     for m in getattr(imu_dcm, "DELTA_METHODS", ()):
         cases.append(
             Case(
@@ -539,6 +528,31 @@ MAIN_CHART_SKIP = tuple(
 ) + ("delta_plain", "delta_three_sample")
 
 
+def _grid(figsize: tuple[float, float]):
+    """A 2x2 figure on the Agg backend."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    return plt.subplots(2, 2, figsize=figsize)
+
+
+def _finish_grid(fig, axes, used: int, path, suptitle: str, rect: tuple, **legend) -> None:
+    """Hide the unused panels, one legend (``legend``: its keywords) from the first panel's
+    lines, the figure's title; save, close."""
+    import matplotlib.pyplot as plt
+
+    for ax in axes.flat[used:]:
+        ax.set_visible(False)
+    handles, labels = axes.flat[0].get_legend_handles_labels()
+    fig.legend(handles, labels, **legend)
+    fig.suptitle(suptitle, fontsize=14)
+    fig.tight_layout(rect=rect)
+    save_figure(fig, path, dpi=100)
+    plt.close(fig)
+
+
 def plot_pareto(
     meas: Sequence[Measurement],
     cases: Sequence[Case],
@@ -552,15 +566,10 @@ def plot_pareto(
 
     ``skip`` names cases left off; the points of ``label_rates`` are labelled with their rate.
     """
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
     by_case = {c.name: c for c in cases}
     scenes = list(dict.fromkeys(m.scene for m in meas))
     titles = {s.key: s.title for s in SCENES}
-    fig, axes = plt.subplots(2, 2, figsize=(17, 10.5))
+    fig, axes = _grid((17, 10.5))
     for ax, key in zip(axes.flat, scenes, strict=False):
         for c in cases:
             if c.name in skip:
@@ -585,53 +594,50 @@ def plot_pareto(
                 label=_label(c.name, by_case),
             )
             if c.name == label_rates:
-                last_y = None
-                for m in pts:
-                    # skip a label that would sit on the previous one (errors at a floor)
-                    if last_y is not None and max(m.max_err_deg, 1e-12) > last_y / 3.0:
-                        continue
-                    last_y = max(m.max_err_deg, 1e-12)
-                    ax.annotate(
-                        f"{m.rate_hz:g} Hz",
-                        (m.ns_per_sample, max(m.max_err_deg, 1e-12)),
-                        textcoords="offset points",
-                        xytext=(8, 0),
-                        ha="left",
-                        va="center",
-                        fontsize=8,
-                        color=colour,
-                    )
+                _label_rates(ax, pts, colour)
         rates = sorted({m.rate_hz for m in meas if m.scene == key})
         ax.set_title(f"{titles.get(key, key)}  (points: {rates[0]:g}–{rates[-1]:g} Hz)")
         ax.set_xlabel(f"{CLOCK_TEXT[clock]} per gyro sample, ns (median, 1 thread)")
         ax.set_ylabel("max attitude error vs truth, deg")
         ax.grid(True, which="major", alpha=0.3)
-    for ax in axes.flat[len(scenes) :]:
-        ax.set_visible(False)
-    handles, labels = axes.flat[0].get_legend_handles_labels()
-    fig.legend(
-        handles,
-        labels,
+    _finish_grid(
+        fig,
+        axes,
+        len(scenes),
+        path,
+        "Speed against accuracy: lower-left is better" + title_note,
+        (0, 0, 0.73, 0.97),
         loc="center right",
         fontsize=9,
         frameon=True,
         title="method (higher rate → lower error)",
     )
-    fig.suptitle("Speed against accuracy: lower-left is better" + title_note, fontsize=14)
-    fig.tight_layout(rect=(0, 0, 0.73, 0.97))
-    fig.savefig(path, dpi=100)
-    plt.close(fig)
+
+
+def _label_rates(ax, pts: Sequence[Measurement], colour: str) -> None:
+    """Label each point with its rate, skipping a label that would sit on the previous one
+    (errors at a floor)."""
+    last_y = None
+    for m in pts:
+        if last_y is not None and max(m.max_err_deg, 1e-12) > last_y / 3.0:
+            continue
+        last_y = max(m.max_err_deg, 1e-12)
+        ax.annotate(
+            f"{m.rate_hz:g} Hz",
+            (m.ns_per_sample, max(m.max_err_deg, 1e-12)),
+            textcoords="offset points",
+            xytext=(8, 0),
+            ha="left",
+            va="center",
+            fontsize=8,
+            color=colour,
+        )
 
 
 def plot_convergence(conv: dict[str, dict[str, NDArray]], path: str | Path) -> None:
     """Write the convergence chart: max error against dt per method, with slope 1, 2, 4 guides."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
     titles = {s.key: s.title for s in SCENES}
-    fig, axes = plt.subplots(2, 2, figsize=(14, 10))
+    fig, axes = _grid((14, 10))
     for ax, (key, res) in zip(axes.flat, conv.items(), strict=False):
         dt = res["dt_s"]
         for m, e in res.items():
@@ -664,23 +670,18 @@ def plot_convergence(conv: dict[str, dict[str, NDArray]], path: str | Path) -> N
         ax.set_ylabel("max attitude error vs truth, deg")
         ax.set_ylim(bottom=max(lo / 5.0, 1e-13))
         ax.grid(True, which="major", alpha=0.3)
-    for ax in axes.flat[len(conv) :]:
-        ax.set_visible(False)
-    handles, labels = axes.flat[0].get_legend_handles_labels()
-    fig.legend(
-        handles,
-        labels,
+    _finish_grid(
+        fig,
+        axes,
+        len(conv),
+        path,
+        "Convergence: max error against step, with theoretical slopes (dashed)",
+        (0, 0.08, 1, 0.97),
         loc="lower center",
         ncol=5,
         fontsize=9,
         title="imu_dcm method (rate input: integrate; Δθ input: integrate_delta)",
     )
-    fig.suptitle(
-        "Convergence: max error against step, with theoretical slopes (dashed)", fontsize=14
-    )
-    fig.tight_layout(rect=(0, 0.08, 1, 0.97))
-    fig.savefig(path, dpi=100)
-    plt.close(fig)
 
 
 # ----------------------------------------------------------------------------------------------

@@ -11,6 +11,9 @@ speed-ups on the same bag:
   :func:`imu_dcm.logio.read_log`. Target >= 10x.
 * sqlite3 and ROS 1 (the same trial written with rosbags' writers): ``rosbags`` ``AnyReader``
   + ``deserialize`` loop against ``read_log``. Target >= 5x.
+* EuRoC/ASL folder (the same trial's gyro and truth written as ``imu0`` and
+  ``state_groundtruth_estimate0`` CSVs): a plain per-row ``csv.reader`` loop (``int`` stamps,
+  ``float`` fields, rows stacked with numpy) against ``read_log``. Target >= 5x.
 * In each group, a ``rosbags`` loop that only *iterates* the raw IMU and truth messages (no
   decoding at all): the best a source built on rosbags' message iterator could do, to show
   where our own container code (MCAP chunks, sqlite3 query, ROS 1 chunks) earns its place.
@@ -211,6 +214,46 @@ def write_hour(src: Path, dst: Path, rate_hz: float = 400.0, seconds: float = 36
     return dst
 
 
+def write_euroc(src: Path, dst: Path) -> Path:
+    """The trial as an ASL dataset: ``mav0/imu0`` (gyro, gravity as the accelerometer) and
+    ``mav0/state_groundtruth_estimate0`` (quaternions w, x, y, z) CSVs."""
+    import numpy as np
+
+    from imu_dcm.logio import read_log
+
+    log = read_log(src)
+    gt = np.hstack([np.zeros((len(log.truth.t_ns), 3)), log.truth.q_w_b[:, [3, 0, 1, 2]]])
+    imu = np.hstack([log.imu.omega_b, np.tile([0.0, 0.0, 9.81], (len(log.imu.t_ns), 1))])
+    for name, t_ns, values in (
+        ("imu0", log.imu.t_ns, imu),
+        ("state_groundtruth_estimate0", log.truth.t_ns, gt),
+    ):
+        (dst / "mav0" / name).mkdir(parents=True)
+        pairs = zip(t_ns.tolist(), values.tolist(), strict=True)
+        rows = [f"{t}," + ",".join(map(repr, v)) for t, v in pairs]
+        (dst / "mav0" / name / "data.csv").write_text("#timestamp [ns],...\n" + "\n".join(rows))
+    return dst
+
+
+def csv_loop(folder: Path) -> int:
+    """csv.reader over every data.csv of an ASL dataset, one row at a time; returns the rows."""
+    import csv
+
+    import numpy as np
+
+    n = 0
+    for path in sorted(folder.glob("mav0/*/data.csv")):
+        stamps, rows = [], []
+        with open(path, newline="") as f:
+            for row in csv.reader(f):
+                if row and not row[0].startswith("#"):
+                    stamps.append(int(row[0]))
+                    rows.append([float(x) for x in row[1:]])
+        np.array(stamps, np.int64), np.array(rows)
+        n += len(stamps)
+    return n
+
+
 # ----------------------------------------------------------------------------- memory
 _PEAK = """
 import sys, warnings
@@ -357,7 +400,7 @@ def main(argv: list[str] | None = None) -> int:
     args = p.parse_args(argv)
 
     limit_threads_env()
-    from imu_dcm.logio import resolve_mcap_path
+    from imu_dcm.logio import read_log, resolve_mcap_path
 
     mcap_path = resolve_mcap_path(args.bag)
     n_msgs = decode_loop(mcap_path)
@@ -366,7 +409,17 @@ def main(argv: list[str] | None = None) -> int:
         tmp = Path(tmp)
         db = write_sqlite3(mcap_path, tmp / "sqlite3_bag")
         bag1 = write_ros1(mcap_path, tmp / "trial.bag")
+        euroc = _quiet(lambda: write_euroc(args.bag, tmp / "euroc"))()
+        n_rows = csv_loop(euroc)
         groups = _groups(args.bag, mcap_path, db, bag1, n_msgs, replay)
+        groups["EuRoC/ASL folder"] = (
+            {
+                "per-row csv loop": (lambda: csv_loop(euroc), n_rows),
+                "read_log": (_quiet(lambda: read_log(euroc)), n_rows),
+            },
+            "per-row csv loop",
+            TARGET_ROSBAGS,
+        )
         shown = args.bag.resolve()
         shown = shown.relative_to(REPO) if shown.is_relative_to(REPO) else args.bag
         print(

@@ -27,6 +27,7 @@ from data_synth.stability import (
     truncated_update,
 )
 from data_synth.stability.common import _EPS
+from imu_dcm.outputs import save_figure
 
 __all__ = ["run"]
 
@@ -116,7 +117,7 @@ def _scene_gimbal_lock(out: Path, quick: bool, progress: Callable[[str], None], 
     a2.legend(fontsize=8)
     fig.suptitle("Scene 1: gimbal lock — same samples, same order, Euler angles vs DCM")
     fig.tight_layout()
-    fig.savefig(out / "stability_gimbal_lock.png", dpi=110)
+    save_figure(fig, out / "stability_gimbal_lock.png", dpi=110)
     plt.close(fig)
     md += [
         "### 1. Gimbal lock (chart `stability_gimbal_lock.png`)",
@@ -164,7 +165,7 @@ def _scene_rotvec_sum(out: Path, quick: bool, progress: Callable[[str], None], p
     ax.set_title("Scene 2: R0·exp(Σω dt) under coning (β = 30°, 1 Hz, 1000 Hz samples)")
     ax.legend()
     fig.tight_layout()
-    fig.savefig(out / "stability_rotvec_sum.png", dpi=110)
+    save_figure(fig, out / "stability_rotvec_sum.png", dpi=110)
     plt.close(fig)
     md += [
         "### 2. Rotation-vector sum R0·exp(Σω dt) (chart `stability_rotvec_sum.png`)",
@@ -196,7 +197,7 @@ def _scene_large_steps(out: Path, quick: bool, progress: Callable[[str], None], 
     ax.legend(fontsize=8, loc="lower right")
     ax.grid(True, which="major", alpha=0.3)
     fig.tight_layout()
-    fig.savefig(out / "stability_large_steps.png", dpi=110)
+    save_figure(fig, out / "stability_large_steps.png", dpi=110)
     plt.close(fig)
     names = list(ls_res.err_deg)
     md += [
@@ -254,7 +255,7 @@ def _scene_long_run(out: Path, quick: bool, progress: Callable[[str], None], plt
     a2.legend(fontsize=8)
     fig.suptitle(f"Scene 4: long runs, up to {n_long:.0e} steps")
     fig.tight_layout()
-    fig.savefig(out / "stability_long_run.png", dpi=110)
+    save_figure(fig, out / "stability_long_run.png", dpi=110)
     plt.close(fig)
     md += [
         "### 4. Long runs (chart `stability_long_run.png`)",
@@ -300,7 +301,7 @@ def _scene_free_box(out: Path, quick: bool, progress: Callable[[str], None], plt
     a2.legend(fontsize=8)
     fig.suptitle("Scene 5: free box (2 × 1.5 × 1 m) about its intermediate axis")
     fig.tight_layout()
-    fig.savefig(out / "stability_free_box.png", dpi=110)
+    save_figure(fig, out / "stability_free_box.png", dpi=110)
     plt.close(fig)
     md += [
         "### 5. Free box, intermediate axis (chart `stability_free_box.png`)",
@@ -352,7 +353,7 @@ def _scene_tops(out: Path, quick: bool, progress: Callable[[str], None], plt) ->
     fig.legend(h, lab, loc="lower center", ncol=4, fontsize=8)
     fig.suptitle("Scene 6: heavy top, sleeping and steady precession (closed-form truth)")
     fig.tight_layout(rect=(0, 0.1, 1, 1))
-    fig.savefig(out / "stability_tops.png", dpi=110)
+    save_figure(fig, out / "stability_tops.png", dpi=110)
     plt.close(fig)
     tm = list(tops[0].err_deg)
     md += [
@@ -397,7 +398,7 @@ def _scene_noise(out: Path, quick: bool, progress: Callable[[str], None], plt) -
     )
     ax.legend()
     fig.tight_layout()
-    fig.savefig(out / "stability_noise.png", dpi=110)
+    save_figure(fig, out / "stability_noise.png", dpi=110)
     plt.close(fig)
     md += [
         "### 7. Noise and bias (chart `stability_noise.png`)",
@@ -428,7 +429,7 @@ def _scene_truncated(out: Path, quick: bool, progress: Callable[[str], None], pl
     ax.set_title("Scene 8: fixed-axis spin, truncated first-order step vs exact exp")
     ax.legend()
     fig.tight_layout()
-    fig.savefig(out / "stability_truncated.png", dpi=110)
+    save_figure(fig, out / "stability_truncated.png", dpi=110)
     plt.close(fig)
     md += [
         "### 8. Truncated first-order update (chart `stability_truncated.png`)",

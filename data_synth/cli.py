@@ -35,14 +35,14 @@ import numpy as np
 from data_synth import budget
 from data_synth.gyro import DEFAULT_EPOCH_NS, MAX_STAMP_NS, OUTPUTS, GyroModel, synthetic_gyro
 from data_synth.scenes import BRANCHES, FREE_BODY_CASES, MOTIONS, simulate
-from imu_dcm.bag_writer import StampedSeries, write_bag
-from imu_dcm.cli import OneLineArgumentParser
+from imu_dcm.cli import OneLineArgumentParser, end_quietly_on_broken_pipe, prog_name
 from imu_dcm.errors import ImuDcmError, InputError
+from imu_dcm.logio.writer import StampedSeries, write_bag
 from imu_dcm.outputs import check_output_dir
 
 __all__ = ["build_parser", "main", "make_log"]
 
-PROG = "python -m data_synth"
+PROG = prog_name("data-synth", "python -m data_synth")
 
 
 def _number(bound: str):
@@ -94,6 +94,7 @@ def _vector3(text: str) -> tuple[float, float, float]:
 
 
 def _add_common(p: argparse.ArgumentParser, scheme: bool) -> None:
+    """The options every scene shares: sampling, output, budget, and the gyro model."""
     g = p.add_argument_group("sampling and output")
     g.add_argument(
         "--rate", type=_positive, required=True, metavar="HZ", help="gyro sample rate, Hz"
@@ -139,7 +140,11 @@ def _add_common(p: argparse.ArgumentParser, scheme: bool) -> None:
             help="truth: exact (DOP853 1e-12, default) or the coupled RK4 + DCM "
             "scheme of Xiaoliang (2014) stepped at --rate",
         )
-    m = p.add_argument_group("gyro model (each term off unless given)")
+    _add_gyro_model(p.add_argument_group("gyro model (each term off unless given)"))
+
+
+def _add_gyro_model(m) -> None:
+    """The synthetic gyro's error terms (:class:`data_synth.gyro.GyroModel`)."""
     m.add_argument(
         "--gyro-output",
         choices=OUTPUTS,
@@ -157,7 +162,7 @@ def _add_common(p: argparse.ArgumentParser, scheme: bool) -> None:
         "--gyro-bias",
         type=_vector3,
         metavar="X,Y,Z",
-        help="constant bias, rad/s (write --gyro-bias=-x,y,z when x < 0)",
+        help="constant bias, rad/s (negative numbers as they are: --gyro-bias -0.01,0,0)",
     )
     m.add_argument(
         "--gyro-bias-walk",
@@ -228,7 +233,7 @@ def build_parser() -> argparse.ArgumentParser:
         "--omega",
         type=_vector3,
         metavar="X,Y,Z",
-        help="initial body rate, rad/s (overrides --case; --omega=-x,y,z when x < 0)",
+        help="initial body rate, rad/s (overrides --case)",
     )
     _add_common(fb, scheme=False)
     co = sub.add_parser("coning", help="pure coning, closed form")
@@ -309,26 +314,9 @@ def _check_values(args: argparse.Namespace) -> None:
         )
 
 
-def make_log(args: argparse.Namespace, argv: list[str]) -> Path:
-    """Simulate, sample and write the bag described by parsed ``args``; return its folder.
-
-    Every check runs before the simulation (options, output, estimated memory and time), and
-    nothing is written before the bag is complete.
-    """
-    out = Path(args.out)
-    _check_values(args)
-    check_output_dir(out, (), force=args.force, what="--out bag", writer=PROG)  # before simulating
-    est = _sample_cost(args)
-    model = GyroModel(
-        noise_density_rad_s_sqrt_hz=args.gyro_noise_density,
-        bias_rad_s=args.gyro_bias,
-        bias_walk_rad_s2_sqrt_hz=args.gyro_bias_walk,
-        quantization_rad_s=args.gyro_quantization,
-        range_rad_s=args.gyro_range,
-        stamp_jitter_s=args.stamp_jitter,
-    )
-    params = _scene_params(args)
-    scheme = getattr(args, "scheme", "exact")
+def _trajectory(args: argparse.Namespace, est: budget.JobEstimate, params: dict, scheme: str):
+    """The scene's motion: the reference scheme, coning's closed form, or the ODE within the
+    budget left after the samples."""
     if scheme == "reference":
         from data_synth.reference_scheme import SampledTrajectory, reference_top
 
@@ -362,23 +350,11 @@ def make_log(args: argparse.Namespace, argv: list[str]) -> Path:
                 f"{args.duration:g} s) and {est.samples:.3g} "
                 f"samples",
             ) from None
-    rec = synthetic_gyro(
-        traj,
-        args.rate,
-        args.duration,
-        model,
-        output=args.gyro_output,
-        seed=args.seed,
-        epoch_ns=args.epoch_ns,
-    )
-    if args.gyro_output == "rate":
-        t_truth_s, t_truth_ns = rec.t_s, rec.t_ns
-        rates = rec.values
-    else:
-        t_truth_s = np.concatenate([[0.0], rec.t_s])
-        t_truth_ns = np.concatenate([[args.epoch_ns], rec.t_ns])
-        rates = rec.rate_rad_s(0.0)
-    q_true, w_true = traj.at(t_truth_s)
+    return traj
+
+
+def _custom_data(args: argparse.Namespace, argv: list[str], traj, model, scheme: str) -> dict:
+    """``metadata.yaml`` ``custom_data``: the scene, its parameters, the gyro model, the command."""
     custom = {
         "data_synth.scene": traj.scene,
         "data_synth.scheme": scheme,
@@ -397,7 +373,48 @@ def make_log(args: argparse.Namespace, argv: list[str]) -> Path:
         custom["data_synth.gyro.note"] = (
             "angular_velocity = delta angle / interval: mean rate over (t_k-1, t_k], stamped t_k"
         )
-    out.parent.mkdir(parents=True, exist_ok=True)  # e.g. --out out/top in a fresh checkout
+    return custom
+
+
+def make_log(args: argparse.Namespace, argv: list[str]) -> Path:
+    """Simulate, sample and write the bag described by parsed ``args``; return its folder.
+
+    Every check runs before the simulation (options, output, estimated memory and time), and
+    nothing is written before the bag is complete.
+    """
+    out = Path(args.out)
+    _check_values(args)
+    check_output_dir(out, (), force=args.force, what="--out bag", writer=PROG)  # before simulating
+    est = _sample_cost(args)
+    model = GyroModel(
+        noise_density_rad_s_sqrt_hz=args.gyro_noise_density,
+        bias_rad_s=args.gyro_bias,
+        bias_walk_rad_s2_sqrt_hz=args.gyro_bias_walk,
+        quantization_rad_s=args.gyro_quantization,
+        range_rad_s=args.gyro_range,
+        stamp_jitter_s=args.stamp_jitter,
+    )
+    params = _scene_params(args)
+    scheme = getattr(args, "scheme", "exact")
+    traj = _trajectory(args, est, params, scheme)
+    rec = synthetic_gyro(
+        traj,
+        args.rate,
+        args.duration,
+        model,
+        output=args.gyro_output,
+        seed=args.seed,
+        epoch_ns=args.epoch_ns,
+    )
+    if args.gyro_output == "rate":
+        t_truth_s, t_truth_ns = rec.t_s, rec.t_ns
+        rates = rec.values
+    else:
+        t_truth_s = np.concatenate([[0.0], rec.t_s])
+        t_truth_ns = np.concatenate([[args.epoch_ns], rec.t_ns])
+        rates = rec.rate_rad_s(0.0)
+    q_true, w_true = traj.at(t_truth_s)
+    custom = _custom_data(args, argv, traj, model, scheme)
     return write_bag(
         out,
         imu=StampedSeries(rec.t_ns, rates, "imu"),
@@ -409,12 +426,15 @@ def make_log(args: argparse.Namespace, argv: list[str]) -> Path:
 
 
 def main(argv: list[str] | None = None) -> int:
-    """Entry point; returns the exit status (0 ok; 2 bad option or value, a job too large,
-    an existing output or a file-system error)."""
+    """Entry point; returns the exit status (:mod:`imu_dcm.cli`: 0 ok; 2 bad option or value,
+    a job too large, an existing output or a file-system error; 130 interrupted)."""
     argv = list(sys.argv[1:] if argv is None else argv)
     args = build_parser().parse_args(argv)
     try:
         out = make_log(args, argv)
+        print(out)
+    except BrokenPipeError:  # ... | head
+        end_quietly_on_broken_pipe()
     except ImuDcmError as exc:  # bad value or existing output: one line, status 2
         msg = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
         print(f"{PROG}: error: {msg}", file=sys.stderr)
@@ -422,5 +442,7 @@ def main(argv: list[str] | None = None) -> int:
     except OSError as exc:  # the file system refused: one line, status 2
         print(f"{PROG}: error: {exc}".splitlines()[0], file=sys.stderr)
         return 2
-    print(out)
+    except KeyboardInterrupt:
+        print(f"{PROG}: error: interrupted", file=sys.stderr)
+        return 130
     return 0

@@ -215,6 +215,46 @@ def synthetic_gyro(
     GyroRecord
     """
     model = model or GyroModel()
+    duration_s = _check_request(traj, rate_hz, duration_s, output, seed, epoch_ns)
+    rng = np.random.default_rng(seed)
+    t_s, t_ns = _sample_times(rate_hz, duration_s, model.stamp_jitter_s, rng, int(epoch_ns))
+    if output == "rate":
+        _, y = traj.at(t_s)
+        dt = None
+    else:
+        y = traj.delta_angles(t_s)
+        dt = np.diff(t_s)[:, None]
+        t_s, t_ns = t_s[1:], t_ns[1:]
+    bias, noise = _random_terms(model, t_s, rng)
+    values = _measure(y, bias, noise, model, rate_hz, dt)
+    if not np.all(np.isfinite(values)):
+        raise InputError(
+            "Expected a finite gyro output, got "
+            f"{np.count_nonzero(~np.isfinite(values))}"
+            f" non-finite values from the model {model.as_dict()}"
+        )
+    return GyroRecord(
+        t_s=t_s,
+        t_ns=t_ns,
+        values=values,
+        output=output,
+        rate_hz=float(rate_hz),
+        epoch_ns=int(epoch_ns),
+        model=model,
+        seed=int(seed),
+        bias_b_rad_s=bias,
+    )
+
+
+def _check_request(
+    traj: Trajectory,
+    rate_hz: float,
+    duration_s: float | None,
+    output: str,
+    seed: int,
+    epoch_ns: int,
+) -> float:
+    """Refuse a request the trajectory or the stamps cannot serve; the duration to sample, s."""
     if output not in OUTPUTS:
         raise InputError(f"Expected output in {OUTPUTS}, got {output!r}")
     if not (math.isfinite(rate_hz) and rate_hz > 0):
@@ -238,19 +278,16 @@ def synthetic_gyro(
         )
     if not (isinstance(seed, (int, np.integer)) and seed >= 0):
         raise InputError(f"Expected `seed` an integer >= 0, got {seed!r}")
-    rng = np.random.default_rng(seed)
-    t_s, t_ns = _sample_times(rate_hz, duration_s, model.stamp_jitter_s, rng, int(epoch_ns))
+    return duration_s
 
-    if output == "rate":
-        _, y = traj.at(t_s)
-        dt_scale = None
-    else:
-        y = traj.delta_angles(t_s)
-        dt = np.diff(t_s)[:, None]
-        dt_scale = dt
-        t_s, t_ns = t_s[1:], t_ns[1:]
-    n = y.shape[0]
 
+def _random_terms(
+    model: GyroModel, t_s: NDArray, rng: np.random.Generator
+) -> tuple[NDArray, NDArray | None]:
+    """The bias at each sample (constant plus random walk), rad/s, (N, 3); and unit white noise
+    (N, 3), or None without a noise term. The noise is drawn before the walk (same seed, same
+    bytes)."""
+    n = len(t_s)
     bias = np.zeros((n, 3))
     if model.bias_rad_s is not None:
         bias += np.asarray(model.bias_rad_s)
@@ -261,50 +298,51 @@ def synthetic_gyro(
         steps = rng.standard_normal((n - 1, 3)) * model.bias_walk_rad_s2_sqrt_hz
         # b_k = b_0 + Σ_{j<k} K √(t_{j+1} − t_j) ν_j: one step per sample interval.
         bias[1:] += np.cumsum(steps * np.sqrt(np.diff(t_s))[:, None], axis=0)
-    if dt_scale is None:
+    return bias, noise
+
+
+def _measure(
+    y: NDArray,
+    bias: NDArray,
+    noise: NDArray | None,
+    model: GyroModel,
+    rate_hz: float,
+    dt: NDArray | None,
+) -> NDArray:
+    """The gyro's output from the true rates (``dt`` None) or true delta-angles over intervals
+    ``dt`` (N, 1), s: bias, noise, saturation, then quantization."""
+    if dt is None:
         values = y + bias
         if noise is not None:
             values = values + noise * (model.noise_density_rad_s_sqrt_hz * math.sqrt(rate_hz))
         lim = model.range_rad_s
         step = model.quantization_rad_s
     else:
-        values = y + bias * dt_scale
+        values = y + bias * dt
         if noise is not None:
-            values = values + noise * (model.noise_density_rad_s_sqrt_hz * np.sqrt(dt_scale))
-        lim = None if model.range_rad_s is None else model.range_rad_s * dt_scale
+            values = values + noise * (model.noise_density_rad_s_sqrt_hz * np.sqrt(dt))
+        lim = None if model.range_rad_s is None else model.range_rad_s * dt
         step = None if model.quantization_rad_s is None else model.quantization_rad_s / rate_hz
     if lim is not None:
         values = np.clip(values, -lim, lim)
     if step is not None:
-        with np.errstate(over="ignore"):  # a step far below the rates: refused just below
-            counts = (values if dt_scale is None else np.cumsum(values, axis=0)) / step
-        if not np.all(np.isfinite(counts)):
-            raise InputError(
-                f"Expected `quantization_rad_s` large enough that rate / step is "
-                f"finite, got {model.quantization_rad_s!r} for rates up to "
-                f"{float(np.max(np.abs(values))):.3g}"
-            )
-        if dt_scale is None:
-            values = np.round(counts) * step
-        else:
-            # Like a delta-angle IMU: quantize the accumulated angle, so that the rounding
-            # residual is carried to the next sample instead of accumulating.
-            total = np.round(counts)
-            values = np.diff(np.concatenate([np.zeros((1, 3)), total]), axis=0) * step
-    if not np.all(np.isfinite(values)):
+        values = _quantize(values, step, model.quantization_rad_s, accumulate=dt is not None)
+    return values
+
+
+def _quantize(values: NDArray, step: float, step_rad_s: float, accumulate: bool) -> NDArray:
+    """Round to multiples of ``step``; with ``accumulate`` (delta-angles) round the accumulated
+    angle instead, as a delta-angle IMU does, so the residual is carried to the next sample
+    instead of accumulating."""
+    with np.errstate(over="ignore"):  # a step far below the rates: refused just below
+        counts = (np.cumsum(values, axis=0) if accumulate else values) / step
+    if not np.all(np.isfinite(counts)):
         raise InputError(
-            "Expected a finite gyro output, got "
-            f"{np.count_nonzero(~np.isfinite(values))}"
-            f" non-finite values from the model {model.as_dict()}"
+            f"Expected `quantization_rad_s` large enough that rate / step is "
+            f"finite, got {step_rad_s!r} for rates up to "
+            f"{float(np.max(np.abs(values))):.3g}"
         )
-    return GyroRecord(
-        t_s=t_s,
-        t_ns=t_ns,
-        values=values,
-        output=output,
-        rate_hz=float(rate_hz),
-        epoch_ns=int(epoch_ns),
-        model=model,
-        seed=int(seed),
-        bias_b_rad_s=bias,
-    )
+    if not accumulate:
+        return np.round(counts) * step
+    total = np.round(counts)
+    return np.diff(np.concatenate([np.zeros((1, 3)), total]), axis=0) * step

@@ -20,6 +20,8 @@ _LAZY = {  # loaded on first use, so a command's --help does not import the nume
     "integrate": "imu_dcm.integrate",
     "integrate_delta": "imu_dcm.integrate",
     "DcmIntegrator": "imu_dcm.streaming",
+    "Method": "imu_dcm.methods",
+    "DeltaMethod": "imu_dcm.methods",
 }
 
 
@@ -49,11 +51,13 @@ __all__ = [
     "DELTA_METHODS",
     "METHODS",
     "DcmIntegrator",
+    "DeltaMethod",
     "GapWarning",
     "ImuDcmError",
     "ImuDcmWarning",
     "InputError",
     "LogError",
+    "Method",
     "integrate",
     "integrate_delta",
 ]

@@ -41,6 +41,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from imu_dcm.errors import GapWarning, ImuDcmWarning, InputError
+from imu_dcm.methods import DELTA_METHODS, GAP_FACTOR, METHODS, DeltaMethod, Method
 from imu_dcm.so3 import as_quat_xyzw
 
 if TYPE_CHECKING:
@@ -56,14 +57,8 @@ __all__ = [
     "increments",
     "integrate",
     "integrate_delta",
+    "integrate_quat",
 ]
-
-#: Rate-input methods, in order of increasing accuracy (``rotvec_sum`` last: a counter-example).
-METHODS = ("start", "end", "trapezoid", "coning", "magnus4", "rotvec_sum")
-#: Delta-angle methods of :func:`integrate_delta`.
-DELTA_METHODS = ("plain", "one_plus_previous", "two_sample", "three_sample")
-#: A step longer than this many median steps is a gap (:func:`find_gaps`, GapWarning).
-GAP_FACTOR = 5.0
 
 
 # ----------------------------------------------------------------------------------------------
@@ -79,7 +74,12 @@ def _as_float_array(a: ArrayLike, name: str) -> NDArray[np.float64]:
 
 
 def check_samples(
-    values: ArrayLike, t_s: ArrayLike, name: str = "omega_b", n_extra_stamps: int = 0
+    values: ArrayLike,
+    t_s: ArrayLike,
+    name: str = "omega_b",
+    n_extra_stamps: int = 0,
+    *,
+    stacklevel: int = 3,
 ) -> tuple[NDArray, NDArray, NDArray]:
     """Validate ``(N, 3)`` samples and their stamps; return float64 arrays and the steps.
 
@@ -93,6 +93,8 @@ def check_samples(
         Name of ``values`` in messages.
     n_extra_stamps : int
         0 for rates (one stamp per sample), 1 for delta angles (stamps bound the intervals).
+    stacklevel : int
+        The GapWarning's stack level, counted from this function (3: its caller's caller).
 
     Returns
     -------
@@ -131,6 +133,7 @@ def check_samples(
     from imu_dcm import kernel
 
     v = np.ascontiguousarray(v)
+    t = np.ascontiguousarray(t)
     row, stamp, order, dt_min, dt_max = kernel.check_record(v, t, -math.inf)
     if row >= 0:
         raise InputError(f"Expected finite `{name}`, got {v[row].tolist()} at row {row}")
@@ -143,7 +146,7 @@ def check_samples(
             f"{float(t[order - 1])!r} s"
         )
     if dt_max > GAP_FACTOR * dt_min:  # else no step can exceed GAP_FACTOR x the median
-        _warn_gaps(t)
+        _warn_gaps(t, stacklevel)
     return v, t, np.diff(t)
 
 
@@ -192,12 +195,12 @@ def _check_method(method: str, allowed: tuple[str, ...]) -> None:
         raise InputError(f"Expected method in {allowed}, got {method!r}")
 
 
-def _warn_rotvec_sum() -> None:
+def _warn_rotvec_sum(stacklevel: int = 3) -> None:
     warnings.warn(
         "method 'rotvec_sum' adds rotation vectors (q_0 ⊗ exp(Σ dt ω)); it is wrong "
         "whenever the rotation axis moves in the body",
         ImuDcmWarning,
-        stacklevel=3,
+        stacklevel=stacklevel,
     )
 
 
@@ -216,7 +219,7 @@ def _rate_run(
     the ``N - 1`` increments when ``emit_phi``."""
     from imu_dcm import kernel
 
-    state = kernel.new_state(q_first, METHODS.index(method))
+    state = kernel.new_state(q_first, int(Method[method.upper()]))
     out = np.empty((len(t), 4))
     out[0] = q_first
     rows = out[1:]
@@ -271,12 +274,28 @@ def integrate(
     >>> integrate(w, t, [0, 0, 0, 1]).as_quat()[-1].round(6)
     array([0.      , 0.      , 0.707107, 0.707107])
     """
+    return _to_rotation(_integrate_rows(omega_b, t_s, q0, method))
+
+
+def integrate_quat(
+    omega_b: ArrayLike, t_s: ArrayLike, q0: ArrayLike | Rotation, method: str = "magnus4"
+) -> NDArray[np.float64]:
+    """:func:`integrate` as an ``(N, 4)`` array of ``[x, y, z, w]`` quaternions ``q_w_b``
+    (unit to rounding, row 0 is ``q0``), without building a scipy ``Rotation``: the replay and
+    live commands take this path and never import scipy's rotations. Same arguments, checks and
+    warnings as :func:`integrate`."""
+    return _integrate_rows(omega_b, t_s, q0, method)
+
+
+def _integrate_rows(omega_b, t_s, q0, method: str) -> NDArray[np.float64]:
+    """Check, then run the kernel: the body of :func:`integrate` and :func:`integrate_quat`
+    (their warnings name their caller: three frames up from here)."""
     _check_method(method, METHODS)
-    omega, t, _dt = check_samples(omega_b, t_s)
+    omega, t, _dt = check_samples(omega_b, t_s, stacklevel=4)
     q_first = as_quat_xyzw(q0)
     if method == "rotvec_sum":
-        _warn_rotvec_sum()
-    return _to_rotation(_rate_run(omega, t, q_first, method))
+        _warn_rotvec_sum(stacklevel=4)
+    return _rate_run(omega, t, q_first, method)
 
 
 def increments(omega_b: ArrayLike, t_s: ArrayLike, method: str = "magnus4") -> NDArray:
@@ -346,5 +365,6 @@ def integrate_delta(
     from imu_dcm import kernel
 
     out = np.empty((len(dtheta) // m + 1, 4))
-    kernel.feed_delta(as_quat_xyzw(q0), dtheta, dt, DELTA_METHODS.index(method), out)
+    q_first = np.ascontiguousarray(as_quat_xyzw(q0), dtype=np.float64)
+    kernel.feed_delta(q_first, dtheta, dt, int(DeltaMethod[method.upper()]), out)
     return _to_rotation(out)

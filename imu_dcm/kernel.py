@@ -12,64 +12,113 @@ in body axes; stamps ``t`` s; increments multiply on the right. The formulas (in
 exponential, the product) are written out here, inline, on purpose: :mod:`imu_dcm.so3` holds the
 vectorised versions of the same maths.
 
-Importing this module imports numba; :mod:`imu_dcm.integrate` imports it on its first call. Compiled
-code is cached next to this file (``__pycache__``) or, when that folder is read-only, in numba's
-user cache folder (``NUMBA_CACHE_DIR`` overrides both); when no folder is writable the kernel is
-compiled in every process and :class:`imu_dcm.errors.ImuDcmWarning` says so once.
+Compiling. Importing this module imports numba but compiles nothing; :mod:`imu_dcm.integrate`
+imports it on its first call. Each entry point has one signature (float64 C-contiguous arrays,
+int64 codes: the callers convert at the Python boundary) and is compiled on its first use:
+:func:`feed` and :func:`push` once per method a process uses (the method a constant of the loop),
+:func:`close`'s ``magnus4`` part, :func:`check_record`, and :func:`feed_delta` only for delta
+angles. The small helpers are inlined into them or compiled once each. Compiled code is cached
+next to this file (``__pycache__``) or, when that folder is read-only, in numba's user cache
+folder (``NUMBA_CACHE_DIR`` overrides both); a cache miss says so once per process on stderr
+before it compiles. When no folder is writable the kernel is compiled in every process and
+:class:`imu_dcm.errors.ImuDcmWarning` says so once.
+
+State. The state is one float64 array of named fields (:data:`STATE_FIELDS`, defined once by
+the ``_STATE.field`` calls below; :func:`state_fields` gives them as views). Method codes are
+:class:`imu_dcm.methods.Method`.
 """
 
 from __future__ import annotations
 
 import math
+import sys
 import warnings
 
 import numba
 import numpy as np
+from numba.core import event as numba_event
 
 from imu_dcm.errors import ImuDcmWarning
-from imu_dcm.integrate import GAP_FACTOR
+from imu_dcm.methods import GAP_FACTOR, DeltaMethod, Method
 from imu_dcm.so3 import COS_HALF_SERIES, SERIES_THETA2, SINC_HALF_SERIES
 
-# numba compiles the constants above into the cached code, and its cache is keyed on this file
-# alone: after changing them, touch this file. (The tests compare the compiled exponential with
-# so3's and the streaming gap warning with find_gaps, so a stale cache does not go unnoticed.)
+# numba compiles the constants above (and the Method codes) into the cached code, and its cache
+# is keyed on this file alone: after changing them, touch this file. (The tests compare the
+# compiled exponential with so3's and the streaming gap warning with find_gaps, so a stale cache
+# does not go unnoticed.)
 
-# -- method codes (positions in imu_dcm.integrate.METHODS / DELTA_METHODS) -------------------
-START, END, TRAPEZOID, CONING, MAGNUS4, ROTVEC_SUM = range(6)
-PLAIN, ONE_PLUS_PREVIOUS, TWO_SAMPLE, THREE_SAMPLE = range(4)
 
 # -- the state array: what carries across samples ----------------------------------------------
-Q = 0  # [0:4] attitude at the last committed sample, [x, y, z, w]
-Q0 = 4  # [4:8] attitude at the first sample (rotvec_sum adds its rotation vectors to it)
-PHI_SUM = 8  # [8:11] rotvec_sum: Σ dt_j ω_j so far, rad
-W = 11  # [11:23] the last four rates, oldest first: sample r at [W + 3 r : W + 3 r + 3]
-T = 23  # [23:27] their stamps, s
-N = 27  # samples received
-METHOD = 28  # method code
-ROWS = 29  # [29:37] two rows of four: the attitudes push() commits for one sample
-CLOSED = 37  # 1 once close() has run: push() refuses samples
-STATE_SIZE = 38
+
+
+class _Layout:
+    """Named fields of the flat float64 state array, laid out in the order they are defined:
+    each :meth:`field` call returns its offset (a plain int, which numba compiles in as a
+    constant, so named fields cost nothing per sample)."""
+
+    def __init__(self) -> None:
+        self.size = 0
+        self.fields: dict[str, tuple[int, int, str]] = {}
+
+    def field(self, name: str, width: int, meaning: str) -> int:
+        offset = self.size
+        self.fields[name] = (offset, width, meaning)
+        self.size += width
+        return offset
+
+
+_STATE = _Layout()
+Q = _STATE.field("q", 4, "attitude at the last committed sample, [x, y, z, w]")
+Q0 = _STATE.field("q0", 4, "attitude at the first sample (rotvec_sum adds to it)")
+PHI_SUM = _STATE.field("phi_sum", 3, "rotvec_sum: sum of dt_j omega_j so far, rad")
+W = _STATE.field("omega", 12, "the last four rates, oldest first (rate r at W + 3 r), rad/s")
+T = _STATE.field("t", 4, "their stamps, s")
+N = _STATE.field("n", 1, "samples received")
+METHOD = _STATE.field("method", 1, "the Method code")
+ROWS = _STATE.field("rows", 8, "two rows of four: the attitudes push() or close() commit")
+CLOSED = _STATE.field("closed", 1, "1 once close() has run: push() refuses samples")
+STATE_SIZE = _STATE.size
+#: ``name -> (offset, width, meaning)`` of every state field, in layout order.
+STATE_FIELDS = _STATE.fields
 
 S0, S1, S2, S3, S4, S5, S6 = SINC_HALF_SERIES
 C0, C1, C2, C3, C4, C5, C6 = COS_HALF_SERIES
+
+#: ``Method.MAGNUS4`` as a plain int: the type the per-method loops pass to :func:`increment`,
+#: so that the end steps reuse its compiled code.
+MAGNUS4 = int(Method.MAGNUS4)
 
 # -- codes returned by push --------------------------------------------------------------------
 OK, NOT_FINITE, NOT_INCREASING, MAYBE_GAP, IS_CLOSED = 0, 1, 2, 3, 4
 
 
-def _jit(fn=None, **options):
-    """``numba.njit(cache=True, error_model="numpy", **options)``: inputs are checked before they
-    get here, so no Python-style division checks. Without any writable cache folder (see the
-    module doc), compile uncached and warn once."""
+def state_fields(state: np.ndarray) -> dict[str, np.ndarray]:
+    """Every named field of ``state`` as a view (writing to one writes the state)."""
+    return {name: state[o : o + w] for name, (o, w, _) in STATE_FIELDS.items()}
+
+
+def _jit(fn=None, signature: str | None = None, **options):
+    """``numba.njit([signature], cache=True, error_model="numpy", **options)``: inputs are
+    checked before they get here, so no Python-style division checks. Without any writable cache
+    folder (see the module doc), compile uncached and warn once."""
+    sig = () if signature is None else (signature,)
 
     def decorate(f):
         try:
-            return numba.njit(cache=True, error_model="numpy", **options)(f)
-        except RuntimeError:  # numba: "cannot cache function ...: no locator available"
+            return numba.njit(*sig, cache=True, error_model="numpy", **options)(f)
+        except RuntimeError as e:  # numba: "cannot cache function ...: no locator available"
+            if "no locator" not in str(e):
+                raise
             _warn_uncached()
-            return numba.njit(error_model="numpy", **options)(f)
+            return numba.njit(*sig, error_model="numpy", **options)(f)
 
     return decorate if fn is None else decorate(fn)
+
+
+def _inline(fn):
+    """A helper compiled into each caller (numba IR inlining): no function of its own to
+    compile, cache and load, and the caller's constants (the method) fold into it."""
+    return _jit(fn, inline="always")
 
 
 _warned_uncached = []
@@ -85,6 +134,65 @@ def _warn_uncached() -> None:
             ImuDcmWarning,
             stacklevel=4,
         )
+
+
+class _Entry:
+    """An entry point of the kernel, compiled (or loaded from the cache) for its one signature
+    on first use, so that a command compiles and loads only what it calls. Calling it calls the
+    compiled function; :meth:`compiled` returns it, for per-sample loops."""
+
+    def __init__(self, fn, signature: str) -> None:
+        self.py_func = fn
+        self.signature = signature
+        self._dispatcher = None
+        self.__doc__ = fn.__doc__
+        self.__name__ = fn.__name__
+
+    def compiled(self):
+        if self._dispatcher is None:
+            self._dispatcher = _compiled(self.py_func, self.signature)
+        return self._dispatcher
+
+    def __call__(self, *args):
+        return self.compiled()(*args)
+
+
+def _compiled(fn, signature: str):
+    """``fn`` compiled for ``signature``, or loaded from the cache (saying so when it compiles)."""
+    with numba_event.install_listener("numba:compile", _NOTICE):
+        return _jit(fn, signature)
+
+
+def _entry(signature: str):
+    """Declare a kernel entry point with its one signature (see :class:`_Entry`)."""
+    return lambda fn: _Entry(fn, signature)
+
+
+#: CPU seconds to compile every entry point a replay uses (measured: see docs/integrator.md).
+COMPILE_S = 4
+
+
+class _CompileNotice(numba_event.Listener):
+    """Says once per process, on stderr, that the kernel is being compiled: numba sends the
+    "numba:compile" event only after it found no cached code for the signature."""
+
+    said = False
+
+    def on_start(self, event) -> None:
+        if not self.said and event.data["dispatcher"].py_func.__module__ == __name__:
+            type(self).said = True
+            print(
+                f"imu_dcm: compiling the integrator kernel once, about {COMPILE_S} s; "
+                "later runs load it from the cache",
+                file=sys.stderr,
+                flush=True,
+            )
+
+    def on_end(self, event) -> None:
+        pass
+
+
+_NOTICE = _CompileNotice()
 
 
 # -- the maths of one step ---------------------------------------------------------------------
@@ -142,7 +250,7 @@ def increment(
     """
     x0, y0, z0 = w0
     x1, y1, z1 = w1
-    if method == MAGNUS4:
+    if method == Method.MAGNUS4:
         # Simpson on the cubic through ω_{i-1..i+2} at their stamps, as weights on the samples:
         # φ = -c_m ω_{i-1} + c_0 ω_i + c_1 ω_{i+1} - c_2 ω_{i+2} + h²/12 ω_i × ω_{i+1};
         # uniform steps give (-1, 13, 13, -1) h/24.
@@ -171,10 +279,10 @@ def increment(
             c_0 * y0 + c_1 * y1 - c_m * ym - c_2 * y2 + k * (z0 * x1 - x0 * z1),
             c_0 * z0 + c_1 * z1 - c_m * zm - c_2 * z2 + k * (x0 * y1 - y0 * x1),
         )
-    if method == TRAPEZOID:
+    if method == Method.TRAPEZOID:
         u = 0.5 * h_0
         return u * (x0 + x1), u * (y0 + y1), u * (z0 + z1)
-    if method == CONING:
+    if method == Method.CONING:
         u = 0.5 * h_0
         k = h_0 * h_0 * (1.0 / 12.0)
         return (
@@ -182,9 +290,9 @@ def increment(
             u * (y0 + y1) + k * (z0 * x1 - x0 * z1),
             u * (z0 + z1) + k * (x0 * y1 - y0 * x1),
         )
-    if method == START:
+    if method == Method.START:
         return h_0 * x0, h_0 * y0, h_0 * z0
-    return h_0 * x1, h_0 * y1, h_0 * z1  # END
+    return h_0 * x1, h_0 * y1, h_0 * z1  # Method.END
 
 
 @_jit
@@ -193,7 +301,7 @@ def newest_step(
 ) -> tuple:
     """``φ`` of the step that the newest of four samples ``(ω_a, t_a) .. (ω_d, t_d)`` completes:
     ``[t_b, t_c]`` for ``magnus4`` (one sample of look-ahead), ``[t_c, t_d]`` for the others."""
-    if method == MAGNUS4:
+    if method == Method.MAGNUS4:
         return increment(MAGNUS4, a, b, c, d, tb - ta, tc - tb, td - tc)
     h = td - tc
     return increment(method, c, c, d, d, h, h, h)
@@ -211,14 +319,14 @@ def new_state(q0: np.ndarray, method: int) -> np.ndarray:
     return state
 
 
-@_jit
+@_inline
 def _rate(state, r: int) -> tuple:
     """Buffered rate ``r`` (0 = oldest of the last four)."""
     i = W + 3 * r
     return state[i], state[i + 1], state[i + 2]
 
 
-@_jit
+@_inline
 def _ghost(state, m: int, t: float) -> tuple:
     """Rate at stamp ``t`` on the polynomial through the newest ``m`` buffered samples
     (Lagrange form; ``m`` = 2, 3 or 4: a line, a parabola, a cubic)."""
@@ -234,7 +342,7 @@ def _ghost(state, m: int, t: float) -> tuple:
     return x, y, z
 
 
-@_jit
+@_inline
 def _commit(state, phi: tuple, out, k: int, emit_phi: bool) -> int:
     """Apply one step to the state's attitude and write row ``k`` of ``out`` (the new attitude,
     or ``φ`` when ``emit_phi``); return ``k + 1``."""
@@ -248,10 +356,13 @@ def _commit(state, phi: tuple, out, k: int, emit_phi: bool) -> int:
     return k + 1
 
 
-@_jit
-def _push(state, x: float, y: float, z: float, t: float, out, k: int, emit_phi: bool) -> int:
+@_inline
+def _push(
+    state, x: float, y: float, z: float, t: float, out, k: int, method: int, emit_phi: bool
+) -> int:
     """Take sample ``(ω, t)`` into the state and commit every step it completes (rows of
-    ``out`` from ``k``); return the next free row. Inputs are already checked."""
+    ``out`` from ``k``); return the next free row. Inputs are already checked; ``method`` is
+    the state's."""
     for i in range(W, W + 9):  # shift the window: the oldest sample leaves
         state[i] = state[i + 3]
     state[T], state[T + 1], state[T + 2] = state[T + 1], state[T + 2], state[T + 3]
@@ -260,10 +371,9 @@ def _push(state, x: float, y: float, z: float, t: float, out, k: int, emit_phi: 
     state[N] = n
     if n < 2.0:
         return k
-    method = int(state[METHOD])
     a, b, c, d = _rate(state, 0), _rate(state, 1), _rate(state, 2), _rate(state, 3)
     ta, tb, tc, td = state[T], state[T + 1], state[T + 2], state[T + 3]
-    if method == ROTVEC_SUM:  # q = q_0 ⊗ exp(Σ h_j ω_j): adds rotation vectors
+    if method == Method.ROTVEC_SUM:  # q = q_0 ⊗ exp(Σ h_j ω_j): adds rotation vectors
         h = td - tc
         sx = state[PHI_SUM] + h * c[0]
         sy = state[PHI_SUM + 1] + h * c[1]
@@ -273,7 +383,7 @@ def _push(state, x: float, y: float, z: float, t: float, out, k: int, emit_phi: 
         out[k, 0], out[k, 1], out[k, 2], out[k, 3] = q
         state[Q], state[Q + 1], state[Q + 2], state[Q + 3] = q
         return k + 1
-    if method == MAGNUS4:
+    if method == Method.MAGNUS4:
         if n < 4.0:  # step [t_b, t_c] needs ω_a..ω_d: it is committed one sample late
             return k
         if n == 4.0:  # the first step, with a ghost sample before the record
@@ -283,39 +393,46 @@ def _push(state, x: float, y: float, z: float, t: float, out, k: int, emit_phi: 
     return _commit(state, newest_step(method, a, b, c, d, ta, tb, tc, td), out, k, emit_phi)
 
 
-@_jit
 def feed(state, omega, t, out, emit_phi: bool = False) -> int:
     """Push samples ``omega[j], t[j]`` (checked: finite, increasing after the state's last
-    stamp); ``out`` gets one row per committed step (the attitude after it, or its ``φ`` when
-    ``emit_phi``). Returns the rows written (at most ``len(t) + 1``).
+    stamp; float64, C-contiguous); ``out`` gets one row per committed step (the attitude after
+    it, or its ``φ`` when ``emit_phi``). Returns the rows written (at most ``len(t) + 1``).
 
-    The first samples (and every ``rotvec_sum`` sample) go through :func:`_push`; once four
-    samples are in, :func:`_recursion` runs with the method as a constant, so that the
-    compiler drops the other methods' branches from the loop (measured: a quarter less time
-    per sample than one loop that tests the method at every step).
+    Runs the loop compiled for the state's method (:func:`_feed_for`), compiling it on the
+    first call with that method in any process (then loading it from the cache).
     """
-    method = int(state[METHOD])
-    j = 0
-    k = 0
-    while j < len(t) and (state[N] < 4.0 or method == ROTVEC_SUM):
-        k = _push(state, omega[j, 0], omega[j, 1], omega[j, 2], t[j], out, k, emit_phi)
-        j += 1
-    if j == len(t):
-        return k
-    if emit_phi:
-        return _recursion(state, omega, t, out, j, k, method, True)
-    if method == MAGNUS4:
-        return _recursion(state, omega, t, out, j, k, MAGNUS4, False)
-    if method == TRAPEZOID:
-        return _recursion(state, omega, t, out, j, k, TRAPEZOID, False)
-    if method == CONING:
-        return _recursion(state, omega, t, out, j, k, CONING, False)
-    if method == START:
-        return _recursion(state, omega, t, out, j, k, START, False)
-    return _recursion(state, omega, t, out, j, k, END, False)
+    key = (int(state[METHOD]), bool(emit_phi))
+    fn = _FEEDS.get(key)
+    if fn is None:
+        fn = _FEEDS[key] = _compiled(_feed_for(*key), _FEED_SIGNATURE)
+    return fn(state, omega, t, out)
 
 
-@_jit(inline="always")
+_FEEDS: dict = {}
+_FEED_SIGNATURE = "int64(float64[::1], float64[:, ::1], float64[::1], float64[:, ::1])"
+
+
+def _feed_for(method: int, emit_phi: bool):
+    """:func:`feed` for one method, with the method a constant so that the compiler keeps only
+    its branch (measured: a quarter less time per sample than one loop that tests the method
+    at every step), and only the methods a process uses are compiled. The first samples (and
+    every ``rotvec_sum`` sample) go through :func:`_push`; once four samples are in,
+    :func:`_recursion` runs."""
+
+    def feed_method(state, omega, t, out):
+        j = 0
+        k = 0
+        while j < len(t) and (state[N] < 4.0 or method == Method.ROTVEC_SUM):
+            k = _push(state, omega[j, 0], omega[j, 1], omega[j, 2], t[j], out, k, method, emit_phi)
+            j += 1
+        if j == len(t):
+            return k
+        return _recursion(state, omega, t, out, j, k, method, emit_phi)
+
+    return feed_method
+
+
+@_inline
 def _recursion(state, omega, t, out, j: int, k: int, method: int, emit_phi: bool) -> int:
     """Samples ``j..`` once the window is full: the DCM recursion ``q <- q ⊗ exp(φ)``, one step
     per sample, with the window of four samples in local variables."""
@@ -340,49 +457,75 @@ def _recursion(state, omega, t, out, j: int, k: int, method: int, emit_phi: bool
     return k
 
 
-@_jit
 def push(state, omega, t: float) -> int:
-    """One unchecked sample (``omega`` a float array): check it, then :func:`_push` it.
+    """One unchecked sample (``omega`` a float64 (3,) C-contiguous array, ``t`` a float): the
+    compiled :func:`push_for` the state's method."""
+    return push_for(int(state[METHOD]))(state, omega, t)
 
-    Returns ``IS_CLOSED``, ``NOT_FINITE`` or ``NOT_INCREASING`` (state unchanged);
-    ``MAYBE_GAP`` when the step
-    exceeds ``GAP_FACTOR`` times the shortest of the last three (the caller then applies the
-    gap rule to the buffered stamps); else ``OK``.
+
+_PUSHES: dict = {}
+
+
+def push_for(method: int):
+    """The compiled per-sample push for ``method`` (compiled or loaded on first use)."""
+    fn = _PUSHES.get(method)
+    if fn is None:
+        fn = _PUSHES[method] = _compiled(
+            _push_for(method), "int64(float64[::1], float64[::1], float64)"
+        )
+    return fn
+
+
+def _push_for(method: int):
+    """Check one sample, then :func:`_push` it; ``method`` a constant (as in :func:`_feed_for`).
+
+    The compiled function returns ``IS_CLOSED``, ``NOT_FINITE`` or ``NOT_INCREASING`` (state
+    unchanged); ``MAYBE_GAP`` when the step exceeds ``GAP_FACTOR`` times the shortest of the
+    last three (the caller then applies the gap rule to the buffered stamps); else ``OK``.
     """
-    if state[CLOSED]:
-        return IS_CLOSED
-    if len(omega) != 3:
-        return NOT_FINITE
-    x, y, z = omega[0], omega[1], omega[2]
-    if not (math.isfinite(x) and math.isfinite(y) and math.isfinite(z) and math.isfinite(t)):
-        return NOT_FINITE
-    n = state[N]
-    code = OK
-    if n >= 1.0:
-        h = t - state[T + 3]
-        if not h > 0.0:
-            return NOT_INCREASING
-        if n >= 2.0:
-            shortest = state[T + 3] - state[T + 2]
-            for r in range(max(1, 4 - int(n)), 3):
-                shortest = min(shortest, state[T + r + 1] - state[T + r])
-            if h > GAP_FACTOR * shortest:
-                code = MAYBE_GAP
-    _push(state, x, y, z, t, state[ROWS : ROWS + 8].reshape((2, 4)), 0, False)
-    return code
+
+    def push_method(state, omega, t):
+        if state[CLOSED]:
+            return IS_CLOSED
+        if len(omega) != 3:
+            return NOT_FINITE
+        x, y, z = omega[0], omega[1], omega[2]
+        if not (math.isfinite(x) and math.isfinite(y) and math.isfinite(z) and math.isfinite(t)):
+            return NOT_FINITE
+        n = state[N]
+        code = OK
+        if n >= 1.0:
+            h = t - state[T + 3]
+            if not h > 0.0:
+                return NOT_INCREASING
+            if n >= 2.0:
+                shortest = state[T + 3] - state[T + 2]
+                for r in range(max(1, 4 - int(n)), 3):
+                    shortest = min(shortest, state[T + r + 1] - state[T + r])
+                if h > GAP_FACTOR * shortest:
+                    code = MAYBE_GAP
+        _push(state, x, y, z, t, state[ROWS : ROWS + 8].reshape((2, 4)), 0, method, False)
+        return code
+
+    return push_method
 
 
-@_jit
 def close(state, emit_phi: bool = False) -> int:
     """End of record: ``magnus4`` commits the steps still open, with a ghost sample after the
     last one (and before the first, for records of 2 or 3 samples) on the polynomial through
     the last (up to four) samples. Other methods: nothing. Returns the rows written to
     ``state[ROWS:ROWS + 8]`` (two rows of four)."""
-    out = state[ROWS : ROWS + 8].reshape((2, 4))
     state[CLOSED] = 1.0
-    n = int(state[N])
-    if int(state[METHOD]) != MAGNUS4 or n < 2:
+    if int(state[METHOD]) != Method.MAGNUS4 or state[N] < 2.0:
         return 0
+    return _close_magnus4(state, bool(emit_phi))
+
+
+@_entry("int64(float64[::1], boolean)")
+def _close_magnus4(state, emit_phi: bool) -> int:
+    """:func:`close` for ``magnus4`` with at least two samples."""
+    out = state[ROWS : ROWS + 8].reshape((2, 4))
+    n = int(state[N])
     m = min(n, 4)
     tc, td = state[T + 2], state[T + 3]
     h_end = td - tc
@@ -419,7 +562,7 @@ def close(state, emit_phi: bool = False) -> int:
 # -- input checks ------------------------------------------------------------------------------
 
 
-@_jit
+@_entry("Tuple((int64, int64, int64, float64, float64))(float64[:, ::1], float64[::1], float64)")
 def check_record(values, t, t_before: float) -> tuple:
     """One pass over a record of samples ``values`` (n, 3) and stamps ``t``.
 
@@ -459,7 +602,7 @@ def check_record(values, t, t_before: float) -> tuple:
 # -- delta angles --------------------------------------------------------------------------------
 
 
-@_jit
+@_inline
 def delta_rotvec(method: int, d1: tuple, d2: tuple, d3: tuple, a: float, b: float) -> tuple:
     """Rotation vector of one attitude update from delta angles (rad, body).
 
@@ -470,10 +613,10 @@ def delta_rotvec(method: int, d1: tuple, d2: tuple, d3: tuple, a: float, b: floa
     """
     x1, y1, z1 = d1
     x2, y2, z2 = d2
-    if method == PLAIN:
+    if method == DeltaMethod.PLAIN:
         return d2
-    if method in (ONE_PLUS_PREVIOUS, TWO_SAMPLE):
-        if method == ONE_PLUS_PREVIOUS:
+    if method == DeltaMethod.ONE_PLUS_PREVIOUS or method == DeltaMethod.TWO_SAMPLE:
+        if method == DeltaMethod.ONE_PLUS_PREVIOUS:
             k = b * b / (6.0 * a * (a + b))
             bx, by, bz = x2, y2, z2
         else:
@@ -484,7 +627,7 @@ def delta_rotvec(method: int, d1: tuple, d2: tuple, d3: tuple, a: float, b: floa
             by + k * (z1 * x2 - x1 * z2),
             bz + k * (x1 * y2 - y1 * x2),
         )
-    x3, y3, z3 = d3  # THREE_SAMPLE
+    x3, y3, z3 = d3  # DeltaMethod.THREE_SAMPLE
     ex, ey, ez = x3 - x1, y3 - y1, z3 - z1
     return (
         x1 + x2 + x3 + 0.45 * (y1 * z3 - z1 * y3) + 0.675 * (y2 * ez - z2 * ey),
@@ -493,13 +636,13 @@ def delta_rotvec(method: int, d1: tuple, d2: tuple, d3: tuple, a: float, b: floa
     )
 
 
-@_jit
+@_entry("void(float64[::1], float64[:, ::1], float64[::1], int64, float64[:, ::1])")
 def feed_delta(q0, dtheta, dt, method: int, out) -> None:
     """Attitudes from checked delta angles: ``out[0] = q0``, then one row per update
     (per interval, or per set of 2 or 3 intervals)."""
     q = (q0[0], q0[1], q0[2], q0[3])
     out[0, 0], out[0, 1], out[0, 2], out[0, 3] = q
-    m = 2 if method == TWO_SAMPLE else 3 if method == THREE_SAMPLE else 1
+    m = 2 if method == DeltaMethod.TWO_SAMPLE else 3 if method == DeltaMethod.THREE_SAMPLE else 1
     zero = (0.0, 0.0, 0.0)
     for u in range(len(dtheta) // m):
         k = u * m

@@ -1,10 +1,23 @@
 """Rest detection: the still segments of a gyro log, and the windowed statistics behind them.
 
-A gyro at rest measures its bias plus noise. A sample is *at rest* when it lies in a window of at
-least ``min_duration_s`` (0.5 s) whose mean rate magnitude is below ``max_rate_rad_s`` and whose
-per-axis standard deviation is below ``max_std_rad_s``. Consecutive rest samples form a rest
-segment. The bias estimate (:mod:`imu_dcm.replay.bias`) and the noise estimate of the pre-filter
-(:mod:`imu_dcm.prefilter`) both start from here.
+A gyro at rest measures its bias plus noise. Rest is stillness, judged over windows of
+``min_duration_s`` (0.5 s):
+
+* the rate is at its noise floor: every per-axis standard deviation below ``max_std_rad_s``;
+* where the log has an accelerometer (``accel_b``, m/s²), it is still too: every per-axis
+  standard deviation below ``max_accel_std_m_s2`` (vibration of smooth driving shows here,
+  not in the gyro), and ``|mean a|`` within ``max_gravity_error_m_s2`` of g. Stillness is then
+  confirmed, and the rate's mean (the bias) may be as large as ``max_bias_rad_s`` (several
+  °/s: a EuRoC ADIS16448 sits at 4.6 °/s);
+* without an accelerometer nothing tells a smooth constant turn from a bias, so the mean rate
+  must stay below ``max_rate_rad_s`` (2 °/s, above most MEMS biases): such rest is
+  *unconfirmed*, and a larger bias needs ``--bias x,y,z``.
+
+A sample is at rest when a still window covers it; consecutive rest samples form a rest segment.
+When none is found, :func:`explain_no_rest` names the condition that failed and by how much.
+The bias estimate (:mod:`imu_dcm.replay.bias`), the pre-filter's noise estimate
+(:mod:`imu_dcm.prefilter`) and the live command's causal bias (:class:`CausalRestBias`, the
+rule without accelerometer, online) all start from here.
 
 Conventions: ``omega_b`` (N, 3) body rate relative to the world in body axes, rad/s; ``t_s`` (N,)
 seconds, increasing.
@@ -20,10 +33,15 @@ from numpy.typing import ArrayLike, NDArray
 
 from imu_dcm.errors import InputError
 
+#: Standard gravity, m/s² (a still accelerometer reads about this much).
+GRAVITY_M_S2 = 9.80665
+
 __all__ = [
+    "GRAVITY_M_S2",
     "CausalRestBias",
     "RestConfig",
     "detect_rest",
+    "explain_no_rest",
     "longest_run",
     "quietest_std",
     "runs",
@@ -43,11 +61,21 @@ class RestConfig:
         above the largest MEMS biases seen, far below deliberate motion).
     max_std_rad_s : largest per-axis standard deviation in the window, rad/s (default 0.01 ≈
         0.6 °/s; 2–5x the noise of a consumer gyro at a few hundred Hz).
+    max_bias_rad_s : largest window-mean rate magnitude when an accelerometer confirms the
+        stillness, rad/s (default 0.175 = 10 °/s: the largest biases of uncalibrated MEMS).
+    max_accel_std_m_s2 : largest per-axis accelerometer standard deviation in the window, m/s²
+        (default 0.2 ≈ 0.02 g: 3x the noise of the BROAD accelerometers at rest; vibration of a
+        driving vehicle is several times more).
+    max_gravity_error_m_s2 : largest difference between ``|mean a|`` and g, m/s² (default 0.5
+        ≈ 0.05 g: scale errors and biases of MEMS accelerometers).
     """
 
     min_duration_s: float = 0.5
     max_rate_rad_s: float = 0.035
     max_std_rad_s: float = 0.01
+    max_bias_rad_s: float = 0.175
+    max_accel_std_m_s2: float = 0.2
+    max_gravity_error_m_s2: float = 0.5
 
 
 def window_samples(t_s: NDArray, duration_s: float) -> int:
@@ -111,7 +139,50 @@ def quietest_std(omega_b: NDArray, t_s: NDArray, window_s: float) -> float:
     return float(np.sqrt(var.max(axis=1).min()))
 
 
-def detect_rest(omega_b: ArrayLike, t_s: ArrayLike, config: RestConfig | None = None) -> NDArray:
+def _checked(omega_b: ArrayLike, t_s: ArrayLike, accel_b: ArrayLike | None):
+    w = np.asarray(omega_b, dtype=float)
+    t = np.asarray(t_s, dtype=float)
+    if w.ndim != 2 or w.shape[1] != 3 or len(t) != len(w):
+        raise InputError(f"Expected omega_b (N, 3) and t_s (N,), got {w.shape} and {t.shape}")
+    acc = None if accel_b is None else np.asarray(accel_b, dtype=float)
+    if acc is not None and acc.shape != w.shape:
+        raise InputError(f"Expected accel_b of shape {w.shape}, got {acc.shape}")
+    return w, t, acc
+
+
+def _window_conditions(
+    w: NDArray, acc: NDArray | None, win: int, cfg: RestConfig
+) -> list[tuple[str, NDArray, float, str]]:
+    """Each rest condition over every window of ``win`` samples: (name, value, limit, unit).
+
+    A window passes a condition when its value is below the limit.
+    """
+    mean, var = windowed_mean_var(w, win)
+    rate = np.linalg.norm(mean, axis=1)
+    conds = [("rate std", np.sqrt(var.max(axis=1)), cfg.max_std_rad_s, "rad/s")]
+    if acc is None:
+        conds.append(("mean |omega| (no accelerometer)", rate, cfg.max_rate_rad_s, "rad/s"))
+        return conds
+    a_mean, a_var = windowed_mean_var(acc, win)
+    conds += [
+        ("mean |omega|", rate, cfg.max_bias_rad_s, "rad/s"),
+        ("accel std", np.sqrt(a_var.max(axis=1)), cfg.max_accel_std_m_s2, "m/s²"),
+        (
+            "| |a| - g |",
+            np.abs(np.linalg.norm(a_mean, axis=1) - GRAVITY_M_S2),
+            cfg.max_gravity_error_m_s2,
+            "m/s²",
+        ),
+    ]
+    return conds
+
+
+def detect_rest(
+    omega_b: ArrayLike,
+    t_s: ArrayLike,
+    config: RestConfig | None = None,
+    accel_b: ArrayLike | None = None,
+) -> NDArray:
     """Boolean mask (N,) of samples at rest (see the module docstring for the rule).
 
     Parameters
@@ -121,21 +192,19 @@ def detect_rest(omega_b: ArrayLike, t_s: ArrayLike, config: RestConfig | None = 
     t_s : array_like, shape (N,)
         Sample times, s, increasing.
     config : RestConfig, optional
+    accel_b : array_like, shape (N, 3), optional
+        Specific force on the same rows, m/s², finite; confirms stillness when given.
     """
     cfg = config or RestConfig()
-    w = np.asarray(omega_b, dtype=float)
-    t = np.asarray(t_s, dtype=float)
-    if w.ndim != 2 or w.shape[1] != 3 or len(t) != len(w):
-        raise InputError(f"Expected omega_b (N, 3) and t_s (N,), got {w.shape} and {t.shape}")
+    w, t, acc = _checked(omega_b, t_s, accel_b)
     n = len(w)
     win = window_samples(t, cfg.min_duration_s)
     rest = np.zeros(n, dtype=bool)
     if n < win:
         return rest
-    mean, var = windowed_mean_var(w, win)  # window starting at i: samples [i, i + win)
-    still = (np.linalg.norm(mean, axis=1) < cfg.max_rate_rad_s) & np.all(
-        var < cfg.max_std_rad_s**2, axis=1
-    )
+    still = np.ones(n - win + 1, dtype=bool)  # window starting at i: samples [i, i + win)
+    for _name, value, limit, _unit in _window_conditions(w, acc, win, cfg):
+        still &= value < limit
     # a sample is at rest when any still window covers it: spread each still start over win
     cover = np.zeros(n + 1, dtype=np.int64)
     starts = np.flatnonzero(still)
@@ -143,6 +212,35 @@ def detect_rest(omega_b: ArrayLike, t_s: ArrayLike, config: RestConfig | None = 
     np.add.at(cover, starts + win, -1)
     rest[:] = np.cumsum(cover[:-1]) > 0
     return rest
+
+
+def explain_no_rest(
+    omega_b: ArrayLike,
+    t_s: ArrayLike,
+    config: RestConfig | None = None,
+    accel_b: ArrayLike | None = None,
+) -> str:
+    """Why no window passed: the conditions that failed in the window closest to passing.
+
+    The closest window is the one whose worst condition (value over limit) is smallest. Returns
+    one clause, e.g. ``"the stillest 0.50 s (at 12.30 s) has rate std 0.0150 rad/s > 0.0100"``.
+    """
+    cfg = config or RestConfig()
+    w, t, acc = _checked(omega_b, t_s, accel_b)
+    win = window_samples(t, cfg.min_duration_s)
+    if len(w) < win:
+        return f"the log ({t[-1] - t[0]:.2f} s) is shorter than a {cfg.min_duration_s:.2f} s window"
+    conds = _window_conditions(w, acc, win, cfg)
+    worst = np.max([value / limit for _n, value, limit, _u in conds], axis=0)
+    i = int(np.argmin(worst))
+    failed = [
+        f"{name} {value[i]:.4g} {unit} > {limit:.4g} ({value[i] / limit:.1f}x)"
+        for name, value, limit, unit in conds
+        if value[i] >= limit
+    ]
+    return f"the stillest {cfg.min_duration_s:.2f} s (at {t[i] - t[0]:.2f} s) has " + ", ".join(
+        failed
+    )
 
 
 class CausalRestBias:

@@ -38,8 +38,6 @@ from numpy.typing import ArrayLike, NDArray
 from imu_dcm import kernel
 from imu_dcm.errors import GapWarning, InputError
 from imu_dcm.integrate import (
-    GAP_FACTOR,
-    METHODS,
     _as_float_array,
     _check_method,
     _to_rotation,
@@ -47,6 +45,7 @@ from imu_dcm.integrate import (
     find_gaps,
     gap_message,
 )
+from imu_dcm.methods import GAP_FACTOR, METHODS, Method
 from imu_dcm.so3 import as_quat_xyzw
 
 if TYPE_CHECKING:
@@ -56,7 +55,6 @@ __all__ = ["DcmIntegrator"]
 
 _ndarray = np.ndarray
 _F64 = np.dtype(np.float64)
-_push = kernel.push
 
 
 class DcmIntegrator:
@@ -80,8 +78,8 @@ class DcmIntegrator:
     -----
     Feeding ``omega_b[k], t_s[k]`` for ``k = 0..N-1`` and calling :meth:`finish` reproduces
     ``integrate(omega_b, t_s, q0, method)`` sample by sample (``t0_s=None``): both run the same
-    compiled kernel. The first integrator of a process loads the kernel (numba; see the README
-    for its cache).
+    compiled kernel. The first integrator of a process loads the kernel (numba;
+    see docs/integrator.md for its cache).
 
     Examples
     --------
@@ -105,8 +103,9 @@ class DcmIntegrator:
             raise InputError(f"Expected `t0_s` finite or None, got {t0_s}")
         self._method = method
         self._t0_s = t0
-        self._state = kernel.new_state(as_quat_xyzw(q0), METHODS.index(method))
+        self._state = kernel.new_state(as_quat_xyzw(q0), Method[method.upper()])
         self._q = self._state[kernel.Q : kernel.Q + 4]  # a view: the attitude, updated in place
+        self._push = kernel.push_for(int(Method[method.upper()]))
         self._finished = False
         self._t0_pending = t0 is not None
         if method == "rotvec_sum":
@@ -185,7 +184,11 @@ class DcmIntegrator:
             t_s = self._as_stamp(omega_b, t_s)
         if self._t0_pending:
             self._start_at_t0(omega_b, t_s)
-        code = _push(self._state, omega_b, t_s)
+        try:
+            code = self._push(self._state, omega_b, t_s)
+        except TypeError:  # a strided array: the compiled push takes contiguous ones
+            omega_b = np.ascontiguousarray(omega_b)
+            code = self._push(self._state, omega_b, t_s)
         if code:
             self._not_ok(code, omega_b, t_s)
         return self._q.copy()
@@ -217,7 +220,7 @@ class DcmIntegrator:
             raise InputError("Expected no samples after finish(), got one")
         if not t > self._t0_s:
             raise InputError(f"Expected the first `t_s` after t0_s = {self._t0_s!r} s, got {t!r} s")
-        code = _push(self._state, w, self._t0_s)
+        code = self._push(self._state, np.ascontiguousarray(w), self._t0_s)
         if code:
             self._not_ok(code, w, self._t0_s)
         self._t0_pending = False
@@ -248,7 +251,7 @@ class DcmIntegrator:
         No sample may follow. Returns the ``[x, y, z, w]`` attitude, shape (4,).
         """
         if not self._finished:
-            kernel.close(self._state)
+            kernel.close(self._state, False)
             self._finished = True
         return self._q.copy()
 
@@ -299,7 +302,7 @@ class DcmIntegrator:
         n0 = self.n_samples
         q_before = self._q.copy()
         out = np.empty((len(t) + 1, 4))
-        k = kernel.feed(self._state, w, t, out)
+        k = kernel.feed(self._state, w, t, out, False)
         if n0 >= (4 if self._method == "magnus4" else 1) and k == n_user:
             return _to_rotation(out[:k])  # steady state: one committed row per sample
         # Warm-up: row j is the attitude committed by then (the start attitude before any).

@@ -17,8 +17,8 @@ from rosbags.rosbag2 import Reader as Rosbag2Reader
 from rosbags.typesys import Stores, get_typestore
 from ruamel.yaml import YAML  # a dependency of rosbags: an independent YAML parser
 
-from imu_dcm.bag_writer import MSG_DEFINITIONS, TYPE_HASHES, StampedSeries, write_bag
 from imu_dcm.errors import InputError, LogError
+from imu_dcm.logio.writer import MSG_DEFINITIONS, TYPE_HASHES, StampedSeries, write_bag
 
 EPOCH_NS = 1_700_000_000_000_000_000
 TYPESTORE = get_typestore(Stores.ROS2_HUMBLE)
@@ -266,12 +266,12 @@ def test_refuses_existing_output_and_force_replaces(tmp_path):
 
 
 def test_output_is_whole_or_absent(tmp_path, monkeypatch):
-    import imu_dcm.bag_writer as bw
+    import imu_dcm.logio.writer as bw
 
     def boom(*a, **k):
         raise RuntimeError("disk full")
 
-    monkeypatch.setattr(bw, "_metadata_yaml", boom)
+    monkeypatch.setattr(bw, "metadata_body", boom)
     with pytest.raises(RuntimeError):
         _write(tmp_path)
     assert list(tmp_path.iterdir()) == []

@@ -576,6 +576,12 @@ def special_input_cases(base: Base) -> list[Case]:
     ]
 
 
+def _file(p: Path) -> Path:
+    """A regular file at ``p`` (so that ``p / "x"`` can never be created)."""
+    p.write_bytes(b"x")
+    return p
+
+
 def output_path_cases(base: Base) -> list[Case]:
     """Hostile outputs for the CLI; every one must be refused (exit 2) and change nothing."""
 
@@ -646,7 +652,12 @@ def output_path_cases(base: Base) -> list[Case]:
         ),
         case(
             "rerun-save-unwritable",
-            lambda d, b: ["--rerun", f"save:{d / 'out' / 'nofolder' / 'x' / 'v.rrd'}"],
+            lambda d, b: [
+                "--rerun",
+                f"save:{_file(d / 'out' / 'file') / 'x' / 'v.rrd'}",
+                "--summary-json",
+                str(d / "out" / "s.json"),
+            ],
             fix="replay CLI: check --rerun save: before any output",
         ),
     ]

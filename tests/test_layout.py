@@ -1,10 +1,18 @@
-"""The layout: imports point one way, every module imports, and the wheel ships two packages.
+"""The layout: imports point one way, no import circles, short functions, every module imports,
+and the wheel ships two packages.
 
 Layers (docs/design.md, "Where each concept lives"): the core maths (``so3``, the integrator and
-its kernels, streaming, rest detection, metrics, Allan deviation, the pre-filter, the reference
-integrators, errors) imports neither log I/O nor replay, viz, live or benchmarks; log I/O
-imports no replay, viz or live; nothing in the shipped packages imports ``benchmarks`` (a
-folder of the repository, not part of the wheel) or ``tests``.
+its kernels, streaming, resampling, rest detection, metrics, Allan deviation, the pre-filter, the
+reference integrators, errors, and the small helpers every layer shares: safe output, command-line
+parsing) imports neither log I/O nor replay, viz, live or benchmarks; log I/O (reading and
+writing every container: ``logio``, with the bag writer) imports no replay, viz or live; live
+imports no replay (what both need lives below them); nothing in the shipped packages imports
+``benchmarks`` (a folder of the repository, not part of the wheel) or ``tests``.
+
+Circles: no module reaches itself through the imports of ``imu_dcm``, ``data_synth`` or
+``benchmarks``, counting imports inside functions too (a lazy import defers the circle, it does
+not remove it). Length: no function of the shipped packages runs over
+:data:`MAX_FUNCTION_LINES` lines (``def`` to its last line), so each one holds one idea.
 """
 
 from __future__ import annotations
@@ -29,18 +37,24 @@ PACKAGE = REPO / "imu_dcm"
 CORE = (
     "so3",
     "kernel",
-    "scan",
     "integrate",
     "streaming",
+    "resample",
     "rest",
     "metrics",
     "allan",
     "prefilter",
     "reference",
+    "peers",
     "errors",
+    "outputs",
+    "cli",
 )
+# the bag writer belongs to log I/O wherever it sits: imu_dcm/bag_writer.py or inside logio
 LOG_IO = ("logio", "bag_writer")
 UPPER = ("imu_dcm.replay", "imu_dcm.viz", "imu_dcm.live", "benchmarks")
+#: The longest function the shipped packages may hold, in lines from ``def`` to its last line.
+MAX_FUNCTION_LINES = 80
 
 
 def _files(name: str) -> list[Path]:
@@ -56,21 +70,143 @@ def _module_name(path: Path, root: Path = REPO) -> str:
     return ".".join(parts[:-1] if parts[-1] == "__init__" else parts)
 
 
-def _imports(path: Path, root: Path = REPO) -> set[str]:
-    """Every module a file imports, relative imports resolved, at any depth of the file."""
+def _import_statements(path: Path, root: Path = REPO) -> list[tuple[int, str, tuple[str, ...]]]:
+    """``(line, module, names)`` per import statement of a file, at any depth, relative imports
+    resolved: ``import a.b`` gives ``(line, "a.b", ())``, ``from .x import y`` gives
+    ``(line, "<package>.x", ("y",))``."""
     tree = ast.parse(path.read_text(encoding="utf-8"), filename=str(path))
     here = _module_name(path, root).split(".")
     package = here if path.name == "__init__.py" else here[:-1]
-    found = set()
+    found = []
     for node in ast.walk(tree):
         if isinstance(node, ast.Import):
-            found.update(alias.name for alias in node.names)
+            found.extend((node.lineno, alias.name, ()) for alias in node.names)
         elif isinstance(node, ast.ImportFrom):
             base = package[: len(package) - node.level + 1] if node.level else []
             mod = ".".join([*base, node.module] if node.module else base)
-            found.add(mod)
-            found.update(f"{mod}.{alias.name}" for alias in node.names)
+            found.append((node.lineno, mod, tuple(alias.name for alias in node.names)))
+    return sorted(found)
+
+
+def _imports(path: Path, root: Path = REPO) -> set[str]:
+    """Every module a file imports, relative imports resolved, at any depth of the file."""
+    found = set()
+    for _, mod, names in _import_statements(path, root):
+        found.add(mod)
+        found.update(f"{mod}.{name}" for name in names)
     return found
+
+
+def _import_graph(folder: Path, root: Path = REPO) -> dict[str, dict[str, int]]:
+    """The modules under ``folder`` and, for each, the modules of that folder it imports, with
+    the line of the first such import. An import names the most specific module it loads:
+    ``from a import b`` is an import of the module ``a.b`` when there is one, else of ``a``."""
+    modules = {_module_name(path, root): path for path in sorted(folder.rglob("*.py"))}
+
+    def known(name: str) -> str | None:  # the longest prefix of a dotted name that is a module
+        parts = name.split(".")
+        while parts and ".".join(parts) not in modules:
+            parts.pop()
+        return ".".join(parts) or None
+
+    graph: dict[str, dict[str, int]] = {}
+    for name, path in modules.items():
+        edges = graph.setdefault(name, {})
+        for line, mod, names in _import_statements(path, root):
+            for target in [known(f"{mod}.{n}") for n in names] or [known(mod)]:
+                if target is not None and target != name:
+                    edges.setdefault(target, line)
+    return graph
+
+
+def _strongly_connected(graph: dict[str, dict[str, int]]) -> list[list[str]]:
+    """Tarjan's strongly connected components with more than one module, each sorted."""
+    index: dict[str, int] = {}
+    low: dict[str, int] = {}
+    stack: list[str] = []
+    on_stack: set[str] = set()
+    components = []
+
+    def visit(v: str) -> None:
+        index[v] = low[v] = len(index)
+        stack.append(v)
+        on_stack.add(v)
+        for w in graph[v]:
+            if w not in index:
+                visit(w)
+                low[v] = min(low[v], low[w])
+            elif w in on_stack:
+                low[v] = min(low[v], index[w])
+        if low[v] == index[v]:
+            component = []
+            while not component or component[-1] != v:
+                component.append(stack.pop())
+                on_stack.discard(component[-1])
+            if len(component) > 1:
+                components.append(sorted(component))
+
+    for v in sorted(graph):
+        if v not in index:
+            visit(v)
+    return sorted(components)
+
+
+def _shortest_path(graph: dict[str, dict[str, int]], start: str, goal: str, inside: set[str]):
+    """The shortest import path ``start -> ... -> goal`` through the modules ``inside``."""
+    previous = {start: start}
+    queue = [start]
+    for v in queue:
+        if v == goal:
+            break
+        for w in sorted(graph[v]):
+            if w in inside and w not in previous:
+                previous[w] = v
+                queue.append(w)
+    path = [goal]
+    while path[-1] != start:
+        path.append(previous[path[-1]])
+    return path[::-1]
+
+
+def _circles(graph: dict[str, dict[str, int]]) -> list[str]:
+    """Every import circle as a readable path, one per import that lies on a circle (the
+    shortest circle through it): ``a (line 3) -> b (line 9) -> a``, where ``(line n)`` is the
+    line of the module on its left that imports the next one."""
+    found = set()
+    for component in _strongly_connected(graph):
+        inside = set(component)
+        for u in component:
+            for v in graph[u]:
+                if v in inside:
+                    cycle = [u, *_shortest_path(graph, v, u, inside)[:-1]]
+                    k = cycle.index(min(cycle))
+                    found.add(tuple(cycle[k:] + cycle[:k]))
+
+    def readable(c: tuple[str, ...]) -> str:
+        steps = [f"{a} (line {graph[a][b]})" for a, b in zip(c, c[1:] + c[:1], strict=True)]
+        return " -> ".join([*steps, c[0]])
+
+    return [readable(c) for c in sorted(found)]
+
+
+def _long_functions(files: list[Path], root: Path = REPO) -> list[str]:
+    """``file:line name: n lines`` for every function or method longer than the limit."""
+    long = []  # (file, line, text)
+    for path in files:
+        tree = ast.parse(path.read_text(encoding="utf-8"), filename=str(path))
+        todo = [(node, "") for node in tree.body]
+        while todo:
+            node, prefix = todo.pop()
+            if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef, ast.ClassDef)):
+                name = prefix + node.name
+                todo.extend((child, name + ".") for child in node.body)
+                n = node.end_lineno - node.lineno + 1
+                if not isinstance(node, ast.ClassDef) and n > MAX_FUNCTION_LINES:
+                    where = f"{path.relative_to(root)}:{node.lineno}"
+                    long.append((path, node.lineno, f"{where} {name}: {n} lines"))
+            else:
+                todo.extend((child, prefix) for child in ast.iter_child_nodes(node))
+    return [text for _, _, text in sorted(long)]
 
 
 def _offending(files: list[Path], forbidden: tuple[str, ...], root: Path = REPO) -> list[str]:
@@ -109,6 +245,75 @@ def test_core_imports_no_log_io_replay_viz_live_or_benchmarks():
 def test_log_io_imports_no_replay_viz_or_live():
     files = [f for name in LOG_IO for f in _files(name)]
     assert _offending(files, UPPER) == []
+
+
+def test_live_imports_no_replay():
+    # live and replay are siblings: what both need (the truth slerp, the integrator, the
+    # readers) lives below them, so either can change without the other
+    assert _offending(_files("live"), ("imu_dcm.replay",)) == []
+
+
+def test_every_module_of_imu_dcm_has_a_layer():
+    # a new top-level module must be placed in a layer here, or the checks above skip it
+    layered = set(CORE) | set(LOG_IO) | {m.split(".")[-1] for m in UPPER}
+    top = {p.stem for p in PACKAGE.glob("*.py") if p.stem != "__init__"}
+    top |= {p.name for p in PACKAGE.iterdir() if (p / "__init__.py").is_file()}
+    assert sorted(top - layered) == []
+
+
+def test_the_circle_finder_reports_every_circle_as_a_path(tmp_path):
+    # a -> b -> c -> a through a function-level import, d <-> e through "from . import", and
+    # f importing a without being on a circle
+    pkg = tmp_path / "pkg"
+    pkg.mkdir()
+    for name, text in {
+        "__init__": "",
+        "a": "from pkg import b\n",
+        "b": "import os\nfrom pkg.c import thing\n",
+        "c": "def f():\n    from . import a\n",
+        "d": "from . import e\n",
+        "e": "\n\nfrom pkg.d import x\n",
+        "f": "import pkg.a\n",
+    }.items():
+        (pkg / f"{name}.py").write_text(text, encoding="utf-8")
+    graph = _import_graph(pkg, tmp_path)
+    assert _strongly_connected(graph) == [["pkg.a", "pkg.b", "pkg.c"], ["pkg.d", "pkg.e"]]
+    assert _circles(graph) == [
+        "pkg.a (line 1) -> pkg.b (line 2) -> pkg.c (line 2) -> pkg.a",
+        "pkg.d (line 1) -> pkg.e (line 3) -> pkg.d",
+    ]
+
+
+def test_no_import_circles_in_the_shipped_packages():
+    circles = _circles(_import_graph(PACKAGE)) + _circles(_import_graph(REPO / "data_synth"))
+    assert circles == [], "\n".join(["import circles:", *circles])
+
+
+def test_no_import_circles_in_benchmarks():
+    circles = _circles(_import_graph(REPO / "benchmarks"))
+    assert circles == [], "\n".join(["import circles:", *circles])
+
+
+def test_the_length_measure_counts_from_def_to_the_last_line(tmp_path):
+    def body(indent: str) -> str:
+        return "".join(f"{indent}x{i} = {i}\n" for i in range(MAX_FUNCTION_LINES - 1))
+
+    probe = tmp_path / "probe.py"
+    probe.write_text(
+        f"def short():\n{body('    ')}\n\nclass C:\n    def long(self):\n{body('        ')}"
+        "        return 1\n",
+        encoding="utf-8",
+    )
+    # short: def + 79 lines = 80 (allowed); C.long: def + 79 + return = 81, nested in a class
+    assert _long_functions([probe], tmp_path) == [
+        f"probe.py:{MAX_FUNCTION_LINES + 4} C.long: {MAX_FUNCTION_LINES + 1} lines"
+    ]
+
+
+def test_no_shipped_function_runs_over_80_lines():
+    files = sorted(PACKAGE.rglob("*.py")) + sorted((REPO / "data_synth").rglob("*.py"))
+    long = _long_functions(files)
+    assert long == [], "\n".join([f"over {MAX_FUNCTION_LINES} lines:", *long])
 
 
 def test_shipped_packages_import_no_benchmarks_or_tests():

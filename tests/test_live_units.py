@@ -228,7 +228,7 @@ def test_stdin_constant_rate_gives_90_deg_about_z(tmp_path):
     [
         (["tcp://x:1"], "Expected SOURCE"),
         (["-", "--rerun", "window"], "Expected --rerun"),
-        (["-", "--bias", "1,2"], "Expected bias"),
+        (["-", "--bias", "1,2"], "Expected --bias"),
         (["-", "--init-quat", "0,0,0"], "init"),
         (["-", "--method", "rk4"], "invalid choice"),
     ],

@@ -7,7 +7,7 @@ import os
 import numpy as np
 import pytest
 
-from imu_dcm.bag_writer import StampedSeries, write_bag
+from imu_dcm.logio.writer import StampedSeries, write_bag
 from imu_dcm.outputs import (
     OutputError,
     check_output_dir,

@@ -1,7 +1,7 @@
-"""Tests of the replay pipeline (imu_dcm.replay): truth slerp, cleaning, bias from rest, the
+"""Tests of the replay pipeline (imu_dcm.replay): cleaning, bias from rest, the
 estimate against analytic and simulated truth, unit detection and bad input.
 
-Oracles: scipy's Slerp and Rotation, closed-form rotations about a fixed axis (which commute,
+Oracles: scipy's Rotation, closed-form rotations about a fixed axis (which commute,
 so the attitude is exp of the integrated angle), and the data_synth rigid-body simulator.
 """
 
@@ -9,48 +9,16 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from scipy.spatial.transform import Rotation, Slerp
+from scipy.spatial.transform import Rotation
 
-from imu_dcm.bag_writer import StampedSeries, write_bag
 from imu_dcm.errors import GapWarning, ImuDcmWarning, InputError, LogError
+from imu_dcm.logio.writer import StampedSeries, write_bag
 from imu_dcm.replay import ReplayResult, replay
 from imu_dcm.replay.bias import RestConfig, detect_rest, estimate_bias
 from imu_dcm.replay.clean import clean_imu
-from imu_dcm.replay.truth import slerp_truth
 
 T0_NS = 1_700_000_000_000_000_000
 Q_Z90 = np.array([0.0, 0.0, np.sqrt(0.5), np.sqrt(0.5)])  # 90° about z, [x, y, z, w]
-
-
-# ------------------------------------------------------------------------------ truth slerp
-def test_slerp_truth_matches_scipy_slerp_inside_coverage():
-    rng = np.random.default_rng(3)
-    tt = T0_NS + np.arange(12, dtype=np.int64) * 10_000_000  # 100 Hz truth
-    q = Rotation.random(12, random_state=4).as_quat()
-    q[::3] *= -1  # sign flips must not matter (shortest arc)
-    t = np.sort(rng.integers(tt[0] - 5_000_000, tt[-1] + 5_000_000, 200))
-    out = slerp_truth(tt, q, t)
-    inside = (t >= tt[0]) & (t <= tt[-1])
-    assert np.all(np.isnan(out[~inside]))  # outside coverage: no truth
-    ref = Slerp((tt - tt[0]) * 1e-9, Rotation.from_quat(q))((t[inside] - tt[0]) * 1e-9)
-    # same rotation up to sign; 1e-12 is float64 round-off of a few quaternion products
-    ang = (Rotation.from_quat(out[inside]) * ref.inv()).magnitude()
-    assert np.max(ang) < 1e-12
-    # at the truth stamps: the samples themselves, up to the round-off of re-normalising
-    np.testing.assert_allclose(slerp_truth(tt, q, tt), q, rtol=0, atol=1e-15)
-
-
-def test_slerp_truth_never_bridges_gaps_longer_than_two_samples():
-    tt = T0_NS + np.array([0, 1, 2, 4, 5, 9, 10], dtype=np.int64) * 10_000_000
-    q = Rotation.from_rotvec(np.outer(np.arange(7), [0, 0, 0.1])).as_quat()
-    t = T0_NS + np.arange(0, 101, 5, dtype=np.int64) * 1_000_000  # every 5 ms
-    out = slerp_truth(tt, q, t)
-    ok = np.isfinite(out[:, 3])
-    t_ms = (t - T0_NS) // 1_000_000
-    # 20..40 ms: one missing sample (a 2-step gap) is bridged; 50..90 ms (4 steps) is not
-    assert np.all(ok[(t_ms >= 0) & (t_ms <= 50)])
-    assert not np.any(ok[(t_ms > 50) & (t_ms < 90)])
-    assert np.all(ok[t_ms >= 90])
 
 
 # ---------------------------------------------------------------------------- cleaning
@@ -176,8 +144,8 @@ def test_data_synth_heavy_top_log_matches_truth(tmp_path):
         == 0
     )
     good = replay(out, bias="none", method="magnus4")
-    # magnus4 (fourth order) is about 6e-5° off after 1.2 s on this top (the README's accuracy
-    # table); stamps rounded to ns add < 1e-6°
+    # magnus4 (fourth order) is about 6e-5° off after 1.2 s on this top (docs/benchmarks.md,
+    # speed against accuracy); stamps rounded to ns add < 1e-6°
     assert good.summary.max_error_deg < 1e-3
     assert good.summary.samples == 2401 and good.summary.truth_samples_used == 2401
     first = replay(out, bias="none", method="end")
@@ -259,7 +227,7 @@ def test_bad_options():
     with pytest.raises(InputError, match="Expected truth offset 'auto' or seconds"):
         replay("whatever", truth_offset_s="soon")
     # text is parsed by the command line only, with the same one-line messages
-    from imu_dcm.replay.__main__ import parse_numbers
+    from imu_dcm.cli import parse_numbers
 
     with pytest.raises(InputError, match="Expected init quaternion x,y,z,w as 4"):
         parse_numbers("1,0,0", 4, "init quaternion x,y,z,w")

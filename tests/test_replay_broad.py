@@ -37,7 +37,8 @@ def movement_rms_deg(result, bag) -> float:
 
 
 def test_broad_movement_rms_with_bias_auto(broad_dir):
-    # Prints the README's table (run with -s). Both columns are measured here, in one run.
+    # Prints docs/benchmarks.md's BROAD table (run with -s). Both columns are measured here, in
+    # one run.
     rows = []
     for trial in BROAD_TRIALS:
         auto = replay(broad_dir / trial, bias="auto")

@@ -18,8 +18,8 @@ from mcap_ros2.decoder import DecoderFactory
 from scipy.spatial.transform import Rotation
 from test_logio import write_imu_bag  # tests/ is on sys.path (pytest rootdir conftest)
 
-from imu_dcm.bag_writer import StampedSeries, write_bag
 from imu_dcm.logio import resolve_mcap_path
+from imu_dcm.logio.writer import StampedSeries, write_bag
 from imu_dcm.replay.__main__ import main
 
 REPO = Path(__file__).resolve().parents[1]
@@ -169,7 +169,7 @@ def test_bad_inputs_one_line_exit_2(tmp_path, capsys):
     )
     _assert_one_line_error(capsys, [str(late), "--rerun", "off"], "to overlap the gyro")
     _assert_one_line_error(
-        capsys, [str(late), "--rerun", "off", "--init-quat", "1,2"], "init quaternion"
+        capsys, [str(late), "--rerun", "off", "--init-quat", "1,2"], "--init-quat x,y,z,w"
     )
     _assert_one_line_error(capsys, [str(late), "--rerun", "bogus"], "--rerun")
     _assert_one_line_error(capsys, [str(late), "--rerun", "off", "--imu-topic", "/x"], "'/x'")
@@ -286,7 +286,7 @@ def test_subprocess_replays_shipped_trial(tmp_path):
 def test_progress_bar_only_on_a_terminal():
     import io
 
-    from imu_dcm.replay.__main__ import Progress
+    from imu_dcm.cli import Progress
 
     class Terminal(io.StringIO):
         def isatty(self) -> bool:
@@ -354,7 +354,8 @@ def test_summary_keeps_small_errors_visible_and_says_when_no_rest(coning_log, ca
     # vector as if a bias had been measured.
     assert main([str(coning_log), "--rerun", "off"]) == 0
     text = capsys.readouterr().out
-    assert "no rest segment found, no bias removed" in text
+    line = next(x for x in text.splitlines() if x.startswith("bias"))
+    assert "no rest found (the stillest 0.50 s" in line and "no bias removed" in line, line
     line = next(x for x in text.splitlines() if x.startswith("error"))
     rms = float(line.split("total RMS ")[1].split("°")[0])
     assert 0.0 < rms < 0.01, line

@@ -15,7 +15,7 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from data_synth.analytic import coning_attitude, coning_rates
-from imu_dcm.bag_writer import StampedSeries, write_bag
+from imu_dcm.logio.writer import StampedSeries, write_bag
 from imu_dcm.outputs import OutputError, check_output_dir, is_own_bag
 from imu_dcm.replay.__main__ import main
 
@@ -111,10 +111,12 @@ def test_output_errors_are_one_line(bag, tmp_path, capsys, monkeypatch):
     folder = tmp_path / "a_folder"
     folder.mkdir()
     _fails(capsys, [str(bag), "--rerun", "off", "--summary-json", str(folder)], "folder")
+    a_file = tmp_path / "a_file"
+    a_file.write_text("x")
     _fails(
         capsys,
-        [str(bag), "--rerun", "off", "--summary-json", str(tmp_path / "no" / "s.json")],
-        "existing folder",
+        [str(bag), "--rerun", "off", "--summary-json", str(a_file / "no" / "s.json")],
+        "Not a directory",
     )
     from imu_dcm import outputs
 
@@ -143,16 +145,17 @@ def test_every_option_is_checked_before_any_output(bag, tmp_path, capsys):
     out, js = tmp_path / "est", tmp_path / "s.json"
     outs = ["--out", str(out), "--summary-json", str(js), "--export-tum", str(tmp_path / "tum")]
     _fails(capsys, [str(bag), *outs, "--rerun", "bogus"], "--rerun")
+    (tmp_path / "a_file").write_text("x")
     _fails(
         capsys,
-        [str(bag), *outs, "--rerun", f"save:{tmp_path / 'nowhere' / 'v.rrd'}"],
-        "existing folder",
+        [str(bag), *outs, "--rerun", f"save:{tmp_path / 'a_file' / 'nowhere' / 'v.rrd'}"],
+        "Not a directory",
     )
     _fails(capsys, [str(bag), *outs, "--rerun", "off", "--truth-offset", "soon"], "--truth-offset")
     _fails(capsys, [str(bag), *outs, "--rerun", "off", "--bias", "1,2"], "bias")
     assert main([str(bag), *outs, "--rerun", "off", "--method", "rk45"]) == 2
     assert "argument --method" in capsys.readouterr().err
-    assert sorted(p.name for p in tmp_path.iterdir()) == ["in"]  # nothing written
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["a_file", "in"]  # nothing written
 
 
 def test_export_tum_reads_back_against_the_closed_form_truth(bag, tmp_path, capsys):

@@ -97,8 +97,6 @@ def _time_ns(rows) -> np.ndarray:
 def test_entity_paths_and_one_row_per_sample(saved):
     view, path, data = saved
     per_sample = [
-        ENTITY["truth_axes"],
-        ENTITY["estimate_axes"],
         ENTITY["errors"],
         *(ENTITY[f"gyro_{a}"] for a in "xyz"),
         *(ENTITY[f"gyro_raw_{a}"] for a in "xyz"),
@@ -110,6 +108,15 @@ def test_entity_paths_and_one_row_per_sample(saved):
         # Timeline = time since the first stamp, stored as integer ns (rounded).
         expected = (view.t_s - view.t_s[0]) * 1e9
         assert np.all(np.abs(t_ns - expected) <= 0.5 + 1e-6), key
+    # The 3D axes: one row per 1/AXES_HZ s of log time (the last sample at or before each
+    # frame time) and the last sample, so a long log's view stays bounded.
+    rel = view.t_s - view.t_s[0]
+    frames = np.arange(math.floor(rel[-1] * viz.AXES_HZ) + 1) / viz.AXES_HZ
+    expected_rows = sorted({int(np.flatnonzero(rel <= f)[-1]) for f in frames} | {N - 1})
+    assert len(expected_rows) < N
+    for key in (ENTITY["truth_axes"], ENTITY["estimate_axes"]):
+        t_ns = _time_ns(data[key]["rows"])
+        np.testing.assert_allclose(t_ns, rel[expected_rows] * 1e9, rtol=0, atol=0.5 + 1e-6)
     for key in ("truth_trail", "estimate_trail", "truth_trace", "estimate_trace"):
         assert ENTITY[key] in data
     from rerun.chunk import RrdReader
@@ -122,8 +129,12 @@ def test_axes_are_the_columns_of_r_w_b(saved):
     rows = data[ENTITY["truth_axes"]]["rows"]
     has_truth = np.ones(N, bool)
     has_truth[GAP] = False
-    for k in range(N):
-        vectors = rows["Arrows3D:vectors"][k]
+    # each row's sample, from its own stamp (the axes are thinned to AXES_HZ)
+    sample = np.rint(_time_ns(rows) * 1e-9 * RATE_HZ).astype(int)
+    assert sample[0] == 0 and sample[-1] == N - 1
+    assert np.any(~has_truth[sample]), "a thinned row falls in the truth gap"
+    for row, k in enumerate(sample):
+        vectors = rows["Arrows3D:vectors"][row]
         if not has_truth[k]:
             # No truth: an empty row (clears the arrows), never a stale or invented attitude.
             assert vectors == [], k
@@ -134,11 +145,16 @@ def test_axes_are_the_columns_of_r_w_b(saved):
     # At t = 0 the truth is 90° about z: body x along world y, body y along world -x.
     np.testing.assert_allclose(rows["Arrows3D:vectors"][0][0], [0, 1, 0], atol=2e-6)
     np.testing.assert_allclose(rows["Arrows3D:vectors"][0][1], [-1, 0, 0], atol=2e-6)
-    est = data[ENTITY["estimate_axes"]]["rows"]["Arrows3D:vectors"]
-    assert all(row == [] for row in est[NO_EST])  # no estimate yet: no arrows
-    for k in (NO_EST.stop, 60, N - 1):
-        R = Rotation.from_quat(view.q_est[k]).as_matrix()
-        np.testing.assert_allclose(np.array(est[k]), R.T, atol=2e-6)
+    est_rows = data[ENTITY["estimate_axes"]]["rows"]
+    est = est_rows["Arrows3D:vectors"]
+    est_sample = np.rint(_time_ns(est_rows) * 1e-9 * RATE_HZ).astype(int)
+    started = est_sample >= NO_EST.stop
+    assert not started.all() and started.any()
+    assert all(row == [] for row, s in zip(est, started, strict=True) if not s)  # no arrows yet
+    for row, k in enumerate(est_sample):
+        if started[row]:
+            R = Rotation.from_quat(view.q_est[k]).as_matrix()
+            np.testing.assert_allclose(np.array(est[row]), R.T, atol=2e-6)
 
 
 def test_error_and_gyro_series_round_trip(saved):
@@ -236,11 +252,10 @@ def test_modes(tmp_path, monkeypatch):
     monkeypatch.delenv("DISPLAY", raising=False)
     monkeypatch.delenv("WAYLAND_DISPLAY", raising=False)
     if sys.platform.startswith("linux"):
-        # No display: the default saves next to the output and says how to open the file.
+        # No display: the default writes nothing and names the two ways to see the view.
         line = show_replay(view, None, tmp_path)
-        expected = tmp_path / "unit_test_view.rrd"
-        assert expected.is_file()
-        assert f"rerun {expected}" in line
+        assert list(tmp_path.iterdir()) == []
+        assert "--rerun serve" in line and "--rerun save:" in line and "127.0.0.1" in line
         with pytest.raises(InputError, match="Expected a display"):
             show_replay(view, "spawn", tmp_path)
     assert show_replay(view, "off", tmp_path) == ""

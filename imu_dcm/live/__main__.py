@@ -4,24 +4,32 @@ Integrates a live gyro stream as it arrives (Foxglove WebSocket ``ws://HOST:PORT
 ``udp://HOST:PORT`` or stdin lines ``-``), shows it in rerun, optionally records it as a ROS 2
 bag, and prints a summary when it stops (Ctrl-C, SIGTERM, end of input, lost source).
 
-Bad input gives one line on stderr and exit code 2.
+Exit codes (:mod:`imu_dcm.cli`): 0 done; 1 no sample received (never connected, or nothing
+came); 2 bad input or options (one line on stderr); 130 / 143 stopped by Ctrl-C / SIGTERM (the
+summary and the recording are still written).
 """
 
 from __future__ import annotations
 
 import argparse
-import json
-import os
 import sys
-import tempfile
 import warnings
-from pathlib import Path
 
 import numpy as np
 
-from imu_dcm.cli import OneLineArgumentParser
+from imu_dcm.cli import (
+    EXIT_BAD_INPUT,
+    EXIT_FAILED,
+    EXIT_INTERRUPTED,
+    EXIT_OK,
+    EXIT_TERMINATED,
+    OneLineArgumentParser,
+    end_quietly_on_broken_pipe,
+    parse_bias,
+    parse_init_quat,
+)
 from imu_dcm.errors import ImuDcmError
-from imu_dcm.integrate import METHODS
+from imu_dcm.methods import METHODS
 
 PROG = "imu-dcm-live"
 
@@ -31,13 +39,23 @@ def build_parser() -> argparse.ArgumentParser:
     p = OneLineArgumentParser(
         prog=PROG,
         description="Integrate a live gyro stream with the DCM integrator as it arrives, show it "
-        "in rerun, record it, and print a summary on Ctrl-C / SIGTERM / end of input.",
+        "in rerun, record it, and print a summary on Ctrl-C / SIGTERM / end of input. Exit "
+        "codes: 0 done, 1 no sample received, 2 bad input or options, 130/143 stopped by "
+        "Ctrl-C/SIGTERM.",
     )
     p.add_argument(
         "source",
         help="ws://HOST:PORT (Foxglove WebSocket, e.g. foxglove_bridge), "
         "udp://HOST:PORT (lines) or - (lines on stdin)",
     )
+    _add_input_options(p)
+    _add_output_options(p)
+    _add_stop_options(p)
+    return p
+
+
+def _add_input_options(p) -> None:
+    """What the stream is and how it is integrated."""
     p.add_argument("--imu-topic", help="IMU channel (default: the one Imu-typed channel)")
     p.add_argument(
         "--truth-topic", help="truth channel (default: by type, as replay; 'none' to ignore truth)"
@@ -51,7 +69,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument(
         "--bias",
         default="auto",
-        help="gyro bias: auto (from rest as it happens, default), none, or x,y,z rad/s",
+        help="gyro bias: auto (from rest as it happens, default), none, or x,y,z rad/s "
+        "(negative numbers as they are: --bias -0.01,0,0)",
     )
     p.add_argument(
         "--gyro-units",
@@ -61,9 +80,11 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.add_argument(
         "--time-units",
+        "--time-unit",
+        dest="time_units",
         choices=("s", "ms", "us", "ns"),
         default="s",
-        help="unit of CSV line stamps (default s)",
+        help="unit of CSV line stamps (default s; --time-unit is the same)",
     )
     p.add_argument(
         "--init-quat",
@@ -78,6 +99,10 @@ def build_parser() -> argparse.ArgumentParser:
         help="reorder window in source time, ms (default 50); later samples are "
         "dropped and counted",
     )
+
+
+def _add_output_options(p) -> None:
+    """The view, the recording and the summary file."""
     p.add_argument(
         "--view-interval",
         type=float,
@@ -89,12 +114,25 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument(
         "--rerun",
         metavar="MODE",
-        help="spawn | serve | save:PATH.rrd | off (default: spawn with a display, "
-        "else serve the web viewer on 127.0.0.1)",
+        help="spawn | serve | save:PATH.rrd | off (default: spawn with a display, else no "
+        "view). serve: rerun's web viewer on 127.0.0.1, stopped at exit",
+    )
+    p.add_argument(
+        "--keep-viewer",
+        action="store_true",
+        help="with --rerun serve: leave the web viewer running after the command exits",
     )
     p.add_argument("--record", metavar="DIR", help="record as a ROS 2 bag as it goes")
-    p.add_argument("--force", action="store_true", help="replace an existing --record bag")
+    p.add_argument(
+        "--force",
+        action="store_true",
+        help="replace an existing --record bag (only one this tool wrote)",
+    )
     p.add_argument("--summary-json", metavar="PATH", help="write the summary as JSON at stop")
+
+
+def _add_stop_options(p) -> None:
+    """When the run ends, and what it prints."""
     p.add_argument(
         "--give-up",
         type=float,
@@ -110,7 +148,6 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.add_argument("--no-status", action="store_true", help="no status line on stderr")
     p.add_argument("--quiet", action="store_true", help="print no summary")
-    return p
 
 
 def _fmt(x: float | None, unit: str = "°") -> str:
@@ -122,17 +159,20 @@ def _fmt(x: float | None, unit: str = "°") -> str:
 def format_summary(s: dict) -> str:
     """The summary for a person, one fact per line (the layout replay prints)."""
     rate = f"{s['rate_hz']:.1f} Hz" if s["rate_hz"] else "n/a"
+    imu = s["imu_topic"] or "no IMU channel"
+    if s["imu_type"]:
+        imu += f" ({s['imu_type']})"
     lines = [
         f"source     {s['source']}",
         (
-            f"imu        {s['imu_topic']} ({s['imu_type']}): {s['samples']} samples, "
+            f"imu        {imu}: {s['samples']} samples, "
             f"{s['duration_s']:.3f} s, {rate}, units {s['gyro_units']}"
         ),
     ]
     if s["truth_topic"]:
+        kind = f" ({s['truth_type']})" if s["truth_type"] else ""
         lines.append(
-            f"truth      {s['truth_topic']} ({s['truth_type']}): "
-            f"{s['truth_samples_used']} estimates compared"
+            f"truth      {s['truth_topic']}{kind}: {s['truth_samples_used']} estimates compared"
         )
     else:
         lines.append("truth      none (no error can be measured)")
@@ -156,8 +196,10 @@ def format_summary(s: dict) -> str:
         )
     else:
         lines.append(f"bias       {s['bias_mode']}: {bias}")
-    start = "never started" if s["start_time_s"] is None else f"t = {s['start_time_s']:.3f} s"
-    lines.append(f"method     {s['method']}; estimate from {start}")
+    if s["start_time_s"] is None:
+        lines.append(f"method     {s['method']}; no estimate (no sample was integrated)")
+    else:
+        lines.append(f"method     {s['method']}; estimate from t = {s['start_time_s']:.3f} s")
     if s["final_quat_xyzw"] is not None:
         q = ", ".join(f"{v:+.6f}" for v in s["final_quat_xyzw"])
         lines.append(f"final      q_w_b [x, y, z, w] = [{q}] at t = {s['final_t_s']:.3f} s")
@@ -181,26 +223,13 @@ def format_summary(s: dict) -> str:
     return "\n".join(lines)
 
 
-def _json_default(o):
-    if isinstance(o, np.ndarray):
-        return o.tolist()
-    if isinstance(o, (np.floating, np.integer, np.bool_)):
-        return o.item()
-    return str(o)
-
-
-def write_json(path: Path, data: dict) -> None:
-    """Write ``data`` as JSON atomically (temporary file + rename)."""
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    try:
-        with os.fdopen(fd, "w") as f:
-            json.dump(data, f, indent=2, default=_json_default)
-            f.write("\n")
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
+def exit_code(summary: dict) -> int:
+    """The exit code of a run that ended (module doc)."""
+    if summary["stopped"] == "stopped by SIGINT":
+        return EXIT_INTERRUPTED
+    if summary["stopped"] == "stopped by SIGTERM":
+        return EXIT_TERMINATED
+    return EXIT_OK if summary["samples"] else EXIT_FAILED
 
 
 def _main(argv: list[str]) -> int:
@@ -211,18 +240,20 @@ def _main(argv: list[str]) -> int:
 
     parse_source(args.source)
     check_mode(args.rerun)
+    bias = parse_bias(args.bias)
     result = run(
         args.source,
         imu_topic=args.imu_topic,
         truth_topic=args.truth_topic,
         method=args.method,
-        bias=args.bias,
+        bias=bias,
         gyro_units=args.gyro_units,
         time_units=args.time_units,
-        init_quat=args.init_quat,
+        init_quat=parse_init_quat(args.init_quat),
         reorder_window_s=args.reorder_window * 1e-3,
         view_interval_s=args.view_interval * 1e-3,
         rerun=args.rerun,
+        keep_viewer=args.keep_viewer,
         record=args.record,
         force=args.force,
         summary_json=args.summary_json,
@@ -230,26 +261,32 @@ def _main(argv: list[str]) -> int:
         idle_stop_s=args.idle_stop,
         status=not args.no_status,
     )
+    code = exit_code(result.summary)
     if not args.quiet:
         print(format_summary(result.summary), flush=True)
-    return 0
+    if code == EXIT_FAILED:
+        print(f"{PROG}: no sample received ({result.summary['stopped']})", file=sys.stderr)
+    return code
 
 
 def main(argv: list[str] | None = None) -> int:
-    """Run the command; returns the exit code (0 fine, 2 bad input)."""
+    """Run the command; returns the exit code (module doc)."""
     argv = list(sys.argv[1:] if argv is None else argv)
     message = ""
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         try:
             code = _main(argv)
+        except BrokenPipeError:  # ... | head: the reader had what it wanted
+            end_quietly_on_broken_pipe()
+            code = EXIT_OK
         except (ImuDcmError, FileExistsError) as exc:
-            code = 2
+            code = EXIT_BAD_INPUT
             message = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
         except SystemExit as exc:
-            code = exc.code if isinstance(exc.code, int) else 2
+            code = exc.code if isinstance(exc.code, int) else EXIT_BAD_INPUT
         except KeyboardInterrupt:
-            code, message = 130, "interrupted"
+            code, message = EXIT_INTERRUPTED, "interrupted"
         finally:
             for w in caught:
                 print(f"{PROG}: warning: {str(w.message).splitlines()[0]}", file=sys.stderr)

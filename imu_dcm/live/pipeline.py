@@ -73,7 +73,7 @@ class LiveResult:
 
 
 def _slerp(truth_t: NDArray, truth_q: NDArray, t_ns: NDArray) -> NDArray:
-    from imu_dcm.replay.core import slerp_truth
+    from imu_dcm.resample import slerp_truth
 
     return slerp_truth(truth_t, truth_q, t_ns)
 

@@ -21,14 +21,14 @@ from __future__ import annotations
 import os
 import shutil
 import time
-from pathlib import Path
 
 import numpy as np
 from numpy.typing import NDArray
 
-from imu_dcm import bag_writer as _bw
-from imu_dcm.errors import LogError
 from imu_dcm.live.sources import Channel, Received
+from imu_dcm.logio import meta
+from imu_dcm.logio.writer import MSG_DEFINITIONS, cdr_messages, imu_doubles
+from imu_dcm.outputs import check_output_dir, ensure_parent
 
 __all__ = ["FLUSH_S", "LiveRecorder"]
 
@@ -45,9 +45,10 @@ class LiveRecorder:
     Parameters
     ----------
     path : path-like
-        Bag folder to create. Its parent must exist.
+        Bag folder to create (missing parent folders are created).
     force : bool
-        Replace an existing folder.
+        Replace an existing bag folder this project wrote (:func:`imu_dcm.outputs.is_own_bag`);
+        anything else is refused with :class:`imu_dcm.outputs.OutputError`.
     custom_data : dict of str -> str
         Stored in ``metadata.yaml`` ``custom_data``.
     """
@@ -55,18 +56,10 @@ class LiveRecorder:
     def __init__(self, path, force: bool = False, custom_data: dict | None = None) -> None:
         from mcap.writer import CompressionType, Writer
 
-        out = Path(path)
-        if (out.exists() or out.is_symlink()) and not force:
-            raise LogError(
-                f"Expected --record {str(out)!r} not to exist (use --force), got an "
-                f"existing {'folder' if out.is_dir() else 'file'}"
-            )
-        if not out.parent.is_dir():
-            raise LogError(f"Expected the parent folder of {str(out)!r} to exist, got none")
-        if out.is_dir() and not out.is_symlink():
+        out = check_output_dir(path, force=force, what="--record bag")
+        ensure_parent(out, "--record bag")
+        if out.exists():  # with force, a bag this project wrote (check_output_dir)
             shutil.rmtree(out)
-        elif out.exists() or out.is_symlink():
-            out.unlink()
         out.mkdir()
         self.path = out
         self.mcap_name = f"{out.name}.mcap"
@@ -80,9 +73,7 @@ class LiveRecorder:
         self._t_range = [None, None]
         self._last_flush = time.monotonic()
         self._closed = False
-        self._channel(
-            "estimate", _EST_TOPIC, _QUAT_TYPE, "ros2msg", _bw.MSG_DEFINITIONS[_QUAT_TYPE]
-        )
+        self._channel("estimate", _EST_TOPIC, _QUAT_TYPE, "ros2msg", MSG_DEFINITIONS[_QUAT_TYPE])
         self._write_metadata()
 
     def _channel(self, kind: str, topic: str, type_name: str, encoding: str, text: str) -> int:
@@ -92,7 +83,7 @@ class LiveRecorder:
             sid = self._writer.register_schema(type_name, encoding, text.encode("utf-8"))
             self._schemas[key] = sid
         cid = self._writer.register_channel(
-            topic, "cdr", sid, {"offered_qos_profiles": _bw._QOS_YAML}
+            topic, "cdr", sid, {"offered_qos_profiles": meta.QOS_YAML}
         )
         self._channels[kind] = cid
         self._topics[cid] = [topic, type_name, 0]
@@ -130,18 +121,18 @@ class LiveRecorder:
             return
         if rec.kind == "imu":
             cid = self._channels.get("imu") or self._channel(
-                "imu", "/imu/data", _IMU_TYPE, "ros2msg", _bw.MSG_DEFINITIONS[_IMU_TYPE]
+                "imu", "/imu/data", _IMU_TYPE, "ros2msg", MSG_DEFINITIONS[_IMU_TYPE]
             )
-            rows = _bw._cdr_messages(t, "imu", _bw._imu_doubles(rec.values[ok], None, None))
+            rows = cdr_messages(t, "imu", imu_doubles(rec.values[ok], None, None))
         else:
             cid = self._channels.get("truth") or self._channel(
                 "truth",
                 "/ground_truth/orientation",
                 _QUAT_TYPE,
                 "ros2msg",
-                _bw.MSG_DEFINITIONS[_QUAT_TYPE],
+                MSG_DEFINITIONS[_QUAT_TYPE],
             )
-            rows = _bw._cdr_messages(t, "world", rec.values[ok])
+            rows = cdr_messages(t, "world", rec.values[ok])
         self._write(cid, rec.wall_ns[ok], t, [r.tobytes() for r in rows])
 
     def add_estimate(self, t_ns: NDArray, q_w_b: NDArray) -> None:
@@ -151,7 +142,7 @@ class LiveRecorder:
         ok = (t_ns >= 0) & (t_ns < (2**31) * 10**9) & np.all(np.isfinite(q_w_b), axis=1)
         if not ok.any():
             return
-        rows = _bw._cdr_messages(t_ns[ok], "world", q_w_b[ok])
+        rows = cdr_messages(t_ns[ok], "world", q_w_b[ok])
         wall = np.full(int(ok.sum()), time.time_ns(), np.int64)
         self._write(self._channels["estimate"], wall, t_ns[ok], [r.tobytes() for r in rows])
 
@@ -178,54 +169,10 @@ class LiveRecorder:
         self._write_metadata()
 
     def _metadata_body(self) -> str:
-        topics = [(t, ty, n) for t, ty, n in self._topics.values()]
         start, end = self._t_range
         start = start or 0
-        end = end or start
-        total = sum(n for _, _, n in topics)
-        lines = ["compression_format: ''", "compression_mode: ''"]
-        if self.custom:
-            lines.append("custom_data:")
-            lines += [f"  {_bw._yaml_str(k)}: {_bw._yaml_str(v)}" for k, v in self.custom.items()]
-        else:
-            lines.append("custom_data: {}")
-        lines += [
-            "duration:",
-            f"  nanoseconds: {end - start}",
-            "files:",
-            "- duration:",
-            f"    nanoseconds: {end - start}",
-            f"  message_count: {total}",
-            f"  path: {self.mcap_name}",
-            "  starting_time:",
-            f"    nanoseconds_since_epoch: {start}",
-            f"message_count: {total}",
-            "relative_file_paths:",
-            f"- {self.mcap_name}",
-            "ros_distro: rosbags",
-            "starting_time:",
-            f"  nanoseconds_since_epoch: {start}",
-            "storage_identifier: mcap",
-            "topics_with_message_count:",
-        ]
-        qos = "\n".join("    " + ln for ln in _bw._QOS_YAML.splitlines())
-        for name, msgtype, count in topics:
-            lines += [
-                f"- message_count: {count}",
-                "  topic_metadata:",
-                f"    name: {_bw._yaml_str(name)}",
-                "    offered_qos_profiles:",
-                qos,
-                "    serialization_format: cdr",
-                f"    type: {msgtype}",
-                f"    type_description_hash: {_bw.TYPE_HASHES.get(msgtype, '')!r}",
-            ]
-        lines.append("version: 9")
-        return "\n".join(lines) + "\n"
+        topics = [(t, ty, n) for t, ty, n in self._topics.values()]
+        return meta.metadata_body(self.mcap_name, topics, start, end or start, self.custom)
 
     def _write_metadata(self) -> None:
-        body = self._metadata_body()
-        indented = "".join("  " + ln + "\n" for ln in body.splitlines())
-        tmp = self.path / ".metadata.yaml.tmp"
-        tmp.write_text("rosbag2_bagfile_information:\n" + indented)
-        os.replace(tmp, self.path / "metadata.yaml")
+        meta.write_metadata(self.path, self._metadata_body())

@@ -23,7 +23,6 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from imu_dcm.cli import parse_numbers
 from imu_dcm.errors import GapWarning, InputError
 from imu_dcm.integrate import METHODS
 from imu_dcm.live.lines import TIME_UNITS
@@ -38,7 +37,7 @@ def _warm_up(method: str) -> None:
     """Load numba and the compiled kernel before the source opens, so the first samples do not
     wait for them (about 0.7 s with a warm cache, measured as the first second's latency)."""
     from imu_dcm.integrate import integrate
-    from imu_dcm.replay.core import slerp_truth  # noqa: F401 - the truth slerp's modules
+    from imu_dcm.resample import slerp_truth  # noqa: F401 - the truth slerp's modules
     from imu_dcm.streaming import DcmIntegrator
 
     q0, w, t = [0.0, 0.0, 0.0, 1.0], np.zeros((5, 3)), 0.001 * np.arange(5)
@@ -58,12 +57,17 @@ def _scaled(rec: Received, gyro_scale: float) -> Received:
     return dataclasses.replace(rec, values=rec.values * gyro_scale)
 
 
-def _parse_bias(bias) -> str | tuple:
+def _check_bias(bias) -> str | tuple:
+    """``"auto"``, ``"none"`` or 3 finite numbers (rad/s); text is parsed by the command line
+    (:func:`imu_dcm.cli.parse_bias`)."""
     if isinstance(bias, str):
         if bias in ("auto", "none"):
             return bias
-        bias = parse_numbers(bias, 3, "bias auto, none or x,y,z in rad/s")
-    b = np.asarray(bias, dtype=float)
+        raise InputError(f"Expected bias 'auto', 'none' or 3 numbers (rad/s), got {bias!r}")
+    try:
+        b = np.asarray(bias, dtype=float)
+    except (TypeError, ValueError):
+        raise InputError(f"Expected bias as 3 finite numbers (rad/s), got {bias!r}") from None
     if b.shape != (3,) or not np.all(np.isfinite(b)):
         raise InputError(f"Expected bias auto, none or 3 finite numbers (rad/s), got {bias!r}")
     return tuple(b.tolist())
@@ -72,6 +76,22 @@ def _parse_bias(bias) -> str | tuple:
 #: A source wakes at most every quarter view interval, and at least every 20 ms: a sample
 #: waits for its batch and then for the view's, so the batch adds <= 1/4 to the latency.
 _BATCH_MAX_S = 0.02
+
+
+def _has_display() -> bool:
+    from imu_dcm.viz import has_display
+
+    return has_display()
+
+
+def _check_outputs(record, force: bool, summary_json) -> None:
+    """The output paths, before the source is opened (imu_dcm.outputs' rule)."""
+    from imu_dcm.outputs import check_output_dir, check_output_file
+
+    if record is not None:
+        check_output_dir(record, force=force, what="--record bag")
+    if summary_json is not None:
+        check_output_file(summary_json, (), "--summary-json file")
 
 
 def _pct(a: NDArray, p: float) -> float | None:
@@ -87,16 +107,18 @@ class LiveOptions:
     imu_topic, truth_topic : str, optional — WebSocket channel choices (default: by schema, as
         replay); ``truth_topic="none"`` ignores any truth.
     method : str — integrator method (:data:`imu_dcm.integrate.METHODS`), default ``magnus4``.
-    bias : "auto", "none", "x,y,z" or array_like (3,) — ``auto``: from rest as it happens
+    bias : "auto", "none" or array_like (3,) — ``auto``: from rest as it happens
         (replay's rest rule, causal); a vector: rad/s.
     gyro_units : "rad/s" or "deg/s" — unit of the rates (line sources and WebSocket alike).
     time_units : "s", "ms", "us" or "ns" — unit of CSV stamps.
-    init_quat : array_like (4,) or "x,y,z,w", optional — start attitude ``q_w_b``
+    init_quat : array_like (4,), optional — start attitude ``q_w_b``
         ``[x, y, z, w]`` at the first sample (instead of the truth).
     reorder_window_s : float — reorder window in source time, s (default 0.05).
     view_interval_s : float — batching interval of the view and the recording (display rate), s.
     rerun : None, "spawn", "serve", "save:PATH.rrd" or "off" — ``None``: spawn with a display,
-        else serve the web viewer on 127.0.0.1.
+        else no view (one line names ``serve`` and ``save:``).
+    keep_viewer : bool — ``serve``: leave the web viewer running after the run (default True;
+        the command line stops it unless ``--keep-viewer``).
     record : path, optional — ROS 2 bag folder written as it goes (received messages +
         ``/estimate/orientation``); ``force`` replaces an existing one.
     summary_json : path, optional — summary written at stop.
@@ -119,6 +141,7 @@ class LiveOptions:
     reorder_window_s: float = 0.05
     view_interval_s: float = 0.05
     rerun: str | None = None
+    keep_viewer: bool = True
     record: str | Path | None = None
     force: bool = False
     summary_json: str | Path | None = None
@@ -143,13 +166,10 @@ def _checked(source: str, o: LiveOptions) -> tuple:
             f"Expected reorder window >= 0 s and view interval > 0 s, got "
             f"{o.reorder_window_s!r} and {o.view_interval_s!r}"
         )
-    bias_v = _parse_bias(o.bias)
+    bias_v = _check_bias(o.bias)
     init_q = None
     if o.init_quat is not None:
-        q = o.init_quat
-        if isinstance(q, str):
-            q = parse_numbers(q, 4, "init quaternion x,y,z,w")
-        init_q = as_quat_xyzw(np.asarray(q, dtype=float), "init_quat")
+        init_q = as_quat_xyzw(np.asarray(o.init_quat, dtype=float), "init_quat")
     return spec, bias_v, init_q
 
 
@@ -199,13 +219,20 @@ def run(
     from imu_dcm.live.view import LiveView, check_mode
 
     check_mode(o.rerun)
+    _check_outputs(o.record, o.force, o.summary_json)
     _warm_up(o.method)
     src = _open_source(spec, o)
     recorder = view = None
     try:
         recorder = _open_recorder(source, o, bias_v)
-        if o.rerun != "off":
-            view = LiveView(o.rerun, title=f"live {source}", say=say)
+        rerun = o.rerun
+        if rerun is None and not _has_display():
+            from imu_dcm.viz import HEADLESS_HINT
+
+            say(HEADLESS_HINT)
+            rerun = "off"
+        if rerun != "off":
+            view = LiveView(rerun, title=f"live {source}", say=say)
         pipe = Pipeline(
             method=o.method,
             bias=bias_v,
@@ -220,13 +247,13 @@ def run(
         )
         reason = _Loop(src, pipe, o, stop or threading.Event(), say, on_ready).run()
     finally:
-        _close(src, view, recorder, say)
+        _close(src, view, recorder, say, o.keep_viewer)
     lat = np.concatenate(pipe.latency) if pipe.latency else np.zeros(0)
     summary = _summary(pipe, src, source, o, bias_v, reason, lat, recorder, started)
     if o.summary_json is not None:
-        from imu_dcm.live.__main__ import write_json
+        from imu_dcm.outputs import write_json
 
-        write_json(Path(o.summary_json), summary)
+        write_json(o.summary_json, summary, what="--summary-json file")
     q = None if pipe.q_last is None else np.asarray(pipe.q_last, dtype=float)
     return LiveResult(summary, q, pipe.t_last_ns, lat)
 
@@ -260,11 +287,14 @@ def _open_recorder(source: str, o: LiveOptions, bias_v):
     )
 
 
-def _close(src: Source, view, recorder, say) -> None:
+def _close(src: Source, view, recorder, say, keep_viewer: bool = True) -> None:
     src.stop()
     if view is not None:
         try:
             line = view.close()
+            if view.served is not None and not keep_viewer:
+                view.served.stop()
+                line = "rerun: web viewer stopped (--keep-viewer leaves it running)"
             if line:
                 say(line)
         except Exception as exc:

@@ -76,6 +76,7 @@ SOURCES: dict[str, str] = {
     "ws": "imu_dcm.live.sources:WsSource",
     "udp": "imu_dcm.live.sources:UdpSource",
     "-": "imu_dcm.live.sources:StdinSource",
+    "mavlink": "imu_dcm.live.mavlink:MavlinkSource",
 }
 
 
@@ -118,13 +119,19 @@ def parse_source(text: str) -> SourceSpec:
     InputError otherwise."""
     if text == "-":
         return SourceSpec("stdin")
+    if text.startswith("mavlink:"):  # a pymavlink-style connection: imu_dcm.live.mavlink
+        return SourceSpec("mavlink", url=text)
     parts = urlsplit(text)
     try:
         port = parts.port
     except ValueError:
         port = None
     if parts.scheme not in SOURCES or parts.scheme == "-" or not parts.hostname or port is None:
-        forms = ", ".join(f"{k}://HOST:PORT" for k in SOURCES if k != "-")
+        forms = ", ".join(
+            "mavlink:udpin:HOST:PORT" if k == "mavlink" else f"{k}://HOST:PORT"
+            for k in SOURCES
+            if k != "-"
+        )
         raise InputError(f"Expected SOURCE {forms} or -, got {text!r}")
     return SourceSpec(parts.scheme, parts.hostname, port, text)
 

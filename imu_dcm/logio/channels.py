@@ -14,6 +14,7 @@ from __future__ import annotations
 import re
 import struct
 from collections.abc import Callable
+from dataclasses import replace
 
 import numpy as np
 from numpy.typing import NDArray
@@ -22,8 +23,9 @@ from imu_dcm.errors import LogError
 from imu_dcm.logio.cdr import decode
 from imu_dcm.logio.json_imu import is_json_imu, json_imu_columns, json_msg
 from imu_dcm.logio.schema import Defs, definitions, norm_type
-from imu_dcm.logio.tf import TF_TYPE, child_frame, tf_truth
+from imu_dcm.logio.tf import TF_TYPE, child_frame, tf_rows, tf_truth
 from imu_dcm.logio.types import Collected, Columns, Conn, ImuSeries, Payloads, TruthSeries
+from imu_dcm.rest import GRAVITY_M_S2
 
 IMU_TYPE = "sensor_msgs/msg/Imu"
 VEC3_TYPE = "geometry_msgs/msg/Vector3Stamped"
@@ -107,7 +109,7 @@ class _Decoder:
             want = {"header.stamp.sec": ("i8", 1), "header.stamp.nanosec": ("i8", 1)}
             want.update({"vector." + a: ("f8", 1) for a in "xyz"})
         else:
-            want = _imu_want(self.path)
+            want = _imu_want(self.path, _field_names(defs, root, self.path))
         return defs, root, want
 
     def __call__(self, p: Payloads) -> Columns:
@@ -151,6 +153,12 @@ class _Decoder:
                     np.stack([out[pre + "angular_velocity." + a] for a in "xyz"], axis=1)
                 ),
             }
+            if pre + "linear_acceleration.x" in out:
+                accel = np.stack([out[pre + "linear_acceleration." + a] for a in "xyz"], axis=1)
+                accel[out[pre + "linear_acceleration_covariance"] == -1.0] = np.nan
+                fields["accel"] = rows(accel)
+            if pre + "angular_velocity_covariance" in out:
+                fields["gyro_cov0"] = rows(out[pre + "angular_velocity_covariance"])
             flagged = out[pre + "orientation_covariance"] == -1.0
             if not flagged.all():
                 quat = np.stack([out[pre + "orientation." + a] for a in "xyzw"], axis=1)
@@ -230,26 +238,50 @@ def _stamp(out: dict, prefix: str) -> NDArray[np.int64]:
     return sec * 1_000_000_000 + nsec
 
 
-def _imu_want(path: str) -> dict[str, tuple[str, int]]:
+def _field_names(defs: Defs, root: str, path: str) -> set[str]:
+    """Field names of the message type at ``path`` inside ``root`` (empty when unknown)."""
+    t = root
+    for part in path.split(".") if path else ():
+        t = next((f.base for f in defs.get(t, ()) if f.name == part), "")
+    return {f.name for f in defs.get(t, ())}
+
+
+#: Imu fields decoded when the message's definition has them (vendor Imu types may not).
+_OPTIONAL = ("angular_velocity_covariance", "linear_acceleration", "linear_acceleration_covariance")
+
+
+def _imu_want(path: str, names: set[str]) -> dict[str, tuple[str, int]]:
     p = path + "." if path else ""
     want = {p + "header.stamp.sec": ("i8", 1), p + "header.stamp.nanosec": ("i8", 1)}
     want.update({p + "orientation." + a: ("f8", 1) for a in "xyzw"})
     want[p + "orientation_covariance"] = ("f8", 1)  # first element only
     want.update({p + "angular_velocity." + a: ("f8", 1) for a in "xyz"})
+    if "angular_velocity_covariance" in names:
+        want[p + "angular_velocity_covariance"] = ("f8", 1)  # first element: -1 marks no gyro
+    if all(f in names for f in _OPTIONAL[1:]):
+        want[p + "linear_acceleration_covariance"] = ("f8", 1)  # first element: -1 marks none
+        want.update({p + "linear_acceleration." + a: ("f8", 1) for a in "xyz"})
     return want
 
 
 def _imu_columns(c: Conn, data):
-    """(order, t_ns, log_t_ns, omega, quat or None, dropped, type, frame) of one channel."""
+    """(order, t_ns, log_t_ns, omega, quat, accel, gyro_cov0, dropped, type, frame) of a channel.
+
+    ``quat`` and ``accel`` are None where the channel has none; ``gyro_cov0`` is the first
+    element of ``angular_velocity_covariance`` (-1 marks an absent gyro), NaN when unknown.
+    """
     if c.encoding == "json":
         t_ns, omega, _, good, typ, frame = json_imu_columns(c, data)
+        n = int(good.sum())
         return (
             data.order[good],
             t_ns[good],
             data.log_time[good],
             omega[good],
             None,
-            int(len(data) - good.sum()),
+            None,
+            np.full(n, np.nan),
+            int(len(data) - n),
             typ,
             frame,
         )
@@ -263,6 +295,8 @@ def _imu_columns(c: Conn, data):
         data.log_time,
         f.get("omega", np.zeros((n, 3))),
         f.get("quat"),
+        f.get("accel"),
+        f.get("gyro_cov0", np.full(n, np.nan)),
         data.dropped,
         data.frames.get("type", ""),
         data.frames.get("frame_id", ""),
@@ -282,46 +316,78 @@ def _merge(rows: list[tuple[NDArray[np.int64], list[NDArray]]]) -> list[NDArray]
     return out
 
 
+def gyro_doubt(got: Collected, conns: list[tuple[Conn, str]]) -> str | None:
+    """Why the decoded samples of a gyro candidate are no gyro's, or None when they may be.
+
+    Refused: messages that all mark the angular velocity absent (Imu
+    ``angular_velocity_covariance[0] = -1``), and rates whose norm stays at g (9.81, within 1)
+    with a spread under 10 %: an accelerometer published as a Vector3Stamped.
+    """
+    omegas, covs = [], []
+    for c, _path in conns:
+        data = got.payloads.get(c.id)
+        if not isinstance(data, Columns) or data.error is not None:
+            continue
+        omegas.append(data.fields.get("omega", np.zeros((0, 3))))
+        covs.append(data.fields.get("gyro_cov0", np.full(len(data), np.nan)))
+    cov = np.concatenate(covs) if covs else np.zeros(0)
+    if len(cov) and np.all(cov == -1.0):
+        return "its messages mark the angular velocity absent (angular_velocity_covariance[0] = -1)"
+    w = np.concatenate(omegas) if omegas else np.zeros((0, 3))
+    norm = np.linalg.norm(w[np.all(np.isfinite(w), axis=1)], axis=1)
+    if len(norm) < 10:
+        return None
+    med = float(np.median(norm))
+    spread = float(np.subtract(*np.percentile(norm, [75, 25])))
+    if abs(med - GRAVITY_M_S2) < 1.0 and spread < 0.1 * med:
+        return (
+            f"|omega| stays at {med:.2f} (interquartile {spread:.2f}), the 9.81 m/s² of gravity: "
+            f"an accelerometer, not a gyro"
+        )
+    return None
+
+
+def _alternatives(got: Collected, usable: list[str], refused: set[str]) -> str:
+    """The channels that could be the gyro instead, for a refusal's line."""
+    if usable:
+        return f"; {', '.join(usable)} would work"
+    vec = sorted(
+        {c.topic for c in got.conns if norm_type(c.msgtype) == VEC3_TYPE and c.topic not in refused}
+    )
+    vec = [t for t in vec if not t.startswith(_NOT_GYRO)]
+    if vec:
+        return f"; try {', '.join(vec)} with --imu-topic"
+    return "; no other channel of the log holds angular rates"
+
+
 def pick_imu(got: Collected, imu_topic: str | None) -> tuple[str, list[tuple[Conn, str]]]:
     """The IMU topic and its channels with their Imu field paths (LogError when unclear)."""
-    topics = _by_topic(got)
+    return pick_imu_judged(got, imu_topic)[:2]
+
+
+def pick_imu_judged(
+    got: Collected, imu_topic: str | None
+) -> tuple[str, list[tuple[Conn, str]], tuple[str, ...]]:
+    """:func:`pick_imu` with the gyro judgement: candidates that are no gyro are refused with
+    one line each (returned as notes when another channel serves, a LogError otherwise)."""
     if imu_topic is not None:
-        conns = topics.get(imu_topic)
-        if not conns:
+        out = _named_imu(got, imu_topic)
+        doubt = gyro_doubt(got, out)
+        if doubt:
             raise LogError(
-                f"Expected IMU topic {imu_topic!r} in the log, got {describe(got.conns)}"
+                f"Expected a gyro on {imu_topic}, got {doubt}" + _alternatives(got, [], {imu_topic})
             )
-        out = []
-        for c in conns:
-            if c.encoding not in KNOWN_ENCODINGS:
-                raise LogError(
-                    f"Expected message encoding cdr, ros1 or json on {imu_topic}, got "
-                    f"{c.encoding!r}"
-                )
-            path = "json" if c.encoding == "json" else imu_path(c)
-            if path is None:
-                raise LogError(
-                    f"Expected IMU messages on {imu_topic}, got "
-                    f"{c.msgtype or 'no schema'} ({c.encoding})"
-                )
-            out.append((c, path))
-        return imu_topic, out
-    found: dict[str, list[tuple[Conn, str]]] = {}
-    gyro: dict[str, list[tuple[Conn, str]]] = {}
-    for topic, conns in topics.items():
-        for c in conns:
-            if c.encoding == "json":
-                p = got.payloads.get(c.id)
-                if p is not None and len(p) and is_json_imu(json_msg(p.payload(0))):
-                    found.setdefault(topic, []).append((c, "json"))
-                continue
-            path = imu_path(c)
-            if path == "vec3":
-                if _gyro_name(topic):
-                    gyro.setdefault(topic, []).append((c, path))
-            elif path is not None:
-                found.setdefault(topic, []).append((c, path))
+        return imu_topic, out, ()
+    found, gyro = _imu_candidates(got)
+    refused = {t: d for t, cs in {**gyro, **found}.items() if (d := gyro_doubt(got, cs))}
+    found = {t: cs for t, cs in found.items() if t not in refused}
+    gyro = {t: cs for t, cs in gyro.items() if t not in refused}
     found = found or gyro
+    if not found and refused:
+        topic, why = next(iter(sorted(refused.items())))
+        raise LogError(
+            f"Expected a gyro channel, got {topic}: {why}" + _alternatives(got, [], set(refused))
+        )
     if not found:
         unknown = [c for c in got.conns if c.encoding not in KNOWN_ENCODINGS]
         if unknown:
@@ -340,7 +406,50 @@ def pick_imu(got: Collected, imu_topic: str | None) -> tuple[str, list[tuple[Con
             f"(choose with --imu-topic)"
         )
     topic = next(iter(found))
-    return topic, found[topic]
+    notes = tuple(
+        f"{t}: refused as the gyro: {d}; using {topic}" for t, d in sorted(refused.items())
+    )
+    return topic, found[topic], notes
+
+
+def _named_imu(got: Collected, imu_topic: str) -> list[tuple[Conn, str]]:
+    conns = _by_topic(got).get(imu_topic)
+    if not conns:
+        raise LogError(f"Expected IMU topic {imu_topic!r} in the log, got {describe(got.conns)}")
+    out = []
+    for c in conns:
+        if c.encoding not in KNOWN_ENCODINGS:
+            raise LogError(
+                f"Expected message encoding cdr, ros1 or json on {imu_topic}, got {c.encoding!r}"
+            )
+        path = "json" if c.encoding == "json" else imu_path(c)
+        if path is None:
+            raise LogError(
+                f"Expected IMU messages on {imu_topic}, got "
+                f"{c.msgtype or 'no schema'} ({c.encoding})"
+            )
+        out.append((c, path))
+    return out
+
+
+def _imu_candidates(got: Collected) -> tuple[dict, dict]:
+    """IMU-typed channels and gyro-named Vector3Stamped channels, by topic."""
+    found: dict[str, list[tuple[Conn, str]]] = {}
+    gyro: dict[str, list[tuple[Conn, str]]] = {}
+    for topic, conns in _by_topic(got).items():
+        for c in conns:
+            if c.encoding == "json":
+                p = got.payloads.get(c.id)
+                if p is not None and len(p) and is_json_imu(json_msg(p.payload(0))):
+                    found.setdefault(topic, []).append((c, "json"))
+                continue
+            path = imu_path(c)
+            if path == "vec3":
+                if _gyro_name(topic):
+                    gyro.setdefault(topic, []).append((c, path))
+            elif path is not None:
+                found.setdefault(topic, []).append((c, path))
+    return found, gyro
 
 
 def read_imu(got: Collected, topic: str, conns: list[tuple[Conn, str]]) -> tuple[ImuSeries, int]:
@@ -354,15 +463,19 @@ def read_imu(got: Collected, topic: str, conns: list[tuple[Conn, str]]) -> tuple
                 if c.encoding == "json"
                 else _Decoder(c, "imu", path)(Payloads.empty())
             )
-        order, t_ns, log_t, omega, quat, drop, typ_c, frame_c = _imu_columns(c, data)
+        order, t_ns, log_t, omega, quat, accel, cov0, drop, typ_c, frame_c = _imu_columns(c, data)
         dropped += drop
         typ, frame = typ or typ_c, frame or frame_c
         if quat is None and len(conns) > 1:
             quat = np.full((len(t_ns), 4), np.nan)
-        rows.append((order, [t_ns, log_t, omega, quat]))
-    t_ns, log_t, omega, quat = _merge(rows)
+        if accel is None and len(conns) > 1:
+            accel = np.full((len(t_ns), 3), np.nan)
+        rows.append((order, [t_ns, log_t, omega, quat, accel, cov0]))
+    t_ns, log_t, omega, quat, accel, cov0 = _merge(rows)
     if quat is not None and not np.isfinite(quat).any():
         quat = None
+    if accel is not None and not np.isfinite(accel).any():
+        accel = None
     return ImuSeries(
         t_ns.astype(np.int64, copy=False),
         log_t.astype(np.int64, copy=False),
@@ -371,6 +484,8 @@ def read_imu(got: Collected, topic: str, conns: list[tuple[Conn, str]]) -> tuple
         topic,
         typ,
         frame,
+        accel_b=accel,
+        gyro_absent=bool(len(cov0)) and bool(np.all(cov0 == -1.0)),
     ), dropped
 
 
@@ -446,29 +561,28 @@ def read_truth(
     got: Collected, imu: ImuSeries, truth_topic: str | None, truth_frame: str | None
 ) -> TruthSeries | None:
     """The truth series chosen by the policy in the module docstring (None when there is none)."""
+    return read_truths(got, imu, truth_topic, truth_frame)[0]
+
+
+#: Who estimated a truth of this type (its ``estimate_of``), when it is no independent reference.
+_ESTIMATED_BY = {"nav_msgs/msg/Odometry": "odometry (an estimate, often wheels and the IMU)"}
+IMU_ESTIMATE = "the IMU's own orientation"
+
+
+def read_truths(
+    got: Collected, imu: ImuSeries, truth_topic: str | None, truth_frame: str | None
+) -> tuple[TruthSeries | None, tuple[TruthSeries, ...]]:
+    """The truth and, when it was picked automatically, every other attitude candidate.
+
+    Candidates, in the order of preference of the module docstring: the truth topics (not under
+    ``/estimate``), each moving frame of ``/tf``, the Imu's own orientation. Odometry and the
+    Imu's orientation carry ``estimate_of``. The replay judges which one follows the gyro.
+    """
     if truth_topic == "none":
-        return None
+        return None, ()
     topics = _by_topic(got)
-    if truth_topic is not None and truth_topic == imu.topic:
-        return imu_truth(imu, required=True)
     if truth_topic is not None:
-        conns = topics.get(truth_topic)
-        if not conns:
-            raise LogError(
-                f"Expected truth topic {truth_topic!r} in the log, got {describe(got.conns)}"
-            )
-        for c in conns:
-            if not is_truth(c):
-                raise LogError(
-                    f"Expected truth messages on {truth_topic}, got "
-                    f"{c.msgtype or 'no schema'} ({c.encoding})"
-                )
-        if all(norm_type(c.msgtype) == TF_TYPE for c in conns):
-            tf = tf_truth(got, conns, imu.frame_id, truth_frame, auto=False)
-            if tf is None:
-                raise LogError(f"Expected a moving transform in {truth_topic}, got none")
-            return tf
-        return _read_truth_topic(got, truth_topic, conns, auto=False)
+        return _named_truth(got, imu, topics, truth_topic, truth_frame), ()
     tf = [c for c in got.conns if c.encoding in ("cdr", "ros1") and norm_type(c.msgtype) == TF_TYPE]
     if truth_frame is not None:  # a frame names a transform
         if not tf:
@@ -476,23 +590,65 @@ def read_truth(
                 f"Expected /tf or /tf_static for truth frame {truth_frame!r}, got "
                 f"{describe(got.conns)}"
             )
-        return tf_truth(got, tf, imu.frame_id, truth_frame, auto=False)
-    auto = {
-        t: cs
-        for t, cs in topics.items()
+        return tf_truth(got, tf, imu.frame_id, truth_frame, auto=False), ()
+    found = [
+        _marked(_read_truth_topic(got, t, cs, auto=True))
+        for t, cs in sorted(topics.items())
         if not t.startswith("/estimate")
         and all(is_truth(c) and norm_type(c.msgtype) != TF_TYPE for c in cs)
-    }
-    if len(auto) > 1:
-        raise LogError(
-            f"Expected one truth channel, got {len(auto)}: {', '.join(sorted(auto))} "
-            f"(choose with --truth-topic)"
-        )
-    if auto:
-        topic = next(iter(auto))
-        return _read_truth_topic(got, topic, auto[topic], auto=True)
+    ]
     if tf:
-        truth = tf_truth(got, tf, imu.frame_id, truth_frame, auto=True)
-        if truth is not None:
-            return truth
-    return imu_truth(imu, required=False)
+        found += [
+            tf_truth(got, tf, imu.frame_id, ch, auto=True) for ch in _moving_children(got, tf)
+        ]
+    own = imu_truth(imu, required=False)
+    if own is not None:
+        found.append(replace(own, estimate_of=IMU_ESTIMATE))
+    if not found:
+        return None, ()
+    return found[0], tuple(found[1:])
+
+
+def _marked(t: TruthSeries) -> TruthSeries:
+    who = _ESTIMATED_BY.get(t.type, "")
+    return replace(t, estimate_of=who) if who else t
+
+
+def _moving_children(got: Collected, conns: list[Conn]) -> list[str]:
+    """Child frames of the transforms in ``conns`` whose rotation changes, sorted."""
+    rot: dict[str, list] = {}
+    for c in conns:
+        p = got.payloads.get(c.id) or Payloads.empty()
+        for i in range(len(p)):
+            try:
+                rows = tf_rows(p.payload(i), c.encoding == "ros1")
+            except (struct.error, ValueError):
+                continue
+            for _stamp, _parent, child, quat in rows:
+                rot.setdefault(child, []).append(quat)
+    return sorted(
+        ch for ch, qs in rot.items() if np.ptp(np.asarray(qs, dtype=float), axis=0).max() > 1e-12
+    )
+
+
+def _named_truth(got, imu, topics, truth_topic: str, truth_frame: str | None):
+    """The truth the caller named by topic (its type checked)."""
+    if truth_topic == imu.topic:
+        return replace(imu_truth(imu, required=True), estimate_of=IMU_ESTIMATE)
+    conns = topics.get(truth_topic)
+    if not conns:
+        raise LogError(
+            f"Expected truth topic {truth_topic!r} in the log, got {describe(got.conns)}"
+        )
+    for c in conns:
+        if not is_truth(c):
+            raise LogError(
+                f"Expected truth messages on {truth_topic}, got "
+                f"{c.msgtype or 'no schema'} ({c.encoding})"
+            )
+    if all(norm_type(c.msgtype) == TF_TYPE for c in conns):
+        tf = tf_truth(got, conns, imu.frame_id, truth_frame, auto=False)
+        if tf is None:
+            raise LogError(f"Expected a moving transform in {truth_topic}, got none")
+        return tf
+    return _marked(_read_truth_topic(got, truth_topic, conns, auto=False))

@@ -19,6 +19,7 @@ from pathlib import Path
 import numpy as np
 
 from imu_dcm.errors import LogError
+from imu_dcm.logio.ros import RosSource
 from imu_dcm.logio.types import Collected, Conn, Damage, Payloads, Sink
 
 MAGIC = b"\x89MCAP0\r\n"
@@ -111,8 +112,8 @@ def _channel(buf, pos: int, out: dict) -> None:
     out[cid] = (sid, topic, enc)
 
 
-class McapSource:
-    """One MCAP file. ``read(sink)`` returns every channel and the data of kept ones."""
+class McapSource(RosSource):
+    """One MCAP file. ``collect(sink)`` returns every channel and the data of kept ones."""
 
     kind = "mcap"
 
@@ -151,7 +152,7 @@ class McapSource:
         return k
 
     # ------------------------------------------------------------------ reading
-    def read(self, sink: Sink) -> Collected:
+    def collect(self, sink: Sink) -> Collected:
         self.sink = sink
         try:
             f = open(self.path, "rb")  # noqa: SIM115
@@ -484,6 +485,7 @@ class McapSource:
 
     # ------------------------------------------------------------------ forward scan
     def _scan(self, f) -> None:
+        """Walk the file record by record (no summary to trust), from the magic to data end."""
         pos, seq = len(MAGIC), 0
         f.seek(pos)
         while pos + 9 <= self.size:
@@ -495,79 +497,19 @@ class McapSource:
             if op in (_DATA_END, _FOOTER):
                 return
             if end > self.size or op == 0 or op > 0x0F:
-                nxt = self._resync(f, pos + 1)
-                what = (
-                    "the file ends inside a record"
-                    if nxt is None and end > self.size
-                    else "a record is damaged"
-                )
-                self.damage.append(
-                    Damage(
-                        pos,
-                        f"{what} at byte {pos} of {self.size}"
-                        + ("" if nxt is None else f"; resumed at byte {nxt}"),
-                    )
-                )
+                nxt = self._skip_damaged(f, pos, end)
                 if nxt is None:
                     return
                 pos = nxt
                 continue
             if op == _CHUNK:
-                entries, after, complete = self._following_index(f, end)
-                if not complete:
-                    entries = None
-                t0 = t1 = None
-                try:
-                    f.seek(pos + 9)
-                    t0, t1 = struct.unpack("<QQ", f.read(16))
-                    known = entries is not None and all(c in self.channels for c in entries)
-                    if known and not any(self._is_kept(c) for c in entries):
-                        for c, e in entries.items():
-                            self.counts_seen[c] = self.counts_seen.get(c, 0) + len(e[0])
-                    else:
-                        f.seek(pos + 9)
-                        self._chunk(f, pos, length, seq, entries)
-                except _Bad as exc:
-                    lost = None
-                    if entries is not None:
-                        lost = sum(
-                            len(e[0])
-                            for c, e in entries.items()
-                            if c not in self.channels or self._is_kept(c)
-                        )
-                    self.damage.append(
-                        Damage(pos, f"the chunk at byte {pos} is damaged: {exc}", t0, t1, lost)
-                    )
+                pos = self._scan_chunk(f, pos, length, end, seq)
                 seq += 1
-                pos = after
                 continue
             if op in (_SCHEMA, _CHANNEL) and length <= MAX_META_RECORD:
-                buf = f.read(length)
-                try:
-                    (_schema if op == _SCHEMA else _channel)(
-                        buf, 0, self.schemas if op == _SCHEMA else self.channels
-                    )
-                except (struct.error, _Bad):
-                    self.damage.append(
-                        Damage(pos, f"a schema or channel record at byte {pos} is damaged")
-                    )
+                self._scan_definition(f, op, pos, length)
             elif op == _MESSAGE and length >= 22:
-                head = f.read(22)
-                cid, _, lt, _ = struct.unpack_from("<HIQQ", head)
-                self.counts_seen[cid] = self.counts_seen.get(cid, 0) + 1
-                if self._is_kept(cid):
-                    payload = np.frombuffer(f.read(length - 22), np.uint8)
-                    one = np.array([0], np.int64)
-                    self.sink.add(
-                        cid,
-                        Payloads(
-                            payload,
-                            one,
-                            np.array([len(payload)], np.int64),
-                            np.array([lt], np.int64),
-                            np.array([(seq << 32) + 0], np.int64),
-                        ),
-                    )
+                self._scan_message(f, length, seq)
                 seq += 1
             pos = end
         # no data-end record: the file was cut (at a record boundary or inside a header)
@@ -579,6 +521,81 @@ class McapSource:
                 f"without its data-end record; anything after it is lost",
             )
         )
+
+    def _skip_damaged(self, f, pos: int, end: int) -> int | None:
+        """A damaged record at ``pos``: noted; the next plausible chunk's offset, or None."""
+        nxt = self._resync(f, pos + 1)
+        what = (
+            "the file ends inside a record"
+            if nxt is None and end > self.size
+            else "a record is damaged"
+        )
+        self.damage.append(
+            Damage(
+                pos,
+                f"{what} at byte {pos} of {self.size}"
+                + ("" if nxt is None else f"; resumed at byte {nxt}"),
+            )
+        )
+        return nxt
+
+    def _scan_chunk(self, f, pos: int, length: int, end: int, seq: int) -> int:
+        """Read (or skip, when its index shows no kept channel) the chunk at ``pos``; returns
+        the offset after it and its message indexes."""
+        entries, after, complete = self._following_index(f, end)
+        if not complete:
+            entries = None
+        t0 = t1 = None
+        try:
+            f.seek(pos + 9)
+            t0, t1 = struct.unpack("<QQ", f.read(16))
+            known = entries is not None and all(c in self.channels for c in entries)
+            if known and not any(self._is_kept(c) for c in entries):
+                for c, e in entries.items():
+                    self.counts_seen[c] = self.counts_seen.get(c, 0) + len(e[0])
+            else:
+                f.seek(pos + 9)
+                self._chunk(f, pos, length, seq, entries)
+        except _Bad as exc:
+            lost = None
+            if entries is not None:
+                lost = sum(
+                    len(e[0])
+                    for c, e in entries.items()
+                    if c not in self.channels or self._is_kept(c)
+                )
+            self.damage.append(
+                Damage(pos, f"the chunk at byte {pos} is damaged: {exc}", t0, t1, lost)
+            )
+        return after
+
+    def _scan_definition(self, f, op: int, pos: int, length: int) -> None:
+        """A schema or channel record outside chunks (the file is positioned at its body)."""
+        buf = f.read(length)
+        try:
+            (_schema if op == _SCHEMA else _channel)(
+                buf, 0, self.schemas if op == _SCHEMA else self.channels
+            )
+        except (struct.error, _Bad):
+            self.damage.append(Damage(pos, f"a schema or channel record at byte {pos} is damaged"))
+
+    def _scan_message(self, f, length: int, seq: int) -> None:
+        """A message record outside chunks (the file is positioned at its body)."""
+        head = f.read(22)
+        cid, _, lt, _ = struct.unpack_from("<HIQQ", head)
+        self.counts_seen[cid] = self.counts_seen.get(cid, 0) + 1
+        if self._is_kept(cid):
+            payload = np.frombuffer(f.read(length - 22), np.uint8)
+            self.sink.add(
+                cid,
+                Payloads(
+                    payload,
+                    np.array([0], np.int64),
+                    np.array([len(payload)], np.int64),
+                    np.array([lt], np.int64),
+                    np.array([(seq << 32) + 0], np.int64),
+                ),
+            )
 
     def _following_index(self, f, pos: int) -> tuple[dict | None, int, bool]:
         """Message index records right after a chunk: ({channel: (offsets, log times)}, the

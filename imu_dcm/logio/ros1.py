@@ -20,6 +20,8 @@ import numpy as np
 
 from imu_dcm.errors import LogError
 from imu_dcm.logio.mcap import compact, size_bound
+from imu_dcm.logio.paths import read_head
+from imu_dcm.logio.ros import RosSource
 from imu_dcm.logio.types import Collected, Conn, Damage, Payloads, Sink
 
 MAGIC = b"#ROSBAG V"
@@ -94,7 +96,7 @@ def _walk_records(d: np.ndarray, offs: np.ndarray) -> tuple[np.ndarray, np.ndarr
     return np.asarray(starts, np.int64), np.asarray(lens, np.int64)
 
 
-class Ros1Source:
+class Ros1Source(RosSource):
     """A ROS 1 bag file."""
 
     kind = "ros1 bag"
@@ -103,7 +105,7 @@ class Ros1Source:
         self.path = path
         self.progress = progress
 
-    def read(self, sink: Sink) -> Collected:
+    def collect(self, sink: Sink) -> Collected:
         from rosbags.rosbag1 import Reader, ReaderError
 
         reader = Reader(self.path)
@@ -208,3 +210,15 @@ class Ros1Source:
             k = np.argsort(start, kind="stable")
             buf, out_start, n = compact(d, start[k], dl[k])
             sink.add(cid, Payloads(buf, out_start, n, t[k], (seq << 32) + off[k]))
+
+
+def open_bag(path: Path, progress: Callable[[float], None] | None = None) -> Ros1Source:
+    """The source of a ROS 1 bag; LogError naming the fix for a version other than 2.0."""
+    head = read_head(path)
+    if not head.startswith(b"#ROSBAG V2.0"):
+        version = head[9:12].decode("ascii", "replace")
+        raise LogError(
+            f"Expected a ROS 1 bag of version 2.0, got version {version} in {path}; "
+            f"`rosbag fix {path.name} out.bag` rewrites it as 2.0"
+        )
+    return Ros1Source(path, progress)

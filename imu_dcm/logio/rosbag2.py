@@ -21,15 +21,24 @@ from pathlib import Path
 import numpy as np
 
 from imu_dcm.errors import LogError
-from imu_dcm.logio.mcap import size_bound
+from imu_dcm.logio import meta
+from imu_dcm.logio.mcap import MAGIC as MCAP_MAGIC
+from imu_dcm.logio.mcap import McapSource, size_bound
 from imu_dcm.logio.meta import topic_counts
+from imu_dcm.logio.paths import check_regular
+from imu_dcm.logio.ros import RosSource
+from imu_dcm.logio.source import Progress
 from imu_dcm.logio.types import Collected, Conn, Damage, Payloads, Sink, join_any
 
 #: Largest single decompressed message of a message-compressed bag (bytes).
 MAX_MESSAGE_BYTES = 256 << 20
+SQLITE_MAGIC = b"SQLite format 3\x00"
+ZSTD_MAGIC = b"\x28\xb5\x2f\xfd"
+#: rosbag2 storage plugins read, by ``storage_identifier``.
+STORAGES = ("mcap", "sqlite3")
 
 
-class SqliteSource:
+class SqliteSource(RosSource):
     """One rosbag2 sqlite3 file."""
 
     kind = "ros2 sqlite3"
@@ -44,7 +53,7 @@ class SqliteSource:
         self.progress = progress
         self.counts = counts  # message count per topic from metadata.yaml (saves a table scan)
 
-    def read(self, sink: Sink) -> Collected:
+    def collect(self, sink: Sink) -> Collected:
         uri = f"file:{self.path.resolve().as_posix()}?mode=ro&immutable=1"
         try:
             db = sqlite3.connect(uri, uri=True)
@@ -192,7 +201,7 @@ def decompress_file(src: Path, dst_dir: Path) -> Path:
     return dst
 
 
-class Rosbag2Folder:
+class Rosbag2Folder(RosSource):
     """A rosbag2 folder: ``metadata.yaml`` and one or more storage files."""
 
     def __init__(
@@ -202,7 +211,7 @@ class Rosbag2Folder:
         files: list[Path],
         progress: Callable[[float], None] | None = None,
     ):
-        self.folder = folder
+        self.folder = self.path = folder
         self.info = info
         self.files = files
         self.progress = progress
@@ -230,9 +239,7 @@ class Rosbag2Folder:
             parts.append(f"{self.mode}-compressed")
         return ", ".join(parts)
 
-    def read(self, sink: Sink) -> Collected:
-        from imu_dcm.logio.containers import source_for_file
-
+    def collect(self, sink: Sink) -> Collected:
         merged: dict[tuple, Conn] = {}
         parts: dict[int, list] = {}
         damage: list[Damage] = []
@@ -240,7 +247,7 @@ class Rosbag2Folder:
             for k, path in enumerate(self.files):
                 if self.mode == "file":
                     path = decompress_file(path, Path(tmp))
-                src = source_for_file(path, self.storage)
+                src = storage_source(path, self.storage)
                 if isinstance(src, SqliteSource) and len(self.files) == 1:
                     src.counts = topic_counts(self.info)
                 name = self.files[k].name
@@ -250,7 +257,7 @@ class Rosbag2Folder:
                     def transform(p, name=name):
                         return decompress_messages(p, name, damage)
 
-                got = src.read(Sink(sink.plan, transform))
+                got = src.collect(Sink(sink.plan, transform))
                 for d in got.damage:
                     damage.append(
                         Damage(
@@ -286,3 +293,77 @@ class Rosbag2Folder:
             shutil.rmtree(tmp, ignore_errors=True)
         payloads = {c: join_any(p) for c, p in parts.items()}
         return Collected(self.kind, list(merged.values()), payloads, damage)
+
+
+# ------------------------------------------------------------------ opening, by storage or bytes
+def storage_source(path: Path, storage: str, progress: Progress | None = None) -> RosSource:
+    """The source reading one storage file of a rosbag2 bag, by its ``storage_identifier``."""
+    if storage == "sqlite3":
+        return SqliteSource(path, progress)
+    return McapSource(path, progress)
+
+
+class ZstdFile(RosSource):
+    """A single ``.zstd``-compressed storage file (MCAP or sqlite3), decompressed into a
+    temporary folder first (bounded, see :func:`decompress_file`)."""
+
+    kind = "zstd-compressed file"
+
+    def __init__(self, path: Path, progress: Progress | None = None):
+        self.path = path
+        self.progress = progress
+
+    def collect(self, sink: Sink) -> Collected:
+        with tempfile.TemporaryDirectory(prefix="imu_dcm_bag_") as tmp:
+            inner = decompress_file(self.path, Path(tmp))
+            with open(inner, "rb") as f:
+                head = f.read(len(SQLITE_MAGIC))
+            if head.startswith(SQLITE_MAGIC):
+                src: RosSource = SqliteSource(inner, self.progress)
+            elif head.startswith(MCAP_MAGIC):
+                src = McapSource(inner, self.progress)
+            else:
+                raise LogError(
+                    f"Expected an MCAP or sqlite3 file inside {self.path}, got a file "
+                    f"starting {head[:8]!r}"
+                )
+            got = src.collect(sink)
+            self.kind = got.kind = f"{src.kind}, file-compressed"
+            return got
+
+
+def is_bag_folder(path: Path, head: bytes) -> bool:
+    """A rosbag2 folder: a folder holding ``metadata.yaml``."""
+    return not head and path.is_dir() and (path / "metadata.yaml").is_file()
+
+
+def open_folder(folder: Path, progress: Progress | None = None) -> RosSource:
+    """The source of a rosbag2 folder: its one plain storage file, or the whole folder.
+
+    Raises
+    ------
+    LogError
+        ``metadata.yaml`` is unreadable, names a storage other than mcap or sqlite3, lists
+        files that are missing or not regular files.
+    """
+    info = meta.load_metadata(folder)
+    storage = str(info.get("storage_identifier") or "")
+    if storage not in STORAGES:
+        raise LogError(
+            f"Expected rosbag2 storage mcap or sqlite3, got {storage!r} in "
+            f"{folder / 'metadata.yaml'}; `ros2 bag convert -i {folder.name} -o out.yaml` "
+            f"with storage_id mcap rewrites it"
+        )
+    files = meta.file_list(info, folder)
+    for f in files:
+        check_regular(f)
+    mode = str(info.get("compression_mode") or "").lower()
+    if len(files) == 1 and mode in ("", "none"):
+        src = storage_source(files[0], storage, progress)
+        src.kind = f"ros2 {storage}"
+        if isinstance(src, SqliteSource):
+            src.counts = topic_counts(info)
+    else:
+        src = Rosbag2Folder(folder, info, files, progress)
+    src.custom_data = meta.custom_data(info)
+    return src

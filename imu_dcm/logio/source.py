@@ -64,9 +64,14 @@ class SourceEntry:
     name : str — the container, as said to the user.
     probe : callable(path, head) -> bool — True when ``path`` is this container. ``head`` holds
         the first 64 bytes of a regular file, or ``b""`` for a folder.
-    open : callable(path, progress) -> LogSource — opens it (reads no samples yet).
+    open : callable(path, progress) -> LogSource — opens it (reads no samples yet). A row
+        that recognises a format only to refuse it raises :class:`~imu_dcm.errors.LogError`
+        here, saying how to convert it.
+    search : bool — :func:`imu_dcm.logio.find_logs` lists what this row accepts (False for
+        refusals and for the catch-all "folder holding one log").
     """
 
     name: str
     probe: Callable[[Path, bytes], bool]
     open: Callable[[Path, Progress | None], LogSource]
+    search: bool = True

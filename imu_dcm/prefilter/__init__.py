@@ -36,9 +36,9 @@ Modules: ``config`` (settings, results, checks), ``linear`` (the model and its t
 ``tuning`` (noise and ``σ_α`` estimates), ``batch`` (:func:`prefilter`), ``euler`` (the
 model-based variant), ``streaming`` (the per-sample twin).
 
-Which to use (``python -m benchmarks.noise_study``; README "Noise"): smoothing cuts the *rate*
-error when the noise lies above the motion's band, but no unity-gain low-pass removes the
-attitude random walk, and the causal filter's lag makes the attitude worse; integrate the
+Which to use (``python -m benchmarks.noise_study``; docs/integrator.md, "Noise"): smoothing cuts
+the *rate* error when the noise lies above the motion's band, but no unity-gain low-pass removes
+the attitude random walk, and the causal filter's lag makes the attitude worse; integrate the
 unfiltered rates for attitude.
 """
 

@@ -12,10 +12,10 @@ from numpy.typing import ArrayLike, NDArray
 from imu_dcm.errors import InputError
 from imu_dcm.prefilter.config import (
     _MIN_REST_SAMPLES,
-    MODES,
     PrefilterConfig,
     PrefilterResult,
     _check_config,
+    _check_mode,
     _check_rates,
 )
 from imu_dcm.prefilter.linear import (
@@ -71,8 +71,7 @@ def prefilter(
         with no rest, a log whose spectrum holds no white noise to estimate a missing density.
     """
     omega_b, t_s = _check_rates(omega_b, t_s)
-    if mode not in MODES:
-        raise InputError(f"Expected `mode` in {MODES}, got {mode!r}")
+    _check_mode(mode)
     if engine not in ("numpy", "filterpy"):
         raise InputError(f"Expected `engine` in ('numpy', 'filterpy'), got {engine!r}")
     cfg = PrefilterConfig() if config is None else config
@@ -85,45 +84,86 @@ def prefilter(
     }
     dt_med = float(np.median(np.diff(t_s)))
     summary["rate_hz"] = 1.0 / dt_med
-
-    rest = None
-    noise_std = (
-        cfg.noise_density_rad_s_sqrt_hz / math.sqrt(dt_med)
-        if cfg.noise_density_rad_s_sqrt_hz is not None
-        else None
+    rest = _find_rest(omega_b, t_s, cfg, dt_med, summary)
+    cfg, bias0 = _resolve_noise(omega_b, t_s, cfg, rest, summary)
+    cfg = _resolve_accel(omega_b, t_s, cfg, bias0, summary)
+    m = _build_model(omega_b, t_s, cfg, rest, bias0 if cfg.estimate_bias else None)
+    run = _run_fast if engine == "numpy" else _run_filterpy
+    X, P = run(omega_b, m, mode == "rts")
+    bias_b = X[:, -1, :] if cfg.estimate_bias else None
+    if bias_b is not None:
+        summary["bias_final_rad_s"] = bias_b[-1].tolist()
+    _stationary_summary(cfg, dt_med, summary)
+    return PrefilterResult(
+        omega_b=X[:, 0, :].copy(),
+        rate_std_rad_s=np.repeat(np.sqrt(P[:, 0, 0])[:, None], 3, axis=1),
+        angular_accel_b=X[:, 1, :].copy(),
+        bias_b=None if bias_b is None else bias_b.copy(),
+        rest=rest,
+        mode=mode,
+        config=cfg,
+        summary=summary,
     )
-    if cfg.noise_density_rad_s_sqrt_hz is None or cfg.estimate_bias:
-        max_std = cfg.rest_max_std_rad_s
-        if max_std is None:
-            floor = (
-                noise_std
-                if noise_std is not None
-                else quietest_std(omega_b, t_s, cfg.rest_window_s)
-            )
-            max_std = max(0.01, 1.5 * floor)
-        rest = detect_rest(
-            omega_b, t_s, RestConfig(cfg.rest_window_s, cfg.rest_max_rate_rad_s, max_std)
-        )
-        summary["rest_samples"] = int(rest.sum())
 
+
+def _find_rest(
+    omega_b: NDArray, t_s: NDArray, cfg: PrefilterConfig, dt_med: float, summary: dict[str, Any]
+) -> NDArray[np.bool_] | None:
+    """The rest mask (None when neither the noise density nor the bias needs a rest). Without a
+    given rate-spread limit, the limit is 1.5 times the given noise (per sample) or, without
+    one, 1.5 times the quietest window's spread, and at least 0.01 rad/s."""
+    if cfg.noise_density_rad_s_sqrt_hz is not None and not cfg.estimate_bias:
+        return None
+    max_std = cfg.rest_max_std_rad_s
+    if max_std is None:
+        floor = (
+            cfg.noise_density_rad_s_sqrt_hz / math.sqrt(dt_med)
+            if cfg.noise_density_rad_s_sqrt_hz is not None
+            else quietest_std(omega_b, t_s, cfg.rest_window_s)
+        )
+        max_std = max(0.01, 1.5 * floor)
+    rest = detect_rest(
+        omega_b, t_s, RestConfig(cfg.rest_window_s, cfg.rest_max_rate_rad_s, max_std)
+    )
+    summary["rest_samples"] = int(rest.sum())
+    return rest
+
+
+def _rest_segment(
+    t_s: NDArray, cfg: PrefilterConfig, rest: NDArray[np.bool_]
+) -> tuple[int, int, str]:
+    """Samples ``[i0, i1)`` of the rest to estimate the noise from (empty: use the spectrum), and
+    where they came from. A given ``rest_interval_s`` must hold two samples; a detected rest
+    must be long enough for the Allan deviation, else it is not used."""
+    if cfg.rest_interval_s is not None:
+        sel = (t_s >= cfg.rest_interval_s[0]) & (t_s <= cfg.rest_interval_s[1])
+        idx = np.flatnonzero(sel)
+        i0, i1 = (int(idx[0]), int(idx[-1]) + 1) if len(idx) else (0, 0)
+        if i1 - i0 < 2:
+            raise InputError(
+                "Expected a rest segment (rest_interval_s) to estimate the gyro noise "
+                "density, got none; pass noise_density_rad_s_sqrt_hz "
+                "(replay: --gyro-noise-density)"
+            )
+        return i0, i1, "rest_interval_s"
+    i0, i1 = longest_run(rest)
+    if i1 - i0 < _MIN_REST_SAMPLES or t_s[max(i1 - 1, i0)] - t_s[i0] < cfg.min_rest_s:
+        i0 = i1 = 0  # no rest long enough for the Allan deviation: use the spectrum
+    return i0, i1, "detected rest"
+
+
+def _resolve_noise(
+    omega_b: NDArray,
+    t_s: NDArray,
+    cfg: PrefilterConfig,
+    rest: NDArray[np.bool_] | None,
+    summary: dict[str, Any],
+) -> tuple[PrefilterConfig, NDArray | None]:
+    """The configuration with its noise density (given, from a rest, or from the spectrum) and
+    the rest's mean rate (the bias, rad/s; None unless a rest gave the density)."""
     bias0 = None
     if cfg.noise_density_rad_s_sqrt_hz is None:
-        if cfg.rest_interval_s is not None:
-            sel = (t_s >= cfg.rest_interval_s[0]) & (t_s <= cfg.rest_interval_s[1])
-            idx = np.flatnonzero(sel)
-            i0, i1 = (int(idx[0]), int(idx[-1]) + 1) if len(idx) else (0, 0)
-            source = "rest_interval_s"
-            if i1 - i0 < 2:
-                raise InputError(
-                    "Expected a rest segment (rest_interval_s) to estimate the gyro noise "
-                    "density, got none; pass noise_density_rad_s_sqrt_hz "
-                    "(replay: --gyro-noise-density)"
-                )
-        else:
-            i0, i1 = longest_run(rest)
-            source = "detected rest"
-            if i1 - i0 < _MIN_REST_SAMPLES or t_s[max(i1 - 1, i0)] - t_s[i0] < cfg.min_rest_s:
-                i0 = i1 = 0  # no rest long enough for the Allan deviation: use the spectrum
+        i0, i1, source = _rest_segment(t_s, cfg, rest)
         if i1 > i0:
             density, bias0 = _noise_from_rest(
                 omega_b[i0:i1], t_s[i0:i1], cfg.min_rest_s, source, summary
@@ -134,7 +174,18 @@ def prefilter(
     else:
         summary["noise_source"] = "given"
     summary["noise_density_rad_s_sqrt_hz"] = cfg.noise_density_rad_s_sqrt_hz
+    return cfg, bias0
 
+
+def _resolve_accel(
+    omega_b: NDArray,
+    t_s: NDArray,
+    cfg: PrefilterConfig,
+    bias0: NDArray | None,
+    summary: dict[str, Any],
+) -> PrefilterConfig:
+    """The configuration with its process noise (the angular acceleration scale): given, or
+    fitted by maximum likelihood to the rates less the rest bias."""
     if cfg.angular_accel_rad_s2 is None:
         z_fit = omega_b if bias0 is None else omega_b - bias0
         fit = _fit_accel(z_fit, t_s, cfg.model, cfg.noise_density_rad_s_sqrt_hz)
@@ -144,30 +195,17 @@ def prefilter(
     else:
         summary["accel_source"] = "given"
     summary["angular_accel_rad_s2"] = cfg.angular_accel_rad_s2
+    return cfg
 
-    m = _build_model(omega_b, t_s, cfg, rest, bias0 if cfg.estimate_bias else None)
-    run = _run_fast if engine == "numpy" else _run_filterpy
-    X, P = run(omega_b, m, mode == "rts")
-    nm = _n_motion(cfg.model)
-    rate_std = np.repeat(np.sqrt(P[:, 0, 0])[:, None], 3, axis=1)
-    bias_b = X[:, -1, :] if cfg.estimate_bias else None
-    if bias_b is not None:
-        summary["bias_final_rad_s"] = bias_b[-1].tolist()
-    # stationary posterior rate std of the causal filter at the median step, rad/s
+
+def _stationary_summary(cfg: PrefilterConfig, dt_med: float, summary: dict[str, Any]) -> None:
+    """The stationary posterior rate std of the causal filter at the median step, and the raw
+    per-sample noise, rad/s, into ``summary``."""
     r_med = cfg.noise_density_rad_s_sqrt_hz**2 / dt_med
+    nm = _n_motion(cfg.model)
     p_med = _stationary_prior(dt_med, nm, _q_scale(cfg.model, cfg.angular_accel_rad_s2), r_med)
     summary["stationary_rate_std_rad_s"] = math.sqrt(p_med[0, 0] * r_med / (p_med[0, 0] + r_med))
     summary["raw_rate_std_rad_s"] = math.sqrt(r_med)
-    return PrefilterResult(
-        omega_b=X[:, 0, :].copy(),
-        rate_std_rad_s=rate_std,
-        angular_accel_b=X[:, 1, :].copy(),
-        bias_b=None if bias_b is None else bias_b.copy(),
-        rest=rest,
-        mode=mode,
-        config=cfg,
-        summary=summary,
-    )
 
 
 def _noise_from_rest(

@@ -189,6 +189,11 @@ def _check_rates(omega_b: ArrayLike, t_s: ArrayLike) -> tuple[NDArray, NDArray]:
     return omega_b, t_s
 
 
+def _check_mode(mode: str) -> None:
+    if mode not in MODES:
+        raise InputError(f"Expected `mode` in {MODES}, got {mode!r}")
+
+
 def _check_positive(name: str, value: float | None, allow_none: bool = True) -> None:
     if value is None and allow_none:
         return

@@ -2,15 +2,17 @@
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from imu_dcm.errors import InputError
 from imu_dcm.prefilter.config import (
     _PRIOR_SCALE,
-    MODES,
     PrefilterConfig,
     PrefilterResult,
+    _check_mode,
     _check_positive,
     _check_rates,
 )
@@ -88,71 +90,21 @@ def euler_prefilter(
         ``angular_accel_b`` from Euler's equations at the estimate; ``config`` holds the noise
         density; ``summary["model"] == "euler"`` with the inertia and torque noise.
     """
-    from filterpy.kalman import MerweScaledSigmaPoints, UnscentedKalmanFilter
-
     omega_b, t_s = _check_rates(omega_b, t_s)
-    if mode not in MODES:
-        raise InputError(f"Expected `mode` in {MODES}, got {mode!r}")
-    inertia = np.asarray(inertia_kg_m2, dtype=float)
-    if inertia.shape != (3,) or not (np.isfinite(inertia).all() and (inertia > 0).all()):
-        raise InputError(f"Expected `inertia_kg_m2` three finite values > 0, got {inertia_kg_m2!r}")
+    _check_mode(mode)
+    inertia = _vector3("inertia_kg_m2", inertia_kg_m2, positive=True)
     _check_positive("noise_density_rad_s_sqrt_hz", noise_density_rad_s_sqrt_hz, allow_none=False)
     _check_positive("torque_noise_n_m_sqrt_hz", torque_noise_n_m_sqrt_hz, allow_none=False)
-    tau = None
-    if torque_b is not None:
-        tau = np.asarray(torque_b, dtype=float)
-        if tau.shape != (3,) or not np.isfinite(tau).all():
-            raise InputError(f"Expected `torque_b` three finite values, got {torque_b!r}")
-
-    n = len(t_s)
-    dt = np.diff(t_s)
-    q_w = (torque_noise_n_m_sqrt_hz / inertia) ** 2  # rate random-walk density per axis, rad²/s³
-
-    class _UKF(UnscentedKalmanFilter):
-        # propagate all sigma points at once, and keep them for the smoother's cross-covariance
-        def compute_process_sigmas(self, dt, fx=None, **fx_args):
-            self.sig_in = self.points_fn.sigma_points(self.x, self.P)
-            self.sig_out = _euler_step(self.sig_in, dt, inertia, tau)
-            self.sigmas_f = self.sig_out.copy()
-
-    points = MerweScaledSigmaPoints(3, alpha=0.1, beta=2.0, kappa=0.0)
-    ukf = _UKF(
-        dim_x=3,
-        dim_z=3,
-        dt=float(np.median(dt)),
-        hx=lambda x: x,
-        fx=lambda x, h: _euler_step(x, h, inertia, tau),
-        points=points,
-    )
-    r0 = noise_density_rad_s_sqrt_hz**2 / float(dt[0])
-    ukf.x = omega_b[0].copy()
-    ukf.P = np.eye(3) * r0 * _PRIOR_SCALE**2
-    X = np.empty((n, 3))
-    P = np.empty((n, 3, 3))
-    Xm = np.empty((n, 3))  # prior means
-    Pm = np.empty((n, 3, 3))  # prior covariances
-    C = np.empty((n, 3, 3))  # cross-covariance of x_{k-1} (filtered) and x_k (prior)
-    for k in range(n):
-        if k > 0:
-            ukf.Q = np.diag(q_w * dt[k - 1])
-            ukf.predict(dt=float(dt[k - 1]))
-            Xm[k], Pm[k] = ukf.x, ukf.P
-            d_in = ukf.sig_in - X[k - 1]
-            d_out = ukf.sig_out - Xm[k]
-            C[k] = (ukf.Wc[:, None] * d_in).T @ d_out
-        r = noise_density_rad_s_sqrt_hz**2 / float(dt[max(k - 1, 0)])
-        ukf.update(omega_b[k], R=np.eye(3) * r)
-        X[k], P[k] = ukf.x, ukf.P
+    tau = None if torque_b is None else _vector3("torque_b", torque_b, positive=False)
+    body = _Body(inertia, tau, (torque_noise_n_m_sqrt_hz / inertia) ** 2)
+    X, P, Xm, Pm, C = _ukf_forward(omega_b, t_s, body, noise_density_rad_s_sqrt_hz)
     if mode == "rts":
-        for k in range(n - 2, -1, -1):
-            G = C[k + 1] @ np.linalg.inv(Pm[k + 1])
-            X[k] = X[k] + G @ (X[k + 1] - Xm[k + 1])
-            P[k] = P[k] + G @ (P[k + 1] - Pm[k + 1]) @ G.T
+        _unscented_rts(X, P, Xm, Pm, C)
     summary = {
         "mode": mode,
         "model": "euler",
         "engine": "filterpy UKF",
-        "n_samples": n,
+        "n_samples": len(t_s),
         "inertia_kg_m2": inertia.tolist(),
         "torque_noise_n_m_sqrt_hz": float(torque_noise_n_m_sqrt_hz),
         "noise_density_rad_s_sqrt_hz": float(noise_density_rad_s_sqrt_hz),
@@ -168,3 +120,78 @@ def euler_prefilter(
         config=PrefilterConfig(noise_density_rad_s_sqrt_hz=float(noise_density_rad_s_sqrt_hz)),
         summary=summary,
     )
+
+
+def _vector3(name: str, value: ArrayLike, positive: bool) -> NDArray:
+    """``value`` as three finite floats (all > 0 when ``positive``), else InputError."""
+    v = np.asarray(value, dtype=float)
+    if v.shape != (3,) or not np.isfinite(v).all() or (positive and not (v > 0).all()):
+        what = "three finite values > 0" if positive else "three finite values"
+        raise InputError(f"Expected `{name}` {what}, got {value!r}")
+    return v
+
+
+@dataclass(frozen=True)
+class _Body:
+    """The process model: principal inertias (3,) kg·m², the known torque (3,) N·m or None, and
+    the rate random-walk density per axis that the torque noise gives, rad²/s³."""
+
+    inertia: NDArray
+    torque_b: NDArray | None
+    rate_walk: NDArray
+
+    def step(self, w: NDArray, dt: float) -> NDArray:
+        return _euler_step(w, dt, self.inertia, self.torque_b)
+
+
+def _make_ukf(body: _Body, dt_s: float):
+    """filterpy's UKF on the body rate, its process the Euler step of every sigma point at once;
+    the sigma points before and after the step are kept for the smoother's cross-covariance."""
+    from filterpy.kalman import MerweScaledSigmaPoints, UnscentedKalmanFilter
+
+    class _UKF(UnscentedKalmanFilter):
+        def compute_process_sigmas(self, dt, fx=None, **fx_args):
+            self.sig_in = self.points_fn.sigma_points(self.x, self.P)
+            self.sig_out = body.step(self.sig_in, dt)
+            self.sigmas_f = self.sig_out.copy()
+
+    points = MerweScaledSigmaPoints(3, alpha=0.1, beta=2.0, kappa=0.0)
+    return _UKF(dim_x=3, dim_z=3, dt=dt_s, hx=lambda x: x, fx=body.step, points=points)
+
+
+def _ukf_forward(
+    omega_b: NDArray, t_s: NDArray, body: _Body, noise_density: float
+) -> tuple[NDArray, NDArray, NDArray, NDArray, NDArray]:
+    """The unscented filter's pass: filtered means (N, 3) and covariances (N, 3, 3), prior means
+    and covariances, and the cross-covariance of ``x_{k-1}`` (filtered) and ``x_k`` (prior)."""
+    n = len(t_s)
+    dt = np.diff(t_s)
+    ukf = _make_ukf(body, float(np.median(dt)))
+    r0 = noise_density**2 / float(dt[0])
+    ukf.x = omega_b[0].copy()
+    ukf.P = np.eye(3) * r0 * _PRIOR_SCALE**2
+    X = np.empty((n, 3))
+    P = np.empty((n, 3, 3))
+    Xm = np.empty((n, 3))
+    Pm = np.empty((n, 3, 3))
+    C = np.empty((n, 3, 3))
+    for k in range(n):
+        if k > 0:
+            ukf.Q = np.diag(body.rate_walk * dt[k - 1])
+            ukf.predict(dt=float(dt[k - 1]))
+            Xm[k], Pm[k] = ukf.x, ukf.P
+            d_in = ukf.sig_in - X[k - 1]
+            d_out = ukf.sig_out - Xm[k]
+            C[k] = (ukf.Wc[:, None] * d_in).T @ d_out
+        r = noise_density**2 / float(dt[max(k - 1, 0)])
+        ukf.update(omega_b[k], R=np.eye(3) * r)
+        X[k], P[k] = ukf.x, ukf.P
+    return X, P, Xm, Pm, C
+
+
+def _unscented_rts(X: NDArray, P: NDArray, Xm: NDArray, Pm: NDArray, C: NDArray) -> None:
+    """The unscented RTS smoother (Särkkä 2008), backwards over the filter's pass, in place."""
+    for k in range(len(X) - 2, -1, -1):
+        G = C[k + 1] @ np.linalg.inv(Pm[k + 1])
+        X[k] = X[k] + G @ (X[k + 1] - Xm[k + 1])
+        P[k] = P[k] + G @ (P[k + 1] - Pm[k + 1]) @ G.T

@@ -19,10 +19,10 @@ import sys
 import warnings
 from pathlib import Path
 
-from imu_dcm.cli import OneLineArgumentParser, Progress, parse_numbers
+from imu_dcm.cli import OneLineArgumentParser, Progress, end_quietly_on_broken_pipe
+from imu_dcm.replay.options import LOG_KINDS, add_replay_options, replay_keywords
 
 PROG = "imu-dcm-replay"
-TIME_BASES = ("auto", "header", "log")
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -30,13 +30,16 @@ def build_parser() -> argparse.ArgumentParser:
 
     Only argparse is imported to build it: ``--help`` does not load the numerical stack.
     """
+    kinds = "; ".join(LOG_KINDS)
     p = OneLineArgumentParser(
         prog=PROG,
-        description="Replay a recorded gyro log (ROS 2 bag folder or .mcap) through the DCM "
-        "integrator and compare the estimate with the log's truth. "
-        f"See also: {PROG} convert-csv --help",
+        description=f"Replay a recorded gyro log ({kinds}) through the DCM integrator and "
+        "compare the estimate with the log's truth. "
+        f"Many logs at once: {PROG} batch PATH... --table OUT.csv (see {PROG} batch --help). "
+        f"A CSV log: {PROG} convert-csv --help. Exit codes: 0 done, 2 bad input or options, "
+        "130/143 interrupted.",
     )
-    p.add_argument("log", help="ROS 2 bag folder (metadata.yaml + .mcap) or a .mcap file")
+    p.add_argument("log", help=f"the log: {kinds}")
     add_replay_options(p)
     p.add_argument("--summary-json", metavar="PATH", help="write the summary as JSON")
     p.add_argument(
@@ -55,8 +58,13 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument(
         "--rerun",
         metavar="MODE",
-        help="spawn | serve | save:PATH.rrd | off (default: spawn with a display, "
-        "else save next to the output)",
+        help="spawn | serve | save:PATH.rrd | off (default: spawn with a display, else no "
+        "view and no file). serve: rerun's web viewer on 127.0.0.1 until Ctrl-C",
+    )
+    p.add_argument(
+        "--keep-viewer",
+        action="store_true",
+        help="with --rerun serve: leave the web viewer running after the command exits",
     )
     p.add_argument(
         "--realtime", action="store_true", help="pace the rerun view at the recorded speed"
@@ -65,78 +73,8 @@ def build_parser() -> argparse.ArgumentParser:
     return p
 
 
-def add_replay_options(g) -> None:
-    """The options that choose how one log is replayed (shared by ``replay`` and ``batch``)."""
-    g.add_argument("--imu-topic", help="IMU channel (default: the one Imu-typed channel)")
-    g.add_argument(
-        "--truth-topic",
-        help="truth channel (QuaternionStamped, PoseStamped, ...; the IMU topic for "
-        "its own orientation; 'none' to ignore truth). Named here, it is scored even "
-        "when its rate does not follow the gyro",
-    )
-    g.add_argument(
-        "--truth-frame",
-        metavar="CHILD",
-        help="child frame of a /tf truth, where several frames move",
-    )
-    g.add_argument(
-        "--truth-offset",
-        default="0",
-        metavar="auto|SECONDS",
-        help="shift added to the truth stamps: seconds (default 0) or auto (the "
-        "shift that best aligns the truth's rotation rate with the gyro's)",
-    )
-    g.add_argument(
-        "--time",
-        choices=TIME_BASES,
-        default="auto",
-        help="stamps: auto (default: header stamps unless they are all equal, not "
-        "increasing or miss the truth while log times overlap it), header, or log",
-    )
-    g.add_argument(
-        "--method",
-        default="magnus4",
-        metavar="METHOD",
-        help="integrator increment (default magnus4; one of imu_dcm.METHODS)",
-    )
-    g.add_argument(
-        "--bias",
-        default="auto",
-        help="gyro bias: auto (from rest segments, default), none, or x,y,z in rad/s",
-    )
-    g.add_argument(
-        "--gyro-units",
-        choices=("rad/s", "deg/s"),
-        default="rad/s",
-        help="unit of the log's angular velocity (default rad/s)",
-    )
-    g.add_argument(
-        "--init-quat",
-        metavar="X,Y,Z,W",
-        help="initial q_world_body (scalar last) when the log has no truth",
-    )
-    g.add_argument(
-        "--prefilter",
-        choices=("none", "kalman", "rts"),
-        default="none",
-        help="gyro pre-filter: Kalman filter or RTS smoother (default none)",
-    )
-    g.add_argument(
-        "--gyro-noise-density",
-        type=float,
-        metavar="RAD_S_SQRT_HZ",
-        help="pre-filter: gyro white-noise density, rad/s/√Hz (default: from rest)",
-    )
-    g.add_argument(
-        "--angular-accel",
-        type=float,
-        metavar="RAD_S2",
-        help="pre-filter: angular-acceleration scale, rad/s² (default: fitted)",
-    )
-
-
 def _write_out(out: Path, result, force: bool, inputs: tuple) -> Path:
-    from imu_dcm.bag_writer import StampedSeries, write_bag
+    from imu_dcm.logio.writer import StampedSeries, write_bag
 
     k = slice(result.start_index, None)
     quats = {"/estimate/orientation": StampedSeries(result.t_ns[k], result.q_est[k], "world")}
@@ -156,9 +94,10 @@ def _write_out(out: Path, result, force: bool, inputs: tuple) -> Path:
     )
 
 
-def _show(result, mode: str | None, realtime: bool, save_dir: Path) -> str:
-    """Hand the replay to the rerun view."""
-    from imu_dcm.viz import ViewData, show_replay
+def _show(result, mode: str | None, realtime: bool, keep: bool) -> str:
+    """Hand the replay to the rerun view. ``serve`` keeps the web viewer up until Ctrl-C (or,
+    with ``keep``, leaves it running and says how to stop it)."""
+    from imu_dcm.viz import ViewData, serve_replay, show_replay
 
     view = ViewData(
         t_s=result.t_s,
@@ -171,7 +110,33 @@ def _show(result, mode: str | None, realtime: bool, save_dir: Path) -> str:
         title=Path(str(result.summary.path).rstrip("/")).name,
         omega_raw_b=result.omega_raw_b,
     )
-    return show_replay(view, mode, save_dir, realtime=realtime)
+    if mode != "serve" or keep:
+        return show_replay(view, mode, realtime=realtime)
+    served = serve_replay(view, realtime)
+    try:
+        print(f"{served.line}; Ctrl-C stops it", flush=True)
+        _wait_for_stop(served.viewer.process)
+    finally:
+        served.stop()
+    return "rerun: web viewer stopped"
+
+
+def _wait_for_stop(process) -> None:
+    """Until Ctrl-C, SIGTERM or the server's own exit (the ending the user asked for)."""
+    import signal
+    import time
+
+    def on_term(signum, frame):
+        raise KeyboardInterrupt
+
+    old = signal.signal(signal.SIGTERM, on_term)
+    try:
+        while process.poll() is None:
+            time.sleep(0.2)
+    except KeyboardInterrupt:
+        pass
+    finally:
+        signal.signal(signal.SIGTERM, old)
 
 
 def _check_rerun(mode: str | None, inputs: tuple) -> None:
@@ -229,53 +194,23 @@ def _distinct_outputs(args) -> None:
                 raise InputError(f"Expected {fa} and {fb} to be separate paths, got {a} and {b}")
 
 
-def replay_keywords(args) -> dict:
-    """The keywords of :func:`imu_dcm.replay.replay` from :func:`add_replay_options`' options,
-    parsed and checked (string parsing lives here, not in the library)."""
+def _not_a_folder_of_logs(log: str) -> None:
+    """A folder that holds logs (not a log itself) is for ``batch``: say so."""
     from imu_dcm.errors import InputError
-    from imu_dcm.integrate import METHODS
 
-    if args.method not in METHODS:
-        build_parser().error(
-            f"argument --method: invalid choice: {args.method!r} (choose from {', '.join(METHODS)})"
-        )
-    bias = args.bias
-    if bias not in ("auto", "none"):
-        bias = parse_numbers(bias, 3, "bias (rad/s)")
-    init = None
-    if args.init_quat is not None:
-        init = parse_numbers(args.init_quat, 4, "init quaternion x,y,z,w")
-        if sum(v * v for v in init) < 1e-12:
-            raise InputError(f"Expected a non-zero init quaternion x,y,z,w, got {args.init_quat!r}")
-    offset: float | str = args.truth_offset
-    if offset != "auto":
-        offset = parse_numbers(offset, 1, "--truth-offset (auto or seconds)")[0]
-    config = None
-    if args.prefilter != "none":
-        from imu_dcm.prefilter import PrefilterConfig
+    if not os.path.isdir(log) or os.path.isfile(os.path.join(log, "metadata.yaml")):
+        return
+    from imu_dcm.replay.batch import find_logs
 
-        config = PrefilterConfig(
-            noise_density_rad_s_sqrt_hz=args.gyro_noise_density,
-            angular_accel_rad_s2=args.angular_accel,
-        )
-    elif args.gyro_noise_density is not None or args.angular_accel is not None:
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        found = find_logs([log])
+    if found and found != [os.path.abspath(log)]:
+        n = len(found)
         raise InputError(
-            "Expected --prefilter kalman or rts with --gyro-noise-density / "
-            "--angular-accel, got --prefilter none"
+            f"Expected one log, got a folder of {n} log{'s' if n != 1 else ''} {log!r}; "
+            f"replay them all with: {PROG} batch {log} --table OUT.csv"
         )
-    return {
-        "imu_topic": args.imu_topic,
-        "truth_topic": args.truth_topic,
-        "truth_frame": args.truth_frame,
-        "time": args.time,
-        "method": args.method,
-        "bias": bias,
-        "gyro_units": args.gyro_units,
-        "init_q_w_b": init,
-        "prefilter": None if args.prefilter == "none" else args.prefilter,
-        "prefilter_config": config,
-        "truth_offset_s": offset,
-    }
 
 
 def _options(args) -> dict:
@@ -283,6 +218,7 @@ def _options(args) -> dict:
     from imu_dcm.outputs import check_output_dir, check_output_file
 
     keywords = replay_keywords(args)
+    _not_a_folder_of_logs(args.log)
     inputs = _inputs(args.log)
     _distinct_outputs(args)
     if args.out:
@@ -337,9 +273,8 @@ def _replay_main(argv: list[str]) -> int:
         for line in lines:
             print(line)
     if args.rerun != "off":
-        save_dir = Path(args.out).resolve().parent if args.out else Path.cwd()
         try:
-            line = _show(result, args.rerun, args.realtime, save_dir)
+            line = _show(result, args.rerun, args.realtime, args.keep_viewer)
         except Exception as exc:
             if isinstance(exc, (ImuDcmError, OSError)) and args.rerun is not None:
                 raise  # asked for: a failure is an error (exit 2, one line)
@@ -368,14 +303,15 @@ def _message(exc: BaseException) -> str:
 
 
 def main(argv: list[str] | None = None) -> int:
-    """Run the command; returns the exit code (0 fine, 2 bad input)."""
+    """Run the command; returns the exit code (:mod:`imu_dcm.cli`: 0 done, 2 bad input or
+    options, 130 interrupted; ``batch`` adds 1 for failed logs)."""
     from imu_dcm.errors import ImuDcmError
 
     argv = list(sys.argv[1:] if argv is None else argv)
     if argv and argv[0] == "batch":
-        from imu_dcm.replay import batch
+        from imu_dcm.replay import batch_cli
 
-        return batch.main(argv[1:])
+        return batch_cli.main(argv[1:])
     message = ""
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
@@ -386,6 +322,9 @@ def main(argv: list[str] | None = None) -> int:
                 code = convert_main(argv[1:])
             else:
                 code = _replay_main(argv)
+        except BrokenPipeError:  # ... | head: the reader had what it wanted
+            end_quietly_on_broken_pipe()
+            code = 0
         except (ImuDcmError, OSError) as exc:
             code, message = 2, _message(exc)
         except SystemExit as exc:  # argparse: --help (0) or a bad option (2), already printed

@@ -23,6 +23,7 @@ from pathlib import Path
 from typing import Any
 
 from imu_dcm.errors import ImuDcmWarning, InputError
+from imu_dcm.logio import find_logs as find_logs_in
 from imu_dcm.replay.runners import LOST, run_dask, run_local
 from imu_dcm.replay.table import (
     Curve,
@@ -40,10 +41,8 @@ from imu_dcm.replay.table import (
     write_table,
 )
 
-__all__ = ["BatchResult", "find_logs", "main", "replay_many", "replay_one", "row_from_result"]
+__all__ = ["BatchResult", "find_logs", "replay_many", "replay_one", "row_from_result"]
 
-#: Files taken as logs when a folder is searched (a folder with metadata.yaml is a bag itself).
-LOG_SUFFIXES = (".mcap", ".db3", ".bag")
 #: Files read as lists of logs (one path a line, relative to the list; ``#`` comments).
 LIST_SUFFIXES = (".txt", ".list", ".lst")
 _ONE_AT_A_TIME = threading.Lock()  # warnings are process-global: one replay per process
@@ -71,26 +70,17 @@ class BatchResult:
 
 # ------------------------------------------------------------------------------ inputs
 def _search(folder: Path) -> Iterator[Path]:
-    if (folder / "metadata.yaml").is_file():
-        yield folder
-        return
-    for p in sorted(folder.iterdir()):
-        if p.name.startswith("."):
-            continue
-        if p.is_dir():
-            yield from _search(p)
-        elif p.suffix in LOG_SUFFIXES:
-            yield p
+    yield from find_logs_in(folder)
 
 
 def find_logs(paths: Iterable[str | Path]) -> list[str]:
     """The logs named by ``paths``, as absolute paths, each once, in the order found.
 
-    A folder holding ``metadata.yaml`` is a bag; another folder is searched (sorted, hidden
-    entries skipped) for bags and ``.mcap`` / ``.db3`` / ``.bag`` files; a ``.txt`` / ``.list``
-    file lists paths, one a line (relative to the list's folder; blank lines and ``#`` comments
-    skipped); anything else, including a path that does not exist, is taken as a log (and gets
-    an error row if it is not one).
+    A folder the reader takes as one log (a bag, a EuRoC dataset) is a log; another folder is
+    searched (sorted, hidden entries skipped) by :func:`imu_dcm.logio.find_logs`; a ``.txt`` /
+    ``.list`` file lists paths, one a line (relative to the list's folder; blank lines and
+    ``#`` comments skipped); anything else, including a path that does not exist, is taken as a
+    log (and gets an error row if it is not one).
     """
     out: dict[str, None] = {}
 
@@ -239,8 +229,30 @@ def replay_many(
         No logs found, a bad ``jobs``, an existing table without ``resume`` or ``overwrite``,
         an unreadable table, ``chart`` asked without matplotlib, ``dask`` without Dask.
     """
-    from imu_dcm.replay.batch_chart import INSTALL_HINT, chart_available, write_chart
+    logs, jobs = _check_batch(paths, jobs, replay_options)
+    chart_path = _chart_path(chart, table)
+    table = None if table is None else Path(table)
+    old = _open_table(table, resume, overwrite)
+    # A row whose worker died is not the log's verdict: replay that log again.
+    done = {k: r for k, r in old.items() if not (r.error and f": {LOST}: " in r.error)}
+    todo = [p for p in logs if p not in done]
+    resumed = len(logs) - len(todo)
+    counts = (resumed, len(logs), progress)
+    fresh, new_curves = _run_logs(todo, dict(replay_options), jobs, dask, table, counts)
+    rows = [fresh.get(p) or done[p] for p in logs]
+    listed = set(logs)
+    others = [r for r in old.values() if r.path not in listed]  # earlier runs, other logs
+    md, chart_path = _write_outputs(table, rows + others, new_curves, chart_path)
+    failed = sum(r.failed for r in rows)
+    return BatchResult(
+        tuple(rows), failed, resumed, table, md, chart_path, summary_line(rows + others)
+    )
 
+
+def _check_batch(
+    paths: Iterable[str | Path], jobs: int | None, replay_options: Mapping[str, Any]
+) -> tuple[list[str], int]:
+    """The logs of a batch (at least one) and the worker count (default: the usable cores)."""
     logs = find_logs(paths)
     if not logs:
         raise InputError("Expected at least one log in the batch, got none")
@@ -250,88 +262,96 @@ def replay_many(
         raise InputError(f"Expected jobs >= 1, got {jobs!r}")
     if "progress" in replay_options:
         raise InputError("Expected no per-log progress callback in a batch, got progress=")
-    chart_path = None
+    return logs, jobs
+
+
+def _chart_path(chart: str | Path | None, table: str | Path | None) -> Path | None:
+    """Where the chart goes: ``"auto"`` beside the table when matplotlib is installed (a warning
+    when it is not), a path as given (matplotlib required), or nowhere."""
+    from imu_dcm.replay.batch_chart import INSTALL_HINT, chart_available
+
     if chart == "auto":
         if table is not None and chart_available():
-            chart_path = Path(table).with_suffix(".png")
-        elif table is not None:
+            return Path(table).with_suffix(".png")
+        if table is not None:
             warnings.warn(
                 f"no chart: matplotlib is not installed ({INSTALL_HINT})",
                 ImuDcmWarning,
-                stacklevel=2,
+                stacklevel=3,
             )
-    elif chart is not None:
-        if not chart_available():
-            raise InputError(
-                f"Expected matplotlib for the chart, got it not installed: {INSTALL_HINT}"
-            )
-        chart_path = Path(chart)
+        return None
+    if chart is None:
+        return None
+    if not chart_available():
+        raise InputError(f"Expected matplotlib for the chart, got it not installed: {INSTALL_HINT}")
+    return Path(chart)
 
-    old: dict[str, LogRow] = {}
-    if table is not None:
-        table = Path(table)
-        if table.exists() and table.stat().st_size and not (resume or overwrite):
-            raise InputError(
-                f"Expected a new table, got an existing {table} (resume or overwrite it)"
-            )
-        if overwrite and not resume:
-            for p in (table, curves_path(table)):
-                p.unlink(missing_ok=True)
-        table.parent.mkdir(parents=True, exist_ok=True)
-        old = {r.path: r for r in read_table(table)} if resume else {}  # the last row wins
-    # A row whose worker died is not the log's verdict: replay that log again.
-    done = {k: r for k, r in old.items() if not (r.error and f": {LOST}: " in r.error)}
-    todo = [p for p in logs if p not in done]
-    resumed = len(logs) - len(todo)
-    options = dict(replay_options)
 
+def _open_table(table: Path | None, resume: bool, overwrite: bool) -> dict[str, LogRow]:
+    """Make the table ready to append to; its rows by path when resuming (the last row wins).
+    An existing table needs ``resume`` or ``overwrite`` (which removes it and its curves)."""
+    if table is None:
+        return {}
+    if table.exists() and table.stat().st_size and not (resume or overwrite):
+        raise InputError(f"Expected a new table, got an existing {table} (resume or overwrite it)")
+    if overwrite and not resume:
+        for p in (table, curves_path(table)):
+            p.unlink(missing_ok=True)
+    table.parent.mkdir(parents=True, exist_ok=True)
+    return {r.path: r for r in read_table(table)} if resume else {}
+
+
+def _run_logs(
+    todo: list[str],
+    options: dict[str, Any],
+    jobs: int,
+    dask,
+    table: Path | None,
+    counts: tuple[int, int, Callable[[int, int, LogRow], None] | None],
+) -> tuple[dict[str, LogRow], dict[str, Curve]]:
+    """Replay the logs ``todo`` (largest first when in parallel) and keep each result as it
+    arrives: appended to the table (curve first, so a row always has its curve), or kept in
+    memory without a table. ``counts``: logs already done, logs in all, the progress callback.
+    Returns the new rows and, without a table, the new curves, by path."""
+    resumed, total, progress = counts
     fresh: dict[str, LogRow] = {}
     new_curves: dict[str, Curve] = {}
-    if todo:
-        if dask is not None or jobs > 1:  # largest first: no big log left alone at the end
-            todo.sort(key=_size, reverse=True)
-        if dask is not None:
-            runs = run_dask(replay_one, todo, options, dask)
-        else:
-            runs = run_local(replay_one, todo, options, jobs)
-        with contextlib.closing(runs):  # stops the workers if this loop is interrupted
-            for row, curve in runs:
-                if table is not None:
-                    if curve is not None:
-                        append_curve(table, curve)  # first: a row always has its curve
-                    append_rows(table, [row])
-                elif curve is not None:
-                    new_curves[row.path] = curve
-                fresh[row.path] = row
-                if progress is not None:
-                    progress(resumed + len(fresh), len(logs), row)
+    if not todo:
+        return fresh, new_curves
+    if dask is not None or jobs > 1:  # largest first: no big log left alone at the end
+        todo = sorted(todo, key=_size, reverse=True)
+    if dask is not None:
+        runs = run_dask(replay_one, todo, options, dask)
+    else:
+        runs = run_local(replay_one, todo, options, jobs)
+    with contextlib.closing(runs):  # stops the workers if this loop is interrupted
+        for row, curve in runs:
+            if table is not None:
+                if curve is not None:
+                    append_curve(table, curve)
+                append_rows(table, [row])
+            elif curve is not None:
+                new_curves[row.path] = curve
+            fresh[row.path] = row
+            if progress is not None:
+                progress(resumed + len(fresh), total, row)
+    return fresh, new_curves
 
-    rows = [fresh.get(p) or done[p] for p in logs]
-    listed = set(logs)
-    others = [r for r in old.values() if r.path not in listed]  # earlier runs, other logs
+
+def _write_outputs(
+    table: Path | None, rows: list[LogRow], new_curves: dict[str, Curve], chart: Path | None
+) -> tuple[Path | None, Path | None]:
+    """Rewrite the table and its curves in input order, with the markdown beside them; draw the
+    chart. Returns the markdown and the chart written (None when not asked for)."""
+    from imu_dcm.replay.batch_chart import write_chart
+
     md = None
     curves = new_curves
     if table is not None:
-        write_table(table, rows + others)
+        write_table(table, rows)
         curves = read_curves(table)
-        write_curves(table, [curves[r.path] for r in rows + others if r.path in curves])
-        md = write_markdown(table, rows + others)
-    if chart_path is not None:
-        chart_path = write_chart(chart_path, rows + others, curves)
-    return BatchResult(
-        tuple(rows),
-        sum(r.failed for r in rows),
-        resumed,
-        table,
-        md,
-        chart_path,
-        summary_line(rows + others),
-    )
-
-
-# ------------------------------------------------------------------------------- CLI
-def main(argv: list[str] | None = None) -> int:
-    """``python -m imu_dcm.replay batch ...``: see :mod:`imu_dcm.replay.batch_cli`."""
-    from imu_dcm.replay.batch_cli import main as cli_main
-
-    return cli_main(argv)
+        write_curves(table, [curves[r.path] for r in rows if r.path in curves])
+        md = write_markdown(table, rows)
+    if chart is not None:
+        chart = write_chart(chart, rows, curves)
+    return md, chart

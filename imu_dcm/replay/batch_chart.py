@@ -34,7 +34,6 @@ def write_chart(path: str | Path, rows: Sequence[LogRow], curves: dict[str, Curv
     log scale, seconds since each log's first sample.
     """
     from matplotlib.backends.backend_agg import FigureCanvasAgg
-    from matplotlib.collections import LineCollection
     from matplotlib.figure import Figure
 
     names = short_names([r.path for r in rows])
@@ -44,46 +43,59 @@ def write_chart(path: str | Path, rows: Sequence[LogRow], curves: dict[str, Curv
     FigureCanvasAgg(fig)
     ax_rms, ax_t = fig.subplots(2, 1, height_ratios=[top_h, 4.5])
     fig.suptitle(summary_line(rows), fontsize=10)
+    colors = [f"C{k % 10}" for k in range(len(rows))]
+    _rms_panel(ax_rms, rows, names, colors, named)
+    _curves_panel(ax_t, rows, names, colors, curves)
+    out = Path(path)
+    fig.savefig(out, dpi=110)
+    return out
 
+
+def _rms_panel(ax, rows: Sequence[LogRow], names: list[str], colors: list[str], named: bool):
+    """Top panel: one bar per log with its value or why it has none (``named``), or, for many
+    logs, the sorted RMS values; log scale either way."""
     rms = np.array([np.nan if r.rms_error_deg is None else r.rms_error_deg for r in rows])
     good = rms[np.isfinite(rms) & (rms > 0)]
     floor = float(good.min()) / 3 if len(good) else 1e-3
-    colors = [f"C{k % 10}" for k in range(len(rows))]
-    if named:
-        y = np.arange(len(rows))[::-1]
-        has = np.isfinite(rms) & (rms > 0)
-        ax_rms.barh(y[has], rms[has], color=[c for c, h in zip(colors, has, strict=False) if h])
-        for yi, r, v in zip(y, rows, rms, strict=False):
-            if r.failed:
-                ax_rms.text(
-                    floor,
-                    yi,
-                    "  failed: " + r.error[:90],
-                    va="center",
-                    fontsize=7,
-                    color="firebrick",
-                )
-            elif not np.isfinite(v):
-                ax_rms.text(floor, yi, "  no truth", va="center", fontsize=7, color="gray")
-            else:
-                ax_rms.text(v, yi, f" {v:.3g}°", va="center", fontsize=7)
-        ax_rms.set_yticks(y, names, fontsize=7)
-        ax_rms.set_ylim(-0.6, len(rows) - 0.4)
-    else:
-        order = np.sort(good)
-        ax_rms.plot(np.arange(1, len(order) + 1), order, ".", ms=3)
-        ax_rms.set_xlabel(
-            f"logs sorted by RMS error ({len(rows) - len(good)} failed or without truth not shown)"
-        )
     top = float(good.max()) if len(good) else 1.0
     if named:
-        ax_rms.set_xscale("log")
-        ax_rms.set_xlim(floor, top * 30)
+        _rms_bars(ax, rows, names, colors, rms, floor)
+        ax.set_xscale("log")
+        ax.set_xlim(floor, top * 30)
     else:
-        ax_rms.set_yscale("log")
-        ax_rms.set_ylim(floor, top * 3)
-    ax_rms.set_title("RMS attitude error per log, deg", fontsize=10, loc="left")
-    ax_rms.grid(True, which="major", alpha=0.3)
+        order = np.sort(good)
+        ax.plot(np.arange(1, len(order) + 1), order, ".", ms=3)
+        ax.set_xlabel(
+            f"logs sorted by RMS error ({len(rows) - len(good)} failed or without truth not shown)"
+        )
+        ax.set_yscale("log")
+        ax.set_ylim(floor, top * 3)
+    ax.set_title("RMS attitude error per log, deg", fontsize=10, loc="left")
+    ax.grid(True, which="major", alpha=0.3)
+
+
+def _rms_bars(ax, rows, names, colors, rms, floor: float) -> None:
+    """A bar per log with truth, labelled with its value; failed logs and logs without truth
+    say so where their bar would be."""
+    y = np.arange(len(rows))[::-1]
+    has = np.isfinite(rms) & (rms > 0)
+    ax.barh(y[has], rms[has], color=[c for c, h in zip(colors, has, strict=False) if h])
+    for yi, r, v in zip(y, rows, rms, strict=False):
+        if r.failed:
+            ax.text(
+                floor, yi, "  failed: " + r.error[:90], va="center", fontsize=7, color="firebrick"
+            )
+        elif not np.isfinite(v):
+            ax.text(floor, yi, "  no truth", va="center", fontsize=7, color="gray")
+        else:
+            ax.text(v, yi, f" {v:.3g}°", va="center", fontsize=7)
+    ax.set_yticks(y, names, fontsize=7)
+    ax.set_ylim(-0.6, len(rows) - 0.4)
+
+
+def _curves_panel(ax, rows, names, colors, curves: dict[str, Curve]) -> None:
+    """Bottom panel: every log's error curve (log scale), a legend when there are few."""
+    from matplotlib.collections import LineCollection
 
     segs, seg_colors, labels = [], [], []
     for k, (name, r) in enumerate(zip(names, rows, strict=False)):
@@ -99,34 +111,29 @@ def write_chart(path: str | Path, rows: Sequence[LogRow], curves: dict[str, Curv
         labels.append(name)
     if segs:
         alpha = 0.9 if len(segs) <= 20 else max(0.15, 20 / len(segs))
-        ax_t.add_collection(LineCollection(segs, colors=seg_colors, linewidths=1.0, alpha=alpha))
+        ax.add_collection(LineCollection(segs, colors=seg_colors, linewidths=1.0, alpha=alpha))
         allpts = np.concatenate(segs)
-        ax_t.set_xlim(0, float(allpts[:, 0].max()) * 1.02 or 1.0)
-        ax_t.set_ylim(float(allpts[:, 1].min()) / 2, float(allpts[:, 1].max()) * 2)
+        ax.set_xlim(0, float(allpts[:, 0].max()) * 1.02 or 1.0)
+        ax.set_ylim(float(allpts[:, 1].min()) / 2, float(allpts[:, 1].max()) * 2)
         if len(segs) <= 12:
             from matplotlib.lines import Line2D
 
             handles = [Line2D([], [], color=c) for c in seg_colors]
-            ax_t.legend(handles, labels, fontsize=7, loc="upper left", bbox_to_anchor=(1.01, 1.0))
+            ax.legend(handles, labels, fontsize=7, loc="upper left", bbox_to_anchor=(1.01, 1.0))
     else:
-        ax_t.set_xlim(0, 1)
-        ax_t.set_ylim(1e-3, 1)
-        ax_t.text(
+        ax.set_xlim(0, 1)
+        ax.set_ylim(1e-3, 1)
+        ax.text(
             0.5,
             0.5,
             "no log with an error curve",
             ha="center",
             va="center",
-            transform=ax_t.transAxes,
+            transform=ax.transAxes,
             color="gray",
         )
-    ax_t.set_yscale("log")
-    ax_t.set_xlabel("time since the log's first sample, s")
-    ax_t.set_ylabel("total attitude error, deg")
-    ax_t.set_title(
-        "error over time, every log (largest error per time bin)", fontsize=10, loc="left"
-    )
-    ax_t.grid(True, which="major", alpha=0.3)
-    out = Path(path)
-    fig.savefig(out, dpi=110)
-    return out
+    ax.set_yscale("log")
+    ax.set_xlabel("time since the log's first sample, s")
+    ax.set_ylabel("total attitude error, deg")
+    ax.set_title("error over time, every log (largest error per time bin)", fontsize=10, loc="left")
+    ax.grid(True, which="major", alpha=0.3)

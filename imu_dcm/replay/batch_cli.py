@@ -15,6 +15,7 @@ import threading
 import time
 import warnings
 
+from imu_dcm.cli import end_quietly_on_broken_pipe
 from imu_dcm.errors import ImuDcmError, InputError
 from imu_dcm.replay.batch import replay_many
 from imu_dcm.replay.table import LogRow, one_line
@@ -25,7 +26,7 @@ PROG = "imu-dcm-replay batch"
 def build_parser() -> argparse.ArgumentParser:
     """The parser of ``python -m imu_dcm.replay batch`` (options are checked before any I/O)."""
     from imu_dcm.cli import OneLineArgumentParser
-    from imu_dcm.replay.__main__ import add_replay_options
+    from imu_dcm.replay.options import add_replay_options
 
     p = OneLineArgumentParser(
         prog=PROG,
@@ -124,7 +125,7 @@ def main(argv: list[str] | None = None) -> int:
             args = build_parser().parse_args(argv)
             if not args.table.endswith(".csv"):
                 raise InputError(f"Expected --table ending in .csv, got {args.table!r}")
-            from imu_dcm.replay.__main__ import replay_keywords
+            from imu_dcm.replay.options import replay_keywords
 
             options = replay_keywords(args)
             bar = _Bar()
@@ -143,6 +144,7 @@ def main(argv: list[str] | None = None) -> int:
                 )
             finally:
                 bar.close()
+            code = 1 if result.failed else 0  # kept when the output pipe closes early
             if not args.quiet:
                 for r in result.rows:
                     if r.failed:
@@ -153,7 +155,8 @@ def main(argv: list[str] | None = None) -> int:
                     print(f"resumed    {result.resumed} rows already in the table")
                 print(f"elapsed    {time.perf_counter() - t0:.2f} s")
             print(result.summary)
-            code = 1 if result.failed else 0
+        except BrokenPipeError:  # ... | head: the reader had what it wanted
+            end_quietly_on_broken_pipe()
         except (ImuDcmError, OSError) as exc:
             message = one_line(str(exc)) or type(exc).__name__
         except SystemExit as exc:  # argparse: --help (0) or a bad option (2), already printed

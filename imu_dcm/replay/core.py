@@ -5,8 +5,11 @@ clean the gyro samples (:mod:`imu_dcm.replay.clean`: NaN/Inf, implausible rates,
 file order, duplicates, gaps), convert deg/s when asked (and warn with the evidence when the
 rates look like deg/s), check that the truth's rotation rate follows the gyro, slerp the truth
 at the gyro stamps inside its coverage, remove the gyro bias (:mod:`imu_dcm.replay.bias`),
-optionally pre-filter, integrate from the truth at the first gyro sample inside its coverage,
-and measure the attitude error (total, inclination, heading).
+estimate the mounting between the gyro's frame and the truth's body frame
+(:mod:`imu_dcm.replay.mounting`), find truth jumps the gyro does not show, optionally
+pre-filter, integrate from the truth at the first gyro sample inside its coverage (and again
+after each truth jump), and measure the attitude error (total, inclination, heading) over the
+segments between jumps.
 
 Conventions: ``q_w_b`` Hamilton ``[x, y, z, w]``, body to world; ``omega_b`` body rate in body
 axes, rad/s; ``t_ns`` int64 stamps, ``t_s`` float64 seconds since the first gyro sample; errors
@@ -25,14 +28,23 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from imu_dcm.errors import GapWarning, ImuDcmWarning, LogError
-from imu_dcm.integrate import integrate
-from imu_dcm.logio import read_log
+from imu_dcm.integrate import integrate_quat
+from imu_dcm.logio import LogData, read_log
 from imu_dcm.metrics import AttitudeError, attitude_error_deg, rms
-from imu_dcm.replay.bias import RestConfig, estimate_bias
+from imu_dcm.replay.bias import BIAS_RULE, BiasEstimate, RestConfig, estimate_bias
 from imu_dcm.replay.clean import CleanedImu, _deg_evidence, clean_imu
+from imu_dcm.replay.mounting import APPLY_DEG, Mounting, estimate_mounting, from_rotation
 from imu_dcm.replay.options import check_options
+from imu_dcm.replay.settings import ReplaySettings, check_mounting
 from imu_dcm.replay.summary import ReplayResult, ReplaySummary
-from imu_dcm.replay.truth import align_truth, choose_time, slerp_truth
+from imu_dcm.replay.truth import (
+    AlignedTruth,
+    align_truth,
+    check_truth,
+    choose_time,
+    find_jumps,
+)
+from imu_dcm.resample import slerp_truth
 
 __all__ = ["CleanedImu", "ReplayResult", "ReplaySummary", "clean_imu", "replay", "slerp_truth"]
 
@@ -40,7 +52,7 @@ DEG = np.pi / 180.0
 
 
 def replay(
-    path: str | Path,
+    path: str | Path | LogData,
     *,
     imu_topic: str | None = None,
     truth_topic: str | None = None,
@@ -54,14 +66,16 @@ def replay(
     prefilter_config=None,
     truth_offset_s: float | str = 0.0,
     rest_config: RestConfig | None = None,
+    mounting: str | ArrayLike = "auto",
     progress: Callable[[str, float], None] | None = None,
 ) -> ReplayResult:
     """Replay a gyro log: integrate its rates and compare the attitude with its truth.
 
     Parameters
     ----------
-    path : str or Path
-        ROS 2 bag folder or log file (never modified).
+    path : str, Path or LogData
+        ROS 2 bag folder or log file (never modified), or a log already read (then the topic
+        and frame choices are those it was read with).
     imu_topic, truth_topic : str, optional
         Channel choices (see the log reader); ``truth_topic="none"`` ignores any truth. A truth
         named here is scored even when its rate does not follow the gyro (the summary says so);
@@ -87,6 +101,11 @@ def replay(
         Added to the truth stamps, s (default 0); ``"auto"``: the shift that best aligns the
         truth's rate with the gyro's. The best shift is reported either way.
     rest_config : RestConfig, optional
+    mounting : "auto", "none" or array_like (4,)
+        The rotation ``q_t_g`` ``[x, y, z, w]`` from the gyro's frame into the truth's body frame
+        (:mod:`imu_dcm.replay.mounting`). ``"auto"`` (default): estimated, and applied when the
+        motion determines it and it exceeds a few degrees; ``"none"``: estimated and reported,
+        never applied; a quaternion: applied as given.
     progress : callable(stage, fraction), optional
         Called as work advances (for a progress bar).
 
@@ -104,12 +123,11 @@ def replay(
         A bad option value.
     """
     t0 = _time.perf_counter()
+    shown = path.path if isinstance(path, LogData) else path
     bias, q_init, offset = check_options(
-        path, time, method, bias, gyro_units, init_q_w_b, prefilter, truth_offset_s
+        shown, time, method, bias, gyro_units, init_q_w_b, prefilter, truth_offset_s
     )
-    notes: list[str] = []  # this replay's warnings, for the summary (no global state)
-    result = _replay(
-        path,
+    settings = ReplaySettings(
         imu_topic,
         truth_topic,
         truth_frame,
@@ -122,9 +140,10 @@ def replay(
         prefilter_config,
         offset,
         rest_config,
-        progress or (lambda stage, frac: None),
-        notes,
+        check_mounting(mounting),
     )
+    notes: list[str] = []  # this replay's warnings, for the summary (no global state)
+    result = _replay(path, settings, progress or (lambda stage, frac: None), notes)
     summary = dataclasses.replace(
         result.summary, warnings=tuple(notes), elapsed_s=_time.perf_counter() - t0
     )
@@ -143,35 +162,47 @@ def _warn(notes: list[str], msg: str) -> None:
     warnings.warn(msg, ImuDcmWarning, stacklevel=3)
 
 
-def _replay(
-    path,
-    imu_topic,
-    truth_topic,
-    truth_frame,
-    time,
-    method,
-    bias,
-    gyro_units,
-    q_init,
-    prefilter,
-    prefilter_config,
-    offset,
-    rest_config,
-    report,
-    notes: list[str],
-) -> ReplayResult:
+@dataclasses.dataclass(frozen=True)
+class _Gyro:
+    """The cleaned gyro of a replay: time base, stamps, rates (rad/s), accelerometer."""
+
+    base: str
+    clean: CleanedImu
+    t_ns: NDArray[np.int64]
+    t_s: NDArray[np.float64]
+    omega: NDArray[np.float64]
+    accel: NDArray[np.float64] | None
+
+
+@dataclasses.dataclass(frozen=True)
+class _Judged:
+    """What the truth side found: truth at the gyro stamps, jumps, mounting."""
+
+    aligned: AlignedTruth
+    truth_t_ns: NDArray[np.int64] | None  # stamps of the truth used, at the applied offset
+    jumps: tuple
+    mounting: Mounting | None
+    mounting_applied: bool
+
+
+def _read(path, s: ReplaySettings, report) -> LogData:
     report("read", 0.0)
     log = read_log(
         path,
-        imu_topic=imu_topic,
-        truth_topic=truth_topic,
-        truth_frame=truth_frame,
+        imu_topic=s.imu_topic,
+        truth_topic=s.truth_topic,
+        truth_frame=s.truth_frame,
         progress=lambda frac: report("read", frac),
     )
     report("read", 1.0)
+    return log
+
+
+def _gyro(log: LogData, s: ReplaySettings, notes: list[str]) -> _Gyro:
+    """Time base, cleaning and units of the gyro samples."""
     imu, truth = log.imu, log.truth
     base, why = choose_time(
-        time,
+        s.time,
         imu.t_ns,
         imu.log_t_ns,
         truth.t_ns if truth is not None else None,
@@ -180,7 +211,7 @@ def _replay(
     if why:
         _warn(notes, f"time: using log time, not header stamps: {why}")
     imu_t = imu.t_ns if base == "header" else imu.log_t_ns
-    scale = DEG if gyro_units == "deg/s" else 1.0
+    scale = DEG if s.gyro_units == "deg/s" else 1.0
     clean = clean_imu(imu_t, np.asarray(imu.omega_b, dtype=float) * scale, imu.topic)
     notes.extend(clean.messages)
     n = len(clean.t_ns)
@@ -189,77 +220,256 @@ def _replay(
         if base == "header" and len(np.unique(imu.log_t_ns[:1000])) > 1:
             hint = "; the log times differ: try --time log"
         raise LogError(f"Expected at least 2 valid gyro samples on {imu.topic}, got {n}{hint}")
-    t_ns = clean.t_ns
-    t_s = (t_ns - t_ns[0]).astype(np.float64) * 1e-9
-    omega_raw = clean.omega_b
+    t_s = (clean.t_ns - clean.t_ns[0]).astype(np.float64) * 1e-9
+    return _Gyro(base, clean, clean.t_ns, t_s, clean.omega_b, _accel(imu, clean, notes))
 
+
+def _accel(imu, clean: CleanedImu, notes: list[str]) -> NDArray | None:
+    """The accelerometer on the cleaned gyro rows, m/s², or None (absent or incomplete)."""
+    if imu.accel_b is None:
+        return None
+    acc = np.asarray(imu.accel_b, dtype=float)[clean.index]
+    if not np.all(np.isfinite(acc)):
+        bad = int(np.count_nonzero(~np.all(np.isfinite(acc), axis=1)))
+        notes.append(
+            f"{imu.topic}: accelerometer missing on {bad} of {len(acc)} samples; rest judged "
+            f"from the gyro alone"
+        )
+        return None
+    return acc
+
+
+def _judge_truth(
+    log: LogData, s: ReplaySettings, g: _Gyro, omega: NDArray, notes: list[str]
+) -> _Judged:
+    """Offset, rate check, jumps and mounting of the truth against the (bias-free) gyro."""
+    imu = log.imu
     aligned = align_truth(
-        truth, base, t_ns, omega_raw, offset, imu.log_t_ns, lambda msg: _warn(notes, msg)
-    )
-    q_truth, truth = aligned.q_truth, aligned.truth
-    if gyro_units == "rad/s":
-        evidence = _deg_evidence(omega_raw, t_s, q_truth)
+        log.truth, g.base, g.t_ns, g.omega, s.truth_offset_s, imu.log_t_ns,
+        lambda msg: _warn(notes, msg),
+    )  # fmt: skip
+    if s.gyro_units == "rad/s":
+        evidence = _deg_evidence(g.omega, g.t_s, aligned.q_truth)
         if evidence:
             _warn(
                 notes,
                 f"{imu.topic}: the rates look like deg/s: {evidence}; pass "
                 f"--gyro-units deg/s to convert",
             )
+    truth = aligned.truth
+    if truth is None:
+        given = None if isinstance(s.mounting, str) else _given(s.mounting)
+        return _Judged(aligned, None, (), given, given is not None)
+    tt = (truth.t_ns if g.base == "header" else truth.log_t_ns) + np.int64(
+        round(aligned.offset_s * 1e9)
+    )
+    jumps = find_jumps(g.t_ns, omega, tt, truth.q_w_b)
+    if jumps:
+        shown = "; ".join(j.describe() for j in jumps[:5])
+        more = f" and {len(jumps) - 5} more" if len(jumps) > 5 else ""
+        _warn(
+            notes,
+            f"truth {truth.topic} jumps where the gyro does not: {shown}{more}; the estimate "
+            f"re-anchors to the truth after each jump and the {len(jumps) + 1} segments "
+            f"between jumps are scored",
+        )
+    residual = 0.0
+    if s.truth_offset_s != "auto" and aligned.check and aligned.check.shift_s is not None:
+        residual = aligned.check.shift_s
+    shift = np.int64(round(residual * 1e9))
+    t00 = int(g.t_ns[0])
+    skip = tuple(
+        (t00 + round(j.t0_s * 1e9) + int(shift), t00 + round(j.t1_s * 1e9) + int(shift))
+        for j in jumps
+    )
+    est = estimate_mounting(g.t_ns, omega, tt + shift, truth.q_w_b, skip)
+    mounting, applied = _choose_mounting(s.mounting, est, imu.frame_id, truth, notes)
+    return _Judged(aligned, tt, jumps, mounting, applied)
 
-    has_truth = np.all(np.isfinite(q_truth), axis=1)
-    start = int(np.flatnonzero(has_truth)[0]) if has_truth.any() else 0
-    if has_truth.any():
-        q0 = q_truth[start]
-    else:
-        q0 = q_init if q_init is not None else np.array([0.0, 0.0, 0.0, 1.0])
 
-    report("bias", 0.0)
-    bias_est = estimate_bias(omega_raw, t_s, bias, rest_config)
-    omega = omega_raw - bias_est.bias_b
-    pf_summary = None
-    if prefilter is not None:
-        from imu_dcm.prefilter import prefilter as run_prefilter
+def _given(q) -> Mounting:
+    from scipy.spatial.transform import Rotation
 
-        with warnings.catch_warnings():  # gaps were reported once, by clean_imu
-            warnings.simplefilter("ignore", GapWarning)
-            pf = run_prefilter(omega, t_s, prefilter, prefilter_config)
-        omega = np.asarray(pf.omega_b, dtype=float)
-        pf_summary = pf.summary
+    return from_rotation(Rotation.from_quat(q), "given")
 
-    report("integrate", 0.0)
+
+def _choose_mounting(mode, est: Mounting | None, imu_frame: str, truth, notes) -> tuple:
+    """The mounting to apply (or not), with its one line."""
+    frames = f"{imu_frame or 'the gyro frame'} -> {truth.child_frame_id or truth.topic}"
+    if not isinstance(mode, str):
+        given = _given(mode)
+        compare = ""
+        if est is not None and est.determined:
+            from imu_dcm.so3 import angle_between_deg
+
+            diff = float(angle_between_deg(np.asarray(given.q_t_g), np.asarray(est.q_t_g)))
+            compare = f"; the motion says {est.describe()}, {diff:.1f}° from the given one"
+        _warn(notes, f"mounting ({frames}): {given.describe()}, applied{compare}")
+        return given, True
+    if est is None or est.angle_deg <= APPLY_DEG:
+        return est, False
+    if mode == "auto" and est.determined:
+        _warn(
+            notes,
+            f"mounting ({frames}): the gyro frame is {est.describe()}: applied to the scoring "
+            f"(--mounting none to score without it)",
+        )
+        return est, True
+    why = "--mounting none" if mode == "none" else "the motion does not determine it"
+    _warn(notes, f"mounting ({frames}): the gyro frame is {est.describe()}: not applied ({why})")
+    return est, False
+
+
+def _pick_truth(log: LogData, g: _Gyro, omega: NDArray) -> tuple[LogData, tuple[dict, ...]]:
+    """Among an automatically picked truth and the log's other attitude candidates, the one
+    whose rate follows the gyro best: independent references before estimates (odometry, the
+    IMU's own orientation, an autopilot's), then the higher rate-norm correlation."""
+    if log.truth is None or not log.truth.auto or not log.truth_candidates:
+        return log, ()
+    rows = []
+    for cand in (log.truth, *log.truth_candidates):
+        tt = cand.t_ns if g.base == "header" else cand.log_t_ns
+        chk = check_truth(g.t_ns, omega, tt, cand.q_w_b)
+        corr = chk.correlation if chk.correlation is not None else -1.0
+        rows.append(((chk.checked and chk.follows, not cand.estimate_of, corr), cand, chk))
+    best = max(range(len(rows)), key=lambda i: rows[i][0])
+    described = tuple(
+        {
+            "topic": cand.topic,
+            "type": cand.type,
+            "child_frame_id": cand.child_frame_id,
+            "estimate_of": cand.estimate_of,
+            "follows": bool(chk.checked and chk.follows),
+            "correlation": chk.correlation,
+            "residual_rad_s": chk.residual_rad_s,
+            "picked": i == best,
+        }
+        for i, (_key, cand, chk) in enumerate(rows)
+    )
+    return dataclasses.replace(log, truth=rows[best][1]), described
+
+
+def _remove_bias(s: ReplaySettings, g: _Gyro) -> tuple[BiasEstimate, NDArray]:
+    bias_est = estimate_bias(g.omega, g.t_s, s.bias, s.rest_config, g.accel)
+    return bias_est, g.omega - bias_est.bias_b
+
+
+def _prefilter(s: ReplaySettings, omega: NDArray, t_s: NDArray):
+    if s.prefilter is None:
+        return omega, None
+    from imu_dcm.prefilter import prefilter as run_prefilter
+
+    with warnings.catch_warnings():  # gaps were reported once, by clean_imu
+        warnings.simplefilter("ignore", GapWarning)
+        pf = run_prefilter(omega, t_s, s.prefilter, s.prefilter_config)
+    return np.asarray(pf.omega_b, dtype=float), pf.summary
+
+
+def _scored_truth(q_truth: NDArray, t_s: NDArray, jumps) -> tuple[NDArray, list[int]]:
+    """Truth usable for scoring (NaN across each jump) and the anchor samples of the segments."""
+    q = q_truth.copy()
+    has = np.all(np.isfinite(q), axis=1)
+    anchors = [int(np.flatnonzero(has)[0])] if has.any() else [0]
+    for j in jumps:
+        q[(t_s > j.t0_s) & (t_s < j.t1_s)] = np.nan
+        after = np.flatnonzero(has & (t_s >= j.t1_s) & (np.arange(len(t_s)) > anchors[-1]))
+        if len(after):
+            anchors.append(int(after[0]))
+    return q, anchors
+
+
+def _integrate(s: ReplaySettings, omega, t_s, q_truth, anchors, topic: str) -> NDArray:
+    """Integrate each segment from its anchor (the truth there, or the initial attitude)."""
+    n = len(t_s)
     q_est = np.full((n, 4), np.nan)
-    if n - start >= 2:
-        with warnings.catch_warnings():  # gaps were reported once, by clean_imu
-            warnings.simplefilter("ignore", GapWarning)
-            q_est[start:] = integrate(omega[start:], t_s[start:], q0, method).as_quat()
-    else:
-        q_est[start:] = q0
-    report("integrate", 1.0)
-    finite = np.all(np.isfinite(q_est[start:]), axis=1)
+    ends = [*anchors[1:], n]
+    for a, b in zip(anchors, ends, strict=True):
+        q0 = q_truth[a] if np.all(np.isfinite(q_truth[a])) else s.q_init
+        if q0 is None:
+            q0 = np.array([0.0, 0.0, 0.0, 1.0])
+        if b - a >= 2:
+            with warnings.catch_warnings():  # gaps were reported once, by clean_imu
+                warnings.simplefilter("ignore", GapWarning)
+                q_est[a:b] = integrate_quat(omega[a:b], t_s[a:b], q0, s.method)
+        else:
+            q_est[a:b] = q0
+    finite = np.all(np.isfinite(q_est[anchors[0] :]), axis=1)
     if not finite.all():
-        k = start + int(np.flatnonzero(~finite)[0])
+        k = anchors[0] + int(np.flatnonzero(~finite)[0])
         raise LogError(
             f"Expected a finite attitude estimate, got NaN/Inf from sample {k} "
-            f"(t = {t_s[k]:.3f} s) on {imu.topic}"
+            f"(t = {t_s[k]:.3f} s) on {topic}"
         )
+    return q_est
 
-    both = has_truth & np.all(np.isfinite(q_est), axis=1)
+
+def _score(q_est: NDArray, q_truth: NDArray) -> tuple[AttitudeError, NDArray]:
+    both = np.all(np.isfinite(q_truth), axis=1) & np.all(np.isfinite(q_est), axis=1)
     unit = np.array([0, 0, 0, 1.0])
-    err_full = attitude_error_deg(
+    err = attitude_error_deg(
         np.where(both[:, None], q_est, unit), np.where(both[:, None], q_truth, unit)
     )
-    error = AttitudeError(
-        *(
-            np.where(both, a, np.nan)
-            for a in (err_full.total_deg, err_full.inclination_deg, err_full.heading_deg)
+    fields = (err.total_deg, err.inclination_deg, err.heading_deg)
+    return AttitudeError(*(np.where(both, a, np.nan) for a in fields)), both
+
+
+def _replay(path, s: ReplaySettings, report, notes: list[str]) -> ReplayResult:
+    log = path if isinstance(path, LogData) else _read(path, s, report)
+    for note in log.notes:  # the reader's findings (a refused channel, a better one used)
+        _warn(notes, note)
+    g = _gyro(log, s, notes)
+    report("bias", 0.0)
+    bias_est, omega = _remove_bias(s, g)
+    log, candidates = _pick_truth(log, g, omega)
+    judged = _judge_truth(log, s, g, omega, notes)
+    if judged.mounting_applied:
+        from scipy.spatial.transform import Rotation
+
+        omega = Rotation.from_quat(judged.mounting.q_t_g).apply(omega)
+    omega, pf_summary = _prefilter(s, omega, g.t_s)
+    q_truth, anchors = _scored_truth(judged.aligned.q_truth, g.t_s, judged.jumps)
+    report("integrate", 0.0)
+    q_est = _integrate(s, omega, g.t_s, q_truth, anchors, log.imu.topic)
+    report("integrate", 1.0)
+    error, both = _score(q_est, q_truth)
+    summary = _summary(log, s, g, bias_est, judged, pf_summary, anchors, error, both)
+    summary = dataclasses.replace(summary, truth_candidates=candidates)
+    start = anchors[0]
+    return ReplayResult(
+        g.t_ns, g.t_s, g.omega, omega, bias_est.bias_b, q_est, q_truth, error, start,
+        bias_est, summary,
+    )  # fmt: skip
+
+
+def _segments(t_s: NDArray, anchors: list[int], error: AttitudeError, both) -> tuple:
+    out = []
+    for a, b in zip(anchors, [*anchors[1:], len(t_s)], strict=True):
+        e = error.total_deg[a:b][both[a:b]]
+        out.append(
+            {
+                "start_s": float(t_s[a]),
+                "end_s": float(t_s[b - 1]),
+                "samples": int(len(e)),
+                "rms_error_deg": float(rms(e)) if len(e) else None,
+            }
         )
-    )
+    return tuple(out)
+
+
+def _summary(log, s, g: _Gyro, bias_est, judged: _Judged, pf_summary, anchors, error, both):
+    """The :class:`ReplaySummary` of a replay."""
+    imu, aligned, truth = log.imu, judged.aligned, judged.aligned.truth
+    start, n, t_s = anchors[0], len(g.t_s), g.t_s
+    clean = g.clean
+    q0 = np.asarray(judged.aligned.q_truth[start]) if both.any() else s.q_init
+    q0 = np.array([0.0, 0.0, 0.0, 1.0]) if q0 is None or not np.all(np.isfinite(q0)) else q0
 
     def stat_(a: NDArray, f) -> float | None:
         return float(f(a[both])) if both.any() else None
 
-    summary = ReplaySummary(
-        path=str(path),
+    mount = judged.mounting
+    return ReplaySummary(
+        path=str(log.path),
         container=getattr(log, "container", "ros2 mcap"),
         samples=int(n),
         samples_estimated=int(n - start),
@@ -269,16 +479,16 @@ def _replay(
         imu_type=imu.type,
         truth_topic=truth.topic if truth is not None else None,
         truth_type=truth.type if truth is not None else None,
-        time=base,
-        method=method,
-        gyro_units=gyro_units,
+        time=g.base,
+        method=s.method,
+        gyro_units=s.gyro_units,
         bias_mode=bias_est.mode,
         bias_rad_s=tuple(float(x) for x in bias_est.bias_b[start:].mean(axis=0)),
         bias_segments=tuple(
-            {"start_s": s.start_s, "end_s": s.end_s, "bias_rad_s": [float(x) for x in s.bias_rad_s]}
-            for s in bias_est.segments
+            {"start_s": x.start_s, "end_s": x.end_s, "bias_rad_s": [float(v) for v in x.bias_rad_s]}
+            for x in bias_est.segments
         ),
-        prefilter=prefilter,
+        prefilter=s.prefilter,
         prefilter_summary=pf_summary,
         start_time_s=float(t_s[start]),
         initial_q_w_b=tuple(float(x) for x in q0),
@@ -302,17 +512,12 @@ def _replay(
         damage=tuple(_record(d) for d in getattr(log, "damage", ())),
         channels=tuple(_record(c) for c in log.channels),
         truth_rejected=aligned.rejected,
-    )
-    return ReplayResult(
-        t_ns,
-        t_s,
-        omega_raw,
-        omega,
-        bias_est.bias_b,
-        q_est,
-        q_truth,
-        error,
-        start,
-        bias_est,
-        summary,
+        bias_rule=BIAS_RULE if bias_est.mode == "auto" else "",
+        rest_confirmed=bias_est.confirmed,
+        no_rest=bias_est.no_rest,
+        mounting=dataclasses.asdict(mount) if mount is not None else None,
+        mounting_applied=judged.mounting_applied,
+        truth_jumps=tuple(dataclasses.asdict(j) for j in judged.jumps),
+        scored_segments=_segments(t_s, anchors, error, both) if judged.jumps else (),
+        truth_estimate_of=getattr(truth, "estimate_of", "") if truth is not None else "",
     )

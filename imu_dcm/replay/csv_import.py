@@ -175,7 +175,7 @@ def convert_csv(
     output may not be or hold the CSV; ``force`` replaces only a bag this
     project wrote (:func:`imu_dcm.outputs.check_output_dir`).
     """
-    from imu_dcm.bag_writer import StampedSeries, write_bag
+    from imu_dcm.logio.writer import StampedSeries, write_bag
     from imu_dcm.outputs import check_output_dir
 
     check_output_dir(out_dir, (csv_path,), force=force, what="output bag")
@@ -210,7 +210,12 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("out", help="output bag folder")
     p.add_argument("--time-col", required=True, help="time column name")
     p.add_argument(
-        "--time-unit", required=True, choices=tuple(TIME_UNITS_NS), help="unit of the time column"
+        "--time-units",
+        "--time-unit",
+        dest="time_unit",
+        required=True,
+        choices=tuple(TIME_UNITS_NS),
+        help="unit of the time column (as live's --time-units; --time-unit is the same)",
     )
     p.add_argument(
         "--gyro-cols", required=True, metavar="X,Y,Z", help="body-rate column names, x,y,z"

@@ -69,7 +69,7 @@ def export_tum(
     inputs = tuple(inputs)
     out = check_export_dir(folder, inputs)
     try:
-        out.mkdir(exist_ok=True)
+        out.mkdir(parents=True, exist_ok=True)
     except OSError as exc:
         raise OutputError(
             f"Expected to create the folder {str(out)!r}, got {type(exc).__name__}: {exc.strerror}"

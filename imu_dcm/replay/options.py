@@ -1,19 +1,38 @@
-"""The options of :func:`imu_dcm.replay.replay`, checked once where they enter.
+"""The options of :func:`imu_dcm.replay.replay`: the command-line options shared by ``replay``
+and ``replay batch`` (:func:`add_replay_options`, parsed once by :func:`replay_keywords`), and the
+library's check of typed values (:func:`check_options`).
 
-Typed values only: text such as ``"x,y,z"`` is parsed by the command line.
+Text such as ``"x,y,z"`` is parsed by the command line only (:mod:`imu_dcm.cli`); the library
+takes numbers. Only argparse and the numpy-free :mod:`imu_dcm.methods` are imported at module
+level, so ``--help`` stays fast.
 """
 
 from __future__ import annotations
 
 import math
 
-import numpy as np
-
+from imu_dcm.cli import parse_bias, parse_init_quat, parse_mounting, parse_numbers
 from imu_dcm.errors import InputError
-from imu_dcm.integrate import METHODS
-from imu_dcm.so3 import as_quat_xyzw
+from imu_dcm.methods import METHODS
 
-__all__ = ["GYRO_UNITS", "PREFILTERS", "TIME_BASES", "check_options"]
+__all__ = [
+    "GYRO_UNITS",
+    "LOG_KINDS",
+    "PREFILTERS",
+    "TIME_BASES",
+    "add_replay_options",
+    "check_options",
+    "replay_keywords",
+]
+
+#: What the replay reads, in words for --help: one entry per container (add a row with a new
+#: reader).
+LOG_KINDS = [
+    "a ROS 2 bag folder (metadata.yaml with .mcap or .db3 storage)",
+    "a .mcap file",
+    "a ROS 2 .db3 (sqlite3) file",
+    "a ROS 1 .bag file",
+]
 
 TIME_BASES = ("auto", "header", "log")
 GYRO_UNITS = ("rad/s", "deg/s")
@@ -22,7 +41,7 @@ PREFILTERS = ("kalman", "rts")
 
 def check_options(
     path, time, method, bias, gyro_units, init_q_w_b, prefilter, truth_offset_s
-) -> tuple[str | np.ndarray, np.ndarray | None, float | str]:
+) -> tuple:
     """Validate every option of :func:`imu_dcm.replay.replay` once, before the log is read.
 
     Returns
@@ -37,6 +56,10 @@ def check_options(
         A value out of its set or not finite. (A special file as the log is refused by the
         reader, from its ``stat``, before a byte is read.)
     """
+    import numpy as np
+
+    from imu_dcm.so3 import as_quat_xyzw
+
     if time not in TIME_BASES:
         raise InputError(f"Expected time in {TIME_BASES}, got {time!r}")
     if method not in METHODS:
@@ -68,3 +91,120 @@ def check_options(
             f"Expected a finite truth offset in s (|x| <= 1e6), got {truth_offset_s!r}"
         )
     return bias, q_init, truth_offset_s
+
+
+def add_replay_options(g) -> None:
+    """The options that choose how one log is replayed (shared by ``replay`` and ``batch``)."""
+    g.add_argument("--imu-topic", help="IMU channel (default: the one Imu-typed channel)")
+    g.add_argument(
+        "--truth-topic",
+        help="truth channel (QuaternionStamped, PoseStamped, ...; the IMU topic for "
+        "its own orientation; 'none' to ignore truth). Named here, it is scored even "
+        "when its rate does not follow the gyro",
+    )
+    g.add_argument(
+        "--truth-frame",
+        metavar="CHILD",
+        help="child frame of a /tf truth, where several frames move",
+    )
+    g.add_argument(
+        "--truth-offset",
+        default="0",
+        metavar="auto|SECONDS",
+        help="shift added to the truth stamps: seconds (default 0) or auto (the "
+        "shift that best aligns the truth's rotation rate with the gyro's)",
+    )
+    g.add_argument(
+        "--time",
+        choices=TIME_BASES,
+        default="auto",
+        help="stamps: auto (default: header stamps unless they are all equal, not "
+        "increasing or miss the truth while log times overlap it), header, or log",
+    )
+    g.add_argument(
+        "--method",
+        default="magnus4",
+        choices=METHODS,
+        help="integrator increment (default magnus4)",
+    )
+    g.add_argument(
+        "--bias",
+        default="auto",
+        help="gyro bias: auto (from rest segments, default), none, or x,y,z in rad/s "
+        "(negative numbers as they are: --bias -0.01,0,0)",
+    )
+    g.add_argument(
+        "--mounting",
+        default="auto",
+        metavar="auto|none|X,Y,Z,W",
+        help="rotation from the gyro's frame into the truth's body frame: auto (estimated from "
+        "the rates, applied when determined and above 3°; default), none (reported only), or "
+        "x,y,z,w",
+    )
+    g.add_argument(
+        "--gyro-units",
+        choices=GYRO_UNITS,
+        default="rad/s",
+        help="unit of the log's angular velocity (default rad/s)",
+    )
+    g.add_argument(
+        "--init-quat",
+        metavar="X,Y,Z,W",
+        help="initial q_world_body (scalar last) when the log has no truth",
+    )
+    g.add_argument(
+        "--prefilter",
+        choices=("none", "kalman", "rts"),
+        default="none",
+        help="gyro pre-filter: Kalman filter or RTS smoother (default none)",
+    )
+    g.add_argument(
+        "--gyro-noise-density",
+        type=float,
+        metavar="RAD_S_SQRT_HZ",
+        help="pre-filter: gyro white-noise density, rad/s/√Hz (default: from rest)",
+    )
+    g.add_argument(
+        "--angular-accel",
+        type=float,
+        metavar="RAD_S2",
+        help="pre-filter: angular-acceleration scale, rad/s² (default: fitted)",
+    )
+
+
+def replay_keywords(args) -> dict:
+    """The keywords of :func:`imu_dcm.replay.replay` from :func:`add_replay_options`' options,
+    parsed and checked (string parsing lives here, not in the library)."""
+    bias = parse_bias(args.bias)
+    init = parse_init_quat(args.init_quat)
+    mounting = parse_mounting(args.mounting)
+    offset: float | str = args.truth_offset
+    if offset != "auto":
+        offset = parse_numbers(offset, 1, "--truth-offset (auto or seconds)")[0]
+    config = None
+    if args.prefilter != "none":
+        from imu_dcm.prefilter import PrefilterConfig
+
+        config = PrefilterConfig(
+            noise_density_rad_s_sqrt_hz=args.gyro_noise_density,
+            angular_accel_rad_s2=args.angular_accel,
+        )
+    elif args.gyro_noise_density is not None or args.angular_accel is not None:
+        raise InputError(
+            "Expected --prefilter kalman or rts with --gyro-noise-density / "
+            "--angular-accel, got --prefilter none"
+        )
+    return {
+        "imu_topic": args.imu_topic,
+        "truth_topic": args.truth_topic,
+        "truth_frame": args.truth_frame,
+        "time": args.time,
+        "method": args.method,
+        "bias": bias,
+        "gyro_units": args.gyro_units,
+        "init_q_w_b": init,
+        "prefilter": None if args.prefilter == "none" else args.prefilter,
+        "prefilter_config": config,
+        "truth_offset_s": offset,
+        "mounting": mounting,
+    }

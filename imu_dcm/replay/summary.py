@@ -70,6 +70,15 @@ class ReplaySummary:
     truth_rejected: str | None = None
     warnings: tuple[str, ...] = ()
     elapsed_s: float = 0.0
+    bias_rule: str = ""
+    rest_confirmed: bool = False
+    no_rest: str = ""
+    mounting: dict | None = None
+    mounting_applied: bool = False
+    truth_jumps: tuple[dict, ...] = ()
+    scored_segments: tuple[dict, ...] = ()
+    truth_estimate_of: str = ""
+    truth_candidates: tuple[dict, ...] = ()
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready dict: tuples become lists, gaps ``{"t_s", "length_s"}`` objects, NaN None."""
@@ -132,6 +141,52 @@ def _fmt(x: float | None, unit: str = "°") -> str:
     return f"{x:.2f}{unit}" if x == 0.0 or abs(x) >= 0.01 else f"{x:.2g}{unit}"
 
 
+def _candidates_line(cands: tuple[dict, ...]) -> str:
+    def one(c: dict) -> str:
+        name = c["topic"] + (f" [{c['child_frame_id']}]" if c.get("child_frame_id") else "")
+        corr = "n/a" if c["correlation"] is None else f"{c['correlation']:.2f}"
+        who = f", {c['estimate_of']}" if c["estimate_of"] else ""
+        follows = "" if c["follows"] else ", does not follow"
+        return f"{name} (correlation {corr}{who}{follows})"
+
+    picked = next(c for c in cands if c["picked"])
+    others = "; ".join(one(c) for c in cands if not c["picked"])
+    return (
+        f"truth pick {one(picked)} of {len(cands)} attitude candidates, by how its rate follows "
+        f"the gyro (independent references first); others: {others}"
+    )
+
+
+def _judgement_lines(s: ReplaySummary) -> list[str]:
+    """The mounting, the truth's own nature and its jumps, one line each."""
+    lines = []
+    if s.truth_candidates:
+        lines.append(_candidates_line(s.truth_candidates))
+    if s.truth_topic and s.truth_estimate_of:
+        lines.append(
+            f"truth is   {s.truth_estimate_of}, not an independent reference: the error is the "
+            f"difference between two estimates"
+        )
+    m = s.mounting
+    if m and (s.mounting_applied or m["angle_deg"] > 3.0):
+        from imu_dcm.replay.mounting import Mounting
+
+        fields = {f.name for f in dataclasses.fields(Mounting)}
+        text = Mounting(**{k: v for k, v in m.items() if k in fields}).describe()
+        verdict = "applied" if s.mounting_applied else "NOT applied"
+        lines.append(f"mounting   {text}: {verdict}")
+    if s.truth_jumps:
+        seg = ", ".join(
+            f"{x['start_s']:.1f}..{x['end_s']:.1f} s {_fmt(x['rms_error_deg'])}"
+            for x in s.scored_segments
+        )
+        lines.append(
+            f"truth jump {len(s.truth_jumps)} step{'s' if len(s.truth_jumps) != 1 else ''} the "
+            f"gyro does not show; re-anchored after each, segments scored: {seg}"
+        )
+    return lines
+
+
 def format_summary(s: ReplaySummary) -> str:
     """The summary for a person, one fact per line."""
     lines = [
@@ -168,6 +223,7 @@ def format_summary(s: ReplaySummary) -> str:
             f"{check['shift_s'] * 1e3:+.1f} ms, residual {check['residual_rad_s']:.3f} "
             f"rad/s"
         )
+    lines.extend(_judgement_lines(s))
     n_gaps = len(s.gaps)
     lines.append(
         f"dropped    {s.dropped_nonfinite} NaN/Inf, {s.dropped_implausible} implausible, "
@@ -178,12 +234,17 @@ def format_summary(s: ReplaySummary) -> str:
     bias = f"({b[0]:+.5f}, {b[1]:+.5f}, {b[2]:+.5f}) rad/s"
     bdeg = np.degrees(b)
     if s.bias_mode == "auto" and not s.bias_segments:
-        lines.append("bias       auto: no rest segment found, no bias removed")
+        lines.append(f"bias       auto: no rest found ({s.no_rest}); no bias removed")
     elif s.bias_mode == "auto":
         nseg = len(s.bias_segments)
+        how = (
+            "still by the accelerometer"
+            if s.rest_confirmed
+            else "unconfirmed: no accelerometer, mean rate under 2 °/s"
+        )
         lines.append(
-            f"bias       auto: {nseg} rest segment{'s' if nseg != 1 else ''}, mean "
-            f"{bias} = ({bdeg[0]:+.3f}, {bdeg[1]:+.3f}, {bdeg[2]:+.3f}) °/s"
+            f"bias       auto: {nseg} rest segment{'s' if nseg != 1 else ''} ({how}; "
+            f"{s.bias_rule}), mean {bias} = ({bdeg[0]:+.3f}, {bdeg[1]:+.3f}, {bdeg[2]:+.3f}) °/s"
         )
     else:
         lines.append(f"bias       {s.bias_mode}: {bias}")

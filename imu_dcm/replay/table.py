@@ -28,6 +28,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from imu_dcm.errors import InputError
+from imu_dcm.outputs import write_text_atomic
 
 __all__ = [
     "COLUMNS",
@@ -197,16 +198,8 @@ def _append(path: Path, text: str) -> None:
 
 
 def _replace(path: Path, text: str) -> None:
-    """Write ``text`` to a temporary file beside ``path``, fsync, and rename it over ``path``."""
-    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
-    try:
-        with open(tmp, "w") as f:
-            f.write(text)
-            f.flush()
-            os.fsync(f.fileno())
-        os.replace(tmp, path)
-    finally:
-        tmp.unlink(missing_ok=True)
+    """Replace ``path`` with ``text`` whole (:func:`imu_dcm.outputs.write_text_atomic`)."""
+    write_text_atomic(path, text, what="batch table")
 
 
 def append_rows(table: str | Path, rows: Sequence[LogRow]) -> None:

@@ -4,7 +4,8 @@ whether the truth is the IMU's attitude at all.
 * :func:`choose_time` — ``"auto"`` uses the header stamps unless they are all equal, fall in
   file order at more than 10 % of the steps, or miss the truth while the log times overlap it;
   then the log (receive) times, with the reason in one line.
-* :func:`slerp_truth` — truth ``q_w_b`` at the gyro stamps, never bridged across long gaps.
+* :func:`slerp_truth` — truth ``q_w_b`` at the gyro stamps, never bridged across long gaps
+  (from :mod:`imu_dcm.resample`, the core, where live uses it too).
 * :func:`align_truth` — all of it for a replay: offset, check, slerp, and the decision to drop
   an automatically picked truth that does not follow the gyro.
 * :func:`check_truth` — the body rate implied by the truth against the gyro: the rate norms
@@ -22,24 +23,27 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
-from numpy.typing import ArrayLike, NDArray
+from numpy.typing import NDArray
 
 from imu_dcm.errors import LogError
-from imu_dcm.so3 import angle_between_deg, exp_quat, log_quat, quat_conjugate, quat_multiply
+from imu_dcm.resample import TRUTH_BRIDGE_STEPS, slerp_truth
+from imu_dcm.so3 import angle_between_deg, log_quat, quat_conjugate, quat_multiply
 
 __all__ = [
     "MIN_CORRELATION",
     "TRUTH_BRIDGE_STEPS",
     "AlignedTruth",
+    "RateGrid",
     "TruthCheck",
+    "TruthJump",
     "align_truth",
     "check_truth",
     "choose_time",
+    "find_jumps",
+    "rate_grid",
     "slerp_truth",
 ]
 
-#: Gaps between truth samples longer than this many median truth steps are not bridged.
-TRUTH_BRIDGE_STEPS = 2.0
 #: A truth whose rate norm correlates less than this with the gyro's does not follow it.
 MIN_CORRELATION = 0.6
 #: Time shifts searched between truth and gyro, s (each way).
@@ -137,58 +141,6 @@ def choose_time(
     return "header", None
 
 
-def slerp_truth(truth_t_ns: ArrayLike, q_w_b: ArrayLike, t_ns: ArrayLike) -> NDArray[np.float64]:
-    """Truth attitudes at times ``t_ns`` by slerp, NaN outside coverage and across long gaps.
-
-    Parameters
-    ----------
-    truth_t_ns : array_like, int64 (M,)
-        Truth stamps (any order; sorted here, duplicates dropped).
-    q_w_b : array_like, shape (M, 4)
-        Truth ``[x, y, z, w]`` (body to world); need not be sign-continuous.
-    t_ns : array_like, int64 (N,)
-        Query stamps.
-
-    Returns
-    -------
-    ndarray, shape (N, 4)
-        Unit quaternions; NaN rows before the first / after the last truth sample and inside
-        gaps longer than ``TRUTH_BRIDGE_STEPS`` median truth steps (never bridged).
-    """
-    tt = np.asarray(truth_t_ns, dtype=np.int64)
-    q = np.asarray(q_w_b, dtype=float)
-    t = np.asarray(t_ns, dtype=np.int64)
-    norm = np.linalg.norm(q, axis=1)
-    ok = np.isfinite(norm) & (norm > 0.5)
-    tt, q = tt[ok], q[ok] / norm[ok, None]
-    if len(tt) > 1 and not np.all(np.diff(tt) > 0):  # recorded truth is usually in order
-        order = np.argsort(tt, kind="stable")
-        tt, q = tt[order], q[order]
-        uniq = np.concatenate([[True], np.diff(tt) > 0])
-        tt, q = tt[uniq], q[uniq]
-    out = np.full((len(t), 4), np.nan)
-    if len(tt) == 0:
-        return out
-    j = np.searchsorted(tt, t, side="right") - 1  # tt[j] <= t < tt[j+1]
-    exact = (j >= 0) & (tt[np.clip(j, 0, None)] == t)
-    out[exact] = q[j[exact]]
-    if len(tt) < 2:
-        return out
-    max_step = TRUTH_BRIDGE_STEPS * float(np.median(np.diff(tt)))
-    inner = ~exact & (j >= 0) & (j < len(tt) - 1)
-    jj = j[inner]
-    step = (tt[jj + 1] - tt[jj]).astype(float)
-    bridge = step <= max_step * (1 + 1e-6)
-    idx = np.flatnonzero(inner)[bridge]
-    jj = jj[bridge]
-    u = (t[idx] - tt[jj]).astype(float) / (tt[jj + 1] - tt[jj]).astype(float)
-    q0, q1 = q[jj], q[jj + 1]
-    rel = quat_multiply(quat_conjugate(q0), q1)
-    rel = np.where(rel[:, 3:4] < 0, -rel, rel)  # shortest arc
-    out[idx] = quat_multiply(q0, exp_quat(u[:, None] * log_quat(rel)))
-    return out
-
-
 def lagged_correlation(
     g: NDArray[np.float64], h: NDArray[np.float64], valid: NDArray[np.bool_], lags: int
 ) -> tuple[NDArray[np.float64], NDArray[np.int64]]:
@@ -223,6 +175,72 @@ def lagged_correlation(
     return corr, count
 
 
+def integrated_rate(
+    t_ns: NDArray[np.int64], omega_b: NDArray[np.float64], at_ns: NDArray[np.int64]
+) -> NDArray[np.float64]:
+    """The trapezoid integral of the rate from the first gyro sample to each of ``at_ns``
+    (linear between samples), rad (K, 3); differences give the turn over short intervals."""
+    ts = (t_ns - t_ns[0]) * 1e-9
+    cum = np.concatenate(
+        [
+            np.zeros((1, 3)),
+            np.cumsum(0.5 * (omega_b[1:] + omega_b[:-1]) * np.diff(ts)[:, None], axis=0),
+        ]
+    )
+    te = (np.asarray(at_ns) - t_ns[0]) * 1e-9
+    return np.stack([np.interp(te, ts, cum[:, k]) for k in range(3)], axis=1)
+
+
+@dataclass(frozen=True)
+class RateGrid:
+    """Gyro and truth rotations over the steps of one time grid (truth stamps as given).
+
+    ``edges_ns`` int64 (K + 1,) grid edges; ``dt_s`` float (K,) step lengths; ``gyro_rotvec``
+    (K, 3) the gyro's rotation over each step (trapezoid integral of the rate, gyro axes, rad);
+    ``truth_rotvec`` (K, 3) the truth's body-frame rotation over each step (truth body axes,
+    rad), NaN where the truth does not cover the step; ``step_s`` the grid step.
+    """
+
+    edges_ns: NDArray[np.int64]
+    dt_s: NDArray[np.float64]
+    gyro_rotvec: NDArray[np.float64]
+    truth_rotvec: NDArray[np.float64]
+    step_s: float
+
+
+def rate_grid(
+    t_ns: NDArray[np.int64],
+    omega_b: NDArray[np.float64],
+    truth_t_ns: NDArray[np.int64],
+    q_w_b: NDArray[np.float64],
+    min_step_s: float = 0.01,
+) -> RateGrid | None:
+    """Gyro and truth rotations on a grid of steps of ``max(min_step_s, 2 truth steps, gyro
+    step)`` over their overlap; None when they overlap in fewer than 24 steps."""
+    tt = np.asarray(truth_t_ns, dtype=np.int64)
+    if len(t_ns) < 4 or len(tt) < 4:
+        return None
+    lo, hi = max(int(t_ns[0]), int(tt.min())), min(int(t_ns[-1]), int(tt.max()))
+    if hi <= lo:
+        return None
+    dt_g = float(np.median(np.diff(t_ns))) * 1e-9
+    dt_t = float(np.median(np.diff(np.sort(tt)))) * 1e-9
+    span_s = (hi - lo) * 1e-9
+    dt = max(min_step_s, 2 * dt_t, dt_g, span_s / 100_000)
+    edges = lo + np.round(np.arange(0.0, span_s, dt) * 1e9).astype(np.int64)
+    if len(edges) < 24:
+        return None
+    te = (edges - t_ns[0]) * 1e-9
+    angle = integrated_rate(t_ns, omega_b, edges)
+    q = slerp_truth(tt, q_w_b, edges)
+    both = np.all(np.isfinite(q[:-1]), axis=1) & np.all(np.isfinite(q[1:]), axis=1)
+    rot = np.full((len(q) - 1, 3), np.nan)
+    rel = quat_multiply(quat_conjugate(q[:-1][both]), q[1:][both])
+    rel = np.where(rel[:, 3:4] < 0, -rel, rel)  # shortest arc
+    rot[both] = log_quat(rel)
+    return RateGrid(edges, np.diff(te), np.diff(angle, axis=0), rot, dt)
+
+
 def check_truth(
     t_ns: NDArray[np.int64],
     omega_b: NDArray[np.float64],
@@ -241,37 +259,14 @@ def check_truth(
     Returns
     -------
     TruthCheck
-        On a grid of mean rates over steps of ``max(10 ms, 2 truth steps, gyro step)``.
+        On the grid of :func:`rate_grid` (mean rates over steps of at least 10 ms).
     """
-    tt = np.asarray(truth_t_ns, dtype=np.int64)
-    if len(t_ns) < 4 or len(tt) < 4:
+    grid = rate_grid(t_ns, omega_b, truth_t_ns, q_w_b)
+    if grid is None:
         return TruthCheck(False, True)
-    lo, hi = max(int(t_ns[0]), int(tt.min())), min(int(t_ns[-1]), int(tt.max()))
-    if hi <= lo:
-        return TruthCheck(False, True)
-    dt_g = float(np.median(np.diff(t_ns))) * 1e-9
-    dt_t = float(np.median(np.diff(np.sort(tt)))) * 1e-9
-    span_s = (hi - lo) * 1e-9
-    dt = max(0.01, 2 * dt_t, dt_g, span_s / 100_000)
-    edges = lo + np.round(np.arange(0.0, span_s, dt) * 1e9).astype(np.int64)
-    if len(edges) < 24:
-        return TruthCheck(False, True)
-    # gyro: mean rate vector over each grid step, from the trapezoid integral at the edges
-    ts = (t_ns - t_ns[0]) * 1e-9
-    cum = np.concatenate(
-        [
-            np.zeros((1, 3)),
-            np.cumsum(0.5 * (omega_b[1:] + omega_b[:-1]) * np.diff(ts)[:, None], axis=0),
-        ]
-    )
-    te = (edges - t_ns[0]) * 1e-9
-    angle = np.stack([np.interp(te, ts, cum[:, k]) for k in range(3)], axis=1)
-    g = np.linalg.norm(np.diff(angle, axis=0), axis=1) / np.diff(te)
-    # truth: rotation angle over each grid step
-    q = slerp_truth(tt, q_w_b, edges)
-    both = np.all(np.isfinite(q[:-1]), axis=1) & np.all(np.isfinite(q[1:]), axis=1)
-    h = np.full(len(q) - 1, np.nan)  # NaN where the truth does not cover the grid step
-    h[both] = np.radians(angle_between_deg(q[:-1][both], q[1:][both])) / np.diff(te)[both]
+    dt = grid.step_s
+    g = np.linalg.norm(grid.gyro_rotvec, axis=1) / grid.dt_s
+    h = np.linalg.norm(grid.truth_rotvec, axis=1) / grid.dt_s  # NaN where uncovered
     valid = np.isfinite(h)
     if valid.sum() < 20:
         return TruthCheck(False, True)
@@ -284,6 +279,7 @@ def check_truth(
         still_truth = float(np.mean(h0)) < STILL_RAD_S
         turning = float(np.mean(g0)) > 10 * STILL_RAD_S
         return TruthCheck(True, not (still_truth and turning), None, None, resid0, g_rms0)
+    span_s = (grid.edges_ns[-1] - grid.edges_ns[0]) * 1e-9
     lags = int(min(MAX_SHIFT_S, span_s / 4) / dt)
     corr, count = lagged_correlation(g, h, valid, lags)
     ok = count >= 20
@@ -393,3 +389,65 @@ def align_truth(
     if not check.follows:
         warn(f"{what} does not follow the gyro ({check.describe()}); scored anyway, as asked")
     return AlignedTruth(q_truth, truth, check, applied, None)
+
+
+#: A truth step that turns this much more than the gyro over the same interval is a jump, deg.
+JUMP_DEG = 5.0
+#: ... and at least this many times the gyro's turn (a fast turn's noise is not a jump).
+JUMP_RATIO = 3.0
+
+
+@dataclass(frozen=True)
+class TruthJump:
+    """A truth step the gyro does not show: from ``t0_s`` to ``t1_s`` (s since the first gyro
+    sample) the truth turns ``truth_deg`` while the gyro turns ``gyro_deg``."""
+
+    t0_s: float
+    t1_s: float
+    truth_deg: float
+    gyro_deg: float
+
+    def describe(self) -> str:
+        return (
+            f"{self.truth_deg:.1f}° at {self.t0_s:.3f} s in {1e3 * (self.t1_s - self.t0_s):.0f} ms "
+            f"(gyro {self.gyro_deg:.1f}°)"
+        )
+
+
+def find_jumps(
+    t_ns: NDArray[np.int64],
+    omega_b: NDArray[np.float64],
+    truth_t_ns: NDArray[np.int64],
+    q_w_b: NDArray[np.float64],
+) -> tuple[TruthJump, ...]:
+    """Truth steps that turn more than the gyro over the same interval (see :data:`JUMP_DEG`).
+
+    Every step between consecutive truth samples inside the gyro's span is compared: the
+    truth's angle against the norm of the gyro's integrated rate over the same interval (a
+    frame-free comparison, so the mounting does not matter).
+
+    Parameters
+    ----------
+    t_ns : int64 (N,) — gyro stamps, increasing; ``omega_b`` (N, 3) rad/s.
+    truth_t_ns : int64 (M,) — truth stamps on the gyro's clock; ``q_w_b`` (M, 4).
+    """
+    tt = np.asarray(truth_t_ns, dtype=np.int64)
+    q = np.asarray(q_w_b, dtype=float)
+    norm = np.linalg.norm(q, axis=1)
+    ok = np.isfinite(norm) & (norm > 0.5)
+    tt, q = tt[ok], q[ok] / norm[ok, None]
+    order = np.argsort(tt, kind="stable")
+    tt, q = tt[order], q[order]
+    inside = (tt >= t_ns[0]) & (tt <= t_ns[-1])
+    tt, q = tt[inside], q[inside]
+    if len(tt) < 2 or len(t_ns) < 2:
+        return ()
+    te = (tt - t_ns[0]) * 1e-9
+    angle = integrated_rate(t_ns, omega_b, tt)
+    gyro_deg = np.degrees(np.linalg.norm(np.diff(angle, axis=0), axis=1))
+    truth_deg = angle_between_deg(q[:-1], q[1:])
+    jump = (truth_deg - gyro_deg > JUMP_DEG) & (truth_deg > JUMP_RATIO * gyro_deg)
+    return tuple(
+        TruthJump(float(te[i]), float(te[i + 1]), float(truth_deg[i]), float(gyro_deg[i]))
+        for i in np.flatnonzero(jump)
+    )

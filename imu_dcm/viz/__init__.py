@@ -13,9 +13,10 @@ stated):
 entity                                 content
 =====================================  ==========================================================
 ``/world/truth/axes``                  Arrows3D, true body x/y/z axes, solid red/green/blue;
-                                       an empty row where there is no truth
+                                       an empty row where there is no truth; one row per
+                                       ``1 / AXES_HZ`` s of log time and the last sample
 ``/world/estimate/axes``               Arrows3D, estimated body axes, light red/green/blue;
-                                       an empty row where there is no estimate
+                                       an empty row where there is no estimate (thinned too)
 ``/world/truth/z_trail``               LineStrips3D, tip of the body z axis over the last
 ``/world/estimate/z_trail``            ``TRAIL_S`` seconds (truth purple, estimate amber), one
                                        row per frame at ``TRAIL_FPS`` frames per second of log
@@ -41,9 +42,11 @@ and gyro time series stacked on the right.
 Viewer modes of :func:`show_replay`: ``"spawn"`` starts the native viewer (the ``rerun`` binary
 shipped in the rerun-sdk wheel, listening on 127.0.0.1 only) and streams to it; ``"serve"``
 saves a temporary ``.rrd`` and serves it with the ``rerun`` binary's web viewer bound to
-127.0.0.1 (the SDK's own servers bind every interface, so they are not used); ``"save:PATH.rrd"``
-writes a file; ``"off"`` does nothing; ``None`` spawns when a display exists, else saves to
-``save_dir/<title>.rrd``.
+127.0.0.1 (the SDK's own servers bind every interface, so they are not used); the command line
+keeps it up until Ctrl-C, then stops the server and removes the file (:func:`serve_replay`);
+``"save:PATH.rrd"`` writes a file; ``"off"`` does nothing; ``None`` spawns when a display
+exists, else shows nothing and writes nothing (one line, :data:`HEADLESS_HINT`, names the
+other modes).
 
 Modules: ``view_data`` (:class:`ViewData` and the geometry drawn from it), ``log`` (what is
 logged: entities, colours, blueprint, :func:`send_view`) and ``viewer`` (how it is shown:
@@ -54,6 +57,7 @@ from __future__ import annotations
 
 from imu_dcm.viz.log import ENTITY, TIMELINE, make_blueprint, send_styles, send_view
 from imu_dcm.viz.view_data import (
+    AXES_HZ,
     TRACE_MAX_POINTS,
     TRACE_MAX_S,
     TRAIL_FPS,
@@ -63,15 +67,22 @@ from imu_dcm.viz.view_data import (
     gyro_needs_split,
 )
 from imu_dcm.viz.viewer import (
+    HEADLESS_HINT,
+    ServedReplay,
     ServedViewer,
     has_display,
     rerun_binary,
     save_rrd,
+    serve_replay,
     serve_rrd,
     show_replay,
 )
 
 __all__ = [
+    "AXES_HZ",
+    "HEADLESS_HINT",
+    "ServedReplay",
+    "serve_replay",
     "ENTITY",
     "TIMELINE",
     "TRACE_MAX_POINTS",

@@ -9,6 +9,7 @@ from __future__ import annotations
 import math
 import time
 import uuid
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -18,12 +19,15 @@ from imu_dcm.errors import InputError
 from imu_dcm.viz.view_data import (
     TRACE_MAX_S,
     ViewData,
+    _axes_rows,
     _body_axes_w,
     _trace_segments,
     _trail_frames,
     _trail_strips,
     gyro_needs_split,
 )
+
+_BLOCK_ROWS = 20_000  # rows per send_columns call when the whole view is sent at once
 
 TIMELINE = "time"
 """Name of the rerun timeline (a duration in seconds from the log's time origin)."""
@@ -146,12 +150,14 @@ class _Entity:
     path: str
     t_rel_s: NDArray[np.float64]
     archetype: type
-    fields: dict
+    fields: dict | Callable[[int, int], dict]
     lengths: NDArray[np.intp] | None = None
 
     def columns(self, a: int = 0, b: int | None = None):
         """Rerun columns of rows ``[a, b)``."""
         b = len(self.t_rel_s) if b is None else b
+        if callable(self.fields):  # made per slice (the trails: bounded memory)
+            return self.archetype.columns(**self.fields(a, b))
         if self.lengths is None:
             cols = self.archetype.columns(**{k: v[a:b] for k, v in self.fields.items()})
             return cols
@@ -185,6 +191,21 @@ def _axes_entity(
     return _Entity(path, t_rel, rr.Arrows3D, fields, np.where(has, 3, 0).astype(np.intp))
 
 
+def _trail_fields(t_s: NDArray, tip: NDArray, frames: NDArray, color, radius: float):
+    """The trail's strips for frames ``[a, b)``, made when sent (120 points per frame: a
+    25-minute log's strips made at once would hold ~130 MB per trail)."""
+
+    def fields(a: int, b: int) -> dict:
+        n = b - a
+        return {
+            "strips": _trail_strips(t_s, tip, frames[a:b]),
+            "colors": np.tile(np.array(color, dtype=np.uint8), (n, 1)),
+            "radii": np.full(n, radius, dtype=np.float32),
+        }
+
+    return fields
+
+
 def _entities(view: ViewData) -> list[_Entity]:
     """Every time-varying entity of the view."""
     import rerun as rr
@@ -192,9 +213,20 @@ def _entities(view: ViewData) -> list[_Entity]:
     t_rel = view.t_s - view.t_s[0]
     est_axes, has_est = _body_axes_w(view.q_est)  # (N, 3 axes, 3)
     true_axes, has_truth = _body_axes_w(view.q_truth)
+    rows = _axes_rows(view.t_s)  # thinned to AXES_HZ: memory bounded on long logs
     out = [
-        _axes_entity(ENTITY["estimate_axes"], t_rel, est_axes, has_est, _EST_RGB, 0.018),
-        _axes_entity(ENTITY["truth_axes"], t_rel, true_axes, has_truth, _TRUTH_RGB, 0.035, True),
+        _axes_entity(
+            ENTITY["estimate_axes"], t_rel[rows], est_axes[rows], has_est[rows], _EST_RGB, 0.018
+        ),
+        _axes_entity(
+            ENTITY["truth_axes"],
+            t_rel[rows],
+            true_axes[rows],
+            has_truth[rows],
+            _TRUTH_RGB,
+            0.035,
+            True,
+        ),
     ]
     frames = _trail_frames(view.t_s)
     tips = {
@@ -202,7 +234,6 @@ def _entities(view: ViewData) -> list[_Entity]:
         "estimate_trail": est_axes[:, 2],
     }
     for key, tip in tips.items():
-        strips = _trail_strips(view.t_s, tip, frames)
         color = _EST_TRAIL_RGB if key == "estimate_trail" else _TRUTH_TRAIL_RGB
         radius = 0.004 if key == "estimate_trail" else 0.007
         out.append(
@@ -210,11 +241,7 @@ def _entities(view: ViewData) -> list[_Entity]:
                 ENTITY[key],
                 t_rel[frames],
                 rr.LineStrips3D,
-                {
-                    "strips": strips,
-                    "colors": np.tile(np.array(color, dtype=np.uint8), (len(frames), 1)),
-                    "radii": np.full(len(frames), radius, dtype=np.float32),
-                },
+                _trail_fields(view.t_s, tip, frames, color, radius),
             )
         )
     errors = np.stack(
@@ -306,8 +333,12 @@ def send_view(view: ViewData, rec, *, realtime: bool = False, chunk_s: float = 0
     send_styles(view, rec)
     entities = _entities(view)
     if not realtime:
-        for e in entities:
-            rec.send_columns(e.path, indexes=[_time_column(e.t_rel_s)], columns=e.columns())
+        for e in entities:  # in blocks of rows: what is made at once stays bounded
+            for a in range(0, len(e.t_rel_s), _BLOCK_ROWS):
+                b = min(a + _BLOCK_ROWS, len(e.t_rel_s))
+                rec.send_columns(
+                    e.path, indexes=[_time_column(e.t_rel_s[a:b])], columns=e.columns(a, b)
+                )
         return
     # Rows of each entity per chunk of log time; one send_columns per entity and chunk.
     span = view.t_s[-1] - view.t_s[0]

@@ -23,6 +23,10 @@ TRAIL_FPS = 30.0
 """Frames per second of log time at which the trailing window is sent."""
 TRAIL_POINTS = 120
 """Points per trailing-window strip (the window is resampled to this many samples)."""
+AXES_HZ = 60.0
+"""Rows of 3D body axes per second of log time (the viewer draws the latest row anyway; the
+scalars keep every sample). Bounds the view's memory on long logs, as live's view does."""
+"""Points per trailing-window strip (the window is resampled to this many samples)."""
 TRACE_MAX_POINTS = 20_000
 """Upper bound on the points of the static full z-tip trace."""
 TRACE_MAX_S = 30.0
@@ -140,12 +144,17 @@ def _body_axes_w(q_w_b: NDArray) -> tuple[NDArray, NDArray[np.bool_]]:
     return np.where(valid[:, None, None], axes, np.nan), valid
 
 
-def _trail_frames(t_s: NDArray) -> NDArray[np.intp]:
-    """Sample index of each trailing-window frame: the last sample at or before k / TRAIL_FPS."""
+def _trail_frames(t_s: NDArray, fps: float = TRAIL_FPS) -> NDArray[np.intp]:
+    """Sample index of each frame: the last sample at or before k / fps."""
     rel = t_s - t_s[0]
-    n_frames = math.floor(rel[-1] * TRAIL_FPS) + 1
-    idx = np.searchsorted(rel, np.arange(n_frames) / TRAIL_FPS, side="right") - 1
+    n_frames = math.floor(rel[-1] * fps) + 1
+    idx = np.searchsorted(rel, np.arange(n_frames) / fps, side="right") - 1
     return np.unique(np.clip(idx, 0, len(t_s) - 1))
+
+
+def _axes_rows(t_s: NDArray) -> NDArray[np.intp]:
+    """Samples whose body axes are drawn: one per 1 / AXES_HZ of log time, and the last."""
+    return np.union1d(_trail_frames(t_s, AXES_HZ), [len(t_s) - 1])
 
 
 def _trail_strips(t_s: NDArray, tip_w: NDArray, frames: NDArray[np.intp]) -> list[NDArray]:

@@ -17,6 +17,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from imu_dcm.errors import ImuDcmError, InputError
+from imu_dcm.outputs import atomic_path
 from imu_dcm.viz.log import _new_recording, make_blueprint, send_view
 from imu_dcm.viz.view_data import ViewData
 
@@ -41,19 +42,13 @@ def save_rrd(view: ViewData, path: str | os.PathLike) -> Path:
     path = Path(path)
     if path.suffix != ".rrd":
         raise InputError(f"Expected an .rrd path, got {str(path)!r}")
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
     rec = _new_recording(view)
-    try:
+    with atomic_path(path, "--rerun save: file") as tmp:
         rec.save(tmp, default_blueprint=make_blueprint(view))
         rec.send_recording_name(view.title)
         send_view(view, rec)
         rec.flush()
         rec.disconnect()
-        os.replace(tmp, path)
-    finally:
-        if tmp.exists():
-            tmp.unlink()
     return path
 
 
@@ -290,8 +285,65 @@ def _safe_stem(title: str) -> str:
     return stem or "replay"
 
 
+#: The one line a headless run prints instead of writing a view nobody asked for.
+HEADLESS_HINT = (
+    "rerun: no display, so no view; see it in a browser with --rerun serve (web viewer on "
+    "127.0.0.1) or save it with --rerun save:F.rrd"
+)
+
+
+@dataclass
+class ServedReplay:
+    """A replay served by :func:`serve_replay`: the web viewer and the temporary folder of its
+    ``.rrd`` (None when streamed). :meth:`stop` ends the server and removes the folder."""
+
+    viewer: ServedViewer
+    folder: Path | None
+
+    @property
+    def line(self) -> str:
+        return f"rerun: web viewer at {self.viewer.url} (127.0.0.1 only)"
+
+    def stop(self) -> None:
+        import shutil
+
+        self.viewer.stop()
+        if self.folder is not None:
+            shutil.rmtree(self.folder, ignore_errors=True)
+
+
+def serve_replay(view: ViewData, realtime: bool = False) -> ServedReplay:
+    """Serve a replay in rerun's web viewer on 127.0.0.1; the caller stops it.
+
+    ``realtime``: stream to the server at the recorded speed (the URL is printed first);
+    otherwise the view is saved to a temporary ``.rrd`` that :meth:`ServedReplay.stop` removes.
+    """
+    if realtime:
+        served = serve_rrd(None)
+        print(f"rerun: open {served.url} (streaming at recorded speed)", flush=True)
+        rec = _new_recording(view)
+        rec.connect_grpc(served.grpc_url, default_blueprint=make_blueprint(view))
+        rec.send_recording_name(view.title)
+        send_view(view, rec, realtime=True)
+        rec.flush(timeout_sec=_FLUSH_TIMEOUT_S)
+        rec.disconnect()
+        return ServedReplay(served, None)
+    folder = Path(tempfile.mkdtemp(prefix="imu_dcm_rerun_"))
+    try:
+        served = serve_rrd(save_rrd(view, folder / (_safe_stem(view.title) + ".rrd")))
+    except BaseException:
+        import shutil
+
+        shutil.rmtree(folder, ignore_errors=True)
+        raise
+    return ServedReplay(served, folder)
+
+
 def show_replay(
-    view: ViewData, mode: str | None, save_dir: str | os.PathLike, realtime: bool = False
+    view: ViewData,
+    mode: str | None,
+    save_dir: str | os.PathLike | None = None,
+    realtime: bool = False,
 ) -> str:
     """Show a replay in rerun and return the one line to print about it.
 
@@ -301,13 +353,12 @@ def show_replay(
         The arrays to show.
     mode : {"spawn", "serve", "save:PATH.rrd", "off", None}
         ``"spawn"``: start the native viewer (listening on 127.0.0.1) and stream to it; needs a
-        display. ``"serve"``: save to a temporary ``.rrd`` and serve it with the ``rerun``
-        binary's web viewer bound to 127.0.0.1; the server keeps running after return (the line
-        gives the URL and the pid to stop). ``"save:PATH.rrd"``: write the file. ``"off"``:
-        nothing. ``None``: ``"spawn"`` when a display exists, else save to
-        ``save_dir/<title>.rrd``.
-    save_dir : path-like
-        Folder of the default ``.rrd`` (``mode=None`` without a display).
+        display. ``"serve"``: :func:`serve_replay`, left running (the line gives the URL and the
+        pid to stop; the command line waits and stops it instead). ``"save:PATH.rrd"``: write
+        the file. ``"off"``: nothing. ``None``: ``"spawn"`` when a display exists, else
+        nothing at all (the line is :data:`HEADLESS_HINT`).
+    save_dir : path-like, optional
+        Unused (the headless default writes no file); kept for callers.
     realtime : bool
         Pace the data at the recorded speed in small chunks (for live viewing with ``"spawn"``
         and ``"serve"``; with ``"serve"`` the URL is printed before streaming). Files are
@@ -325,11 +376,9 @@ def show_replay(
         display.
     """
     if mode is None:
-        mode = (
-            "spawn"
-            if has_display()
-            else f"save:{Path(save_dir) / (_safe_stem(view.title) + '.rrd')}"
-        )
+        if not has_display():
+            return HEADLESS_HINT
+        mode = "spawn"
     if not isinstance(mode, str):
         raise InputError(f"Expected rerun mode one of {_MODES}, got {mode!r}")
     if mode == "off":
@@ -339,23 +388,12 @@ def show_replay(
         if not target.endswith(".rrd") or len(target) <= len(".rrd"):
             raise InputError(f"Expected rerun mode save:PATH.rrd, got {mode!r}")
         path = save_rrd(view, target)
-        return f"rerun: saved {path}; open it with: rerun {path}"
+        return f"rerun: saved {path}; open it with: rerun {path} (or rerun --serve-web {path})"
     if mode == "serve":
-        if realtime:
-            served = serve_rrd(None)
-            print(f"rerun: open {served.url} (streaming at recorded speed)", flush=True)
-            rec = _new_recording(view)
-            rec.connect_grpc(served.grpc_url, default_blueprint=make_blueprint(view))
-            rec.send_recording_name(view.title)
-            send_view(view, rec, realtime=True)
-            rec.flush(timeout_sec=_FLUSH_TIMEOUT_S)
-            rec.disconnect()
-        else:
-            folder = Path(tempfile.mkdtemp(prefix="imu_dcm_rerun_"))
-            served = serve_rrd(save_rrd(view, folder / (_safe_stem(view.title) + ".rrd")))
+        served = serve_replay(view, realtime)
         return (
-            f"rerun: web viewer at {served.url} (127.0.0.1 only; "
-            f"stop it with: kill {served.process.pid})"
+            f"rerun: web viewer at {served.viewer.url} (127.0.0.1 only; stop it with: "
+            f"kill {served.viewer.process.pid})"
         )
     if mode == "spawn":
         if not has_display():

@@ -3,7 +3,9 @@
 The output is a rosbag2 folder in the layout of recorded ROS 2 logs: ``metadata.yaml``
 (rosbag2 format version 9) and one ``<folder name>.mcap`` file with profile ``ros2``, CDR
 messages, their ``ros2msg`` definitions embedded as schemas, zstd chunks, and the rosbag2
-metadata record. Readable by ``mcap`` + ``mcap-ros2-support`` and by ``rosbags``.
+metadata record. Readable by the project's reader, by ``mcap`` + ``mcap-ros2-support`` and by
+``rosbags``. ``metadata.yaml`` is written by :mod:`imu_dcm.logio.meta` (the one module that reads
+and writes it).
 
 Message types and conventions:
 
@@ -19,8 +21,9 @@ logs whose receive times differ from their stamps). Messages are written in log-
 across topics.
 
 Output safety (:mod:`imu_dcm.outputs`): the bag never replaces an input, a folder holding one,
-or a special file; ``force`` replaces only a bag this module wrote (its MCAP header names
-``imu_dcm.bag_writer``).
+or a special file; ``force`` replaces only a bag this module wrote (its MCAP header names the
+library ``imu_dcm.bag_writer``, the module's name before it moved into :mod:`imu_dcm.logio`:
+bags written then stay replaceable).
 
 Speed: the fixed-layout CDR payloads and the MCAP message records and message indexes are built
 in bulk with numpy (one byte array per topic), chunks are compressed whole, and only the few
@@ -31,9 +34,7 @@ the same payloads and 44 µs per Imu message through ``mcap_ros2.writer``.
 
 from __future__ import annotations
 
-import json
 import os
-import re
 import shutil
 import struct
 import uuid
@@ -47,9 +48,21 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from imu_dcm.errors import InputError
-from imu_dcm.outputs import OutputError, check_output_dir
+from imu_dcm.logio.meta import QOS_YAML, TYPE_HASHES, metadata_body, metadata_document
+from imu_dcm.outputs import OutputError, check_output_dir, ensure_parent
 
-__all__ = ["MSG_DEFINITIONS", "TYPE_HASHES", "StampedSeries", "write_bag"]
+__all__ = [
+    "MSG_DEFINITIONS",
+    "OWN_LIBRARY",
+    "TYPE_HASHES",
+    "StampedSeries",
+    "cdr_messages",
+    "imu_doubles",
+    "write_bag",
+]
+
+#: The library named in the MCAP header of the bags written here (see the module doc).
+OWN_LIBRARY = "imu_dcm.bag_writer"
 
 _SEP = "=" * 80 + "\n"
 _HEADER_DEFS = (
@@ -76,29 +89,6 @@ MSG_DEFINITIONS: dict[str, str] = {
         "std_msgs/Header header\ngeometry_msgs/Vector3 vector\n" + _HEADER_DEFS + _VEC_DEF
     ),
 }
-
-#: REP 2011 type hashes (RIHS01) of the message types, as in rosbag2 metadata (Humble+ types).
-TYPE_HASHES: dict[str, str] = {
-    "sensor_msgs/msg/Imu": "RIHS01_7d9a00ff131080897a5ec7e26e315954b8eae3353c3f995c55faf71574000b5b",  # noqa: E501
-    "geometry_msgs/msg/QuaternionStamped": "RIHS01_381add86c6c3160644d228ca342182c7fd6c7fab11c7a85ad817a9cc22dbac6e",  # noqa: E501
-    "geometry_msgs/msg/Vector3Stamped": "RIHS01_d4829622288cbb443886e7ea94ea5671a3b1be6bab4ad04224432a65f7d7887a",  # noqa: E501
-}
-
-_QOS_YAML = """- avoid_ros_namespace_conventions: false
-  deadline:
-    nsec: 854775807
-    sec: 9223372036
-  depth: 10
-  durability: volatile
-  history: keep_last
-  lifespan:
-    nsec: 854775807
-    sec: 9223372036
-  liveliness: automatic
-  liveliness_lease_duration:
-    nsec: 854775807
-    sec: 9223372036
-  reliability: reliable"""
 
 _MAX_T_NS = (2**31) * 10**9  # header.stamp.sec is an int32
 
@@ -174,7 +164,7 @@ def _check_series(name: str, s: StampedSeries, k: int) -> None:
         raise InputError(f"Expected {name} finite values, got row {i} = {s.values[i].tolist()}")
 
 
-def _cdr_messages(
+def cdr_messages(
     t_ns: NDArray[np.int64], frame_id: str, doubles: NDArray[np.float64]
 ) -> NDArray[np.uint8]:
     """CDR (little-endian) payloads of ``Header`` + ``k`` float64, one row of bytes per message."""
@@ -197,7 +187,7 @@ def _cdr_messages(
     return buf
 
 
-def _imu_doubles(
+def imu_doubles(
     rates: NDArray[np.float64],
     accel: NDArray[np.float64] | None,
     gyro_cov: NDArray[np.float64] | None,
@@ -223,36 +213,31 @@ def _u8le(values: NDArray, width: int) -> NDArray[np.uint8]:
     return np.ascontiguousarray(values, dtype=dt).view(np.uint8).reshape(-1, width)
 
 
-def _write_mcap(
-    f,
-    topics: list[tuple[str, str, NDArray[np.int64], NDArray[np.uint8]]],
-    metadata: dict[str, str],
-    chunk_size: int = 1 << 20,
-) -> None:
-    """Write an indexed MCAP file (profile ros2, zstd chunks) with all records built in bulk.
+# ------------------------------------------------------------------------------- MCAP file
+_MAGIC = b"\x89MCAP0\r\n"
+#: (topic, msgtype, log times t_ns (N,), CDR payload rows (N, size)) of one channel.
+Encoded = tuple[str, str, NDArray[np.int64], NDArray[np.uint8]]
 
-    ``topics`` holds ``(topic, msgtype, t_ns, payloads)`` with ``payloads`` the (N, size) CDR
-    rows. Schemas and channels are written in the data section and repeated in the summary;
-    every chunk is followed by its message indexes; the summary has statistics, chunk and
-    metadata indexes and summary offsets (the layout of the mcap library's own writer).
+
+@dataclass(frozen=True)
+class _Messages:
+    """Every message record of the file in (log time, topic) order, as one byte string.
+
+    ``stamps``, ``chan`` (0-based topic index), ``starts``/``ends`` (byte range in ``body``)
+    have one entry per message, in file order.
     """
-    import zstandard
-    from mcap.data_stream import RecordBuilder
-    from mcap.records import (
-        Channel,
-        Chunk,
-        ChunkIndex,
-        DataEnd,
-        Footer,
-        Header,
-        Metadata,
-        MetadataIndex,
-        Schema,
-        Statistics,
-        SummaryOffset,
-    )
 
-    magic = b"\x89MCAP0\r\n"
+    stamps: NDArray[np.int64]
+    chan: NDArray[np.int64]
+    starts: NDArray[np.int64]
+    ends: NDArray[np.int64]
+    body: bytes
+
+
+def _schemas_and_channels(topics: list[Encoded]) -> tuple[dict, list]:
+    """mcap Schema records (one per type, ``ros2msg``) and Channel records (ids from 1)."""
+    from mcap.records import Channel, Schema
+
     schemas: dict[str, Schema] = {}
     channels: list[Channel] = []
     for cid, (name, msgtype, _, _) in enumerate(topics, start=1):
@@ -269,11 +254,14 @@ def _write_mcap(
                 topic=name,
                 message_encoding="cdr",
                 schema_id=schemas[msgtype].id,
-                metadata={"offered_qos_profiles": _QOS_YAML},
+                metadata={"offered_qos_profiles": QOS_YAML},
             )
         )
+    return schemas, channels
 
-    # All message records of the file, in (stamp, topic) order, as one byte array.
+
+def _message_records(topics: list[Encoded]) -> _Messages:
+    """All message records (opcode 0x05), built in bulk per topic, merged in log-time order."""
     stamps = np.concatenate([t[2] for t in topics])
     chan = np.concatenate([np.full(t[2].size, i) for i, t in enumerate(topics)])
     row = np.concatenate([np.arange(t[2].size) for t in topics])
@@ -281,7 +269,6 @@ def _write_mcap(
     stamps, chan, row = stamps[order], chan[order], row[order]
     sizes = np.array([31 + t[3].shape[1] for t in topics], dtype=np.int64)[chan]
     ends = np.cumsum(sizes)
-    starts = ends - sizes
     records: list[list[bytes]] = []
     for i, (_, _, t_ns, payload) in enumerate(topics):
         n, size = payload.shape
@@ -297,28 +284,46 @@ def _write_mcap(
         step = 31 + size
         records.append([flat[k : k + step] for k in range(0, n * step, step)])
     body = b"".join([records[c][j] for c, j in zip(chan.tolist(), row.tolist(), strict=False)])
+    return _Messages(stamps, chan, ends - sizes, ends, body)
 
-    # Chunk boundaries: close a chunk once its records reach chunk_size bytes.
+
+def _chunk_bounds(m: _Messages, chunk_size: int) -> list[int]:
+    """Message indices where chunks start (and the end): a chunk closes at ``chunk_size``."""
     bounds = [0]
-    while bounds[-1] < stamps.size:
-        j = int(np.searchsorted(ends, starts[bounds[-1]] + chunk_size, side="left")) + 1
-        bounds.append(min(max(j, bounds[-1] + 1), stamps.size))
+    while bounds[-1] < m.stamps.size:
+        j = int(np.searchsorted(m.ends, m.starts[bounds[-1]] + chunk_size, side="left")) + 1
+        bounds.append(min(max(j, bounds[-1] + 1), m.stamps.size))
+    return bounds
 
-    out = RecordBuilder()
-    Header(profile="ros2", library="imu_dcm.bag_writer").write(out)
-    for sc in schemas.values():
-        sc.write(out)
-    for ch in channels:
-        ch.write(out)
-    f.write(magic + out.end())
+
+def _message_indexes(m: _Messages, a: int, b: int, lo: int, pos: int, index) -> bytes:
+    """The message index records (0x07) following the chunk of messages ``[a, b)``."""
+    parts: list[bytes] = []
+    sub_chan = m.chan[a:b]
+    for i in np.unique(sub_chan).tolist():
+        sel = np.flatnonzero(sub_chan == i)
+        pairs = np.empty((sel.size, 16), dtype=np.uint8)
+        pairs[:, :8] = _u8le(m.stamps[a:b][sel], 8)
+        pairs[:, 8:] = _u8le(m.starts[a:b][sel] - lo, 8)
+        head = struct.pack("<BQHI", 0x07, 2 + 4 + 16 * sel.size, i + 1, 16 * sel.size)
+        index.message_index_offsets[i + 1] = pos + sum(len(p) for p in parts)
+        parts.append(head + pairs.tobytes())
+    return b"".join(parts)
+
+
+def _write_chunks(f, out, m: _Messages, chunk_size: int) -> list:
+    """Write the zstd chunks, each followed by its message indexes; returns the chunk indexes."""
+    import zstandard
+    from mcap.records import Chunk, ChunkIndex
+
     pos = f.tell()
     compressor = zstandard.ZstdCompressor()
     chunk_indexes: list[ChunkIndex] = []
-    for a, b in pairwise(bounds):
-        lo, hi = int(starts[a]), int(ends[b - 1])
-        raw = body[lo:hi]
+    for a, b in pairwise(_chunk_bounds(m, chunk_size)):
+        lo, hi = int(m.starts[a]), int(m.ends[b - 1])
+        raw = m.body[lo:hi]
         data = compressor.compress(raw)
-        t0, t1 = int(stamps[a:b].min()), int(stamps[a:b].max())
+        t0, t1 = int(m.stamps[a:b].min()), int(m.stamps[a:b].max())
         Chunk(
             compression="zstd",
             data=data,
@@ -341,36 +346,23 @@ def _write_mcap(
         )
         f.write(chunk_bytes)
         pos += len(chunk_bytes)
-        idx_parts = []
-        sub_chan = chan[a:b]
-        for i in np.unique(sub_chan).tolist():
-            sel = np.flatnonzero(sub_chan == i)
-            pairs = np.empty((sel.size, 16), dtype=np.uint8)
-            pairs[:, :8] = _u8le(stamps[a:b][sel], 8)
-            pairs[:, 8:] = _u8le(starts[a:b][sel] - lo, 8)
-            head = struct.pack("<BQHI", 0x07, 2 + 4 + 16 * sel.size, i + 1, 16 * sel.size)
-            index.message_index_offsets[i + 1] = pos + sum(len(p) for p in idx_parts)
-            idx_parts.append(head + pairs.tobytes())
-        idx = b"".join(idx_parts)
+        idx = _message_indexes(m, a, b, lo, pos, index)
         index.message_index_length = len(idx)
         f.write(idx)
         pos += len(idx)
         chunk_indexes.append(index)
+    return chunk_indexes
 
-    meta_record = Metadata(name="rosbag2", metadata=metadata)
-    meta_record.write(out)
-    meta_bytes = out.end()
-    meta_index = MetadataIndex(offset=pos, length=len(meta_bytes), name="rosbag2")
-    f.write(meta_bytes)
-    pos += len(meta_bytes)
-    DataEnd(data_section_crc=0).write(out)
-    f.write(out.end())
+
+def _write_summary(f, out, summary_groups: list[tuple[int, list]]) -> None:
+    """The summary section (record groups, then their summary offsets) and the footer."""
+    from mcap.data_stream import RecordBuilder
+    from mcap.records import Footer, SummaryOffset
+
     summary_start = f.tell()
-
-    groups = []
     summary = RecordBuilder()
-
-    def group(opcode: int, records: list) -> None:
+    groups = []
+    for opcode, records in summary_groups:
         start = summary.count
         for r in records:
             r.write(summary)
@@ -381,28 +373,6 @@ def _write_mcap(
                 group_length=summary.count - start,
             )
         )
-
-    group(0x03, list(schemas.values()))
-    group(0x04, channels)
-    counts = {i + 1: int(t[2].size) for i, t in enumerate(topics)}
-    group(
-        0x0B,
-        [
-            Statistics(
-                message_count=int(stamps.size),
-                schema_count=len(schemas),
-                channel_count=len(channels),
-                attachment_count=0,
-                metadata_count=1,
-                chunk_count=len(chunk_indexes),
-                message_start_time=int(stamps[0]),
-                message_end_time=int(stamps[-1]),
-                channel_message_counts=counts,
-            )
-        ],
-    )
-    group(0x08, chunk_indexes)
-    group(0x0D, [meta_index])
     summary_offset_start = summary_start + summary.count
     for g in groups:
         g.write(summary)
@@ -413,62 +383,147 @@ def _write_mcap(
     Footer(
         summary_start=summary_start, summary_offset_start=summary_offset_start, summary_crc=crc
     ).write(out)
-    f.write(out.end() + magic)
+    f.write(out.end() + _MAGIC)
 
 
-def _yaml_str(s: str) -> str:
-    """A YAML double-quoted scalar (JSON string syntax is valid YAML)."""
-    return json.dumps(s)
+def write_mcap(
+    f, topics: list[Encoded], metadata: dict[str, str], chunk_size: int = 1 << 20
+) -> None:
+    """Write an indexed MCAP file (profile ros2, zstd chunks) with all records built in bulk.
 
+    ``topics`` holds ``(topic, msgtype, t_ns, payloads)`` with ``payloads`` the (N, size) CDR
+    rows. Schemas and channels are written in the data section and repeated in the summary;
+    every chunk is followed by its message indexes; the summary has statistics, chunk and
+    metadata indexes and summary offsets (the layout of the mcap library's own writer).
+    """
+    from mcap.data_stream import RecordBuilder
+    from mcap.records import DataEnd, Header, Metadata, MetadataIndex, Statistics
 
-def _metadata_yaml(
-    mcap_name: str,
-    topics: list[tuple[str, str, int]],
-    start_ns: int,
-    end_ns: int,
-    total: int,
-    custom_data: Mapping[str, str],
-) -> str:
-    """The rosbag2 ``metadata.yaml`` body (format version 9), unindented."""
-    lines = ["compression_format: ''", "compression_mode: ''"]
-    if custom_data:
-        lines.append("custom_data:")
-        lines += [f"  {_yaml_str(k)}: {_yaml_str(v)}" for k, v in custom_data.items()]
-    else:
-        lines.append("custom_data: {}")
-    lines += [
-        "duration:",
-        f"  nanoseconds: {end_ns - start_ns}",
-        "files:",
-        "- duration:",
-        f"    nanoseconds: {end_ns - start_ns}",
-        f"  message_count: {total}",
-        f"  path: {mcap_name}",
-        "  starting_time:",
-        f"    nanoseconds_since_epoch: {start_ns}",
-        f"message_count: {total}",
-        "relative_file_paths:",
-        f"- {mcap_name}",
-        "ros_distro: rosbags",
-        "starting_time:",
-        f"  nanoseconds_since_epoch: {start_ns}",
-        "storage_identifier: mcap",
-        "topics_with_message_count:",
+    schemas, channels = _schemas_and_channels(topics)
+    m = _message_records(topics)
+    out = RecordBuilder()
+    Header(profile="ros2", library=OWN_LIBRARY).write(out)
+    for record in (*schemas.values(), *channels):
+        record.write(out)
+    f.write(_MAGIC + out.end())
+    chunk_indexes = _write_chunks(f, out, m, chunk_size)
+    Metadata(name="rosbag2", metadata=metadata).write(out)
+    meta_bytes = out.end()
+    meta_index = MetadataIndex(offset=f.tell(), length=len(meta_bytes), name="rosbag2")
+    f.write(meta_bytes)
+    DataEnd(data_section_crc=0).write(out)
+    f.write(out.end())
+    stats = Statistics(
+        message_count=int(m.stamps.size),
+        schema_count=len(schemas),
+        channel_count=len(channels),
+        attachment_count=0,
+        metadata_count=1,
+        chunk_count=len(chunk_indexes),
+        message_start_time=int(m.stamps[0]),
+        message_end_time=int(m.stamps[-1]),
+        channel_message_counts={i + 1: int(t[2].size) for i, t in enumerate(topics)},
+    )
+    groups = [
+        (0x03, list(schemas.values())),
+        (0x04, channels),
+        (0x0B, [stats]),
+        (0x08, chunk_indexes),
+        (0x0D, [meta_index]),
     ]
-    qos = "\n".join("    " + ln for ln in _QOS_YAML.splitlines())
-    for name, msgtype, count in topics:
-        lines += [
-            f"- message_count: {count}",
-            "  topic_metadata:",
-            f"    name: {name if re.fullmatch(r'[A-Za-z0-9_/~]+', name) else _yaml_str(name)}",
-            "    offered_qos_profiles:",
-            qos,
-            "    serialization_format: cdr",
-            f"    type: {msgtype}",
-            f"    type_description_hash: {TYPE_HASHES[msgtype]}",
-        ]
-    lines.append("version: 9")
-    return "\n".join(lines) + "\n"
+    _write_summary(f, out, groups)
+
+
+# ------------------------------------------------------------------------------- the bag
+#: (topic, msgtype, series, the float64 after each message's header)
+_Topic = tuple[str, str, StampedSeries, NDArray[np.float64]]
+
+
+def _imu_topic(
+    imu: StampedSeries, imu_topic: str, accel: ArrayLike | None, cov: ArrayLike | None
+) -> _Topic:
+    """The IMU topic's row, its acceleration and gyro covariance checked."""
+    _check_series(f"imu ({imu_topic})", imu, 3)
+    a = None
+    if accel is not None:
+        a = np.asarray(accel, dtype=float)
+        if a.shape != imu.values.shape or not np.all(np.isfinite(a)):
+            raise InputError(
+                f"Expected finite imu_linear_acceleration of shape "
+                f"{imu.values.shape}, got {a.shape}"
+            )
+    c = None
+    if cov is not None:
+        c = np.asarray(cov, dtype=float)
+        if c.shape != (3, 3):
+            raise InputError(
+                f"Expected imu_angular_velocity_covariance of shape (3, 3), got {c.shape}"
+            )
+    return (imu_topic, "sensor_msgs/msg/Imu", imu, imu_doubles(imu.values, a, c))
+
+
+def _check_topic_names(topics: list[_Topic]) -> None:
+    if not topics:
+        raise InputError("Expected at least one of imu, quaternions, vectors, got none")
+    names = [t[0] for t in topics]
+    dup = sorted({n for n in names if names.count(n) > 1})
+    if dup:
+        raise InputError(f"Expected distinct topic names, got {dup} more than once")
+    for name in names:
+        if not name.startswith("/"):
+            raise InputError(f"Expected topic names starting with '/', got {name!r}")
+
+
+def _write_into(folder: Path, name: str, topics: list[_Topic], custom: dict[str, str]) -> None:
+    """``<name>.mcap`` and ``metadata.yaml`` of the bag, written into ``folder``."""
+    mcap_name = f"{name}.mcap"
+    stamps = np.concatenate([t[2].file_t_ns for t in topics])
+    counts = [(t[0], t[1], int(t[2].t_ns.size)) for t in topics]
+    body = metadata_body(mcap_name, counts, int(stamps.min()), int(stamps.max()), custom)
+    encoded = [
+        (topic, msgtype, s.file_t_ns, cdr_messages(s.t_ns, s.frame_id, d))
+        for topic, msgtype, s, d in topics
+    ]
+    with open(folder / mcap_name, "wb") as f:
+        write_mcap(f, encoded, {"serialized_metadata": body})
+    (folder / "metadata.yaml").write_text(metadata_document(body), encoding="utf-8")
+
+
+def _swap_in(tmp: Path, out: Path) -> None:
+    """Rename the finished ``tmp`` to ``out``; an existing ``out`` (our own bag) is replaced."""
+    if out.exists():  # force, and it is our own bag: swap in, then remove the old one
+        old = out.parent / f".{out.name}.old-{os.getpid()}-{uuid.uuid4().hex[:8]}"
+        os.rename(out, old)
+        os.rename(tmp, out)
+        shutil.rmtree(old)
+    else:
+        os.rename(tmp, out)
+
+
+def _write_atomic(out: Path, topics: list[_Topic], custom: dict, inputs: tuple, force: bool):
+    """Write the bag under a temporary sibling name, then swap it in (whole or not at all)."""
+    tmp = out.parent / f".{out.name}.tmp-{os.getpid()}-{uuid.uuid4().hex[:8]}"
+    try:
+        ensure_parent(out, "output bag")  # e.g. --out out/top in a fresh checkout
+        tmp.mkdir()
+    except OSError as exc:
+        raise OutputError(
+            f"Expected to create the output bag {str(out)!r}, got "
+            f"{type(exc).__name__}: {exc.strerror}"
+        ) from None
+    try:
+        _write_into(tmp, out.name, topics, custom)
+        check_output_dir(out, inputs, force=force, what="output bag")  # unchanged meanwhile
+        _swap_in(tmp, out)
+    except OSError as exc:
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise OutputError(
+            f"Expected to write the output bag {str(out)!r}, got "
+            f"{type(exc).__name__}: {exc.strerror or exc}"
+        ) from None
+    except BaseException:
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise
 
 
 def write_bag(
@@ -530,87 +585,21 @@ def write_bag(
     """
     inputs = tuple(inputs)
     out = check_output_dir(out_dir, inputs, force=force, what="output bag")
-    quaternions = dict(quaternions or {})
-    vectors = dict(vectors or {})
     custom = dict(custom_data or {})
     for k, v in custom.items():
         if not isinstance(k, str) or not isinstance(v, str):
             raise InputError(f"Expected custom_data str -> str, got {k!r}: {type(v).__name__}")
-
-    # (topic, type, series, doubles)
-    topics: list[tuple[str, str, StampedSeries, NDArray[np.float64]]] = []
+    topics: list[_Topic] = []
     if imu is not None:
-        _check_series(f"imu ({imu_topic})", imu, 3)
-        accel = None
-        if imu_linear_acceleration is not None:
-            accel = np.asarray(imu_linear_acceleration, dtype=float)
-            if accel.shape != imu.values.shape or not np.all(np.isfinite(accel)):
-                raise InputError(
-                    f"Expected finite imu_linear_acceleration of shape "
-                    f"{imu.values.shape}, got {accel.shape}"
-                )
-        cov = None
-        if imu_angular_velocity_covariance is not None:
-            cov = np.asarray(imu_angular_velocity_covariance, dtype=float)
-            if cov.shape != (3, 3):
-                raise InputError(
-                    f"Expected imu_angular_velocity_covariance of shape (3, 3), got {cov.shape}"
-                )
-        topics.append((imu_topic, "sensor_msgs/msg/Imu", imu, _imu_doubles(imu.values, accel, cov)))
-    for name, s in quaternions.items():
+        topics.append(
+            _imu_topic(imu, imu_topic, imu_linear_acceleration, imu_angular_velocity_covariance)
+        )
+    for name, s in dict(quaternions or {}).items():
         _check_series(f"quaternions[{name!r}]", s, 4)
         topics.append((name, "geometry_msgs/msg/QuaternionStamped", s, s.values))
-    for name, s in vectors.items():
+    for name, s in dict(vectors or {}).items():
         _check_series(f"vectors[{name!r}]", s, 3)
         topics.append((name, "geometry_msgs/msg/Vector3Stamped", s, s.values))
-    if not topics:
-        raise InputError("Expected at least one of imu, quaternions, vectors, got none")
-    names = [t[0] for t in topics]
-    dup = sorted({n for n in names if names.count(n) > 1})
-    if dup:
-        raise InputError(f"Expected distinct topic names, got {dup} more than once")
-    for name in names:
-        if not name.startswith("/"):
-            raise InputError(f"Expected topic names starting with '/', got {name!r}")
-
-    stamps = np.concatenate([t[2].file_t_ns for t in topics])
-    start_ns, end_ns = int(stamps.min()), int(stamps.max())
-
-    tmp = out.parent / f".{out.name}.tmp-{os.getpid()}-{uuid.uuid4().hex[:8]}"
-    mcap_name = f"{out.name}.mcap"
-    try:
-        tmp.mkdir()
-    except OSError as exc:
-        raise OutputError(
-            f"Expected to create the output bag {str(out)!r}, got "
-            f"{type(exc).__name__}: {exc.strerror}"
-        ) from None
-    try:
-        counts = [(t[0], t[1], int(t[2].t_ns.size)) for t in topics]
-        meta_body = _metadata_yaml(mcap_name, counts, start_ns, end_ns, int(stamps.size), custom)
-        encoded = [
-            (name, msgtype, s.file_t_ns, _cdr_messages(s.t_ns, s.frame_id, d))
-            for name, msgtype, s, d in topics
-        ]
-        with open(tmp / mcap_name, "wb") as f:
-            _write_mcap(f, encoded, {"serialized_metadata": meta_body})
-        indented = "".join("  " + ln + "\n" for ln in meta_body.splitlines())
-        (tmp / "metadata.yaml").write_text("rosbag2_bagfile_information:\n" + indented)
-        check_output_dir(out, inputs, force=force, what="output bag")  # unchanged meanwhile
-        if out.exists():  # force, and it is our own bag: swap in, then remove the old one
-            old = out.parent / f".{out.name}.old-{os.getpid()}-{uuid.uuid4().hex[:8]}"
-            os.rename(out, old)
-            os.rename(tmp, out)
-            shutil.rmtree(old)
-        else:
-            os.rename(tmp, out)
-    except OSError as exc:
-        shutil.rmtree(tmp, ignore_errors=True)
-        raise OutputError(
-            f"Expected to write the output bag {str(out)!r}, got "
-            f"{type(exc).__name__}: {exc.strerror or exc}"
-        ) from None
-    except BaseException:
-        shutil.rmtree(tmp, ignore_errors=True)
-        raise
+    _check_topic_names(topics)
+    _write_atomic(out, topics, custom, inputs, force)
     return out

@@ -1,0 +1,116 @@
+"""What every ROS container shares: from the raw channels a container collected to :class:`LogData`.
+
+A ROS container (MCAP, rosbag2 sqlite3, split or compressed rosbag2 folders, ROS 1 bags) only
+collects: ``collect(sink)`` walks its file and hands the payloads of the channels the
+:class:`~imu_dcm.logio.types.Sink` wants to the decoders, batch by batch, and returns a
+:class:`~imu_dcm.logio.types.Collected`. :func:`read_ros` then picks the IMU and the truth
+channels (:mod:`imu_dcm.logio.channels`) and builds the :class:`LogData`; :class:`RosSource`
+makes that the container's :meth:`~imu_dcm.logio.source.LogSource.read`.
+"""
+
+from __future__ import annotations
+
+import warnings
+from pathlib import Path
+
+from imu_dcm.errors import ImuDcmWarning, LogError
+from imu_dcm.logio.channels import describe, pick_imu_judged, plan, read_imu, read_truths
+from imu_dcm.logio.source import Progress, ReadRequest
+from imu_dcm.logio.types import ChannelInfo, Collected, Damage, LogData, Sink
+
+
+class RosSource:
+    """Base of the ROS containers: ``collect(sink)`` is theirs, ``read(request)`` is shared.
+
+    Attributes
+    ----------
+    kind : str — the container, as said to the user ("ros2 mcap", "ros1 bag", ...).
+    path : Path — the file or folder read; it is :attr:`LogData.path` too.
+    progress : callable(fraction) or None — called as the log is read.
+    custom_data : dict — the rosbag2 ``custom_data`` of the bag the file belongs to.
+    """
+
+    kind = "ros"
+    path: Path
+    progress: Progress | None = None
+    custom_data: dict[str, str] = {}  # replaced per instance, never mutated
+
+    def collect(self, sink: Sink) -> Collected:
+        """Every channel, the kept channels' data (decoded in batches), the damage skipped."""
+        raise NotImplementedError
+
+    def read(self, request: ReadRequest) -> LogData:
+        return read_ros(self, request)
+
+
+def damage_summary(damage: list[Damage]) -> str:
+    """One line for the damaged parts skipped: the first one, and the messages lost in all."""
+    lost = [d.messages_lost for d in damage]
+    n_lost = "an unknown number of" if None in lost else str(sum(lost))
+    first = damage[0]
+    more = f" (and {len(damage) - 1} more)" if len(damage) > 1 else ""
+    when = ""
+    if first.t_start_ns is not None and first.t_end_ns is not None:
+        when = f", log time {first.t_start_ns}..{first.t_end_ns} ns"
+    return (
+        f"{first.what} (file offset {first.offset}{when}){more}; {n_lost} messages of the "
+        f"read channels lost in {len(damage)} damaged part{'s' if len(damage) > 1 else ''}"
+    )
+
+
+def _check_not_empty(got: Collected, channels: tuple[ChannelInfo, ...], shown: Path, stopped_at):
+    if channels and (sum(c.count for c in channels) or got.payloads):
+        return
+    if stopped_at:  # one line: the damage is why nothing was read
+        raise LogError(f"Expected messages in the log, got none readable in {shown}: {stopped_at}")
+    raise LogError(
+        f"Expected messages in the log, got an empty log ({describe(got.conns)}): {shown}"
+    )
+
+
+def read_ros(source: RosSource, request: ReadRequest) -> LogData:
+    """The IMU series, the truth and every channel of a ROS container (see ``read_log``).
+
+    Warnings (damage skipped, messages that do not decode) are given only once the log is
+    known to be usable: an error is then the only line the user sees.
+    """
+    if request.progress is not None:
+        source.progress = request.progress
+    got = source.collect(Sink(plan(request.imu_topic, request.truth_topic)))
+    shown = source.path
+    channels = tuple(
+        ChannelInfo(c.topic, c.msgtype, c.encoding, int(c.count or 0)) for c in got.conns
+    )
+    stopped_at = damage_summary(got.damage) if got.damage else None
+    _check_not_empty(got, channels, shown, stopped_at)
+    topic, conns, notes = pick_imu_judged(got, request.imu_topic)
+    imu, undecodable = read_imu(got, topic, conns)
+    if len(imu.t_ns) == 0:
+        raise LogError(
+            f"Expected IMU samples on {imu.topic}, got none that decode ({undecodable} messages)"
+        )
+    truth, candidates = read_truths(got, imu, request.truth_topic, request.truth_frame)
+    if stopped_at:
+        warnings.warn(
+            f"{shown.name} is truncated or corrupt: {stopped_at}", ImuDcmWarning, stacklevel=4
+        )
+    if undecodable:
+        warnings.warn(
+            f"{imu.topic}: dropped {undecodable} messages that do not decode",
+            ImuDcmWarning,
+            stacklevel=4,
+        )
+    if source.progress is not None:
+        source.progress(1.0)
+    return LogData(
+        shown,
+        imu,
+        truth,
+        channels,
+        dict(source.custom_data),
+        got.kind or source.kind,
+        tuple(got.damage),
+        stopped_at,
+        truth_candidates=candidates,
+        notes=notes,
+    )

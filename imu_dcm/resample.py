@@ -1,0 +1,72 @@
+"""Attitude series at other stamps: a recorded ``q_w_b`` series slerped to query times.
+
+:func:`slerp_truth` is the one resampler of a truth (or any attitude) series: the replay judges
+its estimate with it, and live compares against a truth topic with it. It slerps between the
+two recorded samples around each query time and never bridges a gap longer than
+:data:`TRUTH_BRIDGE_STEPS` median steps, so a hole in the truth stays a hole (NaN), never a
+made-up attitude. Quaternions are ``[x, y, z, w]``, body to world; stamps int64 ns.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from imu_dcm.so3 import exp_quat, log_quat, quat_conjugate, quat_multiply
+
+__all__ = ["TRUTH_BRIDGE_STEPS", "slerp_truth"]
+
+#: Gaps between truth samples longer than this many median truth steps are not bridged.
+TRUTH_BRIDGE_STEPS = 2.0
+
+
+def slerp_truth(truth_t_ns: ArrayLike, q_w_b: ArrayLike, t_ns: ArrayLike) -> NDArray[np.float64]:
+    """Truth attitudes at times ``t_ns`` by slerp, NaN outside coverage and across long gaps.
+
+    Parameters
+    ----------
+    truth_t_ns : array_like, int64 (M,)
+        Truth stamps (any order; sorted here, duplicates dropped).
+    q_w_b : array_like, shape (M, 4)
+        Truth ``[x, y, z, w]`` (body to world); need not be sign-continuous.
+    t_ns : array_like, int64 (N,)
+        Query stamps.
+
+    Returns
+    -------
+    ndarray, shape (N, 4)
+        Unit quaternions; NaN rows before the first / after the last truth sample and inside
+        gaps longer than ``TRUTH_BRIDGE_STEPS`` median truth steps (never bridged).
+    """
+    tt = np.asarray(truth_t_ns, dtype=np.int64)
+    q = np.asarray(q_w_b, dtype=float)
+    t = np.asarray(t_ns, dtype=np.int64)
+    norm = np.linalg.norm(q, axis=1)
+    ok = np.isfinite(norm) & (norm > 0.5)
+    tt, q = tt[ok], q[ok] / norm[ok, None]
+    if len(tt) > 1 and not np.all(np.diff(tt) > 0):  # recorded truth is usually in order
+        order = np.argsort(tt, kind="stable")
+        tt, q = tt[order], q[order]
+        uniq = np.concatenate([[True], np.diff(tt) > 0])
+        tt, q = tt[uniq], q[uniq]
+    out = np.full((len(t), 4), np.nan)
+    if len(tt) == 0:
+        return out
+    j = np.searchsorted(tt, t, side="right") - 1  # tt[j] <= t < tt[j+1]
+    exact = (j >= 0) & (tt[np.clip(j, 0, None)] == t)
+    out[exact] = q[j[exact]]
+    if len(tt) < 2:
+        return out
+    max_step = TRUTH_BRIDGE_STEPS * float(np.median(np.diff(tt)))
+    inner = ~exact & (j >= 0) & (j < len(tt) - 1)
+    jj = j[inner]
+    step = (tt[jj + 1] - tt[jj]).astype(float)
+    bridge = step <= max_step * (1 + 1e-6)
+    idx = np.flatnonzero(inner)[bridge]
+    jj = jj[bridge]
+    u = (t[idx] - tt[jj]).astype(float) / (tt[jj + 1] - tt[jj]).astype(float)
+    q0, q1 = q[jj], q[jj + 1]
+    rel = quat_multiply(quat_conjugate(q0), q1)
+    rel = np.where(rel[:, 3:4] < 0, -rel, rel)  # shortest arc
+    out[idx] = quat_multiply(q0, exp_quat(u[:, None] * log_quat(rel)))
+    return out

@@ -1,0 +1,191 @@
+"""ArduPilot DataFlash reader: Euler angles and frames against scipy, a log of known content
+written with pymavlink's own record builders from the shipped trial, instances, damage.
+
+No public ArduPilot log ships with pymavlink or beside the repository, so every log here is
+written by :func:`tests.drone_logs.write_dataflash`.
+"""
+
+from __future__ import annotations
+
+import warnings
+
+import numpy as np
+import pytest
+from scipy.spatial.transform import Rotation
+
+from imu_dcm.errors import ImuDcmWarning, LogError
+from imu_dcm.logio import ardupilot, ned, read_log
+from imu_dcm.so3 import angle_between_deg
+from tests.drone_logs import TRIAL, DFMessage, trial_arrays, trial_dataflash, write_dataflash
+
+pytest.importorskip("pymavlink")
+
+
+# ------------------------------------------------------------------------------ frames
+def test_euler_matches_scipy_zyx():
+    rng = np.random.default_rng(4)
+    rpy = np.column_stack(
+        [rng.uniform(-180, 180, 300), rng.uniform(-89, 89, 300), rng.uniform(0, 360, 300)]
+    )
+    q = ned.q_wxyz_from_euler_deg(rpy[:, 0], rpy[:, 1], rpy[:, 2])
+    want = Rotation.from_euler("ZYX", rpy[:, ::-1], degrees=True)
+    got = Rotation.from_quat(np.column_stack([q[:, 1:], q[:, :1]]))
+    assert np.max((got.inv() * want).magnitude()) < 1e-12
+
+
+def test_yaw_0_is_90_deg_about_z_in_enu_and_yaw_90_the_identity():
+    s = np.sqrt(0.5)
+    north = ned.q_enu_flu(ned.q_wxyz_from_euler_deg(0.0, 0.0, 0.0))
+    east = ned.q_enu_flu(ned.q_wxyz_from_euler_deg(0.0, 0.0, 90.0))
+    assert angle_between_deg(north, [0, 0, s, s]) < 1e-12
+    assert angle_between_deg(east, [0, 0, 0, 1.0]) < 1e-12
+
+
+def test_nose_up_pitch_is_nose_up_in_enu():
+    q = ned.q_enu_flu(ned.q_wxyz_from_euler_deg(0.0, 30.0, 90.0))  # facing east, nose up 30
+    nose = Rotation.from_quat(q).apply([1.0, 0, 0])
+    assert np.allclose(nose, [np.cos(np.radians(30)), 0, np.sin(np.radians(30))], atol=1e-12)
+
+
+# ------------------------------------------------------------------------------ proof
+@pytest.fixture(scope="module")
+def trial_bin(tmp_path_factory):
+    return trial_dataflash(tmp_path_factory.mktemp("df") / "trial.bin")
+
+
+def test_pymavlink_reads_the_written_log(trial_bin):
+    from pymavlink import DFReader
+
+    df = DFReader.DFReader_binary(str(trial_bin))
+    m = df.recv_match(type="IMU")
+    a = trial_arrays()
+    assert m.TimeUS * 1000 == a.t_ns[0] and m.GyrY == -a.omega_b[0, 1]
+    df.close()
+
+
+def test_trial_dataflash_gives_the_trials_arrays(trial_bin):
+    """Doubles: the rates pass through sign flips only (exact); the truth goes through Euler
+    angles (scipy writes them, the reader composes them back), a few ulp per angle, and the
+    composed rotation differs by at most the sum of the three angle errors: ~1e-13 deg."""
+    a = trial_arrays()
+    d = read_log(trial_bin)
+    assert d.container == "ardupilot dataflash"
+    assert np.array_equal(d.imu.t_ns, a.t_ns)
+    assert np.array_equal(d.imu.omega_b, a.omega_b)
+    assert np.array_equal(d.truth.t_ns, a.truth_t_ns)
+    assert np.max(angle_between_deg(d.truth.q_w_b, a.q_w_b)) < 1e-9
+    assert d.truth.topic == "ATT" and d.truth.estimate_of == "ArduPilot's own estimate"
+    assert any("ArduPilot's own estimate" in n for n in d.notes)
+
+
+@pytest.mark.slow
+def test_trial_dataflash_replays_to_the_trials_rms(trial_bin):
+    """|RMS(a) - RMS(b)| <= max |a - b| (the triangle inequality of the l2 norm), and the
+    estimate starts from the truth, which moves it by no more: with truth within 1e-9 deg the
+    RMS agrees within 2e-9 deg, far inside 1e-6 deg."""
+    from imu_dcm.replay import replay
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", ImuDcmWarning)
+        want = replay(TRIAL).summary
+        got = replay(trial_bin).summary
+    assert got.rms_error_deg == pytest.approx(want.rms_error_deg, abs=1e-6)
+    assert got.max_error_deg == pytest.approx(want.max_error_deg, abs=1e-6)
+
+
+def test_float_log_is_within_float32_rounding(tmp_path):
+    """ArduPilot logs floats: rates within half an ulp (2^-24 relative); each Euler angle
+    within 2^-24 of its size, so the attitude within 2^-24 (|roll| + |pitch| + |yaw|) <=
+    2^-24 * 630 deg = 3.8e-5 deg."""
+    a = trial_arrays()
+    d = read_log(trial_dataflash(tmp_path / "f.bin", real="f"))
+    assert np.all(np.abs(d.imu.omega_b - a.omega_b) <= np.abs(a.omega_b) * 2.0**-24)
+    assert np.max(angle_between_deg(d.truth.q_w_b, a.q_w_b)) <= 2.0**-24 * 630
+
+
+# ------------------------------------------------------------------------ instances
+def _imu(rows_per: dict[int, float], n=50, accel=True) -> DFMessage:
+    rows = []
+    for i in range(n):
+        for inst, g in rows_per.items():
+            r = (1000 + 2500 * i, inst, g, 2 * g, 3 * g)
+            rows.append(r + ((0.0, 0.0, -9.81) if accel else ()))
+    cols = ["TimeUS", "I", "GyrX", "GyrY", "GyrZ"] + (["AccX", "AccY", "AccZ"] if accel else [])
+    return DFMessage("IMU", "QB" + "f" * (len(cols) - 2), cols, rows)
+
+
+def _att(n=20, name="ATT") -> DFMessage:
+    rows = [(1000 + 5000 * i, 1.0, 2.0, 350.0) for i in range(n)]
+    return DFMessage(name, "Qfff", ["TimeUS", "Roll", "Pitch", "Yaw"], rows)
+
+
+def test_first_instance_by_default_and_imu_1_on_request(tmp_path):
+    p = write_dataflash(tmp_path / "two.bin", [_imu({0: 0.1, 1: 0.5}), _att()])
+    d = read_log(p)
+    assert d.imu.topic == "IMU[0]"
+    assert np.allclose(d.imu.omega_b, np.float32([0.1, -0.2, -0.3]))
+    assert np.allclose(d.imu.accel_b, [0, 0, 9.81])  # FRD -9.81 (up) -> FLU +9.81
+    assert "IMU[1]: 50 samples at 400 Hz" in d.notes[0] and d.notes[0].endswith("used IMU[0]")
+    one = read_log(p, imu_topic="IMU[1]")
+    assert np.allclose(one.imu.omega_b, np.float32([0.5, -1.0, -1.5]))
+    with pytest.raises(LogError, match=r"Expected IMU topic 'IMU\[2\]' in the DataFlash log"):
+        read_log(p, imu_topic="IMU[2]")
+
+
+def test_older_logs_imu2_message(tmp_path):
+    imu = _imu({0: 0.1}, accel=False)
+    old = DFMessage(
+        "IMU", "Qfff", ["TimeUS", "GyrX", "GyrY", "GyrZ"], [r[:1] + r[2:] for r in imu.rows]
+    )
+    imu2 = DFMessage(
+        "IMU2",
+        "Qfff",
+        ["TimeUS", "GyrX", "GyrY", "GyrZ"],
+        [(r[0], 1.0, 1.0, 1.0) for r in imu.rows],
+    )
+    p = write_dataflash(tmp_path / "old.bin", [old, imu2, _att()])
+    assert read_log(p).imu.topic == "IMU[0]" and read_log(p).imu.accel_b is None
+    assert np.allclose(read_log(p, imu_topic="IMU2").imu.omega_b, [1.0, -1.0, -1.0])
+
+
+def test_sim_is_preferred_and_att_kept_as_candidate(tmp_path):
+    p = write_dataflash(tmp_path / "sitl.bin", [_imu({0: 0.1}), _att(), _att(name="SIM")])
+    d = read_log(p)
+    assert d.truth.topic == "SIM" and d.truth.estimate_of == ""
+    assert [c.topic for c in d.truth_candidates] == ["ATT"]
+    assert read_log(p, truth_topic="ATT").truth.estimate_of == "ArduPilot's own estimate"
+    assert read_log(p, truth_topic="none").truth is None
+    with pytest.raises(LogError, match="Expected truth topic 'XKF1' in the DataFlash log, got"):
+        read_log(p, truth_topic="XKF1")
+
+
+def test_truncated_log_is_read_with_a_warning(tmp_path):
+    full = write_dataflash(tmp_path / "full.bin", [_imu({0: 0.1}), _att()])
+    cut = tmp_path / "cut.bin"
+    cut.write_bytes(full.read_bytes()[:-5])  # the last record (an IMU one) loses 5 bytes
+    with pytest.warns(ImuDcmWarning, match="cut short"):
+        d = read_log(cut)
+    assert len(d.imu.t_ns) == 49
+
+
+def test_missing_pymavlink_is_one_line(monkeypatch, tmp_path):
+    import builtins
+
+    real_import = builtins.__import__
+
+    def no_pymavlink(name, *args, **kwargs):
+        if name.startswith("pymavlink"):
+            raise ImportError(name)
+        return real_import(name, *args, **kwargs)
+
+    monkeypatch.setattr(builtins, "__import__", no_pymavlink)
+    p = tmp_path / "x.bin"
+    p.write_bytes(ardupilot.MAGIC + bytes(100))
+    with pytest.raises(LogError, match=r"pip install 'imu_dcm\[mavlink\]'"):
+        read_log(p)
+
+
+def test_probe():
+    assert ardupilot.probe(None, b"\xa3\x95\x80\x80\x59BBnNZ")
+    assert not ardupilot.probe(None, b"ULog\x01\x12\x35\x01")
+    assert not ardupilot.probe(None, b"")

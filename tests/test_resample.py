@@ -1,0 +1,53 @@
+"""Tests of the attitude resampler (imu_dcm.resample.slerp_truth), which replay and live share.
+
+Oracle: scipy's Slerp on the same samples; and gaps counted in truth steps by hand.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy.spatial.transform import Rotation, Slerp
+
+from imu_dcm.resample import slerp_truth
+
+T0_NS = 1_700_000_000_000_000_000
+
+
+def test_slerp_truth_matches_scipy_slerp_inside_coverage():
+    rng = np.random.default_rng(3)
+    tt = T0_NS + np.arange(12, dtype=np.int64) * 10_000_000  # 100 Hz truth
+    q = Rotation.random(12, random_state=4).as_quat()
+    q[::3] *= -1  # sign flips must not matter (shortest arc)
+    t = np.sort(rng.integers(tt[0] - 5_000_000, tt[-1] + 5_000_000, 200))
+    out = slerp_truth(tt, q, t)
+    inside = (t >= tt[0]) & (t <= tt[-1])
+    assert np.all(np.isnan(out[~inside]))  # outside coverage: no truth
+    ref = Slerp((tt - tt[0]) * 1e-9, Rotation.from_quat(q))((t[inside] - tt[0]) * 1e-9)
+    # same rotation up to sign; 1e-12 is float64 round-off of a few quaternion products
+    ang = (Rotation.from_quat(out[inside]) * ref.inv()).magnitude()
+    assert np.max(ang) < 1e-12
+    # at the truth stamps: the samples themselves, up to the round-off of re-normalising
+    np.testing.assert_allclose(slerp_truth(tt, q, tt), q, rtol=0, atol=1e-15)
+
+
+def test_slerp_truth_never_bridges_gaps_longer_than_two_samples():
+    tt = T0_NS + np.array([0, 1, 2, 4, 5, 9, 10], dtype=np.int64) * 10_000_000
+    q = Rotation.from_rotvec(np.outer(np.arange(7), [0, 0, 0.1])).as_quat()
+    t = T0_NS + np.arange(0, 101, 5, dtype=np.int64) * 1_000_000  # every 5 ms
+    out = slerp_truth(tt, q, t)
+    ok = np.isfinite(out[:, 3])
+    t_ms = (t - T0_NS) // 1_000_000
+    # 20..40 ms: one missing sample (a 2-step gap) is bridged; 50..90 ms (4 steps) is not
+    assert np.all(ok[(t_ms >= 0) & (t_ms <= 50)])
+    assert not np.any(ok[(t_ms > 50) & (t_ms < 90)])
+    assert np.all(ok[t_ms >= 90])
+
+
+def test_slerp_truth_halfway_to_90_deg_about_z_is_45_deg_about_z():
+    # the convention at the boundary: [x, y, z, w], scalar last; halfway is half the angle
+    tt = T0_NS + np.array([0, 10_000_000], dtype=np.int64)
+    q = np.array([[0.0, 0.0, 0.0, 1.0], [0.0, 0.0, np.sqrt(0.5), np.sqrt(0.5)]])
+    out = slerp_truth(tt, q, T0_NS + np.array([5_000_000], dtype=np.int64))
+    want = Rotation.from_euler("z", 45, degrees=True).as_quat()
+    # a log, an exp and one product of unit quaternions: a few ulps of 1 each (2e-16)
+    np.testing.assert_allclose(out[0], want, rtol=0, atol=2e-15)
