@@ -50,8 +50,8 @@ def time_unit_hint(median_step_s: float, max_step_s: float, time_units: str | No
         if u != time_units and 1e-4 <= median_step_s * ns / TIME_UNITS[time_units] <= 0.1
     ]
     if not fits:
-        return f"{line}: check the unit of the stamps (--time-unit)"
-    return f"{line}: stamps in {fits[0]} declared as {time_units}? (--time-unit {fits[0]})"
+        return f"{line}: check the unit of the stamps (--time-units)"
+    return f"{line}: stamps in {fits[0]} declared as {time_units}? (--time-units {fits[0]})"
 
 
 def _stamp_ns(text, scale: int) -> int:
