@@ -38,6 +38,9 @@ _TRAIL_POINTS = 120
 _EST_RGB = np.array([[255, 165, 150], [150, 235, 140], [150, 195, 255]], dtype=np.uint8)
 _TRUTH_RGB = np.array([[220, 40, 40], [30, 170, 50], [40, 90, 235]], dtype=np.uint8)
 _FLUSH_TIMEOUT_S = 10.0
+#: Source time between two sends of the 3D axes and trails, s (30 per second: smooth to the eye;
+#: each send costs two rerun calls, so a 10 ms view interval does not pay them 100 times a second).
+_3D_EVERY_S = 1.0 / 30.0
 
 
 def check_mode(mode: str | None) -> None:
@@ -152,6 +155,8 @@ class LiveView:
         self.rec = rec
         self._static()
         self._last_axes = {"est": -math.inf, "truth": -math.inf}
+        self._held = {"est": [], "truth": []}  # rows waiting for the next 3D send
+        self._sent_3d = {"est": -math.inf, "truth": -math.inf}
         self._tips = {k: (np.zeros(0), np.zeros((0, 3))) for k in ("est", "truth")}
         self.log_calls = 0
 
@@ -178,11 +183,20 @@ class LiveView:
         self._last_axes[key] = slot[-1]
         return np.flatnonzero(first)
 
-    def _axes_rows(self, key: str, t_s: NDArray, q: NDArray) -> None:
+    def _axes_rows(self, key: str, t_s: NDArray, q: NDArray, final: bool = False) -> None:
+        """The 3D axes and the z-tip trail of new rows: at most every ``_3D_EVERY_S`` of source
+        time (the rows in between are held and go with the next send): two ``send_columns``
+        calls per send, whatever the view interval."""
         ok = np.all(np.isfinite(q), axis=1)
-        t_s, q = t_s[ok], q[ok]
-        if not len(t_s):
+        held = self._held[key]
+        if ok.any():
+            held.append((t_s[ok], q[ok]))
+        if not held or (not final and held[-1][0][-1] - self._sent_3d[key] < _3D_EVERY_S):
             return
+        t_s = np.concatenate([h[0] for h in held])
+        q = np.concatenate([h[1] for h in held])
+        held.clear()
+        self._sent_3d[key] = t_s[-1]
         idx = self._thin(key, t_s)
         ax = _axes(q[idx])
         n = len(idx)
@@ -241,6 +255,8 @@ class LiveView:
 
     def close(self) -> str:
         """Flush and disconnect; return the line to print about the viewer."""
+        for key in ("est", "truth"):  # the rows held for the next 3D send
+            self._axes_rows(key, np.zeros(0), np.zeros((0, 4)), final=True)
         self.rec.flush(timeout_sec=_FLUSH_TIMEOUT_S)
         self.rec.disconnect()
         if self.served is not None:
