@@ -304,7 +304,11 @@ url, which, n, batch_s = sys.argv[1], sys.argv[2], int(sys.argv[3]), float(sys.a
 SUB = ("foxglove.websocket.v1", "foxglove.sdk.v1")
 if which == "sync":
     from websockets.sync.client import connect
-    ws = connect(url, subprotocols=list(SUB), max_size=None, compression=None, proxy=None)
+    import contextlib
+    stack = contextlib.ExitStack()  # closed at exit
+    ws = stack.enter_context(
+        connect(url, subprotocols=list(SUB), max_size=None, compression=None, proxy=None)
+    )
     def batch():
         out = [ws.recv(timeout=30)]
         t_end = time.perf_counter() + batch_s
