@@ -14,8 +14,9 @@ A source puts events on a queue for the pipeline, in arrival order:
 server advertises channels (JSON ``advertise``); the IMU and truth channels are picked by schema
 as replay picks them (or by ``imu_topic`` / ``truth_topic``) and subscribed (JSON
 ``subscribe``); messages arrive as binary frames ``0x01 | u32 subscription | u64 log time ns |
-CDR payload``. Frames arriving within 2 ms of a batch's first are decoded together (one bulk
-CDR decode per batch). When the connection drops, the source reconnects with back-off (0.2 s
+CDR payload``. The client (:class:`WsConnection`) is websockets' Sans-I/O protocol under the
+source thread's own socket loop; the frames of one wake-up are decoded together (one bulk CDR
+decode per channel and batch). When the connection drops, the source reconnects with back-off (0.2 s
 doubling to 5 s), says so, and gives up after ``give_up_s`` without a connection.
 
 **UDP** (``udp://HOST:PORT``): binds the address and reads datagrams of one or more lines.
@@ -23,8 +24,8 @@ doubling to 5 s), says so, and gives up after ``give_up_s`` without a connection
 
 Each wake-up of a source takes everything that has arrived by then (the datagrams queued on the
 socket, the bytes in the pipe, the frames received) and hands it on as one batch of arrays: a
-source thread wakes at most every ``batch_s`` (2-5 ms), so the per-batch costs are shared by the
-samples that arrived in between.
+source thread wakes at most every ``batch_s`` (the session uses a quarter of the view interval,
+at most 20 ms), so the per-batch costs are shared by the samples that arrived in between.
 
 **A new source** is one :class:`Source` subclass and one row in :data:`SOURCES` (the URL scheme
 and ``"module:Class"``, imported when a SOURCE of that scheme is opened).
