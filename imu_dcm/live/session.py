@@ -27,7 +27,7 @@ from imu_dcm.errors import GapWarning, InputError
 from imu_dcm.integrate import METHODS
 from imu_dcm.live.lines import TIME_UNITS
 from imu_dcm.live.pipeline import DEG, LiveResult, Pipeline
-from imu_dcm.live.sources import BATCH_S, Received, Source, open_source, parse_source
+from imu_dcm.live.sources import Received, Source, open_source, parse_source
 from imu_dcm.so3 import as_quat_xyzw
 
 __all__ = ["LiveOptions", "run"]
@@ -70,6 +70,11 @@ def _check_bias(bias) -> str | tuple:
     if b.shape != (3,) or not np.all(np.isfinite(b)):
         raise InputError(f"Expected bias auto, none or 3 finite numbers (rad/s), got {bias!r}")
     return tuple(b.tolist())
+
+
+#: A source wakes at most every quarter view interval, and at least every 20 ms: a sample
+#: waits for its batch and then for the view's, so the batch adds <= 1/4 to the latency.
+_BATCH_MAX_S = 0.02
 
 
 def _has_display() -> bool:
@@ -257,7 +262,7 @@ def _open_source(spec, o: LiveOptions) -> Source:
         time_units=o.time_units,
         give_up_s=o.give_up_s,
         stdin_fd=o.stdin_fd,
-        batch_s=min(BATCH_S, o.view_interval_s / 4),
+        batch_s=min(_BATCH_MAX_S, o.view_interval_s / 4),
     )
 
 
