@@ -263,8 +263,10 @@ class CausalRestBias:
     newest sample. When motion starts, the last still window ends at ``b - 1``, so the last update
     covers exactly ``[a + win, b - win)``, replay's value for the segment. The bias applied to a
     sample is the estimate available when it arrives (causal; replay applies a segment's bias from
-    its start). The step ``dt`` is the median of the first ``win_probe`` steps (replay: of the whole
-    log).
+    its start). :meth:`update_many` applies the same rule to a batch as arrays (windows from
+    :func:`windowed_mean_var`, the segment's running mean from cumulative sums) and returns,
+    for each sample, what :meth:`update` would have returned (to rounding). The step ``dt`` is
+    the median of the first ``probe`` steps (replay: of the whole log).
 
     Parameters
     ----------

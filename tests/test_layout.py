@@ -36,7 +36,9 @@ PACKAGE = REPO / "imu_dcm"
 
 CORE = (
     "so3",
+    "methods",
     "kernel",
+    "methods",
     "integrate",
     "streaming",
     "resample",
