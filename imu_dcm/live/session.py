@@ -27,7 +27,7 @@ from imu_dcm.errors import GapWarning, InputError
 from imu_dcm.integrate import METHODS
 from imu_dcm.live.lines import TIME_UNITS
 from imu_dcm.live.pipeline import DEG, LiveResult, Pipeline
-from imu_dcm.live.sources import BATCH_S, Received, Source, open_source, parse_source
+from imu_dcm.live.sources import Received, Source, open_source, parse_source
 from imu_dcm.so3 import as_quat_xyzw
 
 __all__ = ["LiveOptions", "run"]
@@ -72,20 +72,30 @@ def _check_bias(bias) -> str | tuple:
     return tuple(b.tolist())
 
 
+#: A source wakes at most every quarter view interval, and at least every 20 ms: a sample
+#: waits for its batch and then for the view's, so the batch adds <= 1/4 to the latency.
+_BATCH_MAX_S = 0.02
+
+
 def _has_display() -> bool:
     from imu_dcm.viz import has_display
 
     return has_display()
 
 
-def _check_outputs(record, force: bool, summary_json) -> None:
-    """The output paths, before the source is opened (imu_dcm.outputs' rule)."""
+def _check_outputs(record, force: bool, summary_json, rerun) -> None:
+    """The view's mode and the output paths, before the source is opened (imu_dcm.outputs'
+    rule)."""
+    from imu_dcm.live.view import check_mode
     from imu_dcm.outputs import check_output_dir, check_output_file
 
+    check_mode(rerun)
     if record is not None:
         check_output_dir(record, force=force, what="--record bag")
     if summary_json is not None:
         check_output_file(summary_json, (), "--summary-json file")
+    if isinstance(rerun, str) and rerun.startswith("save:"):
+        check_output_file(rerun[len("save:") :], (), "--rerun save: file")
 
 
 def _pct(a: NDArray, p: float) -> float | None:
@@ -210,10 +220,7 @@ def run(
     o = LiveOptions(**options)
     spec, bias_v, init_q = _checked(source, o)
     say = say or _say_stderr
-    from imu_dcm.live.view import check_mode
-
-    check_mode(o.rerun)
-    _check_outputs(o.record, o.force, o.summary_json)
+    _check_outputs(o.record, o.force, o.summary_json, o.rerun)
     _warm_up(o.method)
     src = _open_source(spec, o)
     recorder = view = None
@@ -255,7 +262,7 @@ def _open_source(spec, o: LiveOptions) -> Source:
         time_units=o.time_units,
         give_up_s=o.give_up_s,
         stdin_fd=o.stdin_fd,
-        batch_s=min(BATCH_S, o.view_interval_s / 4),
+        batch_s=min(_BATCH_MAX_S, o.view_interval_s / 4),
     )
 
 

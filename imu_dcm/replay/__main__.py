@@ -114,29 +114,28 @@ def _show(result, mode: str | None, realtime: bool, keep: bool) -> str:
         return show_replay(view, mode, realtime=realtime)
     served = serve_replay(view, realtime)
     try:
-        print(f"{served.line}; Ctrl-C stops it", flush=True)
-        _wait_for_stop(served.viewer.process)
+        _serve_until_stopped(served)
     finally:
         served.stop()
     return "rerun: web viewer stopped"
 
 
-def _wait_for_stop(process) -> None:
-    """Until Ctrl-C, SIGTERM or the server's own exit (the ending the user asked for)."""
+def _serve_until_stopped(served) -> None:
+    """Print the viewer's URL, then wait for Ctrl-C, SIGTERM or the server's own exit (the
+    ending the user asked for: not an interruption of the command)."""
     import signal
-    import time
+    import threading
 
-    def on_term(signum, frame):
-        raise KeyboardInterrupt
-
-    old = signal.signal(signal.SIGTERM, on_term)
+    stop = threading.Event()
+    signals = (signal.SIGINT, signal.SIGTERM)
+    old = {sig: signal.signal(sig, lambda signum, frame: stop.set()) for sig in signals}
     try:
-        while process.poll() is None:
-            time.sleep(0.2)
-    except KeyboardInterrupt:
-        pass
+        print(f"{served.line}; Ctrl-C stops it", flush=True)
+        while not stop.wait(0.2) and served.viewer.process.poll() is None:
+            pass
     finally:
-        signal.signal(signal.SIGTERM, old)
+        for sig, handler in old.items():
+            signal.signal(sig, handler)
 
 
 def _check_rerun(mode: str | None, inputs: tuple) -> None:
