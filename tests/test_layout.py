@@ -36,6 +36,7 @@ PACKAGE = REPO / "imu_dcm"
 
 CORE = (
     "so3",
+    "methods",
     "kernel",
     "integrate",
     "streaming",

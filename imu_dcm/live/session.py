@@ -37,7 +37,7 @@ def _warm_up(method: str) -> None:
     """Load numba and the compiled kernel before the source opens, so the first samples do not
     wait for them (about 0.7 s with a warm cache, measured as the first second's latency)."""
     from imu_dcm.integrate import integrate
-    from imu_dcm.replay.core import slerp_truth  # noqa: F401 - the truth slerp's modules
+    from imu_dcm.resample import slerp_truth  # noqa: F401 - the truth slerp's modules
     from imu_dcm.streaming import DcmIntegrator
 
     q0, w, t = [0.0, 0.0, 0.0, 1.0], np.zeros((5, 3)), 0.001 * np.arange(5)

@@ -194,7 +194,8 @@ def _distinct_outputs(args) -> None:
 
 
 def _not_a_folder_of_logs(log: str) -> None:
-    """A folder that holds logs (not a log itself) is for ``batch``: say so."""
+    """A folder that holds several logs (not a log itself) is for ``batch``: say so. (A folder
+    holding one log file is that log, as the reader takes it.)"""
     from imu_dcm.errors import InputError
 
     if not os.path.isdir(log) or os.path.isfile(os.path.join(log, "metadata.yaml")):
@@ -204,10 +205,9 @@ def _not_a_folder_of_logs(log: str) -> None:
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         found = find_logs([log])
-    if found and found != [os.path.abspath(log)]:
-        n = len(found)
+    if len(found) > 1:
         raise InputError(
-            f"Expected one log, got a folder of {n} log{'s' if n != 1 else ''} {log!r}; "
+            f"Expected one log, got a folder of {len(found)} logs {log!r}; "
             f"replay them all with: {PROG} batch {log} --table OUT.csv"
         )
 
