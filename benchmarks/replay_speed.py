@@ -1,6 +1,7 @@
 """Log reading speed and memory against plain per-message decode loops over the same bags.
 
-``python -m benchmarks.replay_speed [--bag DIR] [--rounds N] [--camera-mb MB] [--hour]``
+``python -m benchmarks.replay_speed [--bag DIR] [--rounds N] [--camera-mb MB] [--hour]
+[--ulog FILE]``
 
 Speed, timed in interleaved rounds after a warm-up, one BLAS thread (:mod:`benchmarks.timing`).
 Every reference decodes every message of the bag into one Python object each, as a user's
@@ -11,6 +12,9 @@ speed-ups on the same bag:
   :func:`imu_dcm.logio.read_log`. Target >= 10x.
 * sqlite3 and ROS 1 (the same trial written with rosbags' writers): ``rosbags`` ``AnyReader``
   + ``deserialize`` loop against ``read_log``. Target >= 5x.
+* PX4 ULog (``--ulog``, default PX4's sample log beside the repository, skipped when absent):
+  ``pyulog`` ``ULog()`` (its reader walks every message in Python; all topics, and only the
+  gyro and attitude topics) against ``read_log``. Target >= 5x the full parse.
 * EuRoC/ASL folder (the same trial's gyro and truth written as ``imu0`` and
   ``state_groundtruth_estimate0`` CSVs): a plain per-row ``csv.reader`` loop (``int`` stamps,
   ``float`` fields, rows stacked with numpy) against ``read_log``. Target >= 5x.
@@ -40,6 +44,7 @@ from benchmarks.timing import limit_threads_env
 
 REPO = Path(__file__).resolve().parents[1]
 DEFAULT_BAG = REPO / "replay" / "broad_07_undisturbed_fast_rotation_B"
+DEFAULT_ULOG = REPO.parent / "shared" / "data" / "strangers" / "sample_px4_events.ulg"
 TARGET_MCAP, TARGET_ROSBAGS = 10.0, 5.0
 
 
@@ -80,6 +85,14 @@ def rosbags_raw_iteration(path: Path, topics: tuple[str, ...]) -> int:
         for _conn, _t, _raw in reader.messages(connections=conns):
             n += 1
     return n
+
+
+def pyulog_loop(path: Path, topics: list[str] | None = None) -> int:
+    """pyulog: parse the ULog (its reader walks every message in Python), or only ``topics``;
+    returns the data messages kept."""
+    from pyulog import ULog
+
+    return sum(len(d.data["timestamp"]) for d in ULog(str(path), topics).data_list)
 
 
 # --------------------------------------------------------------------------- variants
@@ -285,6 +298,103 @@ def peak(path: Path) -> tuple[int, int, int, int]:
 
 
 # ------------------------------------------------------------------------------- main
+def _quiet(fn):
+    import warnings
+
+    def run():
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            return fn()
+
+    return run
+
+
+def _replay_or_none(bag: Path):
+    """imu_dcm.replay.replay where this checkout's replay runs on this reader, else None."""
+    try:
+        from imu_dcm.replay import replay
+
+        _quiet(lambda: replay(bag))()
+    except Exception as exc:
+        print(f"(replay case skipped: {type(exc).__name__}: {exc})")
+        return None
+    return replay
+
+
+def _groups(bag: Path, mcap_path: Path, db: Path, bag1: Path, n_msgs: int, replay) -> dict:
+    """Each container's cases ``{name: (fn, items)}``, its reference case and its target."""
+    from imu_dcm.logio import read_log
+
+    topics = ("/imu/data", "/ground_truth/orientation")
+
+    def rosbags_cases(path: Path) -> dict:
+        return {
+            "rosbags deserialize loop": (lambda: rosbags_loop(path), n_msgs),
+            "rosbags raw iteration, IMU+truth": (
+                lambda: rosbags_raw_iteration(path, topics),
+                n_msgs,
+            ),
+            "read_log": (_quiet(lambda: read_log(path)), n_msgs),
+        }
+
+    mcap_cases = {
+        "decode loop (mcap + mcap_ros2)": (lambda: decode_loop(mcap_path), n_msgs),
+        "rosbags raw iteration, IMU+truth": (lambda: rosbags_raw_iteration(bag, topics), n_msgs),
+        "read_log": (_quiet(lambda: read_log(bag)), n_msgs),
+    }
+    if replay is not None:
+        mcap_cases["replay, no viewer"] = (_quiet(lambda: replay(bag)), n_msgs)
+    return {
+        "MCAP": (mcap_cases, "decode loop (mcap + mcap_ros2)", TARGET_MCAP),
+        "sqlite3": (rosbags_cases(db), "rosbags deserialize loop", TARGET_ROSBAGS),
+        "ROS 1": (rosbags_cases(bag1), "rosbags deserialize loop", TARGET_ROSBAGS),
+    }
+
+
+def _speed(groups: dict, rounds: int) -> None:
+    from benchmarks.timing import interleaved_medians, single_thread
+
+    for group, (cases, ref, target) in groups.items():
+        with single_thread():
+            res = interleaved_medians(cases, rounds=rounds, warmup=1)
+        base = res[ref]
+        print(f"\n{group}\n{'case':<36} {'median s':>9} {'msgs/s':>12} {'vs ref':>8}")
+        for name, t in res.items():
+            print(
+                f"{name:<36} {t.median_s:>9.3f} {t.items_per_s:>12,.0f} "
+                f"{base.median_s / t.median_s:>7.1f}x"
+            )
+        ratio = base.median_s / res["read_log"].median_s
+        verdict = "meets" if ratio >= target else "MISSES"
+        print(f"read_log is {ratio:.1f}x the {ref} ({verdict} the >= {target:.0f}x target)")
+
+
+def _memory(mcap_path: Path, tmp: Path, camera_mb: float, hour: bool) -> None:
+    print("\nmemory (read_log in a fresh process; peak RSS = VmHWM)")
+    n_imu, n_truth, dec, pk0 = peak(mcap_path)
+    print(f"trial:               {n_imu} IMU, {n_truth} truth, peak {pk0 / 1e6:.0f} MB")
+    if camera_mb > 0:
+        cam = write_with_camera(mcap_path, tmp / "camera.mcap", camera_mb)
+        _, _, _, pk1 = peak(cam)
+        rise = pk1 / pk0 - 1.0
+        print(
+            f"trial + {camera_mb:.0f} MB camera: file {cam.stat().st_size / 1e6:.0f}"
+            f" MB, peak {pk1 / 1e6:.0f} MB ({100 * rise:+.1f} %; "
+            f"{'meets' if rise <= 0.2 else 'MISSES'} the <= +20 % target)"
+        )
+        cam.unlink()
+    if hour:
+        path = write_hour(mcap_path, tmp / "hour.mcap")
+        n_imu, n_truth, dec, pk = peak(path)
+        bound = 3 * dec + 300e6
+        print(
+            f"one hour at 400 Hz:  {n_imu} IMU, {n_truth} truth, file "
+            f"{path.stat().st_size / 1e6:.0f} MB, decoded arrays {dec / 1e6:.0f} MB, "
+            f"peak {pk / 1e6:.0f} MB ({'meets' if pk <= bound else 'MISSES'} the "
+            f"<= 3x arrays + 300 MB = {bound / 1e6:.0f} MB target)"
+        )
+
+
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(
         prog="python -m benchmarks.replay_speed",
@@ -300,135 +410,57 @@ def main(argv: list[str] | None = None) -> int:
         help="size of the added camera topic, MB (default 566; 0 skips)",
     )
     p.add_argument("--hour", action="store_true", help="also the one-hour 400 Hz memory case")
+    p.add_argument(
+        "--ulog", type=Path, default=DEFAULT_ULOG, help="a PX4 ULog (default: PX4's sample)"
+    )
     args = p.parse_args(argv)
 
     limit_threads_env()
-    import warnings
-
-    from benchmarks.timing import interleaved_medians, single_thread
     from imu_dcm.logio import read_log, resolve_mcap_path
 
     mcap_path = resolve_mcap_path(args.bag)
     n_msgs = decode_loop(mcap_path)
-
-    def quiet(fn):
-        def run():
-            with warnings.catch_warnings():
-                warnings.simplefilter("ignore")
-                return fn()
-
-        return run
-
-    try:  # the replay case only where this checkout's replay runs on this reader
-        from imu_dcm.replay import replay
-
-        quiet(lambda: replay(args.bag))()
-    except Exception as exc:
-        print(f"(replay case skipped: {type(exc).__name__}: {exc})")
-        replay = None
-
+    replay = _replay_or_none(args.bag)
     with tempfile.TemporaryDirectory(prefix="replay_speed_") as tmp:
         tmp = Path(tmp)
         db = write_sqlite3(mcap_path, tmp / "sqlite3_bag")
         bag1 = write_ros1(mcap_path, tmp / "trial.bag")
-        euroc = quiet(lambda: write_euroc(args.bag, tmp / "euroc"))()
+        euroc = _quiet(lambda: write_euroc(args.bag, tmp / "euroc"))()
         n_rows = csv_loop(euroc)
-        topics = ("/imu/data", "/ground_truth/orientation")
-        groups = {
-            "MCAP": (
+        groups = _groups(args.bag, mcap_path, db, bag1, n_msgs, replay)
+        groups["EuRoC/ASL folder"] = (
+            {
+                "per-row csv loop": (lambda: csv_loop(euroc), n_rows),
+                "read_log": (_quiet(lambda: read_log(euroc)), n_rows),
+            },
+            "per-row csv loop",
+            TARGET_ROSBAGS,
+        )
+        if args.ulog.is_file():  # PX4 ULog: pyulog's reader against read_log's scan
+            n_ulog = pyulog_loop(args.ulog)
+            groups["PX4 ULog " + args.ulog.name] = (
                 {
-                    "decode loop (mcap + mcap_ros2)": (lambda: decode_loop(mcap_path), n_msgs),
-                    "rosbags raw iteration, IMU+truth": (
-                        lambda: rosbags_raw_iteration(args.bag, topics),
-                        n_msgs,
+                    "pyulog ULog(), every message": (lambda: pyulog_loop(args.ulog), n_ulog),
+                    "pyulog ULog(), gyro+attitude topics": (
+                        lambda: pyulog_loop(args.ulog, ["sensor_combined", "vehicle_attitude"]),
+                        n_ulog,
                     ),
-                    "read_log": (quiet(lambda: read_log(args.bag)), n_msgs),
-                    **(
-                        {"replay, no viewer": (quiet(lambda: replay(args.bag)), n_msgs)}
-                        if replay is not None
-                        else {}
-                    ),
+                    "read_log": (_quiet(lambda: read_log(args.ulog)), n_ulog),
                 },
-                "decode loop (mcap + mcap_ros2)",
-                TARGET_MCAP,
-            ),
-            "sqlite3": (
-                {
-                    "rosbags deserialize loop": (lambda: rosbags_loop(db), n_msgs),
-                    "rosbags raw iteration, IMU+truth": (
-                        lambda: rosbags_raw_iteration(db, topics),
-                        n_msgs,
-                    ),
-                    "read_log": (quiet(lambda: read_log(db)), n_msgs),
-                },
-                "rosbags deserialize loop",
+                "pyulog ULog(), every message",
                 TARGET_ROSBAGS,
-            ),
-            "ROS 1": (
-                {
-                    "rosbags deserialize loop": (lambda: rosbags_loop(bag1), n_msgs),
-                    "rosbags raw iteration, IMU+truth": (
-                        lambda: rosbags_raw_iteration(bag1, topics),
-                        n_msgs,
-                    ),
-                    "read_log": (quiet(lambda: read_log(bag1)), n_msgs),
-                },
-                "rosbags deserialize loop",
-                TARGET_ROSBAGS,
-            ),
-            "EuRoC/ASL folder": (
-                {
-                    "per-row csv loop": (lambda: csv_loop(euroc), n_rows),
-                    "read_log": (quiet(lambda: read_log(euroc)), n_rows),
-                },
-                "per-row csv loop",
-                TARGET_ROSBAGS,
-            ),
-        }
+            )
+        else:
+            print(f"(PX4 ULog case skipped: no {args.ulog})")
         shown = args.bag.resolve()
         shown = shown.relative_to(REPO) if shown.is_relative_to(REPO) else args.bag
         print(
             f"bag: {shown} ({n_msgs} messages, {mcap_path.stat().st_size / 1e6:.1f} MB); "
             f"median of {args.rounds} interleaved rounds after a warm-up, 1 thread"
         )
-        for group, (cases, ref, target) in groups.items():
-            with single_thread():
-                res = interleaved_medians(cases, rounds=args.rounds, warmup=1)
-            base = res[ref]
-            print(f"\n{group}\n{'case':<36} {'median s':>9} {'msgs/s':>12} {'vs ref':>8}")
-            for name, t in res.items():
-                print(
-                    f"{name:<36} {t.median_s:>9.3f} {t.items_per_s:>12,.0f} "
-                    f"{base.median_s / t.median_s:>7.1f}x"
-                )
-            ratio = base.median_s / res["read_log"].median_s
-            verdict = "meets" if ratio >= target else "MISSES"
-            print(f"read_log is {ratio:.1f}x the {ref} ({verdict} the >= {target:.0f}x target)")
-
+        _speed(groups, args.rounds)
         if Path("/proc/self/status").is_file():
-            print("\nmemory (read_log in a fresh process; peak RSS = VmHWM)")
-            n_imu, n_truth, dec, pk0 = peak(mcap_path)
-            print(f"trial:               {n_imu} IMU, {n_truth} truth, peak {pk0 / 1e6:.0f} MB")
-            if args.camera_mb > 0:
-                cam = write_with_camera(mcap_path, tmp / "camera.mcap", args.camera_mb)
-                _, _, _, pk1 = peak(cam)
-                rise = pk1 / pk0 - 1.0
-                print(
-                    f"trial + {args.camera_mb:.0f} MB camera: file {cam.stat().st_size / 1e6:.0f}"
-                    f" MB, peak {pk1 / 1e6:.0f} MB ({100 * rise:+.1f} %; "
-                    f"{'meets' if rise <= 0.2 else 'MISSES'} the <= +20 % target)"
-                )
-                cam.unlink()
-            if args.hour:
-                hour = write_hour(mcap_path, tmp / "hour.mcap")
-                n_imu, n_truth, dec, pk = peak(hour)
-                bound = 3 * dec + 300e6
-                print(
-                    f"one hour at 400 Hz:  {n_imu} IMU, {n_truth} truth, file "
-                    f"{hour.stat().st_size / 1e6:.0f} MB, decoded arrays {dec / 1e6:.0f} MB, "
-                    f"peak {pk / 1e6:.0f} MB ({'meets' if pk <= bound else 'MISSES'} the "
-                    f"<= 3x arrays + 300 MB = {bound / 1e6:.0f} MB target)"
-                )
+            _memory(mcap_path, tmp, args.camera_mb, args.hour)
     return 0
 
 

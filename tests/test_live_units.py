@@ -223,6 +223,33 @@ def test_stdin_constant_rate_gives_90_deg_about_z(tmp_path):
     assert summary["final_t_s"] == 1.0 and summary["samples"] == 101
 
 
+def test_stdin_ms_stamps_declared_as_s_get_one_line_naming_the_unit():
+    """200 Hz stamps in ms read as s are a 0.2 Hz log no IMU produces: one line says so and
+    names the option that fixes it; the same stamps declared as ms say nothing."""
+    lines = "".join(f"{k * 5},0,0,0.1\n" for k in range(50)).encode()
+    args = ["-", "--rerun", "off", "--bias", "none", "--no-status"]
+    r = run_cli(args, lines)
+    err = r.stderr.decode()
+    hints = [line for line in err.splitlines() if "no step of hours" in line]
+    assert len(hints) == 1, err
+    assert "got a median step of 5 s (0.2 Hz)" in hints[0]
+    assert "stamps in ms declared as s? (--time-units ms)" in hints[0]
+    r = run_cli([*args, "--time-units", "ms"], lines)
+    assert r.returncode == 0 and "no step of hours" not in r.stderr.decode()
+
+
+def test_time_unit_hint_names_the_unit_that_makes_an_imu_rate():
+    from imu_dcm.live.lines import time_unit_hint
+
+    assert time_unit_hint(0.005, 0.005, "s") is None  # 200 Hz
+    assert time_unit_hint(0.005, 7200.0, "s").endswith(
+        "check the unit of the stamps (--time-units)"
+    )
+    assert "stamps in us declared as ms? (--time-units us)" in time_unit_hint(2.5, 2.5, "ms")
+    assert "stamps in ms declared as ns? (--time-units ms)" in time_unit_hint(2.5e-9, 2.5e-9, "ns")
+    assert time_unit_hint(5.0, 5.0, None).endswith("the source's stamps are not an IMU's")
+
+
 @pytest.mark.parametrize(
     "args, needle",
     [

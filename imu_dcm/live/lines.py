@@ -50,8 +50,8 @@ def time_unit_hint(median_step_s: float, max_step_s: float, time_units: str | No
         if u != time_units and 1e-4 <= median_step_s * ns / TIME_UNITS[time_units] <= 0.1
     ]
     if not fits:
-        return f"{line}: check the unit of the stamps (--time-unit)"
-    return f"{line}: stamps in {fits[0]} declared as {time_units}? (--time-unit {fits[0]})"
+        return f"{line}: check the unit of the stamps (--time-units)"
+    return f"{line}: stamps in {fits[0]} declared as {time_units}? (--time-units {fits[0]})"
 
 
 def _stamp_ns(text, scale: int) -> int:
@@ -156,13 +156,11 @@ def _parse_csv_bulk(
     n = len(lines)
     if len(fields) != 4 * n or lines[0][:1] == b"{":
         return None
-    cols = np.array(fields, dtype=np.bytes_).reshape(n, 4)
+    digits = len(str(t_scale)) - 1  # decimals a stamp may carry: 9 for s, 0 for ns
     try:
-        w = cols[:, 1:].astype(np.float64)
-    except ValueError:
-        return None
-    t_ns = _stamps_bulk(np.strings.strip(cols[:, 0]), t_scale)
-    if t_ns is None:
+        w = np.array(fields, dtype=np.bytes_).reshape(n, 4)[:, 1:].astype(np.float64)
+        t_ns = np.array([_plain_stamp_ns(f, t_scale, digits) for f in fields[::4]], np.int64)
+    except (ValueError, OverflowError):
         return None
     ok = np.isfinite(w).all(axis=1)
     if gyro_scale != 1.0:
@@ -172,24 +170,15 @@ def _parse_csv_bulk(
     return t_ns[ok], w[ok], int(n - ok.sum())
 
 
-def _stamps_bulk(text: NDArray, scale: int) -> NDArray | None:
-    """Decimal stamps ``digits[.digits]`` (bytes array) to exact int64 ns, or None when one is
-    of another form (sign, exponent, more decimals than ns, out of range)."""
-    whole, dot, frac = np.strings.partition(text, b".")
-    digits = len(str(scale)) - 1  # decimals a stamp may carry: 9 for s, 0 for ns
-    n_frac = np.strings.str_len(frac)
-    if not (np.strings.isdigit(whole).all() and n_frac.max(initial=0) <= digits):
-        return None
-    if ((n_frac > 0) & ~np.strings.isdigit(frac)).any() or (np.strings.str_len(whole) > 18).any():
-        return None
-    t = whole.astype(np.int64)
-    if (t >= (2**63 - 1) // scale - 1).any():
-        return None
-    t = t * scale
-    has = n_frac > 0
-    if has.any():
-        f = np.where(has, frac, b"0").astype(np.int64)
-        t += f * 10 ** (digits - n_frac)
+def _plain_stamp_ns(text: bytes, scale: int, digits: int) -> int:
+    """A stamp ``digits[.digits]`` (at most ``digits`` decimals) to exact ns; ValueError for
+    any other form (the line-by-line parser then judges it)."""
+    whole, _, frac = text.strip().partition(b".")
+    if not whole.isdigit() or len(frac) > digits or (frac and not frac.isdigit()):
+        raise ValueError("not a plain stamp")
+    t = int(whole) * scale + (int(frac.ljust(digits, b"0")) if frac else 0)
+    if t >= 2**63:
+        raise ValueError("stamp out of range")
     return t
 
 

@@ -27,7 +27,7 @@ from imu_dcm.errors import GapWarning, InputError
 from imu_dcm.integrate import METHODS
 from imu_dcm.live.lines import TIME_UNITS
 from imu_dcm.live.pipeline import DEG, LiveResult, Pipeline
-from imu_dcm.live.sources import BATCH_S, Received, Source, open_source, parse_source
+from imu_dcm.live.sources import Received, Source, open_source, parse_source
 from imu_dcm.so3 import as_quat_xyzw
 
 __all__ = ["LiveOptions", "run"]
@@ -36,17 +36,16 @@ __all__ = ["LiveOptions", "run"]
 def _warm_up(method: str) -> None:
     """Load numba and the compiled kernel before the source opens, so the first samples do not
     wait for them (about 0.7 s with a warm cache, measured as the first second's latency)."""
-    from imu_dcm.integrate import integrate
+    from imu_dcm.integrate import integrate_quat
     from imu_dcm.resample import slerp_truth  # noqa: F401 - the truth slerp's modules
     from imu_dcm.streaming import DcmIntegrator
 
     q0, w, t = [0.0, 0.0, 0.0, 1.0], np.zeros((5, 3)), 0.001 * np.arange(5)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # rotvec_sum's warning belongs to the real run
-        integrate(w, t, q0, method)  # the pipeline's start-up uses the batch form (and scipy)
+        integrate_quat(w, t, q0, method)  # the pipeline's start-up uses the batch form
         integ = DcmIntegrator(q0, method)
-        for wk, tk in zip(w, t, strict=True):
-            integ.update(wk, float(tk))
+        integ.update_many_quat(w, t)  # the pipeline feeds arrays (the kernel's feed)
         integ.finish()
 
 
@@ -71,6 +70,11 @@ def _check_bias(bias) -> str | tuple:
     if b.shape != (3,) or not np.all(np.isfinite(b)):
         raise InputError(f"Expected bias auto, none or 3 finite numbers (rad/s), got {bias!r}")
     return tuple(b.tolist())
+
+
+#: A source wakes at most every quarter view interval, and at least every 20 ms: a sample
+#: waits for its batch and then for the view's, so the batch adds <= 1/4 to the latency.
+_BATCH_MAX_S = 0.02
 
 
 def _has_display() -> bool:
@@ -216,24 +220,13 @@ def run(
     o = LiveOptions(**options)
     spec, bias_v, init_q = _checked(source, o)
     say = say or _say_stderr
-    from imu_dcm.live.view import LiveView
-
     _check_outputs(o.record, o.force, o.summary_json, o.rerun)
     _warm_up(o.method)
-    src: Source = open_source(
-        spec,
-        imu_topic=o.imu_topic,
-        truth_topic=o.truth_topic,
-        gyro_units=o.gyro_units,
-        time_units=o.time_units,
-        give_up_s=o.give_up_s,
-        stdin_fd=o.stdin_fd,
-        batch_s=min(BATCH_S, o.view_interval_s / 4),
-    )
+    src = _open_source(spec, o)
     recorder = view = None
     try:
         recorder = _open_recorder(source, o, bias_v)
-        view = _open_view(o.rerun, source, say, LiveView)
+        view = _open_view(o.rerun, source, say)
         pipe = Pipeline(
             method=o.method,
             bias=bias_v,
@@ -259,15 +252,31 @@ def run(
     return LiveResult(summary, q, pipe.t_last_ns, lat)
 
 
-def _open_view(rerun, source: str, say, view_class):
-    """The live view, or None: ``off``, or the default without a display (one line says how
-    to see it: ``--rerun serve`` or ``save:``)."""
+def _open_source(spec, o: LiveOptions) -> Source:
+    """The source of ``spec``, created with the options it reads (not started)."""
+    return open_source(
+        spec,
+        imu_topic=o.imu_topic,
+        truth_topic=o.truth_topic,
+        gyro_units=o.gyro_units,
+        time_units=o.time_units,
+        give_up_s=o.give_up_s,
+        stdin_fd=o.stdin_fd,
+        batch_s=min(_BATCH_MAX_S, o.view_interval_s / 4),
+    )
+
+
+def _open_view(rerun: str | None, source: str, say):
+    """The live view, or None: ``off``, or no mode given and no display (one line says how to
+    ask for one)."""
+    from imu_dcm.live.view import LiveView
+
     if rerun is None and not _has_display():
         from imu_dcm.viz import HEADLESS_HINT
 
         say(HEADLESS_HINT)
         return None
-    return None if rerun == "off" else view_class(rerun, title=f"live {source}", say=say)
+    return None if rerun == "off" else LiveView(rerun, title=f"live {source}", say=say)
 
 
 def _open_recorder(source: str, o: LiveOptions, bias_v):

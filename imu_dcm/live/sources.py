@@ -14,8 +14,9 @@ A source puts events on a queue for the pipeline, in arrival order:
 server advertises channels (JSON ``advertise``); the IMU and truth channels are picked by schema
 as replay picks them (or by ``imu_topic`` / ``truth_topic``) and subscribed (JSON
 ``subscribe``); messages arrive as binary frames ``0x01 | u32 subscription | u64 log time ns |
-CDR payload``. Frames arriving within 2 ms of a batch's first are decoded together (one bulk
-CDR decode per batch). When the connection drops, the source reconnects with back-off (0.2 s
+CDR payload``. The client (:class:`WsConnection`) is websockets' Sans-I/O protocol under the
+source thread's own socket loop; the frames of one wake-up are decoded together (one bulk CDR
+decode per channel and batch). When the connection drops, the source reconnects with back-off (0.2 s
 doubling to 5 s), says so, and gives up after ``give_up_s`` without a connection.
 
 **UDP** (``udp://HOST:PORT``): binds the address and reads datagrams of one or more lines.
@@ -23,8 +24,8 @@ doubling to 5 s), says so, and gives up after ``give_up_s`` without a connection
 
 Each wake-up of a source takes everything that has arrived by then (the datagrams queued on the
 socket, the bytes in the pipe, the frames received) and hands it on as one batch of arrays: a
-source thread wakes at most every ``batch_s`` (2-5 ms), so the per-batch costs are shared by the
-samples that arrived in between.
+source thread wakes at most every ``batch_s`` (the session uses a quarter of the view interval,
+at most 20 ms), so the per-batch costs are shared by the samples that arrived in between.
 
 **A new source** is one :class:`Source` subclass and one row in :data:`SOURCES` (the URL scheme
 and ``"module:Class"``, imported when a SOURCE of that scheme is opened).
@@ -324,6 +325,127 @@ class StdinSource(_LineSource):
                 self._emit_lines(lines, arrival, wall)
 
 
+class WsConnection:
+    """A WebSocket client connection: websockets' Sans-I/O protocol under this thread's own
+    socket loop (no second thread, no hand-over per frame).
+
+    :meth:`recv_messages` waits for the first bytes, then takes every frame that has arrived by
+    then in one ``recv``: the framing costs per wake-up, not per message (measured against
+    ``websockets.sync.client``, whose reader thread hands over every frame:
+    ``python -m benchmarks.live_speed --ws-clients``). Pings are answered, fragmented messages
+    assembled, a close handshake completed. Raises ``ConnectionClosed`` when the connection
+    ends, ``InvalidHandshake`` / ``OSError`` / ``TimeoutError`` when it cannot open.
+    """
+
+    def __init__(self, url: str, subprotocols: tuple[str, ...], open_timeout_s: float = 5.0):
+        from websockets.client import ClientProtocol
+        from websockets.protocol import State
+        from websockets.uri import parse_uri
+
+        uri = parse_uri(url)
+        if uri.secure:
+            raise OSError("Expected ws:// (loopback, no TLS), got wss://")
+        self._open = State.OPEN
+        self._eof = False
+        self._proto = ClientProtocol(uri, subprotocols=list(subprotocols), max_size=None)
+        self._sock = socket.create_connection((uri.host, uri.port), timeout=open_timeout_s)
+        try:
+            self._sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+            self._proto.send_request(self._proto.connect())
+            self._flush()
+            deadline = time.monotonic() + open_timeout_s
+            while self._proto.state is not self._open:
+                self._sock.settimeout(max(0.001, deadline - time.monotonic()))
+                self._feed(self._sock.recv(1 << 16))
+                if self._proto.handshake_exc is not None:
+                    raise self._proto.handshake_exc
+        except BaseException:
+            self._sock.close()
+            raise
+        self._sock.setblocking(False)
+        self.subprotocol = self._proto.subprotocol
+        self._parts: list[bytes] = []
+        self._text = False
+        self._pending = [e for e in self._proto.events_received() if hasattr(e, "opcode")]
+
+    def _flush(self) -> None:
+        out = self._proto.data_to_send()
+        if out:
+            self._sock.setblocking(True)
+            for chunk in out:
+                if chunk:
+                    self._sock.sendall(chunk)
+                else:
+                    self._sock.shutdown(socket.SHUT_WR)
+            self._sock.setblocking(False)
+
+    def _feed(self, data: bytes) -> None:
+        if data:
+            self._proto.receive_data(data)
+        else:
+            self._eof = True
+            self._proto.receive_eof()
+
+    def _read_all(self) -> None:
+        """Everything the socket holds, into the protocol (end of stream on EOF or reset)."""
+        try:
+            while not self._eof:
+                self._feed(self._sock.recv(1 << 20))
+        except (BlockingIOError, InterruptedError):
+            pass
+        except OSError:
+            self._feed(b"")
+
+    def recv_messages(self, timeout_s: float) -> list[str | bytes]:
+        """Every message that has arrived, waiting up to ``timeout_s`` for the first bytes
+        (an empty list when none came)."""
+        from websockets.frames import Opcode
+
+        frames, self._pending = self._pending, []
+        if not frames:
+            if self._eof:
+                raise self._closed()
+            ready, _, _ = select.select([self._sock], [], [], timeout_s)
+            if not ready:
+                return []
+            self._read_all()
+            frames = self._proto.events_received()
+            self._flush()  # pongs, the close handshake
+        out: list[str | bytes] = []
+        for f in frames:
+            op = f.opcode
+            if op is Opcode.BINARY or op is Opcode.TEXT or op is Opcode.CONT:
+                if op is not Opcode.CONT:
+                    self._text, self._parts = op is Opcode.TEXT, []
+                self._parts.append(f.data)
+                if f.fin:
+                    data = b"".join(self._parts) if len(self._parts) > 1 else self._parts[0]
+                    out.append(data.decode() if self._text else data)
+        if not out and self._proto.state is not self._open:
+            raise self._closed()
+        return out
+
+    def _closed(self) -> Exception:
+        """The ConnectionClosed to raise once the connection has ended (our side is done
+        with it: the protocol is brought to CLOSED)."""
+        self._proto.receive_eof()  # idempotent
+        return self._proto.close_exc
+
+    def send(self, text: str) -> None:
+        self._proto.send_text(text.encode())
+        self._flush()
+
+    def close(self) -> None:
+        try:
+            if self._proto.state is self._open:
+                self._proto.send_close()
+                self._flush()
+        except OSError:
+            pass
+        finally:
+            self._sock.close()
+
+
 @dataclass
 class _WsSession:
     """What one WebSocket connection knows: advertised channels, subscriptions, picks."""
@@ -397,17 +519,8 @@ class WsSource(Source):
     def _connection(self) -> str | None:
         """Connect and receive until the connection ends: why it ended, or None when the
         source is finished (stopped, or a fatal reason already sent)."""
-        from websockets.sync.client import connect
-
-        with connect(
-            self.url,
-            subprotocols=list(_SUBPROTOCOLS),
-            max_size=None,
-            compression=None,
-            proxy=None,
-            open_timeout=5,
-            close_timeout=1,
-        ) as ws:
+        ws = WsConnection(self.url, _SUBPROTOCOLS, open_timeout_s=5.0)
+        try:
             again = "reconnected" if self._connected_before else "connected"
             self.reconnects += self._connected_before
             self._connected_before = True
@@ -419,26 +532,21 @@ class WsSource(Source):
             if self._stop.is_set():
                 return None
             return "the server closed the connection"
+        finally:
+            ws.close()
 
-    def _frames(self, ws) -> list[tuple]:
-        """Every frame received within ``batch_s`` of the first: ``(data, arrival, wall)``."""
-        try:
-            first = ws.recv(timeout=0.2)
-        except TimeoutError:
+    def _frames(self, ws: WsConnection) -> list[tuple]:
+        """Every message that arrived within ``batch_s`` of the first: ``(data, arrival,
+        wall)`` (the arrival of the batch's first bytes for each)."""
+        got = ws.recv_messages(0.2)
+        if not got:
             return []
-        frames = [(first, time.perf_counter_ns(), time.time_ns())]
-        t_end = time.perf_counter() + self.batch_s
-        while len(frames) < _DRAIN_MAX:
-            left = t_end - time.perf_counter()
-            if left <= 0:
-                break
-            try:
-                frames.append((ws.recv(timeout=left), time.perf_counter_ns(), time.time_ns()))
-            except TimeoutError:
-                break
-        return frames
+        arrival, wall = time.perf_counter_ns(), time.time_ns()
+        self._stop.wait(self.batch_s)  # let the batch arrive, then take all of it
+        got += ws.recv_messages(0.0)
+        return [(m, arrival, wall) for m in got]
 
-    def _session(self, ws) -> str | None:
+    def _session(self, ws: WsConnection) -> str | None:
         """One connection: subscribe, receive, decode. Returns a fatal reason or None."""
         st = _WsSession()
         while not self._stop.is_set():

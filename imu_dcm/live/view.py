@@ -4,8 +4,8 @@ The same entity paths (``imu_dcm.viz.ENTITY``), timeline and blueprint as replay
 (:func:`imu_dcm.viz.make_blueprint`), so a live view reads like a replayed one: estimated and
 true body axes in 3D with the z-tip trail of the last 2 s, the attitude error and the gyro rates
 over time. Each :meth:`LiveView.log` call sends what arrived since the previous one with one
-``send_columns`` per entity (never one log call per sample); the 3D axes are thinned to at most
-``AXES_HZ`` rows per second of source time (the scalars keep every sample).
+``send_columns`` per entity (never one log call per sample); the 3D axes are thinned to the
+first row of each 1/``AXES_HZ`` s of source time (the scalars keep every sample).
 
 Modes: ``spawn`` starts the native viewer (the ``rerun`` binary, listening on 127.0.0.1 only) —
 it needs a display; ``serve`` runs ``rerun --serve-web --bind 127.0.0.1`` (via
@@ -22,7 +22,6 @@ import socket
 import subprocess
 import time
 import uuid
-from collections import deque
 
 import numpy as np
 from numpy.typing import NDArray
@@ -39,6 +38,9 @@ _TRAIL_POINTS = 120
 _EST_RGB = np.array([[255, 165, 150], [150, 235, 140], [150, 195, 255]], dtype=np.uint8)
 _TRUTH_RGB = np.array([[220, 40, 40], [30, 170, 50], [40, 90, 235]], dtype=np.uint8)
 _FLUSH_TIMEOUT_S = 10.0
+#: Source time between two sends of the 3D axes and trails, s (30 per second: smooth to the eye;
+#: each send costs two rerun calls, so a 10 ms view interval does not pay them 100 times a second).
+_3D_EVERY_S = 1.0 / 30.0
 
 
 def check_mode(mode: str | None) -> None:
@@ -153,7 +155,9 @@ class LiveView:
         self.rec = rec
         self._static()
         self._last_axes = {"est": -math.inf, "truth": -math.inf}
-        self._tips = {"est": deque(), "truth": deque()}
+        self._held = {"est": [], "truth": []}  # rows waiting for the next 3D send
+        self._sent_3d = {"est": -math.inf, "truth": -math.inf}
+        self._tips = {k: (np.zeros(0), np.zeros((0, 3))) for k in ("est", "truth")}
         self.log_calls = 0
 
     def _static(self) -> None:
@@ -170,19 +174,30 @@ class LiveView:
         self.rec.send_columns(path, indexes=[self._time(t_s)], columns=columns)
         self.log_calls += 1
 
-    def _axes_rows(self, key: str, t_s: NDArray, q: NDArray) -> None:
+    def _thin(self, key: str, t_s: NDArray) -> NDArray:
+        """Indices of the rows to draw: the first of each new 1/AXES_HZ slot of source time,
+        and always the newest (at most AXES_HZ + one row per call per second)."""
+        slot = np.floor(t_s * AXES_HZ)
+        first = np.concatenate([[slot[0] > self._last_axes[key]], slot[1:] > slot[:-1]])
+        first[-1] = True
+        self._last_axes[key] = slot[-1]
+        return np.flatnonzero(first)
+
+    def _axes_rows(self, key: str, t_s: NDArray, q: NDArray, final: bool = False) -> None:
+        """The 3D axes and the z-tip trail of new rows: at most every ``_3D_EVERY_S`` of source
+        time (the rows in between are held and go with the next send): two ``send_columns``
+        calls per send, whatever the view interval."""
         ok = np.all(np.isfinite(q), axis=1)
-        t_s, q = t_s[ok], q[ok]
-        if not len(t_s):
+        held = self._held[key]
+        if ok.any():
+            held.append((t_s[ok], q[ok]))
+        if not held or (not final and held[-1][0][-1] - self._sent_3d[key] < _3D_EVERY_S):
             return
-        # thin to AXES_HZ, always keeping the newest row
-        keep, last = [], self._last_axes[key]
-        for i, t in enumerate(t_s.tolist()):
-            if t - last >= 1.0 / AXES_HZ or i == len(t_s) - 1:
-                keep.append(i)
-                last = t
-        self._last_axes[key] = last
-        idx = np.array(keep)
+        t_s = np.concatenate([h[0] for h in held])
+        q = np.concatenate([h[1] for h in held])
+        held.clear()
+        self._sent_3d[key] = t_s[-1]
+        idx = self._thin(key, t_s)
         ax = _axes(q[idx])
         n = len(idx)
         rgb, radius = (_EST_RGB, 0.018) if key == "est" else (_TRUTH_RGB, 0.035)
@@ -196,13 +211,12 @@ class LiveView:
         cols = self.rr.Arrows3D.columns(**fields).partition(np.full(n, 3))
         path = self.entity["estimate_axes" if key == "est" else "truth_axes"]
         self._send(path, t_s[idx], cols)
-        # z-tip trail: the last _TRAIL_S seconds, one strip per call
-        tips = self._tips[key]
-        for t, z in zip(t_s.tolist(), _axes(q)[:, 2].tolist(), strict=False):
-            tips.append((t, z))
-        while tips and tips[0][0] < t_s[-1] - _TRAIL_S:
-            tips.popleft()
-        pts = np.array([p for _, p in tips])
+        # z-tip trail of the drawn rows: the last _TRAIL_S seconds, one strip per call
+        tip_t, tip_z = self._tips[key]
+        tip_t, tip_z = np.concatenate([tip_t, t_s[idx]]), np.concatenate([tip_z, ax[:, 2]])
+        keep = tip_t >= t_s[-1] - _TRAIL_S
+        self._tips[key] = tip_t, tip_z = tip_t[keep], tip_z[keep]
+        pts = tip_z
         if len(pts) > _TRAIL_POINTS:
             pts = pts[np.linspace(0, len(pts) - 1, _TRAIL_POINTS).round().astype(int)]
         color = (240, 150, 0) if key == "est" else (150, 70, 220)
@@ -226,10 +240,11 @@ class LiveView:
         ``q_*`` (n, 4) ``[x, y, z, w]`` body to world; errors (n, 3) deg (total, incl., head)."""
         rr = self.rr
         if len(gyro_t_s):
+            index = [self._time(gyro_t_s)]  # one time column for the three axes
             for k, a in enumerate("xyz"):
-                self._send(
-                    self.entity[f"gyro_{a}"], gyro_t_s, rr.Scalars.columns(scalars=omega_b[:, k])
-                )
+                cols = rr.Scalars.columns(scalars=omega_b[:, k])
+                self.rec.send_columns(self.entity[f"gyro_{a}"], indexes=index, columns=cols)
+                self.log_calls += 1
         if len(est_t_s):
             self._axes_rows("est", est_t_s, q_est)
         if len(truth_t_s):
@@ -240,6 +255,8 @@ class LiveView:
 
     def close(self) -> str:
         """Flush and disconnect; return the line to print about the viewer."""
+        for key in ("est", "truth"):  # the rows held for the next 3D send
+            self._axes_rows(key, np.zeros(0), np.zeros((0, 4)), final=True)
         self.rec.flush(timeout_sec=_FLUSH_TIMEOUT_S)
         self.rec.disconnect()
         if self.served is not None:

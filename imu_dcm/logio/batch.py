@@ -12,6 +12,7 @@ stores it (rad/s in ROS); truth ``q_w_b`` (M, 4) ``[x, y, z, w]``, body to world
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 
 import numpy as np
@@ -58,6 +59,15 @@ def classify_schema(name: str, encoding: str, text: str) -> tuple[str, str] | No
     return None
 
 
+@functools.lru_cache(maxsize=64)
+def _decoder(kind: tuple[str, str], name: str, encoding: str, text: str, topic: str) -> _Decoder:
+    """One decoder per channel (its schema parsed once, not per batch: a live source decodes
+    a batch every few ms)."""
+    what, path = kind
+    conn = Conn(0, topic, name, "cdr", encoding, text)
+    return _Decoder(conn, "imu", path) if what == "imu" else _Decoder(conn, "truth")
+
+
 def decode_cdr_batch(
     kind: tuple[str, str], name: str, encoding: str, text: str, payloads: list[bytes], topic: str
 ) -> Decoded:
@@ -94,9 +104,8 @@ def decode_cdr_batch(
         np.zeros(n, np.int64),
         np.arange(n, dtype=np.int64),
     )
-    what, path = kind
-    conn = Conn(0, topic, name, "cdr", encoding, text)
-    cols = _Decoder(conn, "imu", path)(raw) if what == "imu" else _Decoder(conn, "truth")(raw)
+    what = kind[0]
+    cols = _decoder(kind, name, encoding, text, topic)(raw)
     if cols.error is not None:
         raise cols.error
     good = np.zeros(n, bool)

@@ -194,8 +194,7 @@ def _distinct_outputs(args) -> None:
 
 
 def _not_a_folder_of_logs(log: str) -> None:
-    """A folder that holds several logs (not a log itself) is for ``batch``: say so. (A folder
-    holding one log file is that log, as the reader takes it.)"""
+    """A folder that holds logs (not a log itself) is for ``batch``: say so."""
     from imu_dcm.errors import InputError
 
     if not os.path.isdir(log) or os.path.isfile(os.path.join(log, "metadata.yaml")):
@@ -205,9 +204,10 @@ def _not_a_folder_of_logs(log: str) -> None:
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         found = find_logs([log])
-    if len(found) > 1:
+    if len(found) > 1:  # a folder holding one log file is that log (the reader opens it)
+        n = len(found)
         raise InputError(
-            f"Expected one log, got a folder of {len(found)} logs {log!r}; "
+            f"Expected one log, got a folder of {n} log{'s' if n != 1 else ''} {log!r}; "
             f"replay them all with: {PROG} batch {log} --table OUT.csv"
         )
 
