@@ -72,7 +72,7 @@ def _optional_run(
     return "ran", []
 
 
-def main(argv: list[str] | None = None) -> int:
+def _parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="python -m benchmarks",
         description="Regenerate the speed-vs-accuracy and stability charts and results.md.",
@@ -91,7 +91,11 @@ def main(argv: list[str] | None = None) -> int:
         "leaves out the time other processes hold the CPU on a shared "
         "machine",
     )
-    args = parser.parse_args(argv)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = _parser().parse_args(argv)
     out: Path = args.out
     try:
         check_output_folder(out)
@@ -103,22 +107,41 @@ def main(argv: list[str] | None = None) -> int:
 
     import numpy as np  # noqa: F401  (after the thread limit)
 
-    from benchmarks import pareto, stability
+    from benchmarks import stability
 
     progress = _progress_printer()
     t_start = time.perf_counter()
     rounds = 3 if args.quick else 5
+    with single_thread():
+        meas, cases, conv = _pareto(out, args.quick, rounds, args.clock, progress)
+        stab_md = stability.run(out, quick=args.quick, progress=progress)
+        extra, failed = _studies(out, args.quick, progress)
+    elapsed = time.perf_counter() - t_start
+    md = _results_markdown(args, rounds, elapsed, meas, cases, conv, stab_md + extra)
+    write_text_atomic(out / "results.md", "\n".join(md) + "\n")
+    write_text_atomic(
+        out / "pareto.json", json.dumps([dataclasses.asdict(m) for m in meas], indent=0) + "\n"
+    )
+    progress(f"done: {out / 'results.md'} ({elapsed:.0f} s)")
+    if failed:
+        print(
+            f"benchmarks: Expected every study to run, got failures in {', '.join(failed)}",
+            file=sys.stderr,
+        )
+        return 1
+    return 0
+
+
+def _results_markdown(args, rounds, elapsed, meas, cases, conv, tail: list[str]) -> list[str]:
+    """``results.md``: the command that made it, then each study's section."""
+    from benchmarks import pareto
+
     command = (
         "python -m benchmarks"
         + (" --quick" if args.quick else "")
         + (f" --clock {args.clock}" if args.clock != "wall" else "")
         + " --out DIR"
     )
-    with single_thread():
-        meas, cases, conv = _pareto(out, args.quick, rounds, args.clock, progress)
-        stab_md = stability.run(out, quick=args.quick, progress=progress)
-        extra, failed = _studies(out, args.quick, progress)
-    elapsed = time.perf_counter() - t_start
     md = [
         "# imu_dcm benchmarks: speed against accuracy, and stability",
         "",
@@ -134,20 +157,7 @@ def main(argv: list[str] | None = None) -> int:
     md += pareto.summary_markdown(meas)
     md += pareto.results_markdown(meas, cases, rounds, command, clock=args.clock)
     md += pareto.convergence_markdown(conv)
-    md += stab_md
-    md += extra
-    write_text_atomic(out / "results.md", "\n".join(md) + "\n")
-    write_text_atomic(
-        out / "pareto.json", json.dumps([dataclasses.asdict(m) for m in meas], indent=0) + "\n"
-    )
-    progress(f"done: {out / 'results.md'} ({elapsed:.0f} s)")
-    if failed:
-        print(
-            f"benchmarks: Expected every study to run, got failures in {', '.join(failed)}",
-            file=sys.stderr,
-        )
-        return 1
-    return 0
+    return md + tail
 
 
 def _pareto(out: Path, quick: bool, rounds: int, clock: str, progress: Callable[[str], None]):

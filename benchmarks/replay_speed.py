@@ -1,6 +1,7 @@
 """Log reading speed and memory against plain per-message decode loops over the same bags.
 
-``python -m benchmarks.replay_speed [--bag DIR] [--rounds N] [--camera-mb MB] [--hour]``
+``python -m benchmarks.replay_speed [--bag DIR] [--rounds N] [--camera-mb MB] [--hour]
+[--ulog FILE]``
 
 Speed, timed in interleaved rounds after a warm-up, one BLAS thread (:mod:`benchmarks.timing`).
 Every reference decodes every message of the bag into one Python object each, as a user's
@@ -11,6 +12,9 @@ speed-ups on the same bag:
   :func:`imu_dcm.logio.read_log`. Target >= 10x.
 * sqlite3 and ROS 1 (the same trial written with rosbags' writers): ``rosbags`` ``AnyReader``
   + ``deserialize`` loop against ``read_log``. Target >= 5x.
+* PX4 ULog (``--ulog``, default PX4's sample log beside the repository, skipped when absent):
+  ``pyulog`` ``ULog()`` (its reader walks every message in Python; all topics, and only the
+  gyro and attitude topics) against ``read_log``. Target >= 5x the full parse.
 * EuRoC/ASL folder (the same trial's gyro and truth written as ``imu0`` and
   ``state_groundtruth_estimate0`` CSVs): a plain per-row ``csv.reader`` loop (``int`` stamps,
   ``float`` fields, rows stacked with numpy) against ``read_log``. Target >= 5x.
@@ -40,6 +44,7 @@ from benchmarks.timing import limit_threads_env
 
 REPO = Path(__file__).resolve().parents[1]
 DEFAULT_BAG = REPO / "replay" / "broad_07_undisturbed_fast_rotation_B"
+DEFAULT_ULOG = REPO.parent / "shared" / "data" / "strangers" / "sample_px4_events.ulg"
 TARGET_MCAP, TARGET_ROSBAGS = 10.0, 5.0
 
 
@@ -80,6 +85,14 @@ def rosbags_raw_iteration(path: Path, topics: tuple[str, ...]) -> int:
         for _conn, _t, _raw in reader.messages(connections=conns):
             n += 1
     return n
+
+
+def pyulog_loop(path: Path, topics: list[str] | None = None) -> int:
+    """pyulog: parse the ULog (its reader walks every message in Python), or only ``topics``;
+    returns the data messages kept."""
+    from pyulog import ULog
+
+    return sum(len(d.data["timestamp"]) for d in ULog(str(path), topics).data_list)
 
 
 # --------------------------------------------------------------------------- variants
@@ -397,6 +410,9 @@ def main(argv: list[str] | None = None) -> int:
         help="size of the added camera topic, MB (default 566; 0 skips)",
     )
     p.add_argument("--hour", action="store_true", help="also the one-hour 400 Hz memory case")
+    p.add_argument(
+        "--ulog", type=Path, default=DEFAULT_ULOG, help="a PX4 ULog (default: PX4's sample)"
+    )
     args = p.parse_args(argv)
 
     limit_threads_env()
@@ -420,6 +436,22 @@ def main(argv: list[str] | None = None) -> int:
             "per-row csv loop",
             TARGET_ROSBAGS,
         )
+        if args.ulog.is_file():  # PX4 ULog: pyulog's reader against read_log's scan
+            n_ulog = pyulog_loop(args.ulog)
+            groups["PX4 ULog " + args.ulog.name] = (
+                {
+                    "pyulog ULog(), every message": (lambda: pyulog_loop(args.ulog), n_ulog),
+                    "pyulog ULog(), gyro+attitude topics": (
+                        lambda: pyulog_loop(args.ulog, ["sensor_combined", "vehicle_attitude"]),
+                        n_ulog,
+                    ),
+                    "read_log": (_quiet(lambda: read_log(args.ulog)), n_ulog),
+                },
+                "pyulog ULog(), every message",
+                TARGET_ROSBAGS,
+            )
+        else:
+            print(f"(PX4 ULog case skipped: no {args.ulog})")
         shown = args.bag.resolve()
         shown = shown.relative_to(REPO) if shown.is_relative_to(REPO) else args.bag
         print(

@@ -169,7 +169,7 @@ def _entry(signature: str):
 
 
 #: CPU seconds to compile every entry point a replay uses (measured: see docs/integrator.md).
-COMPILE_S = 4
+COMPILE_S = 3
 
 
 class _CompileNotice(numba_event.Listener):
@@ -326,7 +326,7 @@ def _rate(state, r: int) -> tuple:
     return state[i], state[i + 1], state[i + 2]
 
 
-@_inline
+@_jit
 def _ghost(state, m: int, t: float) -> tuple:
     """Rate at stamp ``t`` on the polynomial through the newest ``m`` buffered samples
     (Lagrange form; ``m`` = 2, 3 or 4: a line, a parabola, a cubic)."""
@@ -388,7 +388,7 @@ def _push(
             return k
         if n == 4.0:  # the first step, with a ghost sample before the record
             h = tb - ta
-            ghost = _ghost(state, 4, ta - h)
+            ghost = _ghost(state, int(n), ta - h)  # n (= 4) a variable: one compiled _ghost
             k = _commit(state, increment(MAGNUS4, ghost, a, b, c, h, h, tc - tb), out, k, emit_phi)
     return _commit(state, newest_step(method, a, b, c, d, ta, tb, tc, td), out, k, emit_phi)
 
@@ -523,40 +523,26 @@ def close(state, emit_phi: bool = False) -> int:
 
 @_entry("int64(float64[::1], boolean)")
 def _close_magnus4(state, emit_phi: bool) -> int:
-    """:func:`close` for ``magnus4`` with at least two samples."""
+    """:func:`close` for ``magnus4`` with at least two samples: the last step, with a ghost
+    sample after the record; with two or three samples the first step is still open too, with
+    a ghost before the record (with two, that is the same step)."""
     out = state[ROWS : ROWS + 8].reshape((2, 4))
     n = int(state[N])
-    m = min(n, 4)
-    tc, td = state[T + 2], state[T + 3]
+    tb, tc, td = state[T + 1], state[T + 2], state[T + 3]
     h_end = td - tc
-    ghost_end = _ghost(state, m, td + h_end)
-    c, d = _rate(state, 2), _rate(state, 3)
-    if n >= 4:
-        b = _rate(state, 1)
-        return _commit(
-            state,
-            increment(MAGNUS4, b, c, d, ghost_end, tc - state[T + 1], h_end, h_end),
-            out,
-            0,
-            emit_phi,
-        )
-    if n == 2:
-        ghost_start = _ghost(state, 2, tc - h_end)
-        return _commit(
-            state,
-            increment(MAGNUS4, ghost_start, c, d, ghost_end, h_end, h_end, h_end),
-            out,
-            0,
-            emit_phi,
-        )
-    b = _rate(state, 1)  # n == 3
-    tb = state[T + 1]
-    h0 = tc - tb
-    ghost_start = _ghost(state, 3, tb - h0)
-    k = _commit(state, increment(MAGNUS4, ghost_start, b, c, d, h0, h0, h_end), out, 0, emit_phi)
-    return _commit(
-        state, increment(MAGNUS4, b, c, d, ghost_end, h0, h_end, h_end), out, k, emit_phi
-    )
+    ghost_end = _ghost(state, min(n, 4), td + h_end)
+    b, c, d = _rate(state, 1), _rate(state, 2), _rate(state, 3)
+    h_b = h_end if n == 2 else tc - tb
+    k = 0
+    if n < 4:
+        ghost_start = _ghost(state, n, (tc if n == 2 else tb) - h_b)
+        if n == 2:
+            b = ghost_start
+        else:
+            phi = increment(MAGNUS4, ghost_start, b, c, d, h_b, h_b, h_end)
+            k = _commit(state, phi, out, 0, emit_phi)
+    phi = increment(MAGNUS4, b, c, d, ghost_end, h_b, h_end, h_end)
+    return _commit(state, phi, out, k, emit_phi)
 
 
 # -- input checks ------------------------------------------------------------------------------

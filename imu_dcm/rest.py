@@ -223,7 +223,7 @@ def explain_no_rest(
     """Why no window passed: the conditions that failed in the window closest to passing.
 
     The closest window is the one whose worst condition (value over limit) is smallest. Returns
-    one clause, e.g. ``"the stillest 0.50 s (at 12.30 s) has rate std 0.0150 rad/s > 0.0100"``.
+    one clause, e.g. ``"the stillest 0.50 s, at 12.30 s, has rate std 0.015 rad/s > 0.01 (1.5x)"``.
     """
     cfg = config or RestConfig()
     w, t, acc = _checked(omega_b, t_s, accel_b)
@@ -238,13 +238,17 @@ def explain_no_rest(
         for name, value, limit, unit in conds
         if value[i] >= limit
     ]
-    return f"the stillest {cfg.min_duration_s:.2f} s (at {t[i] - t[0]:.2f} s) has " + ", ".join(
+    return f"the stillest {cfg.min_duration_s:.2f} s, at {t[i] - t[0]:.2f} s, has " + ", ".join(
         failed
     )
 
 
 class CausalRestBias:
     """Online rest detector and bias estimate: the causal twin of :func:`detect_rest`.
+
+    It runs the rule without an accelerometer (a live gyro stream carries none): rate spread at
+    the noise floor and mean rate under ``max_rate_rad_s``, the same thresholds as the batch rule
+    given no ``accel_b`` (a test holds the two equal).
 
     The gyro bias from rest, estimated causally as samples arrive (replay's rule, online).
 

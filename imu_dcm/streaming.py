@@ -53,9 +53,6 @@ if TYPE_CHECKING:
 
 __all__ = ["DcmIntegrator"]
 
-_ndarray = np.ndarray
-_F64 = np.dtype(np.float64)
-
 
 class DcmIntegrator:
     """Streaming strapdown integrator ``q_w_b <- q_w_b ⊗ exp(φ)``, the twin of
@@ -130,6 +127,11 @@ class DcmIntegrator:
 
         return Rotation.from_quat(self._q)
 
+    def state(self) -> dict[str, NDArray[np.float64]]:
+        """A copy of the kernel state, field by field (:data:`imu_dcm.kernel.STATE_FIELDS`:
+        the attitude, the last four rates and stamps, the sample count, ...)."""
+        return kernel.state_fields(self._state.copy())
+
     @property
     def n_samples(self) -> int:
         """Samples received (a ``t0_s`` start counts as one)."""
@@ -176,18 +178,16 @@ class DcmIntegrator:
         GapWarning
             The step is a gap (:func:`imu_dcm.integrate.find_gaps`) among the last four steps.
         """
-        # The usual sample, a float64 (3,) array and a float stamp, goes straight to the
-        # kernel, which checks it (finite, increasing, not closed) and returns a code.
-        if type(omega_b) is not _ndarray or omega_b.dtype is not _F64 or omega_b.ndim != 1:
-            omega_b = self._as_rate(omega_b, t_s)
-        if type(t_s) is not float:
-            t_s = self._as_stamp(omega_b, t_s)
+        # The sample goes straight to the compiled push, which takes a float64 (3,) contiguous
+        # array and a number (numba refuses any other type with a TypeError: only then is the
+        # sample converted here) and checks it (finite, increasing, not closed): a code.
         if self._t0_pending:
+            omega_b, t_s = self._as_rate(omega_b, t_s), self._as_stamp(omega_b, t_s)
             self._start_at_t0(omega_b, t_s)
         try:
             code = self._push(self._state, omega_b, t_s)
-        except TypeError:  # a strided array: the compiled push takes contiguous ones
-            omega_b = np.ascontiguousarray(omega_b)
+        except TypeError:
+            omega_b, t_s = self._as_rate(omega_b, t_s), self._as_stamp(omega_b, t_s)
             code = self._push(self._state, omega_b, t_s)
         if code:
             self._not_ok(code, omega_b, t_s)
@@ -195,7 +195,7 @@ class DcmIntegrator:
 
     def _as_rate(self, omega_b: ArrayLike, t_s: object) -> NDArray[np.float64]:
         try:
-            w = np.asarray(omega_b, dtype=float)
+            w = np.ascontiguousarray(omega_b, dtype=np.float64)
         except (TypeError, ValueError):
             w = None
         if w is None or w.shape != (3,):
@@ -220,7 +220,7 @@ class DcmIntegrator:
             raise InputError("Expected no samples after finish(), got one")
         if not t > self._t0_s:
             raise InputError(f"Expected the first `t_s` after t0_s = {self._t0_s!r} s, got {t!r} s")
-        code = self._push(self._state, np.ascontiguousarray(w), self._t0_s)
+        code = self._push(self._state, w, self._t0_s)
         if code:
             self._not_ok(code, w, self._t0_s)
         self._t0_pending = False
@@ -281,6 +281,16 @@ class DcmIntegrator:
         GapWarning
             A gap (:func:`imu_dcm.integrate.find_gaps`) in the chunk with the buffered stamps.
         """
+        return _to_rotation(self._many(omega_b, t_s))
+
+    def update_many_quat(self, omega_b: ArrayLike, t_s: ArrayLike) -> NDArray[np.float64]:
+        """:meth:`update_many` as an ``(n, 4)`` array of ``[x, y, z, w]`` attitudes, without
+        building a scipy ``Rotation`` (which costs more than integrating a short chunk)."""
+        return self._many(omega_b, t_s)
+
+    def _many(self, omega_b: ArrayLike, t_s: ArrayLike) -> NDArray[np.float64]:
+        """The body of :meth:`update_many` and :meth:`update_many_quat` (warnings name their
+        caller's caller)."""
         w = np.asarray(omega_b)
         t = np.asarray(t_s)
         if w.ndim != 2 or w.shape[1] != 3 or t.shape != (len(w),):
@@ -304,12 +314,12 @@ class DcmIntegrator:
         out = np.empty((len(t) + 1, 4))
         k = kernel.feed(self._state, w, t, out, False)
         if n0 >= (4 if self._method == "magnus4" else 1) and k == n_user:
-            return _to_rotation(out[:k])  # steady state: one committed row per sample
+            return out[:k]  # steady state: one committed row per sample
         # Warm-up: row j is the attitude committed by then (the start attitude before any).
         n_after = n0 + np.arange(1, len(t) + 1)
         rows = np.vstack([q_before, out[:k]])
         idx = self._committed(n_after) - self._committed(np.array([n0]))
-        return _to_rotation(np.ascontiguousarray(rows[idx][-n_user:]))
+        return np.ascontiguousarray(rows[idx][-n_user:])
 
     def _committed(self, n: NDArray) -> NDArray:
         """Rows committed after ``n`` samples in all."""
@@ -321,7 +331,7 @@ class DcmIntegrator:
         """Check a chunk as the continuation of the record (finite, increasing across the
         junction, gaps among the buffered and new stamps); one compiled pass."""
         n = self.n_samples
-        w = np.ascontiguousarray(w)
+        w, t = np.ascontiguousarray(w), np.ascontiguousarray(t)
         stamps = self._state[kernel.T + 4 - min(n, 4) : kernel.T + 4]  # buffered, oldest first
         t_before = stamps[-1] if n else -math.inf
         row, stamp, order, dt_min, dt_max = kernel.check_record(w, t, t_before)
@@ -346,5 +356,5 @@ class DcmIntegrator:
         if dt_max > GAP_FACTOR * dt_min:  # else no step can exceed GAP_FACTOR x the median
             gaps = find_gaps(np.concatenate([stamps, t]))
             if gaps:
-                warnings.warn(gap_message(gaps), GapWarning, stacklevel=3)
+                warnings.warn(gap_message(gaps), GapWarning, stacklevel=4)
         return w, t

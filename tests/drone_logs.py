@@ -109,13 +109,28 @@ class TrialArrays:
     omega_b: np.ndarray  # FLU, rad/s
     truth_t_ns: np.ndarray
     q_w_b: np.ndarray  # [x, y, z, w], FLU -> ENU
+    accel_b: np.ndarray  # FLU, m/s²
+
+
+def trial_gyro_only():
+    """The trial as read, its accelerometer dropped: the drone logs written here carry the gyro
+    only, and rest is judged from the gyro alone without one (``imu_dcm.rest``)."""
+    from dataclasses import replace
+
+    from imu_dcm.logio import read_log
+
+    log = read_log(TRIAL)
+    return replace(log, imu=replace(log.imu, accel_b=None))
 
 
 def trial_arrays() -> TrialArrays:
     from imu_dcm.logio import read_log
 
     log = read_log(TRIAL)
-    return TrialArrays(log.imu.t_ns, log.imu.omega_b, log.truth.t_ns, log.truth.q_w_b)
+    assert log.imu.accel_b is not None, "the trial's Imu messages carry the accelerometer"
+    return TrialArrays(
+        log.imu.t_ns, log.imu.omega_b, log.truth.t_ns, log.truth.q_w_b, log.imu.accel_b
+    )
 
 
 def to_px4(q_w_b_xyzw: np.ndarray) -> np.ndarray:
@@ -135,13 +150,24 @@ def to_px4(q_w_b_xyzw: np.ndarray) -> np.ndarray:
 
 
 def trial_ulog(path: Path, ctype: str = "double") -> Path:
-    """The trial as a ULog: sensor_combined (gyro only) and vehicle_attitude_groundtruth."""
+    """The trial as a ULog: sensor_combined (gyro, accelerometer) and
+    vehicle_attitude_groundtruth."""
     a = trial_arrays()
     assert np.all(a.t_ns % 1000 == 0) and np.all(a.truth_t_ns % 1000 == 0), "µs stamps"
     gyro = UTopic(
         "sensor_combined",
-        [("uint64_t", 0, "timestamp"), (ctype, 3, "gyro_rad")],
-        {"timestamp": a.t_ns // 1000, "gyro_rad": a.omega_b * np.array([1.0, -1, -1])},
+        [
+            ("uint64_t", 0, "timestamp"),
+            (ctype, 3, "gyro_rad"),
+            ("int32_t", 0, "accelerometer_timestamp_relative"),
+            (ctype, 3, "accelerometer_m_s2"),
+        ],
+        {
+            "timestamp": a.t_ns // 1000,
+            "gyro_rad": a.omega_b * np.array([1.0, -1, -1]),
+            "accelerometer_timestamp_relative": np.zeros(len(a.t_ns)),
+            "accelerometer_m_s2": a.accel_b * np.array([1.0, -1, -1]),
+        },
     )
     truth = UTopic(
         "vehicle_attitude_groundtruth",
@@ -210,14 +236,15 @@ def to_ardupilot_euler_deg(q_w_b_xyzw: np.ndarray) -> np.ndarray:
 
 
 def trial_dataflash(path: Path, real: str = "d") -> Path:
-    """The trial as a DataFlash log: IMU (gyro, no accelerometer) and ATT. ``real`` is the
+    """The trial as a DataFlash log: IMU (gyro, accelerometer) and ATT. ``real`` is the
     format character of the values: ``d`` (double) or ``f`` (float, as ArduPilot logs)."""
     a = trial_arrays()
     assert np.all(a.t_ns % 1000 == 0) and np.all(a.truth_t_ns % 1000 == 0), "µs stamps"
     w = a.omega_b * np.array([1.0, -1, -1])
+    f = a.accel_b * np.array([1.0, -1, -1])
     imu_rows = [
-        (int(t // 1000), 0, float(x), float(y), float(z))
-        for t, (x, y, z) in zip(a.t_ns, w, strict=True)
+        (int(t // 1000), 0, *map(float, wi), *map(float, fi))
+        for t, wi, fi in zip(a.t_ns, w, f, strict=True)
     ]
     rpy = to_ardupilot_euler_deg(a.q_w_b)
     att_rows = [
@@ -227,7 +254,12 @@ def trial_dataflash(path: Path, real: str = "d") -> Path:
     return write_dataflash(
         path,
         [
-            DFMessage("IMU", "QB" + real * 3, ["TimeUS", "I", "GyrX", "GyrY", "GyrZ"], imu_rows),
+            DFMessage(
+                "IMU",
+                "QB" + real * 6,
+                ["TimeUS", "I", "GyrX", "GyrY", "GyrZ", "AccX", "AccY", "AccZ"],
+                imu_rows,
+            ),
             DFMessage("ATT", "Q" + real * 3, ["TimeUS", "Roll", "Pitch", "Yaw"], att_rows),
         ],
     )

@@ -55,6 +55,9 @@ OP = {
 }
 OP_NAME = {v: k for k, v in OP.items()}
 PROG_PREFIX = "imu-dcm-replay: "
+#: The command-line kinds: ``cli`` (one replay), ``live`` and ``batch`` (hostile outputs), with
+#: the prefix of their stderr lines.
+CLI_KINDS = {"cli": PROG_PREFIX, "live": "imu-dcm-live: ", "batch": "imu-dcm-replay batch: "}
 #: Peak resident memory a case may add over the worker's baseline (the logs are < 1 MB).
 MEMORY_LIMIT_BYTES = 512 * 2**20
 #: Address space the worker may add after its imports: a bomb gets MemoryError, not the machine.
@@ -394,7 +397,8 @@ class Case:
     ``make(d)`` writes the input under ``d / "in"`` (and any pre-existing output nodes under
     ``d / "out"``) and returns ``(log_path, extra_argv)``. ``lost``: IMU samples the damage may
     cost (None: any, an exit 2 is fine). ``refuse``: only exit 2 is right (hostile outputs).
-    ``kinds``: what runs it (``cli``, ``read_log``, ``replay``). ``fix``: what it exercises.
+    ``kinds``: what runs it (``cli``, ``read_log``, ``replay``; ``live`` and ``batch`` for
+    hostile outputs). ``fix``: what it exercises.
     """
 
     cls: str
@@ -420,7 +424,7 @@ class Verdict:
 
     def line(self) -> str:
         r = self.result
-        got = f"exit {r.get('rc')}" if self.kind == "cli" else f"{r.get('exc_type') or 'ok'}"
+        got = f"exit {r.get('rc')}" if self.kind in CLI_KINDS else f"{r.get('exc_type') or 'ok'}"
         msg = (r.get("stderr") or r.get("exc_msg") or "").strip().splitlines()
         tail = f" | {msg[-1][:160]}" if msg else ""
         return f"{self.case.id} [{self.kind}] {got}: {'; '.join(self.violations)}{tail}"
@@ -456,13 +460,14 @@ def judge(
     if replaced:
         v.append(f"special file replaced or removed: {replaced}")
     samples = None
-    if kind == "cli":
+    if kind in CLI_KINDS:
+        prefix = CLI_KINDS[kind]
         rc, err = r.get("rc"), r.get("stderr", "")
         lines = [ln for ln in err.splitlines() if ln.strip()]
         if "Traceback" in err:
             v.append("traceback on stderr")
         if rc == 2:
-            if len(lines) != 1 or not lines[0].startswith(PROG_PREFIX + "error:"):
+            if len(lines) != 1 or not lines[0].startswith(prefix + "error:"):
                 v.append(f"exit 2 with {len(lines)} stderr lines (expected one error line)")
             if after_out != before_out:
                 extra = sorted(set(after_out) - set(before_out)) or sorted(
@@ -470,7 +475,7 @@ def judge(
                 )
                 v.append(f"output left behind or changed on exit 2: {extra[:3]}")
         elif rc == 0:
-            bad = [ln for ln in lines if not ln.startswith(PROG_PREFIX + "warning:")]
+            bad = [ln for ln in lines if not ln.startswith(prefix + "warning:")]
             if bad:
                 v.append(f"exit 0 with non-warning stderr: {bad[0][:80]!r}")
             if case.refuse:
@@ -479,6 +484,8 @@ def judge(
                 samples = r.get("samples")
                 if samples is None:
                     v.append("exit 0 without a readable --summary-json")
+        elif case.refuse and not r.get("escaped"):
+            v.append(f"exit {rc} where only a refusal (exit 2) is safe")
         elif not r.get("escaped"):
             v.append(f"exit {rc} (expected 0 or 2)")
         ok = rc == 0
@@ -544,9 +551,12 @@ def _run_case(op: dict) -> dict:
             warnings.catch_warnings(record=True) as caught,
         ):
             warnings.simplefilter("always")
-            if kind == "cli":
+            if kind in CLI_KINDS:
+                from imu_dcm.live.__main__ import main as live_main
+
+                run_main = live_main if kind == "live" else replay_main
                 try:
-                    r["rc"] = replay_main(list(op["argv"]))
+                    r["rc"] = run_main(list(op["argv"]))
                 except SystemExit as exc:
                     r["rc"] = exc.code if isinstance(exc.code, int) else 2
             elif kind == "read_log":
@@ -728,6 +738,14 @@ class Pool:
                 w.close()
 
 
+def _free_udp_port() -> int:
+    import socket
+
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as sock:
+        sock.bind(("127.0.0.1", 0))
+        return sock.getsockname()[1]
+
+
 def run_one(w: Worker, case: Case, kind: str, d: Path, base: Base | None) -> Verdict:
     (d / "in").mkdir(parents=True)
     (d / "out").mkdir()
@@ -739,6 +757,11 @@ def run_one(w: Worker, case: Case, kind: str, d: Path, base: Base | None) -> Ver
         if "--summary-json" not in extra:
             argv += ["--summary-json", str(summary)]
         op = {"kind": "cli", "argv": argv}
+    elif kind == "live":  # a source that never sends: every refusal comes before it opens
+        argv = [f"udp://127.0.0.1:{_free_udp_port()}", "--rerun", "off", "--no-status"]
+        op = {"kind": kind, "argv": [*argv, "--idle-stop", "0.5", "--quiet", *extra]}
+    elif kind == "batch":
+        op = {"kind": kind, "argv": ["batch", str(log), "--jobs", "1", "--quiet", *extra]}
     else:
         op = {"kind": kind, "path": str(log)}
     op["timeout"] = CASE_TIMEOUT_S

@@ -6,9 +6,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from imu_dcm.bag_writer import StampedSeries, write_bag
 from imu_dcm.errors import LogError
 from imu_dcm.logio import read_log
+from imu_dcm.logio.writer import StampedSeries, write_bag
 from imu_dcm.replay.__main__ import main
 
 N = 400

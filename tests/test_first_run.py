@@ -160,3 +160,281 @@ def test_data_synth_out_creates_its_parent_folders(tmp_path):
         "metadata.yaml",
         "top.mcap",
     ]
+
+
+# ---------------------------------------------------------------------------- exit codes, words
+FLIP = REPO_ROOT / "replay" / "free_body_flip_100hz_delta"
+
+
+def _one_error_line(r, prog: str) -> str:
+    lines = [x for x in r.stderr.splitlines() if x.strip() and ": warning:" not in x]
+    assert "Traceback" not in r.stderr
+    assert len(lines) == 1 and lines[0].startswith(f"{prog}: error: "), r.stderr
+    return lines[0]
+
+
+def test_headless_replay_with_defaults_leaves_nothing_in_the_current_folder(tmp_path):
+    r = run(["imu_dcm.replay", str(FLIP)], tmp_path)
+    assert r.returncode == 0, r.stderr
+    assert list(tmp_path.iterdir()) == []
+    hint = [x for x in r.stdout.splitlines() if x.startswith("rerun:")]
+    assert len(hint) == 1 and "--rerun serve" in hint[0] and "--rerun save:F.rrd" in hint[0]
+    assert "127.0.0.1" in hint[0]
+
+
+@pytest.mark.parametrize(
+    "args,prog",
+    [
+        (["imu_dcm.replay"], "imu-dcm-replay"),
+        (["imu_dcm.replay", "batch"], "imu-dcm-replay batch"),
+        (["imu_dcm.replay", "convert-csv"], "imu-dcm-replay convert-csv"),
+        (["imu_dcm.live"], "imu-dcm-live"),
+        (["data_synth"], "python -m data_synth"),
+        (["data_synth", "heavy-top"], "python -m data_synth heavy-top"),
+    ],
+)
+def test_version_on_every_command(args, prog, tmp_path):
+    from imu_dcm import __version__
+
+    r = run([*args, "--version"], tmp_path)
+    assert r.returncode == 0, r.stderr
+    assert r.stdout.strip() == f"{prog} {__version__}"
+
+
+def test_console_scripts_name_themselves_and_have_version(monkeypatch, capsys):
+    from importlib import import_module
+
+    import tomllib
+
+    from imu_dcm import __version__
+
+    scripts = tomllib.loads((REPO_ROOT / "pyproject.toml").read_text())["project"]["scripts"]
+    assert set(scripts) == {"imu-dcm-replay", "imu-dcm-live", "data-synth"}
+    for name, target in scripts.items():
+        module, func = target.split(":")
+        if name == "data-synth":  # the program name is read when the module is imported
+            monkeypatch.setattr(sys, "argv", [f"/venv/bin/{name}"])
+            sys.modules.pop(module, None)
+            sys.modules.pop("data_synth.cli", None)
+        main = getattr(import_module(module), func)
+        try:
+            code = main(["--version"])
+        except SystemExit as exc:
+            code = exc.code
+        assert code == 0
+        assert capsys.readouterr().out.strip() == f"{name} {__version__}"
+    sys.modules.pop("data_synth.cli", None)
+
+
+def test_replay_exit_codes(tmp_path):
+    assert run(["imu_dcm.replay", str(FLIP), "--rerun", "off"], tmp_path).returncode == 0
+    r = run(["imu_dcm.replay", str(tmp_path / "missing"), "--rerun", "off"], tmp_path)
+    assert r.returncode == 2
+    _one_error_line(r, "imu-dcm-replay")
+    r = run(["imu_dcm.replay", str(FLIP), "--method", "magnus5"], tmp_path)
+    assert r.returncode == 2 and "did you mean 'magnus4'?" in _one_error_line(r, "imu-dcm-replay")
+
+
+def test_batch_with_a_failed_log_exits_1(tmp_path):
+    bad = tmp_path / "bad.mcap"
+    bad.write_bytes(b"not a log")
+    table = tmp_path / "out" / "t.csv"  # parents created
+    r = run(
+        ["imu_dcm.replay", "batch", str(FLIP), str(bad), "--table", str(table), "--jobs", "1"],
+        tmp_path,
+    )
+    assert r.returncode == 1, r.stderr
+    assert "1 failed" in r.stdout and table.is_file()
+
+
+def test_live_exit_codes(tmp_path):
+    r = run(["imu_dcm.live", "-", "--rerun", "off"], tmp_path, "")  # no sample at all
+    assert r.returncode == 1, r.stderr
+    assert "None" not in r.stdout
+    assert "no estimate (no sample was integrated)" in r.stdout
+    r = run(["imu_dcm.live", "-", "--rerun", "off"], tmp_path, LINES)
+    assert r.returncode == 0, r.stderr
+    r = run(["imu_dcm.live", "ws://127.0.0.1:1", "--rerun", "off", "--give-up", "0.5"], tmp_path)
+    assert r.returncode == 1, r.stderr  # never connected
+    assert "None" not in r.stdout and "imu        no IMU channel" in r.stdout
+    r = run(["imu_dcm.live", "-", "--time-units", "fortnights"], tmp_path)
+    assert r.returncode == 2
+    _one_error_line(r, "imu-dcm-live")
+
+
+def _free_udp_port() -> int:
+    import socket
+
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def _wait_until_bound(port: int, proc, timeout_s: float = 60.0) -> None:
+    import socket
+    import time
+
+    deadline = time.monotonic() + timeout_s
+    while True:
+        assert proc.poll() is None and time.monotonic() < deadline
+        with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+            try:
+                s.bind(("127.0.0.1", port))
+            except OSError:
+                return
+        time.sleep(0.1)
+
+
+def test_live_sigint_and_sigterm_exit_130_and_143(tmp_path):
+    import signal
+    import time
+
+    env = dict(os.environ, PYTHONPATH=str(REPO_ROOT), CI="true")
+    for sig, code in ((signal.SIGINT, 130), (signal.SIGTERM, 143)):
+        port = _free_udp_port()
+        proc = subprocess.Popen(
+            [sys.executable, "-m", "imu_dcm.live", f"udp://127.0.0.1:{port}"]
+            + ["--rerun", "off", "--no-status"],
+            stdin=subprocess.DEVNULL,
+            stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE,
+            env=env,
+            cwd=tmp_path,
+        )
+        try:
+            _wait_until_bound(port, proc)  # the run is up (nothing is ever sent)
+            time.sleep(1.0)
+            proc.send_signal(sig)
+            out, err = proc.communicate(timeout=30)
+        finally:
+            if proc.poll() is None:
+                proc.kill()
+                proc.communicate()
+        assert proc.returncode == code, err.decode()
+        assert f"stopped    stopped by {sig.name}" in out.decode()
+
+
+def test_a_closed_pipe_ends_quietly(tmp_path):
+    env = dict(os.environ, PYTHONPATH=str(REPO_ROOT), CI="true")
+    for args in (["imu_dcm.replay", str(FLIP), "--rerun", "off"], ["imu_dcm.live", "-"]):
+        proc = subprocess.Popen(
+            [sys.executable, "-m", *args],
+            stdin=subprocess.PIPE,
+            stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE,
+            env=env,
+            cwd=tmp_path,
+        )
+        proc.stdout.close()  # `| head` that has already read what it wanted
+        _, err = proc.communicate(LINES.encode(), timeout=120)
+        err = err.decode()
+        assert "BrokenPipe" not in err and "Traceback" not in err and "error" not in err, err
+        assert proc.returncode == 0, err
+
+
+def test_near_miss_and_negative_numbers(tmp_path):
+    r = run(["imu_dcm.replay", str(FLIP), "--rerun", "off", "--bias", "atuo"], tmp_path)
+    assert r.returncode == 2
+    assert "did you mean 'auto'?" in _one_error_line(r, "imu-dcm-replay")
+    js = tmp_path / "s.json"
+    r = run(
+        ["imu_dcm.replay", str(FLIP), "--rerun", "off", "--bias", "-0.01,0,2.5e-3"]
+        + ["--summary-json", str(js)],
+        tmp_path,
+    )
+    assert r.returncode == 0, r.stderr
+    import json
+
+    # the mean of the bias applied at every sample: a few ulps from the value given
+    assert json.loads(js.read_text())["bias_rad_s"] == pytest.approx([-0.01, 0, 0.0025], abs=1e-15)
+    r = run(["imu_dcm.live", "-", "--rerun", "off", "--init-quat", "-0,0,-1,-1"], tmp_path, LINES)
+    assert r.returncode == 0, r.stderr
+    # q = -(0, 0, 1, 1)/sqrt(2) is 90 deg about z: the estimate starts there
+    final = next(x for x in r.stdout.splitlines() if x.startswith("final"))
+    assert "[+0.0" in final or "[-0.0" in final
+    r = run(["imu_dcm.live", "-", "--bias", "-1,0", "--rerun", "off"], tmp_path, LINES)
+    assert r.returncode == 2 and "--bias" in _one_error_line(r, "imu-dcm-live")
+
+
+def test_a_folder_of_logs_points_to_batch(tmp_path):
+    r = run(["imu_dcm.replay", str(REPO_ROOT / "replay"), "--rerun", "off"], tmp_path)
+    assert r.returncode == 2
+    line = _one_error_line(r, "imu-dcm-replay")
+    assert "imu-dcm-replay batch" in line and "--table" in line
+
+
+def test_help_names_every_container_batch_and_the_method_choices(tmp_path):
+    import re
+
+    from imu_dcm.logio.foreign import REFUSALS
+    from imu_dcm.logio.registry import SOURCES
+    from imu_dcm.methods import METHODS
+
+    text = " ".join(run(["imu_dcm.replay", "--help"], tmp_path).stdout.split())
+    for word in ("metadata.yaml", ".mcap", ".db3", "ROS 1 .bag", "imu-dcm-replay batch"):
+        assert word in text, word
+    # every container of the reader table is named (by the first word in its parentheses)
+    for entry in SOURCES:
+        m = re.search(r"\(([^ ,)]+)", entry.name)
+        if entry in REFUSALS or m is None:
+            continue
+        assert m.group(1) in text, entry.name
+    assert "{" + ",".join(METHODS) + "}" in text
+    csv_help = run(["imu_dcm.replay", "convert-csv", "--help"], tmp_path).stdout
+    assert "--time-units" in csv_help and "--time-unit " in csv_help  # one spelling, old alias
+
+
+def _port_closed(url: str) -> bool:
+    import re
+    import socket
+
+    port = int(re.search(r"127\.0\.0\.1:(\d+)", url).group(1))
+    with socket.socket() as s:
+        return s.connect_ex(("127.0.0.1", port)) != 0
+
+
+def test_replay_serve_stops_its_viewer_and_removes_its_file_at_ctrl_c(tmp_path):
+    import signal
+    import time
+
+    tmp = tmp_path / "tmp"
+    tmp.mkdir()
+    env = dict(os.environ, PYTHONPATH=str(REPO_ROOT), CI="true", TMPDIR=str(tmp))
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "imu_dcm.replay", str(FLIP), "--rerun", "serve"],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        env=env,
+        cwd=tmp_path,
+    )
+    try:
+        deadline = time.monotonic() + 90
+        line = ""
+        while "web viewer at" not in line:
+            assert time.monotonic() < deadline and proc.poll() is None, proc.stderr.read()
+            line = proc.stdout.readline()
+        assert any(p.name.startswith("imu_dcm_rerun_") for p in tmp.iterdir())
+        assert not _port_closed(line)
+        proc.send_signal(signal.SIGINT)
+        out, err = proc.communicate(timeout=30)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.communicate()
+    assert proc.returncode == 0, err
+    assert "rerun: web viewer stopped" in out
+    assert _port_closed(line)
+    assert not any(p.name.startswith("imu_dcm_rerun_") for p in tmp.iterdir())
+    assert [p.name for p in tmp_path.iterdir()] == ["tmp"]
+
+
+def test_live_idle_stop_leaves_no_web_viewer_running(tmp_path):
+    r = run(
+        ["imu_dcm.live", "-", "--rerun", "serve", "--idle-stop", "1", "--no-status"],
+        tmp_path,
+        LINES,
+    )
+    url = next(x for x in r.stderr.splitlines() if "rerun: open" in x)
+    assert "web viewer stopped" in r.stderr
+    assert _port_closed(url)

@@ -9,7 +9,8 @@ chunks re-packed with a valid CRC; lying length and size fields (and decompressi
 corrupt schemas; corrupt ``metadata.yaml`` (alias bomb, non-mapping, non-UTF-8); one hostile
 message in a JSON IMU channel (stamps 1e300, 2^70, Infinity; 100 000-deep nesting); special files
 as input; hostile output paths (inside the input, FIFOs, device nodes made in a temporary folder,
-read-only folders).
+read-only folders), for replay and also for live (`--record`, `--summary-json`, `--rerun save:`)
+and batch (`--table`).
 
 Each case names the fix it exercises (``Case.fix``); a failing class lists its cases by fix.
 The reader is imported in one line (``fuzzlib._run_case``): repoint it when the reader moves.
@@ -663,6 +664,99 @@ def output_path_cases(base: Base) -> list[Case]:
     ]
 
 
+def live_batch_output_cases(base: Base) -> list[Case]:
+    """Hostile outputs for ``live`` (--record, --summary-json, --rerun save:) and ``batch``
+    (--table): each refused (exit 2) before anything is read or written, nothing changed."""
+
+    def case(kind, name, extra, fix):
+        def make(d):
+            return _bag(d, base), extra(d)
+
+        return Case("output_path", f"{kind}-{name}", base.name, make, None, (kind,), True, fix)
+
+    def notes(d):
+        (d / "out" / "rec").mkdir()
+        (d / "out" / "rec" / "notes.txt").write_text("mine\n")
+        return d / "out" / "rec"
+
+    def bag_copy(d):
+        shutil.copytree(base.folder, d / "out" / "copy")
+        (d / "out" / "copy" / "ATTRIBUTION.md").write_text("theirs\n")
+        return d / "out" / "copy"
+
+    def fifo(d, name="fifo"):
+        os.mkfifo(d / "out" / name)
+        return d / "out" / name
+
+    def device(d):
+        p = d / "out" / "dev3"
+        if not _mknod(p, 3):
+            os.mkfifo(p)
+        return p
+
+    def folder(d, name):
+        (d / "out" / name).mkdir()
+        (d / "out" / name / "notes.txt").write_text("mine\n")
+        return d / "out" / name
+
+    def link_to_folder(d):
+        (d / "out" / "real").mkdir()
+        (d / "out" / "link").symlink_to(d / "out" / "real")
+        return d / "out" / "link"
+
+    rec, force = "--record", "--force"
+    live_fix = "live CLI: imu_dcm.outputs before the source opens"
+    batch_fix = "batch CLI: imu_dcm.outputs for --table"
+    return [
+        case("live", "record-foreign-folder", lambda d: [rec, str(notes(d)), force], live_fix),
+        case("live", "record-bag-copy", lambda d: [rec, str(bag_copy(d)), force], live_fix),
+        case("live", "record-fifo", lambda d: [rec, str(fifo(d)), force], live_fix),
+        case("live", "record-symlink", lambda d: [rec, str(link_to_folder(d)), force], live_fix),
+        case("live", "record-no-force", lambda d: [rec, str(link_to_folder(d) / "..")], live_fix),
+        case(
+            "live",
+            "record-parent-is-file",
+            lambda d: [rec, str(_file(d / "out" / "file") / "rec")],
+            live_fix,
+        ),
+        case("live", "summary-json-fifo", lambda d: ["--summary-json", str(fifo(d))], live_fix),
+        case("live", "summary-json-device", lambda d: ["--summary-json", str(device(d))], live_fix),
+        case("live", "summary-json-folder", lambda d: ["--summary-json", str(d / "out")], live_fix),
+        case(
+            "live",
+            "rerun-save-parent-is-file",
+            lambda d: ["--rerun", f"save:{_file(d / 'out' / 'file') / 'v.rrd'}"],
+            live_fix,
+        ),
+        case("batch", "table-fifo", lambda d: ["--table", str(fifo(d, "t.csv"))], batch_fix),
+        case("batch", "table-folder", lambda d: ["--table", str(folder(d, "t.csv"))], batch_fix),
+        case(
+            "batch",
+            "table-parent-is-file",
+            lambda d: ["--table", str(_file(d / "out" / "file") / "t.csv")],
+            batch_fix,
+        ),
+        case(
+            "batch",
+            "table-in-input-folder",
+            lambda d: ["--table", str(d / "in" / base.folder.name / "t.csv")],
+            batch_fix,
+        ),
+        case(
+            "batch",
+            "table-not-a-table",
+            lambda d: ["--table", str(_file(d / "out" / "t.csv"))],
+            batch_fix,
+        ),
+        case(
+            "batch",
+            "table-not-ours-force",
+            lambda d: ["--table", str(_file(d / "out" / "t.csv")), "--force"],
+            batch_fix,
+        ),
+    ]
+
+
 # -------------------------------------------------------------------------------- campaign
 def _bases(tmp: Path) -> dict[str, Base]:
     from data_synth.cli import main as synth_main
@@ -734,6 +828,7 @@ class Campaign:
         self.cases["json_message"] = json_cases(self.bases["json"])
         self.cases["special_input"] = special_input_cases(self.bases["broad07"])
         self.cases["output_path"] = output_path_cases(self.bases["broad07"])
+        self.cases["output_path"] += live_batch_output_cases(self.bases["broad07"])
         broad = self.bases["broad07"]
         self.pool = fuzzlib.Pool(
             REPO_ROOT, n=2, warmup={"kind": "replay", "path": str(broad.folder)}

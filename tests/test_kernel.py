@@ -20,7 +20,15 @@ import numpy as np
 import pytest
 
 from imu_dcm import DcmIntegrator, GapWarning, ImuDcmWarning, kernel
-from imu_dcm.integrate import METHODS, find_gaps, gap_message, integrate, integrate_delta
+from imu_dcm.integrate import (
+    DELTA_METHODS,
+    METHODS,
+    find_gaps,
+    gap_message,
+    integrate,
+    integrate_delta,
+)
+from imu_dcm.methods import DeltaMethod, Method
 from imu_dcm.so3 import quat_angle_rad
 
 EPS = np.finfo(float).eps
@@ -180,6 +188,78 @@ def test_state_layout_fits():
     state = kernel.new_state(np.array([0.0, 0.0, 0.0, 1.0]), kernel.MAGNUS4)
     assert state.shape == (kernel.STATE_SIZE,)
     assert kernel.T + 4 <= kernel.N < kernel.METHOD < kernel.STATE_SIZE
+
+
+def test_state_fields_tile_the_state_and_name_what_new_state_sets():
+    offsets = sorted((o, w) for o, w, _ in kernel.STATE_FIELDS.values())
+    ends = [o + w for o, w in offsets]
+    assert offsets[0][0] == 0 and ends[-1] == kernel.STATE_SIZE
+    assert [o for o, _ in offsets[1:]] == ends[:-1]  # no gap, no overlap
+    q0 = np.array([0.0, 0.0, math.sqrt(0.5), math.sqrt(0.5)])  # 90 deg about z
+    fields = kernel.state_fields(kernel.new_state(q0, Method.CONING))
+    assert fields["q"].tolist() == q0.tolist() and fields["q0"].tolist() == q0.tolist()
+    assert fields["method"][0] == Method.CONING and fields["n"][0] == 0.0
+    assert fields["omega"].shape == (12,) and fields["t"].shape == (4,)
+
+
+def test_method_names_are_the_enum_names_in_code_order():
+    assert tuple(m.name.lower() for m in sorted(Method)) == METHODS
+    assert tuple(m.name.lower() for m in sorted(DeltaMethod)) == DELTA_METHODS
+    assert all(Method[name.upper()].label == name for name in METHODS)
+
+
+def test_entry_points_have_one_signature_and_refuse_other_types():
+    # Each entry point is compiled for one signature; other argument types are refused (the
+    # callers convert at the Python boundary) instead of compiling a second version.
+    w, t = np.zeros((5, 3)), 1e-3 * np.arange(5)
+    integrate(w, t, [0, 0, 0, 1], "magnus4")
+    check = kernel.check_record.compiled()
+    assert len(check.signatures) == 1
+    with pytest.raises(TypeError):
+        check(np.zeros((5, 3), dtype=np.int64), t, -math.inf)
+    with pytest.raises(TypeError):
+        check(np.asfortranarray(np.zeros((5, 3))), t, -math.inf)
+    push = kernel.push_for(int(Method.MAGNUS4))
+    assert len(push.signatures) == 1
+    with pytest.raises(TypeError):
+        push(kernel.new_state(np.array([0.0, 0, 0, 1]), Method.MAGNUS4), [0.0, 0.0, 0.0], 0.0)
+    assert all(len(fn.signatures) == 1 for fn in kernel._FEEDS.values())
+
+
+def _kernel_env(cache: Path) -> dict[str, str]:
+    return {
+        **os.environ,
+        "NUMBA_CACHE_DIR": str(cache),
+        "PYTHONPATH": os.pathsep.join(
+            [str(Path(kernel.__file__).parents[1]), os.environ.get("PYTHONPATH", "")]
+        ),
+    }
+
+
+def test_compile_notice_once_on_a_cache_miss_and_never_from_the_cache(tmp_path):
+    # An empty cache: the kernel compiles, and says so once on stderr before it does. The same
+    # cache again: it loads, silently.
+    code = (
+        "import numpy as np, imu_dcm; w, t = np.zeros((9, 3)), 1e-3 * np.arange(9); "
+        "imu_dcm.integrate(w, t, [0, 0, 0, 1]); integ = imu_dcm.DcmIntegrator([0, 0, 0, 1]); "
+        "[integ.update(w[k], float(t[k])) for k in range(9)]; integ.finish()"
+    )
+    runs = [
+        subprocess.run(
+            [sys.executable, "-c", code],
+            env=_kernel_env(tmp_path / "cache"),
+            capture_output=True,
+            text=True,
+            check=False,
+            timeout=600,
+        )
+        for _ in range(2)
+    ]
+    assert [r.returncode for r in runs] == [0, 0], runs[0].stderr + runs[1].stderr
+    notice = "compiling the integrator kernel once, about"
+    assert runs[0].stderr.count(notice) == 1, runs[0].stderr
+    assert "later runs load it from the cache" in runs[0].stderr
+    assert runs[1].stderr == "", runs[1].stderr
 
 
 def test_no_writable_cache_folder_warns_once_and_still_imports(tmp_path):

@@ -36,11 +36,14 @@ PACKAGE = REPO / "imu_dcm"
 
 CORE = (
     "so3",
+    "methods",
     "kernel",
+    "methods",
     "integrate",
     "streaming",
     "resample",
     "rest",
+    "stamps",
     "metrics",
     "allan",
     "prefilter",

@@ -139,7 +139,7 @@ def test_record_after_sigterm_to_the_command(trial, tmp_path):
         if proc.poll() is None:
             proc.kill()
             proc.communicate()
-    assert proc.returncode == 143, err.decode()  # stopped by SIGTERM (imu_dcm.cli's codes)
+    assert proc.returncode == 143, err.decode()  # 128 + SIGTERM: the exit-code convention
     text = out.decode()
     assert "stopped    stopped by SIGTERM" in text
     s = json.loads(summary.read_text())

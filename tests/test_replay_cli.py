@@ -355,7 +355,7 @@ def test_summary_keeps_small_errors_visible_and_says_when_no_rest(coning_log, ca
     assert main([str(coning_log), "--rerun", "off"]) == 0
     text = capsys.readouterr().out
     line = next(x for x in text.splitlines() if x.startswith("bias"))
-    assert "no rest found (the stillest 0.50 s" in line and "no bias removed" in line, line
+    assert "no rest found: the stillest 0.50 s, at " in line and "no bias removed" in line, line
     line = next(x for x in text.splitlines() if x.startswith("error"))
     rms = float(line.split("total RMS ")[1].split("°")[0])
     assert 0.0 < rms < 0.01, line

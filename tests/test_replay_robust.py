@@ -143,14 +143,9 @@ def test_a_log_of_only_implausible_rates_is_an_error(tmp_path):
 def test_a_non_finite_estimate_is_an_error_never_a_score(trial, tmp_path, monkeypatch):
     from imu_dcm.replay import core
 
-    class Broken:
-        def __init__(self, n):
-            self.q = np.full((n, 4), np.nan)
-
-        def as_quat(self):
-            return self.q
-
-    monkeypatch.setattr(core, "integrate", lambda w, t, q0, method: Broken(len(t)))
+    monkeypatch.setattr(
+        core, "integrate_quat", lambda w, t, q0, method: np.full((len(t), 4), np.nan)
+    )
     with pytest.raises(LogError, match="Expected a finite attitude estimate, got NaN/Inf"):
         _run(SHIPPED)
 

@@ -178,3 +178,46 @@ def test_readme_usage_example_runs(repo_root, capsys):
     code = section.split("```python", 1)[1].split("```", 1)[0]
     exec(compile(code, "README usage", "exec"), {})
     assert capsys.readouterr().out.count("0.7071 0.7071]") == 2
+
+
+@pytest.mark.parametrize("method", ["magnus4", "trapezoid"])
+def test_any_array_layout_gives_the_same_bits(method):
+    # The kernel takes float64 C-contiguous arrays; the Python boundary converts whatever the
+    # caller holds (columns of a table, float32, lists, ints) to those, so the result is the
+    # batch result of the same numbers, bit for bit.
+    omega, t = record(60, seed=7)
+    table = np.asfortranarray(np.column_stack([t, omega]))  # every column strided
+    want = integrate(omega, t, Q0, method).as_quat()
+    assert np.array_equal(integrate(table[:, 1:], table[:, 0], Q0, method).as_quat(), want)
+    chunked = DcmIntegrator(Q0, method)
+    got = np.vstack(
+        [chunked.update_many_quat(table[i : i + 20, 1:], table[i : i + 20, 0]) for i in (0, 20, 40)]
+    )
+    single = DcmIntegrator(Q0, method)
+    rows = [single.update(list(table[k, 1:]), t[k]) for k in range(30)]
+    rows += [single.update(table[k, 1:], t[k]) for k in range(30, 60)]  # strided rows
+    assert np.array_equal(got, np.array(rows))
+    idx = [lagged_index(k, method) for k in range(60)]
+    assert np.array_equal(got, want[idx])
+
+
+def test_update_many_quat_is_update_many_as_an_array():
+    omega, t = record(50, seed=3)
+    a, b = DcmIntegrator(Q0), DcmIntegrator(Q0)
+    for i, j in ((0, 2), (2, 30), (30, 50)):  # the warm-up inside the first chunks
+        assert np.array_equal(
+            a.update_many_quat(omega[i:j], t[i:j]),
+            b.update_many(omega[i:j], t[i:j]).as_quat(canonical=False),
+        )
+
+
+def test_state_is_a_copy_by_field():
+    integ = DcmIntegrator([0, 0, 0, 1], method="trapezoid")
+    integ.update(np.array([0.0, 0.0, 1.0]), 0.0)
+    integ.update(np.array([0.0, 0.0, 1.0]), 0.01)
+    state = integ.state()
+    # 1 rad/s about z for 10 ms: 0.01 rad, q = [0, 0, sin 0.005, cos 0.005].
+    assert np.allclose(state["q"], [0, 0, np.sin(0.005), np.cos(0.005)], rtol=0, atol=1e-15)
+    assert state["n"][0] == 2 and state["t"][-2:].tolist() == [0.0, 0.01]
+    state["q"][:] = 0.0
+    assert integ.q_w_b[3] > 0.99  # a copy: the integrator is unchanged

@@ -35,7 +35,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from imu_dcm.errors import GapWarning
-from imu_dcm.integrate import find_gaps, gap_message, integrate
+from imu_dcm.integrate import find_gaps, gap_message, integrate_quat
 from imu_dcm.live.lines import time_unit_hint
 from imu_dcm.live.reorder import ReorderBuffer
 from imu_dcm.live.sources import Received
@@ -385,7 +385,7 @@ class Pipeline:
             return
         integ = self.integ
         n0 = integ.n_samples
-        q = integ.update_many(wc, t_s).as_quat()
+        q = integ.update_many_quat(wc, t_s)
         n_after = n0 + 1 + np.arange(len(t_ns))
         if self.method == "magnus4":  # the attitude is one sample late (see streaming)
             idx = np.where(n_after >= 4, n_after - 2, 0)
@@ -418,7 +418,7 @@ class Pipeline:
         t_ns, t_s, wc = self.first4.take()
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", GapWarning)
-            q1 = integrate(wc, t_s, self.q0, self.method).as_quat()[1]
+            q1 = integrate_quat(wc, t_s, self.q0, self.method)[1]
         self._emit(t_ns[1:2], t_s[1:2], q1[None, :])
 
     def _emit(self, t_ns: NDArray, t_s: NDArray, q: NDArray) -> None:

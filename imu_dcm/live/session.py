@@ -36,17 +36,16 @@ __all__ = ["LiveOptions", "run"]
 def _warm_up(method: str) -> None:
     """Load numba and the compiled kernel before the source opens, so the first samples do not
     wait for them (about 0.7 s with a warm cache, measured as the first second's latency)."""
-    from imu_dcm.integrate import integrate
+    from imu_dcm.integrate import integrate_quat
     from imu_dcm.resample import slerp_truth  # noqa: F401 - the truth slerp's modules
     from imu_dcm.streaming import DcmIntegrator
 
     q0, w, t = [0.0, 0.0, 0.0, 1.0], np.zeros((5, 3)), 0.001 * np.arange(5)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # rotvec_sum's warning belongs to the real run
-        integrate(w, t, q0, method)  # the pipeline's start-up uses the batch form (and scipy)
+        integrate_quat(w, t, q0, method)  # the pipeline's start-up uses the batch form
         integ = DcmIntegrator(q0, method)
-        for wk, tk in zip(w, t, strict=True):
-            integ.update(wk, float(tk))
+        integ.update_many_quat(w, t)  # the pipeline feeds arrays (the kernel's feed)
         integ.finish()
 
 
@@ -84,14 +83,19 @@ def _has_display() -> bool:
     return has_display()
 
 
-def _check_outputs(record, force: bool, summary_json) -> None:
-    """The output paths, before the source is opened (imu_dcm.outputs' rule)."""
+def _check_outputs(record, force: bool, summary_json, rerun) -> None:
+    """The view's mode and the output paths, before the source is opened (imu_dcm.outputs'
+    rule)."""
+    from imu_dcm.live.view import check_mode
     from imu_dcm.outputs import check_output_dir, check_output_file
 
+    check_mode(rerun)
     if record is not None:
         check_output_dir(record, force=force, what="--record bag")
     if summary_json is not None:
         check_output_file(summary_json, (), "--summary-json file")
+    if isinstance(rerun, str) and rerun.startswith("save:"):
+        check_output_file(rerun[len("save:") :], (), "--rerun save: file")
 
 
 def _pct(a: NDArray, p: float) -> float | None:
@@ -216,23 +220,13 @@ def run(
     o = LiveOptions(**options)
     spec, bias_v, init_q = _checked(source, o)
     say = say or _say_stderr
-    from imu_dcm.live.view import LiveView, check_mode
-
-    check_mode(o.rerun)
-    _check_outputs(o.record, o.force, o.summary_json)
+    _check_outputs(o.record, o.force, o.summary_json, o.rerun)
     _warm_up(o.method)
     src = _open_source(spec, o)
     recorder = view = None
     try:
         recorder = _open_recorder(source, o, bias_v)
-        rerun = o.rerun
-        if rerun is None and not _has_display():
-            from imu_dcm.viz import HEADLESS_HINT
-
-            say(HEADLESS_HINT)
-            rerun = "off"
-        if rerun != "off":
-            view = LiveView(rerun, title=f"live {source}", say=say)
+        view = _open_view(o.rerun, source, say)
         pipe = Pipeline(
             method=o.method,
             bias=bias_v,
@@ -259,6 +253,7 @@ def run(
 
 
 def _open_source(spec, o: LiveOptions) -> Source:
+    """The source of ``spec``, created with the options it reads (not started)."""
     return open_source(
         spec,
         imu_topic=o.imu_topic,
@@ -269,6 +264,19 @@ def _open_source(spec, o: LiveOptions) -> Source:
         stdin_fd=o.stdin_fd,
         batch_s=min(_BATCH_MAX_S, o.view_interval_s / 4),
     )
+
+
+def _open_view(rerun: str | None, source: str, say):
+    """The live view, or None: ``off``, or no mode given and no display (one line says how to
+    ask for one)."""
+    from imu_dcm.live.view import LiveView
+
+    if rerun is None and not _has_display():
+        from imu_dcm.viz import HEADLESS_HINT
+
+        say(HEADLESS_HINT)
+        return None
+    return None if rerun == "off" else LiveView(rerun, title=f"live {source}", say=say)
 
 
 def _open_recorder(source: str, o: LiveOptions, bias_v):

@@ -112,11 +112,11 @@ def decode(df, name: str, struct_codes: dict) -> tuple[dict[str, NDArray], int]:
 
 
 # ------------------------------------------------------------------------ the series
-def _instances(df, struct_codes) -> dict[str, dict[str, NDArray]]:
+def _instances(df, struct_codes) -> tuple[dict[str, dict[str, NDArray]], int]:
     """IMU instances by label (``IMU[0]``, ``IMU[1]``, ...), from the ``I`` column or the
-    ``IMU2``/``IMU3`` messages of older logs."""
+    ``IMU2``/``IMU3`` messages of older logs; and the IMU records cut short."""
     out: dict[str, dict[str, NDArray]] = {}
-    cols, _ = decode(df, "IMU", struct_codes)
+    cols, cut = decode(df, "IMU", struct_codes)
     if cols and "I" in cols:
         inst = cols["I"].astype(np.int64)
         for k in np.unique(inst).tolist():
@@ -128,7 +128,7 @@ def _instances(df, struct_codes) -> dict[str, dict[str, NDArray]]:
         more, _ = decode(df, f"IMU{k}", struct_codes)
         if more:
             out[f"IMU[{k - 1}]"] = more
-    return out
+    return out, cut
 
 
 def _rate_hz(t_us: NDArray) -> float:
@@ -266,12 +266,11 @@ class DataFlashSource:
             df.close()
 
     def _read(self, df, codes, said: str, request: ReadRequest, progress) -> LogData:
-        imus = _instances(df, codes)
+        imus, cut = _instances(df, codes)
         label, imu_note = _pick_imu(imus, request.imu_topic)
         imu = imu_series(imus[label], label)
         truths, truth_note = _truths(df, codes, request.truth_topic)
         damage = []
-        _, cut = decode(df, "IMU", codes)
         if cut:
             damage.append(Damage(-1, f"DataFlash log cut short: {cut} IMU record(s) incomplete"))
         if said:

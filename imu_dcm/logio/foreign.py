@@ -10,6 +10,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from imu_dcm.errors import LogError
+from imu_dcm.logio.lfs import is_lfs_pointer, refuse_lfs_pointer
 from imu_dcm.logio.paths import read_head
 from imu_dcm.logio.source import LogSource, Progress, SourceEntry
 
@@ -47,6 +48,7 @@ def _refuse_text(path: Path, _progress: Progress | None) -> LogSource:
 
 REFUSALS: tuple[SourceEntry, ...] = (
     SourceEntry("an empty file", _is_empty_file, _refuse_empty, search=False),
+    SourceEntry("a Git LFS pointer", is_lfs_pointer, refuse_lfs_pointer, search=False),
     _refusal(
         "an HDF5 file",
         b"\x89HDF",

@@ -286,7 +286,7 @@ class _Scanner:
             ok = (n >= layout.itemsize) & (n <= layout.itemsize + pad)
             self.short[k] = self.short.get(k, 0) + int(len(sel) - np.count_nonzero(ok))
             start = dpos[sel[ok]] + 5
-            rows = b[start[:, None] + np.arange(layout.itemsize)]
+            rows = np.lib.stride_tricks.sliding_window_view(b, layout.itemsize)[start]
             self.blocks.setdefault(k, []).append(rows)
             self.positions.setdefault(k, []).append(start + base)
 
@@ -403,8 +403,10 @@ def _labeller(counts: dict[tuple[str, int, str], int]):
 
 
 def _rate_hz(t_us: NDArray) -> float:
-    d = np.diff(np.unique(np.asarray(t_us, dtype=np.int64)))
-    return 1e6 / float(np.median(d)) if len(d) and np.median(d) > 0 else 0.0
+    """The median rate of the steps forward, Hz."""
+    d = np.diff(np.asarray(t_us, dtype=np.int64))
+    d = d[d > 0]
+    return 1e6 / float(np.median(d)) if len(d) else 0.0
 
 
 def _vec(t: Topic, names: tuple[str, ...]) -> NDArray[np.float64]:

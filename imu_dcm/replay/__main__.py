@@ -114,29 +114,28 @@ def _show(result, mode: str | None, realtime: bool, keep: bool) -> str:
         return show_replay(view, mode, realtime=realtime)
     served = serve_replay(view, realtime)
     try:
-        print(f"{served.line}; Ctrl-C stops it", flush=True)
-        _wait_for_stop(served.viewer.process)
+        _serve_until_stopped(served)
     finally:
         served.stop()
     return "rerun: web viewer stopped"
 
 
-def _wait_for_stop(process) -> None:
-    """Until Ctrl-C, SIGTERM or the server's own exit (the ending the user asked for)."""
+def _serve_until_stopped(served) -> None:
+    """Print the viewer's URL, then wait for Ctrl-C, SIGTERM or the server's own exit (the
+    ending the user asked for: not an interruption of the command)."""
     import signal
-    import time
+    import threading
 
-    def on_term(signum, frame):
-        raise KeyboardInterrupt
-
-    old = signal.signal(signal.SIGTERM, on_term)
+    stop = threading.Event()
+    signals = (signal.SIGINT, signal.SIGTERM)
+    old = {sig: signal.signal(sig, lambda signum, frame: stop.set()) for sig in signals}
     try:
-        while process.poll() is None:
-            time.sleep(0.2)
-    except KeyboardInterrupt:
-        pass
+        print(f"{served.line}; Ctrl-C stops it", flush=True)
+        while not stop.wait(0.2) and served.viewer.process.poll() is None:
+            pass
     finally:
-        signal.signal(signal.SIGTERM, old)
+        for sig, handler in old.items():
+            signal.signal(sig, handler)
 
 
 def _check_rerun(mode: str | None, inputs: tuple) -> None:
@@ -205,7 +204,7 @@ def _not_a_folder_of_logs(log: str) -> None:
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         found = find_logs([log])
-    if found and found != [os.path.abspath(log)]:
+    if len(found) > 1:  # a folder holding one log file is that log (the reader opens it)
         n = len(found)
         raise InputError(
             f"Expected one log, got a folder of {n} log{'s' if n != 1 else ''} {log!r}; "

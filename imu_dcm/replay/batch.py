@@ -17,7 +17,7 @@ import os
 import threading
 import time
 import warnings
-from collections.abc import Callable, Iterable, Iterator, Mapping
+from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -69,10 +69,6 @@ class BatchResult:
 
 
 # ------------------------------------------------------------------------------ inputs
-def _search(folder: Path) -> Iterator[Path]:
-    yield from find_logs_in(folder)
-
-
 def find_logs(paths: Iterable[str | Path]) -> list[str]:
     """The logs named by ``paths``, as absolute paths, each once, in the order found.
 
@@ -86,7 +82,7 @@ def find_logs(paths: Iterable[str | Path]) -> list[str]:
 
     def add(p: Path, from_list: bool) -> None:
         if p.is_dir():
-            found = list(_search(p))
+            found = list(find_logs_in(p))
             if not found:
                 warnings.warn(f"no logs found under {p}", ImuDcmWarning, stacklevel=3)
             out.update((os.path.abspath(f), None) for f in found)

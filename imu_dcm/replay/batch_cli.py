@@ -14,6 +14,7 @@ import sys
 import threading
 import time
 import warnings
+from pathlib import Path
 
 from imu_dcm.cli import end_quietly_on_broken_pipe
 from imu_dcm.errors import ImuDcmError, InputError
@@ -76,6 +77,30 @@ def build_parser() -> argparse.ArgumentParser:
     return p
 
 
+def _check_outputs(args) -> None:
+    """The table and the files beside it, by :mod:`imu_dcm.outputs`' rule, before any log is
+    read: regular files (or new), never an input or inside one; ``--force`` starts afresh only
+    a table this tool wrote (its header row)."""
+    from imu_dcm.outputs import OutputError, check_output_file
+    from imu_dcm.replay.table import COLUMNS, curves_path, markdown_path
+
+    inputs = tuple(args.paths)
+    table = check_output_file(args.table, inputs, "--table")
+    beside = [markdown_path(table), curves_path(table)]
+    if not args.no_chart:
+        beside.append(args.chart or table.with_suffix(".png"))
+    for path in beside:
+        check_output_file(path, inputs, f"--table's {Path(path).name}")
+    if (args.force or args.resume) and table.exists() and table.stat().st_size:
+        with open(table, encoding="utf-8", errors="replace") as f:
+            head = f.readline().rstrip("\r\n")
+        if head != ",".join(COLUMNS):
+            raise OutputError(
+                f"Expected --force or --resume on a batch table this tool wrote (header "
+                f"{','.join(COLUMNS[:3])},...), got {head[:40]!r} in {str(table)!r}"
+            )
+
+
 class _Bar:
     """``logs [#####.....] 3/7, 1 failed, 0:12`` on stderr, only when stderr is a terminal."""
 
@@ -128,6 +153,7 @@ def main(argv: list[str] | None = None) -> int:
             from imu_dcm.replay.options import replay_keywords
 
             options = replay_keywords(args)
+            _check_outputs(args)
             bar = _Bar()
             t0 = time.perf_counter()
             try:

@@ -180,6 +180,35 @@ def clean_imu(t_ns: ArrayLike, omega_b: ArrayLike, topic: str = "IMU") -> Cleane
     wild_t = t[wild]
     drop(wild)
 
+    t, w, index, n_sorted, n_dup, n_conf = _sort_and_dedupe(t, w, index)
+    spike = _spikes(w)
+    bad_t.append(t[spike])
+    drop(spike)
+    bad = np.sort(np.concatenate(bad_t))
+    t0 = int(t[0]) if len(t) else (int(bad[0]) if len(bad) else 0)
+
+    messages, gaps = _report(topic, t, t0, n_bad, bad, n_dup, n_conf, n_wild, wild_t, n_sorted)
+    return CleanedImu(
+        t,
+        w,
+        index,
+        n_bad,
+        len(bad),
+        n_wild,
+        n_dup,
+        n_conf,
+        n_sorted,
+        gaps,
+        tuple(float((x - t0) * 1e-9) for x in bad),
+        tuple(messages),
+    )
+
+
+def _sort_and_dedupe(t, w, index):
+    """Sort by stamp (stable) and drop repeated stamps (rules 4 and 5).
+
+    Returns (t, w, index, samples sorted out of file order, exact duplicates, conflicts).
+    """
     step = np.diff(t)
     n_sorted = 0
     if np.any(step < 0):
@@ -188,27 +217,24 @@ def clean_imu(t_ns: ArrayLike, omega_b: ArrayLike, topic: str = "IMU") -> Cleane
         order = np.argsort(t, kind="stable")
         t, w, index = t[order], w[order], index[order]
         step = np.diff(t)
-
     same = np.concatenate([[False], step == 0])
-    dup = conflict = np.zeros(len(t), dtype=bool)
-    if same.any():
-        # a repeat of the previous stamp: an exact duplicate of the first sample at that stamp?
-        first = np.maximum.accumulate(np.where(~same, np.arange(len(t)), 0))
-        dup = same & np.all(w == w[first], axis=1)
-        conflict = same & ~dup
-        drop(same)
+    if not same.any():
+        return t, w, index, n_sorted, 0, 0
+    # a repeat of the previous stamp: an exact duplicate of the first sample at that stamp?
+    first = np.maximum.accumulate(np.where(~same, np.arange(len(t)), 0))
+    dup = same & np.all(w == w[first], axis=1)
+    n_dup = int(dup.sum())
+    keep = ~same
+    return t[keep], w[keep], index[keep], n_sorted, n_dup, int(same.sum()) - n_dup
 
-    spike = _spikes(w)
-    bad_t.append(t[spike])
-    drop(spike)
-    bad = np.sort(np.concatenate(bad_t))
-    t0 = int(t[0]) if len(t) else (int(bad[0]) if len(bad) else 0)
 
+def _report(topic, t, t0, n_bad, bad, n_dup, n_conf, n_wild, wild_t, n_sorted):
+    """The cleaning's warnings, one line per rule that acted (raised and returned), and gaps."""
     messages: list[str] = []
 
     def warn(msg: str, cat: type[Warning] = ImuDcmWarning) -> None:
         messages.append(f"{topic}: {msg}")
-        warnings.warn(messages[-1], cat, stacklevel=3)
+        warnings.warn(messages[-1], cat, stacklevel=4)
 
     if n_bad:
         warn(f"dropped {n_bad} samples with NaN/Inf rates")
@@ -218,7 +244,6 @@ def clean_imu(t_ns: ArrayLike, omega_b: ArrayLike, topic: str = "IMU") -> Cleane
             f"an isolated spike over {SPIKE_RATIO:.0f}x the log's 99.9th percentile) at "
             f"{_times(bad, t0)}"
         )
-    n_dup, n_conf = int(dup.sum()), int(conflict.sum())
     if n_wild or n_dup or n_conf:
         parts = []
         if n_dup:
@@ -236,20 +261,7 @@ def clean_imu(t_ns: ArrayLike, omega_b: ArrayLike, topic: str = "IMU") -> Cleane
     gaps = find_gaps((t - t[0]) * 1e-9) if len(t) else ()
     if gaps:
         warn(gap_message(gaps), GapWarning)
-    return CleanedImu(
-        t,
-        w,
-        index,
-        n_bad,
-        len(bad),
-        n_wild,
-        n_dup,
-        n_conf,
-        n_sorted,
-        gaps,
-        tuple(float((x - t0) * 1e-9) for x in bad),
-        tuple(messages),
-    )
+    return tuple(messages), gaps
 
 
 def _deg_evidence(omega_b: NDArray, t_s: NDArray, q_truth: NDArray) -> str | None:
@@ -273,7 +285,8 @@ def _deg_evidence(omega_b: NDArray, t_s: NDArray, q_truth: NDArray) -> str | Non
     p99 = float(np.percentile(np.linalg.norm(omega_b, axis=1), 99)) if len(omega_b) else 0.0
     if p99 > FULL_SCALE_RAD_S:
         return (
-            f"99 % of |omega| are below {p99:.0f}, above the ±2000 °/s = "
-            f"{FULL_SCALE_RAD_S:.1f} rad/s full scale of common gyros"
+            f"the 99th percentile of |omega| is {p99:.0f} rad/s, above the ±2000 °/s = "
+            f"{FULL_SCALE_RAD_S:.1f} rad/s full scale of common gyros (as deg/s it would be "
+            f"{np.radians(p99):.2f} rad/s)"
         )
     return None

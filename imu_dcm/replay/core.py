@@ -45,6 +45,7 @@ from imu_dcm.replay.truth import (
     find_jumps,
 )
 from imu_dcm.resample import slerp_truth
+from imu_dcm.stamps import timing_doubt
 
 __all__ = ["CleanedImu", "ReplayResult", "ReplaySummary", "clean_imu", "replay", "slerp_truth"]
 
@@ -76,36 +77,10 @@ def replay(
     path : str, Path or LogData
         ROS 2 bag folder or log file (never modified), or a log already read (then the topic
         and frame choices are those it was read with).
-    imu_topic, truth_topic : str, optional
-        Channel choices (see the log reader); ``truth_topic="none"`` ignores any truth. A truth
-        named here is scored even when its rate does not follow the gyro (the summary says so);
-        an automatically picked one that does not follow is dropped with a warning.
-    truth_frame : str, optional
-        Child frame of a transform truth (``/tf``), passed to the reader.
-    time : {"auto", "header", "log"}
-        Stamp source; ``"auto"`` (default) prefers the header stamps (see
-        :func:`imu_dcm.replay.truth.choose_time`).
-    method : str
-        Integrator method, one of :data:`imu_dcm.integrate.METHODS` (default ``"magnus4"``).
-    bias : "auto", "none" or array_like (3,)
-        Gyro bias handling, rad/s (see :func:`imu_dcm.replay.bias.estimate_bias`).
-    gyro_units : {"rad/s", "deg/s"} or None
-        Unit of the log's rates; deg/s are converted. None: rad/s (the ROS convention), with a
-        warning when the rates look like deg/s.
-    init_q_w_b : array_like (4,), optional
-        Initial ``q_w_b`` ``[x, y, z, w]`` when the log has no truth (default identity).
-    prefilter : {None, "kalman", "rts"}
-        Gyro pre-filter (:mod:`imu_dcm.prefilter`), applied after bias removal.
-    prefilter_config : PrefilterConfig, optional
-    truth_offset_s : float or "auto"
-        Added to the truth stamps, s (default 0); ``"auto"``: the shift that best aligns the
-        truth's rate with the gyro's. The best shift is reported either way.
-    rest_config : RestConfig, optional
-    mounting : "auto", "none" or array_like (4,)
-        The rotation ``q_t_g`` ``[x, y, z, w]`` from the gyro's frame into the truth's body frame
-        (:mod:`imu_dcm.replay.mounting`). ``"auto"`` (default): estimated, and applied when the
-        motion determines it and it exceeds a few degrees; ``"none"``: estimated and reported,
-        never applied; a quaternion: applied as given.
+    imu_topic, truth_topic, truth_frame, time, method, bias, gyro_units, init_q_w_b, prefilter,
+    prefilter_config, truth_offset_s, rest_config, mounting
+        How to replay: each is a field of :class:`imu_dcm.replay.settings.ReplaySettings`
+        (``init_q_w_b`` is its ``q_init``), documented there.
     progress : callable(stage, fraction), optional
         Called as work advances (for a progress bar).
 
@@ -220,6 +195,11 @@ def _gyro(log: LogData, s: ReplaySettings, notes: list[str]) -> _Gyro:
         if base == "header" and len(np.unique(imu.log_t_ns[:1000])) > 1:
             hint = "; the log times differ: try --time log"
         raise LogError(f"Expected at least 2 valid gyro samples on {imu.topic}, got {n}{hint}")
+    doubt = timing_doubt(clean.t_ns)
+    if doubt is not None:
+        clause, fix = doubt
+        hint = f"; was it converted with the wrong time unit (convert-csv --time-unit {fix})?"
+        _warn(notes, f"{imu.topic}: stamps no IMU produces: {clause}{hint if fix else ''}")
     t_s = (clean.t_ns - clean.t_ns[0]).astype(np.float64) * 1e-9
     return _Gyro(base, clean, clean.t_ns, t_s, clean.omega_b, _accel(imu, clean, notes))
 
@@ -306,17 +286,19 @@ def _choose_mounting(mode, est: Mounting | None, imu_frame: str, truth, notes) -
             compare = f"; the motion says {est.describe()}, {diff:.1f}° from the given one"
         _warn(notes, f"mounting ({frames}): {given.describe()}, applied{compare}")
         return given, True
-    if est is None or est.angle_deg <= APPLY_DEG:
-        return est, False
-    if mode == "auto" and est.determined:
+    if est is None or not est.determined or est.angle_deg <= APPLY_DEG:
+        return est, False  # nothing to say: no turn to learn from, or no mounting to speak of
+    if mode == "auto":
         _warn(
             notes,
             f"mounting ({frames}): the gyro frame is {est.describe()}: applied to the scoring "
             f"(--mounting none to score without it)",
         )
         return est, True
-    why = "--mounting none" if mode == "none" else "the motion does not determine it"
-    _warn(notes, f"mounting ({frames}): the gyro frame is {est.describe()}: not applied ({why})")
+    _warn(
+        notes,
+        f"mounting ({frames}): the gyro frame is {est.describe()}: not applied (--mounting none)",
+    )
     return est, False
 
 

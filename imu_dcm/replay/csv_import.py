@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import argparse
 import csv
+import warnings
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -20,12 +21,13 @@ import numpy as np
 from numpy.typing import NDArray
 
 from imu_dcm.cli import OneLineArgumentParser
-from imu_dcm.errors import InputError, LogError
+from imu_dcm.errors import ImuDcmWarning, InputError, LogError
+from imu_dcm.stamps import NS_PER_UNIT, timing_doubt
 
 __all__ = ["TIME_UNITS_NS", "CsvColumns", "convert_csv", "convert_main", "read_csv_columns"]
 
 #: Nanoseconds per unit of the time column.
-TIME_UNITS_NS = {"s": 1_000_000_000, "ms": 1_000_000, "us": 1_000, "ns": 1}
+TIME_UNITS_NS = NS_PER_UNIT
 
 
 @dataclass(frozen=True)
@@ -101,6 +103,37 @@ def read_csv_columns(
     p = Path(path)
     if not p.is_file():
         raise LogError(f"Expected an existing CSV file, got {str(path)!r}")
+    _check_options(time_unit, gyro_units, truth_cols, truth_order, delimiter)
+    data = _read_table(p, time_col, gyro_cols, truth_cols, delimiter)
+    t = data[:, 0]
+    if not np.all(np.isfinite(t)):
+        bad = int(np.flatnonzero(~np.isfinite(t))[0])
+        raise InputError(
+            f"Expected finite times in column {time_col!r}, got {t[bad]} in data row {bad}"
+        )
+    if np.any(t < 0):
+        raise InputError(f"Expected times >= 0 in column {time_col!r}, got {t.min()}")
+    t_ns = np.round(t * TIME_UNITS_NS[time_unit]).astype(np.int64)
+    doubt = timing_doubt(np.sort(t_ns), time_unit)
+    if doubt is not None:
+        clause, fix = doubt
+        hint = f"; pass --time-unit {fix} if that is the column's unit" if fix else ""
+        warnings.warn(
+            f"{p.name}: column {time_col!r} in {time_unit} gives stamps no IMU produces: "
+            f"{clause}{hint}",
+            ImuDcmWarning,
+            stacklevel=2,
+        )
+    omega = data[:, 1:4] * (np.pi / 180.0 if gyro_units == "deg/s" else 1.0)
+    q = None
+    if truth_cols is not None:
+        q = data[:, 4:8]
+        if truth_order == "wxyz":
+            q = q[:, [1, 2, 3, 0]]
+    return CsvColumns(t_ns, omega, q)
+
+
+def _check_options(time_unit, gyro_units, truth_cols, truth_order, delimiter) -> None:
     if time_unit not in TIME_UNITS_NS:
         raise InputError(f"Expected time unit in {tuple(TIME_UNITS_NS)}, got {time_unit!r}")
     if gyro_units not in ("rad/s", "deg/s"):
@@ -116,6 +149,10 @@ def read_csv_columns(
         raise InputError(
             f"Expected --delimiter to be one character (not a quote or newline), got {delimiter!r}"
         )
+
+
+def _read_table(p: Path, time_col, gyro_cols, truth_cols, delimiter) -> NDArray[np.float64]:
+    """The wanted columns (time, gyro x, y, z, truth) of every data row, float64."""
     try:
         with p.open(newline="", encoding="utf-8") as f:
             reader = csv.reader(f, delimiter=delimiter)
@@ -141,22 +178,7 @@ def read_csv_columns(
         raise LogError(f"Expected a well-formed CSV in {p.name}, got {exc}") from None
     if data.size == 0:
         raise LogError(f"Expected data rows in {p.name}, got none")
-    t = data[:, 0]
-    if not np.all(np.isfinite(t)):
-        bad = int(np.flatnonzero(~np.isfinite(t))[0])
-        raise InputError(
-            f"Expected finite times in column {time_col!r}, got {t[bad]} in data row {bad}"
-        )
-    if np.any(t < 0):
-        raise InputError(f"Expected times >= 0 in column {time_col!r}, got {t.min()}")
-    t_ns = np.round(t * TIME_UNITS_NS[time_unit]).astype(np.int64)
-    omega = data[:, 1:4] * (np.pi / 180.0 if gyro_units == "deg/s" else 1.0)
-    q = None
-    if truth_cols is not None:
-        q = data[:, 4:8]
-        if truth_order == "wxyz":
-            q = q[:, [1, 2, 3, 0]]
-    return CsvColumns(t_ns, omega, q)
+    return data
 
 
 def convert_csv(

@@ -8,10 +8,12 @@ Wahba's problem, solved by the SVD of ``H = Σ a_k b_kᵀ`` (Kabsch, with the si
 ``det R = +1``).
 
 The singular values of ``H`` say how many axes the motion determines: an axis is determined when
-its singular value is at least :data:`MIN_AXIS_SHARE` of the largest. Two or three determined
+its singular value is at least :data:`MIN_AXIS_SHARE` of the largest and the RMS rate about it
+(``sqrt(s / steps) / step``) at least :data:`MIN_AXIS_RATE`. Two or three determined
 axes fix the rotation; one (a robot that only yaws) fixes only where that axis goes, and the
-smallest rotation that takes it there is reported. The nearest signed axis permutation is named
-when it lies within :data:`PERMUTATION_DEG` ("gyro y = truth z").
+smallest rotation that takes it there is reported (and applied: the motion is about that axis,
+so the unknown turn about it hardly matters to the score). The nearest signed axis
+permutation is named when it lies within :data:`PERMUTATION_DEG` ("gyro y = truth z").
 
 Conventions: quaternions ``[x, y, z, w]``; ``q_t_g`` maps gyro-frame vectors into the truth's
 body frame (``omega_T = R(q_t_g) omega_G``), so the gyro's attitude is ``q_w_t ⊗ q_t_g``.
@@ -32,6 +34,8 @@ __all__ = ["APPLY_DEG", "Mounting", "axis_permutation", "estimate_mounting"]
 
 #: An axis is determined when its singular value is at least this share of the largest.
 MIN_AXIS_SHARE = 0.02
+#: ... and the RMS rate about it at least this, rad/s (3 °/s: turning, not noise).
+MIN_AXIS_RATE = 0.05
 #: A signed axis permutation within this angle of the estimate is named, degrees.
 PERMUTATION_DEG = 5.0
 #: With ``--mounting auto``, a determined rotation larger than this is applied, degrees.
@@ -73,8 +77,12 @@ class Mounting:
 
     @property
     def determined(self) -> bool:
-        """The motion fixes the whole rotation (two axes or more) and the fit is good."""
-        return self.axes_determined >= 2 and self.fit >= MIN_FIT
+        """The motion determines at least one axis and the rotated gyro fits the truth.
+
+        With one axis (a robot that only yaws) the rotation about it is unknown, but it hardly
+        matters for scoring: the motion is about that axis.
+        """
+        return self.axes_determined >= 1 and self.fit >= MIN_FIT
 
     def describe(self) -> str:
         """One clause: angle, axis, permutation, axes determined, fit."""
@@ -86,9 +94,14 @@ class Mounting:
         )
         if self.source == "given":
             return f"{self.angle_deg:.1f}° about ({ax}) as given{perm}"
+        partly = (
+            " (the rotation about it is unknown: the smallest one is used)"
+            if self.axes_determined == 1
+            else ""
+        )
         return (
             f"{self.angle_deg:.1f}° about ({ax}){perm}; the motion determines "
-            f"{self.axes_determined} of 3 axes, fit {self.fit:.3f}"
+            f"{self.axes_determined} of 3 axes{partly}, fit {self.fit:.3f}"
         )
 
 
@@ -183,7 +196,9 @@ def estimate_mounting(
         return None
     d = np.sign(np.linalg.det(vt.T @ u.T)) or 1.0
     r = vt.T @ np.diag([1.0, 1.0, d]) @ u.T
-    determined = int(np.sum(svals >= MIN_AXIS_SHARE * svals[0]))
+    # an axis is determined by motion about it: a share of the largest, and above noise
+    axis_rate = np.sqrt(np.maximum(svals, 0.0) / len(a)) / grid.step_s
+    determined = int(np.sum((svals >= MIN_AXIS_SHARE * svals[0]) & (axis_rate >= MIN_AXIS_RATE)))
     if determined == 1:  # only where the strongest axis goes: the smallest such rotation
         src = u[:, 0]
         r = _smallest(src, r @ src)

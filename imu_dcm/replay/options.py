@@ -25,13 +25,18 @@ __all__ = [
     "replay_keywords",
 ]
 
-#: What the replay reads, in words for --help: one entry per container (add a row with a new
-#: reader).
+#: What the replay reads, in words for --help (static: --help does not import the readers). One
+#: entry per row of the reader table (imu_dcm.logio.registry.SOURCES): add one with a new reader
+#: (tests/test_first_run.py checks that every row is named here).
 LOG_KINDS = [
     "a ROS 2 bag folder (metadata.yaml with .mcap or .db3 storage)",
     "a .mcap file",
     "a ROS 2 .db3 (sqlite3) file",
+    "a zstd-compressed storage file (.mcap.zstd, .db3.zstd)",
     "a ROS 1 .bag file",
+    "a PX4 ULog (.ulg)",
+    "an ArduPilot DataFlash log (.bin; pip install imu_dcm[mavlink])",
+    "a EuRoC / ASL dataset folder (mav0/imu0/data.csv)",
 ]
 
 TIME_BASES = ("auto", "header", "log")

@@ -22,11 +22,41 @@ MOUNTING_MODES = ("auto", "none")
 
 @dataclass(frozen=True, eq=False)
 class ReplaySettings:
-    """How one log is replayed (see :func:`imu_dcm.replay.replay` for each field's meaning).
+    """How one log is replayed (the keywords of :func:`imu_dcm.replay.replay`, checked).
 
-    ``bias`` is "auto", "none" or a float64 (3,) rad/s; ``q_init`` a unit ``[x, y, z, w]`` or
-    None; ``truth_offset_s`` seconds or "auto"; ``mounting`` "auto", "none" or a unit
-    ``q_t_g`` ``[x, y, z, w]`` (gyro frame into the truth's body frame).
+    Attributes
+    ----------
+    imu_topic, truth_topic : str or None
+        Channel choices (see the log reader); ``truth_topic="none"`` ignores any truth. A truth
+        named here is scored even when its rate does not follow the gyro (the summary says so);
+        an automatically picked one is chosen among the log's attitude candidates by how its
+        rate follows the gyro, and dropped with a warning when none does.
+    truth_frame : str or None
+        Child frame of a transform truth (``/tf``), passed to the reader.
+    time : {"auto", "header", "log"}
+        Stamp source; ``"auto"`` prefers the header stamps
+        (:func:`imu_dcm.replay.truth.choose_time`).
+    method : str
+        Integrator method, one of :data:`imu_dcm.integrate.METHODS` (default ``"magnus4"``).
+    bias : "auto", "none" or float64 (3,)
+        Gyro bias, rad/s (:func:`imu_dcm.replay.bias.estimate_bias`).
+    gyro_units : {"rad/s", "deg/s"}
+        Unit of the log's rates; deg/s are converted (rad/s is checked for deg/s evidence).
+    q_init : float64 (4,) or None
+        Initial ``q_w_b`` ``[x, y, z, w]`` when the log has no truth (default identity).
+    prefilter : {None, "kalman", "rts"}
+        Gyro pre-filter (:mod:`imu_dcm.prefilter`), applied after bias removal.
+    prefilter_config : PrefilterConfig or None
+    truth_offset_s : float or "auto"
+        Added to the truth stamps, s; ``"auto"``: the shift that best aligns the truth's rate
+        with the gyro's. The best shift is reported either way.
+    rest_config : RestConfig or None
+        Rest thresholds (:mod:`imu_dcm.rest`).
+    mounting : "auto", "none" or float64 (4,)
+        The rotation ``q_t_g`` ``[x, y, z, w]`` from the gyro's frame into the truth's body
+        frame (:mod:`imu_dcm.replay.mounting`). ``"auto"``: estimated, and applied when the
+        motion determines it and it exceeds a few degrees; ``"none"``: estimated and reported,
+        never applied; a quaternion: applied as given (and compared with the estimate).
     """
 
     imu_topic: str | None = None

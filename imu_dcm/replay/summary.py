@@ -168,13 +168,14 @@ def _judgement_lines(s: ReplaySummary) -> list[str]:
             f"difference between two estimates"
         )
     m = s.mounting
-    if m and (s.mounting_applied or m["angle_deg"] > 3.0):
-        from imu_dcm.replay.mounting import Mounting
+    if m:
+        from imu_dcm.replay.mounting import APPLY_DEG, Mounting
 
         fields = {f.name for f in dataclasses.fields(Mounting)}
-        text = Mounting(**{k: v for k, v in m.items() if k in fields}).describe()
-        verdict = "applied" if s.mounting_applied else "NOT applied"
-        lines.append(f"mounting   {text}: {verdict}")
+        mount = Mounting(**{k: v for k, v in m.items() if k in fields})
+        if s.mounting_applied or (mount.determined and mount.angle_deg > APPLY_DEG):
+            verdict = "applied" if s.mounting_applied else "NOT applied"
+            lines.append(f"mounting   {mount.describe()}: {verdict}")
     if s.truth_jumps:
         seg = ", ".join(
             f"{x['start_s']:.1f}..{x['end_s']:.1f} s {_fmt(x['rms_error_deg'])}"
@@ -234,7 +235,7 @@ def format_summary(s: ReplaySummary) -> str:
     bias = f"({b[0]:+.5f}, {b[1]:+.5f}, {b[2]:+.5f}) rad/s"
     bdeg = np.degrees(b)
     if s.bias_mode == "auto" and not s.bias_segments:
-        lines.append(f"bias       auto: no rest found ({s.no_rest}); no bias removed")
+        lines.append(f"bias       auto: no rest found: {s.no_rest}; no bias removed")
     elif s.bias_mode == "auto":
         nseg = len(s.bias_segments)
         how = (

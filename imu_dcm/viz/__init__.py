@@ -6,8 +6,8 @@ the columns of ``R_w_b`` (``quat_rotate(q_w_b, e_k)``); world is ENU, z up; ``om
 rate relative to the world in body axes, rad/s; time ``t_s`` in seconds, shown on the rerun
 timeline ``"time"`` (a duration timeline).
 
-What is sent (every time-varying entity in ONE ``send_columns`` call, one row per sample unless
-stated):
+What is sent (every time-varying entity in ``send_columns`` calls of a few thousand rows, one
+row per sample unless stated):
 
 =====================================  ==========================================================
 entity                                 content

@@ -1,7 +1,9 @@
 """What is logged to rerun: the entities, their colours, the blueprint, and sending a view.
 
-See :mod:`imu_dcm.viz` for the table of entities. Every time-varying entity goes out in ONE
-``send_columns`` call (or in chunks of ``chunk_s`` seconds when paced at the recorded speed).
+See :mod:`imu_dcm.viz` for the table of entities. Every time-varying entity goes out in
+``send_columns`` calls of at most ``_BLOCK_ROWS`` rows (never one log call per sample; the block
+bounds the memory a long log's view needs), or in chunks of ``chunk_s`` seconds when paced at
+the recorded speed.
 """
 
 from __future__ import annotations
@@ -27,7 +29,7 @@ from imu_dcm.viz.view_data import (
     gyro_needs_split,
 )
 
-_BLOCK_ROWS = 20_000  # rows per send_columns call when the whole view is sent at once
+_BLOCK_ROWS = 2_000  # rows per send_columns call when the whole view is sent at once
 
 TIMELINE = "time"
 """Name of the rerun timeline (a duration in seconds from the log's time origin)."""
@@ -322,9 +324,10 @@ def send_view(view: ViewData, rec, *, realtime: bool = False, chunk_s: float = 0
     rec : rerun.RecordingStream
         The stream to send to (its sinks are already set).
     realtime : bool
-        False: each entity in one ``send_columns`` call. True: pace the replay at the recorded
-        speed, sending every entity's rows in chunks of ``chunk_s`` seconds of log time
-        (``send_columns`` per chunk) and sleeping to the wall clock in between.
+        False: each entity in ``send_columns`` calls of ``_BLOCK_ROWS`` rows. True: pace the
+        replay at the recorded speed, sending every entity's rows in chunks of ``chunk_s``
+        seconds of log time (``send_columns`` per chunk) and sleeping to the wall clock in
+        between.
     chunk_s : float
         Chunk length for ``realtime``, s.
     """

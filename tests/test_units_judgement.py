@@ -1,0 +1,100 @@
+"""Units and time a new user gets wrong: ms stamps declared as s, deg/s declared as rad/s, a Git
+LFS pointer in place of the log. Each gets one line naming the likely fix."""
+
+from __future__ import annotations
+
+import re
+import warnings
+
+import numpy as np
+import pytest
+
+from imu_dcm.errors import ImuDcmWarning, LogError
+from imu_dcm.logio import read_log
+from imu_dcm.replay import replay
+from imu_dcm.replay.csv_import import convert_csv
+from imu_dcm.stamps import timing_doubt
+
+N = 4000
+
+
+def _csv(path, t, w):
+    rows = "\n".join(f"{a:.6f},{b:.6f},{c:.6f},{d:.6f}" for a, (b, c, d) in zip(t, w, strict=True))
+    path.write_text("t,gx,gy,gz\n" + rows + "\n")
+    return path
+
+
+def _rates(rng):
+    return 0.3 * np.sin(np.linspace(0, 30, N))[:, None] + 0.01 * rng.standard_normal((N, 3))
+
+
+def test_ms_stamps_declared_as_s_are_flagged_in_convert_and_replay(tmp_path):
+    # 200 Hz for 20 s, stamped in ms (0, 5, 10, ...) and declared as seconds: "0.2 Hz over
+    # 5.6 h" unless told; as ms it is 200 Hz over 20 s.
+    rng = np.random.default_rng(1)
+    csv_path = _csv(tmp_path / "g.csv", np.arange(N) * 5.0, _rates(rng))
+    cols = {"time_col": "t", "gyro_cols": "gx,gy,gz", "gyro_units": "rad/s"}
+    with pytest.warns(ImuDcmWarning, match="no IMU produces") as said:
+        bag = convert_csv(csv_path, tmp_path / "bag", time_unit="s", **cols)
+    (line,) = [str(w.message) for w in said if "no IMU produces" in str(w.message)]
+    assert "0.2 Hz (median step 5 s)" in line and "as ms: 200 Hz over 20 s" in line
+    assert line.endswith("pass --time-unit ms if that is the column's unit")
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        res = replay(bag, truth_topic="none")
+    said = [w for w in res.summary.warnings if "stamps no IMU produces" in w]
+    assert len(said) == 1 and "convert-csv --time-unit ms" in said[0], said
+    assert any("stamps no IMU produces" in str(c.message) for c in caught)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # the right unit: not a word
+        convert_csv(csv_path, tmp_path / "ok", time_unit="ms", **cols)
+
+
+def test_plausible_stamps_say_nothing_and_days_are_flagged():
+    step = np.int64(5_000_000)
+    assert timing_doubt(np.arange(N, dtype=np.int64) * step) is None  # 200 Hz
+    assert timing_doubt(np.arange(N, dtype=np.int64) * 1_000_000_000) is None  # 1 Hz: slow
+    days = np.arange(N, dtype=np.int64) * 100_000_000 + np.int64(
+        np.concatenate([np.zeros(N // 2), np.full(N - N // 2, 3 * 86400)]) * 1e9
+    )
+    clause, _fix = timing_doubt(days)
+    assert "days" in clause
+
+
+def test_deg_per_s_warning_says_one_consistent_thing(tmp_path):
+    # Rates in deg/s declared as rad/s, no truth: the warning quotes the 99th percentile and
+    # what it would be as deg/s, both true of the data.
+    rng = np.random.default_rng(2)
+    w_deg = np.degrees(2.0 * np.sin(np.linspace(0, 30, N))[:, None]) + rng.standard_normal((N, 3))
+    csv_path = _csv(tmp_path / "g.csv", np.arange(N) * 0.005, w_deg)
+    bag = convert_csv(
+        csv_path, tmp_path / "bag", time_col="t", time_unit="s", gyro_cols="gx,gy,gz",
+        gyro_units="rad/s",
+    )  # fmt: skip
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        res = replay(bag, truth_topic="none")
+    (line,) = [w for w in res.summary.warnings if "look like deg/s" in w]
+    m = re.search(
+        r"99th percentile of \|omega\| is (\d+) rad/s, above.*as deg/s it would be ([\d.]+) rad/s",
+        line,
+    )
+    assert m, line
+    p99 = np.percentile(np.linalg.norm(w_deg, axis=1), 99)
+    assert abs(float(m.group(1)) - p99) <= 0.5 and p99 > 34.9
+    assert abs(float(m.group(2)) - np.radians(p99)) <= 0.005
+
+
+def test_git_lfs_pointer_is_named_with_git_lfs_pull(tmp_path):
+    pointer = (
+        "version https://git-lfs.github.com/spec/v1\n"
+        "oid sha256:4d7a214614ab2935c943f9e0ff69d22eadbb8f32b1258daaa5e2ca24d17e2393\n"
+        "size 52428800\n"
+    )
+    f = tmp_path / "run.mcap"
+    f.write_text(pointer)
+    with pytest.raises(LogError) as info:
+        read_log(f)
+    msg = str(info.value)
+    assert "a Git LFS pointer to a 52.4 MB file" in msg and "`git lfs pull`" in msg
+    assert "\n" not in msg
