@@ -112,17 +112,6 @@ class TrialArrays:
     accel_b: np.ndarray  # FLU, m/s²
 
 
-def trial_gyro_only():
-    """The trial as read, its accelerometer dropped: the drone logs written here carry the gyro
-    only, and rest is judged from the gyro alone without one (``imu_dcm.rest``)."""
-    from dataclasses import replace
-
-    from imu_dcm.logio import read_log
-
-    log = read_log(TRIAL)
-    return replace(log, imu=replace(log.imu, accel_b=None))
-
-
 def trial_arrays() -> TrialArrays:
     from imu_dcm.logio import read_log
 

@@ -17,10 +17,10 @@ from imu_dcm.errors import ImuDcmWarning, LogError
 from imu_dcm.logio import ardupilot, ned, read_log
 from imu_dcm.so3 import angle_between_deg
 from tests.drone_logs import (
+    TRIAL,
     DFMessage,
     trial_arrays,
     trial_dataflash,
-    trial_gyro_only,
     write_dataflash,
 )
 
@@ -94,7 +94,7 @@ def test_trial_dataflash_replays_to_the_trials_rms(trial_bin):
 
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", ImuDcmWarning)
-        want = replay(trial_gyro_only()).summary
+        want = replay(TRIAL).summary
         got = replay(trial_bin).summary
     assert got.rms_error_deg == pytest.approx(want.rms_error_deg, abs=1e-6)
     assert got.max_error_deg == pytest.approx(want.max_error_deg, abs=1e-6)

@@ -15,10 +15,10 @@ from imu_dcm.logio.source import ReadRequest
 from imu_dcm.so3 import angle_between_deg
 from tests.drone_logs import (
     STRANGERS,
+    TRIAL,
     ULogSpec,
     UTopic,
     trial_arrays,
-    trial_gyro_only,
     trial_ulog,
     write_ulog,
 )
@@ -112,7 +112,7 @@ def test_trial_ulog_replays_to_the_trials_rms(trial_ulg):
 
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", ImuDcmWarning)
-        want = replay(trial_gyro_only()).summary
+        want = replay(TRIAL).summary
         got = replay(trial_ulg).summary
     assert got.rms_error_deg == pytest.approx(want.rms_error_deg, abs=1e-6)
     assert got.max_error_deg == pytest.approx(want.max_error_deg, abs=1e-6)

@@ -23,7 +23,7 @@ from imu_dcm.errors import LogError
 from imu_dcm.logio.cdr import decode
 from imu_dcm.logio.json_imu import is_json_imu, json_imu_columns, json_msg
 from imu_dcm.logio.schema import Defs, definitions, norm_type
-from imu_dcm.logio.tf import TF_TYPE, child_frame, tf_rows, tf_truth
+from imu_dcm.logio.tf import TF_TYPE, child_frame, moving_children, tf_truth
 from imu_dcm.logio.types import Collected, Columns, Conn, ImuSeries, Payloads, TruthSeries
 from imu_dcm.rest import GRAVITY_M_S2
 
@@ -598,9 +598,7 @@ def read_truths(
         and all(is_truth(c) and norm_type(c.msgtype) != TF_TYPE for c in cs)
     ]
     if tf:
-        found += [
-            tf_truth(got, tf, imu.frame_id, ch, auto=True) for ch in _moving_children(got, tf)
-        ]
+        found += [tf_truth(got, tf, imu.frame_id, ch, auto=True) for ch in moving_children(got, tf)]
     own = imu_truth(imu, required=False)
     if own is not None:
         found.append(replace(own, estimate_of=IMU_ESTIMATE))
@@ -612,23 +610,6 @@ def read_truths(
 def _marked(t: TruthSeries) -> TruthSeries:
     who = _ESTIMATED_BY.get(t.type, "")
     return replace(t, estimate_of=who) if who else t
-
-
-def _moving_children(got: Collected, conns: list[Conn]) -> list[str]:
-    """Child frames of the transforms in ``conns`` whose rotation changes, sorted."""
-    rot: dict[str, list] = {}
-    for c in conns:
-        p = got.payloads.get(c.id) or Payloads.empty()
-        for i in range(len(p)):
-            try:
-                rows = tf_rows(p.payload(i), c.encoding == "ros1")
-            except (struct.error, ValueError):
-                continue
-            for _stamp, _parent, child, quat in rows:
-                rot.setdefault(child, []).append(quat)
-    return sorted(
-        ch for ch, qs in rot.items() if np.ptp(np.asarray(qs, dtype=float), axis=0).max() > 1e-12
-    )
 
 
 def _named_truth(got, imu, topics, truth_topic: str, truth_frame: str | None):

@@ -78,10 +78,9 @@ def tf_rows(raw: bytes, ros1: bool, single: bool = False) -> list[tuple]:
     return out
 
 
-def tf_truth(
-    got: Collected, conns: list[Conn], imu_frame: str, truth_frame: str | None, auto: bool
-) -> TruthSeries | None:
-    t, lt, order, parent, child, q = [], [], [], [], [], []
+def _transforms(got: Collected, conns: list[Conn]):
+    """Every transform in the messages of ``conns``: ``(payloads, index, stamp_ns, parent,
+    child, q_xyzw)``; a message that does not decode is passed over."""
     for c in conns:
         p = got.payloads.get(c.id) or Payloads.empty()
         for i in range(len(p)):
@@ -90,12 +89,30 @@ def tf_truth(
             except (struct.error, ValueError):
                 continue
             for stamp, par, ch, quat in rows:
-                t.append(stamp)
-                lt.append(int(p.log_time[i]))
-                order.append(int(p.order[i]))
-                parent.append(par)
-                child.append(ch)
-                q.append(quat)
+                yield p, i, stamp, par, ch, quat
+
+
+def moving_children(got: Collected, conns: list[Conn]) -> list[str]:
+    """Child frames of the transforms in ``conns`` whose rotation changes, sorted."""
+    rot: dict[str, list] = {}
+    for *_, ch, quat in _transforms(got, conns):
+        rot.setdefault(ch, []).append(quat)
+    return sorted(
+        ch for ch, qs in rot.items() if np.ptp(np.asarray(qs, dtype=float), axis=0).max() > 1e-12
+    )
+
+
+def tf_truth(
+    got: Collected, conns: list[Conn], imu_frame: str, truth_frame: str | None, auto: bool
+) -> TruthSeries | None:
+    t, lt, order, parent, child, q = [], [], [], [], [], []
+    for p, i, stamp, par, ch, quat in _transforms(got, conns):
+        t.append(stamp)
+        lt.append(int(p.log_time[i]))
+        order.append(int(p.order[i]))
+        parent.append(par)
+        child.append(ch)
+        q.append(quat)
     if not t:
         return None
     q_arr = np.asarray(q, dtype=np.float64)
