@@ -43,8 +43,11 @@ def test_ws_connection_assembles_answers_pings_and_sees_the_close():
         ws.send("hello")
         from websockets.exceptions import ConnectionClosed
 
-        with pytest.raises(ConnectionClosed):
+        def until_closed():
             while time.monotonic() < deadline:
                 assert ws.recv_messages(0.2) == []
+
+        with pytest.raises(ConnectionClosed):
+            until_closed()
         ws.close()
         server.shutdown()
