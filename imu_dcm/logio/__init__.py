@@ -21,7 +21,14 @@ from imu_dcm.logio.channels import TRUTH_TYPES
 from imu_dcm.logio.meta import read_custom_data
 from imu_dcm.logio.registry import SOURCES, find_logs, open_log, resolve_mcap_path
 from imu_dcm.logio.source import LogSource, ReadRequest, SourceEntry
-from imu_dcm.logio.types import ChannelInfo, Damage, ImuSeries, LogData, TruthSeries
+from imu_dcm.logio.types import (
+    ChannelInfo,
+    Damage,
+    ImuSeries,
+    LogData,
+    StaticTransform,
+    TruthSeries,
+)
 
 __all__ = [
     "SOURCES",
@@ -33,6 +40,7 @@ __all__ = [
     "LogSource",
     "ReadRequest",
     "SourceEntry",
+    "StaticTransform",
     "TruthSeries",
     "find_logs",
     "open_log",

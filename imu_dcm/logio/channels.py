@@ -23,7 +23,7 @@ from imu_dcm.errors import LogError
 from imu_dcm.logio.cdr import decode
 from imu_dcm.logio.json_imu import is_json_imu, json_imu_columns, json_msg
 from imu_dcm.logio.schema import Defs, definitions, norm_type
-from imu_dcm.logio.tf import TF_TYPE, child_frame, moving_children, tf_truth
+from imu_dcm.logio.tf import TF_TYPE, child_frame, is_static_tf, moving_children, tf_truth
 from imu_dcm.logio.types import Collected, Columns, Conn, ImuSeries, Payloads, TruthSeries
 from imu_dcm.rest import GRAVITY_M_S2
 
@@ -172,8 +172,9 @@ class _Decoder:
 def plan(imu_topic: str | None, truth_topic: str | None) -> Callable[[Conn], object]:
     """What a container must do with each channel: skip it (None), keep it raw, or decode it.
 
-    Only channels that can be the IMU or the truth are kept; the IMU and truth types are
-    decoded batch by batch, so their raw payloads never pile up.
+    Only channels that can be the IMU or the truth are kept, and ``/tf_static`` (for the
+    mounting); the IMU and truth types are decoded batch by batch, so their raw payloads never
+    pile up.
     """
 
     def role(c: Conn):
@@ -195,6 +196,8 @@ def plan(imu_topic: str | None, truth_topic: str | None) -> Callable[[Conn], obj
             return _Decoder(c, "truth")
         if c.topic in (imu_topic, truth_topic):
             return _raw  # named but of an unexpected type: kept to say so
+        if is_static_tf(c):
+            return _raw  # the mounting between the IMU's frame and the truth's (few messages)
         return None
 
     return role

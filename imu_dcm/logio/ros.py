@@ -16,6 +16,7 @@ from pathlib import Path
 from imu_dcm.errors import ImuDcmWarning, LogError
 from imu_dcm.logio.channels import describe, pick_imu_judged, plan, read_imu, read_truths
 from imu_dcm.logio.source import Progress, ReadRequest
+from imu_dcm.logio.tf import static_transforms
 from imu_dcm.logio.types import ChannelInfo, Collected, Damage, LogData, Sink
 
 
@@ -113,4 +114,5 @@ def read_ros(source: RosSource, request: ReadRequest) -> LogData:
         stopped_at,
         truth_candidates=candidates,
         notes=notes,
+        static_transforms=static_transforms(got),
     )

@@ -4,6 +4,11 @@ Each TFMessage holds a sequence of TransformStamped, decoded here message by mes
 alignment, or ROS 1 packed). The truth is the transform whose child frame moves: the one
 ``truth_frame`` names, else the only moving one, else the one whose child is the IMU's frame.
 Its rotation maps the child (body) frame to the parent (world) frame: ``q_w_b``.
+
+The transforms of ``/tf_static`` (a topic named ``tf_static``, in any namespace) are also kept
+as :class:`~imu_dcm.logio.types.StaticTransform` (:func:`static_transforms`): the replay
+composes the mounting between the IMU's frame and the truth's body frame from them. A constant
+transform on ``/tf`` is not static: only ``/tf_static`` declares one.
 """
 
 from __future__ import annotations
@@ -13,9 +18,21 @@ import struct
 import numpy as np
 
 from imu_dcm.errors import LogError
-from imu_dcm.logio.types import Collected, Conn, Payloads, TruthSeries
+from imu_dcm.logio.schema import norm_type
+from imu_dcm.logio.types import Collected, Conn, Payloads, StaticTransform, TruthSeries
 
 TF_TYPE = "tf2_msgs/msg/TFMessage"
+#: tf2 refuses a quaternion whose squared norm is further than this from 1; so does the reader.
+_NORM2_TOL = 0.01
+
+
+def is_static_tf(conn: Conn) -> bool:
+    """``conn`` is a ``tf_static`` topic (``/tf_static``, ``/robot/tf_static``) of TFMessages."""
+    return (
+        conn.encoding in ("cdr", "ros1")
+        and norm_type(conn.msgtype) == TF_TYPE
+        and conn.topic.rstrip("/").rsplit("/", 1)[-1] == "tf_static"
+    )
 
 
 def child_frame(c: Conn, p: Payloads, good) -> str:
@@ -90,6 +107,20 @@ def _transforms(got: Collected, conns: list[Conn]):
                 continue
             for stamp, par, ch, quat in rows:
                 yield p, i, stamp, par, ch, quat
+
+
+def static_transforms(got: Collected) -> tuple[StaticTransform, ...]:
+    """The transforms of the log's ``tf_static`` topics, one per child frame: the last one in
+    file order (a later static transform replaces an earlier one, as in tf2), sorted by child.
+    A rotation that is not finite or not of unit norm (tf2 refuses those) is left out."""
+    rows = []
+    for p, i, _stamp, par, ch, quat in _transforms(got, [c for c in got.conns if is_static_tf(c)]):
+        q = np.asarray(quat, dtype=np.float64)
+        n2 = float(q @ q)
+        if np.isfinite(n2) and abs(n2 - 1.0) <= _NORM2_TOL:
+            rows.append((int(p.order[i]), par, ch, tuple((q / np.sqrt(n2)).tolist())))
+    last = {ch: StaticTransform(par, ch, q) for _o, par, ch, q in sorted(rows, key=lambda r: r[0])}
+    return tuple(last[ch] for ch in sorted(last))
 
 
 def moving_children(got: Collected, conns: list[Conn]) -> list[str]:

@@ -103,6 +103,23 @@ class TruthSeries:
 
 
 @dataclass(frozen=True)
+class StaticTransform:
+    """A static transform of the log's ``/tf_static`` (rotation only).
+
+    Attributes
+    ----------
+    parent, child : frame ids as the message gives them (``header.frame_id``,
+        ``child_frame_id``; a leading '/' is kept here and ignored where frames are compared).
+    q_xyzw : ``q_parent_child`` ``[x, y, z, w]``, unit: maps child-frame coordinates into the
+        parent frame (``v_parent = R(q_parent_child) v_child``), as tf defines a transform.
+    """
+
+    parent: str
+    child: str
+    q_xyzw: tuple[float, float, float, float]
+
+
+@dataclass(frozen=True)
 class LogData:
     """What :func:`imu_dcm.logio.read_log` found: IMU series, truth (or None), channels.
 
@@ -111,7 +128,9 @@ class LogData:
     none). ``truth_candidates`` holds every other attitude series the log offered (the picked
     one is ``truth``), for the replay to judge which follows the gyro; ``notes`` are one-line
     findings of the reader for the user ("sensor_gyro_0: 6 samples at 1 Hz; used
-    sensor_combined at 250 Hz").
+    sensor_combined at 250 Hz"). ``static_transforms`` holds the log's ``/tf_static`` transforms
+    (one per child frame, the last one sent; empty where the log has none), from which the
+    replay composes the mounting between the IMU's frame and the truth's body frame.
     """
 
     path: Path
@@ -124,6 +143,7 @@ class LogData:
     stopped_at: str | None = None
     truth_candidates: tuple[TruthSeries, ...] = ()
     notes: tuple[str, ...] = ()
+    static_transforms: tuple[StaticTransform, ...] = ()
 
 
 # ---------------------------------------------------------------- between containers and decoders

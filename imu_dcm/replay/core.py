@@ -6,7 +6,8 @@ file order, duplicates, gaps), convert deg/s when asked (and warn with the evide
 rates look like deg/s), check that the truth's rotation rate follows the gyro, slerp the truth
 at the gyro stamps inside its coverage, remove the gyro bias (:mod:`imu_dcm.replay.bias`),
 estimate the mounting between the gyro's frame and the truth's body frame
-(:mod:`imu_dcm.replay.mounting`), find truth jumps the gyro does not show, optionally
+(:mod:`imu_dcm.replay.mounting`) and compare it with the one ``/tf_static`` declares
+(:mod:`imu_dcm.replay.mounting_tf`), find truth jumps the gyro does not show, optionally
 pre-filter, integrate from the truth at the first gyro sample inside its coverage (and again
 after each truth jump), and measure the attitude error (total, inclination, heading) over the
 segments between jumps.
@@ -33,7 +34,8 @@ from imu_dcm.logio import LogData, read_log
 from imu_dcm.metrics import AttitudeError, attitude_error_deg, rms
 from imu_dcm.replay.bias import BIAS_RULE, BiasEstimate, RestConfig, estimate_bias
 from imu_dcm.replay.clean import CleanedImu, _deg_evidence, clean_imu
-from imu_dcm.replay.mounting import APPLY_DEG, Mounting, estimate_mounting, from_rotation
+from imu_dcm.replay.mounting import Mounting, estimate_mounting, from_rotation
+from imu_dcm.replay.mounting_tf import MountingChoice, choose_mounting, tf_mounting
 from imu_dcm.replay.options import check_options
 from imu_dcm.replay.settings import ReplaySettings, check_mounting
 from imu_dcm.replay.summary import ReplayResult, ReplaySummary
@@ -156,8 +158,7 @@ class _Judged:
     aligned: AlignedTruth
     truth_t_ns: NDArray[np.int64] | None  # stamps of the truth used, at the applied offset
     jumps: tuple
-    mounting: Mounting | None
-    mounting_applied: bool
+    mounting: MountingChoice
 
 
 def _read(path, s: ReplaySettings, report) -> LogData:
@@ -239,7 +240,9 @@ def _judge_truth(
     truth = aligned.truth
     if truth is None:
         given = None if isinstance(s.mounting, str) else _given(s.mounting)
-        return _Judged(aligned, None, (), given, given is not None)
+        return _Judged(
+            aligned, None, (), MountingChoice(given, given, "given" if given else "", None, "")
+        )
     tt = (truth.t_ns if g.base == "header" else truth.log_t_ns) + np.int64(
         round(aligned.offset_s * 1e9)
     )
@@ -263,43 +266,19 @@ def _judge_truth(
         for j in jumps
     )
     est = estimate_mounting(g.t_ns, omega, tt + shift, truth.q_w_b, skip)
-    mounting, applied = _choose_mounting(s.mounting, est, imu.frame_id, truth, notes)
-    return _Judged(aligned, tt, jumps, mounting, applied)
+    declared = tf_mounting(log.static_transforms, imu.topic, imu.frame_id, truth)
+    frames = f"{imu.frame_id or 'the gyro frame'} -> {truth.child_frame_id or truth.topic}"
+    given = None if isinstance(s.mounting, str) else _given(s.mounting)
+    choice = choose_mounting(s.mounting, est, declared, given, frames)
+    if choice.line:
+        _warn(notes, choice.line)
+    return _Judged(aligned, tt, jumps, choice)
 
 
 def _given(q) -> Mounting:
     from scipy.spatial.transform import Rotation
 
     return from_rotation(Rotation.from_quat(q), "given", determined=0, fit=float("nan"))
-
-
-def _choose_mounting(mode, est: Mounting | None, imu_frame: str, truth, notes) -> tuple:
-    """The mounting to apply (or not), with its one line."""
-    frames = f"{imu_frame or 'the gyro frame'} -> {truth.child_frame_id or truth.topic}"
-    if not isinstance(mode, str):
-        given = _given(mode)
-        compare = ""
-        if est is not None and est.determined:
-            from imu_dcm.so3 import angle_between_deg
-
-            diff = float(angle_between_deg(np.asarray(given.q_t_g), np.asarray(est.q_t_g)))
-            compare = f"; the motion says {est.describe()}, {diff:.1f}° from the given one"
-        _warn(notes, f"mounting ({frames}): {given.describe()}, applied{compare}")
-        return given, True
-    if est is None or not est.determined or est.angle_deg <= APPLY_DEG:
-        return est, False  # nothing to say: no turn to learn from, or no mounting to speak of
-    if mode == "auto":
-        _warn(
-            notes,
-            f"mounting ({frames}): the gyro frame is {est.describe()}: applied to the scoring "
-            f"(--mounting none to score without it)",
-        )
-        return est, True
-    _warn(
-        notes,
-        f"mounting ({frames}): the gyro frame is {est.describe()}: not applied (--mounting none)",
-    )
-    return est, False
 
 
 def _pick_truth(log: LogData, g: _Gyro, omega: NDArray) -> tuple[LogData, tuple[dict, ...]]:
@@ -404,10 +383,10 @@ def _replay(path, s: ReplaySettings, report, notes: list[str]) -> ReplayResult:
     bias_est, omega = _remove_bias(s, g)
     log, candidates = _pick_truth(log, g, omega)
     judged = _judge_truth(log, s, g, omega, notes)
-    if judged.mounting_applied:
+    if judged.mounting.applied is not None:
         from scipy.spatial.transform import Rotation
 
-        omega = Rotation.from_quat(judged.mounting.q_t_g).apply(omega)
+        omega = Rotation.from_quat(judged.mounting.applied.q_t_g).apply(omega)
     omega, pf_summary = _prefilter(s, omega, g.t_s)
     q_truth, anchors = _scored_truth(judged.aligned.q_truth, g.t_s, judged.jumps)
     report("integrate", 0.0)
@@ -497,8 +476,10 @@ def _summary(log, s, g: _Gyro, bias_est, judged: _Judged, pf_summary, anchors, e
         bias_rule=BIAS_RULE if bias_est.mode == "auto" else "",
         rest_confirmed=bias_est.confirmed,
         no_rest=bias_est.no_rest,
-        mounting=dataclasses.asdict(mount) if mount is not None else None,
-        mounting_applied=judged.mounting_applied,
+        mounting=dataclasses.asdict(mount.reported) if mount.reported is not None else None,
+        mounting_applied=mount.applied is not None,
+        mounting_used=mount.used,
+        mounting_tf=mount.tf,
         truth_jumps=tuple(dataclasses.asdict(j) for j in judged.jumps),
         scored_segments=_segments(t_s, anchors, error, both) if judged.jumps else (),
         truth_estimate_of=getattr(truth, "estimate_of", "") if truth is not None else "",

@@ -60,8 +60,11 @@ class Mounting:
     permutation : "gyro x = truth x, ..." when a signed axis permutation is within
         :data:`PERMUTATION_DEG`, else "".
     permutation_deg : angle between the estimate and the nearest permutation, degrees.
-    source : "estimated" or "given".
+    source : "estimated", "given" or "tf" (declared in the log's ``/tf_static``).
     steps : grid steps used.
+    turn_axis_g : unit gyro-frame direction of the strongest turn (the first singular vector
+        of ``H``) for an estimate, else None. With one axis determined, only where this
+        direction goes is known.
     """
 
     q_t_g: tuple[float, float, float, float]
@@ -74,6 +77,7 @@ class Mounting:
     permutation_deg: float
     source: str = "estimated"
     steps: int = 0
+    turn_axis_g: tuple[float, float, float] | None = None
 
     @property
     def determined(self) -> bool:
@@ -92,8 +96,9 @@ class Mounting:
             if self.permutation
             else ""
         )
-        if self.source == "given":
-            return f"{self.angle_deg:.1f}° about ({ax}) as given{perm}"
+        if self.source != "estimated":
+            how = "as given" if self.source == "given" else "as declared"
+            return f"{self.angle_deg:.1f}° about ({ax}) {how}{perm}"
         partly = (
             " (the rotation about it is unknown: the smallest one is used)"
             if self.axes_determined == 1
@@ -137,7 +142,13 @@ def axis_permutation(r: NDArray[np.float64]) -> tuple[str, float]:
 
 
 def from_rotation(
-    r: Rotation, source: str, svals=(), determined: int = 3, fit: float = 1.0, steps: int = 0
+    r: Rotation,
+    source: str,
+    svals=(),
+    determined: int = 3,
+    fit: float = 1.0,
+    steps: int = 0,
+    turn_axis_g=None,
 ) -> Mounting:
     """A :class:`Mounting` from a rotation (gyro into truth frame)."""
     rv = r.as_rotvec()
@@ -157,6 +168,7 @@ def from_rotation(
         perm_deg if named else float("nan"),
         source,
         steps,
+        None if turn_axis_g is None else tuple(float(x) for x in turn_axis_g),
     )
 
 
@@ -205,7 +217,9 @@ def estimate_mounting(
     total = float(np.sum(b * b))
     resid = float(np.sum((b - a @ r.T) ** 2))
     fit = 1.0 - resid / total if total > 0 else 0.0
-    return from_rotation(Rotation.from_matrix(r), "estimated", svals, determined, fit, len(a))
+    return from_rotation(
+        Rotation.from_matrix(r), "estimated", svals, determined, fit, len(a), u[:, 0]
+    )
 
 
 def _smallest(src: NDArray[np.float64], dst: NDArray[np.float64]) -> NDArray[np.float64]:

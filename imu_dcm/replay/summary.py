@@ -26,6 +26,10 @@ class ReplaySummary:
     truth checks, kept per replay so that replays in threads do not mix (the reader's own are
     summed up in ``stopped_at`` / ``damage``). ``truth_check`` is the rate comparison of truth
     and gyro (:class:`imu_dcm.replay.truth.TruthCheck`) as a dict, or None without truth.
+    ``mounting`` is the motion's estimate of the mounting (or the quaternion given);
+    ``mounting_used`` says which rotation was applied to the rates ("estimated", "given", "tf"
+    for the one ``/tf_static`` declares, "" for none); ``mounting_tf`` is the declared one with
+    its frames and its distance to the estimate (:mod:`imu_dcm.replay.mounting_tf`), or None.
     """
 
     path: str
@@ -75,6 +79,8 @@ class ReplaySummary:
     no_rest: str = ""
     mounting: dict | None = None
     mounting_applied: bool = False
+    mounting_used: str = ""
+    mounting_tf: dict | None = None
     truth_jumps: tuple[dict, ...] = ()
     scored_segments: tuple[dict, ...] = ()
     truth_estimate_of: str = ""
@@ -158,6 +164,36 @@ def _candidates_line(cands: tuple[dict, ...]) -> str:
     )
 
 
+def _mounting_lines(s: ReplaySummary) -> list[str]:
+    """The estimated (or given) mounting and the declared one, one line each."""
+    from imu_dcm.replay.mounting import APPLY_DEG, Mounting
+
+    fields = {f.name for f in dataclasses.fields(Mounting)}
+    lines = []
+    if s.mounting:
+        mount = Mounting(**{k: v for k, v in s.mounting.items() if k in fields})
+        own = s.mounting_used in ("estimated", "given")
+        if own or (mount.determined and mount.angle_deg > APPLY_DEG):
+            lines.append(f"mounting   {mount.describe()}: {'applied' if own else 'NOT applied'}")
+    tf = s.mounting_tf
+    if tf:
+        declared = Mounting(**{k: v for k, v in tf.items() if k in fields})
+        diff = tf["angle_to_estimate_deg"]
+        where = " on the determined axis" if tf["compared_on"] == "axis" else ""
+        compare = (
+            "not checked by the motion"
+            if diff is None
+            else f"{diff:.1f}° from the estimate{where} "
+            f"({'agree' if tf['agrees'] else 'DISAGREE'})"
+        )
+        verdict = "applied" if s.mounting_used == "tf" else "NOT applied"
+        lines.append(
+            f"mounting   /tf_static {' -> '.join(tf['chain'])}: {declared.describe()}, "
+            f"{compare}: {verdict}"
+        )
+    return lines
+
+
 def _judgement_lines(s: ReplaySummary) -> list[str]:
     """The mounting, the truth's own nature and its jumps, one line each."""
     lines = []
@@ -168,15 +204,7 @@ def _judgement_lines(s: ReplaySummary) -> list[str]:
             f"truth is   {s.truth_estimate_of}, not an independent reference: the error is the "
             f"difference between two estimates"
         )
-    m = s.mounting
-    if m:
-        from imu_dcm.replay.mounting import APPLY_DEG, Mounting
-
-        fields = {f.name for f in dataclasses.fields(Mounting)}
-        mount = Mounting(**{k: v for k, v in m.items() if k in fields})
-        if s.mounting_applied or (mount.determined and mount.angle_deg > APPLY_DEG):
-            verdict = "applied" if s.mounting_applied else "NOT applied"
-            lines.append(f"mounting   {mount.describe()}: {verdict}")
+    lines += _mounting_lines(s)
     if s.truth_jumps:
         seg = ", ".join(
             f"{x['start_s']:.1f}..{x['end_s']:.1f} s {_fmt(x['rms_error_deg'])}"
