@@ -180,11 +180,11 @@ def _mounting_lines(s: ReplaySummary) -> list[str]:
         declared = Mounting(**{k: v for k, v in tf.items() if k in fields})
         diff = tf["angle_to_estimate_deg"]
         where = " on the determined axis" if tf["compared_on"] == "axis" else ""
+        word = "agree" if tf["agrees"] else "DISAGREE"
         compare = (
             "not checked by the motion"
             if diff is None
-            else f"{diff:.1f}° from the estimate{where} "
-            f"({'agree' if tf['agrees'] else 'DISAGREE'})"
+            else f"{diff:.1f}° from the estimate{where} ({word})"
         )
         verdict = "applied" if s.mounting_used == "tf" else "NOT applied"
         lines.append(
