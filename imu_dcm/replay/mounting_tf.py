@@ -173,6 +173,15 @@ class MountingChoice:
     line: str
 
 
+def _motion(est: Mounting) -> str:
+    """The estimate in short: angle, axis, what the motion determines."""
+    ax = ", ".join(f"{v:+.2f}" for v in est.axis)
+    return (
+        f"{est.angle_deg:.1f}° about ({ax}) (it determines {est.axes_determined} of 3 axes, "
+        f"fit {est.fit:.3f})"
+    )
+
+
 def _tf_record(tf: TfMounting, est: Mounting | None) -> tuple[dict, str, bool | None]:
     """The summary's ``mounting_tf`` and the clause comparing it with the estimate."""
     record = {
@@ -202,7 +211,7 @@ def _tf_record(tf: TfMounting, est: Mounting | None) -> tuple[dict, str, bool | 
         else f"they DISAGREE by {diff:.1f}°{where}: the declared transform is wrong or the "
         f"truth is not the attitude of {tf.body_frame}"
     )
-    return record, f"the motion says {est.describe()}; {verdict}", agrees
+    return record, f"the motion says {_motion(est)}; {verdict}", agrees
 
 
 def _choose_with_tf(mode, est: Mounting | None, tf: TfMounting) -> MountingChoice:
@@ -217,7 +226,7 @@ def _choose_with_tf(mode, est: Mounting | None, tf: TfMounting) -> MountingChoic
         return MountingChoice(None, est, "", record, f"{head}: neither applied (--mounting none)")
     if agrees is False:
         if est.angle_deg > APPLY_DEG:
-            tail = "applied the motion's estimate"
+            tail = "applied the motion's estimate (--mounting x,y,z,w to impose one)"
             return MountingChoice(est, est, "estimated", record, f"{head}; {tail}")
         tail = f"scored without a mounting (the motion's is under {APPLY_DEG:g}°)"
         return MountingChoice(None, est, "", record, f"{head}; {tail}")

@@ -174,7 +174,10 @@ def _mounting_lines(s: ReplaySummary) -> list[str]:
         mount = Mounting(**{k: v for k, v in s.mounting.items() if k in fields})
         own = s.mounting_used in ("estimated", "given")
         if own or (mount.determined and mount.angle_deg > APPLY_DEG):
-            lines.append(f"mounting   {mount.describe()}: {'applied' if own else 'NOT applied'}")
+            verdict = "applied" if own else "NOT applied"
+            if s.mounting_used == "tf":
+                verdict = "not applied (the declared one below is)"
+            lines.append(f"mounting   {mount.describe()}: {verdict}")
     tf = s.mounting_tf
     if tf:
         declared = Mounting(**{k: v for k, v in tf.items() if k in fields})
