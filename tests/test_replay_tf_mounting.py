@@ -278,10 +278,15 @@ def test_a_two_link_chain_and_a_pose_truth_give_the_same_mounting(trial, tmp, cl
         trial
     )
     # a PoseStamped truth names no body frame: the root of the static tree above imu_link
-    pose = _replay(build_log(trial, _mkdir(tmp / "pose"), RZ90, links, truth="pose"))
+    path = build_log(trial, _mkdir(tmp / "pose"), RZ90, links, truth="pose")
+    pose = _replay(path)
     tf = pose.summary.mounting_tf
     assert (tf["body_frame"], tf["body_frame_from"]) == ("base_link", "static root")
     assert pose.summary.mounting_used == "tf" and "they agree" in _line(pose)
+    assert abs(pose.summary.rms_error_deg - res.summary.rms_error_deg) <= _rounding_bound_deg(trial)
+    # /tf_static is read when the truth is named too
+    named = _replay(path, truth_topic="/pose")
+    assert named.summary.mounting_tf["chain"] == ["base_link", "mount", "imu_link"]
 
 
 def test_a_generic_mounting_scores_as_the_unturned_gyro(trial, tmp):
