@@ -217,7 +217,7 @@ def _dask(b: _Batches, rounds: int) -> bool:
             threads_per_worker=1,
             processes=True,
             host="127.0.0.1",
-            dashboard_address=None,
+            dashboard_address="127.0.0.1:0",  # any free port, loopback only
             silence_logs=logging.ERROR,
         ) as cluster,
         single_thread(),

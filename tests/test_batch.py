@@ -113,7 +113,11 @@ def test_rows_are_the_bare_replay_bit_for_bit_sequential_pool_and_dask(logs, tmp
 
     distributed = pytest.importorskip("distributed")
     with distributed.LocalCluster(
-        n_workers=2, threads_per_worker=1, processes=True, host="127.0.0.1", dashboard_address=None
+        n_workers=2,
+        threads_per_worker=1,
+        processes=True,
+        host="127.0.0.1",
+        dashboard_address="127.0.0.1:0",
     ) as cluster:
         on_dask = replay_many(
             logs, tmp_path / "dask.csv", dask=cluster.scheduler_address, chart=None

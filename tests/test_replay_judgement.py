@@ -191,3 +191,22 @@ def test_yaw_only_motion_determines_one_axis_and_its_mounting_is_applied():
     assert res.summary.rms_error_deg < 0.01
     line = next(w for w in res.summary.warnings if w.startswith("mounting (imu_link -> base_link)"))
     assert "1 of 3 axes (the rotation about it is unknown" in line
+
+
+def test_a_5_deg_s_bias_is_found_at_rest_and_scores_as_without_it(log, clean):
+    # The shipped trial with 5 °/s more bias on x and z: its accelerometer confirms the rests,
+    # so the larger mean still counts as bias; the same rests are found, each bias is the old one
+    # plus the added one, and the estimate is the same to rounding.
+    added = np.radians([5.0, 0.0, 5.0])
+    imu = dataclasses.replace(log.imu, omega_b=log.imu.omega_b + added)
+    res = _quiet_replay(dataclasses.replace(log, imu=imu))
+    assert res.summary.rest_confirmed
+    old, new = clean.bias.segments, res.bias.segments
+    assert [(s.start, s.stop) for s in new] == [(s.start, s.stop) for s in old]
+    for a, b in zip(old, new, strict=True):
+        np.testing.assert_allclose(np.subtract(b.bias_rad_s, a.bias_rad_s), added, atol=1e-12)
+    assert abs(res.summary.rms_error_deg - clean.summary.rms_error_deg) < 1e-9
+    # without the accelerometer the rule cannot tell it from a turn: no rest, and it says why
+    gyro_only = dataclasses.replace(imu, accel_b=None)
+    res = _quiet_replay(dataclasses.replace(log, imu=gyro_only))
+    assert not res.bias.segments and "mean |omega| (no accelerometer)" in res.summary.no_rest

@@ -179,6 +179,7 @@ class Pipeline:
         self.truth_t: list[NDArray] = []  # truth stamps / quats, oldest first
         self.truth_q: list[NDArray] = []
         self.truth_max_ns: int | None = None
+        self.truth_min_ns: int | None = None  # the first truth stamp (where re-anchoring may be)
         self.truth_count = 0
         self.fed = _Rows(*_SAMPLES)  # the last samples fed (stamps of the lagged rows)
         self.emitted = -1  # index (since the start) of the newest estimate row
@@ -214,6 +215,8 @@ class Pipeline:
         self.truth_count += len(t)
         m = int(t.max())
         self.truth_max_ns = m if self.truth_max_ns is None else max(self.truth_max_ns, m)
+        lo = int(t.min())
+        self.truth_min_ns = lo if self.truth_min_ns is None else min(self.truth_min_ns, lo)
         while len(self.truth_t) > 1 and int(self.truth_t[0].max()) < m - _TRUTH_KEEP_NS:
             del self.truth_t[0], self.truth_q[0]
         self.truth_rows.add(t, q)
@@ -356,9 +359,9 @@ class Pipeline:
         keep = t_ns >= t_ns[-1] - _ANCHOR_KEEP_NS
         t_ns, t_s, wc = t_ns[keep], t_s[keep], wc[keep]
         self.history.add(t_ns, t_s, wc)
-        covered = np.flatnonzero(t_ns <= self.truth_max_ns)
+        covered = np.flatnonzero((t_ns >= self.truth_min_ns) & (t_ns <= self.truth_max_ns))
         if not len(covered):
-            return
+            return  # no sample inside the truth yet (cheap: no slerp)
         q = _slerp(*self._truth_arrays(), t_ns[covered])
         ok = np.flatnonzero(np.all(np.isfinite(q), axis=1))
         if not len(ok):

@@ -366,7 +366,9 @@ class WsConnection:
         self.subprotocol = self._proto.subprotocol
         self._parts: list[bytes] = []
         self._text = False
+        # frames that came with the handshake's response; a ping among them is answered now
         self._pending = [e for e in self._proto.events_received() if hasattr(e, "opcode")]
+        self._flush()
 
     def _flush(self) -> None:
         out = self._proto.data_to_send()

@@ -270,7 +270,7 @@ def _judge_truth(
 def _given(q) -> Mounting:
     from scipy.spatial.transform import Rotation
 
-    return from_rotation(Rotation.from_quat(q), "given")
+    return from_rotation(Rotation.from_quat(q), "given", determined=0, fit=float("nan"))
 
 
 def _choose_mounting(mode, est: Mounting | None, imu_frame: str, truth, notes) -> tuple:

@@ -110,8 +110,9 @@ class ReplayResult:
     t_ns : int64 (N,) — gyro stamps, ns (on the chosen time base).
     t_s : float64 (N,) — seconds since the first gyro sample.
     omega_raw_b : float64 (N, 3) — gyro rates as read (after unit conversion), body, rad/s.
-    omega_b : float64 (N, 3) — rates as integrated (bias removed, pre-filtered), body, rad/s.
-    bias_b : float64 (N, 3) — bias removed at each sample, body, rad/s.
+    omega_b : float64 (N, 3) — rates as integrated (bias removed, turned into the truth's body
+        frame when a mounting was applied, pre-filtered), rad/s.
+    bias_b : float64 (N, 3) — bias removed at each sample, gyro axes, rad/s.
     q_est : float64 (N, 4) — estimate ``q_w_b`` ``[x, y, z, w]``; NaN before ``start_index``.
     q_truth : float64 (N, 4) — truth slerped at the gyro stamps; NaN outside its coverage or
         when the truth was rejected.

@@ -423,8 +423,9 @@ def find_jumps(
     """Truth steps that turn more than the gyro over the same interval (see :data:`JUMP_DEG`).
 
     Every step between consecutive truth samples inside the gyro's span is compared: the
-    truth's angle against the norm of the gyro's integrated rate over the same interval (a
-    frame-free comparison, so the mounting does not matter).
+    truth's angle against the gyro's path length over the same interval (the integral of
+    ``|omega|``, which no rotation over the interval can exceed, whatever its axes; frame-free,
+    so the mounting does not matter).
 
     Parameters
     ----------
@@ -443,8 +444,10 @@ def find_jumps(
     if len(tt) < 2 or len(t_ns) < 2:
         return ()
     te = (tt - t_ns[0]) * 1e-9
-    angle = integrated_rate(t_ns, omega_b, tt)
-    gyro_deg = np.degrees(np.linalg.norm(np.diff(angle, axis=0), axis=1))
+    # the gyro's path length over each truth step bounds any rotation it can have made
+    speed = np.linalg.norm(omega_b, axis=1)[:, None] * np.ones((1, 3))
+    path = integrated_rate(t_ns, speed, tt)[:, 0]
+    gyro_deg = np.degrees(np.diff(path))
     truth_deg = angle_between_deg(q[:-1], q[1:])
     jump = (truth_deg - gyro_deg > JUMP_DEG) & (truth_deg > JUMP_RATIO * gyro_deg)
     return tuple(
