@@ -6,14 +6,13 @@ from __future__ import annotations
 
 import subprocess
 import sys
-import threading
 
 import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
+from test_live_ws import live_thread
 
 from imu_dcm.errors import InputError
-from imu_dcm.live import run
 from imu_dcm.live.mavlink import parse_url
 from imu_dcm.live.sources import parse_source
 from imu_dcm.logio import ned
@@ -57,27 +56,8 @@ for k in range(751):                      # gyro every 4 ms from 10 s since boot
 
 
 def _run_with_sender(kind: str, source: str = "mavlink:udpin:127.0.0.1:0", **kw):
-    ready, stop = threading.Event(), threading.Event()
-    addr: dict = {}
-    out: dict = {}
-
-    def on_ready(info):
-        addr.update(info)
-        ready.set()
-
-    def target():
-        out["result"] = run(
-            source,
-            rerun="off",
-            status=False,
-            say=lambda _text: None,
-            stop=stop,
-            on_ready=on_ready,
-            **kw,
-        )
-
-    th = threading.Thread(target=target, daemon=True)
-    th.start()
+    live = live_thread(source, say=lambda _text: None, **kw)
+    ready, stop, addr, out, th = live.ready, live.stop, live.addr, live.out, live.thread
     assert ready.wait(20)
     host, port = addr["address"]
     pause_s = "0.004" if kind == "raw" else "0.0008"  # RAW_IMU: past the 1 s wait

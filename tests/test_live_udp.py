@@ -7,13 +7,20 @@ from __future__ import annotations
 
 import subprocess
 import sys
-import threading
 
 import numpy as np
 import pytest
-from test_live_ws import IMU, SLICE, TOL_DEG, TRIAL, angle_deg, decode_slice, read_slice, replay_of
-
-from imu_dcm.live import run
+from test_live_ws import (
+    IMU,
+    SLICE,
+    TOL_DEG,
+    TRIAL,
+    angle_deg,
+    decode_slice,
+    live_thread,
+    read_slice,
+    replay_of,
+)
 
 SENDER = r"""
 import socket, sys, time
@@ -64,29 +71,9 @@ def send(lines: list[bytes], address, tmp_path, rate_hz: float) -> None:
 
 
 def run_udp(lines, tmp_path, rate_hz=1500.0, **kw):
-    ready = threading.Event()
-    addr: dict = {}
-    said: list[str] = []
-    out: dict = {}
-
-    def on_ready(info):
-        addr.update(info)
-        ready.set()
-
-    def target():
-        out["result"] = run(
-            "udp://127.0.0.1:0",
-            rerun="off",
-            status=False,
-            say=said.append,
-            idle_stop_s=1.0,
-            on_ready=on_ready,
-            **kw,
-        )
-
-    th = threading.Thread(target=target, daemon=True)
-    th.start()
-    assert ready.wait(20)
+    live = live_thread("udp://127.0.0.1:0", idle_stop_s=1.0, **kw)
+    said, out, addr, th = live.said, live.out, live.addr, live.thread
+    assert live.ready.wait(20)
     send(lines, addr["address"], tmp_path, rate_hz)
     th.join(60)
     assert not th.is_alive()

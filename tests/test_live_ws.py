@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import threading
 import time
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -137,17 +138,49 @@ def trial():
     return read_slice(*SLICE)
 
 
-def start_live(url: str, **kw):
+@dataclass
+class LiveThread:
+    """A live run in a thread: what it said, its result once done (``out["result"]``), the
+    event that stops it, and the source's address once it is up (``ready``, ``addr``)."""
+
+    thread: threading.Thread
+    said: list[str]
+    out: dict
+    stop: threading.Event
+    ready: threading.Event
+    addr: dict
+
+
+def live_thread(source: str, say=None, **kw) -> LiveThread:
+    """Start ``imu_dcm.live.run(source, **kw)`` in a thread, without a view or status line."""
     said: list[str] = []
     out: dict = {}
-    stop = threading.Event()
+    addr: dict = {}
+    stop, ready = threading.Event(), threading.Event()
+
+    def on_ready(info):
+        addr.update(info)
+        ready.set()
 
     def target():
-        out["result"] = run(url, rerun="off", status=False, say=said.append, stop=stop, **kw)
+        out["result"] = run(
+            source,
+            rerun="off",
+            status=False,
+            say=say or said.append,
+            stop=stop,
+            on_ready=on_ready,
+            **kw,
+        )
 
     th = threading.Thread(target=target, daemon=True)
     th.start()
-    return th, said, out, stop
+    return LiveThread(th, said, out, stop, ready, addr)
+
+
+def start_live(url: str, **kw):
+    live = live_thread(url, **kw)
+    return live.thread, live.said, live.out, live.stop
 
 
 def angle_deg(q_a, q_b) -> float:
