@@ -2,7 +2,7 @@
 lasting days. Usually a time unit declared wrongly (ms read as s); :func:`timing_doubt` names
 the unit that would make the log plausible.
 
-Conventions: stamps int64 nanoseconds; units ``s, ms, us, ns`` as in ``--time-unit``.
+Conventions: stamps int64 nanoseconds; units ``s, ms, us, ns`` as in ``--time-units``.
 """
 
 from __future__ import annotations

@@ -38,12 +38,12 @@ def test_ms_stamps_declared_as_s_are_flagged_in_convert_and_replay(tmp_path):
         bag = convert_csv(csv_path, tmp_path / "bag", time_unit="s", **cols)
     (line,) = [str(w.message) for w in said if "no IMU produces" in str(w.message)]
     assert "0.2 Hz (median step 5 s)" in line and "as ms: 200 Hz over 20 s" in line
-    assert line.endswith("pass --time-unit ms if that is the column's unit")
+    assert line.endswith("pass --time-units ms if that is the column's unit")
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         res = replay(bag, truth_topic="none")
     said = [w for w in res.summary.warnings if "stamps no IMU produces" in w]
-    assert len(said) == 1 and "convert-csv --time-unit ms" in said[0], said
+    assert len(said) == 1 and "convert-csv --time-units ms" in said[0], said
     assert any("stamps no IMU produces" in str(c.message) for c in caught)
     with warnings.catch_warnings():
         warnings.simplefilter("error")  # the right unit: not a word

@@ -199,7 +199,7 @@ def _gyro(log: LogData, s: ReplaySettings, notes: list[str]) -> _Gyro:
     doubt = timing_doubt(clean.t_ns)
     if doubt is not None:
         clause, fix = doubt
-        hint = f"; was it converted with the wrong time unit (convert-csv --time-unit {fix})?"
+        hint = f"; was it converted with the wrong time unit (convert-csv --time-units {fix})?"
         _warn(notes, f"{imu.topic}: stamps no IMU produces: {clause}{hint if fix else ''}")
     t_s = (clean.t_ns - clean.t_ns[0]).astype(np.float64) * 1e-9
     return _Gyro(base, clean, clean.t_ns, t_s, clean.omega_b, _accel(imu, clean, notes))

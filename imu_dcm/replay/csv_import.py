@@ -117,7 +117,7 @@ def read_csv_columns(
     doubt = timing_doubt(np.sort(t_ns), time_unit)
     if doubt is not None:
         clause, fix = doubt
-        hint = f"; pass --time-unit {fix} if that is the column's unit" if fix else ""
+        hint = f"; pass --time-units {fix} if that is the column's unit" if fix else ""
         warnings.warn(
             f"{p.name}: column {time_col!r} in {time_unit} gives stamps no IMU produces: "
             f"{clause}{hint}",
