@@ -388,7 +388,10 @@ def show_replay(
         if not target.endswith(".rrd") or len(target) <= len(".rrd"):
             raise InputError(f"Expected rerun mode save:PATH.rrd, got {mode!r}")
         path = save_rrd(view, target)
-        return f"rerun: saved {path}; open it with: rerun {path} (or rerun --serve-web {path})"
+        return (
+            f"rerun: saved {path}; open it with: rerun {path} (without a display: "
+            f"rerun --serve-web --bind 127.0.0.1 {path})"
+        )
     if mode == "serve":
         served = serve_replay(view, realtime)
         return (
