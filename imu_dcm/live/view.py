@@ -28,15 +28,13 @@ from numpy.typing import NDArray
 
 from imu_dcm.errors import InputError
 from imu_dcm.so3 import quat_rotate
+from imu_dcm.viz.log import EST_RGB, TRUTH_RGB
+from imu_dcm.viz.view_data import AXES_HZ  # rows of 3D body axes per second, as replay's view
 
 __all__ = ["AXES_HZ", "LiveView", "check_mode"]
 
-#: Rows of 3D body axes per second of source time (the viewer draws the latest anyway).
-AXES_HZ = 60.0
 _TRAIL_S = 2.0
 _TRAIL_POINTS = 120
-_EST_RGB = np.array([[255, 165, 150], [150, 235, 140], [150, 195, 255]], dtype=np.uint8)
-_TRUTH_RGB = np.array([[220, 40, 40], [30, 170, 50], [40, 90, 235]], dtype=np.uint8)
 _FLUSH_TIMEOUT_S = 10.0
 #: Source time between two sends of the 3D axes and trails, s (30 per second: smooth to the eye;
 #: each send costs two rerun calls, so a 10 ms view interval does not pay them 100 times a second).
@@ -200,7 +198,7 @@ class LiveView:
         idx = self._thin(key, t_s)
         ax = _axes(q[idx])
         n = len(idx)
-        rgb, radius = (_EST_RGB, 0.018) if key == "est" else (_TRUTH_RGB, 0.035)
+        rgb, radius = (EST_RGB, 0.018) if key == "est" else (TRUTH_RGB, 0.035)
         fields = {
             "vectors": ax.reshape(-1, 3),
             "colors": np.tile(rgb, (n, 1)),

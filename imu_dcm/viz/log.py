@@ -52,8 +52,8 @@ ENTITY = {
 """Entity paths of the view (see the module docstring)."""
 
 # Truth: saturated RGB; estimate: the same hues, light.
-_TRUTH_RGB = np.array([[220, 40, 40], [30, 170, 50], [40, 90, 235]], dtype=np.uint8)
-_EST_RGB = np.array([[255, 165, 150], [150, 235, 140], [150, 195, 255]], dtype=np.uint8)
+TRUTH_RGB = np.array([[220, 40, 40], [30, 170, 50], [40, 90, 235]], dtype=np.uint8)
+EST_RGB = np.array([[255, 165, 150], [150, 235, 140], [150, 195, 255]], dtype=np.uint8)
 # Colours readable on the viewer's light and dark themes.
 _TRUTH_TRAIL_RGB = (150, 70, 220)
 _EST_TRAIL_RGB = (240, 150, 0)
@@ -218,14 +218,14 @@ def _entities(view: ViewData) -> list[_Entity]:
     rows = _axes_rows(view.t_s)  # thinned to AXES_HZ: memory bounded on long logs
     out = [
         _axes_entity(
-            ENTITY["estimate_axes"], t_rel[rows], est_axes[rows], has_est[rows], _EST_RGB, 0.018
+            ENTITY["estimate_axes"], t_rel[rows], est_axes[rows], has_est[rows], EST_RGB, 0.018
         ),
         _axes_entity(
             ENTITY["truth_axes"],
             t_rel[rows],
             true_axes[rows],
             has_truth[rows],
-            _TRUTH_RGB,
+            TRUTH_RGB,
             0.035,
             True,
         ),
