@@ -26,13 +26,13 @@ from __future__ import annotations
 import contextlib
 import io
 import re
-import warnings
 from pathlib import Path
 
 import numpy as np
 from numpy.typing import NDArray
 
-from imu_dcm.errors import ImuDcmWarning, LogError
+from imu_dcm.errors import LogError
+from imu_dcm.logio.damage import warn_damage
 from imu_dcm.logio.ned import FLU_FROM_FRD, q_enu_flu, q_wxyz_from_euler_deg
 from imu_dcm.logio.source import Progress, ReadRequest, SourceEntry
 from imu_dcm.logio.types import ChannelInfo, Damage, ImuSeries, LogData, TruthSeries
@@ -275,12 +275,7 @@ class DataFlashSource:
             damage.append(Damage(-1, f"DataFlash log cut short: {cut} IMU record(s) incomplete"))
         if said:
             damage.append(Damage(-1, f"pymavlink skipped damaged bytes: {said.splitlines()[0]}"))
-        if damage:
-            warnings.warn(
-                f"{self.path.name} is truncated or corrupt: {damage[0].what}",
-                ImuDcmWarning,
-                stacklevel=3,
-            )
+        stopped_at = warn_damage(self.path, damage)
         channels = tuple(
             ChannelInfo(name, name, "dataflash", len(df.offsets[tid]))
             for name, tid in sorted(df.name_to_id.items())
@@ -295,7 +290,7 @@ class DataFlashSource:
             channels=channels,
             container=KIND,
             damage=tuple(damage),
-            stopped_at=damage[0].what if damage else None,
+            stopped_at=stopped_at,
             truth_candidates=tuple(truths[1:]),
             notes=tuple(n for n in (imu_note, truth_note) if n),
         )

@@ -15,9 +15,10 @@ from pathlib import Path
 
 from imu_dcm.errors import ImuDcmWarning, LogError
 from imu_dcm.logio.channels import describe, pick_imu_judged, plan, read_imu, read_truths
+from imu_dcm.logio.damage import damage_summary, warn_damage
 from imu_dcm.logio.source import Progress, ReadRequest
 from imu_dcm.logio.tf import static_transforms
-from imu_dcm.logio.types import ChannelInfo, Collected, Damage, LogData, Sink
+from imu_dcm.logio.types import ChannelInfo, Collected, LogData, Sink
 
 
 class RosSource:
@@ -42,21 +43,6 @@ class RosSource:
 
     def read(self, request: ReadRequest) -> LogData:
         return read_ros(self, request)
-
-
-def damage_summary(damage: list[Damage]) -> str:
-    """One line for the damaged parts skipped: the first one, and the messages lost in all."""
-    lost = [d.messages_lost for d in damage]
-    n_lost = "an unknown number of" if None in lost else str(sum(lost))
-    first = damage[0]
-    more = f" (and {len(damage) - 1} more)" if len(damage) > 1 else ""
-    when = ""
-    if first.t_start_ns is not None and first.t_end_ns is not None:
-        when = f", log time {first.t_start_ns}..{first.t_end_ns} ns"
-    return (
-        f"{first.what} (file offset {first.offset}{when}){more}; {n_lost} messages of the "
-        f"read channels lost in {len(damage)} damaged part{'s' if len(damage) > 1 else ''}"
-    )
 
 
 def _check_not_empty(got: Collected, channels: tuple[ChannelInfo, ...], shown: Path, stopped_at):
@@ -91,10 +77,7 @@ def read_ros(source: RosSource, request: ReadRequest) -> LogData:
             f"Expected IMU samples on {imu.topic}, got none that decode ({undecodable} messages)"
         )
     truth, candidates = read_truths(got, imu, request.truth_topic, request.truth_frame)
-    if stopped_at:
-        warnings.warn(
-            f"{shown.name} is truncated or corrupt: {stopped_at}", ImuDcmWarning, stacklevel=4
-        )
+    warn_damage(shown, got.damage, stacklevel=4)
     if undecodable:
         warnings.warn(
             f"{imu.topic}: dropped {undecodable} messages that do not decode",

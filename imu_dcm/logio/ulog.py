@@ -38,14 +38,14 @@ from __future__ import annotations
 import contextlib
 import io
 import re
-import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 from numpy.typing import NDArray
 
-from imu_dcm.errors import ImuDcmWarning, LogError
+from imu_dcm.errors import LogError
+from imu_dcm.logio.damage import warn_damage
 from imu_dcm.logio.ned import FLU_FROM_FRD, q_enu_flu
 from imu_dcm.logio.source import Progress, ReadRequest, SourceEntry
 from imu_dcm.logio.types import ChannelInfo, Damage, ImuSeries, LogData, TruthSeries
@@ -597,13 +597,7 @@ class UlogSource:
         channels = tuple(
             ChannelInfo(label(n, i), fmt, "ulog", c) for (n, i, fmt), c in sorted(s.counts.items())
         )
-        if s.damage:  # once the log is known to be usable: an error is then the only line
-            warnings.warn(
-                f"{self.path.name} is truncated or corrupt: {s.damage[0].what}"
-                + (f" (and {len(s.damage) - 1} more)" if len(s.damage) > 1 else ""),
-                ImuDcmWarning,
-                stacklevel=3,
-            )
+        stopped_at = warn_damage(self.path, s.damage)  # once the log is known to be usable
         if progress is not None:
             progress(1.0)
         return LogData(
@@ -614,7 +608,7 @@ class UlogSource:
             custom_data={k: v for k, v in s.info.items() if len(v) < 200},
             container=KIND,
             damage=tuple(s.damage),
-            stopped_at=s.damage[0].what if s.damage else None,
+            stopped_at=stopped_at,
             truth_candidates=tuple(series[1:]),
             notes=tuple(n for n in notes if n),
         )
