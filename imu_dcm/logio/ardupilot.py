@@ -99,11 +99,13 @@ def decode(df, name: str, struct_codes: dict) -> tuple[dict[str, NDArray], int]:
     offs = np.asarray(df.offsets[type_id], dtype=np.int64)
     whole = offs + 3 + dtype.itemsize <= df.data_len
     offs = offs[whole]
-    b = np.frombuffer(df.data_map, np.uint8)
-    try:
-        rows = b[(offs + 3)[:, None] + np.arange(dtype.itemsize)]
-    finally:
-        del b  # the reader's mmap must have no exported buffer when it closes
+    rows = np.zeros((0, dtype.itemsize), np.uint8)
+    if len(offs):  # whole records only, so the window fits the data
+        b = np.frombuffer(df.data_map, np.uint8)
+        try:  # a copy of the records' bytes only (no N x itemsize index matrix)
+            rows = np.lib.stride_tricks.sliding_window_view(b, dtype.itemsize)[offs + 3]
+        finally:
+            del b  # the reader's mmap must have no exported buffer when it closes
     rec = np.ascontiguousarray(rows).view(dtype)[:, 0]
     cols = {}
     for col, mult in zip(dtype.names, fmt.msg_mults, strict=False):

@@ -148,7 +148,10 @@ def _dtype(name: str, formats: dict[str, bytes], depth: int = 0) -> np.dtype:
     for typ, n, fname in _parse_format(formats[name])[1]:
         base = np.dtype(_BASIC[typ]) if typ in _BASIC else _dtype(typ, formats, depth + 1)
         parts.append((fname, base, (n,)) if n else (fname, base))
-    return np.dtype(parts)
+    try:
+        return np.dtype(parts)
+    except (ValueError, TypeError) as exc:  # a field named twice, an empty or bad name
+        raise _Irregular(f"format {name!r} has no numpy layout ({exc})") from None
 
 
 def _layout(name: str, formats: dict) -> tuple[np.dtype, int]:
@@ -285,6 +288,8 @@ class _Scanner:
             n = size[sel] - 2
             ok = (n >= layout.itemsize) & (n <= layout.itemsize + pad)
             self.short[k] = self.short.get(k, 0) + int(len(sel) - np.count_nonzero(ok))
+            if not ok.any():
+                continue
             start = dpos[sel[ok]] + 5
             rows = np.lib.stride_tricks.sliding_window_view(b, layout.itemsize)[start]
             self.blocks.setdefault(k, []).append(rows)
@@ -366,7 +371,15 @@ def scan(path: Path, wanted: frozenset[str], progress: Progress | None = None) -
     try:
         scanned = _scan_fast(path, wanted, progress)
     except _Irregular as exc:
-        scanned = _scan_pyulog(path, wanted, str(exc))
+        try:
+            scanned = _scan_pyulog(path, wanted, str(exc))
+        except LogError:
+            raise
+        except Exception as err:  # pyulog's own failure on a file the fast scan refused
+            raise LogError(
+                f"Expected a readable ULog, got {exc} (and pyulog: {type(err).__name__}: "
+                f"{err}) in {path}"
+            ) from None
     if not scanned.dropout_times_us:
         scanned.dropout_times_us = _dropout_times(scanned)
     return scanned
@@ -470,8 +483,17 @@ def _accel(gyro: Topic, topics: list[Topic], t_ns: NDArray[np.int64]) -> NDArray
         a[rel.astype(np.int64) == _ACCEL_INVALID] = np.nan
     if gyro is comb:
         return a
-    t_acc = comb.fields["timestamp"].astype(np.int64) * 1000
+    # PX4 stamps the accelerometer at timestamp + accelerometer_timestamp_relative (µs)
+    t_us = comb.fields["timestamp"].astype(np.int64)
+    if rel is not None:
+        t_us = t_us + np.where(rel.astype(np.int64) == _ACCEL_INVALID, 0, rel.astype(np.int64))
+    good = np.all(np.isfinite(a), axis=1)
+    t_acc, a = t_us[good] * 1000, a[good]
     out = np.full((len(t_ns), 3), np.nan)
+    if len(t_acc) < 2:
+        return out
+    order = np.argsort(t_acc, kind="stable")
+    t_acc, a = t_acc[order], a[order]
     inside = (t_ns >= t_acc[0]) & (t_ns <= t_acc[-1])
     for i in range(3):
         out[inside, i] = np.interp(t_ns[inside], t_acc, a[:, i])
