@@ -47,7 +47,7 @@ from imu_dcm.replay.truth import (
     find_jumps,
 )
 from imu_dcm.resample import slerp_truth
-from imu_dcm.stamps import timing_doubt
+from imu_dcm.stamps import NS_PER_UNIT, timing_doubt
 
 __all__ = ["CleanedImu", "ReplayResult", "ReplaySummary", "clean_imu", "replay", "slerp_truth"]
 
@@ -199,7 +199,13 @@ def _gyro(log: LogData, s: ReplaySettings, notes: list[str]) -> _Gyro:
     doubt = timing_doubt(clean.t_ns)
     if doubt is not None:
         clause, fix = doubt
-        hint = f"; was it converted with the wrong time unit (convert-csv --time-units {fix})?"
+        factor = NS_PER_UNIT["s"] // NS_PER_UNIT[fix] if fix else 0
+        # a log's stamps have no declared unit: say the factor, not a unit read as seconds
+        clause = clause.replace(f"; as {fix}:", f"; with steps {factor}x shorter:")
+        hint = (
+            f"; was it converted with a time unit {factor}x too large (for a CSV declared in "
+            f"s: convert-csv --time-units {fix})?"
+        )
         _warn(notes, f"{imu.topic}: stamps no IMU produces: {clause}{hint if fix else ''}")
     t_s = (clean.t_ns - clean.t_ns[0]).astype(np.float64) * 1e-9
     return _Gyro(base, clean, clean.t_ns, t_s, clean.omega_b, _accel(imu, clean, notes))
@@ -246,25 +252,28 @@ def _judge_truth(
     tt = (truth.t_ns if g.base == "header" else truth.log_t_ns) + np.int64(
         round(aligned.offset_s * 1e9)
     )
-    jumps = find_jumps(g.t_ns, omega, tt, truth.q_w_b)
+    residual = 0.0  # the measured truth lag, not applied to the scoring with a fixed offset
+    if s.truth_offset_s != "auto" and aligned.check and aligned.check.shift_s is not None:
+        residual = aligned.check.shift_s
+    shift = np.int64(round(residual * 1e9))
+    # jumps are judged with the truth aligned to the gyro (a lagging truth would turn after the
+    # gyro and look like a jump), then said and scored on the truth's own stamps
+    on_gyro = find_jumps(g.t_ns, omega, tt + shift, truth.q_w_b)
+    t00 = int(g.t_ns[0])
+    skip = tuple((t00 + round(j.t0_s * 1e9), t00 + round(j.t1_s * 1e9)) for j in on_gyro)
+    jumps = tuple(
+        dataclasses.replace(j, t0_s=j.t0_s - residual, t1_s=j.t1_s - residual) for j in on_gyro
+    )
     if jumps:
         shown = "; ".join(j.describe() for j in jumps[:5])
         more = f" and {len(jumps) - 5} more" if len(jumps) > 5 else ""
         _warn(
             notes,
             f"truth {truth.topic} jumps where the gyro does not: {shown}{more}; the estimate "
-            f"re-anchors to the truth after each jump and the {len(jumps) + 1} segments "
-            f"between jumps are scored",
+            f"re-anchors to the truth after each jump and the "
+            f"{len(_scored_truth(aligned.q_truth, g.t_s, jumps)[1])} segments between jumps are "
+            f"scored",
         )
-    residual = 0.0
-    if s.truth_offset_s != "auto" and aligned.check and aligned.check.shift_s is not None:
-        residual = aligned.check.shift_s
-    shift = np.int64(round(residual * 1e9))
-    t00 = int(g.t_ns[0])
-    skip = tuple(
-        (t00 + round(j.t0_s * 1e9) + int(shift), t00 + round(j.t1_s * 1e9) + int(shift))
-        for j in jumps
-    )
     est = estimate_mounting(g.t_ns, omega, tt + shift, truth.q_w_b, skip)
     declared = tf_mounting(log.static_transforms, imu.topic, imu.frame_id, truth)
     frames = f"{imu.frame_id or 'the gyro frame'} -> {truth.child_frame_id or truth.topic}"

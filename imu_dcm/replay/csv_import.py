@@ -113,6 +113,13 @@ def read_csv_columns(
         )
     if np.any(t < 0):
         raise InputError(f"Expected times >= 0 in column {time_col!r}, got {t.min()}")
+    if t.max() * TIME_UNITS_NS[time_unit] >= 2.0**63:
+        fits = [u for u, f in TIME_UNITS_NS.items() if t.max() * f < 2.0**63]
+        raise InputError(
+            f"Expected times in {time_unit} in column {time_col!r}, got {t.max():.6g}, beyond "
+            f"int64 nanoseconds (year 2262) in {time_unit}; the column's unit is likely "
+            f"{fits[0] if fits else 'not a time'} (--time-units)"
+        )
     t_ns = np.round(t * TIME_UNITS_NS[time_unit]).astype(np.int64)
     doubt = timing_doubt(np.sort(t_ns), time_unit)
     if doubt is not None:
