@@ -270,6 +270,12 @@ class EurocSource:
                 f"{', '.join(t.name for t in TRUTHS)}), got {request.truth_frame!r}"
             )
         imu = self._imu(request.imu_topic or "imu0")
+        if imu.topic != "imu0" and request.truth_topic != "none":
+            raise LogError(
+                f"Expected imu0 with a truth (the dataset's truths are given in imu0's frame or "
+                f"through it), got {imu.topic} in {self.mav}; add --truth-topic none to "
+                f"integrate {imu.topic} without a truth"
+            )
         channels = [ChannelInfo(imu.topic, CSV_TYPE, "csv", len(imu.t_ns))]
         if progress is not None:
             progress(0.5)
