@@ -280,7 +280,7 @@ def main(argv: list[str] | None = None) -> int:
         except BrokenPipeError:  # ... | head: the reader had what it wanted
             end_quietly_on_broken_pipe()
             code = EXIT_OK
-        except (ImuDcmError, FileExistsError) as exc:
+        except (ImuDcmError, OSError) as exc:  # FileExistsError is an OSError
             code = EXIT_BAD_INPUT
             message = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
         except SystemExit as exc:

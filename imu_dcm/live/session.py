@@ -87,15 +87,22 @@ def _check_outputs(record, force: bool, summary_json, rerun) -> None:
     """The view's mode and the output paths, before the source is opened (imu_dcm.outputs'
     rule)."""
     from imu_dcm.live.view import check_mode
-    from imu_dcm.outputs import check_output_dir, check_output_file
+    from imu_dcm.outputs import OutputError, check_output_dir, check_output_file
 
     check_mode(rerun)
-    if record is not None:
-        check_output_dir(record, force=force, what="--record bag")
+    files = []
     if summary_json is not None:
-        check_output_file(summary_json, (), "--summary-json file")
+        files.append((check_output_file(summary_json, (), "--summary-json file"), "--summary-json"))
     if isinstance(rerun, str) and rerun.startswith("save:"):
-        check_output_file(rerun[len("save:") :], (), "--rerun save: file")
+        path = check_output_file(rerun[len("save:") :], (), "--rerun save: file")
+        files.append((path, "--rerun save:"))
+    if record is not None:  # the other outputs must not land in (or be) the bag folder
+        bag = check_output_dir(record, force=force, what="--record bag")
+        for path, what in files:
+            if path.is_relative_to(bag):
+                raise OutputError(
+                    f"Expected {what} outside the --record bag {str(bag)!r}, got {str(path)!r}"
+                )
 
 
 def _pct(a: NDArray, p: float) -> float | None:

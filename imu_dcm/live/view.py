@@ -80,6 +80,14 @@ def _axes(q: NDArray) -> NDArray:
     return quat_rotate(q[:, None, :], np.eye(3)[None, :, :])
 
 
+def _save(rec, target: str, blueprint) -> None:
+    """Stream the recording into ``target`` (.rrd), its missing folders created."""
+    from imu_dcm.outputs import ensure_parent
+
+    ensure_parent(target, "--rerun save: file")
+    rec.save(target, default_blueprint=blueprint)
+
+
 class LiveView:
     """A rerun recording fed as the live run goes (see the module doc)."""
 
@@ -145,10 +153,14 @@ class LiveView:
             say(f"rerun: viewer started (pid {pid}, listening on 127.0.0.1:{port})")
         elif mode == "serve":
             self.served = viz.serve_rrd(None)
-            rec.connect_grpc(self.served.grpc_url, default_blueprint=blueprint)
+            try:
+                rec.connect_grpc(self.served.grpc_url, default_blueprint=blueprint)
+            except BaseException:
+                self.served.stop()
+                raise
             say(f"rerun: open {self.served.url} (web viewer, 127.0.0.1 only)")
         else:
-            rec.save(mode[len("save:") :], default_blueprint=blueprint)
+            _save(rec, mode[len("save:") :], blueprint)
         rec.send_recording_name(title)
         self.rec = rec
         self._static()

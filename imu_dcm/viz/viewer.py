@@ -320,13 +320,17 @@ def serve_replay(view: ViewData, realtime: bool = False) -> ServedReplay:
     """
     if realtime:
         served = serve_rrd(None)
-        print(f"rerun: open {served.url} (streaming at recorded speed)", flush=True)
-        rec = _new_recording(view)
-        rec.connect_grpc(served.grpc_url, default_blueprint=make_blueprint(view))
-        rec.send_recording_name(view.title)
-        send_view(view, rec, realtime=True)
-        rec.flush(timeout_sec=_FLUSH_TIMEOUT_S)
-        rec.disconnect()
+        try:  # Ctrl-C or an error while streaming must not leave the server running
+            print(f"rerun: open {served.url} (streaming at recorded speed)", flush=True)
+            rec = _new_recording(view)
+            rec.connect_grpc(served.grpc_url, default_blueprint=make_blueprint(view))
+            rec.send_recording_name(view.title)
+            send_view(view, rec, realtime=True)
+            rec.flush(timeout_sec=_FLUSH_TIMEOUT_S)
+            rec.disconnect()
+        except BaseException:
+            served.stop()
+            raise
         return ServedReplay(served, None)
     folder = Path(tempfile.mkdtemp(prefix="imu_dcm_rerun_"))
     try:
