@@ -11,6 +11,7 @@ processed, the integrator closes its last step, the recording is finished and th
 from __future__ import annotations
 
 import dataclasses
+import gc
 import queue
 import signal
 import sys
@@ -246,6 +247,7 @@ def run(
             say=say,
             time_units=o.time_units if src.converts_gyro_units else None,
         )
+        gc.freeze()  # the start-up's objects: not traversed by every collection while live
         reason = _Loop(src, pipe, o, stop or threading.Event(), say, on_ready).run()
     finally:
         _close(src, view, recorder, say, o.keep_viewer)
