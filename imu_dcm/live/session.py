@@ -57,6 +57,21 @@ def _scaled(rec: Received, gyro_scale: float) -> Received:
     return dataclasses.replace(rec, values=rec.values * gyro_scale)
 
 
+def _joined(recs: list[Received]) -> Received:
+    """Batches of one kind, in arrival order, as one."""
+    if len(recs) == 1:
+        return recs[0]
+    raw = None if any(r.raw is None for r in recs) else [p for r in recs for p in r.raw]
+    return Received(
+        recs[0].kind,
+        np.concatenate([r.t_ns for r in recs]),
+        np.concatenate([r.values for r in recs]),
+        np.concatenate([r.arrival_ns for r in recs]),
+        np.concatenate([r.wall_ns for r in recs]),
+        raw,
+    )
+
+
 def _check_bias(bias) -> str | tuple:
     """``"auto"``, ``"none"`` or 3 finite numbers (rad/s); text is parsed by the command line
     (:func:`imu_dcm.cli.parse_bias`)."""
@@ -250,6 +265,7 @@ def run(
         gc.freeze()  # the start-up's objects: not traversed by every collection while live
         reason = _Loop(src, pipe, o, stop or threading.Event(), say, on_ready).run()
     finally:
+        gc.unfreeze()
         _close(src, view, recorder, say, o.keep_viewer)
     lat = np.concatenate(pipe.latency) if pipe.latency else np.zeros(0)
     summary = _summary(pipe, src, source, o, bias_v, reason, lat, recorder, started)
@@ -366,44 +382,58 @@ class _Loop:
         return self.reason
 
     def _receive(self) -> None:
-        pipe, events = self.pipe, self.src.events
+        """Wake once per view interval (not per event): take every event the source has
+        queued, hand the samples on as one batch per kind, send the view batch."""
+        pipe = self.pipe
         now = time.monotonic()
         next_flush, next_status = now + self.interval_s, now + self.status_every
         window_s = pipe.reorder.window_ns * 1e-9
-        while not self.stop.is_set():
-            try:
-                if self._handle(events.get(timeout=max(0.0, next_flush - time.monotonic()))):
-                    return
-            except queue.Empty:
-                pass
+        while not self.stop.wait(max(0.0, next_flush - time.monotonic())):
+            if self._take():
+                return
             now = time.monotonic()
-            if now >= next_flush:
-                pipe.flush()
-                if self.recorder is not None:
-                    self.recorder.maybe_flush()
-                next_flush = now + self.interval_s
+            if len(pipe.reorder) and now - self.idle_since > window_s:
+                pipe.release_held()  # the source went quiet: a sample waits <= the window
+            pipe.flush()
+            if self.recorder is not None:
+                self.recorder.maybe_flush()
+            next_flush = max(next_flush + self.interval_s, now)  # a steady cadence
             if self.status and now >= next_status:
                 _status(pipe, self.tty)
                 next_status = now + self.status_every
-            if len(pipe.reorder) and now - self.idle_since > window_s:
-                pipe.release_held()  # the source went quiet: a sample waits <= the window
             if self.idle_stop_s is not None and now - self.idle_since > self.idle_stop_s:
                 self.reason = f"no sample for {self.idle_stop_s:g} s"
                 return
 
+    def _take(self, data_only: bool = False) -> bool:
+        """Every event queued by now, in order; the samples of each kind go to the pipeline as
+        one batch (the truth first: it may start the estimate). True when the source ended."""
+        events = self.src.events
+        got: dict[str, list[Received]] = {"truth": [], "imu": []}
+        ended = False
+        while not ended:
+            try:
+                ev = events.get_nowait()
+            except queue.Empty:
+                break
+            if ev[0] == "data":
+                got[ev[1].kind].append(ev[1])
+                if self.recorder is not None:
+                    self.recorder.add_received(ev[1])
+            elif not data_only or ev[0] == "malformed":
+                ended = self._handle(ev)
+        pipe = self.pipe
+        if got["truth"]:
+            pipe.on_truth(_joined(got["truth"]))
+        if got["imu"]:
+            pipe.on_imu(_scaled(_joined(got["imu"]), self.gyro_scale))
+            self.idle_since = time.monotonic()
+        return ended
+
     def _handle(self, ev: tuple) -> bool:
-        """One event from the source; True when it ends the run."""
+        """One event from the source other than samples; True when it ends the run."""
         kind, pipe = ev[0], self.pipe
-        if kind == "data":
-            rec: Received = ev[1]
-            if rec.kind == "imu":
-                pipe.on_imu(_scaled(rec, self.gyro_scale))
-                self.idle_since = time.monotonic()
-            else:
-                pipe.on_truth(rec)
-            if self.recorder is not None:
-                self.recorder.add_received(rec)
-        elif kind == "malformed":
+        if kind == "malformed":
             pipe.malformed += ev[1]
         elif kind == "channel":
             ch = ev[1]
@@ -421,13 +451,7 @@ class _Loop:
     def _drain(self) -> None:
         """What the source already delivered, once it has stopped."""
         self.src.stop()
-        while True:
-            try:
-                ev = self.src.events.get_nowait()
-            except queue.Empty:
-                return
-            if ev[0] in ("data", "malformed"):
-                self._handle(ev)
+        self._take(data_only=True)
 
 
 def _status(pipe: Pipeline, tty: bool) -> None:
