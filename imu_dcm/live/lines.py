@@ -21,7 +21,7 @@ from decimal import Decimal, InvalidOperation
 import numpy as np
 from numpy.typing import NDArray
 
-__all__ = ["TIME_UNITS", "parse_lines", "time_unit_hint"]
+__all__ = ["TIME_UNITS", "parse_csv_rows", "parse_lines", "time_unit_hint"]
 
 #: Nanoseconds per unit of a CSV stamp.
 TIME_UNITS = {"s": 1_000_000_000, "ms": 1_000_000, "us": 1_000, "ns": 1}
@@ -138,7 +138,8 @@ def parse_lines(
     bulk = _parse_csv_bulk(lines, gyro_scale, t_scale) if lines else None
     if bulk is None:
         return _parse_each(head + lines, gyro_scale, t_scale, first=bool(head))
-    t, w, bad = bulk
+    t, w, rows = bulk
+    bad = len(lines) - len(rows)
     if head:
         t0, w0, tt, q, bad0 = _parse_each(head, gyro_scale, t_scale, first=True)
         t, w, bad = np.concatenate([t0, t]), np.concatenate([w0, w]), bad + bad0
@@ -146,12 +147,27 @@ def parse_lines(
     return t, w, np.zeros(0, np.int64), np.zeros((0, 4)), bad
 
 
+def parse_csv_rows(
+    lines: list[bytes], *, gyro_units: str = "rad/s", time_units: str = "s"
+) -> tuple[NDArray, NDArray, NDArray, int] | None:
+    """Plain CSV lines ``t,gx,gy,gz`` (no header, no blank line) in one numpy pass:
+    ``(t_ns, omega_b, rows, malformed)``, ``rows`` the indices of the lines kept (a line with a
+    non-finite rate is malformed); None when a line is not of that form (then
+    :func:`parse_lines` judges the lines one by one)."""
+    gyro_scale = DEG if gyro_units == "deg/s" else 1.0
+    bulk = _parse_csv_bulk(lines, gyro_scale, TIME_UNITS[time_units]) if lines else None
+    if bulk is None:
+        return None
+    t, w, rows = bulk
+    return t, w, rows, len(lines) - len(rows)
+
+
 def _parse_csv_bulk(
     lines: list[bytes], gyro_scale: float, t_scale: int
-) -> tuple[NDArray, NDArray, int] | None:
-    """CSV lines ``t,gx,gy,gz`` as arrays (stamps exact, as :func:`_stamp_ns`), or None when a
-    line is not of that plain form (the caller then parses line by line). Rows with a
-    non-finite rate are dropped and counted."""
+) -> tuple[NDArray, NDArray, NDArray] | None:
+    """CSV lines ``t,gx,gy,gz`` as arrays (stamps exact, as :func:`_stamp_ns`) and the indices
+    of the rows kept, or None when a line is not of that plain form (the caller then parses line
+    by line). Rows with a non-finite rate are dropped."""
     fields = b",".join(lines).split(b",")
     n = len(lines)
     if len(fields) != 4 * n or lines[0][:1] == b"{":
@@ -166,8 +182,8 @@ def _parse_csv_bulk(
     if gyro_scale != 1.0:
         w *= gyro_scale
     if ok.all():
-        return t_ns, w, 0
-    return t_ns[ok], w[ok], int(n - ok.sum())
+        return t_ns, w, np.arange(n)
+    return t_ns[ok], w[ok], np.flatnonzero(ok)
 
 
 def _plain_stamp_ns(text: bytes, scale: int, digits: int) -> int:

@@ -406,36 +406,46 @@ class _Loop:
                 return
 
     def _take(self, data_only: bool = False) -> bool:
-        """Every event queued by now, in order; the samples of each kind go to the pipeline as
-        one batch (the truth first: it may start the estimate). True when the source ended."""
+        """Every event queued by now, in order; raw items decoded once per key (the source's
+        :meth:`~imu_dcm.live.sources.Source.decode`); the samples of each kind go to the
+        pipeline as one batch (the truth first: it may start the estimate). True when the
+        source ended."""
         events = self.src.events
-        got: dict[str, list[Received]] = {"truth": [], "imu": []}
+        raw: dict[int, tuple] = {}  # id(key) -> (key, items), in first-seen order
+        data: list[tuple] = []
         ended = False
         while not ended:
             try:
                 ev = events.get_nowait()
             except queue.Empty:
                 break
-            if ev[0] == "data":
-                got[ev[1].kind].append(ev[1])
-                if self.recorder is not None:
-                    self.recorder.add_received(ev[1])
-            elif not data_only or ev[0] == "malformed":
+            if ev[0] == "raw":
+                raw.setdefault(id(ev[1]), (ev[1], []))[1].extend(ev[2])
+            elif ev[0] == "data" or ev[0] == "malformed":
+                data.append(ev)
+            elif not data_only:
                 ended = self._handle(ev)
-        pipe = self.pipe
+        for key, items in raw.values():
+            data.extend(self.src.decode(key, items))
+        got: dict[str, list[Received]] = {"truth": [], "imu": []}
+        for ev in data:
+            if ev[0] == "malformed":
+                self.pipe.malformed += ev[1]
+                continue
+            got[ev[1].kind].append(ev[1])
+            if self.recorder is not None:
+                self.recorder.add_received(ev[1])
         if got["truth"]:
-            pipe.on_truth(_joined(got["truth"]))
+            self.pipe.on_truth(_joined(got["truth"]))
         if got["imu"]:
-            pipe.on_imu(_scaled(_joined(got["imu"]), self.gyro_scale))
+            self.pipe.on_imu(_scaled(_joined(got["imu"]), self.gyro_scale))
             self.idle_since = time.monotonic()
         return ended
 
     def _handle(self, ev: tuple) -> bool:
         """One event from the source other than samples; True when it ends the run."""
         kind, pipe = ev[0], self.pipe
-        if kind == "malformed":
-            pipe.malformed += ev[1]
-        elif kind == "channel":
+        if kind == "channel":
             ch = ev[1]
             pipe.channels[ch.kind] = ch
             pipe.truth_channel |= ch.kind == "truth"

@@ -49,7 +49,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from imu_dcm.errors import InputError
-from imu_dcm.live.lines import parse_lines
+from imu_dcm.live.lines import parse_csv_rows, parse_lines
 from imu_dcm.logio.batch import classify_schema, decode_cdr_batch
 
 __all__ = [
@@ -208,6 +208,12 @@ class Source:
     def _close(self) -> None:
         """Release what the constructor opened (for a source that never started)."""
 
+    def decode(self, key, items: list) -> list[tuple]:
+        """The ``data`` and ``malformed`` events of raw items the thread queued as
+        ``("raw", key, items)``: called by the session's loop once per key and wake-up with every
+        item of that key in arrival order, so the decode's fixed cost is shared by all of them."""
+        raise NotImplementedError
+
     def _guarded(self) -> None:
         try:
             self._run()
@@ -228,19 +234,40 @@ class _LineSource(Source):
         self.batch_s = batch_s
         self._first = True
 
-    def _emit_lines(self, lines: list[bytes], arrival_ns: int, wall_ns: int) -> None:
+    def decode(self, key, items: list) -> list[tuple]:
+        """Items ``(blob, arrival_ns, wall_ns)``, ``blob`` whole lines: plain CSV lines in one
+        numpy pass over all the items, else item by item (:func:`parse_lines`)."""
+        per = [[ln for ln in blob.split(b"\n") if ln.strip()] for blob, _, _ in items]
+        bulk = None
+        if not self._first:
+            lines = [ln for p in per for ln in p]
+            bulk = parse_csv_rows(lines, gyro_units=self.gyro_units, time_units=self.time_units)
+        if bulk is None:
+            return [
+                ev for p, (_, a, w) in zip(per, items, strict=True) for ev in self._each(p, a, w)
+            ]
+        t, w, rows, bad = bulk
+        counts = [len(p) for p in per]
+        arrival = np.repeat(np.array([a for _, a, _ in items], np.int64), counts)[rows]
+        wall = np.repeat(np.array([x for _, _, x in items], np.int64), counts)[rows]
+        out: list[tuple] = [("malformed", bad)] if bad else []
+        if len(t):
+            out.append(("data", Received("imu", t, w, arrival, wall)))
+        return out
+
+    def _each(self, lines: list[bytes], arrival_ns: int, wall_ns: int) -> list[tuple]:
         t, w, tt, q, bad = parse_lines(
             lines, gyro_units=self.gyro_units, time_units=self.time_units, first=self._first
         )
-        self._first = False
-        if bad:
-            self.events.put(("malformed", bad))
+        self._first = self._first and not lines
+        out: list[tuple] = [("malformed", bad)] if bad else []
         for kind, stamps, values in (("truth", tt, q), ("imu", t, w)):
             if len(stamps):
                 n = len(stamps)
                 arrival = np.full(n, arrival_ns, np.int64)
                 wall = np.full(n, wall_ns, np.int64)
-                self.events.put(("data", Received(kind, stamps, values, arrival, wall)))
+                out.append(("data", Received(kind, stamps, values, arrival, wall)))
+        return out
 
 
 class UdpSource(_LineSource):
@@ -285,8 +312,8 @@ class UdpSource(_LineSource):
                         chunks.append(sock.recv(65536))
                 except (BlockingIOError, InterruptedError):
                     pass
-                if chunks:
-                    self._emit_lines(b"\n".join(chunks).split(b"\n"), arrival, wall)
+                if chunks:  # parsed by the session's loop (decode), with the other items
+                    self.events.put(("raw", "lines", [(b"\n".join(chunks), arrival, wall)]))
         finally:
             sock.close()
 
@@ -316,13 +343,12 @@ class StdinSource(_LineSource):
             data = os.read(self.fd, 1 << 20)
             if not data:
                 if rest:
-                    self._emit_lines([rest], arrival, wall)
+                    self.events.put(("raw", "lines", [(rest, arrival, wall)]))
                 self.events.put(("end", "end of input"))
                 return
-            lines = (rest + data).split(b"\n")
-            rest = lines.pop()
-            if lines:
-                self._emit_lines(lines, arrival, wall)
+            whole, newline, rest = (rest + data).rpartition(b"\n")
+            if newline:  # parsed by the session's loop (decode), with the other items
+                self.events.put(("raw", "lines", [(whole, arrival, wall)]))
 
 
 class WsConnection:
@@ -562,9 +588,9 @@ class WsSource(Source):
                     _, sid, _ = _MSG_HEAD.unpack_from(data)
                     if sid in st.subs:
                         pending.setdefault(sid, []).append((data[_MSG_HEAD.size :], arrival, wall))
-            for sid, items in pending.items():
+            for sid, items in pending.items():  # decoded by the session's loop (decode)
                 if sid in st.subs:
-                    self._decode(st.subs[sid], items)
+                    self.events.put(("raw", st.subs[sid], items))
         return None
 
     def _on_text(self, ws, st: _WsSession, msg) -> str | None:
@@ -640,8 +666,10 @@ class WsSource(Source):
                 out.append(cid)
         return out
 
-    def _decode(self, sub: tuple[str, dict], items: list) -> None:
-        kind, ch = sub
+    def decode(self, key, items: list) -> list[tuple]:
+        """The messages of one subscription (``key``: its ``(kind, channel)``): every item
+        ``(payload, arrival_ns, wall_ns)`` of the wake-up in one bulk CDR decode."""
+        kind, ch = key
         payloads = [p for p, _, _ in items]
         dec = decode_cdr_batch(
             ch["kind"],
@@ -652,14 +680,14 @@ class WsSource(Source):
             ch["topic"],
         )
         bad = int(len(payloads) - dec.good.sum())
-        if bad:
-            self.events.put(("malformed", bad))
+        out: list[tuple] = [("malformed", bad)] if bad else []
         if len(dec.t_ns):
             g = np.flatnonzero(dec.good)
             arrival = np.fromiter((items[i][1] for i in g), np.int64, len(g))
             wall = np.fromiter((items[i][2] for i in g), np.int64, len(g))
             raw = [payloads[i] for i in g]
-            self.events.put(("data", Received(kind, dec.t_ns, dec.values, arrival, wall, raw)))
+            out.append(("data", Received(kind, dec.t_ns, dec.values, arrival, wall, raw)))
+        return out
 
 
 def open_source(

@@ -41,6 +41,62 @@ _FLUSH_TIMEOUT_S = 10.0
 _3D_EVERY_S = 1.0 / 30.0
 
 
+_AXES_STYLE = {  # arrows of the body axes: colours, radius, labels (as replay's view)
+    "estimate": (EST_RGB, 0.018, None),
+    "truth": (TRUTH_RGB, 0.035, ["x", "y", "z"]),
+}
+_TRAIL_STYLE = {"estimate": ((240, 150, 0), 0.004), "truth": ((150, 70, 220), 0.007)}
+_ONE_ROW = np.array([0, 1], dtype=np.int32)
+
+
+class _Batch:
+    """A ready arrow array as a rerun component batch (``ComponentBatchLike``)."""
+
+    __slots__ = ("array",)
+
+    def __init__(self, array) -> None:
+        self.array = array
+
+    def as_arrow_array(self):
+        return self.array
+
+
+class _Times:
+    """The ``time`` timeline of rows, a duration rounded to the ns (``TimeColumnLike``)."""
+
+    __slots__ = ("array", "timeline")
+
+    def __init__(self, timeline: str, t_s: NDArray) -> None:
+        import pyarrow as pa
+
+        self.timeline = timeline
+        self.array = pa.array(np.rint(t_s * 1e9).astype(np.int64), pa.duration("ns"))
+
+    def timeline_name(self) -> str:
+        return self.timeline
+
+    def as_arrow_array(self):
+        return self.array
+
+
+def pa_array(values, dtype):
+    """``values`` as an arrow array of ``dtype``: float64 scalars, fixed-size lists of 3
+    (vectors, from an (n, 3) array) or lists of them (strips, from a list of (k, 3) arrays)."""
+    import pyarrow as pa
+
+    if pa.types.is_fixed_size_list(dtype):
+        flat = np.ascontiguousarray(values, dtype=np.float32).reshape(-1)
+        return pa.FixedSizeListArray.from_arrays(pa.array(flat, dtype.value_type), type=dtype)
+    if pa.types.is_list(dtype):
+        sizes = np.array([len(v) for v in values], dtype=np.int32)
+        offsets = pa.array(np.concatenate([[0], np.cumsum(sizes)]).astype(np.int32))
+        inner = pa_array(
+            np.concatenate(values) if len(values) else np.zeros((0, 3)), dtype.value_type
+        )
+        return pa.ListArray.from_arrays(offsets, inner, type=dtype)
+    return pa.array(np.ascontiguousarray(values, dtype=np.float64), dtype)
+
+
 def check_mode(mode: str | None) -> None:
     """Raise InputError for a mode other than None, spawn, serve, off or save:PATH.rrd."""
     if mode is None or mode in ("spawn", "serve", "off"):
@@ -173,15 +229,38 @@ class LiveView:
     def _static(self) -> None:
         from imu_dcm import viz
 
+        rr = self.rr
         viz.send_styles(self._blank, self.rec)  # replay's styles (colours, names, widths)
+        # the axes' and trails' colours, radii and labels: static, once (replay's values), so
+        # each send carries the vectors and the strip alone
+        for key, (rgb, radius, labels) in _AXES_STYLE.items():
+            style = rr.Arrows3D.from_fields(colors=rgb, radii=[radius], labels=labels)
+            self.rec.log(self.entity[f"{key}_axes"], style, static=True)
+        for key, (color, radius) in _TRAIL_STYLE.items():
+            style = rr.LineStrips3D.from_fields(colors=[color], radii=[radius])
+            self.rec.log(self.entity[f"{key}_trail"], style, static=True)
+        # arrow types and descriptors of the columns, from rerun's own builders
+        vec = rr.Arrows3D.columns(vectors=np.zeros((1, 3)))
+        strip = rr.LineStrips3D.columns(strips=[np.zeros((2, 3))])
+        scalar = rr.Scalars.columns(scalars=np.zeros(1))
+        self._kinds = {
+            name: (col.component_descriptor(), col.as_arrow_array().type.value_type)
+            for name, cols in (("vectors", vec), ("strips", strip), ("scalars", scalar))
+            for col in cols
+        }
 
-    def _time(self, t_s: NDArray):
-        return self.rr.TimeColumn(
-            self.timeline, duration=np.rint(t_s * 1e9).astype("timedelta64[ns]")
-        )
+    def _time(self, t_s: NDArray) -> _Times:
+        return _Times(self.timeline, t_s)
 
-    def _send(self, path: str, t_s: NDArray, columns) -> None:
-        self.rec.send_columns(path, indexes=[self._time(t_s)], columns=columns)
+    def _column(self, kind: str, values, offsets: NDArray):
+        """One component column (``vectors``, ``strips`` or ``scalars``) of rows
+        ``values[offsets[i]:offsets[i + 1]]``, made directly as the arrow array rerun's builder
+        makes (its type taken from that builder at start)."""
+        desc, dtype = self._kinds[kind]
+        return self.rr.ComponentColumn(desc, _Batch(pa_array(values, dtype)), offsets=offsets)
+
+    def _send(self, path: str, times, column) -> None:
+        self.rec.send_columns(path, indexes=[times], columns=[column])
         self.log_calls += 1
 
     def _thin(self, key: str, t_s: NDArray) -> NDArray:
@@ -210,17 +289,9 @@ class LiveView:
         idx = self._thin(key, t_s)
         ax = _axes(q[idx])
         n = len(idx)
-        rgb, radius = (EST_RGB, 0.018) if key == "est" else (TRUTH_RGB, 0.035)
-        fields = {
-            "vectors": ax.reshape(-1, 3),
-            "colors": np.tile(rgb, (n, 1)),
-            "radii": np.full(3 * n, radius, dtype=np.float32),
-        }
-        if key == "truth":
-            fields["labels"] = np.tile(np.array(["x", "y", "z"]), n)
-        cols = self.rr.Arrows3D.columns(**fields).partition(np.full(n, 3))
         path = self.entity["estimate_axes" if key == "est" else "truth_axes"]
-        self._send(path, t_s[idx], cols)
+        vectors = self._column("vectors", ax.reshape(-1, 3), np.arange(0, 3 * n + 1, 3, np.int32))
+        self._send(path, self._time(t_s[idx]), vectors)
         # z-tip trail of the drawn rows: the last _TRAIL_S seconds, one strip per call
         tip_t, tip_z = self._tips[key]
         tip_t, tip_z = np.concatenate([tip_t, t_s[idx]]), np.concatenate([tip_z, ax[:, 2]])
@@ -229,10 +300,12 @@ class LiveView:
         pts = tip_z
         if len(pts) > _TRAIL_POINTS:
             pts = pts[np.linspace(0, len(pts) - 1, _TRAIL_POINTS).round().astype(int)]
-        color = (240, 150, 0) if key == "est" else (150, 70, 220)
-        radius = 0.004 if key == "est" else 0.007
-        cols = self.rr.LineStrips3D.columns(strips=[pts], colors=[color], radii=[radius])
-        self._send(self.entity["estimate_trail" if key == "est" else "truth_trail"], t_s[-1:], cols)
+        strip = self._column("strips", [pts], _ONE_ROW)
+        self._send(
+            self.entity["estimate_trail" if key == "est" else "truth_trail"],
+            self._time(t_s[-1:]),
+            strip,
+        )
 
     def log(
         self,
@@ -248,20 +321,25 @@ class LiveView:
     ) -> None:
         """Send one batch: times in s since the first sample; rates (n, 3) rad/s body axes;
         ``q_*`` (n, 4) ``[x, y, z, w]`` body to world; errors (n, 3) deg (total, incl., head)."""
-        rr = self.rr
         if len(gyro_t_s):
-            index = [self._time(gyro_t_s)]  # one time column for the three axes
+            times = self._time(gyro_t_s)  # one time column for the three axes
+            rows = np.arange(len(gyro_t_s) + 1, dtype=np.int32)
             for k, a in enumerate("xyz"):
-                cols = rr.Scalars.columns(scalars=omega_b[:, k])
-                self.rec.send_columns(self.entity[f"gyro_{a}"], indexes=index, columns=cols)
-                self.log_calls += 1
+                self._send(
+                    self.entity[f"gyro_{a}"], times, self._column("scalars", omega_b[:, k], rows)
+                )
         if len(est_t_s):
             self._axes_rows("est", est_t_s, q_est)
         if len(truth_t_s):
             order = np.argsort(truth_t_s, kind="stable")
             self._axes_rows("truth", truth_t_s[order], q_truth[order])
         if len(err_t_s):
-            self._send(self.entity["errors"], err_t_s, rr.Scalars.columns(scalars=err_deg))
+            rows = np.arange(0, 3 * len(err_t_s) + 1, 3, dtype=np.int32)  # total, incl., heading
+            self._send(
+                self.entity["errors"],
+                self._time(err_t_s),
+                self._column("scalars", err_deg.reshape(-1), rows),
+            )
 
     def close(self) -> str:
         """Flush and disconnect; return the line to print about the viewer."""
