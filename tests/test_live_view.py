@@ -59,11 +59,11 @@ def live_rrd(tmp_path_factory):
 def test_scalars_are_every_row_fed(live_rrd):
     (t_s, _, w, err), data = live_rrd
     want_ns = np.rint(t_s * 1e9).astype(np.int64)
-    for k, axis in enumerate("xyz"):
-        rows = data[ENTITY[f"gyro_{axis}"]]["rows"]
-        assert _time_ns(rows).tolist() == want_ns.tolist()
-        got = np.array(rows["Scalars:scalars"], dtype=float)
-        np.testing.assert_array_equal(got.reshape(-1), w[:, k])
+    rows = data[ENTITY["gyro"]]["rows"]  # x, y, z: three series of one entity
+    assert _time_ns(rows).tolist() == want_ns.tolist()
+    np.testing.assert_array_equal(np.array(rows["Scalars:scalars"], dtype=float), w)
+    names = data[ENTITY["gyro"]]["static"]["SeriesLines:names"]
+    assert names == [["ω_x", "ω_y", "ω_z"]]
     rows = data[ENTITY["errors"]]["rows"]
     assert _time_ns(rows).tolist() == want_ns.tolist()
     np.testing.assert_array_equal(np.array(rows["Scalars:scalars"], dtype=float), err)

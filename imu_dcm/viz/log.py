@@ -48,6 +48,7 @@ ENTITY = {
     "gyro_raw_x": "/gyro/x/measured_omega_raw_b",
     "gyro_raw_y": "/gyro/y/measured_omega_raw_b",
     "gyro_raw_z": "/gyro/z/measured_omega_raw_b",
+    "gyro": "/gyro/omega_b",  # the live view's: the three rates as three series of one entity
 }
 """Entity paths of the view (see the module docstring)."""
 
@@ -267,8 +268,12 @@ def _entities(view: ViewData) -> list[_Entity]:
     return out
 
 
-def send_styles(view: ViewData, rec) -> None:
-    """View coordinates, series styles and the faint full z-tip traces (static, sent once)."""
+def send_styles(view: ViewData, rec, *, gyro_one_entity: bool = False) -> None:
+    """View coordinates, series styles and the faint full z-tip traces (static, sent once).
+
+    ``gyro_one_entity``: the rates go to ``ENTITY["gyro"]`` as three series of one entity (the
+    live view: one ``send_columns`` per batch instead of three), styled as the three entities.
+    """
     import rerun as rr
 
     rec.log("/world", rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
@@ -279,7 +284,12 @@ def send_styles(view: ViewData, rec) -> None:
         ),
         static=True,
     )
-    for k, axis in enumerate(_AXES):
+    if gyro_one_entity:
+        names = [f"ω_{axis}" for axis in _AXES]
+        rec.log(
+            ENTITY["gyro"], rr.SeriesLines(names=names, colors=_GYRO_RGB, widths=[1.5]), static=True
+        )
+    for k, axis in enumerate(_AXES if not gyro_one_entity else ()):
         rec.log(
             ENTITY[f"gyro_{axis}"],
             rr.SeriesLines(names=[f"ω_{axis}"], colors=[_GYRO_RGB[k]], widths=[1.5]),
