@@ -419,6 +419,7 @@ def main(argv: list[str] | None = None) -> int:
 
     import numpy as np
 
+    load_before = os.getloadavg()
     with tempfile.TemporaryDirectory(prefix="live_speed_") as d:
         tmp = Path(d)
         rows = measure(args, tmp)
@@ -427,14 +428,21 @@ def main(argv: list[str] | None = None) -> int:
     if args.ws_clients:
         for which in ("sync", "sansio"):
             clients[which] = ws_client_cpu(which, args.rate, args.duration)
+    load = "/".join(f"{a:.1f}" for a in (load_before[0], os.getloadavg()[0]))
     print(
         f"imu_dcm live speed: CPython {platform.python_version()}, numpy {np.__version__}, "
-        f"{platform.machine()}; live as a child process, bias none, magnus4"
+        f"{platform.machine()}, {os.cpu_count()} cores, load average {load} (start/end); live as "
+        f"a child process, bias none, magnus4"
     )
     print()
     report(rows, rep, clients)
     if args.json:
-        out = {"rows": rows, "replay_cpu_per_1000": rep, "ws_clients_cpu_s": clients}
+        out = {
+            "rows": rows,
+            "replay_cpu_per_1000": rep,
+            "ws_clients_cpu_s": clients,
+            "load_average": [load_before[0], os.getloadavg()[0]],
+        }
         args.json.write_text(json.dumps(out, indent=2))
     return 0
 
