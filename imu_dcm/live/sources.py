@@ -2,6 +2,9 @@
 
 A source puts events on a queue for the pipeline, in arrival order:
 
+* ``("raw", key, items)`` — what a wake-up read, not yet decoded (lines, CDR payloads) with
+  its arrival time: the session's loop hands every item of a key queued since its last wake-up
+  to :meth:`Source.decode` at once, which returns the events below;
 * ``("data", Received)`` — a batch of decoded samples (IMU rates or truth quaternions) with
   their arrival times and, from a WebSocket, the raw CDR payloads (for ``--record``);
 * ``("malformed", n)`` — lines or payloads that do not parse (counted, never fatal);
@@ -14,18 +17,21 @@ A source puts events on a queue for the pipeline, in arrival order:
 server advertises channels (JSON ``advertise``); the IMU and truth channels are picked by schema
 as replay picks them (or by ``imu_topic`` / ``truth_topic``) and subscribed (JSON
 ``subscribe``); messages arrive as binary frames ``0x01 | u32 subscription | u64 log time ns |
-CDR payload``. The client (:class:`WsConnection`) is websockets' Sans-I/O protocol under the
-source thread's own socket loop; the frames of one wake-up are decoded together (one bulk CDR
-decode per channel and batch). When the connection drops, the source reconnects with back-off (0.2 s
-doubling to 5 s), says so, and gives up after ``give_up_s`` without a connection.
+CDR payload``. The client (:class:`WsConnection`) runs under the source thread's own socket
+loop (websockets' Sans-I/O protocol for the handshake and the control frames; the data frames
+split by the client); the messages queued between two wake-ups of the session's loop are
+decoded together (one bulk CDR decode per channel). When the connection drops, the source
+reconnects with back-off (0.2 s doubling to 5 s), says so, and gives up after ``give_up_s``
+without a connection.
 
 **UDP** (``udp://HOST:PORT``): binds the address and reads datagrams of one or more lines.
 **stdin** (``-``): reads lines until end of input. Line format: :mod:`imu_dcm.live.lines`.
 
 Each wake-up of a source takes everything that has arrived by then (the datagrams queued on the
-socket, the bytes in the pipe, the frames received) and hands it on as one batch of arrays: a
-source thread wakes at most every ``batch_s`` (the session uses a quarter of the view interval,
-at most 20 ms), so the per-batch costs are shared by the samples that arrived in between.
+socket, the bytes in the pipe, the frames received) and queues it raw: a source thread wakes at
+most every ``batch_s`` (the session uses a quarter of the view interval, at most 20 ms) and only
+reads; the parse or decode runs once per wake-up of the session's loop (once per view interval)
+over everything queued, so its fixed cost is shared by all the samples in between.
 
 **A new source** is one :class:`Source` subclass and one row in :data:`SOURCES` (the URL scheme
 and ``"module:Class"``, imported when a SOURCE of that scheme is opened).
