@@ -419,6 +419,7 @@ class WsConnection:
             if self._proto.handshake_exc is not None:
                 raise self._proto.handshake_exc
         self._buf = buf
+        self._fresh = bool(buf)  # (later, the buffer holds at most part of a frame)
 
     def _flush(self) -> None:
         out = self._proto.data_to_send()
@@ -488,6 +489,15 @@ class WsConnection:
         if control:
             self._proto.events_received()  # handled by websockets; nothing for the caller
         return out
+
+    def wait(self, timeout_s: float) -> bool:
+        """Wait up to ``timeout_s`` for bytes to read (or the end of the connection, or frames
+        already buffered); True when :meth:`recv_messages` has something to look at."""
+        if self._fresh or self._eof:  # frames that came with the handshake's response
+            self._fresh = False
+            return True
+        ready, _, _ = select.select([self._sock], [], [], timeout_s)
+        return bool(ready)
 
     def recv_messages(self, timeout_s: float) -> list[str | bytes]:
         """Every message that has arrived, waiting up to ``timeout_s`` for the first bytes
@@ -624,13 +634,11 @@ class WsSource(Source):
     def _frames(self, ws: WsConnection) -> list[tuple]:
         """Every message that arrived within ``batch_s`` of the first: ``(data, arrival,
         wall)`` (the arrival of the batch's first bytes for each)."""
-        got = ws.recv_messages(0.2)
-        if not got:
+        if not ws.wait(0.2):
             return []
         arrival, wall = time.perf_counter_ns(), time.time_ns()
-        self._stop.wait(self.batch_s)  # let the batch arrive, then take all of it
-        got += ws.recv_messages(0.0)
-        return [(m, arrival, wall) for m in got]
+        self._stop.wait(self.batch_s)  # let the batch arrive, then take all of it in one read
+        return [(m, arrival, wall) for m in ws.recv_messages(0.0)]
 
     def _session(self, ws: WsConnection) -> str | None:
         """One connection: subscribe, receive, decode. Returns a fatal reason or None."""
