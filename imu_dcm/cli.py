@@ -54,6 +54,18 @@ def version_text(prog: str) -> str:
     return f"{prog} {v}"
 
 
+class _VersionAction(argparse.Action):
+    """``--version``: the version is looked up only when asked (``importlib.metadata`` costs
+    ~20 ms of every start-up otherwise)."""
+
+    def __init__(self, option_strings, dest=argparse.SUPPRESS, default=argparse.SUPPRESS, **kw):
+        super().__init__(option_strings, dest, nargs=0, default=default, **kw)
+
+    def __call__(self, parser, namespace, values, option_string=None):
+        parser._print_message(version_text(parser.prog) + "\n", sys.stdout)
+        parser.exit()
+
+
 class OneLineArgumentParser(argparse.ArgumentParser):
     """argparse that reports a bad option in one line (no usage dump) and exits with status 2,
     suggests the nearest choice for a near miss, takes negative numbers as option values
@@ -64,9 +76,7 @@ class OneLineArgumentParser(argparse.ArgumentParser):
 
     def __init__(self, *args, **kwargs) -> None:
         super().__init__(*args, **kwargs)
-        self.add_argument(
-            "--version", action="version", version=version_text(self.prog), help=argparse.SUPPRESS
-        )
+        self.add_argument("--version", action=_VersionAction, help=argparse.SUPPRESS)
 
     def error(self, message: str) -> NoReturn:
         m = _INVALID_CHOICE.search(message)

@@ -165,8 +165,9 @@ def log_quat(q: ArrayLike) -> NDArray[np.float64]:
     small = s < 0.5 * _SMALL_ANGLE_RAD
     safe = np.where(small, 1.0, s)
     # theta / sin(theta/2); near 0, 2/w * (1 - s²/(3 w²) + s⁴/(5 w⁴)) from the series of atan.
-    r2 = s * s / (w * w)
-    scale = np.where(small, 2.0 / w * (1.0 - r2 / 3.0 + r2 * r2 / 5.0), theta / safe)
+    w_small = np.where(small, w, 1.0)  # w is near 1 there; elsewhere it may be 0 (half turns)
+    r2 = s * s / (w_small * w_small)
+    scale = np.where(small, 2.0 / w_small * (1.0 - r2 / 3.0 + r2 * r2 / 5.0), theta / safe)
     return v * scale[..., None]
 
 

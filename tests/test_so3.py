@@ -9,6 +9,7 @@ from imu_dcm.so3 import (
     as_quat_xyzw,
     exp_matrix,
     exp_quat,
+    log_quat,
     quat_as_matrix,
     quat_from_matrix,
     quat_multiply,
@@ -100,3 +101,11 @@ def test_quat_from_matrix_takes_the_nearest_rotation_of_a_noisy_matrix():
     assert np.max((got.inv() * nearest).magnitude()) < 1e-13
     # and the noise moved the rotation by about its size, not more
     assert np.max((got.inv() * r).magnitude()) < 1e-4
+
+
+def test_log_quat_of_half_turns_matches_scipy_without_warnings():
+    # w == 0 exactly: the small-angle series must not be evaluated there (it divides by w)
+    q = np.array([[1.0, 0.0, 0.0, 0.0], [0.0, SQRT_HALF, SQRT_HALF, 0.0], [0.0, 0.0, 1.0, 0.0]])
+    got = log_quat(q)
+    np.testing.assert_allclose(np.linalg.norm(got, axis=-1), np.pi, rtol=0, atol=4 * EPS)
+    np.testing.assert_allclose(got, Rotation.from_quat(q).as_rotvec(), rtol=0, atol=8 * EPS)
