@@ -53,6 +53,8 @@ if TYPE_CHECKING:
 
 __all__ = ["DcmIntegrator"]
 
+_FLOAT64 = np.dtype(np.float64)
+
 
 class DcmIntegrator:
     """Streaming strapdown integrator ``q_w_b <- q_w_b ⊗ exp(φ)``, the twin of
@@ -178,17 +180,21 @@ class DcmIntegrator:
         GapWarning
             The step is a gap (:func:`imu_dcm.integrate.find_gaps`) among the last four steps.
         """
-        # The sample goes straight to the compiled push, which takes a float64 (3,) contiguous
-        # array and a number (numba refuses any other type with a TypeError: only then is the
-        # sample converted here) and checks it (finite, increasing, not closed): a code.
+        # The compiled push takes a float64 (3,) C-contiguous array and a float, unchecked:
+        # anything else is converted here first. It checks the sample (finite, increasing, not
+        # closed) and returns a code.
+        if (
+            type(omega_b) is not np.ndarray
+            or omega_b.dtype is not _FLOAT64
+            or omega_b.shape != (3,)
+            or not omega_b.flags.c_contiguous
+        ):
+            omega_b = self._as_rate(omega_b, t_s)
+        if type(t_s) is not float:
+            t_s = self._as_stamp(omega_b, t_s)
         if self._t0_pending:
-            omega_b, t_s = self._as_rate(omega_b, t_s), self._as_stamp(omega_b, t_s)
             self._start_at_t0(omega_b, t_s)
-        try:
-            code = self._push(self._state, omega_b, t_s)
-        except TypeError:
-            omega_b, t_s = self._as_rate(omega_b, t_s), self._as_stamp(omega_b, t_s)
-            code = self._push(self._state, omega_b, t_s)
+        code = self._push(self._state, omega_b, t_s)
         if code:
             self._not_ok(code, omega_b, t_s)
         return self._q.copy()

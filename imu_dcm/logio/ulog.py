@@ -106,7 +106,7 @@ _compiled: list = []
 def _chain(b: NDArray[np.uint8], pos: int):
     """:func:`_chain_py` compiled (by the kernel's numba settings) on first use."""
     if not _compiled:
-        from imu_dcm.kernel import _jit
+        from imu_dcm.kernel_jit import _jit
 
         _compiled.append(_jit(_chain_py))
     return _compiled[0](b, pos)
