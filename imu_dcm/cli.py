@@ -17,7 +17,6 @@ A closed output pipe (``... | head``) ends the command quietly with the code it 
 from __future__ import annotations
 
 import argparse
-import difflib
 import os
 import re
 import sys
@@ -34,6 +33,8 @@ _INVALID_CHOICE = re.compile(r"invalid choice: '([^']*)' \(choose from (.*)\)$")
 
 def did_you_mean(word: str, choices) -> str:
     """`` (did you mean 'auto'?)`` for a near miss of one of ``choices``, else ``""``."""
+    import difflib  # only on a bad option
+
     close = difflib.get_close_matches(str(word), [str(c) for c in choices], n=1, cutoff=0.6)
     return f" (did you mean {close[0]!r}?)" if close else ""
 
