@@ -19,7 +19,8 @@ from conftest import REPO_ROOT
 
 TRIAL = REPO_ROOT / "replay" / "broad_07_undisturbed_fast_rotation_B"
 ULOG = REPO_ROOT.parent / "shared" / "data" / "strangers" / "sample_log_small.ulg"
-#: Imported only by paths a plain replay does not take (--rerun, --prefilter, --out, batch).
+#: Imported only by paths a plain replay does not take (--rerun, --prefilter, --out, batch, a
+#: summary file).
 NOT_ON_THE_PATH = (
     "scipy.spatial",
     "rerun",
@@ -27,6 +28,7 @@ NOT_ON_THE_PATH = (
     "imu_dcm.viz",
     "imu_dcm.prefilter",
     "imu_dcm.logio.writer",
+    "imu_dcm.outputs",
     "imu_dcm.replay.batch",
     "mcap_ros2",
 )
