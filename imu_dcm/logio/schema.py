@@ -1,11 +1,14 @@
-"""Message definitions as field lists, from ros2msg, ros1msg or ros2idl schemas (via rosbags).
+"""Message definitions as field lists, from ros2msg, ros1msg or ros2idl schemas.
 
-:mod:`rosbags.typesys` parses the schema text a container stores (``ros2msg`` / ``ros1msg``
-text with its ``MSG:`` dependencies, or ``ros2idl``); a channel without one (sqlite3 bags of
-Humble and older) takes its definition from rosbags' built-in type store. The result is a plain
-map ``type name -> [Field]`` that :mod:`imu_dcm.logio.cdr` walks. A corrupt schema, one that
-is too large, or one whose types nest deeper than :data:`MAX_DEPTH` (or contain themselves)
-raises :class:`~imu_dcm.errors.LogError`.
+A plain ``.msg`` text (``ros2msg`` / ``ros1msg`` with its ``MSG:`` dependencies, what ROS
+recorders store) is read here, field by field, exactly as :mod:`rosbags.typesys` reads it
+(tested against it); anything else in one (quotes, annotations, a line this reader does not
+know) and every ``ros2idl`` schema go to rosbags' parser, whose import costs more than reading
+a log's schemas. A channel without a schema (sqlite3 bags of Humble and older) takes its
+definition from rosbags' built-in type store. The result is a plain map
+``type name -> [Field]`` that :mod:`imu_dcm.logio.cdr` walks. A corrupt schema, one that is too
+large, or one whose types nest deeper than :data:`MAX_DEPTH` (or contain themselves) raises
+:class:`~imu_dcm.errors.LogError`.
 """
 
 from __future__ import annotations

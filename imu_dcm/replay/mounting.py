@@ -128,6 +128,7 @@ def _permutations() -> list[NDArray[np.float64]]:
 
 
 _PERMS = _permutations()
+_PERMS_T = np.stack([p.T for p in _PERMS])  # (24, 3, 3), each transposed
 _IDENTITY = np.array([0.0, 0.0, 0.0, 1.0])
 
 
@@ -137,8 +138,7 @@ def axis_permutation(r: NDArray[np.float64]) -> tuple[str, float]:
     ``r`` maps gyro-frame vectors into the truth frame; column ``i`` is gyro axis ``i`` in truth
     axes, so the words read "gyro y = truth z" when column 1 is ``e_z``.
     """
-    perms = np.stack(_PERMS)
-    angles = np.degrees(quat_angle_rad(_IDENTITY, quat_from_matrix(perms.swapaxes(1, 2) @ r)))
+    angles = np.degrees(quat_angle_rad(_IDENTITY, quat_from_matrix(_PERMS_T @ r)))
     k = int(np.argmin(angles))
     p = _PERMS[k]
     words = []
