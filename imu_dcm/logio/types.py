@@ -284,7 +284,7 @@ class Sink:
     each batch first (message decompression). Payloads are decoded every :data:`BATCH_BYTES`.
     """
 
-    BATCH_BYTES = 8 << 20
+    BATCH_BYTES = 2 << 20
     #: Payloads are decoded in groups of at least this many bytes (see ``_flush``).
     GROUP_BYTES = 256 << 10
 
