@@ -38,6 +38,7 @@ from benchmarks.timing import limit_threads_env
 limit_threads_env(1)
 
 import argparse
+import importlib.util
 import os
 import platform
 import resource
@@ -262,6 +263,7 @@ REPO = Path(__file__).resolve().parents[1]
 SHIPPED_TRIAL = REPO / "replay" / "broad_07_undisturbed_fast_rotation_B"
 #: What the kernel's compile notice says (imu_dcm.kernel), to count it in a first run's stderr.
 COMPILE_NOTICE = "compiling the integrator kernel once"
+DECODE_LOOP = "mcap + mcap_ros2 decode loop over the shipped trial"
 
 
 def _child_env(cache: str | None = None, **extra: str) -> dict[str, str]:
@@ -298,10 +300,12 @@ def _run_s(
 
 
 def startup_cases() -> dict[str, list[str]]:
-    """The fresh-process cases: the import baseline, the bare interpreter, ``--help`` and a
-    replay of the shipped trial without the view."""
+    """The fresh-process cases: the import baseline, the bare interpreter, ``--help``, a
+    replay of the shipped trial without the view, and (with ``mcap_ros2`` installed) a plain
+    ``mcap`` + ``mcap_ros2`` decode loop over the same trial, start-up included as for the
+    replay."""
     py = sys.executable
-    return {
+    cases = {
         "import numpy, scipy.spatial.transform (baseline)": [
             py,
             "-c",
@@ -319,6 +323,17 @@ def startup_cases() -> dict[str, list[str]]:
             "--quiet",
         ],
     }
+    if importlib.util.find_spec("mcap_ros2") is not None:  # the bench extra
+        cases[DECODE_LOOP] = [
+            py,
+            "-c",
+            (
+                "import sys; from pathlib import Path; from benchmarks.replay_speed import "
+                "decode_loop; decode_loop(Path(sys.argv[1]))"
+            ),
+            str(next(SHIPPED_TRIAL.glob("*.mcap"))),
+        ]
+    return cases
 
 
 def startup(runs: int) -> dict[str, tuple[float, float]]:
@@ -382,6 +397,10 @@ def report_startup(res: dict[str, tuple[float, float]], first: dict[str, float])
         ("replay --help, CPU s", res["python -m imu_dcm.replay --help"][1], 0.3, "<="),
         ("warm replay / import baseline, CPU", warm / base, 1.5, "<="),
     ]
+    if DECODE_LOOP in res:
+        checks.append(
+            ("replay end to end: decode loop / replay, CPU", res[DECODE_LOOP][1] / warm, 10, ">=")
+        )
     for label, said_first in (("as installed", 0), ("IMU_DCM_KERNEL=jit", 1)):
         compile_s = (
             first[f"first replay, empty cache, {label} (CPU s)"]
@@ -405,7 +424,7 @@ def report_startup(res: dict[str, tuple[float, float]], first: dict[str, float])
     print(f"\n{'start-up check':62s} {'measured':>8s}   target   met")
     out = []
     for name, value, target, op in checks:
-        met = value <= target if op == "<=" else value == target
+        met = {"<=": value <= target, ">=": value >= target, "==": value == target}[op]
         print(f"{name:62s} {value:8.3g}   {op} {target:<5g} {'yes' if met else 'NO'}")
         out.append((name, value, target, met))
     return out

@@ -53,7 +53,7 @@ if TYPE_CHECKING:
 
 __all__ = ["DcmIntegrator"]
 
-_FLOAT64 = np.dtype(np.float64)
+_F8 = np.dtype(np.float64)  # numpy's one native float64 dtype: `is` compares it
 
 
 class DcmIntegrator:
@@ -183,12 +183,8 @@ class DcmIntegrator:
         # The compiled push takes a float64 (3,) C-contiguous array and a float, unchecked:
         # anything else is converted here first. It checks the sample (finite, increasing, not
         # closed) and returns a code.
-        if (
-            type(omega_b) is not np.ndarray
-            or omega_b.dtype is not _FLOAT64
-            or omega_b.shape != (3,)
-            or not omega_b.flags.c_contiguous
-        ):
+        # (1-D float64 with stride 8 is contiguous; the push refuses a length other than 3.)
+        if type(omega_b) is not np.ndarray or omega_b.strides != (8,) or omega_b.dtype is not _F8:
             omega_b = self._as_rate(omega_b, t_s)
         if type(t_s) is not float:
             t_s = self._as_stamp(omega_b, t_s)
@@ -236,6 +232,8 @@ class DcmIntegrator:
         n = self.n_samples
         if code == kernel.IS_CLOSED:
             raise InputError("Expected no samples after finish(), got one")
+        if code == kernel.NOT_FINITE and w.shape != (3,):
+            self._as_rate(w, t)  # raises: not 3 numbers
         if code == kernel.NOT_FINITE:
             raise InputError(
                 f"Expected finite `omega_b` and `t_s`, got {w.tolist()} at t_s = {t} (sample {n})"
