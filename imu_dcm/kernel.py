@@ -87,6 +87,7 @@ __all__ = [
     "new_state",
     "push",
     "push_for",
+    "record_chain",
     "source_digest",
     "state_fields",
 ]
@@ -239,3 +240,15 @@ def feed_delta(q0, dtheta, dt, method: int, out) -> None:
     interval, or per set of 2 or 3 intervals)."""
     _arrays(q0=(q0, 1), dtheta=(dtheta, 2), dt=(dt, 1), out=(out, 2))
     entry("feed_delta")(q0, dtheta, dt, int(method), out)
+
+
+def record_chain(b, pos: int) -> tuple[np.ndarray, np.ndarray, int]:
+    """The ``[uint16 size][uint8 type]`` record chain of the bytes ``b`` (a uint8 array) from
+    ``pos``: ``(positions, types, end)``, every whole record and where the first incomplete one
+    starts (:func:`imu_dcm.kernel_jit.record_chain`)."""
+    if not (isinstance(b, np.ndarray) and b.dtype == np.uint8 and b.ndim == 1):
+        raise TypeError(f"Expected `b` a 1-D uint8 array, got {type(b).__name__}")
+    b = np.ascontiguousarray(b)
+    if _aot() is None and not b.flags.writeable:
+        b = b.copy()  # numba's signature is of a writable array (the built one reads any)
+    return entry("record_chain")(b, int(pos))

@@ -410,3 +410,21 @@ def test_find_gaps_is_the_one_rule():
     with pytest.warns(GapWarning) as caught:
         integ.update(np.zeros(3), t[10])
     assert str(caught[0].message) == gap_message(find_gaps(t[7:11]))
+
+
+def test_record_chain_walks_ulog_framing_and_stops_at_an_incomplete_record():
+    # [uint16 size][uint8 type] headers: sizes 2, 0 and 300 (little endian), then a header whose
+    # record runs past the end. Positions and types by hand; both loaders agree.
+    records = [(2, 65), (0, 66), (300, 68)]
+    buf = bytearray()
+    for size, typ in records:
+        buf += bytes([size & 0xFF, size >> 8, typ]) + bytes(size)
+    end = len(buf)
+    buf += bytes([9, 0, 70, 1, 2])  # incomplete
+    b = np.frombuffer(bytes(buf), np.uint8)  # read-only, as the reader passes it
+    at, typ, stop = kernel.record_chain(b, 0)
+    assert at.tolist() == [0, 5, 8] and typ.tolist() == [65, 66, 68] and stop == end
+    jit = kernel_jit.compiled("record_chain")(np.array(b), 0)
+    assert [a.tolist() for a in jit[:2]] == [at.tolist(), typ.tolist()] and jit[2] == stop
+    with pytest.raises(TypeError, match="uint8"):
+        kernel.record_chain(b.astype(np.int16), 0)
