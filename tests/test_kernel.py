@@ -326,7 +326,7 @@ def test_an_out_of_date_built_kernel_is_not_used(monkeypatch):
     # A module built from other sources than these (an edited kernel) is left alone: numba
     # compiles instead, and the compile line says why.
     monkeypatch.setattr(kernel, "_AOT", [])
-    monkeypatch.setattr(kernel, "digest_entry", lambda: "source_0000000000000000")
+    monkeypatch.setattr(kernel, "digest_entry", lambda: "source_no_such_build")
     assert kernel.backend() == "jit"
     if "out of date" not in kernel._AOT[1]:
         assert "no kernel built ahead of time" in kernel._AOT[1]
