@@ -428,3 +428,17 @@ def test_record_chain_walks_ulog_framing_and_stops_at_an_incomplete_record():
     assert [a.tolist() for a in jit[:2]] == [at.tolist(), typ.tolist()] and jit[2] == stop
     with pytest.raises(TypeError, match="uint8"):
         kernel.record_chain(b.astype(np.int16), 0)
+
+
+def test_a_failed_build_is_one_line_and_leaves_no_module(tmp_path):
+    # The build's errors (numba, the C compiler, the disk) come out as one line, exit 1; here
+    # the output folder cannot be made (a regular file stands in its way).
+    blocker = tmp_path / "file"
+    blocker.write_text("")
+    out = str(blocker / "x")
+    code = f"import sys; from imu_dcm.kernel_build import main; sys.exit(main(['--out', {out!r}]))"
+    res = _run(code, _kernel_env(tmp_path / "cache"))
+    assert res.returncode == 1, res.stderr
+    lines = res.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("imu_dcm: the kernel was not built:"), lines
+    assert "Traceback" not in res.stderr and not list(tmp_path.rglob("*_kernel_aot*"))
