@@ -21,9 +21,11 @@ Targets:
 Start-up (fresh processes, CPU and wall time, medians of interleaved rounds after a warm-up):
 ``python -m imu_dcm.replay --help`` (target <= 0.3 s CPU); a replay of the shipped trial without
 the view against the import baseline ``python -c "import numpy, scipy.spatial.transform"``
-(target <= 1.5x its CPU); the same replay with an empty ``NUMBA_CACHE_DIR`` (it compiles the
-kernel; target: at most 4 s CPU more than the warm one) and again with that cache, counting the
-compile notice in each (once, then never). ``--only streaming`` runs the streaming ratio alone.
+(target <= 1.5x its CPU); the same replay with an empty ``NUMBA_CACHE_DIR`` and again with that
+cache, as installed (the kernel built ahead of time: no compile, no notice) and with
+``IMU_DCM_KERNEL=jit`` (numba compiles; target: at most 4 s CPU more than the warm one, the
+notice once, then never); and the CPU the install spends building the kernel. ``--only
+streaming`` runs the streaming ratio alone.
 
 A second section measures the two ways of streaming ``magnus4`` (the one-sample look-ahead):
 lag one sample (the chosen one) against a causal one-sided cubic, on analytic coning.
@@ -36,6 +38,7 @@ from benchmarks.timing import limit_threads_env
 limit_threads_env(1)
 
 import argparse
+import importlib.util
 import os
 import platform
 import resource
@@ -207,7 +210,7 @@ def report_speed(res: dict) -> list[tuple[str, float, float, bool]]:
     out = []
     for name, ratio, target in checks:
         met = ratio >= target
-        print(f"{name:52s} {ratio:8.3g}   >= {target:<6.3g} {'yes' if met else 'NO'}")
+        print(f"{name:62s} {ratio:8.3g}   >= {target:<6.3g} {'yes' if met else 'NO'}")
         out.append((name, ratio, target, met))
     return out
 
@@ -260,12 +263,14 @@ REPO = Path(__file__).resolve().parents[1]
 SHIPPED_TRIAL = REPO / "replay" / "broad_07_undisturbed_fast_rotation_B"
 #: What the kernel's compile notice says (imu_dcm.kernel), to count it in a first run's stderr.
 COMPILE_NOTICE = "compiling the integrator kernel once"
+DECODE_LOOP = "mcap + mcap_ros2 decode loop over the shipped trial"
 
 
-def _child_env(cache: str | None = None) -> dict[str, str]:
+def _child_env(cache: str | None = None, **extra: str) -> dict[str, str]:
     env = {
         **os.environ,
         "PYTHONPATH": os.pathsep.join([str(REPO), os.environ.get("PYTHONPATH", "")]),
+        **extra,
     }
     env.pop("PYTHONDONTWRITEBYTECODE", None)  # a user's install has its bytecode cached
     if cache is not None:
@@ -274,9 +279,10 @@ def _child_env(cache: str | None = None) -> dict[str, str]:
 
 
 def _run_s(
-    args: list[str], cache: str | None = None, cwd: str | None = None
+    args: list[str], cache: str | None = None, cwd: str | None = None, **extra: str
 ) -> tuple[float, float, str]:
-    """Wall time, CPU time (user + system, s) and stderr of one child process."""
+    """Wall time, CPU time (user + system, s, its own children included) and stderr of one
+    child process."""
     before = resource.getrusage(resource.RUSAGE_CHILDREN)
     t0 = time.perf_counter()
     res = subprocess.run(
@@ -285,7 +291,7 @@ def _run_s(
         stdout=subprocess.DEVNULL,
         stderr=subprocess.PIPE,
         text=True,
-        env=_child_env(cache),
+        env=_child_env(cache, **extra),
         cwd=cwd,
     )
     wall = time.perf_counter() - t0
@@ -294,10 +300,12 @@ def _run_s(
 
 
 def startup_cases() -> dict[str, list[str]]:
-    """The fresh-process cases: the import baseline, the bare interpreter, ``--help`` and a
-    replay of the shipped trial without the view."""
+    """The fresh-process cases: the import baseline, the bare interpreter, ``--help``, a
+    replay of the shipped trial without the view, and (with ``mcap_ros2`` installed) a plain
+    ``mcap`` + ``mcap_ros2`` decode loop over the same trial, start-up included as for the
+    replay."""
     py = sys.executable
-    return {
+    cases = {
         "import numpy, scipy.spatial.transform (baseline)": [
             py,
             "-c",
@@ -315,6 +323,17 @@ def startup_cases() -> dict[str, list[str]]:
             "--quiet",
         ],
     }
+    if importlib.util.find_spec("mcap_ros2") is not None:  # the bench extra
+        cases[DECODE_LOOP] = [
+            py,
+            "-c",
+            (
+                "import sys; from pathlib import Path; from benchmarks.replay_speed import "
+                "decode_loop; decode_loop(Path(sys.argv[1]))"
+            ),
+            str(next(SHIPPED_TRIAL.glob("*.mcap"))),
+        ]
+    return cases
 
 
 def startup(runs: int) -> dict[str, tuple[float, float]]:
@@ -335,62 +354,78 @@ def startup(runs: int) -> dict[str, tuple[float, float]]:
 
 
 def first_run(runs: int) -> dict[str, float]:
-    """The replay of the shipped trial with an empty ``NUMBA_CACHE_DIR`` (it compiles the
-    kernel), then again with that cache (it loads it): median CPU seconds over ``runs`` fresh
-    caches, and how many times the compile notice was printed in each."""
+    """The replay of the shipped trial with an empty ``NUMBA_CACHE_DIR``, then again with that
+    cache: as installed (the kernel built ahead of time: nothing to compile) and with
+    ``IMU_DCM_KERNEL=jit`` (numba compiles it in the first run, loads it in the second). Median
+    CPU seconds over ``runs`` fresh caches, and how many times the compile notice was printed in
+    each run (-1: not the same in every run). Plus the build itself (``python -m
+    imu_dcm.kernel_build`` into a temporary folder, its C compiler included): what an install
+    spends once."""
     replay = startup_cases()["replay shipped trial, warm cache"]
-    first, second, said_first, said_second = [], [], [], []
-    for _ in range(runs):
-        with tempfile.TemporaryDirectory() as cache, tempfile.TemporaryDirectory() as cwd:
-            _, cpu1, err1 = _run_s(replay, cache=cache, cwd=cwd)
-            _, cpu2, err2 = _run_s(replay, cache=cache, cwd=cwd)
-        first.append(cpu1)
-        second.append(cpu2)
-        said_first.append(err1.count(COMPILE_NOTICE))
-        said_second.append(err2.count(COMPILE_NOTICE))
-    return {
-        "first replay, empty cache (CPU s)": statistics.median(first),
-        "second replay, same cache (CPU s)": statistics.median(second),
-        "compile notices, first run (each run)": max(said_first)
-        if min(said_first) == max(said_first)
-        else -1,
-        "compile notices, second run (each run)": max(said_second),
-    }
+    out: dict[str, float] = {}
+    for label, extra in (("as installed", {}), ("IMU_DCM_KERNEL=jit", {"IMU_DCM_KERNEL": "jit"})):
+        first, second, said_first, said_second = [], [], [], []
+        for _ in range(runs):
+            with tempfile.TemporaryDirectory() as cache, tempfile.TemporaryDirectory() as cwd:
+                _, cpu1, err1 = _run_s(replay, cache=cache, cwd=cwd, **extra)
+                _, cpu2, err2 = _run_s(replay, cache=cache, cwd=cwd, **extra)
+            first.append(cpu1)
+            second.append(cpu2)
+            said_first.append(err1.count(COMPILE_NOTICE))
+            said_second.append(err2.count(COMPILE_NOTICE))
+        out[f"first replay, empty cache, {label} (CPU s)"] = statistics.median(first)
+        out[f"second replay, same cache, {label} (CPU s)"] = statistics.median(second)
+        for which, said in (("first", said_first), ("second", said_second)):
+            out[f"compile notices, {which} run, {label}"] = (
+                said[0] if min(said) == max(said) else -1
+            )
+    with tempfile.TemporaryDirectory() as build_dir:
+        build = [sys.executable, "-m", "imu_dcm.kernel_build", "--out", build_dir]
+        out["kernel build at install (CPU s)"] = _run_s(build)[1]
+    return out
 
 
 def report_startup(res: dict[str, tuple[float, float]], first: dict[str, float]) -> list:
-    print(f"\n{'start-up, fresh process (median)':52s} {'wall s':>7s} {'CPU s':>7s}")
+    print(f"\n{'start-up, fresh process (median)':62s} {'wall s':>7s} {'CPU s':>7s}")
     for name, (wall, cpu) in res.items():
-        print(f"{name:52s} {wall:7.3f} {cpu:7.3f}")
+        print(f"{name:62s} {wall:7.3f} {cpu:7.3f}")
     for name, v in first.items():
-        print(f"{name:52s} {'':7s} {v:7.3f}" if "CPU" in name else f"{name:52s} {v:>15g}")
+        print(f"{name:62s} {'':7s} {v:7.3f}" if "CPU" in name else f"{name:62s} {v:>15g}")
     base = res["import numpy, scipy.spatial.transform (baseline)"][1]
     warm = res["replay shipped trial, warm cache"][1]
-    compile_s = (
-        first["first replay, empty cache (CPU s)"] - first["second replay, same cache (CPU s)"]
-    )
     checks = [
         ("replay --help, CPU s", res["python -m imu_dcm.replay --help"][1], 0.3, "<="),
         ("warm replay / import baseline, CPU", warm / base, 1.5, "<="),
-        ("first replay - warm replay (the compile), CPU s", compile_s, 4.0, "<="),
-        (
-            "compile notice: once in a first run",
-            first["compile notices, first run (each run)"],
-            1,
-            "==",
-        ),
-        (
-            "compile notice: not in a second run",
-            first["compile notices, second run (each run)"],
-            0,
-            "==",
-        ),
     ]
-    print(f"\n{'start-up check':52s} {'measured':>8s}   target   met")
+    if DECODE_LOOP in res:
+        checks.append(
+            ("replay end to end: decode loop / replay, CPU", res[DECODE_LOOP][1] / warm, 10, ">=")
+        )
+    for label, said_first in (("as installed", 0), ("IMU_DCM_KERNEL=jit", 1)):
+        compile_s = (
+            first[f"first replay, empty cache, {label} (CPU s)"]
+            - first[f"second replay, same cache, {label} (CPU s)"]
+        )
+        checks += [
+            (f"first - second replay (the compile), {label}, CPU s", compile_s, 4.0, "<="),
+            (
+                f"compile notices in a first run, {label}",
+                first[f"compile notices, first run, {label}"],
+                said_first,
+                "==",
+            ),
+            (
+                f"compile notices in a second run, {label}",
+                first[f"compile notices, second run, {label}"],
+                0,
+                "==",
+            ),
+        ]
+    print(f"\n{'start-up check':62s} {'measured':>8s}   target   met")
     out = []
     for name, value, target, op in checks:
-        met = value <= target if op == "<=" else value == target
-        print(f"{name:52s} {value:8.3g}   {op} {target:<5g} {'yes' if met else 'NO'}")
+        met = {"<=": value <= target, ">=": value >= target, "==": value == target}[op]
+        print(f"{name:62s} {value:8.3g}   {op} {target:<5g} {'yes' if met else 'NO'}")
         out.append((name, value, target, met))
     return out
 

@@ -17,7 +17,6 @@ A closed output pipe (``... | head``) ends the command quietly with the code it 
 from __future__ import annotations
 
 import argparse
-import difflib
 import os
 import re
 import sys
@@ -34,6 +33,8 @@ _INVALID_CHOICE = re.compile(r"invalid choice: '([^']*)' \(choose from (.*)\)$")
 
 def did_you_mean(word: str, choices) -> str:
     """`` (did you mean 'auto'?)`` for a near miss of one of ``choices``, else ``""``."""
+    import difflib  # only on a bad option
+
     close = difflib.get_close_matches(str(word), [str(c) for c in choices], n=1, cutoff=0.6)
     return f" (did you mean {close[0]!r}?)" if close else ""
 
@@ -54,6 +55,18 @@ def version_text(prog: str) -> str:
     return f"{prog} {v}"
 
 
+class _VersionAction(argparse.Action):
+    """``--version``: the version is looked up only when asked (``importlib.metadata`` costs
+    ~20 ms of every start-up otherwise)."""
+
+    def __init__(self, option_strings, dest=argparse.SUPPRESS, default=argparse.SUPPRESS, **kw):
+        super().__init__(option_strings, dest, nargs=0, default=default, **kw)
+
+    def __call__(self, parser, namespace, values, option_string=None):
+        parser._print_message(version_text(parser.prog) + "\n", sys.stdout)
+        parser.exit()
+
+
 class OneLineArgumentParser(argparse.ArgumentParser):
     """argparse that reports a bad option in one line (no usage dump) and exits with status 2,
     suggests the nearest choice for a near miss, takes negative numbers as option values
@@ -64,9 +77,7 @@ class OneLineArgumentParser(argparse.ArgumentParser):
 
     def __init__(self, *args, **kwargs) -> None:
         super().__init__(*args, **kwargs)
-        self.add_argument(
-            "--version", action="version", version=version_text(self.prog), help=argparse.SUPPRESS
-        )
+        self.add_argument("--version", action=_VersionAction, help=argparse.SUPPRESS)
 
     def error(self, message: str) -> NoReturn:
         m = _INVALID_CHOICE.search(message)

@@ -1,513 +1,218 @@
-"""The compiled integrator kernel: the DCM recursion ``q_{i+1} = q_i ⊗ exp(φ_i)`` as one loop.
+"""The integrator kernel: the DCM recursion ``q_{i+1} = q_i ⊗ exp(φ_i)`` as one compiled loop.
 
-One numba kernel serves the batch :func:`imu_dcm.integrate`, :func:`imu_dcm.integrate_delta` and
-the streaming :class:`imu_dcm.DcmIntegrator`: every sample goes through :func:`push` (or
+One kernel serves the batch :func:`imu_dcm.integrate`, :func:`imu_dcm.integrate_delta` and the
+streaming :class:`imu_dcm.DcmIntegrator`: every sample goes through :func:`push` (or
 :func:`feed`, the same over an array), which keeps what carries across samples in a small
-``state`` array and commits each step as soon as its stencil is complete. Batch is "feed every
-sample, then :func:`close`"; streaming feeds them as they come, so the two are the same
-arithmetic.
+``state`` array (:mod:`imu_dcm.kernel_state`) and commits each step as soon as its stencil is
+complete. Batch is "feed every sample, then :func:`close`"; streaming feeds them as they come,
+so the two are the same arithmetic. The code itself is :mod:`imu_dcm.kernel_jit`.
 
 Conventions: quaternions Hamilton ``[x, y, z, w]``, ``q_w_b`` body to world; rates ``ω`` rad/s
-in body axes; stamps ``t`` s; increments multiply on the right. The formulas (increments, the
-exponential, the product) are written out here, inline, on purpose: :mod:`imu_dcm.so3` holds the
-vectorised versions of the same maths.
+in body axes; stamps ``t`` s; increments multiply on the right.
 
-Compiling. Importing this module imports numba but compiles nothing; :mod:`imu_dcm.integrate`
-imports it on its first call. Each entry point has one signature (float64 C-contiguous arrays,
-int64 codes: the callers convert at the Python boundary) and is compiled on its first use:
-:func:`feed` and :func:`push` once per method a process uses (the method a constant of the loop),
-:func:`close`'s ``magnus4`` part, :func:`check_record`, and :func:`feed_delta` only for delta
-angles. The small helpers are inlined into them or compiled once each. Compiled code is cached
-next to this file (``__pycache__``) or, when that folder is read-only, in numba's user cache
-folder (``NUMBA_CACHE_DIR`` overrides both); a cache miss says so once per process on stderr
-before it compiles. When no folder is writable the kernel is compiled in every process and
-:class:`imu_dcm.errors.ImuDcmWarning` says so once.
+Loading. Installing the package builds the kernel ahead of time into one extension module
+(``imu_dcm._kernel_aot``, by :mod:`imu_dcm.kernel_build`), which loads in about a millisecond
+and needs no numba at run time. The module carries a digest of the files it was built from
+(:data:`SOURCES`) and of the constants they take from :mod:`imu_dcm.so3` and
+:mod:`imu_dcm.methods`; a module built from other versions of them is not used. Without an
+up-to-date module (no C compiler at install, an edited kernel, or ``IMU_DCM_KERNEL=jit`` in
+the environment) each entry point is compiled by numba on its first use instead, and cached
+(see :mod:`imu_dcm.kernel_jit`). :func:`backend` says which one a process runs.
 
-State. The state is one float64 array of named fields (:data:`STATE_FIELDS`, defined once by
-the ``_STATE.field`` calls below; :func:`state_fields` gives them as views). Method codes are
-:class:`imu_dcm.methods.Method`.
+The entry points take float64 C-contiguous arrays and do not check their types: the functions
+below check the arrays of a batch call (a ``TypeError`` otherwise), and :func:`push_for` gives
+the unchecked per-sample function, whose caller converts (as :class:`imu_dcm.DcmIntegrator`
+does).
 """
 
 from __future__ import annotations
 
-import math
-import sys
-import warnings
+import importlib
+import os
+import zlib
+from pathlib import Path
 
-import numba
 import numpy as np
-from numba.core import event as numba_event
 
-from imu_dcm.errors import ImuDcmWarning
-from imu_dcm.methods import GAP_FACTOR, DeltaMethod, Method
-from imu_dcm.so3 import COS_HALF_SERIES, SERIES_THETA2, SINC_HALF_SERIES
+from imu_dcm.kernel_state import (
+    CLOSED,
+    IS_CLOSED,
+    MAGNUS4,
+    MAYBE_GAP,
+    METHOD,
+    NOT_FINITE,
+    NOT_INCREASING,
+    OK,
+    PHI_SUM,
+    Q0,
+    ROWS,
+    STATE_FIELDS,
+    STATE_SIZE,
+    N,
+    Q,
+    T,
+    W,
+    feed_entry,
+    new_state,
+    push_entry,
+    state_fields,
+)
+from imu_dcm.methods import Method
 
-# numba compiles the constants above (and the Method codes) into the cached code, and its cache
-# is keyed on this file alone: after changing them, touch this file. (The tests compare the
-# compiled exponential with so3's and the streaming gap warning with find_gaps, so a stale cache
-# does not go unnoticed.)
+__all__ = [
+    "CLOSED",
+    "IS_CLOSED",
+    "MAGNUS4",
+    "MAYBE_GAP",
+    "METHOD",
+    "N",
+    "NOT_FINITE",
+    "NOT_INCREASING",
+    "OK",
+    "PHI_SUM",
+    "Q",
+    "Q0",
+    "ROWS",
+    "SOURCES",
+    "STATE_FIELDS",
+    "STATE_SIZE",
+    "T",
+    "W",
+    "backend",
+    "check_record",
+    "close",
+    "entry",
+    "feed",
+    "feed_delta",
+    "new_state",
+    "push",
+    "push_for",
+    "record_chain",
+    "source_digest",
+    "state_fields",
+]
 
-
-# -- the state array: what carries across samples ----------------------------------------------
-
-
-class _Layout:
-    """Named fields of the flat float64 state array, laid out in the order they are defined:
-    each :meth:`field` call returns its offset (a plain int, which numba compiles in as a
-    constant, so named fields cost nothing per sample)."""
-
-    def __init__(self) -> None:
-        self.size = 0
-        self.fields: dict[str, tuple[int, int, str]] = {}
-
-    def field(self, name: str, width: int, meaning: str) -> int:
-        offset = self.size
-        self.fields[name] = (offset, width, meaning)
-        self.size += width
-        return offset
-
-
-_STATE = _Layout()
-Q = _STATE.field("q", 4, "attitude at the last committed sample, [x, y, z, w]")
-Q0 = _STATE.field("q0", 4, "attitude at the first sample (rotvec_sum adds to it)")
-PHI_SUM = _STATE.field("phi_sum", 3, "rotvec_sum: sum of dt_j omega_j so far, rad")
-W = _STATE.field("omega", 12, "the last four rates, oldest first (rate r at W + 3 r), rad/s")
-T = _STATE.field("t", 4, "their stamps, s")
-N = _STATE.field("n", 1, "samples received")
-METHOD = _STATE.field("method", 1, "the Method code")
-ROWS = _STATE.field("rows", 8, "two rows of four: the attitudes push() or close() commit")
-CLOSED = _STATE.field("closed", 1, "1 once close() has run: push() refuses samples")
-STATE_SIZE = _STATE.size
-#: ``name -> (offset, width, meaning)`` of every state field, in layout order.
-STATE_FIELDS = _STATE.fields
-
-S0, S1, S2, S3, S4, S5, S6 = SINC_HALF_SERIES
-C0, C1, C2, C3, C4, C5, C6 = COS_HALF_SERIES
-
-#: ``Method.MAGNUS4`` as a plain int: the type the per-method loops pass to :func:`increment`,
-#: so that the end steps reuse its compiled code.
-MAGNUS4 = int(Method.MAGNUS4)
-
-# -- codes returned by push --------------------------------------------------------------------
-OK, NOT_FINITE, NOT_INCREASING, MAYBE_GAP, IS_CLOSED = 0, 1, 2, 3, 4
-
-
-def state_fields(state: np.ndarray) -> dict[str, np.ndarray]:
-    """Every named field of ``state`` as a view (writing to one writes the state)."""
-    return {name: state[o : o + w] for name, (o, w, _) in STATE_FIELDS.items()}
-
-
-def _jit(fn=None, signature: str | None = None, **options):
-    """``numba.njit([signature], cache=True, error_model="numpy", **options)``: inputs are
-    checked before they get here, so no Python-style division checks. Without any writable cache
-    folder (see the module doc), compile uncached and warn once."""
-    sig = () if signature is None else (signature,)
-
-    def decorate(f):
-        try:
-            return numba.njit(*sig, cache=True, error_model="numpy", **options)(f)
-        except RuntimeError as e:  # numba: "cannot cache function ...: no locator available"
-            if "no locator" not in str(e):
-                raise
-            _warn_uncached()
-            return numba.njit(*sig, error_model="numpy", **options)(f)
-
-    return decorate if fn is None else decorate(fn)
+#: The module the kernel is built into ahead of time.
+AOT_MODULE = "imu_dcm._kernel_aot"
+#: The files (in this package) the compiled code is made from; the digest covers them and the
+#: constants they take from elsewhere (:func:`_constants`).
+SOURCES = ("kernel_jit.py", "kernel_state.py")
+#: ``IMU_DCM_KERNEL=jit`` makes a process compile with numba even when a built module exists.
+ENV = "IMU_DCM_KERNEL"
 
 
-def _inline(fn):
-    """A helper compiled into each caller (numba IR inlining): no function of its own to
-    compile, cache and load, and the caller's constants (the method) fold into it."""
-    return _jit(fn, inline="always")
+def _constants() -> str:
+    """The values the compiled code folds in from other modules: the series of the
+    exponential, the gap factor, the method codes."""
+    from imu_dcm.methods import GAP_FACTOR, DeltaMethod
+    from imu_dcm.so3 import COS_HALF_SERIES, SERIES_THETA2, SINC_HALF_SERIES
+
+    codes = [(m.name, int(m)) for m in (*Method, *DeltaMethod)]
+    series = (SINC_HALF_SERIES, COS_HALF_SERIES, SERIES_THETA2)
+    return repr((series, GAP_FACTOR, codes))
 
 
-_warned_uncached = []
+def source_digest() -> str:
+    """CRC-32 (8 hex digits) of :data:`SOURCES` and :func:`_constants`: what a built module
+    must have been built from to be used. (A check against stale builds, not a signature:
+    zlib is loaded anyway, where hashlib's OpenSSL would cost ~3 ms of every start-up.)"""
+    here = Path(__file__).parent
+    crc = zlib.crc32(_constants().encode())
+    for name in SOURCES:
+        crc = zlib.crc32((here / name).read_bytes(), crc)
+    return f"{crc:08x}"
 
 
-def _warn_uncached() -> None:
-    if not _warned_uncached:
-        _warned_uncached.append(True)
-        warnings.warn(
-            "Expected a writable folder to cache imu_dcm's compiled kernel, got none "
-            "(package folder and user cache read-only): it is compiled in every "
-            "process; set NUMBA_CACHE_DIR to a writable folder",
-            ImuDcmWarning,
-            stacklevel=4,
+def digest_entry() -> str:
+    """The name of the built module's marker function: ``source_<digest>``."""
+    return f"source_{source_digest()}"
+
+
+_AOT: list = []  # [module or None, why not]: loaded once per process
+_FUNCTIONS: dict = {}
+
+
+def _aot():
+    """The module built ahead of time if it is present and up to date, else None (and why)."""
+    if not _AOT:
+        _AOT.extend(_load_aot())
+    return _AOT[0]
+
+
+def _load_aot() -> tuple[object, str]:
+    if os.environ.get(ENV, "").strip().lower() == "jit":
+        return None, f" ({ENV}=jit)"
+    try:
+        module = importlib.import_module(AOT_MODULE)
+    except ImportError:
+        return None, " (no kernel built ahead of time: `python -m imu_dcm.kernel_build` builds it)"
+    if not hasattr(module, digest_entry()):
+        return None, (
+            " (the kernel built ahead of time is out of date: `python -m imu_dcm.kernel_build` "
+            "rebuilds it)"
         )
+    return module, ""
 
 
-class _Entry:
-    """An entry point of the kernel, compiled (or loaded from the cache) for its one signature
-    on first use, so that a command compiles and loads only what it calls. Calling it calls the
-    compiled function; :meth:`compiled` returns it, for per-sample loops."""
-
-    def __init__(self, fn, signature: str) -> None:
-        self.py_func = fn
-        self.signature = signature
-        self._dispatcher = None
-        self.__doc__ = fn.__doc__
-        self.__name__ = fn.__name__
-
-    def compiled(self):
-        if self._dispatcher is None:
-            self._dispatcher = _compiled(self.py_func, self.signature)
-        return self._dispatcher
-
-    def __call__(self, *args):
-        return self.compiled()(*args)
+def backend() -> str:
+    """``"ahead-of-time"`` when this process runs the built module, else ``"jit"`` (numba)."""
+    return "ahead-of-time" if _aot() is not None else "jit"
 
 
-def _compiled(fn, signature: str):
-    """``fn`` compiled for ``signature``, or loaded from the cache (saying so when it compiles)."""
-    with numba_event.install_listener("numba:compile", _NOTICE):
-        return _jit(fn, signature)
+def entry(name: str):
+    """The compiled entry point ``name`` (see :data:`imu_dcm.kernel_jit.ENTRIES`): from the
+    module built ahead of time, else compiled (or loaded from numba's cache) on first use."""
+    fn = _FUNCTIONS.get(name)
+    if fn is None:
+        module = _aot()
+        if module is not None:
+            fn = getattr(module, name)
+        else:
+            from imu_dcm import kernel_jit
+
+            fn = kernel_jit.compiled(name, _AOT[1])
+        _FUNCTIONS[name] = fn
+    return fn
 
 
-def _entry(signature: str):
-    """Declare a kernel entry point with its one signature (see :class:`_Entry`)."""
-    return lambda fn: _Entry(fn, signature)
-
-
-#: CPU seconds to compile every entry point a replay uses (measured: see docs/integrator.md).
-COMPILE_S = 3
-
-
-class _CompileNotice(numba_event.Listener):
-    """Says once per process, on stderr, that the kernel is being compiled: numba sends the
-    "numba:compile" event only after it found no cached code for the signature."""
-
-    said = False
-
-    def on_start(self, event) -> None:
-        if not self.said and event.data["dispatcher"].py_func.__module__ == __name__:
-            type(self).said = True
-            print(
-                f"imu_dcm: compiling the integrator kernel once, about {COMPILE_S} s; "
-                "later runs load it from the cache",
-                file=sys.stderr,
-                flush=True,
+def _arrays(**arrays: tuple[np.ndarray, int]) -> None:
+    """Refuse any array the compiled code would misread: float64, C-contiguous, ``ndim``."""
+    for name, (a, ndim) in arrays.items():
+        if not (
+            isinstance(a, np.ndarray)
+            and a.dtype == np.float64
+            and a.ndim == ndim
+            and a.flags.c_contiguous
+        ):
+            raise TypeError(
+                f"Expected `{name}` a float64 C-contiguous array of {ndim} dimension(s), "
+                f"got {type(a).__name__} {getattr(a, 'dtype', '')} {getattr(a, 'shape', '')}"
             )
-
-    def on_end(self, event) -> None:
-        pass
-
-
-_NOTICE = _CompileNotice()
-
-
-# -- the maths of one step ---------------------------------------------------------------------
-
-
-@_jit
-def exp_quat(px: float, py: float, pz: float) -> tuple:
-    """``exp(φ) = [φ sin(θ/2)/θ, cos(θ/2)]``, ``θ = |φ|``: exact, with the series policy of
-    :func:`imu_dcm.so3.exp_quat` (seven series terms up to 0.5 rad,
-    ``sin``/``cos`` above)."""
-    t2 = px * px + py * py + pz * pz
-    if t2 <= SERIES_THETA2:
-        s = S0 + t2 * (S1 + t2 * (S2 + t2 * (S3 + t2 * (S4 + t2 * (S5 + t2 * S6)))))
-        c = C0 + t2 * (C1 + t2 * (C2 + t2 * (C3 + t2 * (C4 + t2 * (C5 + t2 * C6)))))
-    else:
-        theta = math.sqrt(t2)
-        s = math.sin(0.5 * theta) / theta
-        c = math.cos(0.5 * theta)
-    return px * s, py * s, pz * s, c
-
-
-@_jit
-def quat_mul(p: tuple, q: tuple) -> tuple:
-    """Hamilton product ``p ⊗ q`` of ``[x, y, z, w]`` tuples."""
-    px, py, pz, pw = p
-    qx, qy, qz, qw = q
-    return (
-        pw * qx + px * qw + py * qz - pz * qy,
-        pw * qy - px * qz + py * qw + pz * qx,
-        pw * qz + px * qy - py * qx + pz * qw,
-        pw * qw - px * qx - py * qy - pz * qz,
-    )
-
-
-@_jit
-def step(q: tuple, px: float, py: float, pz: float) -> tuple:
-    """``q ⊗ exp(φ)``, pulled back to unit norm to first order.
-
-    Each product moves ``|q|`` by a rounding error; ``q (3 - |q|²) / 2`` removes it (exact to
-    second order in the error), so ``R(q)`` stays orthonormal however many steps follow.
-    """
-    x, y, z, w = quat_mul(q, exp_quat(px, py, pz))
-    k = 1.5 - 0.5 * (x * x + y * y + z * z + w * w)
-    return x * k, y * k, z * k, w * k
-
-
-@_jit
-def increment(
-    method: int, wm: tuple, w0: tuple, w1: tuple, w2: tuple, h_m: float, h_0: float, h_p: float
-) -> tuple:
-    """Rotation vector ``φ_i`` (rad, body) of step ``[t_i, t_{i+1}]`` of length ``h_0``.
-
-    ``wm, w0, w1, w2`` are ``ω_{i-1}, ω_i, ω_{i+1}, ω_{i+2}``; ``h_m, h_p`` the steps before and
-    after (only ``magnus4`` reads ``wm``, ``w2``, ``h_m``, ``h_p``).
-    """
-    x0, y0, z0 = w0
-    x1, y1, z1 = w1
-    if method == Method.MAGNUS4:
-        # Simpson on the cubic through ω_{i-1..i+2} at their stamps, as weights on the samples:
-        # φ = -c_m ω_{i-1} + c_0 ω_i + c_1 ω_{i+1} - c_2 ω_{i+2} + h²/12 ω_i × ω_{i+1};
-        # uniform steps give (-1, 13, 13, -1) h/24.
-        xm, ym, zm = wm
-        x2, y2, z2 = w2
-        u = 0.5 * h_0
-        a_m = u + h_m
-        a_p = u + h_p
-        s_m0 = h_m + h_0
-        s_0p = h_0 + h_p
-        s_all = s_m0 + h_p
-        h6 = h_0 * (1.0 / 6.0)
-        g = h_0 * h_0 * h6
-        p = h_0 * a_m * a_p * (1.0 / 3.0)
-        # c_m = g a_p / (h_m s_m0 s_all), c_2 = g a_m / (h_p s_0p s_all),
-        # c_0 = h6 + p / (h_m s_0p), c_1 = h6 + p / (h_p s_m0): over one common denominator
-        # (one division per step instead of four).
-        r = 1.0 / (h_m * h_p * s_m0 * s_0p * s_all)
-        c_m = g * a_p * h_p * s_0p * r
-        c_2 = g * a_m * h_m * s_m0 * r
-        c_0 = h6 + p * h_p * s_m0 * s_all * r
-        c_1 = h6 + p * h_m * s_0p * s_all * r
-        k = h_0 * h_0 * (1.0 / 12.0)
-        return (
-            c_0 * x0 + c_1 * x1 - c_m * xm - c_2 * x2 + k * (y0 * z1 - z0 * y1),
-            c_0 * y0 + c_1 * y1 - c_m * ym - c_2 * y2 + k * (z0 * x1 - x0 * z1),
-            c_0 * z0 + c_1 * z1 - c_m * zm - c_2 * z2 + k * (x0 * y1 - y0 * x1),
-        )
-    if method == Method.TRAPEZOID:
-        u = 0.5 * h_0
-        return u * (x0 + x1), u * (y0 + y1), u * (z0 + z1)
-    if method == Method.CONING:
-        u = 0.5 * h_0
-        k = h_0 * h_0 * (1.0 / 12.0)
-        return (
-            u * (x0 + x1) + k * (y0 * z1 - z0 * y1),
-            u * (y0 + y1) + k * (z0 * x1 - x0 * z1),
-            u * (z0 + z1) + k * (x0 * y1 - y0 * x1),
-        )
-    if method == Method.START:
-        return h_0 * x0, h_0 * y0, h_0 * z0
-    return h_0 * x1, h_0 * y1, h_0 * z1  # Method.END
-
-
-@_jit
-def newest_step(
-    method: int, a: tuple, b: tuple, c: tuple, d: tuple, ta: float, tb: float, tc: float, td: float
-) -> tuple:
-    """``φ`` of the step that the newest of four samples ``(ω_a, t_a) .. (ω_d, t_d)`` completes:
-    ``[t_b, t_c]`` for ``magnus4`` (one sample of look-ahead), ``[t_c, t_d]`` for the others."""
-    if method == Method.MAGNUS4:
-        return increment(MAGNUS4, a, b, c, d, tb - ta, tc - tb, td - tc)
-    h = td - tc
-    return increment(method, c, c, d, d, h, h, h)
-
-
-# -- the state -----------------------------------------------------------------------------------
-
-
-def new_state(q0: np.ndarray, method: int) -> np.ndarray:
-    """A fresh state: attitude ``q0`` (unit ``[x, y, z, w]``), no sample yet."""
-    state = np.zeros(STATE_SIZE)
-    state[Q : Q + 4] = q0
-    state[Q0 : Q0 + 4] = q0
-    state[METHOD] = method
-    return state
-
-
-@_inline
-def _rate(state, r: int) -> tuple:
-    """Buffered rate ``r`` (0 = oldest of the last four)."""
-    i = W + 3 * r
-    return state[i], state[i + 1], state[i + 2]
-
-
-@_jit
-def _ghost(state, m: int, t: float) -> tuple:
-    """Rate at stamp ``t`` on the polynomial through the newest ``m`` buffered samples
-    (Lagrange form; ``m`` = 2, 3 or 4: a line, a parabola, a cubic)."""
-    x = y = z = 0.0
-    for j in range(4 - m, 4):
-        lj = 1.0
-        for i in range(4 - m, 4):
-            if i != j:
-                lj *= (t - state[T + i]) / (state[T + j] - state[T + i])
-        x += lj * state[W + 3 * j]
-        y += lj * state[W + 3 * j + 1]
-        z += lj * state[W + 3 * j + 2]
-    return x, y, z
-
-
-@_inline
-def _commit(state, phi: tuple, out, k: int, emit_phi: bool) -> int:
-    """Apply one step to the state's attitude and write row ``k`` of ``out`` (the new attitude,
-    or ``φ`` when ``emit_phi``); return ``k + 1``."""
-    q = (state[Q], state[Q + 1], state[Q + 2], state[Q + 3])
-    if emit_phi:
-        out[k, 0], out[k, 1], out[k, 2], out[k, 3] = phi[0], phi[1], phi[2], 0.0
-    else:
-        q = step(q, phi[0], phi[1], phi[2])
-        out[k, 0], out[k, 1], out[k, 2], out[k, 3] = q
-    state[Q], state[Q + 1], state[Q + 2], state[Q + 3] = q
-    return k + 1
-
-
-@_inline
-def _push(
-    state, x: float, y: float, z: float, t: float, out, k: int, method: int, emit_phi: bool
-) -> int:
-    """Take sample ``(ω, t)`` into the state and commit every step it completes (rows of
-    ``out`` from ``k``); return the next free row. Inputs are already checked; ``method`` is
-    the state's."""
-    for i in range(W, W + 9):  # shift the window: the oldest sample leaves
-        state[i] = state[i + 3]
-    state[T], state[T + 1], state[T + 2] = state[T + 1], state[T + 2], state[T + 3]
-    state[W + 9], state[W + 10], state[W + 11], state[T + 3] = x, y, z, t
-    n = state[N] + 1.0
-    state[N] = n
-    if n < 2.0:
-        return k
-    a, b, c, d = _rate(state, 0), _rate(state, 1), _rate(state, 2), _rate(state, 3)
-    ta, tb, tc, td = state[T], state[T + 1], state[T + 2], state[T + 3]
-    if method == Method.ROTVEC_SUM:  # q = q_0 ⊗ exp(Σ h_j ω_j): adds rotation vectors
-        h = td - tc
-        sx = state[PHI_SUM] + h * c[0]
-        sy = state[PHI_SUM + 1] + h * c[1]
-        sz = state[PHI_SUM + 2] + h * c[2]
-        state[PHI_SUM], state[PHI_SUM + 1], state[PHI_SUM + 2] = sx, sy, sz
-        q = quat_mul((state[Q0], state[Q0 + 1], state[Q0 + 2], state[Q0 + 3]), exp_quat(sx, sy, sz))
-        out[k, 0], out[k, 1], out[k, 2], out[k, 3] = q
-        state[Q], state[Q + 1], state[Q + 2], state[Q + 3] = q
-        return k + 1
-    if method == Method.MAGNUS4:
-        if n < 4.0:  # step [t_b, t_c] needs ω_a..ω_d: it is committed one sample late
-            return k
-        if n == 4.0:  # the first step, with a ghost sample before the record
-            h = tb - ta
-            ghost = _ghost(state, int(n), ta - h)  # n (= 4) a variable: one compiled _ghost
-            k = _commit(state, increment(MAGNUS4, ghost, a, b, c, h, h, tc - tb), out, k, emit_phi)
-    return _commit(state, newest_step(method, a, b, c, d, ta, tb, tc, td), out, k, emit_phi)
 
 
 def feed(state, omega, t, out, emit_phi: bool = False) -> int:
     """Push samples ``omega[j], t[j]`` (checked: finite, increasing after the state's last
-    stamp; float64, C-contiguous); ``out`` gets one row per committed step (the attitude after
-    it, or its ``φ`` when ``emit_phi``). Returns the rows written (at most ``len(t) + 1``).
-
-    Runs the loop compiled for the state's method (:func:`_feed_for`), compiling it on the
-    first call with that method in any process (then loading it from the cache).
-    """
-    key = (int(state[METHOD]), bool(emit_phi))
-    fn = _FEEDS.get(key)
-    if fn is None:
-        fn = _FEEDS[key] = _compiled(_feed_for(*key), _FEED_SIGNATURE)
-    return fn(state, omega, t, out)
-
-
-_FEEDS: dict = {}
-_FEED_SIGNATURE = "int64(float64[::1], float64[:, ::1], float64[::1], float64[:, ::1])"
-
-
-def _feed_for(method: int, emit_phi: bool):
-    """:func:`feed` for one method, with the method a constant so that the compiler keeps only
-    its branch (measured: a quarter less time per sample than one loop that tests the method
-    at every step), and only the methods a process uses are compiled. The first samples (and
-    every ``rotvec_sum`` sample) go through :func:`_push`; once four samples are in,
-    :func:`_recursion` runs."""
-
-    def feed_method(state, omega, t, out):
-        j = 0
-        k = 0
-        while j < len(t) and (state[N] < 4.0 or method == Method.ROTVEC_SUM):
-            k = _push(state, omega[j, 0], omega[j, 1], omega[j, 2], t[j], out, k, method, emit_phi)
-            j += 1
-        if j == len(t):
-            return k
-        return _recursion(state, omega, t, out, j, k, method, emit_phi)
-
-    return feed_method
-
-
-@_inline
-def _recursion(state, omega, t, out, j: int, k: int, method: int, emit_phi: bool) -> int:
-    """Samples ``j..`` once the window is full: the DCM recursion ``q <- q ⊗ exp(φ)``, one step
-    per sample, with the window of four samples in local variables."""
-    q = (state[Q], state[Q + 1], state[Q + 2], state[Q + 3])
-    a, b, c, d = _rate(state, 0), _rate(state, 1), _rate(state, 2), _rate(state, 3)
-    ta, tb, tc, td = state[T], state[T + 1], state[T + 2], state[T + 3]
-    state[N] += len(t) - j
-    for i in range(j, len(t)):
-        a, b, c, d = b, c, d, (omega[i, 0], omega[i, 1], omega[i, 2])
-        ta, tb, tc, td = tb, tc, td, t[i]
-        phi = newest_step(method, a, b, c, d, ta, tb, tc, td)
-        if emit_phi:
-            out[k, 0], out[k, 1], out[k, 2], out[k, 3] = phi[0], phi[1], phi[2], 0.0
-        else:
-            q = step(q, phi[0], phi[1], phi[2])
-            out[k, 0], out[k, 1], out[k, 2], out[k, 3] = q
-        k += 1
-    state[Q], state[Q + 1], state[Q + 2], state[Q + 3] = q
-    for r, w in enumerate((a, b, c, d)):
-        state[W + 3 * r], state[W + 3 * r + 1], state[W + 3 * r + 2] = w
-    state[T], state[T + 1], state[T + 2], state[T + 3] = ta, tb, tc, td
-    return k
+    stamp); ``out`` gets one row per committed step (the attitude after it, or its ``φ`` when
+    ``emit_phi``). Returns the rows written (at most ``len(t) + 1``). Runs the loop compiled
+    for the state's method."""
+    _arrays(state=(state, 1), omega=(omega, 2), t=(t, 1), out=(out, 2))
+    return entry(feed_entry(int(state[METHOD]), emit_phi))(state, omega, t, out)
 
 
 def push(state, omega, t: float) -> int:
-    """One unchecked sample (``omega`` a float64 (3,) C-contiguous array, ``t`` a float): the
-    compiled :func:`push_for` the state's method."""
-    return push_for(int(state[METHOD]))(state, omega, t)
-
-
-_PUSHES: dict = {}
+    """One sample (``omega`` a float64 (3,) array, ``t`` a number) into the state; a code
+    (:data:`OK`, :data:`NOT_FINITE`, ...). See :func:`push_for`."""
+    _arrays(state=(state, 1), omega=(omega, 1))
+    return push_for(int(state[METHOD]))(state, omega, float(t))
 
 
 def push_for(method: int):
-    """The compiled per-sample push for ``method`` (compiled or loaded on first use)."""
-    fn = _PUSHES.get(method)
-    if fn is None:
-        fn = _PUSHES[method] = _compiled(
-            _push_for(method), "int64(float64[::1], float64[::1], float64)"
-        )
-    return fn
-
-
-def _push_for(method: int):
-    """Check one sample, then :func:`_push` it; ``method`` a constant (as in :func:`_feed_for`).
-
-    The compiled function returns ``IS_CLOSED``, ``NOT_FINITE`` or ``NOT_INCREASING`` (state
-    unchanged); ``MAYBE_GAP`` when the step exceeds ``GAP_FACTOR`` times the shortest of the
-    last three (the caller then applies the gap rule to the buffered stamps); else ``OK``.
-    """
-
-    def push_method(state, omega, t):
-        if state[CLOSED]:
-            return IS_CLOSED
-        if len(omega) != 3:
-            return NOT_FINITE
-        x, y, z = omega[0], omega[1], omega[2]
-        if not (math.isfinite(x) and math.isfinite(y) and math.isfinite(z) and math.isfinite(t)):
-            return NOT_FINITE
-        n = state[N]
-        code = OK
-        if n >= 1.0:
-            h = t - state[T + 3]
-            if not h > 0.0:
-                return NOT_INCREASING
-            if n >= 2.0:
-                shortest = state[T + 3] - state[T + 2]
-                for r in range(max(1, 4 - int(n)), 3):
-                    shortest = min(shortest, state[T + r + 1] - state[T + r])
-                if h > GAP_FACTOR * shortest:
-                    code = MAYBE_GAP
-        _push(state, x, y, z, t, state[ROWS : ROWS + 8].reshape((2, 4)), 0, method, False)
-        return code
-
-    return push_method
+    """The compiled per-sample push for ``method``, unchecked: ``fn(state, omega, t)`` with
+    ``state`` and ``omega`` float64 C-contiguous 1-D arrays and ``t`` a float. It checks the
+    sample (finite, after the last stamp, not closed) and returns :data:`IS_CLOSED`,
+    :data:`NOT_FINITE` or :data:`NOT_INCREASING` (state unchanged); :data:`MAYBE_GAP` when the
+    step exceeds ``GAP_FACTOR`` times the shortest of the last three; else :data:`OK`."""
+    return entry(push_entry(int(method)))
 
 
 def close(state, emit_phi: bool = False) -> int:
@@ -515,131 +220,36 @@ def close(state, emit_phi: bool = False) -> int:
     last one (and before the first, for records of 2 or 3 samples) on the polynomial through
     the last (up to four) samples. Other methods: nothing. Returns the rows written to
     ``state[ROWS:ROWS + 8]`` (two rows of four)."""
+    _arrays(state=(state, 1))
     state[CLOSED] = 1.0
     if int(state[METHOD]) != Method.MAGNUS4 or state[N] < 2.0:
         return 0
-    return _close_magnus4(state, bool(emit_phi))
+    return entry("close_magnus4")(state, bool(emit_phi))
 
 
-@_entry("int64(float64[::1], boolean)")
-def _close_magnus4(state, emit_phi: bool) -> int:
-    """:func:`close` for ``magnus4`` with at least two samples: the last step, with a ghost
-    sample after the record; with two or three samples the first step is still open too, with
-    a ghost before the record (with two, that is the same step)."""
-    out = state[ROWS : ROWS + 8].reshape((2, 4))
-    n = int(state[N])
-    tb, tc, td = state[T + 1], state[T + 2], state[T + 3]
-    h_end = td - tc
-    ghost_end = _ghost(state, min(n, 4), td + h_end)
-    b, c, d = _rate(state, 1), _rate(state, 2), _rate(state, 3)
-    h_b = h_end if n == 2 else tc - tb
-    k = 0
-    if n < 4:
-        ghost_start = _ghost(state, n, (tc if n == 2 else tb) - h_b)
-        if n == 2:
-            b = ghost_start
-        else:
-            phi = increment(MAGNUS4, ghost_start, b, c, d, h_b, h_b, h_end)
-            k = _commit(state, phi, out, 0, emit_phi)
-    phi = increment(MAGNUS4, b, c, d, ghost_end, h_b, h_end, h_end)
-    return _commit(state, phi, out, k, emit_phi)
+def check_record(values, t, t_before: float) -> tuple[int, int, int, float, float]:
+    """One pass over samples ``values`` (n, 3) and stamps ``t``: ``(row, stamp, order, dt_min,
+    dt_max)``, the first row with a non-finite number, the first non-finite stamp, the first
+    index not after the stamp before it (``t_before`` for index 0; ``-inf``: none), each ``-1``
+    when there is none, and the shortest and longest step (s)."""
+    _arrays(values=(values, 2), t=(t, 1))
+    return entry("check_record")(values, t, float(t_before))
 
 
-# -- input checks ------------------------------------------------------------------------------
-
-
-@_entry("Tuple((int64, int64, int64, float64, float64))(float64[:, ::1], float64[::1], float64)")
-def check_record(values, t, t_before: float) -> tuple:
-    """One pass over a record of samples ``values`` (n, 3) and stamps ``t``.
-
-    Returns ``(row, stamp, order, dt_min, dt_max)``: the first row of ``values`` with a
-    non-finite number, the first non-finite stamp, the first index ``i`` with ``t[i]`` not after
-    the stamp before it (``t_before`` for ``i = 0``; ``-inf``: none), each ``-1`` when there is
-    none; and the shortest and longest step (s, the one after ``t_before`` included).
-    """
-    row = -1
-    for i in range(values.shape[0]):
-        if not (
-            math.isfinite(values[i, 0])
-            and math.isfinite(values[i, 1])
-            and math.isfinite(values[i, 2])
-        ):
-            row = i
-            break
-    stamp = -1
-    order = -1
-    dt_min = math.inf
-    dt_max = -math.inf
-    prev = t_before
-    for i in range(len(t)):
-        if not math.isfinite(t[i]):
-            stamp = i
-            break
-        h = t[i] - prev
-        if not h > 0.0 and order < 0:
-            order = i
-        if prev != -math.inf:
-            dt_min = min(dt_min, h)
-            dt_max = max(dt_max, h)
-        prev = t[i]
-    return row, stamp, order, dt_min, dt_max
-
-
-# -- delta angles --------------------------------------------------------------------------------
-
-
-@_inline
-def delta_rotvec(method: int, d1: tuple, d2: tuple, d3: tuple, a: float, b: float) -> tuple:
-    """Rotation vector of one attitude update from delta angles (rad, body).
-
-    ``one_plus_previous``: ``d1 = Δθ_{k-1}``, ``d2 = Δθ_k``, intervals ``a``, ``b``:
-    ``Δθ_k + b²/(6 a (a + b)) Δθ_{k-1} × Δθ_k`` (1/12 for ``a = b``). ``two_sample``:
-    ``Δθ1 + Δθ2 + (a + b)²/(6 a b) Δθ1 × Δθ2`` (2/3 for ``a = b``). ``three_sample``:
-    ``ΣΔθ + 9/20 Δθ1 × Δθ3 + 27/40 Δθ2 × (Δθ3 − Δθ1)``. ``plain``: ``d2``.
-    """
-    x1, y1, z1 = d1
-    x2, y2, z2 = d2
-    if method == DeltaMethod.PLAIN:
-        return d2
-    if method == DeltaMethod.ONE_PLUS_PREVIOUS or method == DeltaMethod.TWO_SAMPLE:
-        if method == DeltaMethod.ONE_PLUS_PREVIOUS:
-            k = b * b / (6.0 * a * (a + b))
-            bx, by, bz = x2, y2, z2
-        else:
-            k = (a + b) * (a + b) / (6.0 * a * b)
-            bx, by, bz = x1 + x2, y1 + y2, z1 + z2
-        return (
-            bx + k * (y1 * z2 - z1 * y2),
-            by + k * (z1 * x2 - x1 * z2),
-            bz + k * (x1 * y2 - y1 * x2),
-        )
-    x3, y3, z3 = d3  # DeltaMethod.THREE_SAMPLE
-    ex, ey, ez = x3 - x1, y3 - y1, z3 - z1
-    return (
-        x1 + x2 + x3 + 0.45 * (y1 * z3 - z1 * y3) + 0.675 * (y2 * ez - z2 * ey),
-        y1 + y2 + y3 + 0.45 * (z1 * x3 - x1 * z3) + 0.675 * (z2 * ex - x2 * ez),
-        z1 + z2 + z3 + 0.45 * (x1 * y3 - y1 * x3) + 0.675 * (x2 * ey - y2 * ex),
-    )
-
-
-@_entry("void(float64[::1], float64[:, ::1], float64[::1], int64, float64[:, ::1])")
 def feed_delta(q0, dtheta, dt, method: int, out) -> None:
-    """Attitudes from checked delta angles: ``out[0] = q0``, then one row per update
-    (per interval, or per set of 2 or 3 intervals)."""
-    q = (q0[0], q0[1], q0[2], q0[3])
-    out[0, 0], out[0, 1], out[0, 2], out[0, 3] = q
-    m = 2 if method == DeltaMethod.TWO_SAMPLE else 3 if method == DeltaMethod.THREE_SAMPLE else 1
-    zero = (0.0, 0.0, 0.0)
-    for u in range(len(dtheta) // m):
-        k = u * m
-        d = (dtheta[k, 0], dtheta[k, 1], dtheta[k, 2])
-        if m == 1:
-            prev = zero if k == 0 else (dtheta[k - 1, 0], dtheta[k - 1, 1], dtheta[k - 1, 2])
-            a = dt[k - 1] if k > 0 else dt[k]
-            phi = delta_rotvec(method, prev, d, zero, a, dt[k])
-        else:
-            d2 = (dtheta[k + 1, 0], dtheta[k + 1, 1], dtheta[k + 1, 2])
-            d3 = zero if m == 2 else (dtheta[k + 2, 0], dtheta[k + 2, 1], dtheta[k + 2, 2])
-            phi = delta_rotvec(method, d, d2, d3, dt[k], dt[k + 1])
-        q = step(q, phi[0], phi[1], phi[2])
-        out[u + 1, 0], out[u + 1, 1], out[u + 1, 2], out[u + 1, 3] = q
+    """Attitudes from checked delta angles: ``out[0] = q0``, then one row per update (per
+    interval, or per set of 2 or 3 intervals)."""
+    _arrays(q0=(q0, 1), dtheta=(dtheta, 2), dt=(dt, 1), out=(out, 2))
+    entry("feed_delta")(q0, dtheta, dt, int(method), out)
+
+
+def record_chain(b, pos: int) -> tuple[np.ndarray, np.ndarray, int]:
+    """The ``[uint16 size][uint8 type]`` record chain of the bytes ``b`` (a uint8 array) from
+    ``pos``: ``(positions, types, end)``, every whole record and where the first incomplete one
+    starts (:func:`imu_dcm.kernel_jit.record_chain`)."""
+    if not (isinstance(b, np.ndarray) and b.dtype == np.uint8 and b.ndim == 1):
+        raise TypeError(f"Expected `b` a 1-D uint8 array, got {type(b).__name__}")
+    b = np.ascontiguousarray(b)
+    if _aot() is None and not b.flags.writeable:
+        b = b.copy()  # numba's signature is of a writable array (the built one reads any)
+    return entry("record_chain")(b, int(pos))

@@ -36,7 +36,9 @@ __all__ = [
     "hat",
     "log_quat",
     "quat_angle_rad",
+    "quat_as_matrix",
     "quat_conjugate",
+    "quat_from_matrix",
     "quat_multiply",
     "quat_normalize",
     "quat_rotate",
@@ -163,8 +165,9 @@ def log_quat(q: ArrayLike) -> NDArray[np.float64]:
     small = s < 0.5 * _SMALL_ANGLE_RAD
     safe = np.where(small, 1.0, s)
     # theta / sin(theta/2); near 0, 2/w * (1 - s²/(3 w²) + s⁴/(5 w⁴)) from the series of atan.
-    r2 = s * s / (w * w)
-    scale = np.where(small, 2.0 / w * (1.0 - r2 / 3.0 + r2 * r2 / 5.0), theta / safe)
+    w_small = np.where(small, w, 1.0)  # w is near 1 there; elsewhere it may be 0 (half turns)
+    r2 = s * s / (w_small * w_small)
+    scale = np.where(small, 2.0 / w_small * (1.0 - r2 / 3.0 + r2 * r2 / 5.0), theta / safe)
     return v * scale[..., None]
 
 
@@ -233,6 +236,86 @@ def quat_rotate(q: ArrayLike, v: ArrayLike) -> NDArray[np.float64]:
     u, w = q[..., :3], q[..., 3:4]
     t = 2.0 * np.cross(u, v)
     return v + w * t + np.cross(u, t)
+
+
+def quat_as_matrix(q: ArrayLike) -> NDArray[np.float64]:
+    """Rotation matrix ``R_w_b`` of quaternions ``q_w_b`` (``v_w = R @ v_b``, active).
+
+    Parameters
+    ----------
+    q : array_like, shape (..., 4)
+        ``[x, y, z, w]``; normalised here.
+
+    Returns
+    -------
+    ndarray, shape (..., 3, 3)
+        Its columns are the body axes in world coordinates.
+    """
+    q = quat_normalize(q)
+    x, y, z, w = q[..., 0], q[..., 1], q[..., 2], q[..., 3]
+    xx, yy, zz = x * x, y * y, z * z
+    xy, xz, yz = x * y, x * z, y * z
+    wx, wy, wz = w * x, w * y, w * z
+    rows = (
+        (1.0 - 2.0 * (yy + zz), 2.0 * (xy - wz), 2.0 * (xz + wy)),
+        (2.0 * (xy + wz), 1.0 - 2.0 * (xx + zz), 2.0 * (yz - wx)),
+        (2.0 * (xz - wy), 2.0 * (yz + wx), 1.0 - 2.0 * (xx + yy)),
+    )
+    return np.stack([np.stack(r, axis=-1) for r in rows], axis=-2)
+
+
+#: A matrix with ``max |R Rᵀ - I|`` beyond this is projected on the nearest rotation first.
+_ORTHONORMAL_TOL = 1e-12
+
+
+def quat_from_matrix(R: ArrayLike) -> NDArray[np.float64]:
+    """Unit quaternion ``[x, y, z, w]`` of rotation matrices (the nearest rotation's).
+
+    A matrix that is not orthonormal to 1e-12 is first replaced by the nearest rotation
+    (``U Vᵀ`` of its SVD, in the Frobenius norm). The quaternion is then Markley's: the
+    largest of ``x², y², z², w²`` is computed from the diagonal, the others from the
+    off-diagonal sums and differences, and that largest component is positive (the sign
+    scipy ``Rotation.from_matrix`` gives too).
+
+    Parameters
+    ----------
+    R : array_like, shape (..., 3, 3)
+        ``R_w_b`` with ``det > 0``; the determinant is not checked here.
+
+    Returns
+    -------
+    ndarray, shape (..., 4)
+    """
+    R = np.array(R, dtype=float)  # a copy: projected rows are written back
+    gram = R @ np.swapaxes(R, -1, -2)
+    off = np.abs(gram - np.eye(3)).max(axis=(-2, -1)) > _ORTHONORMAL_TOL
+    if np.any(off):
+        u, _, vt = np.linalg.svd(R[off])
+        R[off] = u @ vt
+    trace = R[..., 0, 0] + R[..., 1, 1] + R[..., 2, 2]
+    choice = np.argmax(np.stack([R[..., 0, 0], R[..., 1, 1], R[..., 2, 2], trace], -1), -1)
+    q = np.empty(R.shape[:-2] + (4,))
+    for i in range(3):  # x, y or z largest
+        j, k = (i + 1) % 3, (i + 2) % 3
+        m = choice == i
+        qi = np.empty(R.shape[:-2] + (4,))
+        qi[..., i] = 1.0 - trace + 2.0 * R[..., i, i]
+        qi[..., j] = R[..., j, i] + R[..., i, j]
+        qi[..., k] = R[..., k, i] + R[..., i, k]
+        qi[..., 3] = R[..., k, j] - R[..., j, k]
+        q[m] = qi[m]
+    m = choice == 3  # w largest
+    qw = np.stack(
+        [
+            R[..., 2, 1] - R[..., 1, 2],
+            R[..., 0, 2] - R[..., 2, 0],
+            R[..., 1, 0] - R[..., 0, 1],
+            1.0 + trace,
+        ],
+        axis=-1,
+    )
+    q[m] = qw[m]
+    return q / np.linalg.norm(q, axis=-1, keepdims=True)
 
 
 def quat_angle_rad(q_a: ArrayLike, q_b: ArrayLike) -> NDArray[np.float64]:

@@ -53,6 +53,8 @@ if TYPE_CHECKING:
 
 __all__ = ["DcmIntegrator"]
 
+_F8 = np.dtype(np.float64)  # numpy's one native float64 dtype: `is` compares it
+
 
 class DcmIntegrator:
     """Streaming strapdown integrator ``q_w_b <- q_w_b ⊗ exp(φ)``, the twin of
@@ -178,17 +180,17 @@ class DcmIntegrator:
         GapWarning
             The step is a gap (:func:`imu_dcm.integrate.find_gaps`) among the last four steps.
         """
-        # The sample goes straight to the compiled push, which takes a float64 (3,) contiguous
-        # array and a number (numba refuses any other type with a TypeError: only then is the
-        # sample converted here) and checks it (finite, increasing, not closed): a code.
+        # The compiled push takes a float64 (3,) C-contiguous array and a float, unchecked:
+        # anything else is converted here first. It checks the sample (finite, increasing, not
+        # closed) and returns a code.
+        # (1-D float64 with stride 8 is contiguous; the push refuses a length other than 3.)
+        if type(omega_b) is not np.ndarray or omega_b.strides != (8,) or omega_b.dtype is not _F8:
+            omega_b = self._as_rate(omega_b, t_s)
+        if type(t_s) is not float:
+            t_s = self._as_stamp(omega_b, t_s)
         if self._t0_pending:
-            omega_b, t_s = self._as_rate(omega_b, t_s), self._as_stamp(omega_b, t_s)
             self._start_at_t0(omega_b, t_s)
-        try:
-            code = self._push(self._state, omega_b, t_s)
-        except TypeError:
-            omega_b, t_s = self._as_rate(omega_b, t_s), self._as_stamp(omega_b, t_s)
-            code = self._push(self._state, omega_b, t_s)
+        code = self._push(self._state, omega_b, t_s)
         if code:
             self._not_ok(code, omega_b, t_s)
         return self._q.copy()
@@ -230,6 +232,8 @@ class DcmIntegrator:
         n = self.n_samples
         if code == kernel.IS_CLOSED:
             raise InputError("Expected no samples after finish(), got one")
+        if code == kernel.NOT_FINITE and w.shape != (3,):
+            self._as_rate(w, t)  # raises: not 3 numbers
         if code == kernel.NOT_FINITE:
             raise InputError(
                 f"Expected finite `omega_b` and `t_s`, got {w.tolist()} at t_s = {t} (sample {n})"

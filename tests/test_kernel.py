@@ -19,7 +19,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from imu_dcm import DcmIntegrator, GapWarning, ImuDcmWarning, kernel
+from imu_dcm import DcmIntegrator, GapWarning, ImuDcmWarning, kernel, kernel_jit
+from imu_dcm.errors import InputError
 from imu_dcm.integrate import (
     DELTA_METHODS,
     METHODS,
@@ -208,83 +209,191 @@ def test_method_names_are_the_enum_names_in_code_order():
     assert all(Method[name.upper()].label == name for name in METHODS)
 
 
-def test_entry_points_have_one_signature_and_refuse_other_types():
-    # Each entry point is compiled for one signature; other argument types are refused (the
-    # callers convert at the Python boundary) instead of compiling a second version.
-    w, t = np.zeros((5, 3)), 1e-3 * np.arange(5)
-    integrate(w, t, [0, 0, 0, 1], "magnus4")
-    check = kernel.check_record.compiled()
-    assert len(check.signatures) == 1
-    with pytest.raises(TypeError):
-        check(np.zeros((5, 3), dtype=np.int64), t, -math.inf)
-    with pytest.raises(TypeError):
-        check(np.asfortranarray(np.zeros((5, 3))), t, -math.inf)
-    push = kernel.push_for(int(Method.MAGNUS4))
-    assert len(push.signatures) == 1
-    with pytest.raises(TypeError):
-        push(kernel.new_state(np.array([0.0, 0, 0, 1]), Method.MAGNUS4), [0.0, 0.0, 0.0], 0.0)
-    assert all(len(fn.signatures) == 1 for fn in kernel._FEEDS.values())
+def test_batch_entry_points_refuse_arrays_the_compiled_code_would_misread():
+    # The compiled code reads float64 C-contiguous arrays without checking them; the kernel's
+    # batch functions refuse anything else (the callers convert at the Python boundary).
+    t = 1e-3 * np.arange(5)
+    with pytest.raises(TypeError, match="float64 C-contiguous"):
+        kernel.check_record(np.zeros((5, 3), dtype=np.int64), t, -math.inf)
+    with pytest.raises(TypeError, match="float64 C-contiguous"):
+        kernel.check_record(np.asfortranarray(np.zeros((5, 3))), t, -math.inf)
+    state = kernel.new_state(np.array([0.0, 0, 0, 1]), Method.MAGNUS4)
+    with pytest.raises(TypeError, match="`out`"):
+        kernel.feed(state, np.zeros((5, 3)), t, np.zeros((4, 6))[:, ::2], False)
+    with pytest.raises(TypeError, match="`omega`"):
+        kernel.push(state, [0.0, 0.0, 0.0], 0.0)
 
 
-def _kernel_env(cache: Path) -> dict[str, str]:
+def test_streaming_update_converts_any_sample_type_to_the_same_bits():
+    # Lists, ints, strided views, other byte orders and numpy scalars reach the unchecked
+    # compiled push as float64 C arrays: every form gives the float64 path's attitude exactly.
+    w, t = record(40, seed=5)
+    w[:, 0] = np.round(w[:, 0])  # ints are exact as floats
+    forms = {
+        "float64": lambda k: (w[k].copy(), float(t[k])),
+        "list": lambda k: (w[k].tolist(), float(t[k])),
+        "strided": lambda k: (np.repeat(w[k], 2)[::2], np.float64(t[k])),
+        "big-endian": lambda k: (w[k].astype(">f8"), t[k].item()),
+        "2-d row": lambda k: (w[k : k + 1][0], t[k]),
+    }
+    got = {}
+    for name, form in forms.items():
+        integ = DcmIntegrator([0, 0, 0, 1])
+        got[name] = np.array([integ.update(*form(k)) for k in range(len(t))])
+    for name in forms:
+        assert np.array_equal(got[name], got["float64"]), name
+    integ = DcmIntegrator([0, 0, 0, 1])
+    for k in range(3):
+        integ.update(np.round(w[k]).astype(np.int64), int(k))
+    assert integ.n_samples == 3
+    with pytest.raises(InputError, match="3 numbers"):
+        integ.update(np.zeros(4), 5.0)
+    with pytest.raises(InputError, match="3 numbers"):
+        integ.update(np.zeros(3), "later")
+
+
+def _aot_or_skip():
+    """The module built ahead of time, or a skip (a failure when the environment requires
+    it: CI does, after its install built it)."""
+    if kernel.backend() == "ahead-of-time":
+        return kernel._aot()
+    reason = f"no up-to-date kernel built ahead of time{kernel._AOT[1]}"
+    if os.environ.get("IMU_DCM_REQUIRE_AOT") == "1":
+        pytest.fail(reason)
+    pytest.skip(reason)
+
+
+@pytest.mark.parametrize("method", [int(m) for m in Method])
+@pytest.mark.parametrize("emit_phi", [False, True])
+def test_built_kernel_equals_numba_compile_bit_for_bit(method, emit_phi):
+    # The two ways to load the kernel compile the same functions; the built module and numba's
+    # compile must agree in every bit (no fast-math: no reassociation, no fused multiply-add).
+    aot = _aot_or_skip()
+    w, t = record(3000, seed=method)
+    outs, states = [], []
+    for fn in (
+        getattr(aot, kernel.feed_entry(method, emit_phi)),
+        kernel_jit.compiled(kernel.feed_entry(method, emit_phi)),
+    ):
+        state = kernel.new_state(np.array([0.0, 0.6, 0.0, 0.8]), method)
+        out = np.zeros((len(t) + 1, 4))
+        k = fn(state, w, t, out)
+        outs.append(out[:k])
+        states.append(state)
+    assert np.array_equal(outs[0].view(np.int64), outs[1].view(np.int64))
+    assert np.array_equal(states[0].view(np.int64), states[1].view(np.int64))
+
+
+def test_built_push_close_check_and_delta_equal_numba_compile():
+    aot = _aot_or_skip()
+    w, t = record(50, seed=9)
+    t[30:] += 0.05  # a gap: the push says MAYBE_GAP
+    for method in (int(Method.MAGNUS4), int(Method.CONING)):
+        runs = []
+        for push, close in (
+            (getattr(aot, kernel.push_entry(method)), aot.close_magnus4),
+            (kernel_jit.compiled(kernel.push_entry(method)), kernel_jit.compiled("close_magnus4")),
+        ):
+            state = kernel.new_state(np.array([0.0, 0.0, 0.0, 1.0]), method)
+            codes = [push(state, w[k], float(t[k])) for k in range(len(t))]
+            codes.append(push(state, w[0], float(t[0])))  # not after the last stamp
+            if method == kernel.MAGNUS4:
+                close(state, False)
+            runs.append((codes, state))
+        assert runs[0][0] == runs[1][0] and kernel.MAYBE_GAP in runs[0][0]
+        assert runs[0][0][-1] == kernel.NOT_INCREASING
+        assert np.array_equal(runs[0][1], runs[1][1])
+    bad = w.copy()
+    bad[7, 1] = np.nan
+    assert aot.check_record(bad, t, -math.inf) == kernel_jit.compiled("check_record")(
+        bad, t, -math.inf
+    )
+    for method in DeltaMethod:
+        outs = []
+        for fn in (aot.feed_delta, kernel_jit.compiled("feed_delta")):
+            out = np.zeros((49, 4))
+            fn(np.array([0.0, 0.0, 0.0, 1.0]), 1e-3 * w[:48], np.diff(t)[:48], int(method), out)
+            outs.append(out)
+        assert np.array_equal(outs[0], outs[1]), method.name
+
+
+def test_numba_compiles_each_entry_point_for_one_signature():
+    for name in ("check_record", kernel.feed_entry(kernel.MAGNUS4, False)):
+        assert len(kernel_jit.compiled(name).signatures) == 1
+
+
+def test_an_out_of_date_built_kernel_is_not_used(monkeypatch):
+    # A module built from other sources than these (an edited kernel) is left alone: numba
+    # compiles instead, and the compile line says why.
+    monkeypatch.setattr(kernel, "_AOT", [])
+    monkeypatch.setattr(kernel, "digest_entry", lambda: "source_no_such_build")
+    assert kernel.backend() == "jit"
+    if "out of date" not in kernel._AOT[1]:
+        assert "no kernel built ahead of time" in kernel._AOT[1]
+    monkeypatch.setattr(kernel, "_AOT", [])
+    monkeypatch.setenv(kernel.ENV, "jit")
+    assert kernel.backend() == "jit" and "IMU_DCM_KERNEL=jit" in kernel._AOT[1]
+
+
+def _kernel_env(cache: Path, **extra: str) -> dict[str, str]:
     return {
         **os.environ,
         "NUMBA_CACHE_DIR": str(cache),
         "PYTHONPATH": os.pathsep.join(
             [str(Path(kernel.__file__).parents[1]), os.environ.get("PYTHONPATH", "")]
         ),
+        **extra,
     }
 
 
-def test_compile_notice_once_on_a_cache_miss_and_never_from_the_cache(tmp_path):
-    # An empty cache: the kernel compiles, and says so once on stderr before it does. The same
-    # cache again: it loads, silently.
-    code = (
-        "import numpy as np, imu_dcm; w, t = np.zeros((9, 3)), 1e-3 * np.arange(9); "
-        "imu_dcm.integrate(w, t, [0, 0, 0, 1]); integ = imu_dcm.DcmIntegrator([0, 0, 0, 1]); "
-        "[integ.update(w[k], float(t[k])) for k in range(9)]; integ.finish()"
-    )
-    runs = [
-        subprocess.run(
-            [sys.executable, "-c", code],
-            env=_kernel_env(tmp_path / "cache"),
-            capture_output=True,
-            text=True,
-            check=False,
-            timeout=600,
-        )
-        for _ in range(2)
-    ]
-    assert [r.returncode for r in runs] == [0, 0], runs[0].stderr + runs[1].stderr
-    notice = "compiling the integrator kernel once, about"
-    assert runs[0].stderr.count(notice) == 1, runs[0].stderr
-    assert "later runs load it from the cache" in runs[0].stderr
-    assert runs[1].stderr == "", runs[1].stderr
+_RUN_BOTH = (
+    "import sys, numpy as np, imu_dcm; w, t = np.zeros((9, 3)), 1e-3 * np.arange(9); "
+    "imu_dcm.integrate(w, t, [0, 0, 0, 1]); integ = imu_dcm.DcmIntegrator([0, 0, 0, 1]); "
+    "[integ.update(w[k], float(t[k])) for k in range(9)]; integ.finish(); "
+    "print('numba' in sys.modules)"
+)
 
 
-def test_no_writable_cache_folder_warns_once_and_still_imports(tmp_path):
-    # A read-only install with no user cache either: numba finds no cache folder. The kernel
-    # must still import (compiled per process) and say so once. Simulated by allowing only
-    # numba's NUMBA_CACHE_DIR locator and pointing it below a regular file.
-    blocker = tmp_path / "file"
-    blocker.write_text("")
-    env = {
-        **os.environ,
-        "NUMBA_CACHE_LOCATOR_CLASSES": "UserProvidedCacheLocator",
-        "NUMBA_CACHE_DIR": str(blocker / "cache"),
-        "PYTHONPATH": os.pathsep.join(
-            [str(Path(kernel.__file__).parents[1]), os.environ.get("PYTHONPATH", "")]
-        ),
-    }
-    code = "import warnings; warnings.simplefilter('always'); import imu_dcm.kernel"
-    res = subprocess.run(
+def _run(code: str, env: dict[str, str]) -> subprocess.CompletedProcess:
+    return subprocess.run(
         [sys.executable, "-c", code],
         env=env,
         capture_output=True,
         text=True,
         check=False,
-        timeout=300,
+        timeout=600,
     )
+
+
+def test_compile_notice_once_on_a_cache_miss_and_never_from_the_cache(tmp_path):
+    # Compiling with numba (forced here): an empty cache compiles, and says so once on stderr
+    # before it does. The same cache again: it loads, silently.
+    env = _kernel_env(tmp_path / "cache", IMU_DCM_KERNEL="jit")
+    runs = [_run(_RUN_BOTH, env) for _ in range(2)]
+    assert [r.returncode for r in runs] == [0, 0], runs[0].stderr + runs[1].stderr
+    notice = "compiling the integrator kernel once, about"
+    assert runs[0].stderr.count(notice) == 1, runs[0].stderr
+    assert "later runs load it from the cache (IMU_DCM_KERNEL=jit)" in runs[0].stderr
+    assert runs[1].stderr == "", runs[1].stderr
+
+
+def test_the_built_kernel_runs_without_numba_and_without_a_compile_line(tmp_path):
+    _aot_or_skip()
+    res = _run(_RUN_BOTH, _kernel_env(tmp_path / "cache"))
+    assert res.returncode == 0, res.stderr
+    assert res.stderr == "" and res.stdout.strip() == "False"
+    assert not (tmp_path / "cache").exists()  # nothing compiled, nothing cached
+
+
+def test_no_writable_cache_folder_warns_once_and_still_imports(tmp_path):
+    # A read-only install with no user cache either: numba finds no cache folder. The kernel
+    # must still compile (in every process) and say so once. Simulated by allowing only
+    # numba's NUMBA_CACHE_DIR locator and pointing it below a regular file.
+    blocker = tmp_path / "file"
+    blocker.write_text("")
+    env = _kernel_env(blocker / "cache", NUMBA_CACHE_LOCATOR_CLASSES="UserProvidedCacheLocator")
+    code = "import warnings; warnings.simplefilter('always'); import imu_dcm.kernel_jit"
+    res = _run(code, env)
     assert res.returncode == 0, res.stderr
     assert res.stderr.count("Expected a writable folder to cache") == 1
 
@@ -301,3 +410,35 @@ def test_find_gaps_is_the_one_rule():
     with pytest.warns(GapWarning) as caught:
         integ.update(np.zeros(3), t[10])
     assert str(caught[0].message) == gap_message(find_gaps(t[7:11]))
+
+
+def test_record_chain_walks_ulog_framing_and_stops_at_an_incomplete_record():
+    # [uint16 size][uint8 type] headers: sizes 2, 0 and 300 (little endian), then a header whose
+    # record runs past the end. Positions and types by hand; both loaders agree.
+    records = [(2, 65), (0, 66), (300, 68)]
+    buf = bytearray()
+    for size, typ in records:
+        buf += bytes([size & 0xFF, size >> 8, typ]) + bytes(size)
+    end = len(buf)
+    buf += bytes([9, 0, 70, 1, 2])  # incomplete
+    b = np.frombuffer(bytes(buf), np.uint8)  # read-only, as the reader passes it
+    at, typ, stop = kernel.record_chain(b, 0)
+    assert at.tolist() == [0, 5, 8] and typ.tolist() == [65, 66, 68] and stop == end
+    jit = kernel_jit.compiled("record_chain")(np.array(b), 0)
+    assert [a.tolist() for a in jit[:2]] == [at.tolist(), typ.tolist()] and jit[2] == stop
+    with pytest.raises(TypeError, match="uint8"):
+        kernel.record_chain(b.astype(np.int16), 0)
+
+
+def test_a_failed_build_is_one_line_and_leaves_no_module(tmp_path):
+    # The build's errors (numba, the C compiler, the disk) come out as one line, exit 1; here
+    # the output folder cannot be made (a regular file stands in its way).
+    blocker = tmp_path / "file"
+    blocker.write_text("")
+    out = str(blocker / "x")
+    code = f"import sys; from imu_dcm.kernel_build import main; sys.exit(main(['--out', {out!r}]))"
+    res = _run(code, _kernel_env(tmp_path / "cache"))
+    assert res.returncode == 1, res.stderr
+    lines = res.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("imu_dcm: the kernel was not built:"), lines
+    assert "Traceback" not in res.stderr and not list(tmp_path.rglob("*_kernel_aot*"))

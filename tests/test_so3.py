@@ -5,7 +5,16 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from imu_dcm.errors import InputError
-from imu_dcm.so3 import as_quat_xyzw, exp_matrix, exp_quat, quat_multiply, quat_rotate
+from imu_dcm.so3 import (
+    as_quat_xyzw,
+    exp_matrix,
+    exp_quat,
+    log_quat,
+    quat_as_matrix,
+    quat_from_matrix,
+    quat_multiply,
+    quat_rotate,
+)
 
 SQRT_HALF = np.sqrt(0.5)
 
@@ -33,3 +42,70 @@ def test_as_quat_rejects_bad_attitudes():
         as_quat_xyzw(np.zeros(3))
     with pytest.raises(InputError, match="rotation matrix"):
         as_quat_xyzw(2 * np.eye(3))
+
+
+EPS = np.finfo(float).eps
+
+
+def _rotations() -> Rotation:
+    """Random rotations and the hard cases: identity, tiny angles, angles near π (every
+    branch of Markley's method), 90° about z."""
+    rng = np.random.default_rng(7)
+    axes = rng.normal(size=(60, 3))
+    axes /= np.linalg.norm(axes, axis=1, keepdims=True)
+    angles = np.concatenate([np.zeros(5), 1e-9 * rng.random(15), np.pi - 1e-9 * rng.random(20)])
+    special = np.concatenate([axes[:40] * angles[:, None], np.eye(3) * np.pi, [[0, 0, np.pi / 2]]])
+    return Rotation.concatenate(
+        [Rotation.random(500, random_state=rng), Rotation.from_rotvec(special)]
+    )
+
+
+def test_quat_as_matrix_matches_scipy_and_90_deg_about_z():
+    r = _rotations()
+    # each entry is a sum of three products of unit-bounded terms: a few ulps
+    np.testing.assert_allclose(quat_as_matrix(r.as_quat()), r.as_matrix(), rtol=0, atol=8 * EPS)
+    # body x is world y under an active 90 deg yaw: the first column
+    m = quat_as_matrix([0.0, 0.0, SQRT_HALF, SQRT_HALF])
+    np.testing.assert_allclose(m[:, 0], [0.0, 1.0, 0.0], atol=4 * EPS)
+    # a quaternion that is not unit is normalised, and leading shapes are kept
+    np.testing.assert_allclose(quat_as_matrix(3.0 * r.as_quat()), r.as_matrix(), atol=8 * EPS)
+    assert quat_as_matrix(r.as_quat().reshape(-1, 1, 4)).shape == (len(r), 1, 3, 3)
+
+
+def test_quat_from_matrix_matches_scipy_with_its_sign():
+    r = _rotations()
+    m = r.as_matrix()
+    q = quat_from_matrix(m)
+    want = Rotation.from_matrix(m).as_quat()
+    sign = np.where(np.sum(q * want, axis=-1) < 0, -1.0, 1.0)[:, None]
+    # each component is a sum of matrix entries (few ulps) over a norm of at least 1/2
+    np.testing.assert_allclose(q, sign * want, rtol=0, atol=8 * EPS)
+    # the largest component is positive (Markley's choice, which scipy keeps)
+    assert np.all(q[np.arange(len(q)), np.argmax(np.abs(q), axis=-1)] > 0)
+    np.testing.assert_allclose(
+        quat_from_matrix([[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]]),
+        [0.0, 0.0, SQRT_HALF, SQRT_HALF],
+        atol=4 * EPS,
+    )
+    np.testing.assert_allclose(quat_from_matrix(np.diag([1.0, -1.0, -1.0])), [1, 0, 0, 0])
+    assert quat_from_matrix(m.reshape(-1, 1, 3, 3)).shape == (len(r), 1, 4)
+
+
+def test_quat_from_matrix_takes_the_nearest_rotation_of_a_noisy_matrix():
+    r = Rotation.random(200, random_state=np.random.default_rng(3))
+    noisy = r.as_matrix() + 1e-5 * np.random.default_rng(4).normal(size=(200, 3, 3))
+    u, _, vt = np.linalg.svd(noisy)
+    nearest = Rotation.from_matrix(u @ vt)  # the orthogonal Procrustes solution
+    got = Rotation.from_quat(quat_from_matrix(noisy))
+    # both are the SVD's projection: they differ by rounding only (SVD of a 3x3, ~1e-15)
+    assert np.max((got.inv() * nearest).magnitude()) < 1e-13
+    # and the noise moved the rotation by about its size, not more
+    assert np.max((got.inv() * r).magnitude()) < 1e-4
+
+
+def test_log_quat_of_half_turns_matches_scipy_without_warnings():
+    # w == 0 exactly: the small-angle series must not be evaluated there (it divides by w)
+    q = np.array([[1.0, 0.0, 0.0, 0.0], [0.0, SQRT_HALF, SQRT_HALF, 0.0], [0.0, 0.0, 1.0, 0.0]])
+    got = log_quat(q)
+    np.testing.assert_allclose(np.linalg.norm(got, axis=-1), np.pi, rtol=0, atol=4 * EPS)
+    np.testing.assert_allclose(got, Rotation.from_quat(q).as_rotvec(), rtol=0, atol=8 * EPS)

@@ -49,7 +49,7 @@ from imu_dcm.logio.meta import load_yaml
 from imu_dcm.logio.paths import check_regular
 from imu_dcm.logio.source import Progress, ReadRequest, SourceEntry
 from imu_dcm.logio.types import ChannelInfo, ImuSeries, LogData, TruthSeries
-from imu_dcm.so3 import quat_conjugate, quat_multiply
+from imu_dcm.so3 import quat_conjugate, quat_from_matrix, quat_multiply
 
 KIND = "euroc/asl folder"
 CSV_TYPE = "asl data.csv"
@@ -236,9 +236,7 @@ def sensor_rotation(folder: Path) -> NDArray[np.float64] | None:
         or (np.linalg.det(r) <= 0)
     ):
         raise LogError(f"Expected T_BS in {path} to hold a rotation, got {r.tolist()}")
-    from scipy.spatial.transform import Rotation
-
-    return Rotation.from_matrix(r).as_quat()  # nearest rotation; [x, y, z, w]
+    return quat_from_matrix(r)  # the nearest rotation; [x, y, z, w]
 
 
 def _angle_deg(q: NDArray[np.float64]) -> float:

@@ -407,6 +407,7 @@ class McapSource(RosSource):
     def _keep_spans(
         self, d, offs, length, cid, log_time, seq: int, pos: int = -1, note_unknown: bool = True
     ) -> None:
+        kept = []
         for c in np.unique(cid).tolist():
             m = cid == c
             if c not in self.channels:
@@ -414,14 +415,15 @@ class McapSource(RosSource):
                     self.unknown[pos] = self.unknown.get(pos, 0) + int(m.sum())
                 continue
             self.counts_seen[c] = self.counts_seen.get(c, 0) + int(m.sum())
-            if not self._is_kept(c):
-                continue
-            self._n_kept += int(m.sum())
-            s = offs[m] + _MSG_HEADER
-            n = length[m] - 22
-            # A channel that fills most of the chunk keeps the chunk as is (no copy); a small
-            # one (IMU beside a camera) copies out its payloads, so the chunk can go.
-            buf = (d, s, n) if 2 * int(n.sum()) >= len(d) else compact(d, s, n)
+            if self._is_kept(c):
+                kept.append((c, m, offs[m] + _MSG_HEADER, length[m] - 22))
+        # Kept channels that together fill most of the chunk keep the chunk as is, shared (no
+        # copy: IMU and truth interleaved); small ones (IMU beside a camera) copy out their
+        # payloads, so the chunk can go.
+        share = 2 * sum(int(n.sum()) for *_, n in kept) >= len(d)
+        for c, m, s, n in kept:
+            self._n_kept += len(s)
+            buf = (d, s, n) if share else compact(d, s, n)
             self.sink.add(c, Payloads(*buf, log_time[m], (seq << 32) + offs[m]))
 
     def _walk(

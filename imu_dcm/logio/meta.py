@@ -22,7 +22,6 @@ from pathlib import Path
 from typing import Any
 
 from imu_dcm.errors import LogError
-from imu_dcm.outputs import write_text_atomic
 
 #: Largest metadata.yaml read (bytes); real ones are a few kB, one per topic ~0.5 kB.
 MAX_METADATA_BYTES = 4 * 1024 * 1024
@@ -310,4 +309,6 @@ def metadata_document(body: str) -> str:
 
 def write_metadata(folder: Path, body: str) -> Path:
     """Replace ``folder/metadata.yaml`` whole with ``body`` (never half-written)."""
+    from imu_dcm.outputs import write_text_atomic  # (tempfile, shutil: only for writing)
+
     return write_text_atomic(folder / "metadata.yaml", metadata_document(body))

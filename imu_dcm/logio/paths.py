@@ -6,7 +6,6 @@ import stat
 from pathlib import Path
 
 from imu_dcm.errors import LogError
-from imu_dcm.outputs import file_kind
 
 #: Bytes of a file's start handed to the container table's probes.
 HEAD_BYTES = 64
@@ -25,6 +24,8 @@ def check_regular(p: Path) -> bool:
     if stat.S_ISDIR(st.st_mode):
         return True
     if not stat.S_ISREG(st.st_mode):
+        from imu_dcm.outputs import file_kind  # (tempfile, shutil: not for every read)
+
         raise LogError(
             f"Expected a regular file or a folder, got a {file_kind(st.st_mode)} (a special "
             f"file): {p}"

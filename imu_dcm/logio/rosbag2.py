@@ -13,10 +13,9 @@
 from __future__ import annotations
 
 import shutil
-import sqlite3
-import tempfile
 from collections.abc import Callable
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -29,6 +28,9 @@ from imu_dcm.logio.paths import check_regular
 from imu_dcm.logio.ros import RosSource
 from imu_dcm.logio.source import Progress
 from imu_dcm.logio.types import Collected, Conn, Damage, Payloads, Sink, join_any
+
+if TYPE_CHECKING:
+    import sqlite3
 
 #: Largest single decompressed message of a message-compressed bag (bytes).
 MAX_MESSAGE_BYTES = 256 << 20
@@ -54,6 +56,8 @@ class SqliteSource(RosSource):
         self.counts = counts  # message count per topic from metadata.yaml (saves a table scan)
 
     def collect(self, sink: Sink) -> Collected:
+        import sqlite3  # imported when a sqlite3 bag is read (an MCAP replay needs none)
+
         uri = f"file:{self.path.resolve().as_posix()}?mode=ro&immutable=1"
         try:
             db = sqlite3.connect(uri, uri=True)
@@ -243,6 +247,8 @@ class Rosbag2Folder(RosSource):
         merged: dict[tuple, Conn] = {}
         parts: dict[int, list] = {}
         damage: list[Damage] = []
+        import tempfile
+
         with tempfile.TemporaryDirectory(prefix="imu_dcm_bag_") as tmp:
             for k, path in enumerate(self.files):
                 if self.mode == "file":
@@ -314,6 +320,8 @@ class ZstdFile(RosSource):
         self.progress = progress
 
     def collect(self, sink: Sink) -> Collected:
+        import tempfile
+
         with tempfile.TemporaryDirectory(prefix="imu_dcm_bag_") as tmp:
             inner = decompress_file(self.path, Path(tmp))
             with open(inner, "rb") as f:

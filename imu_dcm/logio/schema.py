@@ -1,15 +1,19 @@
-"""Message definitions as field lists, from ros2msg, ros1msg or ros2idl schemas (via rosbags).
+"""Message definitions as field lists, from ros2msg, ros1msg or ros2idl schemas.
 
-:mod:`rosbags.typesys` parses the schema text a container stores (``ros2msg`` / ``ros1msg``
-text with its ``MSG:`` dependencies, or ``ros2idl``); a channel without one (sqlite3 bags of
-Humble and older) takes its definition from rosbags' built-in type store. The result is a plain
-map ``type name -> [Field]`` that :mod:`imu_dcm.logio.cdr` walks. A corrupt schema, one that
-is too large, or one whose types nest deeper than :data:`MAX_DEPTH` (or contain themselves)
-raises :class:`~imu_dcm.errors.LogError`.
+A plain ``.msg`` text (``ros2msg`` / ``ros1msg`` with its ``MSG:`` dependencies, what ROS
+recorders store) is read here, field by field, exactly as :mod:`rosbags.typesys` reads it
+(tested against it); anything else in one (quotes, annotations, a line this reader does not
+know) and every ``ros2idl`` schema go to rosbags' parser, whose import costs more than reading
+a log's schemas. A channel without a schema (sqlite3 bags of Humble and older) takes its
+definition from rosbags' built-in type store. The result is a plain map
+``type name -> [Field]`` that :mod:`imu_dcm.logio.cdr` walks. A corrupt schema, one that is too
+large, or one whose types nest deeper than :data:`MAX_DEPTH` (or contain themselves) raises
+:class:`~imu_dcm.errors.LogError`.
 """
 
 from __future__ import annotations
 
+import re
 from dataclasses import dataclass
 from functools import lru_cache
 
@@ -91,6 +95,11 @@ def _convert(typesdict) -> Defs:
                     )
                 )
         defs[tname] = out
+    return _with_time(defs)
+
+
+def _with_time(defs: Defs) -> Defs:
+    """``defs`` with the builtin Time and Duration where the schema leaves them out."""
     for builtin in ("builtin_interfaces/msg/Time", "builtin_interfaces/msg/Duration"):
         defs.setdefault(builtin, [Field(n, t, None, 0) for n, t in _TIME])
     return defs
@@ -123,8 +132,6 @@ def _check_depth(defs: Defs, root: str) -> None:
 
 def _idl_types(text: str) -> dict:
     """Types of an IDL schema, possibly several IDL files separated by ``=== / IDL: name``."""
-    import re
-
     from rosbags.typesys import get_types_from_idl
 
     types: dict = {}
@@ -135,16 +142,131 @@ def _idl_types(text: str) -> dict:
     return types
 
 
-@lru_cache(maxsize=64)
-def _parse(msgtype: str, encoding: str, text: str, serialization: str) -> tuple[Defs, str]:
+# The ``.msg`` grammar as rosbags reads it, for the fast path. Names are matched as plain
+# tokens and checked in code (no nested quantifiers: a long odd line cannot make a regex
+# backtrack for ever).
+_BASE = re.compile(r"(bool|byte|char|float(32|64)|u?int(8|16|32|64)|string)\b")
+_FIELD = re.compile(
+    r"(?P<type>string<=\d+|[A-Za-z0-9_/]+)(?:\[(?P<count>\d*|<=\d+)\])?"
+    r"[ \t]+(?P<name>[A-Za-z][A-Za-z0-9_]*)(?:[ \t]+\S.*)?"
+)
+_CONSTANT = re.compile(r"(?P<type>[a-z0-9]+)[ \t]+(?P<name>[A-Z][A-Z0-9_]*)[ \t]*=[ \t]*\S.*")
+_LOWER = re.compile(r"[a-z][a-z0-9_]*")
+_MIXED = re.compile(r"[A-Za-z][A-Za-z0-9_]*")
+_UPPER = re.compile(r"[A-Z][A-Z0-9_]*")
+_WORD = re.compile(r"[A-Za-z0-9_]+")
+
+
+def _snake(word: str, first: re.Pattern) -> bool:
+    """``word`` is ``first`` with single underscores between letters or digits."""
+    return bool(first.fullmatch(word)) and "__" not in word and not word.endswith("_")
+
+
+def _is_constant(line: str) -> bool:
+    m = _CONSTANT.fullmatch(line)
+    return bool(m and _BASE.fullmatch(m["type"]) and _snake(m["name"], _UPPER))
+
+
+_HEADER = re.compile(r"MSG: ([A-Za-z0-9/_]+)[ \t]*")
+_SEPARATOR = "=" * 80
+_NAMED = {
+    "time": "builtin_interfaces/msg/Time",
+    "duration": "builtin_interfaces/msg/Duration",
+    "Header": "std_msgs/msg/Header",
+}
+
+
+def _full(name: str) -> str:
+    """``pkg/Name`` -> ``pkg/msg/Name`` (rosbags' normalisation of a ``MSG:`` name)."""
+    parent, _, last = name.rpartition("/")
+    if parent.rpartition("/")[2] in ("msg", "action"):
+        return name
+    return f"{parent}/msg/{last}" if parent else f"msg/{last}"
+
+
+def _named(owner: str, name: str) -> str:
+    """A field's message type as a full name, resolved against its owner as rosbags does."""
+    name = _NAMED.get(name, name)
+    if "/" not in name:
+        return owner.rpartition("/")[0] + "/" + name
+    if "/msg/" in name or "/action/" in name:
+        return name
+    parent, _, last = name.rpartition("/")
+    return f"{parent}/msg/{last}"
+
+
+def _type_base(owner: str, typ: str) -> str | None:
+    """A field type as the fast path keeps it, or None when rosbags must judge it."""
+    if typ.startswith("string<=") or typ == "string":
+        return "string"
+    if typ in PRIM:
+        return typ
+    if _BASE.match(typ):
+        return None  # "int32/Foo": rosbags takes the base type and then fails
+    *packages, name = typ.split("/")
+    if not _snake(name, _MIXED) or not all(_snake(p, _LOWER) for p in packages):
+        return None
+    return _named(owner, typ)
+
+
+def _msg_fields(owner: str, lines: list[str]) -> list[Field] | None:
+    out = []
+    for raw in lines:
+        line = raw.split("#", 1)[0].strip()
+        if not line or _is_constant(line):
+            continue
+        m = _FIELD.fullmatch(line)
+        base = None if m is None else _type_base(owner, m["type"])
+        if base is None:
+            return None
+        count, name = m["count"], m["name"]
+        if name == "structure_needs_at_least_one_member":
+            continue
+        array = None if count is None else "fixed" if count.isdigit() else "seq"
+        out.append(Field(name, base, array, int(count) if array == "fixed" else 0))
+    return out
+
+
+def _msg_types(text: str, root: str) -> Defs | None:
+    """The field lists of a ``.msg`` text (``ros2msg`` or ``ros1msg``, with its ``MSG:``
+    dependencies) in the plain forms rosbags' parser reads; None for anything else (quotes,
+    annotations, a line it does not know), which then goes to rosbags."""
+    if "'" in text or '"' in text or "@" in text or "\r" in text:
+        return None
+    lines = text.split("\n")
+    sections: list[tuple[str, list[str]]] = [(root, [])]
+    i = 0
+    while i < len(lines):
+        if lines[i] == _SEPARATOR:
+            head = _HEADER.fullmatch(lines[i + 1]) if i + 1 < len(lines) else None
+            if head is None:
+                return None
+            sections.append((head[1], []))
+            i += 2
+            continue
+        sections[-1][1].append(lines[i])
+        i += 1
+    defs: Defs = {}
+    for name, body in sections:
+        if not all(_WORD.fullmatch(part) for part in name.split("/")):
+            return None  # "pkg//Name", "pkg/Name/": rosbags' path rules decide
+        full = _full(name)
+        fields = _msg_fields(full, body)
+        if fields is None:
+            return None
+        defs[full] = fields
+    return defs
+
+
+def _definitions(msgtype: str, encoding: str, text: str, serialization: str) -> Defs:
+    """Field lists of a schema: plain ``.msg`` texts read here, the rest by rosbags."""
+    root = norm_type(msgtype)
+    if text.strip() and encoding not in ("ros2idl", "omgidl"):
+        defs = _msg_types(text, root)
+        if defs is not None:
+            return _with_time(defs)
     from rosbags.typesys import get_types_from_msg
 
-    root = norm_type(msgtype)
-    if len(text.encode("utf-8", "surrogatepass")) > MAX_SCHEMA_BYTES:
-        raise LogError(
-            f"Expected a message definition of at most {MAX_SCHEMA_BYTES} bytes for "
-            f"{msgtype}, got {len(text)} characters"
-        )
     if text.strip():
         if encoding in ("ros2idl", "omgidl"):
             typesdict = _idl_types(text)
@@ -160,7 +282,18 @@ def _parse(msgtype: str, encoding: str, text: str, serialization: str) -> tuple[
                 f"and rosbags does not know the type), got none"
             )
         typesdict = store.fielddefs
-    defs = _convert(typesdict)
+    return _convert(typesdict)
+
+
+@lru_cache(maxsize=64)
+def _parse(msgtype: str, encoding: str, text: str, serialization: str) -> tuple[Defs, str]:
+    root = norm_type(msgtype)
+    if len(text.encode("utf-8", "surrogatepass")) > MAX_SCHEMA_BYTES:
+        raise LogError(
+            f"Expected a message definition of at most {MAX_SCHEMA_BYTES} bytes for "
+            f"{msgtype}, got {len(text)} characters"
+        )
+    defs = _definitions(msgtype, encoding, text, serialization)
     if root not in defs:
         raise LogError(
             f"Expected the definition of {msgtype} in its schema, got only "

@@ -284,7 +284,9 @@ class Sink:
     each batch first (message decompression). Payloads are decoded every :data:`BATCH_BYTES`.
     """
 
-    BATCH_BYTES = 8 << 20
+    BATCH_BYTES = 2 << 20
+    #: Payloads are decoded in groups of at least this many bytes (see ``_flush``).
+    GROUP_BYTES = 256 << 10
 
     def __init__(self, plan, transform=None):
         self.plan = plan
@@ -308,12 +310,20 @@ class Sink:
     def _flush(self, cid: int) -> None:
         parts = self._pending.pop(cid, [])
         self._bytes[cid] = 0
-        if not parts:
-            return
-        p = join_payloads(parts)
-        if self.transform is not None:
-            p = self.transform(p)
-        self._done.setdefault(cid, []).append(self._plans[cid](p))
+        # Decoded in groups of at least GROUP_BYTES: a part that holds a whole chunk (shared by
+        # the channels that fill it) alone, small parts (a channel's payloads copied out of its
+        # chunks) joined. Joining whole chunks would copy each once per channel.
+        group: list[Payloads] = []
+        size = 0
+        for k, p in enumerate(parts):
+            group.append(p)
+            size += len(p.buf)
+            if size >= self.GROUP_BYTES or k == len(parts) - 1:
+                batch = join_payloads(group)
+                if self.transform is not None:
+                    batch = self.transform(batch)
+                self._done.setdefault(cid, []).append(self._plans[cid](batch))
+                group, size = [], 0
 
     def finish(self) -> dict[int, Payloads | Columns]:
         for cid in list(self._pending):

@@ -141,7 +141,6 @@ def _serve_until_stopped(served) -> None:
 def _check_rerun(mode: str | None, inputs: tuple) -> None:
     """Validate --rerun before anything is read or written."""
     from imu_dcm.errors import InputError
-    from imu_dcm.outputs import check_output_file
 
     if mode is None or mode in ("off", "serve"):
         return
@@ -158,6 +157,8 @@ def _check_rerun(mode: str | None, inputs: tuple) -> None:
         target = mode[len("save:") :]
         if not target.endswith(".rrd") or len(target) <= len(".rrd"):
             raise InputError(f"Expected --rerun save:PATH.rrd, got {mode!r}")
+        from imu_dcm.outputs import check_output_file
+
         check_output_file(target, inputs, "--rerun save: file")
         return
     raise InputError(f"Expected --rerun spawn, serve, save:PATH.rrd or off, got {mode!r}")
@@ -214,15 +215,17 @@ def _not_a_folder_of_logs(log: str) -> None:
 
 def _options(args) -> dict:
     """Every option parsed and checked, before any input is read or output written."""
-    from imu_dcm.outputs import check_output_dir, check_output_file
-
     keywords = replay_keywords(args)
     _not_a_folder_of_logs(args.log)
     inputs = _inputs(args.log)
     _distinct_outputs(args)
     if args.out:
+        from imu_dcm.outputs import check_output_dir
+
         check_output_dir(args.out, inputs, force=args.force, what="--out bag")
     if args.summary_json:
+        from imu_dcm.outputs import check_output_file
+
         check_output_file(args.summary_json, inputs, "--summary-json file")
     if args.export_tum:
         from imu_dcm.replay.export import check_export_dir
@@ -238,7 +241,6 @@ def _replay_main(argv: list[str]) -> int:
     import json
 
     from imu_dcm.errors import ImuDcmError
-    from imu_dcm.outputs import write_text_atomic
     from imu_dcm.replay.core import replay
     from imu_dcm.replay.summary import format_summary
 
@@ -265,6 +267,8 @@ def _replay_main(argv: list[str]) -> int:
         )
         lines.append(f"tum        {', '.join(str(f) for f in files)}")
     if args.summary_json:
+        from imu_dcm.outputs import write_text_atomic
+
         text = json.dumps(result.summary.to_dict(), indent=2, allow_nan=False) + "\n"
         write_text_atomic(args.summary_json, text, inputs)
     if not args.quiet:

@@ -47,6 +47,7 @@ from imu_dcm.replay.truth import (
     find_jumps,
 )
 from imu_dcm.resample import slerp_truth
+from imu_dcm.so3 import quat_as_matrix
 from imu_dcm.stamps import NS_PER_UNIT, timing_doubt
 
 __all__ = ["CleanedImu", "ReplayResult", "ReplaySummary", "clean_imu", "replay", "slerp_truth"]
@@ -285,9 +286,7 @@ def _judge_truth(
 
 
 def _given(q) -> Mounting:
-    from scipy.spatial.transform import Rotation
-
-    return from_rotation(Rotation.from_quat(q), "given", determined=0, fit=float("nan"))
+    return from_rotation(q, "given", determined=0, fit=float("nan"))
 
 
 def _pick_truth(log: LogData, g: _Gyro, omega: NDArray) -> tuple[LogData, tuple[dict, ...]]:
@@ -392,10 +391,8 @@ def _replay(path, s: ReplaySettings, report, notes: list[str]) -> ReplayResult:
     bias_est, omega = _remove_bias(s, g)
     log, candidates = _pick_truth(log, g, omega)
     judged = _judge_truth(log, s, g, omega, notes)
-    if judged.mounting.applied is not None:
-        from scipy.spatial.transform import Rotation
-
-        omega = Rotation.from_quat(judged.mounting.applied.q_t_g).apply(omega)
+    if judged.mounting.applied is not None:  # omega_T = R(q_t_g) omega_G, row by row
+        omega = omega @ quat_as_matrix(judged.mounting.applied.q_t_g).T
     omega, pf_summary = _prefilter(s, omega, g.t_s)
     q_truth, anchors = _scored_truth(judged.aligned.q_truth, g.t_s, judged.jumps)
     report("integrate", 0.0)

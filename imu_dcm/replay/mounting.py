@@ -25,10 +25,16 @@ import itertools
 from dataclasses import dataclass
 
 import numpy as np
-from numpy.typing import NDArray
-from scipy.spatial.transform import Rotation
+from numpy.typing import ArrayLike, NDArray
 
 from imu_dcm.replay.truth import rate_grid
+from imu_dcm.so3 import (
+    exp_matrix,
+    quat_angle_rad,
+    quat_as_matrix,
+    quat_from_matrix,
+    quat_normalize,
+)
 
 __all__ = ["APPLY_DEG", "Mounting", "axis_permutation", "estimate_mounting"]
 
@@ -122,6 +128,8 @@ def _permutations() -> list[NDArray[np.float64]]:
 
 
 _PERMS = _permutations()
+_PERMS_T = np.stack([p.T for p in _PERMS])  # (24, 3, 3), each transposed
+_IDENTITY = np.array([0.0, 0.0, 0.0, 1.0])
 
 
 def axis_permutation(r: NDArray[np.float64]) -> tuple[str, float]:
@@ -130,7 +138,7 @@ def axis_permutation(r: NDArray[np.float64]) -> tuple[str, float]:
     ``r`` maps gyro-frame vectors into the truth frame; column ``i`` is gyro axis ``i`` in truth
     axes, so the words read "gyro y = truth z" when column 1 is ``e_z``.
     """
-    angles = [np.degrees(Rotation.from_matrix(p.T @ r).magnitude()) for p in _PERMS]
+    angles = np.degrees(quat_angle_rad(_IDENTITY, quat_from_matrix(_PERMS_T @ r)))
     k = int(np.argmin(angles))
     p = _PERMS[k]
     words = []
@@ -141,8 +149,15 @@ def axis_permutation(r: NDArray[np.float64]) -> tuple[str, float]:
     return ", ".join(words), float(angles[k])
 
 
+def _canonical(q: NDArray[np.float64]) -> NDArray[np.float64]:
+    """``q`` or ``-q``: ``w > 0``, or at ``w == 0`` (half turns) the first non-zero component
+    positive, so that a half turn's axis reads the same whichever sign it was given with."""
+    first = q[np.flatnonzero(q)[0]] if q[3] == 0.0 and np.any(q) else q[3]
+    return -q if first < 0.0 else q
+
+
 def from_rotation(
-    r: Rotation,
+    q_t_g: ArrayLike,
     source: str,
     svals=(),
     determined: int = 3,
@@ -150,15 +165,18 @@ def from_rotation(
     steps: int = 0,
     turn_axis_g=None,
 ) -> Mounting:
-    """A :class:`Mounting` from a rotation (gyro into truth frame)."""
-    rv = r.as_rotvec()
-    angle = float(np.linalg.norm(rv))
-    axis = tuple((rv / angle).tolist()) if angle > 1e-12 else (0.0, 0.0, 1.0)
-    words, perm_deg = axis_permutation(r.as_matrix())
+    """A :class:`Mounting` from a rotation ``q_t_g`` (gyro into truth frame, ``[x, y, z, w]``,
+    normalised here; its sign is kept in :attr:`Mounting.q_t_g`)."""
+    q = quat_normalize(q_t_g)
+    c = _canonical(q)  # the angle in [0, π] and its axis, as scipy's rotation vector gives
+    s = float(np.linalg.norm(c[:3]))
+    angle = 2.0 * float(np.arctan2(s, c[3]))
+    axis = tuple((c[:3] / s).tolist()) if angle > 1e-12 else (0.0, 0.0, 1.0)
+    words, perm_deg = axis_permutation(quat_as_matrix(q))
     identity = words == "gyro x = truth x, gyro y = truth y, gyro z = truth z"
     named = perm_deg <= PERMUTATION_DEG and not identity
     return Mounting(
-        tuple(float(x) for x in r.as_quat()),
+        tuple(float(x) for x in q),
         float(np.degrees(angle)),
         axis,
         determined,
@@ -217,9 +235,7 @@ def estimate_mounting(
     total = float(np.sum(b * b))
     resid = float(np.sum((b - a @ r.T) ** 2))
     fit = 1.0 - resid / total if total > 0 else 0.0
-    return from_rotation(
-        Rotation.from_matrix(r), "estimated", svals, determined, fit, len(a), u[:, 0]
-    )
+    return from_rotation(quat_from_matrix(r), "estimated", svals, determined, fit, len(a), u[:, 0])
 
 
 def _smallest(src: NDArray[np.float64], dst: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -231,5 +247,5 @@ def _smallest(src: NDArray[np.float64], dst: NDArray[np.float64]) -> NDArray[np.
         if c > 0:
             return np.eye(3)
         perp = np.cross(src, np.eye(3)[int(np.argmin(np.abs(src)))])
-        return Rotation.from_rotvec(np.pi * perp / np.linalg.norm(perp)).as_matrix()
-    return Rotation.from_rotvec(axis / s * np.arctan2(s, c)).as_matrix()
+        return exp_matrix(np.pi * perp / np.linalg.norm(perp))
+    return exp_matrix(axis / s * np.arctan2(s, c))

@@ -30,13 +30,23 @@ given quaternion is applied and compared with both.
 from __future__ import annotations
 
 from dataclasses import asdict, dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
-from scipy.spatial.transform import Rotation
+from numpy.typing import NDArray
 
 from imu_dcm.logio.types import StaticTransform, TruthSeries
 from imu_dcm.replay.mounting import APPLY_DEG, Mounting, from_rotation
-from imu_dcm.so3 import angle_between_deg
+from imu_dcm.so3 import (
+    angle_between_deg,
+    quat_conjugate,
+    quat_multiply,
+    quat_normalize,
+    quat_rotate,
+)
+
+if TYPE_CHECKING:
+    from scipy.spatial.transform import Rotation
 
 __all__ = ["TF_AGREE_DEG", "MountingChoice", "TfMounting", "choose_mounting", "tf_mounting"]
 
@@ -69,9 +79,9 @@ class TfMounting:
     chain: tuple[str, ...]
 
 
-def _parents(static: tuple[StaticTransform, ...]) -> dict[str, tuple[str, Rotation]]:
-    """child -> (parent, q_parent_child), frame ids bare."""
-    return {_bare(s.child): (_bare(s.parent), Rotation.from_quat(s.q_xyzw)) for s in static}
+def _parents(static: tuple[StaticTransform, ...]) -> dict[str, tuple[str, NDArray]]:
+    """child -> (parent, q_parent_child ``[x, y, z, w]``, unit), frame ids bare."""
+    return {_bare(s.child): (_bare(s.parent), quat_normalize(s.q_xyzw)) for s in static}
 
 
 def _up(parents: dict, frame: str) -> list[str]:
@@ -82,19 +92,34 @@ def _up(parents: dict, frame: str) -> list[str]:
     return out
 
 
-def _down(parents: dict, path: list[str]) -> Rotation:
+def _down(parents: dict, path: list[str]) -> NDArray:
     """``q_top_frame`` for ``path`` = [frame, its parent, ..., top]."""
-    q = Rotation.identity()
+    q = np.array([0.0, 0.0, 0.0, 1.0])
     for child in path[:-1]:
-        q = parents[child][1] * q
+        q = quat_multiply(parents[child][1], q)
     return q
 
 
 def static_rotation(
     static: tuple[StaticTransform, ...], a: str, b: str
 ) -> tuple[Rotation, tuple[str, ...]] | None:
-    """``q_a_b`` (frame ``b`` into frame ``a``) composed along the static tree, and the frames
-    of the path from ``a`` to ``b``; None when the tree does not connect them."""
+    """``q_a_b`` (frame ``b`` into frame ``a``) as a scipy ``Rotation``, composed along the
+    static tree, and the frames of the path from ``a`` to ``b``; None when the tree does not
+    connect them. (:func:`static_quat` gives the quaternion without importing scipy.)"""
+    found = static_quat(static, a, b)
+    if found is None:
+        return None
+    from scipy.spatial.transform import Rotation
+
+    return Rotation.from_quat(found[0]), found[1]
+
+
+def static_quat(
+    static: tuple[StaticTransform, ...], a: str, b: str
+) -> tuple[NDArray[np.float64], tuple[str, ...]] | None:
+    """``q_a_b`` ``[x, y, z, w]`` (frame ``b`` into frame ``a``) composed along the static
+    tree, and the frames of the path from ``a`` to ``b``; None when the tree does not connect
+    them."""
     parents = _parents(static)
     up_a, up_b = _up(parents, _bare(a)), _up(parents, _bare(b))
     common = next((f for f in up_b if f in up_a), None)
@@ -103,7 +128,7 @@ def static_rotation(
     path_a = up_a[: up_a.index(common) + 1]
     path_b = up_b[: up_b.index(common) + 1]
     q_c_a, q_c_b = _down(parents, path_a), _down(parents, path_b)
-    return q_c_a.inv() * q_c_b, (*path_a, *reversed(path_b[:-1]))
+    return quat_multiply(quat_conjugate(q_c_a), q_c_b), (*path_a, *reversed(path_b[:-1]))
 
 
 def truth_body_frame(
@@ -131,7 +156,7 @@ def tf_mounting(
     body, how = truth_body_frame(truth, imu_topic, imu_frame, static)
     if not body or body == _bare(imu_frame):
         return None
-    found = static_rotation(static, body, imu_frame)
+    found = static_quat(static, body, imu_frame)
     if found is None:
         return None
     q_body_imu, chain = found
@@ -147,8 +172,8 @@ def disagreement_deg(declared: Mounting, est: Mounting) -> tuple[float, str]:
         diff = angle_between_deg(np.asarray(declared.q_t_g), np.asarray(est.q_t_g))
         return float(diff), "rotation"
     u = np.asarray(est.turn_axis_g)
-    a = Rotation.from_quat(declared.q_t_g).apply(u)
-    b = Rotation.from_quat(est.q_t_g).apply(u)
+    a = quat_rotate(quat_normalize(declared.q_t_g), u)
+    b = quat_rotate(quat_normalize(est.q_t_g), u)
     return float(np.degrees(np.arctan2(np.linalg.norm(np.cross(a, b)), a @ b))), "axis"
 
 

@@ -1,0 +1,90 @@
+"""The replay command imports what it uses: not scipy's rotations, the viewer or the writers.
+
+Behaviour, not speed: each case runs in a fresh interpreter and lists the modules it imported
+(``python -X importtime``, or ``sys.modules`` after :func:`imu_dcm.replay.replay`). scipy's
+``spatial.transform`` alone costs more start-up than reading and integrating the shipped trial;
+the project's own ``so3`` does what a replay needs of it. (numba, while the kernel needs it,
+imports ``scipy.linalg`` for its BLAS bindings; without numba nothing imports scipy at all.)
+"""
+
+from __future__ import annotations
+
+import os
+import re
+import subprocess
+import sys
+
+import pytest
+from conftest import REPO_ROOT
+
+TRIAL = REPO_ROOT / "replay" / "broad_07_undisturbed_fast_rotation_B"
+ULOG = REPO_ROOT.parent / "shared" / "data" / "strangers" / "sample_log_small.ulg"
+#: Imported only by paths a plain replay does not take (--rerun, --prefilter, --out, batch, a
+#: summary file).
+NOT_ON_THE_PATH = (
+    "scipy.spatial",
+    "rerun",
+    "filterpy",
+    "imu_dcm.viz",
+    "imu_dcm.prefilter",
+    "imu_dcm.logio.writer",
+    "imu_dcm.outputs",
+    "imu_dcm.replay.batch",
+    "mcap_ros2",
+)
+
+
+def _env() -> dict[str, str]:
+    env = dict(os.environ, PYTHONPATH=str(REPO_ROOT), CI="true")
+    env.pop("DISPLAY", None)
+    return env
+
+
+def _unexpected(modules: set[str]) -> list[str]:
+    """The modules of :data:`NOT_ON_THE_PATH` (or their submodules) among ``modules``; any
+    scipy module at all when numba was not imported."""
+    banned = NOT_ON_THE_PATH if "numba" in modules else (*NOT_ON_THE_PATH, "scipy")
+    return sorted(m for m in modules if any(m == b or m.startswith(b + ".") for b in banned))
+
+
+def test_the_replay_command_imports_no_scipy_rotation_viewer_or_writer(tmp_path):
+    args = [sys.executable, "-X", "importtime", "-m", "imu_dcm.replay", str(TRIAL)]
+    res = subprocess.run(
+        [*args, "--rerun", "off", "--quiet"],
+        capture_output=True,
+        text=True,
+        timeout=300,
+        cwd=tmp_path,
+        env=_env(),
+    )
+    assert res.returncode == 0, res.stderr[-2000:]
+    modules = set(re.findall(r"^import time:\s+\d+ \|\s+\d+ \|\s*(\S+)$", res.stderr, re.M))
+    assert "imu_dcm.replay.mounting" in modules and "imu_dcm.so3" in modules  # it did parse
+    assert _unexpected(modules) == []
+    assert "importlib.metadata" not in modules or "numba" in modules  # --version only
+
+
+@pytest.mark.parametrize("log", [TRIAL, ULOG], ids=["shipped trial", "PX4 ULog"])
+def test_replay_api_imports_no_scipy_rotation(log, tmp_path):
+    if not log.exists():
+        pytest.skip(f"{log.name} not found beside the repository")
+    code = (
+        "import sys, warnings\n"
+        "warnings.simplefilter('ignore')\n"
+        "from imu_dcm.replay import replay\n"
+        f"res = replay({str(log)!r})\n"
+        "assert res.summary.samples > 0\n"
+        "print('\\n'.join(sorted(sys.modules)))\n"
+    )
+    res = subprocess.run(
+        [sys.executable, "-c", code],
+        capture_output=True,
+        text=True,
+        timeout=300,
+        cwd=tmp_path,
+        env=_env(),
+    )
+    assert res.returncode == 0, res.stderr[-2000:]
+    modules = set(res.stdout.split())
+    assert "imu_dcm.replay.mounting" in modules
+    assert _unexpected(modules) == []
