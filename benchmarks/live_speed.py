@@ -23,8 +23,11 @@ What is measured (the live command runs as a child process, as a user runs it):
 * With ``--ws-clients``: the WebSocket client alone, each in a child process receiving
   ``--rate`` messages/s for ``--duration`` s from the same server: ``websockets.sync.client``
   (a reader thread hands each frame over; one ``recv`` per message, batches of 5 ms as the live
-  source used it) against :class:`imu_dcm.live.sources.WsConnection` (websockets' Sans-I/O
-  protocol under the source thread's own socket loop: one ``recv`` per wake-up).
+  source used it) against :class:`imu_dcm.live.sources.WsConnection` (under the source thread's
+  own socket loop: websockets' Sans-I/O protocol for the handshake and control frames, the data
+  frames split by the client; one ``recv`` per wake-up).
+* The report's first line gives the machine's cores and its load average at start and end (the
+  CPU figures rise with the load of other jobs: measure before and after one after the other).
 """
 
 from __future__ import annotations
