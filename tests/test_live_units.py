@@ -354,3 +354,33 @@ def test_pipeline_in_batches_equals_batch_integrate(method, sizes):
     ref = integrate(w, (t_ns - t_ns[0]) * 1e-9, q0, method).as_quat()
     np.testing.assert_array_equal(got_t, t_ns)
     np.testing.assert_array_equal(got_q, ref)
+
+
+def test_line_decode_of_several_wake_ups_keeps_each_line_and_its_arrival():
+    """The session's loop decodes the items of several source wake-ups at once: one numpy parse
+    for plain CSV, item by item otherwise; each sample keeps the arrival of its own wake-up."""
+    from imu_dcm.live.sources import StdinSource
+
+    items = [
+        (b"1.0,0,0,1\n\n1.001,0,0,2", 100, 1000),  # a blank line: ignored
+        (b"1.002,nan,0,3\n1.003,0,0,4\n", 200, 2000),  # a non-finite rate: malformed
+    ]
+    for first, csv_only in ((False, True), (True, True), (False, False)):
+        src = StdinSource("rad/s", "s")
+        src._first = first  # first: a header may start the stream (parsed line by line)
+        batch = (
+            items if csv_only else [*items, (b'{"t_s": 1.004, "omega_b": [0, 0, 5]}', 300, 3000)]
+        )
+        events = src.decode("lines", batch)
+        assert ("malformed", 1) in events
+        recs = [ev[1] for ev in events if ev[0] == "data"]
+        t = np.concatenate([r.t_ns for r in recs])
+        w = np.concatenate([r.values for r in recs])
+        arrival = np.concatenate([r.arrival_ns for r in recs])
+        wall = np.concatenate([r.wall_ns for r in recs])
+        n = 3 if csv_only else 4
+        want_t = [1_000_000_000, 1_001_000_000, 1_003_000_000, 1_004_000_000][:n]
+        assert t.tolist() == want_t
+        assert w[:, 2].tolist() == [1.0, 2.0, 4.0, 5.0][:n]
+        assert arrival.tolist() == [100, 100, 200, 300][:n]
+        assert wall.tolist() == [1000, 1000, 2000, 3000][:n]
