@@ -511,6 +511,8 @@ class WsConnection:
         if timeout_s > 0:
             ready, _, _ = select.select([self._sock], [], [], timeout_s)
             if not ready:
+                if self._proto.state is not self._open:  # closing: nothing more to wait for
+                    raise self._closed()
                 return []
         self._read_all()
         out = self._messages()
