@@ -12,7 +12,7 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from imu_dcm.so3 import exp_quat, log_quat, quat_conjugate, quat_multiply
+from imu_dcm.so3 import exp_quat, log_quat, quat_conjugate, quat_multiply, row_norm
 
 __all__ = ["TRUTH_BRIDGE_STEPS", "slerp_truth"]
 
@@ -41,7 +41,7 @@ def slerp_truth(truth_t_ns: ArrayLike, q_w_b: ArrayLike, t_ns: ArrayLike) -> NDA
     tt = np.asarray(truth_t_ns, dtype=np.int64)
     q = np.asarray(q_w_b, dtype=float)
     t = np.asarray(t_ns, dtype=np.int64)
-    norm = np.linalg.norm(q, axis=1)
+    norm = row_norm(q)
     ok = np.isfinite(norm) & (norm > 0.5)
     tt, q = tt[ok], q[ok] / norm[ok, None]
     if len(tt) > 1 and not np.all(np.diff(tt) > 0):  # recorded truth is usually in order

@@ -42,6 +42,8 @@ __all__ = [
     "quat_multiply",
     "quat_normalize",
     "quat_rotate",
+    "row_finite",
+    "row_norm",
 ]
 
 # Below this angle (rad) the Taylor branches of exp_matrix and log_quat are used: their truncation
@@ -57,6 +59,29 @@ SINC_HALF_SERIES = tuple(
 )
 #: Coefficients of θ^(2k), k = 0..6, of cos(θ/2) = Σ (-1)^k θ^(2k) / (4^k (2k)!).
 COS_HALF_SERIES = tuple((-1) ** k / (4**k * math.factorial(2 * k)) for k in range(7))
+
+
+#: Multiplying by this conjugates ``[x, y, z, w]`` (a sign flip is exact).
+_CONJUGATE = np.array([-1.0, -1.0, -1.0, 1.0])
+
+
+def row_norm(a: ArrayLike) -> NDArray[np.float64]:
+    """Euclidean norm over the last axis, shape ``(...)``: ``np.linalg.norm(a, axis=-1)``
+    without numpy's slow reduction over a short axis (a few times faster for ``(N, 4)``)."""
+    a = np.asarray(a, dtype=float)
+    return np.sqrt(np.einsum("...i,...i->...", a, a))
+
+
+def row_finite(a: ArrayLike) -> NDArray[np.bool_]:
+    """Whether every element along the last axis is finite, shape ``(...)``:
+    ``np.all(np.isfinite(a), axis=-1)``, column by column (many times faster for ``(N, 4)``)."""
+    f = np.isfinite(a)
+    if f.ndim == 0 or f.shape[-1] == 0:
+        return np.all(f, axis=-1)
+    out = f[..., 0].copy()
+    for k in range(1, f.shape[-1]):
+        out &= f[..., k]
+    return out
 
 
 def _horner(t2: NDArray, coefs: tuple) -> NDArray:
@@ -160,7 +185,7 @@ def log_quat(q: ArrayLike) -> NDArray[np.float64]:
     q = quat_normalize(q)
     q = np.where(q[..., 3:4] < 0.0, -q, q)
     v, w = q[..., :3], q[..., 3]
-    s = np.linalg.norm(v, axis=-1)
+    s = row_norm(v)
     theta = 2.0 * np.arctan2(s, w)
     small = s < 0.5 * _SMALL_ANGLE_RAD
     safe = np.where(small, 1.0, s)
@@ -187,21 +212,17 @@ def quat_multiply(p: ArrayLike, q: ArrayLike) -> NDArray[np.float64]:
     q = np.asarray(q, dtype=float)
     px, py, pz, pw = p[..., 0], p[..., 1], p[..., 2], p[..., 3]
     qx, qy, qz, qw = q[..., 0], q[..., 1], q[..., 2], q[..., 3]
-    return np.stack(
-        [
-            pw * qx + px * qw + py * qz - pz * qy,
-            pw * qy - px * qz + py * qw + pz * qx,
-            pw * qz + px * qy - py * qx + pz * qw,
-            pw * qw - px * qx - py * qy - pz * qz,
-        ],
-        axis=-1,
-    )
+    out = np.empty(np.broadcast_shapes(p.shape, q.shape))
+    out[..., 0] = pw * qx + px * qw + py * qz - pz * qy
+    out[..., 1] = pw * qy - px * qz + py * qw + pz * qx
+    out[..., 2] = pw * qz + px * qy - py * qx + pz * qw
+    out[..., 3] = pw * qw - px * qx - py * qy - pz * qz
+    return out
 
 
 def quat_conjugate(q: ArrayLike) -> NDArray[np.float64]:
     """Conjugate ``[-x, -y, -z, w]``: the inverse rotation of a unit quaternion."""
-    q = np.asarray(q, dtype=float)
-    return np.concatenate([-q[..., :3], q[..., 3:]], axis=-1)
+    return np.asarray(q, dtype=float) * _CONJUGATE
 
 
 def quat_normalize(q: ArrayLike) -> NDArray[np.float64]:
@@ -213,10 +234,10 @@ def quat_normalize(q: ArrayLike) -> NDArray[np.float64]:
         If a quaternion has zero or non-finite norm.
     """
     q = np.asarray(q, dtype=float)
-    n = np.linalg.norm(q, axis=-1, keepdims=True)
-    if not np.all(np.isfinite(n)) or np.any(n == 0.0):
+    n = row_norm(q)
+    if not np.isfinite(n).all() or (n == 0.0).any():
         raise InputError("Expected quaternions with finite non-zero norm, got a zero or NaN one")
-    return q / n
+    return q / n[..., None]
 
 
 def quat_rotate(q: ArrayLike, v: ArrayLike) -> NDArray[np.float64]:
@@ -315,7 +336,7 @@ def quat_from_matrix(R: ArrayLike) -> NDArray[np.float64]:
         axis=-1,
     )
     q[m] = qw[m]
-    return q / np.linalg.norm(q, axis=-1, keepdims=True)
+    return q / row_norm(q)[..., None]
 
 
 def quat_angle_rad(q_a: ArrayLike, q_b: ArrayLike) -> NDArray[np.float64]:
@@ -325,7 +346,7 @@ def quat_angle_rad(q_a: ArrayLike, q_b: ArrayLike) -> NDArray[np.float64]:
     not ``acos``).
     """
     d = quat_multiply(quat_conjugate(quat_normalize(q_a)), quat_normalize(q_b))
-    return 2.0 * np.arctan2(np.linalg.norm(d[..., :3], axis=-1), np.abs(d[..., 3]))
+    return 2.0 * np.arctan2(row_norm(d[..., :3]), np.abs(d[..., 3]))
 
 
 def angle_between_deg(q_a: ArrayLike, q_b: ArrayLike) -> NDArray[np.float64]:

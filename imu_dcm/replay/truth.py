@@ -27,7 +27,14 @@ from numpy.typing import NDArray
 
 from imu_dcm.errors import LogError
 from imu_dcm.resample import TRUTH_BRIDGE_STEPS, slerp_truth
-from imu_dcm.so3 import angle_between_deg, log_quat, quat_conjugate, quat_multiply
+from imu_dcm.so3 import (
+    angle_between_deg,
+    log_quat,
+    quat_conjugate,
+    quat_multiply,
+    row_finite,
+    row_norm,
+)
 
 __all__ = [
     "MIN_CORRELATION",
@@ -179,16 +186,17 @@ def integrated_rate(
     t_ns: NDArray[np.int64], omega_b: NDArray[np.float64], at_ns: NDArray[np.int64]
 ) -> NDArray[np.float64]:
     """The trapezoid integral of the rate from the first gyro sample to each of ``at_ns``
-    (linear between samples), rad (K, 3); differences give the turn over short intervals."""
+    (linear between samples), rad (K, 3); differences give the turn over short intervals.
+    Any number of columns: ``omega_b`` (N, C) gives (K, C)."""
     ts = (t_ns - t_ns[0]) * 1e-9
     cum = np.concatenate(
         [
-            np.zeros((1, 3)),
+            np.zeros((1, omega_b.shape[1])),
             np.cumsum(0.5 * (omega_b[1:] + omega_b[:-1]) * np.diff(ts)[:, None], axis=0),
         ]
     )
     te = (np.asarray(at_ns) - t_ns[0]) * 1e-9
-    return np.stack([np.interp(te, ts, cum[:, k]) for k in range(3)], axis=1)
+    return np.stack([np.interp(te, ts, cum[:, k]) for k in range(cum.shape[1])], axis=1)
 
 
 @dataclass(frozen=True)
@@ -233,7 +241,8 @@ def rate_grid(
     te = (edges - t_ns[0]) * 1e-9
     angle = integrated_rate(t_ns, omega_b, edges)
     q = slerp_truth(tt, q_w_b, edges)
-    both = np.all(np.isfinite(q[:-1]), axis=1) & np.all(np.isfinite(q[1:]), axis=1)
+    has = row_finite(q)
+    both = has[:-1] & has[1:]
     rot = np.full((len(q) - 1, 3), np.nan)
     rel = quat_multiply(quat_conjugate(q[:-1][both]), q[1:][both])
     rel = np.where(rel[:, 3:4] < 0, -rel, rel)  # shortest arc
@@ -265,8 +274,8 @@ def check_truth(
     if grid is None:
         return TruthCheck(False, True)
     dt = grid.step_s
-    g = np.linalg.norm(grid.gyro_rotvec, axis=1) / grid.dt_s
-    h = np.linalg.norm(grid.truth_rotvec, axis=1) / grid.dt_s  # NaN where uncovered
+    g = row_norm(grid.gyro_rotvec) / grid.dt_s
+    h = row_norm(grid.truth_rotvec) / grid.dt_s  # NaN where uncovered
     valid = np.isfinite(h)
     if valid.sum() < 20:
         return TruthCheck(False, True)
@@ -434,7 +443,7 @@ def find_jumps(
     """
     tt = np.asarray(truth_t_ns, dtype=np.int64)
     q = np.asarray(q_w_b, dtype=float)
-    norm = np.linalg.norm(q, axis=1)
+    norm = row_norm(q)
     ok = np.isfinite(norm) & (norm > 0.5)
     tt, q = tt[ok], q[ok] / norm[ok, None]
     order = np.argsort(tt, kind="stable")
@@ -445,7 +454,7 @@ def find_jumps(
         return ()
     te = (tt - t_ns[0]) * 1e-9
     # the gyro's path length over each truth step bounds any rotation it can have made
-    speed = np.linalg.norm(omega_b, axis=1)[:, None] * np.ones((1, 3))
+    speed = row_norm(omega_b)[:, None]
     path = integrated_rate(t_ns, speed, tt)[:, 0]
     gyro_deg = np.degrees(np.diff(path))
     truth_deg = angle_between_deg(q[:-1], q[1:])
