@@ -317,7 +317,7 @@ def test_lagged_correlation_equals_numpy_corrcoef_per_lag():
         a = g[max(k, 0) : n + min(k, 0)][m]
         b = h[max(-k, 0) : n - max(k, 0)][m]
         assert count[k + lags] == len(a)
-        # FFT sums of n products: round-off grows with n (n·eps·C, C for the data's range)
+        # sums of n products: round-off grows with n (n·eps·C, C for the data's range)
         tol = n * np.finfo(float).eps * 1e3
         assert abs(corr[k + lags] - np.corrcoef(a, b)[0, 1]) < tol, k
     assert int(np.argmax(corr)) - lags == -7

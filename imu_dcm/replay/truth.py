@@ -153,25 +153,22 @@ def lagged_correlation(
 ) -> tuple[NDArray[np.float64], NDArray[np.int64]]:
     """Pearson correlation of ``g[i + k]`` with ``h[i]`` over the valid ``i``, k = -lags..lags.
 
-    All lags at once: the five pair sums (count, Σa, Σa², Σb, Σb², Σab) are cross-correlations,
-    computed by FFT. Returns (correlation (2 lags + 1,), 0 where a series is constant; the
-    number of pairs per lag).
+    The six pair sums of a lag (count, Σa, Σa², Σb, Σb², Σab) are one 3x3 product of the
+    series ``[1, g, g²]`` (at ``i + k``) with ``[valid, h, h²]`` (at ``i``, zero where not
+    valid): ``2 lags + 1`` small matrix products, cheaper than FFTs for the few lags searched.
+    Returns (correlation (2 lags + 1,), 0 where a series is constant; the number of pairs per
+    lag).
     """
     n = len(g)
-    w = valid.astype(float)
     hv = np.where(valid, h, 0.0)
-    nfft = 1 << int(np.ceil(np.log2(2 * n)))
-    k = np.arange(-lags, lags + 1)
-
-    def xcorr(x: NDArray[np.float64], y: NDArray[np.float64]) -> NDArray[np.float64]:
-        r = np.fft.irfft(np.fft.rfft(x, nfft) * np.conj(np.fft.rfft(y, nfft)), nfft)
-        return r[k % nfft]  # Σ_i x[i + k] y[i]
-
-    ones = np.ones(n)
-    cnt = xcorr(ones, w)
-    sa, saa = xcorr(g, w), xcorr(g * g, w)
-    sb, sbb = xcorr(ones, hv), xcorr(ones, hv * hv)
-    sab = xcorr(g, hv)
+    x = np.stack([np.ones(n), g, g * g])
+    y = np.stack([valid.astype(float), hv, hv * hv])
+    sums = np.zeros((2 * lags + 1, 3, 3))
+    for j, k in enumerate(range(-lags, lags + 1)):
+        if abs(k) < n:
+            sums[j] = x[:, max(k, 0) : n + min(k, 0)] @ y[:, max(-k, 0) : n - max(k, 0)].T
+    cnt, sa, saa = sums[:, 0, 0], sums[:, 1, 0], sums[:, 2, 0]
+    sb, sbb, sab = sums[:, 0, 1], sums[:, 0, 2], sums[:, 1, 1]
     count = np.rint(cnt).astype(np.int64)
     safe = np.maximum(cnt, 1.0)
     cov = sab - sa * sb / safe
