@@ -234,10 +234,15 @@ def quat_normalize(q: ArrayLike) -> NDArray[np.float64]:
         If a quaternion has zero or non-finite norm.
     """
     q = np.asarray(q, dtype=float)
+    return q / _checked_norm(q)[..., None]
+
+
+def _checked_norm(q: NDArray[np.float64]) -> NDArray[np.float64]:
+    """:func:`row_norm` of quaternions, raising :class:`InputError` for a zero or NaN one."""
     n = row_norm(q)
     if not np.isfinite(n).all() or (n == 0.0).any():
         raise InputError("Expected quaternions with finite non-zero norm, got a zero or NaN one")
-    return q / n[..., None]
+    return n
 
 
 def quat_rotate(q: ArrayLike, v: ArrayLike) -> NDArray[np.float64]:
@@ -345,7 +350,11 @@ def quat_angle_rad(q_a: ArrayLike, q_b: ArrayLike) -> NDArray[np.float64]:
     Insensitive to the sign of either quaternion. Accurate for tiny angles (uses ``atan2``,
     not ``acos``).
     """
-    d = quat_multiply(quat_conjugate(quat_normalize(q_a)), quat_normalize(q_b))
+    q_a = np.asarray(q_a, dtype=float)
+    q_b = np.asarray(q_b, dtype=float)
+    _checked_norm(q_a)  # the ratio below does not depend on the norms: only checked
+    _checked_norm(q_b)
+    d = quat_multiply(q_a * _CONJUGATE, q_b)
     return 2.0 * np.arctan2(row_norm(d[..., :3]), np.abs(d[..., 3]))
 
 

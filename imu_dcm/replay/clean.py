@@ -33,7 +33,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from imu_dcm.errors import GapWarning, ImuDcmWarning
 from imu_dcm.integrate import find_gaps, gap_message
-from imu_dcm.so3 import angle_between_deg, row_finite, row_norm
+from imu_dcm.so3 import quat_angle_rad, row_finite, row_norm
 
 __all__ = ["MAX_RATE_RAD_S", "SPIKE_RATIO", "CleanedImu", "clean_imu"]
 
@@ -269,10 +269,13 @@ def _deg_evidence(omega_b: NDArray, t_s: NDArray, q_truth: NDArray) -> str | Non
     ok = row_finite(q_truth)
     pair = ok[:-1] & ok[1:]
     if pair.sum() > 10:
-        i = np.flatnonzero(pair)
-        ang = np.radians(angle_between_deg(q_truth[i], q_truth[i + 1]))
-        truth_rate = ang / np.diff(t_s)[i]
-        gyro_rate = row_norm(0.5 * (omega_b[i] + omega_b[i + 1]))
+        # pairs (i, i + 1) as views when all are covered (the usual case), else gathered
+        every = bool(pair.all())
+        i = slice(None, -1) if every else np.flatnonzero(pair)
+        j = slice(1, None) if every else i + 1
+        ang = quat_angle_rad(q_truth[i], q_truth[j])
+        truth_rate = ang / np.diff(t_s)[slice(None) if every else i]
+        gyro_rate = row_norm(0.5 * (omega_b[i] + omega_b[j]))
         moving = truth_rate > 0.2  # rad/s: motion well above noise
         if moving.sum() > 10:
             ratio = float(np.median(gyro_rate[moving] / truth_rate[moving]))

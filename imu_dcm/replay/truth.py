@@ -28,8 +28,8 @@ from numpy.typing import NDArray
 from imu_dcm.errors import LogError
 from imu_dcm.resample import TRUTH_BRIDGE_STEPS, slerp_truth
 from imu_dcm.so3 import (
-    angle_between_deg,
     log_quat,
+    quat_angle_rad,
     quat_conjugate,
     quat_multiply,
     row_finite,
@@ -443,8 +443,9 @@ def find_jumps(
     norm = row_norm(q)
     ok = np.isfinite(norm) & (norm > 0.5)
     tt, q = tt[ok], q[ok] / norm[ok, None]
-    order = np.argsort(tt, kind="stable")
-    tt, q = tt[order], q[order]
+    if not np.all(tt[1:] >= tt[:-1]):  # a stable sort leaves sorted stamps as they are
+        order = np.argsort(tt, kind="stable")
+        tt, q = tt[order], q[order]
     inside = (tt >= t_ns[0]) & (tt <= t_ns[-1])
     tt, q = tt[inside], q[inside]
     if len(tt) < 2 or len(t_ns) < 2:
@@ -454,7 +455,7 @@ def find_jumps(
     speed = row_norm(omega_b)[:, None]
     path = integrated_rate(t_ns, speed, tt)[:, 0]
     gyro_deg = np.degrees(np.diff(path))
-    truth_deg = angle_between_deg(q[:-1], q[1:])
+    truth_deg = np.degrees(quat_angle_rad(q[:-1], q[1:]))
     jump = (truth_deg - gyro_deg > JUMP_DEG) & (truth_deg > JUMP_RATIO * gyro_deg)
     return tuple(
         TruthJump(float(te[i]), float(te[i + 1]), float(truth_deg[i]), float(gyro_deg[i]))
