@@ -15,7 +15,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from imu_dcm.so3 import quat_conjugate, quat_multiply, quat_normalize
+from imu_dcm.so3 import product_planes, quat_conjugate, quat_normalize
 
 __all__ = ["AttitudeError", "attitude_error_deg", "rms"]
 
@@ -48,8 +48,8 @@ def attitude_error_deg(q_est: ArrayLike, q_true: ArrayLike) -> AttitudeError:
     -------
     AttitudeError
     """
-    e = quat_multiply(quat_normalize(q_est), quat_conjugate(quat_normalize(q_true)))
-    ex, ey, ez, ew = (np.abs(e[..., k]) for k in range(4))
+    e = product_planes(quat_normalize(q_est), quat_conjugate(quat_normalize(q_true)))
+    ex, ey, ez, ew = np.abs(e)
     total = 2.0 * np.arctan2(np.sqrt(ex * ex + ey * ey + ez * ez), ew)
     heading = 2.0 * np.arctan2(ez, ew)
     # swing angle: 2 atan2(|(ex, ey)|, |(ew, ez)|) — equal to 2 acos(sqrt(ew²+ez²)), better

@@ -450,14 +450,22 @@ def find_jumps(
     tt, q = tt[inside], q[inside]
     if len(tt) < 2 or len(t_ns) < 2:
         return ()
-    te = (tt - t_ns[0]) * 1e-9
+    # Only a step turning more than JUMP_DEG can be one: |q_i · q_i+1| = cos(θ/2) screens the
+    # steps at 0.9 JUMP_DEG (its rounding moves θ by ~1e-14 rad there, far inside the margin);
+    # the exact angles and the gyro's path are computed for the few steps left, the same
+    # numbers as over every step.
+    cos_half = np.abs(np.einsum("ij,ij->i", q[:-1], q[1:]))
+    i = np.flatnonzero(cos_half < np.cos(np.radians(0.9 * JUMP_DEG) / 2))
+    if not len(i):
+        return ()
+    truth_deg = np.degrees(quat_angle_rad(q[i], q[i + 1]))
     # the gyro's path length over each truth step bounds any rotation it can have made
     speed = row_norm(omega_b)[:, None]
-    path = integrated_rate(t_ns, speed, tt)[:, 0]
-    gyro_deg = np.degrees(np.diff(path))
-    truth_deg = np.degrees(quat_angle_rad(q[:-1], q[1:]))
+    path = integrated_rate(t_ns, speed, np.stack([tt[i], tt[i + 1]], axis=1).ravel())
+    gyro_deg = np.degrees(np.diff(path[:, 0].reshape(-1, 2), axis=1)[:, 0])
+    te = (tt - t_ns[0]) * 1e-9
     jump = (truth_deg - gyro_deg > JUMP_DEG) & (truth_deg > JUMP_RATIO * gyro_deg)
     return tuple(
-        TruthJump(float(te[i]), float(te[i + 1]), float(truth_deg[i]), float(gyro_deg[i]))
-        for i in np.flatnonzero(jump)
+        TruthJump(float(te[k]), float(te[k + 1]), float(truth_deg[m]), float(gyro_deg[m]))
+        for m, k in zip(np.flatnonzero(jump).tolist(), i[jump].tolist(), strict=True)
     )
