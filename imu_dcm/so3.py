@@ -44,6 +44,7 @@ __all__ = [
     "quat_normalize",
     "quat_rotate",
     "row_finite",
+    "row_max",
     "row_norm",
 ]
 
@@ -92,6 +93,16 @@ def row_finite(a: ArrayLike) -> NDArray[np.bool_]:
     out = f[..., 0].copy()
     for k in range(1, f.shape[-1]):
         out &= f[..., k]
+    return out
+
+
+def row_max(a: ArrayLike) -> NDArray[np.float64]:
+    """Largest element over the last axis of a non-empty one, shape ``(...)``:
+    ``np.max(a, axis=-1)`` column by column (NaN propagates the same way)."""
+    a = np.asarray(a)
+    out = a[..., 0].copy()
+    for k in range(1, a.shape[-1]):
+        np.maximum(out, a[..., k], out=out)
     return out
 
 

@@ -33,7 +33,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from imu_dcm.errors import GapWarning, ImuDcmWarning
 from imu_dcm.integrate import find_gaps, gap_message
-from imu_dcm.so3 import quat_angle_rad, row_finite, row_norm
+from imu_dcm.so3 import quat_angle_rad, row_finite, row_max, row_norm
 
 __all__ = ["MAX_RATE_RAD_S", "SPIKE_RATIO", "CleanedImu", "clean_imu"]
 
@@ -171,7 +171,7 @@ def clean_imu(t_ns: ArrayLike, omega_b: ArrayLike, topic: str = "IMU") -> Cleane
     n_bad = int(nonfinite.sum())
     drop(nonfinite)
 
-    huge = np.max(np.abs(w), axis=1, initial=0.0) > MAX_RATE_RAD_S
+    huge = row_max(np.abs(w)) > MAX_RATE_RAD_S
     bad_t = [t[huge]]
     drop(huge)
 
