@@ -38,6 +38,7 @@ __all__ = [
     "product_planes",
     "quat_angle_rad",
     "quat_as_matrix",
+    "quat_checked_norm",
     "quat_conjugate",
     "quat_from_matrix",
     "quat_multiply",
@@ -286,11 +287,17 @@ def quat_normalize(q: ArrayLike) -> NDArray[np.float64]:
         If a quaternion has zero or non-finite norm.
     """
     q = np.asarray(q, dtype=float)
-    return q / _checked_norm(q)[..., None]
+    return q / quat_checked_norm(q)[..., None]
 
 
-def _checked_norm(q: NDArray[np.float64]) -> NDArray[np.float64]:
-    """:func:`row_norm` of quaternions, raising :class:`InputError` for a zero or NaN one."""
+def quat_checked_norm(q: ArrayLike) -> NDArray[np.float64]:
+    """Norms of quaternions ``(..., 4)``, shape ``(...)``.
+
+    Raises
+    ------
+    InputError
+        If a quaternion has zero or non-finite norm.
+    """
     return _checked(row_norm(q))
 
 
@@ -408,8 +415,8 @@ def quat_angle_rad(q_a: ArrayLike, q_b: ArrayLike) -> NDArray[np.float64]:
     """
     q_a = np.asarray(q_a, dtype=float)
     q_b = np.asarray(q_b, dtype=float)
-    _checked_norm(q_a)  # the ratio below does not depend on the norms: only checked
-    _checked_norm(q_b)
+    quat_checked_norm(q_a)  # the ratio below does not depend on the norms: only checked
+    quat_checked_norm(q_b)
     x, y, z, w = product_planes(q_a * _CONJUGATE, q_b)
     return 2.0 * np.arctan2(np.sqrt(x * x + y * y + z * z), np.abs(w))
 

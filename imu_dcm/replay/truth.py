@@ -229,7 +229,7 @@ def rate_grid(
     if hi <= lo:
         return None
     dt_g = float(np.median(np.diff(t_ns))) * 1e-9
-    dt_t = float(np.median(np.diff(np.sort(tt)))) * 1e-9
+    dt_t = float(np.median(np.diff(tt if np.all(tt[1:] >= tt[:-1]) else np.sort(tt)))) * 1e-9
     span_s = (hi - lo) * 1e-9
     dt = max(min_step_s, 2 * dt_t, dt_g, span_s / 100_000)
     edges = lo + np.round(np.arange(0.0, span_s, dt) * 1e9).astype(np.int64)
