@@ -252,9 +252,13 @@ def quat_multiply(p: ArrayLike, q: ArrayLike) -> NDArray[np.float64]:
     return _rows(product_planes(p, q))
 
 
-def product_planes(p: ArrayLike, q: ArrayLike) -> NDArray[np.float64]:
+def product_planes(
+    p: ArrayLike, q: ArrayLike, conj_p: bool = False, conj_q: bool = False
+) -> NDArray[np.float64]:
     """:func:`quat_multiply` as component planes, shape ``(4, ...)``: ``[x, y, z, w]`` of
     ``p ⊗ q`` first, each plane contiguous (for the callers that use the components).
+    ``conj_p`` / ``conj_q``: of the conjugate of ``p`` / ``q`` instead (the same numbers as
+    conjugating first: a sign flip is exact).
 
     numpy is several times slower on the strided columns of an ``(N, 4)`` array, so the
     operands are turned into planes once; each component is summed in the order of the
@@ -264,12 +268,18 @@ def product_planes(p: ArrayLike, q: ArrayLike) -> NDArray[np.float64]:
     rest = np.broadcast_shapes(P.shape[1:], Q.shape[1:])
     out = np.empty((4,) + rest)
     term = np.empty(rest)
-    for k, ((i, j, _), *others) in enumerate(_PRODUCT):
+    for k, terms in enumerate(_PRODUCT):
         o = out[k, ...]
-        np.multiply(P[i], Q[j], out=o)
-        for a, b, sign in others:
-            np.multiply(P[a], Q[b], out=term)
-            (np.add if sign > 0 else np.subtract)(o, term, out=o)
+        for n, (i, j, sign) in enumerate(terms):
+            if (conj_p and i < 3) != (conj_q and j < 3):
+                sign = -sign
+            if n == 0:
+                np.multiply(P[i], Q[j], out=o)
+                if sign < 0:
+                    np.negative(o, out=o)
+            else:
+                np.multiply(P[i], Q[j], out=term)
+                (np.add if sign > 0 else np.subtract)(o, term, out=o)
     return out
 
 
@@ -417,7 +427,7 @@ def quat_angle_rad(q_a: ArrayLike, q_b: ArrayLike) -> NDArray[np.float64]:
     q_b = np.asarray(q_b, dtype=float)
     quat_checked_norm(q_a)  # the ratio below does not depend on the norms: only checked
     quat_checked_norm(q_b)
-    x, y, z, w = product_planes(q_a * _CONJUGATE, q_b)
+    x, y, z, w = product_planes(q_a, q_b, conj_p=True)
     return 2.0 * np.arctan2(np.sqrt(x * x + y * y + z * z), np.abs(w))
 
 
