@@ -27,9 +27,9 @@ does).
 
 from __future__ import annotations
 
-import hashlib
 import importlib
 import os
+import zlib
 from pathlib import Path
 
 import numpy as np
@@ -87,6 +87,7 @@ __all__ = [
     "new_state",
     "push",
     "push_for",
+    "record_chain",
     "source_digest",
     "state_fields",
 ]
@@ -112,13 +113,14 @@ def _constants() -> str:
 
 
 def source_digest() -> str:
-    """SHA-256 (16 hex digits) of :data:`SOURCES` and :func:`_constants`: what a built module
-    must have been built from to be used."""
+    """CRC-32 (8 hex digits) of :data:`SOURCES` and :func:`_constants`: what a built module
+    must have been built from to be used. (A check against stale builds, not a signature:
+    zlib is loaded anyway, where hashlib's OpenSSL would cost ~3 ms of every start-up.)"""
     here = Path(__file__).parent
-    h = hashlib.sha256(_constants().encode())
+    crc = zlib.crc32(_constants().encode())
     for name in SOURCES:
-        h.update((here / name).read_bytes())
-    return h.hexdigest()[:16]
+        crc = zlib.crc32((here / name).read_bytes(), crc)
+    return f"{crc:08x}"
 
 
 def digest_entry() -> str:
@@ -239,3 +241,15 @@ def feed_delta(q0, dtheta, dt, method: int, out) -> None:
     interval, or per set of 2 or 3 intervals)."""
     _arrays(q0=(q0, 1), dtheta=(dtheta, 2), dt=(dt, 1), out=(out, 2))
     entry("feed_delta")(q0, dtheta, dt, int(method), out)
+
+
+def record_chain(b, pos: int) -> tuple[np.ndarray, np.ndarray, int]:
+    """The ``[uint16 size][uint8 type]`` record chain of the bytes ``b`` (a uint8 array) from
+    ``pos``: ``(positions, types, end)``, every whole record and where the first incomplete one
+    starts (:func:`imu_dcm.kernel_jit.record_chain`)."""
+    if not (isinstance(b, np.ndarray) and b.dtype == np.uint8 and b.ndim == 1):
+        raise TypeError(f"Expected `b` a 1-D uint8 array, got {type(b).__name__}")
+    b = np.ascontiguousarray(b)
+    if _aot() is None and not b.flags.writeable:
+        b = b.copy()  # numba's signature is of a writable array (the built one reads any)
+    return entry("record_chain")(b, int(pos))

@@ -34,6 +34,7 @@ import sys
 import warnings
 
 import numba
+import numpy as np
 from numba.core import event as numba_event
 
 from imu_dcm.errors import ImuDcmWarning
@@ -541,6 +542,32 @@ def feed_delta(q0, dtheta, dt, method: int, out) -> None:
         out[u + 1, 0], out[u + 1, 1], out[u + 1, 2], out[u + 1, 3] = q
 
 
+# -- a byte walker for the ULog reader ------------------------------------------------------------
+
+
+RECORD_CHAIN_SIGNATURE = "Tuple((int64[::1], uint8[::1], int64))(uint8[::1], int64)"
+
+
+def record_chain(b, pos: int):
+    """Follow the ``[uint16 size][uint8 type]`` chain of little-endian record headers of ``b``
+    from ``pos`` (PX4 ULog's message framing): the position and type of every whole record,
+    and where the first incomplete one starts. Compiled with the kernel so that a ULog replay
+    needs no numba either (:func:`imu_dcm.kernel.record_chain`)."""
+    n = len(b)
+    at = np.empty(n // 3 + 1, np.int64)
+    typ = np.empty(n // 3 + 1, np.uint8)
+    k = 0
+    while pos + 3 <= n:
+        end = pos + 3 + (np.int64(b[pos]) | (np.int64(b[pos + 1]) << 8))
+        if end > n:
+            break
+        at[k] = pos
+        typ[k] = b[pos + 2]
+        k += 1
+        pos = end
+    return at[:k], typ[:k], pos
+
+
 # -- the entry points ----------------------------------------------------------------------------
 
 
@@ -558,6 +585,7 @@ def _entries() -> dict[str, tuple[object, str]]:
     entries["close_magnus4"] = (_close_magnus4, CLOSE_SIGNATURE)
     entries["check_record"] = (check_record, CHECK_SIGNATURE)
     entries["feed_delta"] = (feed_delta, FEED_DELTA_SIGNATURE)
+    entries["record_chain"] = (record_chain, RECORD_CHAIN_SIGNATURE)
     return entries
 
 

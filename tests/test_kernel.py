@@ -326,7 +326,7 @@ def test_an_out_of_date_built_kernel_is_not_used(monkeypatch):
     # A module built from other sources than these (an edited kernel) is left alone: numba
     # compiles instead, and the compile line says why.
     monkeypatch.setattr(kernel, "_AOT", [])
-    monkeypatch.setattr(kernel, "digest_entry", lambda: "source_0000000000000000")
+    monkeypatch.setattr(kernel, "digest_entry", lambda: "source_no_such_build")
     assert kernel.backend() == "jit"
     if "out of date" not in kernel._AOT[1]:
         assert "no kernel built ahead of time" in kernel._AOT[1]
@@ -410,3 +410,35 @@ def test_find_gaps_is_the_one_rule():
     with pytest.warns(GapWarning) as caught:
         integ.update(np.zeros(3), t[10])
     assert str(caught[0].message) == gap_message(find_gaps(t[7:11]))
+
+
+def test_record_chain_walks_ulog_framing_and_stops_at_an_incomplete_record():
+    # [uint16 size][uint8 type] headers: sizes 2, 0 and 300 (little endian), then a header whose
+    # record runs past the end. Positions and types by hand; both loaders agree.
+    records = [(2, 65), (0, 66), (300, 68)]
+    buf = bytearray()
+    for size, typ in records:
+        buf += bytes([size & 0xFF, size >> 8, typ]) + bytes(size)
+    end = len(buf)
+    buf += bytes([9, 0, 70, 1, 2])  # incomplete
+    b = np.frombuffer(bytes(buf), np.uint8)  # read-only, as the reader passes it
+    at, typ, stop = kernel.record_chain(b, 0)
+    assert at.tolist() == [0, 5, 8] and typ.tolist() == [65, 66, 68] and stop == end
+    jit = kernel_jit.compiled("record_chain")(np.array(b), 0)
+    assert [a.tolist() for a in jit[:2]] == [at.tolist(), typ.tolist()] and jit[2] == stop
+    with pytest.raises(TypeError, match="uint8"):
+        kernel.record_chain(b.astype(np.int16), 0)
+
+
+def test_a_failed_build_is_one_line_and_leaves_no_module(tmp_path):
+    # The build's errors (numba, the C compiler, the disk) come out as one line, exit 1; here
+    # the output folder cannot be made (a regular file stands in its way).
+    blocker = tmp_path / "file"
+    blocker.write_text("")
+    out = str(blocker / "x")
+    code = f"import sys; from imu_dcm.kernel_build import main; sys.exit(main(['--out', {out!r}]))"
+    res = _run(code, _kernel_env(tmp_path / "cache"))
+    assert res.returncode == 1, res.stderr
+    lines = res.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("imu_dcm: the kernel was not built:"), lines
+    assert "Traceback" not in res.stderr and not list(tmp_path.rglob("*_kernel_aot*"))

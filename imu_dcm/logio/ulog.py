@@ -44,6 +44,7 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import NDArray
 
+from imu_dcm import kernel
 from imu_dcm.errors import LogError
 from imu_dcm.logio.damage import warn_damage
 from imu_dcm.logio.ned import FLU_FROM_FRD, q_enu_flu
@@ -80,36 +81,6 @@ _KNOWN = frozenset(b"FIMPQARDLCSOB")
 def probe(path: Path, head: bytes) -> bool:
     """True for a ULog file (its 7-byte magic)."""
     return head.startswith(MAGIC)
-
-
-def _chain_py(b: NDArray[np.uint8], pos: int):  # pragma: no cover - compiled
-    """Follow the ``[uint16 size][uint8 type]`` chain of ``b`` from ``pos``: the position and
-    type of every whole message, and where the first incomplete one starts."""
-    n = len(b)
-    at = np.empty(n // 3 + 1, np.int64)
-    typ = np.empty(n // 3 + 1, np.uint8)
-    k = 0
-    while pos + 3 <= n:
-        end = pos + 3 + (np.int64(b[pos]) | (np.int64(b[pos + 1]) << 8))
-        if end > n:
-            break
-        at[k] = pos
-        typ[k] = b[pos + 2]
-        k += 1
-        pos = end
-    return at[:k], typ[:k], pos
-
-
-_compiled: list = []
-
-
-def _chain(b: NDArray[np.uint8], pos: int):
-    """:func:`_chain_py` compiled (by the kernel's numba settings) on first use."""
-    if not _compiled:
-        from imu_dcm.kernel_jit import _jit
-
-        _compiled.append(_jit(_chain_py))
-    return _compiled[0](b, pos)
 
 
 class _Irregular(Exception):
@@ -257,7 +228,7 @@ class _Scanner:
     def walk(self, buf: bytes, base: int) -> int:
         """Walk ``buf`` (file offset ``base``); gather data records; return bytes consumed."""
         b = np.frombuffer(buf, np.uint8)
-        pos, typ, used = _chain(b, 0)
+        pos, typ, used = kernel.record_chain(b, 0)
         for i in np.flatnonzero(typ != 68).tolist():
             at, t = int(pos[i]), int(typ[i])
             size = int(b[at]) | int(b[at + 1]) << 8
