@@ -15,7 +15,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from imu_dcm.so3 import quat_conjugate, quat_multiply, quat_normalize
+from imu_dcm.so3 import product_planes, quat_checked_norm
 
 __all__ = ["AttitudeError", "attitude_error_deg", "rms"]
 
@@ -48,8 +48,12 @@ def attitude_error_deg(q_est: ArrayLike, q_true: ArrayLike) -> AttitudeError:
     -------
     AttitudeError
     """
-    e = quat_multiply(quat_normalize(q_est), quat_conjugate(quat_normalize(q_true)))
-    ex, ey, ez, ew = (np.abs(e[..., k]) for k in range(4))
+    # Each angle below is a ratio of components, the same for scaled quaternions: the norms
+    # are only checked (zero or NaN refused), not divided out.
+    q_est, q_true = np.asarray(q_est, dtype=float), np.asarray(q_true, dtype=float)
+    quat_checked_norm(q_est)
+    quat_checked_norm(q_true)
+    ex, ey, ez, ew = np.abs(product_planes(q_est, q_true, conj_q=True))
     total = 2.0 * np.arctan2(np.sqrt(ex * ex + ey * ey + ez * ez), ew)
     heading = 2.0 * np.arctan2(ez, ew)
     # swing angle: 2 atan2(|(ex, ey)|, |(ew, ez)|) — equal to 2 acos(sqrt(ew²+ez²)), better

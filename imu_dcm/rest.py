@@ -32,6 +32,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from imu_dcm.errors import InputError
+from imu_dcm.so3 import row_max, row_norm
 
 #: Standard gravity, m/s² (a still accelerometer reads about this much).
 GRAVITY_M_S2 = 9.80665
@@ -100,11 +101,15 @@ def windowed_mean_var(x: NDArray, m: int) -> tuple[NDArray, NDArray]:
         Row ``i`` describes the window of samples ``[i, i + m)`` (variance in the unit squared,
         clipped at 0 against cancellation in the running sums).
     """
-    c1 = np.concatenate([np.zeros((1,) + x.shape[1:]), np.cumsum(x, axis=0)])
-    c2 = np.concatenate([np.zeros((1,) + x.shape[1:]), np.cumsum(x * x, axis=0)])
-    mean = (c1[m:] - c1[:-m]) / m
-    var = np.maximum((c2[m:] - c2[:-m]) / m - mean * mean, 0.0)
-    return mean, var
+    sums = np.empty((2, len(x) + 1) + x.shape[1:])  # running sums of x and x², in place
+    sums[:, 0] = 0.0
+    np.cumsum(x, axis=0, out=sums[0, 1:])
+    np.cumsum(np.square(x), axis=0, out=sums[1, 1:])
+    mean, var = sums[:, m:] - sums[:, :-m]
+    mean /= m
+    var /= m
+    var -= mean * mean
+    return mean, np.maximum(var, 0.0, out=var)
 
 
 def runs(mask: NDArray[np.bool_]) -> list[tuple[int, int]]:
@@ -136,7 +141,7 @@ def quietest_std(omega_b: NDArray, t_s: NDArray, window_s: float) -> float:
     """
     m = max(3, min(len(t_s), round(window_s / float(np.median(np.diff(t_s))))))
     _mean, var = windowed_mean_var(omega_b, m)
-    return float(np.sqrt(var.max(axis=1).min()))
+    return float(np.sqrt(row_max(var).min()))
 
 
 def _checked(omega_b: ArrayLike, t_s: ArrayLike, accel_b: ArrayLike | None):
@@ -158,18 +163,18 @@ def _window_conditions(
     A window passes a condition when its value is below the limit.
     """
     mean, var = windowed_mean_var(w, win)
-    rate = np.linalg.norm(mean, axis=1)
-    conds = [("rate std", np.sqrt(var.max(axis=1)), cfg.max_std_rad_s, "rad/s")]
+    rate = row_norm(mean)
+    conds = [("rate std", np.sqrt(row_max(var)), cfg.max_std_rad_s, "rad/s")]
     if acc is None:
         conds.append(("mean |omega| (no accelerometer)", rate, cfg.max_rate_rad_s, "rad/s"))
         return conds
     a_mean, a_var = windowed_mean_var(acc, win)
     conds += [
         ("mean |omega|", rate, cfg.max_bias_rad_s, "rad/s"),
-        ("accel std", np.sqrt(a_var.max(axis=1)), cfg.max_accel_std_m_s2, "m/s²"),
+        ("accel std", np.sqrt(row_max(a_var)), cfg.max_accel_std_m_s2, "m/s²"),
         (
             "| |a| - g |",
-            np.abs(np.linalg.norm(a_mean, axis=1) - GRAVITY_M_S2),
+            np.abs(row_norm(a_mean) - GRAVITY_M_S2),
             cfg.max_gravity_error_m_s2,
             "m/s²",
         ),

@@ -35,13 +35,18 @@ __all__ = [
     "exp_quat",
     "hat",
     "log_quat",
+    "product_planes",
     "quat_angle_rad",
     "quat_as_matrix",
+    "quat_checked_norm",
     "quat_conjugate",
     "quat_from_matrix",
     "quat_multiply",
     "quat_normalize",
     "quat_rotate",
+    "row_finite",
+    "row_max",
+    "row_norm",
 ]
 
 # Below this angle (rad) the Taylor branches of exp_matrix and log_quat are used: their truncation
@@ -57,6 +62,49 @@ SINC_HALF_SERIES = tuple(
 )
 #: Coefficients of θ^(2k), k = 0..6, of cos(θ/2) = Σ (-1)^k θ^(2k) / (4^k (2k)!).
 COS_HALF_SERIES = tuple((-1) ** k / (4**k * math.factorial(2 * k)) for k in range(7))
+
+
+#: Multiplying by this conjugates ``[x, y, z, w]`` (a sign flip is exact).
+_CONJUGATE = np.array([-1.0, -1.0, -1.0, 1.0])
+
+
+#: The Hamilton product ``p ⊗ q`` component by component: ``(i, j, sign)`` terms
+#: ``sign p_i q_j`` of x, y, z and w, in order (indices into ``[x, y, z, w]``).
+_PRODUCT = (
+    ((3, 0, 1), (0, 3, 1), (1, 2, 1), (2, 1, -1)),
+    ((3, 1, 1), (0, 2, -1), (1, 3, 1), (2, 0, 1)),
+    ((3, 2, 1), (0, 1, 1), (1, 0, -1), (2, 3, 1)),
+    ((3, 3, 1), (0, 0, -1), (1, 1, -1), (2, 2, -1)),
+)
+
+
+def row_norm(a: ArrayLike) -> NDArray[np.float64]:
+    """Euclidean norm over the last axis, shape ``(...)``: ``np.linalg.norm(a, axis=-1)``
+    without numpy's slow reduction over a short axis (a few times faster for ``(N, 4)``)."""
+    a = np.asarray(a, dtype=float)
+    return np.sqrt(np.einsum("...i,...i->...", a, a))
+
+
+def row_finite(a: ArrayLike) -> NDArray[np.bool_]:
+    """Whether every element along the last axis is finite, shape ``(...)``:
+    ``np.all(np.isfinite(a), axis=-1)``, column by column (many times faster for ``(N, 4)``)."""
+    f = np.isfinite(a)
+    if f.ndim == 0 or f.shape[-1] == 0:
+        return np.all(f, axis=-1)
+    out = f[..., 0].copy()
+    for k in range(1, f.shape[-1]):
+        out &= f[..., k]
+    return out
+
+
+def row_max(a: ArrayLike) -> NDArray[np.float64]:
+    """Largest element over the last axis of a non-empty one, shape ``(...)``:
+    ``np.max(a, axis=-1)`` column by column (NaN propagates the same way)."""
+    a = np.asarray(a)
+    out = a[..., 0].copy()
+    for k in range(1, a.shape[-1]):
+        np.maximum(out, a[..., k], out=out)
+    return out
 
 
 def _horner(t2: NDArray, coefs: tuple) -> NDArray:
@@ -86,13 +134,27 @@ def hat(v: ArrayLike) -> NDArray[np.float64]:
     return out
 
 
-def _half_angle_terms(phi: NDArray[np.float64]) -> tuple[NDArray, NDArray]:
-    """Return ``sin(θ/2)/θ`` and ``cos(θ/2)`` for ``θ = |phi|``, exact near zero."""
-    t2 = np.einsum("...i,...i->...", phi, phi)
+def _planes(a: ArrayLike) -> NDArray[np.float64]:
+    """The components of ``(..., k)`` values as contiguous planes ``(k, ...)``: numpy is several
+    times slower on the strided columns of an ``(N, k)`` array."""
+    return np.ascontiguousarray(np.moveaxis(np.asarray(a, dtype=float), -1, 0))
+
+
+def _rows(planes: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Planes ``(k, ...)`` back to a C-contiguous ``(..., k)`` array."""
+    return np.ascontiguousarray(np.moveaxis(planes, 0, -1))
+
+
+def _half_angle_terms(t2: NDArray[np.float64]) -> tuple[NDArray, NDArray]:
+    """Return ``sin(θ/2)/θ`` and ``cos(θ/2)`` for ``θ² = t2``, exact near zero (the sine and
+    cosine are evaluated only when some ``θ`` is beyond the series)."""
     small = t2 <= SERIES_THETA2
-    theta = np.sqrt(np.where(small, 1.0, t2))
-    sinc_half = np.where(small, _horner(t2, SINC_HALF_SERIES), np.sin(0.5 * theta) / theta)
-    cos_half = np.where(small, _horner(t2, COS_HALF_SERIES), np.cos(0.5 * theta))
+    sinc_half = _horner(t2, SINC_HALF_SERIES)
+    cos_half = _horner(t2, COS_HALF_SERIES)
+    if not np.all(small):
+        theta = np.sqrt(np.where(small, 1.0, t2))
+        sinc_half = np.where(small, sinc_half, np.sin(0.5 * theta) / theta)
+        cos_half = np.where(small, cos_half, np.cos(0.5 * theta))
     return sinc_half, cos_half
 
 
@@ -109,9 +171,12 @@ def exp_quat(phi: ArrayLike) -> NDArray[np.float64]:
     ndarray, shape (..., 4)
         Unit quaternion ``[x, y, z, w]`` with ``w >= 0`` for ``|phi| <= π``.
     """
-    phi = np.asarray(phi, dtype=float)
-    s, c = _half_angle_terms(phi)
-    return np.concatenate([phi * s[..., None], c[..., None]], axis=-1)
+    x, y, z = P = _planes(phi)
+    s, c = _half_angle_terms(x * x + y * y + z * z)
+    out = np.empty((4,) + c.shape)
+    out[:3] = P * s
+    out[3] = c
+    return _rows(out)
 
 
 def exp_matrix(phi: ArrayLike) -> NDArray[np.float64]:
@@ -157,10 +222,11 @@ def log_quat(q: ArrayLike) -> NDArray[np.float64]:
     ndarray, shape (..., 3)
         Rotation vector, rad.
     """
-    q = quat_normalize(q)
-    q = np.where(q[..., 3:4] < 0.0, -q, q)
-    v, w = q[..., :3], q[..., 3]
-    s = np.linalg.norm(v, axis=-1)
+    Q = _planes(q)
+    Q = Q / _checked(np.sqrt(Q[0] * Q[0] + Q[1] * Q[1] + Q[2] * Q[2] + Q[3] * Q[3]))
+    Q = np.where(Q[3] < 0.0, -Q, Q)
+    (x, y, z), w = Q[:3], Q[3]
+    s = np.sqrt(x * x + y * y + z * z)
     theta = 2.0 * np.arctan2(s, w)
     small = s < 0.5 * _SMALL_ANGLE_RAD
     safe = np.where(small, 1.0, s)
@@ -168,7 +234,7 @@ def log_quat(q: ArrayLike) -> NDArray[np.float64]:
     w_small = np.where(small, w, 1.0)  # w is near 1 there; elsewhere it may be 0 (half turns)
     r2 = s * s / (w_small * w_small)
     scale = np.where(small, 2.0 / w_small * (1.0 - r2 / 3.0 + r2 * r2 / 5.0), theta / safe)
-    return v * scale[..., None]
+    return _rows(Q[:3] * scale)
 
 
 def quat_multiply(p: ArrayLike, q: ArrayLike) -> NDArray[np.float64]:
@@ -183,25 +249,43 @@ def quat_multiply(p: ArrayLike, q: ArrayLike) -> NDArray[np.float64]:
     -------
     ndarray, shape (..., 4)
     """
-    p = np.asarray(p, dtype=float)
-    q = np.asarray(q, dtype=float)
-    px, py, pz, pw = p[..., 0], p[..., 1], p[..., 2], p[..., 3]
-    qx, qy, qz, qw = q[..., 0], q[..., 1], q[..., 2], q[..., 3]
-    return np.stack(
-        [
-            pw * qx + px * qw + py * qz - pz * qy,
-            pw * qy - px * qz + py * qw + pz * qx,
-            pw * qz + px * qy - py * qx + pz * qw,
-            pw * qw - px * qx - py * qy - pz * qz,
-        ],
-        axis=-1,
-    )
+    return _rows(product_planes(p, q))
+
+
+def product_planes(
+    p: ArrayLike, q: ArrayLike, conj_p: bool = False, conj_q: bool = False
+) -> NDArray[np.float64]:
+    """:func:`quat_multiply` as component planes, shape ``(4, ...)``: ``[x, y, z, w]`` of
+    ``p ⊗ q`` first, each plane contiguous (for the callers that use the components).
+    ``conj_p`` / ``conj_q``: of the conjugate of ``p`` / ``q`` instead (the same numbers as
+    conjugating first: a sign flip is exact).
+
+    numpy is several times slower on the strided columns of an ``(N, 4)`` array, so the
+    operands are turned into planes once; each component is summed in the order of the
+    formula.
+    """
+    P, Q = _planes(p), _planes(q)
+    rest = np.broadcast_shapes(P.shape[1:], Q.shape[1:])
+    out = np.empty((4,) + rest)
+    term = np.empty(rest)
+    for k, terms in enumerate(_PRODUCT):
+        o = out[k, ...]
+        for n, (i, j, sign) in enumerate(terms):
+            if (conj_p and i < 3) != (conj_q and j < 3):
+                sign = -sign
+            if n == 0:
+                np.multiply(P[i], Q[j], out=o)
+                if sign < 0:
+                    np.negative(o, out=o)
+            else:
+                np.multiply(P[i], Q[j], out=term)
+                (np.add if sign > 0 else np.subtract)(o, term, out=o)
+    return out
 
 
 def quat_conjugate(q: ArrayLike) -> NDArray[np.float64]:
     """Conjugate ``[-x, -y, -z, w]``: the inverse rotation of a unit quaternion."""
-    q = np.asarray(q, dtype=float)
-    return np.concatenate([-q[..., :3], q[..., 3:]], axis=-1)
+    return np.asarray(q, dtype=float) * _CONJUGATE
 
 
 def quat_normalize(q: ArrayLike) -> NDArray[np.float64]:
@@ -213,10 +297,25 @@ def quat_normalize(q: ArrayLike) -> NDArray[np.float64]:
         If a quaternion has zero or non-finite norm.
     """
     q = np.asarray(q, dtype=float)
-    n = np.linalg.norm(q, axis=-1, keepdims=True)
-    if not np.all(np.isfinite(n)) or np.any(n == 0.0):
+    return q / quat_checked_norm(q)[..., None]
+
+
+def quat_checked_norm(q: ArrayLike) -> NDArray[np.float64]:
+    """Norms of quaternions ``(..., 4)``, shape ``(...)``.
+
+    Raises
+    ------
+    InputError
+        If a quaternion has zero or non-finite norm.
+    """
+    return _checked(row_norm(q))
+
+
+def _checked(n: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Quaternion norms ``n``, or :class:`InputError` for a zero or NaN one."""
+    if not np.isfinite(n).all() or (n == 0.0).any():
         raise InputError("Expected quaternions with finite non-zero norm, got a zero or NaN one")
-    return q / n
+    return n
 
 
 def quat_rotate(q: ArrayLike, v: ArrayLike) -> NDArray[np.float64]:
@@ -315,7 +414,7 @@ def quat_from_matrix(R: ArrayLike) -> NDArray[np.float64]:
         axis=-1,
     )
     q[m] = qw[m]
-    return q / np.linalg.norm(q, axis=-1, keepdims=True)
+    return q / row_norm(q)[..., None]
 
 
 def quat_angle_rad(q_a: ArrayLike, q_b: ArrayLike) -> NDArray[np.float64]:
@@ -324,8 +423,12 @@ def quat_angle_rad(q_a: ArrayLike, q_b: ArrayLike) -> NDArray[np.float64]:
     Insensitive to the sign of either quaternion. Accurate for tiny angles (uses ``atan2``,
     not ``acos``).
     """
-    d = quat_multiply(quat_conjugate(quat_normalize(q_a)), quat_normalize(q_b))
-    return 2.0 * np.arctan2(np.linalg.norm(d[..., :3], axis=-1), np.abs(d[..., 3]))
+    q_a = np.asarray(q_a, dtype=float)
+    q_b = np.asarray(q_b, dtype=float)
+    quat_checked_norm(q_a)  # the ratio below does not depend on the norms: only checked
+    quat_checked_norm(q_b)
+    x, y, z, w = product_planes(q_a, q_b, conj_p=True)
+    return 2.0 * np.arctan2(np.sqrt(x * x + y * y + z * z), np.abs(w))
 
 
 def angle_between_deg(q_a: ArrayLike, q_b: ArrayLike) -> NDArray[np.float64]:

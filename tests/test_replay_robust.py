@@ -317,7 +317,48 @@ def test_lagged_correlation_equals_numpy_corrcoef_per_lag():
         a = g[max(k, 0) : n + min(k, 0)][m]
         b = h[max(-k, 0) : n - max(k, 0)][m]
         assert count[k + lags] == len(a)
-        # FFT sums of n products: round-off grows with n (n·eps·C, C for the data's range)
+        # sums of n products: round-off grows with n (n·eps·C, C for the data's range)
         tol = n * np.finfo(float).eps * 1e3
         assert abs(corr[k + lags] - np.corrcoef(a, b)[0, 1]) < tol, k
     assert int(np.argmax(corr)) - lags == -7
+
+
+def test_find_jumps_equals_every_step_judged_in_full():
+    """The jump search screens steps by |q_i . q_i+1| before computing exact angles: the jumps
+    it finds are those of judging every truth step against the gyro's path (brute force)."""
+    from scipy.spatial.transform import Rotation
+
+    from imu_dcm.replay.truth import JUMP_DEG, JUMP_RATIO, find_jumps
+
+    rng = np.random.default_rng(21)
+    t_ns = np.arange(2001, dtype=np.int64) * 5_000_000  # 200 Hz, 10 s
+    omega = 0.3 * np.sin(np.outer(t_ns * 1e-9, [0.7, 1.1, 1.9]) + rng.random(3))
+    tt = t_ns[::2] + 1_000_000  # 100 Hz truth, between gyro stamps
+    steps = Rotation.from_rotvec(omega[::2][:-1] * 0.01)
+    rots = [Rotation.identity()]
+    for k, step in enumerate(steps):
+        rots.append(rots[-1] * step)
+        jump = {100: 4.9, 300: 5.3, 500: 20.0, 700: 170.0, 800: 4.0}.get(k)
+        if jump:  # a turn about a random axis the gyro does not show
+            axis = rng.normal(size=3)
+            turn = Rotation.from_rotvec(np.radians(jump) * axis / np.linalg.norm(axis))
+            rots[-1] = turn * rots[-1]
+    q = Rotation.concatenate(rots).as_quat() * rng.choice([-1.0, 1.0], size=(len(rots), 1))
+    got = find_jumps(t_ns, omega, tt, q)
+    # brute force: every step's angle (scipy) and the gyro's path length over it (trapezoid of
+    # |omega|, linear between samples), the rule of JUMP_DEG and JUMP_RATIO
+    ts = (t_ns - t_ns[0]) * 1e-9
+    speed = np.linalg.norm(omega, axis=1)
+    cum = np.concatenate([[0.0], np.cumsum(0.5 * (speed[1:] + speed[:-1]) * np.diff(ts))])
+    inside = (tt >= t_ns[0]) & (tt <= t_ns[-1])
+    te = (tt[inside] - t_ns[0]) * 1e-9
+    r = Rotation.from_quat(q[inside])
+    truth_deg = np.degrees((r[:-1].inv() * r[1:]).magnitude())
+    gyro_deg = np.degrees(np.diff(np.interp(te, ts, cum)))
+    want = np.flatnonzero((truth_deg - gyro_deg > JUMP_DEG) & (truth_deg > JUMP_RATIO * gyro_deg))
+    assert len(want) == 3  # 5.3°, 20° and 170°; not 4.9° or 4°
+    assert len(got) == len(want)
+    for j, i in zip(got, want, strict=True):
+        assert abs(j.t0_s - te[i]) < 1e-9 and abs(j.t1_s - te[i + 1]) < 1e-9
+        # angles: scipy's and ours differ by rounding (1e-12 deg); the path by its sum order
+        assert abs(j.truth_deg - truth_deg[i]) < 1e-9 and abs(j.gyro_deg - gyro_deg[i]) < 1e-9

@@ -109,3 +109,40 @@ def test_log_quat_of_half_turns_matches_scipy_without_warnings():
     got = log_quat(q)
     np.testing.assert_allclose(np.linalg.norm(got, axis=-1), np.pi, rtol=0, atol=4 * EPS)
     np.testing.assert_allclose(got, Rotation.from_quat(q).as_rotvec(), rtol=0, atol=8 * EPS)
+
+
+def test_row_helpers_equal_numpy_reductions_over_the_last_axis():
+    from imu_dcm.so3 import row_finite, row_max, row_norm
+
+    rng = np.random.default_rng(11)
+    for shape in [(4,), (50, 4), (7, 3), (3, 5, 2), (0, 4)]:
+        a = rng.normal(size=shape) * 10.0 ** rng.integers(-8, 8, size=shape)
+        if a.size > 4:
+            a.flat[[1, 5]] = np.nan
+            a.flat[3] = np.inf
+        want = np.linalg.norm(a, axis=-1)
+        # a sum of at most four squares in another order: a few ulps apart
+        np.testing.assert_allclose(row_norm(a), want, rtol=4 * EPS, atol=0)
+        np.testing.assert_array_equal(row_finite(a), np.all(np.isfinite(a), axis=-1))
+        if a.shape[0]:
+            np.testing.assert_array_equal(row_max(a), np.max(a, axis=-1))  # NaN where NaN
+
+
+def test_product_planes_of_conjugates_and_the_angle_between_attitudes():
+    from imu_dcm.so3 import product_planes, quat_angle_rad
+
+    r = _rotations()
+    s = Rotation.random(len(r), random_state=np.random.default_rng(12))
+    p, q = r.as_quat(), s.as_quat()
+    for conj_p, conj_q in [(False, False), (True, False), (False, True), (True, True)]:
+        want = (r.inv() if conj_p else r) * (s.inv() if conj_q else s)
+        got = Rotation.from_quat(np.moveaxis(product_planes(p, q, conj_p, conj_q), 0, -1))
+        assert np.max((got.inv() * want).magnitude()) < 1e-14
+    # the angle between attitudes: scipy's magnitude of a* ⊗ b, whatever the signs and norms
+    want = (r.inv() * s).magnitude()
+    got = quat_angle_rad(-3.0 * p, 0.5 * q)
+    np.testing.assert_allclose(got, want, rtol=0, atol=1e-14)
+    yaw90 = [0.0, 0.0, SQRT_HALF, SQRT_HALF]
+    assert abs(quat_angle_rad([0.0, 0.0, 0.0, 1.0], yaw90) - np.pi / 2) < 4 * EPS
+    with pytest.raises(InputError, match="non-zero norm"):
+        quat_angle_rad(p[:3], np.zeros((3, 4)))

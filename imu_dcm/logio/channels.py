@@ -26,6 +26,7 @@ from imu_dcm.logio.schema import Defs, definitions, norm_type
 from imu_dcm.logio.tf import TF_TYPE, child_frame, is_static_tf, moving_children, tf_truth
 from imu_dcm.logio.types import Collected, Columns, Conn, ImuSeries, Payloads, TruthSeries
 from imu_dcm.rest import GRAVITY_M_S2
+from imu_dcm.so3 import row_finite, row_norm
 
 IMU_TYPE = "sensor_msgs/msg/Imu"
 VEC3_TYPE = "geometry_msgs/msg/Vector3Stamped"
@@ -337,7 +338,7 @@ def gyro_doubt(got: Collected, conns: list[tuple[Conn, str]]) -> str | None:
     if len(cov) and np.all(cov == -1.0):
         return "its messages mark the angular velocity absent (angular_velocity_covariance[0] = -1)"
     w = np.concatenate(omegas) if omegas else np.zeros((0, 3))
-    norm = np.linalg.norm(w[np.all(np.isfinite(w), axis=1)], axis=1)
+    norm = row_norm(w[row_finite(w)])
     if len(norm) < 10:
         return None
     med = float(np.median(norm))

@@ -408,7 +408,7 @@ class McapSource(RosSource):
         self, d, offs, length, cid, log_time, seq: int, pos: int = -1, note_unknown: bool = True
     ) -> None:
         kept = []
-        for c in np.unique(cid).tolist():
+        for c in np.flatnonzero(np.bincount(cid)).tolist():  # the ids present, ascending
             m = cid == c
             if c not in self.channels:
                 if note_unknown:

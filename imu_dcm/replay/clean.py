@@ -33,7 +33,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from imu_dcm.errors import GapWarning, ImuDcmWarning
 from imu_dcm.integrate import find_gaps, gap_message
-from imu_dcm.so3 import angle_between_deg
+from imu_dcm.so3 import quat_angle_rad, row_finite, row_max, row_norm
 
 __all__ = ["MAX_RATE_RAD_S", "SPIKE_RATIO", "CleanedImu", "clean_imu"]
 
@@ -167,11 +167,11 @@ def clean_imu(t_ns: ArrayLike, omega_b: ArrayLike, topic: str = "IMU") -> Cleane
         if mask.any():
             t, w, index = t[~mask], w[~mask], index[~mask]
 
-    nonfinite = ~np.all(np.isfinite(w), axis=1)
+    nonfinite = ~row_finite(w)
     n_bad = int(nonfinite.sum())
     drop(nonfinite)
 
-    huge = np.max(np.abs(w), axis=1, initial=0.0) > MAX_RATE_RAD_S
+    huge = row_max(np.abs(w)) > MAX_RATE_RAD_S
     bad_t = [t[huge]]
     drop(huge)
 
@@ -266,13 +266,16 @@ def _report(topic, t, t0, n_bad, bad, n_dup, n_conf, n_wild, wild_t, n_sorted):
 
 def _deg_evidence(omega_b: NDArray, t_s: NDArray, q_truth: NDArray) -> str | None:
     """Evidence that rates are in deg/s, or None. Compares with the truth's rate if possible."""
-    ok = np.all(np.isfinite(q_truth), axis=1)
+    ok = row_finite(q_truth)
     pair = ok[:-1] & ok[1:]
     if pair.sum() > 10:
-        i = np.flatnonzero(pair)
-        ang = np.radians(angle_between_deg(q_truth[i], q_truth[i + 1]))
-        truth_rate = ang / np.diff(t_s)[i]
-        gyro_rate = np.linalg.norm(0.5 * (omega_b[i] + omega_b[i + 1]), axis=1)
+        # pairs (i, i + 1) as views when all are covered (the usual case), else gathered
+        every = bool(pair.all())
+        i = slice(None, -1) if every else np.flatnonzero(pair)
+        j = slice(1, None) if every else i + 1
+        ang = quat_angle_rad(q_truth[i], q_truth[j])
+        truth_rate = ang / np.diff(t_s)[slice(None) if every else i]
+        gyro_rate = row_norm(0.5 * (omega_b[i] + omega_b[j]))
         moving = truth_rate > 0.2  # rad/s: motion well above noise
         if moving.sum() > 10:
             ratio = float(np.median(gyro_rate[moving] / truth_rate[moving]))
@@ -282,7 +285,7 @@ def _deg_evidence(omega_b: NDArray, t_s: NDArray, q_truth: NDArray) -> str | Non
                     f"(180/π = 57.3 for deg/s)"
                 )
             return None
-    p99 = float(np.percentile(np.linalg.norm(omega_b, axis=1), 99)) if len(omega_b) else 0.0
+    p99 = float(np.percentile(row_norm(omega_b), 99)) if len(omega_b) else 0.0
     if p99 > FULL_SCALE_RAD_S:
         return (
             f"the 99th percentile of |omega| is {p99:.0f} rad/s, above the ±2000 °/s = "

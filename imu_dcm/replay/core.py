@@ -47,7 +47,7 @@ from imu_dcm.replay.truth import (
     find_jumps,
 )
 from imu_dcm.resample import slerp_truth
-from imu_dcm.so3 import quat_as_matrix
+from imu_dcm.so3 import quat_as_matrix, row_finite
 from imu_dcm.stamps import NS_PER_UNIT, timing_doubt
 
 __all__ = ["CleanedImu", "ReplayResult", "ReplaySummary", "clean_imu", "replay", "slerp_truth"]
@@ -218,7 +218,7 @@ def _accel(imu, clean: CleanedImu, notes: list[str]) -> NDArray | None:
         return None
     acc = np.asarray(imu.accel_b, dtype=float)[clean.index]
     if not np.all(np.isfinite(acc)):
-        bad = int(np.count_nonzero(~np.all(np.isfinite(acc), axis=1)))
+        bad = int(np.count_nonzero(~row_finite(acc)))
         notes.append(
             f"{imu.topic}: accelerometer missing on {bad} of {len(acc)} samples; rest judged "
             f"from the gyro alone"
@@ -337,7 +337,7 @@ def _prefilter(s: ReplaySettings, omega: NDArray, t_s: NDArray):
 def _scored_truth(q_truth: NDArray, t_s: NDArray, jumps) -> tuple[NDArray, list[int]]:
     """Truth usable for scoring (NaN across each jump) and the anchor samples of the segments."""
     q = q_truth.copy()
-    has = np.all(np.isfinite(q), axis=1)
+    has = row_finite(q)
     anchors = [int(np.flatnonzero(has)[0])] if has.any() else [0]
     for j in jumps:
         q[(t_s > j.t0_s) & (t_s < j.t1_s)] = np.nan
@@ -362,7 +362,7 @@ def _integrate(s: ReplaySettings, omega, t_s, q_truth, anchors, topic: str) -> N
                 q_est[a:b] = integrate_quat(omega[a:b], t_s[a:b], q0, s.method)
         else:
             q_est[a:b] = q0
-    finite = np.all(np.isfinite(q_est[anchors[0] :]), axis=1)
+    finite = row_finite(q_est[anchors[0] :])
     if not finite.all():
         k = anchors[0] + int(np.flatnonzero(~finite)[0])
         raise LogError(
@@ -373,7 +373,7 @@ def _integrate(s: ReplaySettings, omega, t_s, q_truth, anchors, topic: str) -> N
 
 
 def _score(q_est: NDArray, q_truth: NDArray) -> tuple[AttitudeError, NDArray]:
-    both = np.all(np.isfinite(q_truth), axis=1) & np.all(np.isfinite(q_est), axis=1)
+    both = row_finite(q_truth) & row_finite(q_est)
     unit = np.array([0, 0, 0, 1.0])
     err = attitude_error_deg(
         np.where(both[:, None], q_est, unit), np.where(both[:, None], q_truth, unit)

@@ -34,6 +34,7 @@ from imu_dcm.so3 import (
     quat_as_matrix,
     quat_from_matrix,
     quat_normalize,
+    row_finite,
 )
 
 __all__ = ["APPLY_DEG", "Mounting", "axis_permutation", "estimate_mounting"]
@@ -214,7 +215,7 @@ def estimate_mounting(
     grid = rate_grid(t_ns, omega_b, truth_t_ns, q_w_b)
     if grid is None:
         return None
-    ok = np.all(np.isfinite(grid.truth_rotvec), axis=1)
+    ok = row_finite(grid.truth_rotvec)
     for t0, t1 in exclude_ns:
         ok &= (grid.edges_ns[1:] <= t0) | (grid.edges_ns[:-1] >= t1)
     a, b = grid.gyro_rotvec[ok], grid.truth_rotvec[ok]

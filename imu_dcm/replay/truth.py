@@ -27,7 +27,14 @@ from numpy.typing import NDArray
 
 from imu_dcm.errors import LogError
 from imu_dcm.resample import TRUTH_BRIDGE_STEPS, slerp_truth
-from imu_dcm.so3 import angle_between_deg, log_quat, quat_conjugate, quat_multiply
+from imu_dcm.so3 import (
+    log_quat,
+    quat_angle_rad,
+    quat_conjugate,
+    quat_multiply,
+    row_finite,
+    row_norm,
+)
 
 __all__ = [
     "MIN_CORRELATION",
@@ -146,25 +153,22 @@ def lagged_correlation(
 ) -> tuple[NDArray[np.float64], NDArray[np.int64]]:
     """Pearson correlation of ``g[i + k]`` with ``h[i]`` over the valid ``i``, k = -lags..lags.
 
-    All lags at once: the five pair sums (count, Σa, Σa², Σb, Σb², Σab) are cross-correlations,
-    computed by FFT. Returns (correlation (2 lags + 1,), 0 where a series is constant; the
-    number of pairs per lag).
+    The six pair sums of a lag (count, Σa, Σa², Σb, Σb², Σab) are one 3x3 product of the
+    series ``[1, g, g²]`` (at ``i + k``) with ``[valid, h, h²]`` (at ``i``, zero where not
+    valid): ``2 lags + 1`` small matrix products, cheaper than FFTs for the few lags searched.
+    Returns (correlation (2 lags + 1,), 0 where a series is constant; the number of pairs per
+    lag).
     """
     n = len(g)
-    w = valid.astype(float)
     hv = np.where(valid, h, 0.0)
-    nfft = 1 << int(np.ceil(np.log2(2 * n)))
-    k = np.arange(-lags, lags + 1)
-
-    def xcorr(x: NDArray[np.float64], y: NDArray[np.float64]) -> NDArray[np.float64]:
-        r = np.fft.irfft(np.fft.rfft(x, nfft) * np.conj(np.fft.rfft(y, nfft)), nfft)
-        return r[k % nfft]  # Σ_i x[i + k] y[i]
-
-    ones = np.ones(n)
-    cnt = xcorr(ones, w)
-    sa, saa = xcorr(g, w), xcorr(g * g, w)
-    sb, sbb = xcorr(ones, hv), xcorr(ones, hv * hv)
-    sab = xcorr(g, hv)
+    x = np.stack([np.ones(n), g, g * g])
+    y = np.stack([valid.astype(float), hv, hv * hv])
+    sums = np.zeros((2 * lags + 1, 3, 3))
+    for j, k in enumerate(range(-lags, lags + 1)):
+        if abs(k) < n:
+            sums[j] = x[:, max(k, 0) : n + min(k, 0)] @ y[:, max(-k, 0) : n - max(k, 0)].T
+    cnt, sa, saa = sums[:, 0, 0], sums[:, 1, 0], sums[:, 2, 0]
+    sb, sbb, sab = sums[:, 0, 1], sums[:, 0, 2], sums[:, 1, 1]
     count = np.rint(cnt).astype(np.int64)
     safe = np.maximum(cnt, 1.0)
     cov = sab - sa * sb / safe
@@ -179,16 +183,17 @@ def integrated_rate(
     t_ns: NDArray[np.int64], omega_b: NDArray[np.float64], at_ns: NDArray[np.int64]
 ) -> NDArray[np.float64]:
     """The trapezoid integral of the rate from the first gyro sample to each of ``at_ns``
-    (linear between samples), rad (K, 3); differences give the turn over short intervals."""
+    (linear between samples), rad (K, 3); differences give the turn over short intervals.
+    Any number of columns: ``omega_b`` (N, C) gives (K, C)."""
     ts = (t_ns - t_ns[0]) * 1e-9
     cum = np.concatenate(
         [
-            np.zeros((1, 3)),
+            np.zeros((1, omega_b.shape[1])),
             np.cumsum(0.5 * (omega_b[1:] + omega_b[:-1]) * np.diff(ts)[:, None], axis=0),
         ]
     )
     te = (np.asarray(at_ns) - t_ns[0]) * 1e-9
-    return np.stack([np.interp(te, ts, cum[:, k]) for k in range(3)], axis=1)
+    return np.stack([np.interp(te, ts, cum[:, k]) for k in range(cum.shape[1])], axis=1)
 
 
 @dataclass(frozen=True)
@@ -224,7 +229,7 @@ def rate_grid(
     if hi <= lo:
         return None
     dt_g = float(np.median(np.diff(t_ns))) * 1e-9
-    dt_t = float(np.median(np.diff(np.sort(tt)))) * 1e-9
+    dt_t = float(np.median(np.diff(tt if np.all(tt[1:] >= tt[:-1]) else np.sort(tt)))) * 1e-9
     span_s = (hi - lo) * 1e-9
     dt = max(min_step_s, 2 * dt_t, dt_g, span_s / 100_000)
     edges = lo + np.round(np.arange(0.0, span_s, dt) * 1e9).astype(np.int64)
@@ -233,7 +238,8 @@ def rate_grid(
     te = (edges - t_ns[0]) * 1e-9
     angle = integrated_rate(t_ns, omega_b, edges)
     q = slerp_truth(tt, q_w_b, edges)
-    both = np.all(np.isfinite(q[:-1]), axis=1) & np.all(np.isfinite(q[1:]), axis=1)
+    has = row_finite(q)
+    both = has[:-1] & has[1:]
     rot = np.full((len(q) - 1, 3), np.nan)
     rel = quat_multiply(quat_conjugate(q[:-1][both]), q[1:][both])
     rel = np.where(rel[:, 3:4] < 0, -rel, rel)  # shortest arc
@@ -265,8 +271,8 @@ def check_truth(
     if grid is None:
         return TruthCheck(False, True)
     dt = grid.step_s
-    g = np.linalg.norm(grid.gyro_rotvec, axis=1) / grid.dt_s
-    h = np.linalg.norm(grid.truth_rotvec, axis=1) / grid.dt_s  # NaN where uncovered
+    g = row_norm(grid.gyro_rotvec) / grid.dt_s
+    h = row_norm(grid.truth_rotvec) / grid.dt_s  # NaN where uncovered
     valid = np.isfinite(h)
     if valid.sum() < 20:
         return TruthCheck(False, True)
@@ -434,23 +440,32 @@ def find_jumps(
     """
     tt = np.asarray(truth_t_ns, dtype=np.int64)
     q = np.asarray(q_w_b, dtype=float)
-    norm = np.linalg.norm(q, axis=1)
+    norm = row_norm(q)
     ok = np.isfinite(norm) & (norm > 0.5)
     tt, q = tt[ok], q[ok] / norm[ok, None]
-    order = np.argsort(tt, kind="stable")
-    tt, q = tt[order], q[order]
+    if not np.all(tt[1:] >= tt[:-1]):  # a stable sort leaves sorted stamps as they are
+        order = np.argsort(tt, kind="stable")
+        tt, q = tt[order], q[order]
     inside = (tt >= t_ns[0]) & (tt <= t_ns[-1])
     tt, q = tt[inside], q[inside]
     if len(tt) < 2 or len(t_ns) < 2:
         return ()
-    te = (tt - t_ns[0]) * 1e-9
+    # Only a step turning more than JUMP_DEG can be one: |q_i · q_i+1| = cos(θ/2) screens the
+    # steps at 0.9 JUMP_DEG (its rounding moves θ by ~1e-14 rad there, far inside the margin);
+    # the exact angles and the gyro's path are computed for the few steps left, the same
+    # numbers as over every step.
+    cos_half = np.abs(np.einsum("ij,ij->i", q[:-1], q[1:]))
+    i = np.flatnonzero(cos_half < np.cos(np.radians(0.9 * JUMP_DEG) / 2))
+    if not len(i):
+        return ()
+    truth_deg = np.degrees(quat_angle_rad(q[i], q[i + 1]))
     # the gyro's path length over each truth step bounds any rotation it can have made
-    speed = np.linalg.norm(omega_b, axis=1)[:, None] * np.ones((1, 3))
-    path = integrated_rate(t_ns, speed, tt)[:, 0]
-    gyro_deg = np.degrees(np.diff(path))
-    truth_deg = angle_between_deg(q[:-1], q[1:])
+    speed = row_norm(omega_b)[:, None]
+    path = integrated_rate(t_ns, speed, np.stack([tt[i], tt[i + 1]], axis=1).ravel())
+    gyro_deg = np.degrees(np.diff(path[:, 0].reshape(-1, 2), axis=1)[:, 0])
+    te = (tt - t_ns[0]) * 1e-9
     jump = (truth_deg - gyro_deg > JUMP_DEG) & (truth_deg > JUMP_RATIO * gyro_deg)
     return tuple(
-        TruthJump(float(te[i]), float(te[i + 1]), float(truth_deg[i]), float(gyro_deg[i]))
-        for i in np.flatnonzero(jump)
+        TruthJump(float(te[k]), float(te[k + 1]), float(truth_deg[m]), float(gyro_deg[m]))
+        for m, k in zip(np.flatnonzero(jump).tolist(), i[jump].tolist(), strict=True)
     )
