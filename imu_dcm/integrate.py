@@ -42,7 +42,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from imu_dcm.errors import GapWarning, ImuDcmWarning, InputError
 from imu_dcm.methods import DELTA_METHODS, GAP_FACTOR, METHODS, DeltaMethod, Method
-from imu_dcm.so3 import as_quat_xyzw
+from imu_dcm.so3 import as_quat_xyzw, median
 
 if TYPE_CHECKING:
     from scipy.spatial.transform import Rotation
@@ -172,7 +172,7 @@ def find_gaps(t_s: ArrayLike, factor: float = GAP_FACTOR) -> tuple[tuple[float, 
     # Cheap test first: no step exceeds factor x the median if none exceeds factor x the min.
     if len(dt) < 2 or dt.max() <= factor * dt.min():
         return ()
-    big = np.flatnonzero(dt > factor * np.median(dt))
+    big = np.flatnonzero(dt > factor * median(dt))
     return tuple((float(t[i]), float(dt[i])) for i in big)
 
 

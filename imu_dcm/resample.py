@@ -12,7 +12,7 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from imu_dcm.so3 import exp_quat, log_quat, quat_conjugate, quat_multiply, row_norm
+from imu_dcm.so3 import exp_quat, log_quat, median, quat_conjugate, quat_multiply, row_norm
 
 __all__ = ["TRUTH_BRIDGE_STEPS", "slerp_truth"]
 
@@ -63,7 +63,7 @@ def slerp_truth(truth_t_ns: ArrayLike, q_w_b: ArrayLike, t_ns: ArrayLike) -> NDA
     if len(tt) < 2:
         return out
     # each truth step is bridged or not, once; a query inside takes its step's verdict
-    bridged = steps <= TRUTH_BRIDGE_STEPS * float(np.median(steps)) * (1 + 1e-6)
+    bridged = steps <= TRUTH_BRIDGE_STEPS * median(steps) * (1 + 1e-6)
     inner = ~exact & (j >= 0) & (j < len(tt) - 1)
     inner &= bridged[np.clip(j, 0, len(tt) - 2)]
     idx = np.flatnonzero(inner)

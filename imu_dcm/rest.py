@@ -32,7 +32,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from imu_dcm.errors import InputError
-from imu_dcm.so3 import row_max, row_norm
+from imu_dcm.so3 import median, row_max, row_norm
 
 #: Standard gravity, m/s² (a still accelerometer reads about this much).
 GRAVITY_M_S2 = 9.80665
@@ -81,7 +81,7 @@ class RestConfig:
 
 def window_samples(t_s: NDArray, duration_s: float) -> int:
     """Samples in a window of ``duration_s`` seconds at the median step (at least 2)."""
-    dt = float(np.median(np.diff(t_s))) if len(t_s) > 1 else 1.0
+    dt = median(np.diff(t_s)) if len(t_s) > 1 else 1.0
     return max(2, int(np.ceil(duration_s / dt)))
 
 
@@ -139,7 +139,7 @@ def quietest_std(omega_b: NDArray, t_s: NDArray, window_s: float) -> float:
     window_s : float
         Window length, s (at least 3 samples, at most the whole log).
     """
-    m = max(3, min(len(t_s), round(window_s / float(np.median(np.diff(t_s))))))
+    m = max(3, min(len(t_s), round(window_s / median(np.diff(t_s)))))
     _mean, var = windowed_mean_var(omega_b, m)
     return float(np.sqrt(row_max(var).min()))
 

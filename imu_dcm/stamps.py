@@ -10,6 +10,8 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import ArrayLike
 
+from imu_dcm.so3 import median
+
 __all__ = ["NS_PER_UNIT", "timing_doubt"]
 
 #: Nanoseconds per time unit.
@@ -40,7 +42,7 @@ def timing_doubt(t_ns: ArrayLike, unit: str = "s") -> tuple[str, str | None] | N
     t = np.asarray(t_ns, dtype=np.int64)
     if len(t) < 3:
         return None
-    step_s = float(np.median(np.diff(t))) * 1e-9
+    step_s = median(np.diff(t)) * 1e-9
     span_s = float(t[-1] - t[0]) * 1e-9
     if step_s <= 0:
         return None

@@ -146,3 +146,18 @@ def test_product_planes_of_conjugates_and_the_angle_between_attitudes():
     assert abs(quat_angle_rad([0.0, 0.0, 0.0, 1.0], yaw90) - np.pi / 2) < 4 * EPS
     with pytest.raises(InputError, match="non-zero norm"):
         quat_angle_rad(p[:3], np.zeros((3, 4)))
+
+
+@pytest.mark.parametrize("n", [1, 2, 3, 4, 7, 10, 101, 1000])
+def test_median_and_percentile_equal_numpy_bit_for_bit(n):
+    # The replay's median and percentiles skip numpy's masked-array import; they must give
+    # numpy's own values exactly (even counts, ties, ints, every percentile rule branch).
+    from imu_dcm.so3 import median, percentile
+
+    rng = np.random.default_rng(n)
+    for a in (rng.normal(size=n) * 1e3, np.round(rng.normal(size=n) * 3), rng.integers(0, 5, n)):
+        assert median(a) == float(np.median(a))
+        for q in (0, 1, 25, 50, 75, 99, 99.9, 100, *rng.uniform(0, 100, 5)):
+            assert percentile(a, q) == float(np.percentile(a, q)), q
+    assert np.isnan(median([1.0, np.nan, 2.0])) and np.isnan(percentile([np.nan], 50))
+    assert np.isnan(median([])) and np.isnan(percentile([], 50))

@@ -26,7 +26,7 @@ from imu_dcm.logio.schema import Defs, definitions, norm_type
 from imu_dcm.logio.tf import TF_TYPE, child_frame, is_static_tf, moving_children, tf_truth
 from imu_dcm.logio.types import Collected, Columns, Conn, ImuSeries, Payloads, TruthSeries
 from imu_dcm.rest import GRAVITY_M_S2
-from imu_dcm.so3 import row_finite, row_norm
+from imu_dcm.so3 import median, percentile, row_finite, row_norm
 
 IMU_TYPE = "sensor_msgs/msg/Imu"
 VEC3_TYPE = "geometry_msgs/msg/Vector3Stamped"
@@ -341,8 +341,8 @@ def gyro_doubt(got: Collected, conns: list[tuple[Conn, str]]) -> str | None:
     norm = row_norm(w[row_finite(w)])
     if len(norm) < 10:
         return None
-    med = float(np.median(norm))
-    spread = float(np.subtract(*np.percentile(norm, [75, 25])))
+    med = median(norm)
+    spread = percentile(norm, 75) - percentile(norm, 25)
     if abs(med - GRAVITY_M_S2) < 1.0 and spread < 0.1 * med:
         return (
             f"|omega| stays at {med:.2f} (interquartile {spread:.2f}), the 9.81 m/s² of gravity: "

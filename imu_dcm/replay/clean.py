@@ -33,7 +33,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from imu_dcm.errors import GapWarning, ImuDcmWarning
 from imu_dcm.integrate import find_gaps, gap_message
-from imu_dcm.so3 import quat_angle_rad, row_finite, row_max, row_norm
+from imu_dcm.so3 import median, percentile, quat_angle_rad, row_finite, row_max, row_norm
 
 __all__ = ["MAX_RATE_RAD_S", "SPIKE_RATIO", "CleanedImu", "clean_imu"]
 
@@ -97,12 +97,14 @@ def _wild_stamps(t: NDArray[np.int64]) -> NDArray[np.bool_]:
     positive = step[step > 0]
     if len(positive) == 0:
         return np.zeros(n, dtype=bool)
-    limit = WILD_STAMP_STEPS * float(np.median(positive))
+    limit = WILD_STAMP_STEPS * median(positive)
     half = w // 2
     odd = np.flatnonzero((step <= 0) | (step > limit))
     near = (odd[:, None] + np.arange(-half + 1, half + 1)).ravel()  # windows holding a step
-    cand = np.unique(np.concatenate([np.arange(w), np.arange(n - w, n), near]))
-    cand = cand[(cand >= 0) & (cand < n)]
+    hit = np.zeros(n, dtype=bool)  # the candidates, each once, in order (np.unique without
+    hit[:w] = hit[n - w :] = True  # the masked-array import it costs)
+    hit[near[(near >= 0) & (near < n)]] = True
+    cand = np.flatnonzero(hit)
     start = np.clip(cand - half, 0, n - w)  # at the ends: the nearest full window
     wild = np.zeros(n, dtype=bool)
     for s in range(0, len(cand), 1 << 16):  # bounded memory: a block of windows at a time
@@ -119,7 +121,7 @@ def _spikes(w: NDArray[np.float64]) -> NDArray[np.bool_]:
     if n < 2 * k + 1:
         return spike
     norm = np.sqrt(np.einsum("ij,ij->i", w, w))
-    level = max(SPIKE_RATIO * float(np.percentile(norm, 99.9)), SPIKE_FLOOR_RAD_S)
+    level = max(SPIKE_RATIO * percentile(norm, 99.9), SPIKE_FLOOR_RAD_S)
     cand = np.flatnonzero(norm > level)  # rare: a good log has none
     if len(cand):
         around = np.concatenate([np.arange(-k, 0), np.arange(1, k + 1)])
@@ -278,14 +280,14 @@ def _deg_evidence(omega_b: NDArray, t_s: NDArray, q_truth: NDArray) -> str | Non
         gyro_rate = row_norm(0.5 * (omega_b[i] + omega_b[j]))
         moving = truth_rate > 0.2  # rad/s: motion well above noise
         if moving.sum() > 10:
-            ratio = float(np.median(gyro_rate[moving] / truth_rate[moving]))
+            ratio = median(gyro_rate[moving] / truth_rate[moving])
             if abs(ratio / (180 / np.pi) - 1) < 0.2:
                 return (
                     f"the gyro rate is {ratio:.1f}x the truth's rotation rate "
                     f"(180/π = 57.3 for deg/s)"
                 )
             return None
-    p99 = float(np.percentile(row_norm(omega_b), 99)) if len(omega_b) else 0.0
+    p99 = percentile(row_norm(omega_b), 99) if len(omega_b) else 0.0
     if p99 > FULL_SCALE_RAD_S:
         return (
             f"the 99th percentile of |omega| is {p99:.0f} rad/s, above the ±2000 °/s = "

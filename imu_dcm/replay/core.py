@@ -47,7 +47,7 @@ from imu_dcm.replay.truth import (
     find_jumps,
 )
 from imu_dcm.resample import slerp_truth
-from imu_dcm.so3 import quat_as_matrix, row_finite
+from imu_dcm.so3 import median, quat_as_matrix, row_finite
 from imu_dcm.stamps import NS_PER_UNIT, timing_doubt
 
 __all__ = ["CleanedImu", "ReplayResult", "ReplaySummary", "clean_imu", "replay", "slerp_truth"]
@@ -441,7 +441,7 @@ def _summary(log, s, g: _Gyro, bias_est, judged: _Judged, pf_summary, anchors, e
         samples=int(n),
         samples_estimated=int(n - start),
         duration_s=float(t_s[-1]),
-        rate_hz=float(1.0 / np.median(np.diff(t_s))),
+        rate_hz=1.0 / median(np.diff(t_s)),
         imu_topic=imu.topic,
         imu_type=imu.type,
         truth_topic=truth.topic if truth is not None else None,

@@ -29,6 +29,7 @@ from imu_dcm.errors import LogError
 from imu_dcm.resample import TRUTH_BRIDGE_STEPS, slerp_truth
 from imu_dcm.so3 import (
     log_quat,
+    median,
     quat_angle_rad,
     quat_conjugate,
     quat_multiply,
@@ -228,8 +229,8 @@ def rate_grid(
     lo, hi = max(int(t_ns[0]), int(tt.min())), min(int(t_ns[-1]), int(tt.max()))
     if hi <= lo:
         return None
-    dt_g = float(np.median(np.diff(t_ns))) * 1e-9
-    dt_t = float(np.median(np.diff(tt if np.all(tt[1:] >= tt[:-1]) else np.sort(tt)))) * 1e-9
+    dt_g = median(np.diff(t_ns)) * 1e-9
+    dt_t = median(np.diff(tt if np.all(tt[1:] >= tt[:-1]) else np.sort(tt))) * 1e-9
     span_s = (hi - lo) * 1e-9
     dt = max(min_step_s, 2 * dt_t, dt_g, span_s / 100_000)
     edges = lo + np.round(np.arange(0.0, span_s, dt) * 1e9).astype(np.int64)
