@@ -186,7 +186,7 @@ class DcmIntegrator:
         # (1-D float64 with stride 8 is contiguous; the push refuses a length other than 3.)
         if type(omega_b) is not np.ndarray or omega_b.strides != (8,) or omega_b.dtype is not _F8:
             omega_b = self._as_rate(omega_b, t_s)
-        if type(t_s) is not float:
+        if not isinstance(t_s, float):  # float, or numpy's float64 (a float subclass)
             t_s = self._as_stamp(omega_b, t_s)
         if self._t0_pending:
             self._start_at_t0(omega_b, t_s)
