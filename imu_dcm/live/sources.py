@@ -41,6 +41,7 @@ from __future__ import annotations
 
 import importlib
 import json
+import math
 import os
 import queue
 import select
@@ -76,6 +77,9 @@ _DRAIN_MAX = 4000  # frames (datagrams) per batch at most
 #: A batch collects what arrives within this long after its first sample, s (default): per-batch
 #: costs (one bulk parse or decode, one queue event) are shared by the samples of a few ms.
 BATCH_S = 0.005
+#: A paced read (:meth:`Source.pace`) waits at most this long after the first bytes, s: a long
+#: view interval must not let a socket or pipe buffer fill.
+_PACE_MAX_S = 0.1
 
 #: SOURCE URL scheme -> the Source class that reads it, as ``"module:Class"`` (imported on
 #: open). ``-`` is stdin. A new source: one class and one row here.
@@ -119,6 +123,12 @@ class SourceOptions:
     give_up_s: float | None = 30.0
     stdin_fd: int | None = None
     batch_s: float = BATCH_S
+
+
+def _readable(fd, timeout_s: float) -> bool:
+    """Whether ``fd`` (a socket or a file descriptor) has something to read within
+    ``timeout_s``."""
+    return bool(select.select([fd], [], [], timeout_s)[0])
 
 
 def parse_source(text: str) -> SourceSpec:
@@ -199,6 +209,47 @@ class Source:
         self.events: queue.Queue = queue.Queue()
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._guarded, name=type(self).__name__, daemon=True)
+        self._pace: tuple | None = None
+        self._read_at: tuple[int, int] | None = None  # the last paced read (perf, wall ns)
+
+    def pace(self, next_take, every_s: float, lead_s: float) -> None:
+        """Read on the taker's cadence: ``next_take()`` is the monotonic time of the session
+        loop's next wake-up (once every ``every_s``); the thread then reads ``lead_s`` before
+        each wake-up that has something to take, so it wakes once per wake-up of the loop
+        rather than once per ``batch_s`` (each wake-up of a thread costs CPU of its own)."""
+        self._pace = (next_take, every_s, lead_s)
+
+    def _settle(self, batch_s: float) -> None:
+        """Bytes have arrived: wait until the read (``batch_s`` without :meth:`pace`; else
+        ``lead_s`` before the session loop's next wake-up), so that one read takes them all."""
+        if self._pace is None:
+            self._stop.wait(batch_s)
+            return
+        next_take, every_s, lead_s = self._pace
+        now = time.monotonic()
+        at = next_take() - lead_s
+        if at < now:  # that wake-up is under way: the one after it
+            at += every_s * math.ceil((now - at) / every_s)
+        self._stop.wait(min(at - now, _PACE_MAX_S))
+
+    def _await(self, ready, batch_s: float) -> tuple[int, int] | None:
+        """Wait for a batch to read: ``(arrival_ns, wall_ns)`` of its first bytes, or None when
+        nothing came. ``ready(timeout_s)`` says whether there is something to read.
+
+        Without :meth:`pace`: wait up to 0.2 s for the first bytes, then ``batch_s`` for the
+        rest. Paced: sleep until the read before the loop's next wake-up and look then (one
+        wake-up of the thread per read); the bytes' arrival is taken as the previous read's time,
+        the earliest they can have come (a latency measured from it is an upper bound)."""
+        if self._pace is None:
+            if not ready(0.2):
+                return None
+            got = time.perf_counter_ns(), time.time_ns()
+            self._stop.wait(batch_s)
+            return got
+        since = self._read_at or (time.perf_counter_ns(), time.time_ns())
+        self._settle(batch_s)
+        self._read_at = time.perf_counter_ns(), time.time_ns()
+        return since if ready(0.0) else None
 
     def start(self) -> Source:
         self._thread.start()
@@ -307,11 +358,10 @@ class UdpSource(_LineSource):
         sock.setblocking(False)
         try:
             while not self._stop.is_set():
-                ready, _, _ = select.select([sock], [], [], 0.2)
-                if not ready:
+                got = self._await(lambda t: _readable(sock, t), self.batch_s)
+                if got is None:
                     continue
-                arrival, wall = time.perf_counter_ns(), time.time_ns()
-                self._stop.wait(self.batch_s)  # let the batch arrive, then take all of it
+                arrival, wall = got
                 chunks: list[bytes] = []
                 try:
                     while len(chunks) < _DRAIN_MAX:
@@ -341,11 +391,10 @@ class StdinSource(_LineSource):
         self.events.put(("channel", Channel("imu", "stdin", "", "", "", "lines")))
         rest = b""
         while not self._stop.is_set():
-            ready, _, _ = select.select([self.fd], [], [], 0.2)
-            if not ready:
+            got = self._await(lambda t: _readable(self.fd, t), self.batch_s)
+            if got is None:
                 continue
-            arrival, wall = time.perf_counter_ns(), time.time_ns()
-            self._stop.wait(self.batch_s)  # let the batch arrive, then take all of it
+            arrival, wall = got
             data = os.read(self.fd, 1 << 20)
             if not data:
                 if rest:
@@ -644,12 +693,12 @@ class WsSource(Source):
             ws.close()
 
     def _frames(self, ws: WsConnection) -> list[tuple]:
-        """Every message that arrived within ``batch_s`` of the first: ``(data, arrival,
-        wall)`` (the arrival of the batch's first bytes for each)."""
-        if not ws.wait(0.2):
+        """Every message of one read: ``(data, arrival, wall)`` (the arrival of the batch's first
+        bytes, or the previous read's time when paced, for each)."""
+        got = self._await(ws.wait, self.batch_s)
+        if got is None:
             return []
-        arrival, wall = time.perf_counter_ns(), time.time_ns()
-        self._stop.wait(self.batch_s)  # let the batch arrive, then take all of it in one read
+        arrival, wall = got
         return [(m, arrival, wall) for m in ws.recv_messages(0.0)]
 
     def _session(self, ws: WsConnection) -> str | None:
