@@ -147,7 +147,7 @@ class MavlinkSource(Source):
                     return
                 if data:
                     self._handle(data, time.perf_counter_ns(), time.time_ns())
-                    self._settle(self.batch_s)  # let the batch arrive, then take all of it
+                    self._stop.wait(self.batch_s)  # let the batch arrive, then take all of it
         finally:
             self.sock.close()
 
