@@ -62,6 +62,9 @@ def test_the_replay_command_imports_no_scipy_rotation_viewer_or_writer(tmp_path)
     assert "imu_dcm.replay.mounting" in modules and "imu_dcm.so3" in modules  # it did parse
     assert _unexpected(modules) == []
     assert "importlib.metadata" not in modules or "numba" in modules  # --version only
+    # The readers of other containers load when their row opens a log, not for a ROS bag.
+    others = {"imu_dcm.logio.ulog", "imu_dcm.logio.ardupilot", "imu_dcm.logio.euroc"}
+    assert others & modules == set()
 
 
 @pytest.mark.parametrize("log", [TRIAL, ULOG], ids=["shipped trial", "PX4 ULog"])

@@ -34,12 +34,13 @@ from numpy.typing import NDArray
 from imu_dcm.errors import LogError
 from imu_dcm.logio.damage import warn_damage
 from imu_dcm.logio.ned import FLU_FROM_FRD, q_enu_flu, q_wxyz_from_euler_deg
-from imu_dcm.logio.source import Progress, ReadRequest, SourceEntry
+from imu_dcm.logio.paths import DATAFLASH_MAGIC as MAGIC  # noqa: F401 (tests write it)
+from imu_dcm.logio.paths import is_dataflash as probe  # noqa: F401 (the reader's probe, here too)
+from imu_dcm.logio.source import Progress, ReadRequest
 from imu_dcm.logio.types import ChannelInfo, Damage, ImuSeries, LogData, TruthSeries
 
 KIND = "ardupilot dataflash"
 #: Every binary DataFlash log opens with the FMT record describing FMT itself.
-MAGIC = b"\xa3\x95\x80\x80"
 ARDUPILOT_ESTIMATE = "ArduPilot's own estimate"
 TRUTHS = ("SIM", "ATT", "AHR2")
 INSTALL = "pip install 'imu_dcm[mavlink]'"
@@ -59,11 +60,6 @@ _NP = {  # struct codes of pymavlink's FORMAT_TO_STRUCT -> numpy
     "16s": "S16",
     "64s": "S64",
 }
-
-
-def probe(path: Path, head: bytes) -> bool:
-    """True for a binary DataFlash log (its first FMT record)."""
-    return head.startswith(MAGIC)
 
 
 def _dfreader():
@@ -300,6 +296,3 @@ class DataFlashSource:
 
 def open_dataflash(path: Path, progress: Progress | None = None) -> DataFlashSource:
     return DataFlashSource(path, progress)
-
-
-ENTRY = SourceEntry("ArduPilot DataFlash log (.bin)", probe, open_dataflash)

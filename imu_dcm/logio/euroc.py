@@ -46,8 +46,8 @@ from numpy.typing import NDArray
 
 from imu_dcm.errors import LogError
 from imu_dcm.logio.meta import load_yaml
-from imu_dcm.logio.paths import check_regular
-from imu_dcm.logio.source import Progress, ReadRequest, SourceEntry
+from imu_dcm.logio.paths import check_regular, mav_folder
+from imu_dcm.logio.source import Progress, ReadRequest
 from imu_dcm.logio.types import ChannelInfo, ImuSeries, LogData, TruthSeries
 from imu_dcm.so3 import quat_conjugate, quat_from_matrix, quat_multiply
 
@@ -83,19 +83,6 @@ TRUTHS = (
     TruthFolder("mocap0", 8, True, False, "motion capture"),
     TruthFolder("leica0", 4, False, False, "Leica laser tracker, positions only"),
 )
-
-
-def mav_folder(path: Path) -> Path | None:
-    """The ``mav0`` folder of a dataset given as itself or its parent (None if neither)."""
-    for mav in (path / "mav0", path):
-        if (mav / "imu0" / "data.csv").is_file():
-            return mav
-    return None
-
-
-def is_dataset(path: Path, head: bytes) -> bool:
-    """A EuRoC/ASL dataset folder or its ``mav0`` (``imu0/data.csv`` inside)."""
-    return not head and path.is_dir() and mav_folder(path) is not None
 
 
 # ----------------------------------------------------------------------------- CSV
@@ -364,5 +351,3 @@ class EurocSource:
 
 
 TRUTHS_BY_NAME = {t.name: t for t in TRUTHS}
-
-ENTRY = SourceEntry("EuRoC / ASL dataset folder (mav0/imu0/data.csv)", is_dataset, EurocSource)

@@ -15,7 +15,6 @@ bag's ``metadata.yaml`` whole (:func:`imu_dcm.outputs.write_text_atomic`).
 
 from __future__ import annotations
 
-import json
 import re
 from collections.abc import Mapping
 from pathlib import Path
@@ -244,6 +243,8 @@ def yaml_str(s: str) -> str:
     string syntax is valid YAML)."""
     if re.fullmatch(r"[A-Za-z_/][A-Za-z0-9_/~]*", s) and s.lower() not in _YAML_WORDS:
         return s
+    import json  # (writing only: not imported for every read)
+
     return json.dumps(s)
 
 
@@ -260,6 +261,8 @@ def metadata_body(
     :data:`TYPE_HASHES` (an empty string for a type not listed, as rosbag2 writes for types
     without one). ``start_ns`` / ``end_ns`` are the first and last log times.
     """
+    import json  # (writing only: not imported for every read)
+
     total = sum(n for _, _, n in topics)
     lines = ["compression_format: ''", "compression_mode: ''"]
     if custom_data:

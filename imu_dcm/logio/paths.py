@@ -10,6 +10,10 @@ from imu_dcm.errors import LogError
 #: Bytes of a file's start handed to the container table's probes.
 HEAD_BYTES = 64
 
+#: First bytes of a PX4 ULog and of a binary ArduPilot DataFlash log (its first FMT record).
+ULOG_MAGIC = b"ULog\x01\x12\x35"
+DATAFLASH_MAGIC = b"\xa3\x95\x80\x80"
+
 
 def check_regular(p: Path) -> bool:
     """True for a folder, False for a regular file; LogError for anything else or missing."""
@@ -40,3 +44,27 @@ def read_head(p: Path) -> bytes:
             return f.read(HEAD_BYTES)
     except OSError as exc:
         raise LogError(f"Expected a readable log file, got {p} ({exc.strerror})") from None
+
+
+# Probes of the readers imported only when they open a log (:mod:`imu_dcm.logio.registry`).
+def is_ulog(path: Path, head: bytes) -> bool:
+    """True for a ULog file (its 7-byte magic)."""
+    return head.startswith(ULOG_MAGIC)
+
+
+def is_dataflash(path: Path, head: bytes) -> bool:
+    """True for a binary DataFlash log (its first FMT record)."""
+    return head.startswith(DATAFLASH_MAGIC)
+
+
+def mav_folder(path: Path) -> Path | None:
+    """The ``mav0`` folder of a EuRoC dataset given as itself or its parent (None if neither)."""
+    for mav in (path / "mav0", path):
+        if (mav / "imu0" / "data.csv").is_file():
+            return mav
+    return None
+
+
+def is_euroc(path: Path, head: bytes) -> bool:
+    """A EuRoC/ASL dataset folder or its ``mav0`` (``imu0/data.csv`` inside)."""
+    return not head and path.is_dir() and mav_folder(path) is not None

@@ -2,24 +2,28 @@
 
 :data:`SOURCES` has one :class:`~imu_dcm.logio.source.SourceEntry` per container; the first
 whose ``probe`` accepts a path reads it. Adding a container is one module holding a
-:class:`~imu_dcm.logio.source.LogSource` and its ``ENTRY``, plus one row here. Rows that only
+:class:`~imu_dcm.logio.source.LogSource`, plus one row here. Rows that only
 recognise a format to refuse it (saying how to convert it) come last
 (:mod:`imu_dcm.logio.foreign`).
 
 Accepted paths are regular files and folders; a FIFO, a device such as ``/dev/zero`` or a
 socket is refused before a byte is read.
+
+Readers of containers other than ROS are imported only when their row opens a log
+(:func:`_later`), so that a replay of a ROS bag does not load them.
 """
 
 from __future__ import annotations
 
+from importlib import import_module
 from pathlib import Path
 
 from imu_dcm.errors import LogError
-from imu_dcm.logio import ardupilot, euroc, meta, ulog
+from imu_dcm.logio import meta
 from imu_dcm.logio.foreign import REFUSALS
 from imu_dcm.logio.mcap import MAGIC as MCAP_MAGIC
 from imu_dcm.logio.mcap import McapSource
-from imu_dcm.logio.paths import check_regular, read_head
+from imu_dcm.logio.paths import check_regular, is_dataflash, is_euroc, is_ulog, read_head
 from imu_dcm.logio.ros import RosSource
 from imu_dcm.logio.ros1 import MAGIC as ROS1_MAGIC
 from imu_dcm.logio.ros1 import open_bag
@@ -54,6 +58,15 @@ def _in_bag(open_file):
     return opened
 
 
+def _later(module: str, opener: str):
+    """The opener ``opener`` of ``imu_dcm.logio.<module>``, that module imported at the call."""
+
+    def opened(path: Path, progress: Progress | None) -> LogSource:
+        return getattr(import_module(f"imu_dcm.logio.{module}"), opener)(path, progress)
+
+    return opened
+
+
 def _is_folder(path: Path, head: bytes) -> bool:
     return not head and path.is_dir()
 
@@ -74,7 +87,9 @@ def _open_inside(folder: Path, progress: Progress | None) -> LogSource:
 
 SOURCES: tuple[SourceEntry, ...] = (
     SourceEntry("rosbag2 folder (metadata.yaml + storage files)", is_bag_folder, open_folder),
-    euroc.ENTRY,
+    SourceEntry(
+        "EuRoC / ASL dataset folder (mav0/imu0/data.csv)", is_euroc, _later("euroc", "EurocSource")
+    ),
     SourceEntry("MCAP file (.mcap)", _magic(MCAP_MAGIC), _in_bag(McapSource)),
     SourceEntry("rosbag2 sqlite3 file (.db3)", _magic(SQLITE_MAGIC), _in_bag(SqliteSource)),
     SourceEntry(
@@ -83,8 +98,10 @@ SOURCES: tuple[SourceEntry, ...] = (
         _in_bag(ZstdFile),
     ),
     SourceEntry("ROS 1 bag (.bag, v2.0)", _magic(ROS1_MAGIC), open_bag),
-    ulog.ENTRY,
-    ardupilot.ENTRY,
+    SourceEntry("PX4 ULog (.ulg)", is_ulog, _later("ulog", "open_ulog")),
+    SourceEntry(
+        "ArduPilot DataFlash log (.bin)", is_dataflash, _later("ardupilot", "open_dataflash")
+    ),
     SourceEntry("folder holding one log file", _is_folder, _open_inside, search=False),
     *REFUSALS,
 )

@@ -10,7 +10,6 @@ its ``read``; replay, batch and live never know which container they got.
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass
 from pathlib import Path
 from typing import Protocol, runtime_checkable
 
@@ -19,7 +18,6 @@ from imu_dcm.logio.types import LogData
 Progress = Callable[[float], None]
 
 
-@dataclass(frozen=True)
 class ReadRequest:
     """What the caller wants from a log.
 
@@ -31,12 +29,22 @@ class ReadRequest:
         reads no truth.
     truth_frame : str or None — the child frame of a ``/tf`` transform to use as truth.
     progress : callable(fraction) or None — called as the log is read.
+
+    This and :class:`SourceEntry` are plain classes, not dataclasses: nothing compares them,
+    and a dataclass costs every replay's start-up about half a millisecond.
     """
 
-    imu_topic: str | None = None
-    truth_topic: str | None = None
-    truth_frame: str | None = None
-    progress: Progress | None = None
+    __slots__ = ("imu_topic", "truth_topic", "truth_frame", "progress")
+
+    def __init__(
+        self,
+        imu_topic: str | None = None,
+        truth_topic: str | None = None,
+        truth_frame: str | None = None,
+        progress: Progress | None = None,
+    ) -> None:
+        self.imu_topic, self.truth_topic = imu_topic, truth_topic
+        self.truth_frame, self.progress = truth_frame, progress
 
 
 @runtime_checkable
@@ -55,7 +63,6 @@ class LogSource(Protocol):
     def read(self, request: ReadRequest) -> LogData: ...
 
 
-@dataclass(frozen=True)
 class SourceEntry:
     """One row of the container table.
 
@@ -71,7 +78,13 @@ class SourceEntry:
         refusals and for the catch-all "folder holding one log").
     """
 
-    name: str
-    probe: Callable[[Path, bytes], bool]
-    open: Callable[[Path, Progress | None], LogSource]
-    search: bool = True
+    __slots__ = ("name", "probe", "open", "search")
+
+    def __init__(
+        self,
+        name: str,
+        probe: Callable[[Path, bytes], bool],
+        open: Callable[[Path, Progress | None], LogSource],
+        search: bool = True,
+    ) -> None:
+        self.name, self.probe, self.open, self.search = name, probe, open, search

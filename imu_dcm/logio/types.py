@@ -147,25 +147,33 @@ class LogData:
 
 
 # ---------------------------------------------------------------- between containers and decoders
-@dataclass
 class Conn:
     """A channel as a container describes it (internal).
 
     ``encoding`` is the payload serialisation: "cdr" (ROS 2), "ros1" (ROS 1, packed little
     endian), "json" or whatever else the file says. ``schema_encoding`` is "ros2msg", "ros2idl",
     "ros1msg" or "" (the definition then comes from rosbags' type store for ``msgtype``).
+
+    The internal records here are plain classes, not dataclasses: nothing compares, copies or
+    freezes them, and each dataclass costs a replay's start-up about half a millisecond.
     """
 
-    id: int
-    topic: str
-    msgtype: str
-    encoding: str
-    schema_encoding: str = ""
-    schema_text: str = ""
-    count: int | None = None
+    __slots__ = ("id", "topic", "msgtype", "encoding", "schema_encoding", "schema_text", "count")
+
+    def __init__(
+        self,
+        id: int,
+        topic: str,
+        msgtype: str,
+        encoding: str,
+        schema_encoding: str = "",
+        schema_text: str = "",
+        count: int | None = None,
+    ) -> None:
+        self.id, self.topic, self.msgtype, self.encoding = id, topic, msgtype, encoding
+        self.schema_encoding, self.schema_text, self.count = schema_encoding, schema_text, count
 
 
-@dataclass
 class Payloads:
     """Raw payloads of one channel: ``buf[start[i] : start[i] + length[i]]`` (internal).
 
@@ -173,11 +181,23 @@ class Payloads:
     merge several channels of one topic in file order.
     """
 
-    buf: NDArray[np.uint8]
-    start: NDArray[np.int64]
-    length: NDArray[np.int64]
-    log_time: NDArray[np.int64]
-    order: NDArray[np.int64]
+    __slots__ = ("buf", "start", "length", "log_time", "order")
+
+    def __init__(
+        self,
+        buf: NDArray[np.uint8],
+        start: NDArray[np.int64],
+        length: NDArray[np.int64],
+        log_time: NDArray[np.int64],
+        order: NDArray[np.int64],
+    ) -> None:
+        self.buf, self.start, self.length, self.log_time, self.order = (
+            buf,
+            start,
+            length,
+            log_time,
+            order,
+        )
 
     @staticmethod
     def empty() -> Payloads:
@@ -209,7 +229,6 @@ def join_payloads(parts: list[Payloads]) -> Payloads:
     return Payloads(buf, start[idx], length[idx], log_time[idx], order[idx])
 
 
-@dataclass
 class Columns:
     """Decoded fields of one channel (internal): one row per message that decoded, file order.
 
@@ -219,12 +238,20 @@ class Columns:
     channel's definition could not be read (then every message is dropped).
     """
 
-    order: NDArray[np.int64]
-    log_time: NDArray[np.int64]
-    fields: dict[str, NDArray]
-    frames: dict[str, str] = field(default_factory=dict)
-    error: Exception | None = None
-    dropped: int = 0
+    __slots__ = ("order", "log_time", "fields", "frames", "error", "dropped")
+
+    def __init__(
+        self,
+        order: NDArray[np.int64],
+        log_time: NDArray[np.int64],
+        fields: dict[str, NDArray],
+        frames: dict[str, str] | None = None,
+        error: Exception | None = None,
+        dropped: int = 0,
+    ) -> None:
+        self.order, self.log_time, self.fields = order, log_time, fields
+        self.frames = {} if frames is None else frames
+        self.error, self.dropped = error, dropped
 
     def __len__(self) -> int:
         return len(self.order)
@@ -331,11 +358,17 @@ class Sink:
         return {cid: join_any(parts) for cid, parts in self._done.items()}
 
 
-@dataclass
 class Collected:
     """What a container read (internal): all channels, the kept ones' data, damage."""
 
-    kind: str
-    conns: list[Conn]
-    payloads: dict[int, Payloads | Columns]
-    damage: list[Damage] = field(default_factory=list)
+    __slots__ = ("kind", "conns", "payloads", "damage")
+
+    def __init__(
+        self,
+        kind: str,
+        conns: list[Conn],
+        payloads: dict[int, Payloads | Columns],
+        damage: list[Damage] | None = None,
+    ) -> None:
+        self.kind, self.conns, self.payloads = kind, conns, payloads
+        self.damage = [] if damage is None else damage

@@ -48,10 +48,11 @@ from imu_dcm import kernel
 from imu_dcm.errors import LogError
 from imu_dcm.logio.damage import warn_damage
 from imu_dcm.logio.ned import FLU_FROM_FRD, q_enu_flu
-from imu_dcm.logio.source import Progress, ReadRequest, SourceEntry
+from imu_dcm.logio.paths import ULOG_MAGIC as MAGIC
+from imu_dcm.logio.paths import is_ulog as probe  # noqa: F401 (the reader's probe, here too)
+from imu_dcm.logio.source import Progress, ReadRequest
 from imu_dcm.logio.types import ChannelInfo, Damage, ImuSeries, LogData, TruthSeries
 
-MAGIC = b"ULog\x01\x12\x35"
 KIND = "px4 ulog"
 GYRO_TOPICS = ("sensor_combined", "sensor_gyro")
 TRUTH_TOPICS = ("vehicle_attitude_groundtruth", "vehicle_attitude")
@@ -76,11 +77,6 @@ _BASIC = {
 # Message types of the ULog format: F(ormat), I(nfo), M(ulti info), P(aram), Q (param default),
 # A(dd subscription), R(emove), D(ata), L(og), C (tagged log), S(ync), O (dropout), B (flags).
 _KNOWN = frozenset(b"FIMPQARDLCSOB")
-
-
-def probe(path: Path, head: bytes) -> bool:
-    """True for a ULog file (its 7-byte magic)."""
-    return head.startswith(MAGIC)
 
 
 class _Irregular(Exception):
@@ -609,6 +605,3 @@ class UlogSource:
 
 def open_ulog(path: Path, progress: Progress | None = None) -> UlogSource:
     return UlogSource(path, progress)
-
-
-ENTRY = SourceEntry("PX4 ULog (.ulg)", probe, open_ulog)

@@ -238,8 +238,6 @@ def _options(args) -> dict:
 def _replay_main(argv: list[str]) -> int:
     args = build_parser().parse_args(argv)
     options = _options(args)  # every option checked before the log is read
-    import json
-
     from imu_dcm.errors import ImuDcmError
     from imu_dcm.replay.core import replay
     from imu_dcm.replay.summary import format_summary
@@ -267,6 +265,8 @@ def _replay_main(argv: list[str]) -> int:
         )
         lines.append(f"tum        {', '.join(str(f) for f in files)}")
     if args.summary_json:
+        import json
+
         from imu_dcm.outputs import write_text_atomic
 
         text = json.dumps(result.summary.to_dict(), indent=2, allow_nan=False) + "\n"

@@ -26,7 +26,6 @@ Rules, in order (all on the rates in rad/s, in file order until the sort):
 from __future__ import annotations
 
 import warnings
-from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -54,7 +53,6 @@ WILD_STAMP_WINDOW = 9
 WILD_STAMP_STEPS = 1000
 
 
-@dataclass(frozen=True)
 class CleanedImu:
     """Gyro samples after cleaning, sorted by stamp, with the counts of what was dropped.
 
@@ -62,20 +60,47 @@ class CleanedImu:
     ``index`` int64 (N,) position of each kept sample in the input; gaps as (time s since the
     first kept sample, length s); ``implausible_t_s`` the times of the implausible samples (s
     since the first kept sample); ``messages`` the warnings it raised, one line each.
+
+    A plain class (not a dataclass: nothing compares or copies it; a dataclass costs the
+    replay's start-up about half a millisecond).
     """
 
-    t_ns: NDArray[np.int64]
-    omega_b: NDArray[np.float64]
-    index: NDArray[np.int64]
-    dropped_nonfinite: int
-    dropped_implausible: int
-    dropped_wild_stamp: int
-    dropped_duplicate: int
-    dropped_stamp_conflict: int
-    sorted_out_of_order: int
-    gaps: tuple[tuple[float, float], ...]
-    implausible_t_s: tuple[float, ...]
-    messages: tuple[str, ...] = ()
+    __slots__ = (
+        "t_ns",
+        "omega_b",
+        "index",
+        "dropped_nonfinite",
+        "dropped_implausible",
+        "dropped_wild_stamp",
+        "dropped_duplicate",
+        "dropped_stamp_conflict",
+        "sorted_out_of_order",
+        "gaps",
+        "implausible_t_s",
+        "messages",
+    )
+
+    def __init__(
+        self,
+        t_ns: NDArray[np.int64],
+        omega_b: NDArray[np.float64],
+        index: NDArray[np.int64],
+        dropped_nonfinite: int,
+        dropped_implausible: int,
+        dropped_wild_stamp: int,
+        dropped_duplicate: int,
+        dropped_stamp_conflict: int,
+        sorted_out_of_order: int,
+        gaps: tuple[tuple[float, float], ...],
+        implausible_t_s: tuple[float, ...],
+        messages: tuple[str, ...] = (),
+    ) -> None:
+        self.t_ns, self.omega_b, self.index = t_ns, omega_b, index
+        self.dropped_nonfinite, self.dropped_implausible = dropped_nonfinite, dropped_implausible
+        self.dropped_wild_stamp, self.dropped_duplicate = dropped_wild_stamp, dropped_duplicate
+        self.dropped_stamp_conflict = dropped_stamp_conflict
+        self.sorted_out_of_order, self.gaps = sorted_out_of_order, gaps
+        self.implausible_t_s, self.messages = implausible_t_s, messages
 
     @property
     def dropped_nonincreasing(self) -> int:

@@ -140,26 +140,45 @@ def _warn(notes: list[str], msg: str) -> None:
     warnings.warn(msg, ImuDcmWarning, stacklevel=3)
 
 
-@dataclasses.dataclass(frozen=True)
 class _Gyro:
     """The cleaned gyro of a replay: time base, stamps, rates (rad/s), accelerometer."""
 
-    base: str
-    clean: CleanedImu
-    t_ns: NDArray[np.int64]
-    t_s: NDArray[np.float64]
-    omega: NDArray[np.float64]
-    accel: NDArray[np.float64] | None
+    __slots__ = ("base", "clean", "t_ns", "t_s", "omega", "accel")
+
+    def __init__(
+        self,
+        base: str,
+        clean: CleanedImu,
+        t_ns: NDArray[np.int64],
+        t_s: NDArray[np.float64],
+        omega: NDArray[np.float64],
+        accel: NDArray[np.float64] | None,
+    ) -> None:
+        self.base, self.clean, self.t_ns, self.t_s = base, clean, t_ns, t_s
+        self.omega, self.accel = omega, accel
 
 
-@dataclasses.dataclass(frozen=True)
 class _Judged:
-    """What the truth side found: truth at the gyro stamps, jumps, mounting."""
+    """What the truth side found: truth at the gyro stamps, jumps, mounting.
 
-    aligned: AlignedTruth
-    truth_t_ns: NDArray[np.int64] | None  # stamps of the truth used, at the applied offset
-    jumps: tuple
-    mounting: MountingChoice
+    ``truth_t_ns``: the stamps of the truth used, at the applied offset (or None).
+    """
+
+    __slots__ = ("aligned", "truth_t_ns", "jumps", "mounting")
+
+    def __init__(
+        self,
+        aligned: AlignedTruth,
+        truth_t_ns: NDArray[np.int64] | None,
+        jumps: tuple,
+        mounting: MountingChoice,
+    ) -> None:
+        self.aligned, self.truth_t_ns, self.jumps, self.mounting = (
+            aligned,
+            truth_t_ns,
+            jumps,
+            mounting,
+        )
 
 
 def _read(path, s: ReplaySettings, report) -> LogData:

@@ -197,7 +197,6 @@ def integrated_rate(
     return np.stack([np.interp(te, ts, cum[:, k]) for k in range(cum.shape[1])], axis=1)
 
 
-@dataclass(frozen=True)
 class RateGrid:
     """Gyro and truth rotations over the steps of one time grid (truth stamps as given).
 
@@ -207,11 +206,18 @@ class RateGrid:
     rad), NaN where the truth does not cover the step; ``step_s`` the grid step.
     """
 
-    edges_ns: NDArray[np.int64]
-    dt_s: NDArray[np.float64]
-    gyro_rotvec: NDArray[np.float64]
-    truth_rotvec: NDArray[np.float64]
-    step_s: float
+    __slots__ = ("edges_ns", "dt_s", "gyro_rotvec", "truth_rotvec", "step_s")
+
+    def __init__(
+        self,
+        edges_ns: NDArray[np.int64],
+        dt_s: NDArray[np.float64],
+        gyro_rotvec: NDArray[np.float64],
+        truth_rotvec: NDArray[np.float64],
+        step_s: float,
+    ) -> None:
+        self.edges_ns, self.dt_s, self.step_s = edges_ns, dt_s, step_s
+        self.gyro_rotvec, self.truth_rotvec = gyro_rotvec, truth_rotvec
 
 
 def rate_grid(
@@ -308,7 +314,6 @@ def check_truth(
     return TruthCheck(True, c >= MIN_CORRELATION, shift, c, resid, g_rms)
 
 
-@dataclass(frozen=True)
 class AlignedTruth:
     """The truth at the gyro stamps, after the offset and the rate check.
 
@@ -318,11 +323,18 @@ class AlignedTruth:
     follow the gyro.
     """
 
-    q_truth: NDArray[np.float64]
-    truth: object | None
-    check: TruthCheck | None
-    offset_s: float
-    rejected: str | None
+    __slots__ = ("q_truth", "truth", "check", "offset_s", "rejected")
+
+    def __init__(
+        self,
+        q_truth: NDArray[np.float64],
+        truth: object | None,
+        check: TruthCheck | None,
+        offset_s: float,
+        rejected: str | None,
+    ) -> None:
+        self.q_truth, self.truth, self.check = q_truth, truth, check
+        self.offset_s, self.rejected = offset_s, rejected
 
 
 def _spans_overlap(a: NDArray[np.int64], b: NDArray[np.int64]) -> bool:
