@@ -47,17 +47,16 @@ def _unexpected(modules: set[str]) -> list[str]:
     return sorted(m for m in modules if any(m == b or m.startswith(b + ".") for b in banned))
 
 
+def _run(args: list[str], cwd) -> subprocess.CompletedProcess:
+    """Run ``args`` in ``cwd`` with this tree importable; it must succeed."""
+    res = subprocess.run(args, capture_output=True, text=True, timeout=300, cwd=cwd, env=_env())
+    assert res.returncode == 0, res.stderr[-2000:]
+    return res
+
+
 def test_the_replay_command_imports_no_scipy_rotation_viewer_or_writer(tmp_path):
     args = [sys.executable, "-X", "importtime", "-m", "imu_dcm.replay", str(TRIAL)]
-    res = subprocess.run(
-        [*args, "--rerun", "off", "--quiet"],
-        capture_output=True,
-        text=True,
-        timeout=300,
-        cwd=tmp_path,
-        env=_env(),
-    )
-    assert res.returncode == 0, res.stderr[-2000:]
+    res = _run([*args, "--rerun", "off", "--quiet"], tmp_path)
     modules = set(re.findall(r"^import time:\s+\d+ \|\s+\d+ \|\s*(\S+)$", res.stderr, re.M))
     assert "imu_dcm.replay.mounting" in modules and "imu_dcm.so3" in modules  # it did parse
     assert _unexpected(modules) == []
@@ -79,15 +78,7 @@ def test_replay_api_imports_no_scipy_rotation(log, tmp_path):
         "assert res.summary.samples > 0\n"
         "print('\\n'.join(sorted(sys.modules)))\n"
     )
-    res = subprocess.run(
-        [sys.executable, "-c", code],
-        capture_output=True,
-        text=True,
-        timeout=300,
-        cwd=tmp_path,
-        env=_env(),
-    )
-    assert res.returncode == 0, res.stderr[-2000:]
+    res = _run([sys.executable, "-c", code], tmp_path)
     modules = set(res.stdout.split())
     assert "imu_dcm.replay.mounting" in modules
     assert _unexpected(modules) == []
