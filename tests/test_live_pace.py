@@ -26,7 +26,7 @@ def test_paced_wait_ends_a_lead_before_the_next_wake_up():
     take = time.monotonic() + 0.03
     src.pace(lambda: take, EVERY_S, LEAD_S)
     before = time.monotonic()
-    src._settle(0.005)
+    src._settle()
     after = time.monotonic()
     # the wait ends at take - lead, whenever within [before, after] it was computed
     assert take - LEAD_S - after <= waits[0] <= take - LEAD_S - before
@@ -38,7 +38,7 @@ def test_paced_wait_skips_a_wake_up_already_under_way():
     take = time.monotonic() - 0.001  # the loop is waking now: its queue is being taken
     src.pace(lambda: take, EVERY_S, LEAD_S)
     before = time.monotonic()
-    src._settle(0.005)
+    src._settle()
     after = time.monotonic()
     at = take + EVERY_S - LEAD_S  # the read before the wake-up after it
     assert at - after <= waits[0] <= at - before

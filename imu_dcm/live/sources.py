@@ -221,12 +221,9 @@ class Source:
         rather than once per ``batch_s`` (each wake-up of a thread costs CPU of its own)."""
         self._pace = (next_take, every_s, lead_s)
 
-    def _settle(self, batch_s: float) -> None:
-        """Bytes have arrived: wait until the read (``batch_s`` without :meth:`pace`; else
-        ``lead_s`` before the session loop's next wake-up), so that one read takes them all."""
-        if self._pace is None:
-            self._stop.wait(batch_s)
-            return
+    def _settle(self) -> None:
+        """Paced: sleep until ``lead_s`` before the session loop's next wake-up (at most
+        :data:`_PACE_MAX_S`), so that one read takes everything that came meanwhile."""
         next_take, every_s, lead_s = self._pace
         now = time.monotonic()
         at = next_take() - lead_s
@@ -249,7 +246,7 @@ class Source:
             self._stop.wait(batch_s)
             return got
         since = self._read_at or (time.perf_counter_ns(), time.time_ns())
-        self._settle(batch_s)
+        self._settle()
         self._read_at = time.perf_counter_ns(), time.time_ns()
         return since if ready(0.0) else None
 
