@@ -253,3 +253,15 @@ def record_chain(b, pos: int) -> tuple[np.ndarray, np.ndarray, int]:
     if _aot() is None and not b.flags.writeable:
         b = b.copy()  # numba's signature is of a writable array (the built one reads any)
     return entry("record_chain")(b, int(pos))
+
+
+def csv_scan(blob: bytes, scale: int, digits: int) -> tuple[np.ndarray, bytes, int]:
+    """Plain CSV lines ``t,gx,gy,gz`` of ``blob`` in one compiled pass
+    (:func:`imu_dcm.kernel_jit.csv_scan`): ``(t_ns, rates_text, rows)``, the exact stamps, the
+    rate fields as ``b"gx,gy,gz,..."``, and the lines read; ``rows < 0`` when a line is not of
+    that form."""
+    b = np.frombuffer(blob, np.uint8)
+    if _aot() is None:
+        b = b.copy()  # numba's signature is of a writable array (the built one reads any)
+    t, text, rows = entry("csv_scan")(b, int(scale), int(digits))
+    return t, text.tobytes(), int(rows)

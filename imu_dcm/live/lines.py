@@ -16,12 +16,15 @@ from __future__ import annotations
 
 import json
 import math
+import warnings
 from decimal import Decimal, InvalidOperation
 
 import numpy as np
 from numpy.typing import NDArray
 
-__all__ = ["TIME_UNITS", "parse_csv_rows", "parse_lines", "time_unit_hint"]
+from imu_dcm.kernel import csv_scan
+
+__all__ = ["TIME_UNITS", "parse_csv_blob", "parse_lines", "time_unit_hint"]
 
 #: Nanoseconds per unit of a CSV stamp.
 TIME_UNITS = {"s": 1_000_000_000, "ms": 1_000_000, "us": 1_000, "ns": 1}
@@ -101,7 +104,7 @@ def _parse_json(obj, gyro_scale: float) -> tuple[int, list[float], list[float] |
 def parse_lines(
     lines: list[bytes], *, gyro_units: str = "rad/s", time_units: str = "s", first: bool = False
 ) -> tuple[NDArray, NDArray, NDArray, NDArray, int]:
-    """Parse sample lines: a batch of CSV lines in one numpy pass, anything else line by line.
+    """Parse sample lines: a batch of plain CSV lines in one pass, anything else line by line.
 
     Parameters
     ----------
@@ -135,11 +138,10 @@ def parse_lines(
     if first and lines:
         head, lines = lines[:1], lines[1:]
     lines = [ln for ln in lines if ln.strip()]
-    bulk = _parse_csv_bulk(lines, gyro_scale, t_scale) if lines else None
+    bulk = _parse_csv_bulk(b"\n".join(lines), gyro_scale, t_scale) if lines else None
     if bulk is None:
         return _parse_each(head + lines, gyro_scale, t_scale, first=bool(head))
-    t, w, rows = bulk
-    bad = len(lines) - len(rows)
+    t, w, bad = bulk
     if head:
         t0, w0, tt, q, bad0 = _parse_each(head, gyro_scale, t_scale, first=True)
         t, w, bad = np.concatenate([t0, t]), np.concatenate([w0, w]), bad + bad0
@@ -147,55 +149,47 @@ def parse_lines(
     return t, w, np.zeros(0, np.int64), np.zeros((0, 4)), bad
 
 
-def parse_csv_rows(
-    lines: list[bytes], *, gyro_units: str = "rad/s", time_units: str = "s"
-) -> tuple[NDArray, NDArray, NDArray, int] | None:
-    """Plain CSV lines ``t,gx,gy,gz`` (no header, no blank line) in one numpy pass:
-    ``(t_ns, omega_b, rows, malformed)``, ``rows`` the indices of the lines kept (a line with a
-    non-finite rate is malformed); None when a line is not of that form (then
-    :func:`parse_lines` judges the lines one by one)."""
-    gyro_scale = DEG if gyro_units == "deg/s" else 1.0
-    bulk = _parse_csv_bulk(lines, gyro_scale, TIME_UNITS[time_units]) if lines else None
+def parse_csv_blob(
+    blob: bytes, *, gyro_units: str = "rad/s", time_units: str = "s"
+) -> tuple[NDArray, NDArray, int] | None:
+    """Plain CSV lines ``t,gx,gy,gz`` (lines end in ``\\n``; blank lines are skipped; no header)
+    in one pass: ``(t_ns, omega_b, malformed)``, a line with a non-finite rate malformed; None
+    when a line is not of that form (then :func:`parse_lines` judges the lines one by one).
+
+    The stamps are read exactly and the line structure checked by one compiled scan
+    (:func:`imu_dcm.kernel.csv_scan`); the rates by one float parse of them all, correctly
+    rounded as Python's ``float``."""
+    bulk = _parse_csv_bulk(blob, 1.0, TIME_UNITS[time_units])
     if bulk is None:
         return None
-    t, w, rows = bulk
-    return t, w, rows, len(lines) - len(rows)
+    t, w, bad = bulk
+    if gyro_units == "deg/s":
+        w *= DEG
+    return t, w, bad
 
 
-def _parse_csv_bulk(
-    lines: list[bytes], gyro_scale: float, t_scale: int
-) -> tuple[NDArray, NDArray, NDArray] | None:
-    """CSV lines ``t,gx,gy,gz`` as arrays (stamps exact, as :func:`_stamp_ns`) and the indices
-    of the rows kept, or None when a line is not of that plain form (the caller then parses line
-    by line). Rows with a non-finite rate are dropped."""
-    fields = b",".join(lines).split(b",")
-    n = len(lines)
-    if len(fields) != 4 * n or lines[0][:1] == b"{":
-        return None
+def _parse_csv_bulk(blob: bytes, gyro_scale: float, t_scale: int):
+    """:func:`parse_csv_blob` scaling the rates by ``gyro_scale``: ``(t_ns, omega, malformed)``
+    or None."""
     digits = len(str(t_scale)) - 1  # decimals a stamp may carry: 9 for s, 0 for ns
-    try:
-        w = np.array(fields, dtype=np.bytes_).reshape(n, 4)[:, 1:].astype(np.float64)
-        t_ns = np.array([_plain_stamp_ns(f, t_scale, digits) for f in fields[::4]], np.int64)
-    except (ValueError, OverflowError):
+    t_ns, text, rows = csv_scan(blob, t_scale, digits)
+    if rows < 0:
         return None
-    ok = np.isfinite(w).all(axis=1)
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", DeprecationWarning)  # numpy's word for "stopped early"
+            w = np.fromstring(text, dtype=np.float64, sep=",")
+    except ValueError:
+        return None
+    if len(w) != 3 * rows:
+        return None  # a rate field that is not a number
+    w = w.reshape(rows, 3)
     if gyro_scale != 1.0:
         w *= gyro_scale
+    ok = np.isfinite(w).all(axis=1)
     if ok.all():
-        return t_ns, w, np.arange(n)
-    return t_ns[ok], w[ok], np.flatnonzero(ok)
-
-
-def _plain_stamp_ns(text: bytes, scale: int, digits: int) -> int:
-    """A stamp ``digits[.digits]`` (at most ``digits`` decimals) to exact ns; ValueError for
-    any other form (the line-by-line parser then judges it)."""
-    whole, _, frac = text.strip().partition(b".")
-    if not whole.isdigit() or len(frac) > digits or (frac and not frac.isdigit()):
-        raise ValueError("not a plain stamp")
-    t = int(whole) * scale + (int(frac.ljust(digits, b"0")) if frac else 0)
-    if t >= 2**63:
-        raise ValueError("stamp out of range")
-    return t
+        return t_ns, w, 0
+    return t_ns[ok], w[ok], rows - int(ok.sum())
 
 
 def _parse_each(
