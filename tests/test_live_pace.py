@@ -4,10 +4,13 @@ come); every line sent over UDP arrives, in order, through paced reads."""
 
 from __future__ import annotations
 
+import os
 import socket
+import threading
 import time
 
 import numpy as np
+import pytest
 
 from imu_dcm.live.sources import Source, UdpSource
 
@@ -88,3 +91,85 @@ def test_paced_udp_source_delivers_every_line_in_order():
     np.testing.assert_array_equal(stamps, np.arange(n) * 1_000_000)
     # ~0.3 s of sending over 50 ms reads: a handful of reads, not one per 5 ms batch
     assert reads <= 2 + (time.monotonic() - start) / EVERY_S
+
+
+def test_inline_udp_source_reads_in_the_callers_thread_every_line_in_order():
+    src = UdpSource("127.0.0.1", 0, "rad/s", "s")
+    assert src.pollable
+    src.begin()  # no thread: the session's loop reads it (poll) once per wake-up
+    n = 300
+    sent = [f"{1700000000 + k / 1000:.3f},0,0,{k}".encode() for k in range(n)]
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as tx:
+        for k, line in enumerate(sent):
+            tx.sendto(line, src.address)
+            if k % 50 == 49:
+                src.poll()
+    deadline = time.monotonic() + 5.0
+    got: list[float] = []
+    infos = []
+    while len(got) < n and time.monotonic() < deadline:
+        src.poll()
+        while not src.events.empty():
+            ev = src.events.get_nowait()
+            if ev[0] == "raw":
+                for e in src.decode(ev[1], ev[2]):
+                    got.extend(e[1].values[:, 2].tolist())
+            else:
+                infos.append(ev[0])
+        time.sleep(0.005)
+    assert src._thread.ident is None  # never started
+    src.stop()
+    assert got == [float(k) for k in range(n)]
+    assert infos == ["channel", "info"]
+
+
+def _count_polls(monkeypatch) -> list[float]:
+    from imu_dcm.live import sources
+
+    polls: list[float] = []
+    poll = sources.Source.poll
+
+    def counted(self):
+        polls.append(time.monotonic())
+        return poll(self)
+
+    monkeypatch.setattr(sources.Source, "poll", counted)
+    return polls
+
+
+@pytest.mark.parametrize(("view_interval_s", "every_s"), [(None, 0.25), (0.05, 0.05)])
+def test_loop_reads_a_line_source_inline_on_its_cadence(monkeypatch, view_interval_s, every_s):
+    # without a view the loop wakes every 0.25 s by default (nothing needs it sooner); a view
+    # interval given is kept. Polls: one per wake-up (at most one per interval, a steady
+    # cadence), plus the last one at the end.
+    from imu_dcm.live import run
+
+    polls = _count_polls(monkeypatch)
+    r, w = os.pipe()
+
+    def feed():
+        with os.fdopen(w, "wb") as f:
+            for k in range(80):
+                f.write(f"{k / 100},0,0,1\n".encode())
+                f.flush()
+                time.sleep(0.01)
+
+    feeder = threading.Thread(target=feed)
+    feeder.start()
+    try:
+        res = run(
+            "-",
+            stdin_fd=r,
+            rerun="off",
+            status=False,
+            bias="none",
+            say=lambda s: None,
+            view_interval_s=view_interval_s,
+        )
+    finally:
+        feeder.join()
+        os.close(r)
+    assert res.summary["samples"] == 80 and res.summary["stopped"] == "end of input"
+    span = polls[-1] - polls[0]
+    assert len(polls) >= 2
+    assert len(polls) <= span / every_s + 2

@@ -106,10 +106,9 @@ def _add_output_options(p) -> None:
     p.add_argument(
         "--view-interval",
         type=float,
-        default=50.0,
         metavar="MS",
-        help="send the view and the recording in batches every MS ms (default 50; "
-        "each rerun send_columns call costs ~0.5 ms)",
+        help="wake up and send the view and the recording in batches every MS ms (default 50 "
+        "with a view, 250 without: each wake-up costs CPU)",
     )
     p.add_argument(
         "--rerun",
@@ -251,7 +250,7 @@ def _main(argv: list[str]) -> int:
         time_units=args.time_units,
         init_quat=parse_init_quat(args.init_quat),
         reorder_window_s=args.reorder_window * 1e-3,
-        view_interval_s=args.view_interval * 1e-3,
+        view_interval_s=None if args.view_interval is None else args.view_interval * 1e-3,
         rerun=args.rerun,
         keep_viewer=args.keep_viewer,
         record=args.record,

@@ -96,6 +96,11 @@ _BATCH_MAX_S = 0.02
 #: batch_s at most). Shorter intervals ask for latency: each sample is read a batch_s after its
 #: first bytes, not held for the read before the next wake-up (worth a 10 ms interval's p99).
 _PACE_MIN_S = 0.025
+#: The loop's wake-up interval by default: the view's display rate, or, without a view, four
+#: times a second (the status line, the recording and the reorder window's release need no
+#: more; each wake-up costs CPU of its own, most of it in caches gone cold while asleep).
+_VIEW_INTERVAL_S = 0.05
+_NO_VIEW_INTERVAL_S = 0.25
 
 
 def _has_display() -> bool:
@@ -146,7 +151,8 @@ class LiveOptions:
     init_quat : array_like (4,), optional — start attitude ``q_w_b``
         ``[x, y, z, w]`` at the first sample (instead of the truth).
     reorder_window_s : float — reorder window in source time, s (default 0.05).
-    view_interval_s : float — batching interval of the view and the recording (display rate), s.
+    view_interval_s : float, optional — the loop's wake-up interval: the batches of the view
+        and the recording (display rate), s; default 0.05 with a view, 0.25 without.
     rerun : None, "spawn", "serve", "save:PATH.rrd" or "off" — ``None``: spawn with a display,
         else no view (one line names ``serve`` and ``save:``).
     keep_viewer : bool — ``serve``: leave the web viewer running after the run (default True;
@@ -171,7 +177,7 @@ class LiveOptions:
     time_units: str = "s"
     init_quat: ArrayLike | None = None
     reorder_window_s: float = 0.05
-    view_interval_s: float = 0.05
+    view_interval_s: float | None = None
     rerun: str | None = None
     keep_viewer: bool = True
     record: str | Path | None = None
@@ -193,7 +199,7 @@ def _checked(source: str, o: LiveOptions) -> tuple:
         raise InputError(f"Expected gyro units 'rad/s' or 'deg/s', got {o.gyro_units!r}")
     if o.time_units not in TIME_UNITS:
         raise InputError(f"Expected time units in {tuple(TIME_UNITS)}, got {o.time_units!r}")
-    if not o.reorder_window_s >= 0 or not o.view_interval_s > 0:
+    if not o.reorder_window_s >= 0 or not (o.view_interval_s is None or o.view_interval_s > 0):
         raise InputError(
             f"Expected reorder window >= 0 s and view interval > 0 s, got "
             f"{o.reorder_window_s!r} and {o.view_interval_s!r}"
@@ -284,7 +290,7 @@ def run(
 
 def _batch_s(o: LiveOptions) -> float:
     """How long a source's wake-up waits for the rest of a batch after its first bytes, s."""
-    return min(_BATCH_MAX_S, o.view_interval_s / 4)
+    return min(_BATCH_MAX_S, (o.view_interval_s or _VIEW_INTERVAL_S) / 4)
 
 
 def _open_source(spec, o: LiveOptions) -> Source:
@@ -353,17 +359,22 @@ class _Loop:
     def __init__(self, src: Source, pipe: Pipeline, o: LiveOptions, stop, say, on_ready) -> None:
         self.src, self.pipe, self.stop, self.say, self.on_ready = src, pipe, stop, say, on_ready
         self.recorder = pipe.recorder
-        self.interval_s = o.view_interval_s
+        self.interval_s = o.view_interval_s or (
+            _VIEW_INTERVAL_S if pipe.view is not None else _NO_VIEW_INTERVAL_S
+        )
         self.idle_stop_s = o.idle_stop_s
         scale = o.gyro_units == "deg/s" and not src.converts_gyro_units
         self.gyro_scale = DEG if scale else 1.0
         self.tty = sys.stderr.isatty()
         self.status = True if o.status is None else o.status
         self.status_every = 0.5 if self.tty else 5.0
-        self.reason = "stopped"
+        self.reason, self.ended = "stopped", False  # ended: the source said it ended
         self.idle_since = time.monotonic()
         self.next_flush = self.idle_since + self.interval_s  # the next wake-up of _receive
-        if self.interval_s >= _PACE_MIN_S:  # the source reads once per wake-up, just before it
+        # from _PACE_MIN_S on, the source reads once per wake-up: in the loop (inline), or in
+        # its thread just before the wake-up (paced)
+        self.inline = src.pollable and self.interval_s >= _PACE_MIN_S
+        if self.interval_s >= _PACE_MIN_S and not self.inline:
             src.pace(lambda: self.next_flush, self.interval_s, _batch_s(o))
 
     def _on_signal(self, signum, frame) -> None:
@@ -379,7 +390,7 @@ class _Loop:
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore", GapWarning)  # gaps are reported once, here
                 cpu_start = time.process_time()
-                self.src.start()
+                self.src.begin() if self.inline else self.src.start()
                 if self.on_ready is not None:
                     self.on_ready({"address": getattr(self.src, "address", None)})
                 self._receive()
@@ -402,6 +413,8 @@ class _Loop:
         self.next_flush, next_status = now + self.interval_s, now + self.status_every
         window_s = pipe.reorder.window_ns * 1e-9
         while not self.stop.wait(max(0.0, self.next_flush - time.monotonic())):
+            if self.inline:
+                self.src.poll()
             if self._take():
                 return
             now = time.monotonic()
@@ -467,12 +480,14 @@ class _Loop:
         elif kind == "info":
             self.say(ev[1])
         elif kind == "end":
-            self.reason = ev[1]
+            self.reason, self.ended = ev[1], True
             return True
         return False
 
     def _drain(self) -> None:
         """What the source already delivered, once it has stopped."""
+        if self.inline and not self.ended:
+            self.src.poll()  # what came since the last wake-up
         self.src.stop()
         self._take(data_only=True)
 

@@ -58,7 +58,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from imu_dcm.errors import InputError
-from imu_dcm.live.lines import parse_csv_rows, parse_lines
+from imu_dcm.live.lines import parse_csv_blob, parse_lines
 from imu_dcm.logio.batch import classify_schema, decode_cdr_batch
 
 __all__ = [
@@ -250,6 +250,31 @@ class Source:
         self._read_at = time.perf_counter_ns(), time.time_ns()
         return since if ready(0.0) else None
 
+    #: The session's loop may read the source itself (:meth:`begin`, then :meth:`poll` once
+    #: per wake-up) instead of a thread reading just before it: one wake-up per interval, not two.
+    pollable: bool = False
+
+    def begin(self) -> None:
+        """Read inline instead of in a thread: the events a thread puts before its first read."""
+        raise NotImplementedError
+
+    def poll(self) -> None:
+        """Inline: read what has arrived by now, without waiting (the session's loop calls it
+        once per wake-up). The bytes' arrival is taken as the previous poll's time, the
+        earliest they can have come (a latency measured from it is an upper bound)."""
+        since = self._read_at or (time.perf_counter_ns(), time.time_ns())
+        self._read_at = time.perf_counter_ns(), time.time_ns()
+        if self._ready(0.0):
+            self._read(*since)
+
+    def _ready(self, timeout_s: float) -> bool:
+        """Whether there is something to read within ``timeout_s`` (a pollable source)."""
+        raise NotImplementedError
+
+    def _read(self, arrival_ns: int, wall_ns: int) -> bool:
+        """Read what is there and queue it (a pollable source); False once the source ended."""
+        raise NotImplementedError
+
     def start(self) -> Source:
         self._thread.start()
         return self
@@ -290,25 +315,37 @@ class _LineSource(Source):
         self.batch_s = batch_s
         self._first = True
 
+    pollable = True
+
+    def _run(self) -> None:
+        self.begin()
+        try:
+            while not self._stop.is_set():
+                got = self._await(self._ready, self.batch_s)
+                if got is not None and not self._read(*got):
+                    return
+        finally:
+            self._close()
+
     def decode(self, key, items: list) -> list[tuple]:
         """Items ``(blob, arrival_ns, wall_ns)``, ``blob`` whole lines: plain CSV lines in one
-        numpy pass over all the items, else item by item (:func:`parse_lines`)."""
-        per = [[ln for ln in blob.split(b"\n") if ln.strip()] for blob, _, _ in items]
-        bulk = None
-        if not self._first:
-            lines = [ln for p in per for ln in p]
-            bulk = parse_csv_rows(lines, gyro_units=self.gyro_units, time_units=self.time_units)
-        if bulk is None:
-            return [
-                ev for p, (_, a, w) in zip(per, items, strict=True) for ev in self._each(p, a, w)
-            ]
-        t, w, rows, bad = bulk
-        counts = [len(p) for p in per]
-        arrival = np.repeat(np.array([a for _, a, _ in items], np.int64), counts)[rows]
-        wall = np.repeat(np.array([x for _, _, x in items], np.int64), counts)[rows]
-        out: list[tuple] = [("malformed", bad)] if bad else []
-        if len(t):
-            out.append(("data", Received("imu", t, w, arrival, wall)))
+        pass over each blob (:func:`parse_csv_blob`), else line by line (:func:`parse_lines`)."""
+        out: list[tuple] = []
+        for blob, arrival_ns, wall_ns in items:
+            bulk = None
+            if not self._first:
+                bulk = parse_csv_blob(blob, gyro_units=self.gyro_units, time_units=self.time_units)
+            if bulk is None:
+                lines = [ln for ln in blob.split(b"\n") if ln.strip()]
+                out.extend(self._each(lines, arrival_ns, wall_ns))
+                continue
+            t, w, bad = bulk
+            if bad:
+                out.append(("malformed", bad))
+            if len(t):
+                n = len(t)
+                arrival, wall = np.full(n, arrival_ns, np.int64), np.full(n, wall_ns, np.int64)
+                out.append(("data", Received("imu", t, w, arrival, wall)))
         return out
 
     def _each(self, lines: list[bytes], arrival_ns: int, wall_ns: int) -> list[tuple]:
@@ -349,28 +386,25 @@ class UdpSource(_LineSource):
     def _close(self) -> None:
         self.sock.close()
 
-    def _run(self) -> None:
+    def begin(self) -> None:
         where = f"udp://{self.address[0]}:{self.address[1]}"
         self.events.put(("channel", Channel("imu", where, "", "", "", "lines")))
         self.events.put(("info", f"listening on {where}"))
-        sock = self.sock
-        sock.setblocking(False)
+        self.sock.setblocking(False)
+
+    def _ready(self, timeout_s: float) -> bool:
+        return _readable(self.sock, timeout_s)
+
+    def _read(self, arrival_ns: int, wall_ns: int) -> bool:
+        chunks: list[bytes] = []
         try:
-            while not self._stop.is_set():
-                got = self._await(lambda t: _readable(sock, t), self.batch_s)
-                if got is None:
-                    continue
-                arrival, wall = got
-                chunks: list[bytes] = []
-                try:
-                    while len(chunks) < _DRAIN_MAX:
-                        chunks.append(sock.recv(65536))
-                except (BlockingIOError, InterruptedError):
-                    pass
-                if chunks:  # parsed by the session's loop (decode), with the other items
-                    self.events.put(("raw", "lines", [(b"\n".join(chunks), arrival, wall)]))
-        finally:
-            sock.close()
+            while len(chunks) < _DRAIN_MAX:
+                chunks.append(self.sock.recv(65536))
+        except (BlockingIOError, InterruptedError):
+            pass
+        if chunks:  # parsed by the session's loop (decode), with the other items
+            self.events.put(("raw", "lines", [(b"\n".join(chunks), arrival_ns, wall_ns)]))
+        return True
 
 
 class StdinSource(_LineSource):
@@ -385,24 +419,26 @@ class StdinSource(_LineSource):
     ) -> None:
         super().__init__(gyro_units, time_units, batch_s)
         self.fd = 0 if fd is None else fd
+        self._rest = b""  # a line not yet ended
 
-    def _run(self) -> None:
+    def begin(self) -> None:
         self.events.put(("channel", Channel("imu", "stdin", "", "", "", "lines")))
-        rest = b""
-        while not self._stop.is_set():
-            got = self._await(lambda t: _readable(self.fd, t), self.batch_s)
-            if got is None:
-                continue
-            arrival, wall = got
-            data = os.read(self.fd, 1 << 20)
-            if not data:
-                if rest:
-                    self.events.put(("raw", "lines", [(rest, arrival, wall)]))
-                self.events.put(("end", "end of input"))
-                return
-            whole, newline, rest = (rest + data).rpartition(b"\n")
-            if newline:  # parsed by the session's loop (decode), with the other items
-                self.events.put(("raw", "lines", [(whole, arrival, wall)]))
+
+    def _ready(self, timeout_s: float) -> bool:
+        return _readable(self.fd, timeout_s)
+
+    def _read(self, arrival_ns: int, wall_ns: int) -> bool:
+        data = os.read(self.fd, 1 << 20)
+        if not data:
+            if self._rest:
+                self.events.put(("raw", "lines", [(self._rest, arrival_ns, wall_ns)]))
+                self._rest = b""
+            self.events.put(("end", "end of input"))
+            return False
+        whole, newline, self._rest = (self._rest + data).rpartition(b"\n")
+        if newline:  # parsed by the session's loop (decode), with the other items
+            self.events.put(("raw", "lines", [(whole, arrival_ns, wall_ns)]))
+        return True
 
 
 class WsConnection:
