@@ -31,9 +31,11 @@ Each wake-up of a source takes everything that has arrived by then (the datagram
 socket, the bytes in the pipe, the frames received) and queues it raw: a source thread wakes at
 most every ``batch_s`` (the session uses a quarter of the view interval, at most 20 ms) and only
 reads; the parse or decode runs once per wake-up of the session's loop (once per view interval)
-over everything queued, so its fixed cost is shared by all the samples in between. Paced
-(:meth:`Source.pace`, what the session asks for with a view interval of 25 ms or more), a UDP,
-stdin or WebSocket source instead wakes once per wake-up of the session's loop, a lead before it.
+over everything queued, so its fixed cost is shared by all the samples in between. With a view
+interval of 25 ms or more the session reads a pollable source (UDP, stdin: :attr:`Source.pollable`)
+itself, once per wake-up of its loop (:meth:`Source.begin`, :meth:`Source.poll`: no thread), and
+paces the others' threads (:meth:`Source.pace`): a WebSocket source then wakes once per wake-up of
+the session's loop, a lead before it.
 
 **A new source** is one :class:`Source` subclass and one row in :data:`SOURCES` (the URL scheme
 and ``"module:Class"``, imported when a SOURCE of that scheme is opened).
