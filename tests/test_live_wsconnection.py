@@ -123,3 +123,37 @@ def test_ws_connection_frames_split_by_hand_control_frames_to_websockets():
     ws.close()
     sent = b"".join(got)
     assert sent[:1] == b"\x8a"  # the pong, first (client frames are masked: payload not plain)
+
+
+def test_client_close_completes_the_handshake_while_the_server_streams():
+    # the server sends data frames until the client closes: the client answers with the
+    # closing handshake (the server's close frame read, its end of the connection awaited),
+    # so the server sees a clean close (code 1000), not a reset with bytes unread.
+    from websockets.exceptions import ConnectionClosed
+
+    seen: dict = {}
+
+    def handler(conn):
+        try:
+            while True:
+                conn.send(b"\x02" * 200)
+                time.sleep(0.0005)
+        except ConnectionClosed as exc:
+            seen["rcvd"] = exc.rcvd
+
+    with server_mod.serve(
+        handler, "127.0.0.1", 0, subprotocols=["foxglove.websocket.v1"], compression=None
+    ) as server:
+        threading.Thread(target=server.serve_forever, daemon=True).start()
+        port = server.socket.getsockname()[1]
+        ws = WsConnection(f"ws://127.0.0.1:{port}", ("foxglove.websocket.v1",))
+        deadline = time.monotonic() + 10
+        while not ws.recv_messages(0.2) and time.monotonic() < deadline:
+            pass
+        time.sleep(0.05)  # frames pile up unread in the socket
+        ws.close()
+        deadline = time.monotonic() + 5
+        while "rcvd" not in seen and time.monotonic() < deadline:
+            time.sleep(0.01)
+        server.shutdown()
+    assert seen["rcvd"] is not None and seen["rcvd"].code == 1000

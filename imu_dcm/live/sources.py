@@ -619,15 +619,29 @@ class WsConnection:
         self._proto.send_text(text.encode())
         self._flush()
 
-    def close(self) -> None:
+    def close(self, timeout_s: float = 1.0) -> None:
+        """The closing handshake (our close frame, then the server's frames up to its close
+        frame and the end of its side, at most ``timeout_s``), then the socket: a socket closed
+        with bytes unread resets the connection, and the server logs an error."""
         try:
             if self._proto.state is self._open:
-                self._proto.send_close()
+                self._proto.send_close(1000)  # a normal closure
                 self._flush()
+                self._read_to_end(time.monotonic() + timeout_s)
         except OSError:
             pass
         finally:
             self._sock.close()
+
+    def _read_to_end(self, deadline: float) -> None:
+        """Read (and drop) what the server still sends until it ends the connection."""
+        while not self._eof:
+            left = deadline - time.monotonic()
+            if left <= 0 or not select.select([self._sock], [], [], left)[0]:
+                return
+            self._read_all()
+            self._messages()  # data dropped; the server's close frame goes to websockets
+            self._flush()
 
 
 def _import_websockets() -> None:
