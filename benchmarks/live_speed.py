@@ -10,8 +10,9 @@ What is measured (the live command runs as a child process, as a user runs it):
   stdin) and per view setting (``--rerun off``, and ``--rerun save:FILE.rrd``, where every
   batch goes through real rerun log calls): a coning motion sampled at ``--rate`` Hz for
   ``--duration`` s, sent paced to the wall clock, with live's defaults: a 50 ms reorder window,
-  and a wake-up every 50 ms with the view (its batches), every 250 ms without. CPU is the live process's ``process_time`` while receiving (all
-  threads), over the duration, per 1000 samples/s: a fraction of one core. Counted end to end:
+  and a wake-up every 50 ms with the view (its batches), every 250 ms without. CPU is the live
+  process's ``process_time`` while receiving (all threads), over the duration, per 1000
+  samples/s: a fraction of one core. Counted end to end:
   samples sent, integrated, dropped (any reason) and lost on the way. Targets at 1 kHz: at most
   5 % of a core without the view, 10 % with it.
 * **Latency** receive -> view log call of each sample, p50 / p99, from the live summary
