@@ -15,8 +15,6 @@ import argparse
 import sys
 import warnings
 
-import numpy as np
-
 from imu_dcm.cli import (
     EXIT_BAD_INPUT,
     EXIT_FAILED,
@@ -182,6 +180,8 @@ def format_summary(s: dict) -> str:
         f"{s['reordered']} put back in order; {gaps} gap{'s' if gaps != 1 else ''} over "
         f"5x the median step; {s['reconnects']} reconnects"
     )
+    import numpy as np
+
     b = np.asarray(s["bias_rad_s"])
     bias = f"({b[0]:+.5f}, {b[1]:+.5f}, {b[2]:+.5f}) rad/s"
     if s["bias_mode"] == "auto" and not s["bias_segments"]:

@@ -4,8 +4,8 @@
 the recording), then loops, waking every ``view_interval_s`` (0.05 s with a view, 0.25 s
 without, by default): the source is read (a pollable one by the loop itself, else by its thread
 before), its events go to the :class:`imu_dcm.live.pipeline.Pipeline`, the pipeline sends its
-batch, a status line goes to stderr. SIGINT / SIGTERM (in the main thread), ``stop``, the end of input,
-a lost source or ``idle_stop_s`` end the loop; what the source already delivered is still
+batch, a status line goes to stderr. SIGINT / SIGTERM (in the main thread), ``stop``, the end
+of input, a lost source or ``idle_stop_s`` end the loop; what the source already delivered is still
 processed, the integrator closes its last step, the recording is finished and the summary made.
 """
 
