@@ -187,13 +187,50 @@ def angle_deg(q_a, q_b) -> float:
     return float(attitude_error_deg(np.asarray(q_a), np.asarray(q_b)).total_deg)
 
 
-@pytest.mark.parametrize("method", ["magnus4", "coning"])
-def test_ws_live_equals_replay_on_the_same_messages(trial, tmp_path, method):
+#: How the source is read: by the session's loop at each wake-up (the default with a wake-up
+#: interval of 25 ms or more), or by the source's thread (a shorter one).
+READS = {"inline": None, "thread": 0.01}
+
+
+def spy_reads(monkeypatch) -> dict:
+    """Count the WebSocket source's reads of each kind: ``poll`` (inline) and ``session``."""
+    from imu_dcm.live.sources import WsSource
+
+    calls = {"poll": 0, "session": 0}
+    poll, session = WsSource.poll, WsSource._session
+
+    def counted_poll(self):
+        calls["poll"] += self._live is not None
+        return poll(self)
+
+    def counted_session(self, ws):
+        calls["session"] += 1
+        return session(self, ws)
+
+    monkeypatch.setattr(WsSource, "poll", counted_poll)
+    monkeypatch.setattr(WsSource, "_session", counted_session)
+    return calls
+
+
+def assert_read(calls: dict, read: str) -> None:
+    if read == "inline":
+        assert calls["poll"] > 0 and calls["session"] == 0, calls
+    else:
+        assert calls["poll"] == 0 and calls["session"] > 0, calls
+
+
+@pytest.mark.parametrize(("method", "read"), [("magnus4", "inline"), ("coning", "thread")])
+def test_ws_live_equals_replay_on_the_same_messages(trial, tmp_path, monkeypatch, method, read):
+    calls = spy_reads(monkeypatch)
     msgs = trial["messages"]
     pub = Publisher(trial["schemas"])
     try:
         th, said, out, _ = start_live(
-            f"ws://127.0.0.1:{pub.port}", method=method, bias="none", idle_stop_s=1.5
+            f"ws://127.0.0.1:{pub.port}",
+            method=method,
+            bias="none",
+            idle_stop_s=1.5,
+            view_interval_s=READS[read],
         )
         pub.wait_subscribed()
         pub.publish(msgs)
@@ -217,9 +254,14 @@ def test_ws_live_equals_replay_on_the_same_messages(trial, tmp_path, method):
     assert s["rms_error_deg"] == pytest.approx(rep.summary.to_dict()["rms_error_deg"], rel=1e-9)
     assert s["max_error_deg"] == pytest.approx(rep.summary.to_dict()["max_error_deg"], rel=1e-9)
     assert any("subscribed to /imu/data" in line for line in said)
+    assert_read(calls, read)
 
 
-def test_ws_server_killed_and_restarted_reconnects_reports_the_gap(trial, tmp_path):
+@pytest.mark.parametrize("read", ["inline", "thread"])
+def test_ws_server_killed_and_restarted_reconnects_reports_the_gap(
+    trial, tmp_path, monkeypatch, read
+):
+    calls = spy_reads(monkeypatch)
     msgs = trial["messages"]
     imu_idx = [i for i, m in enumerate(msgs) if m[0] == IMU]
     cut = imu_idx[500]  # first message not published by the first server
@@ -228,7 +270,11 @@ def test_ws_server_killed_and_restarted_reconnects_reports_the_gap(trial, tmp_pa
     port = pub.port
     try:
         th, said, out, _ = start_live(
-            f"ws://127.0.0.1:{port}", method="magnus4", bias="none", idle_stop_s=4.0
+            f"ws://127.0.0.1:{port}",
+            method="magnus4",
+            bias="none",
+            idle_stop_s=4.0,
+            view_interval_s=READS[read],
         )
         pub.wait_subscribed()
         pub.publish(msgs[:cut])
@@ -258,6 +304,7 @@ def test_ws_server_killed_and_restarted_reconnects_reports_the_gap(trial, tmp_pa
     assert g["t_s"] == (imu_t[k] - imu_t[0]) * 1e-9
     assert g["length_s"] == pytest.approx((imu_t[k + 1] - imu_t[k]) * 1e-9, rel=1e-12)
     assert any(line.startswith("1 gap(s) longer than") for line in said), said
+    assert_read(calls, read)
     with pytest.warns(GapWarning, match=r"1 gap\(s\)"):  # replay sees the same gap
         q_replay, rep = replay_of(published, tmp_path, "magnus4", "none")
     rep_gaps = rep.summary.to_dict()["gaps"]

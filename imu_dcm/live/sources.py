@@ -32,10 +32,11 @@ socket, the bytes in the pipe, the frames received) and queues it raw: a source 
 most every ``batch_s`` (the session uses a quarter of the view interval, at most 20 ms) and only
 reads; the parse or decode runs once per wake-up of the session's loop (once per view interval)
 over everything queued, so its fixed cost is shared by all the samples in between. With a view
-interval of 25 ms or more the session reads a pollable source (UDP, stdin: :attr:`Source.pollable`)
-itself, once per wake-up of its loop (:meth:`Source.begin`, :meth:`Source.poll`: no thread), and
-paces the others' threads (:meth:`Source.pace`): a WebSocket source then wakes once per wake-up of
-the session's loop, a lead before it.
+interval of 25 ms or more the session reads a pollable source (UDP, stdin, WebSocket:
+:attr:`Source.pollable`) itself, once per wake-up of its loop (:meth:`Source.begin`,
+:meth:`Source.poll`; a WebSocket source's thread then only connects and reconnects), and paces
+the others' threads (:meth:`Source.pace`): they wake once per wake-up of the loop, a lead
+before it.
 
 **A new source** is one :class:`Source` subclass and one row in :data:`SOURCES` (the URL scheme
 and ``"module:Class"``, imported when a SOURCE of that scheme is opened).
@@ -690,7 +691,48 @@ class WsSource(Source):
         self.batch_s = batch_s
         self.reconnects = 0
         self._connected_before = False
+        # read inline (begin, poll): the thread connects, then hands the connection to poll
+        # until poll sees it end (_lost): (ws, session) while handed over, and how it ended
+        self._inline = False
+        self._live: tuple[WsConnection, _WsSession] | None = None
+        self._lost = threading.Event()
+        self._ended: tuple[Exception | None, str | None] = (None, None)
         _import_websockets()  # at open, not in the receiving thread (~60 ms of CPU)
+
+    pollable = True
+
+    def begin(self) -> None:
+        """Read inline: the thread only connects (and reconnects); :meth:`poll` reads."""
+        self._inline = True
+        self._thread.start()
+
+    def poll(self) -> None:
+        """Inline: every message that has arrived on the connection, if there is one. What
+        ends the connection (closed, lost, a failure) goes to the thread, which handles it as
+        its own reading would have (reconnect, or end the source)."""
+        live = self._live
+        since = self._read_at or (time.perf_counter_ns(), time.time_ns())
+        self._read_at = time.perf_counter_ns(), time.time_ns()
+        if live is None:
+            return
+        ws, st = live
+        try:
+            messages = ws.recv_messages(0.0) if ws.wait(0.0) else []
+            fatal = self._handle(ws, st, [(m, *since) for m in messages])
+        except Exception as exc:  # raised in the thread, as there (_run, _guarded)
+            self._end_connection(exc, None)
+            return
+        if fatal:
+            self._end_connection(None, fatal)
+
+    def _end_connection(self, exc: Exception | None, fatal: str | None) -> None:
+        self._live, self._ended = None, (exc, fatal)
+        self._lost.set()
+
+    def stop(self, timeout_s: float = 5.0) -> None:
+        self._stop.set()
+        self._lost.set()  # a thread waiting on a handed-over connection
+        super().stop(timeout_s)
 
     def _run(self) -> None:
         from websockets.exceptions import ConnectionClosed, InvalidHandshake, InvalidURI
@@ -733,7 +775,7 @@ class WsSource(Source):
             self.reconnects += self._connected_before
             self._connected_before = True
             self.events.put(("info", f"{again} to {self.url} ({ws.subprotocol})"))
-            fatal = self._session(ws)
+            fatal = self._handed_over(ws) if self._inline else self._session(ws)
             if fatal:
                 self.events.put(("end", fatal))
                 return None
@@ -756,19 +798,44 @@ class WsSource(Source):
         """One connection: subscribe, receive, decode. Returns a fatal reason or None."""
         st = _WsSession()
         while not self._stop.is_set():
-            pending: dict[int, list] = {}
-            for data, arrival, wall in self._frames(ws):
-                if isinstance(data, str):
-                    fatal = self._on_text(ws, st, json.loads(data))
-                    if fatal:
-                        return fatal
-                elif len(data) >= _MSG_HEAD.size and data[0] == _BIN_MESSAGE:
-                    _, sid, _ = _MSG_HEAD.unpack_from(data)
-                    if sid in st.subs:
-                        pending.setdefault(sid, []).append((data[_MSG_HEAD.size :], arrival, wall))
-            for sid, items in pending.items():  # decoded by the session's loop (decode)
+            fatal = self._handle(ws, st, self._frames(ws))
+            if fatal:
+                return fatal
+        return None
+
+    def _handed_over(self, ws: WsConnection) -> str | None:
+        """Inline: one connection, read by :meth:`poll` until it ends (or the source stops).
+        Returns a fatal reason or None; raises how the connection was lost."""
+        self._lost.clear()
+        self._ended = (None, None)
+        self._live = (ws, _WsSession())
+        if self._stop.is_set():  # stopped before the hand-over: poll will not end it
+            self._live = None
+            return None
+        self._lost.wait()
+        self._live = None
+        exc, fatal = self._ended
+        if exc is not None:
+            raise exc
+        return fatal
+
+    def _handle(self, ws: WsConnection, st: _WsSession, frames: list[tuple]) -> str | None:
+        """The messages of one read, ``(data, arrival, wall)``: JSON ones acted on (channels
+        picked and subscribed), the binary ones of a subscription queued raw (decoded by the
+        session's loop). Returns a fatal reason or None."""
+        pending: dict[int, list] = {}
+        for data, arrival, wall in frames:
+            if isinstance(data, str):
+                fatal = self._on_text(ws, st, json.loads(data))
+                if fatal:
+                    return fatal
+            elif len(data) >= _MSG_HEAD.size and data[0] == _BIN_MESSAGE:
+                _, sid, _ = _MSG_HEAD.unpack_from(data)
                 if sid in st.subs:
-                    self.events.put(("raw", st.subs[sid], items))
+                    pending.setdefault(sid, []).append((data[_MSG_HEAD.size :], arrival, wall))
+        for sid, items in pending.items():  # decoded by the session's loop (decode)
+            if sid in st.subs:
+                self.events.put(("raw", st.subs[sid], items))
         return None
 
     def _on_text(self, ws, st: _WsSession, msg) -> str | None:
