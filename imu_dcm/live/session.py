@@ -92,11 +92,11 @@ def _check_bias(bias) -> str | tuple:
 #: A source wakes at most every quarter view interval, and at least every 20 ms: a sample
 #: waits for its batch and then for the view's, so the batch adds <= 1/4 to the latency.
 _BATCH_MAX_S = 0.02
-#: From this view interval on, the source reads on the loop's cadence (one wake-up of its thread
-#: per wake-up of the loop, a batch_s before it; the latency is as without: the interval plus a
-#: batch_s at most). Shorter intervals ask for latency: each sample is read a batch_s after its
-#: first bytes, not held for the read before the next wake-up (worth a 10 ms interval's p99).
-_PACE_MIN_S = 0.025
+#: From this view interval on, the loop reads a pollable source itself at each wake-up (one
+#: thread wakes per interval, not two). Shorter intervals ask for latency: the source's thread
+#: reads each sample a batch_s after its first bytes, not held for the next wake-up's read (worth
+#: a 10 ms interval's p99).
+_INLINE_MIN_S = 0.025
 #: The loop's wake-up interval by default: the view's display rate, or, without a view, four
 #: times a second (the status line, the recording and the reorder window's release need no
 #: more; each wake-up costs CPU of its own, most of it in caches gone cold while asleep).
@@ -372,11 +372,7 @@ class _Loop:
         self.reason, self.ended = "stopped", False  # ended: the source said it ended
         self.idle_since = time.monotonic()
         self.next_flush = self.idle_since + self.interval_s  # the next wake-up of _receive
-        # from _PACE_MIN_S on, the source reads once per wake-up: in the loop (inline), or in
-        # its thread just before the wake-up (paced)
-        self.inline = src.pollable and self.interval_s >= _PACE_MIN_S
-        if self.interval_s >= _PACE_MIN_S and not self.inline:
-            src.pace(lambda: self.next_flush, self.interval_s, _batch_s(o))
+        self.inline = src.pollable and self.interval_s >= _INLINE_MIN_S  # read in the loop
 
     def _on_signal(self, signum, frame) -> None:
         self.reason = f"stopped by {signal.Signals(signum).name}"

@@ -34,9 +34,8 @@ reads; the parse or decode runs once per wake-up of the session's loop (once per
 over everything queued, so its fixed cost is shared by all the samples in between. With a view
 interval of 25 ms or more the session reads a pollable source (UDP, stdin, WebSocket:
 :attr:`Source.pollable`) itself, once per wake-up of its loop (:meth:`Source.begin`,
-:meth:`Source.poll`; a WebSocket source's thread then only connects and reconnects), and paces
-the others' threads (:meth:`Source.pace`): they wake once per wake-up of the loop, a lead
-before it.
+:meth:`Source.poll`; a WebSocket source's thread then only connects and reconnects): one
+thread wakes per interval, not two.
 
 **A new source** is one :class:`Source` subclass and one row in :data:`SOURCES` (the URL scheme
 and ``"module:Class"``, imported when a SOURCE of that scheme is opened).
@@ -46,7 +45,6 @@ from __future__ import annotations
 
 import importlib
 import json
-import math
 import os
 import queue
 import select
@@ -82,10 +80,6 @@ _DRAIN_MAX = 4000  # frames (datagrams) per batch at most
 #: A batch collects what arrives within this long after its first sample, s (default): per-batch
 #: costs (one bulk parse or decode, one queue event) are shared by the samples of a few ms.
 BATCH_S = 0.005
-#: A paced read (:meth:`Source.pace`) waits at most this long after the first bytes, s: a long
-#: view interval must not let a socket or pipe buffer fill.
-_PACE_MAX_S = 0.1
-
 #: SOURCE URL scheme -> the Source class that reads it, as ``"module:Class"`` (imported on
 #: open). ``-`` is stdin. A new source: one class and one row here.
 SOURCES: dict[str, str] = {
@@ -214,47 +208,20 @@ class Source:
         self.events: queue.Queue = queue.Queue()
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._guarded, name=type(self).__name__, daemon=True)
-        self._pace: tuple | None = None
-        self._read_at: tuple[int, int] | None = None  # the last paced read (perf, wall ns)
-
-    def pace(self, next_take, every_s: float, lead_s: float) -> None:
-        """Read on the taker's cadence: ``next_take()`` is the monotonic time of the session
-        loop's next wake-up (once every ``every_s``); the thread then reads ``lead_s`` before
-        each wake-up that has something to take, so it wakes once per wake-up of the loop
-        rather than once per ``batch_s`` (each wake-up of a thread costs CPU of its own)."""
-        self._pace = (next_take, every_s, lead_s)
-
-    def _settle(self) -> None:
-        """Paced: sleep until ``lead_s`` before the session loop's next wake-up (at most
-        :data:`_PACE_MAX_S`), so that one read takes everything that came meanwhile."""
-        next_take, every_s, lead_s = self._pace
-        now = time.monotonic()
-        at = next_take() - lead_s
-        if at < now:  # that wake-up is under way: the one after it
-            at += every_s * math.ceil((now - at) / every_s)
-        self._stop.wait(min(at - now, _PACE_MAX_S))
+        self._read_at: tuple[int, int] | None = None  # the last inline read (perf, wall ns)
 
     def _await(self, ready, batch_s: float) -> tuple[int, int] | None:
         """Wait for a batch to read: ``(arrival_ns, wall_ns)`` of its first bytes, or None when
-        nothing came. ``ready(timeout_s)`` says whether there is something to read.
-
-        Without :meth:`pace`: wait up to 0.2 s for the first bytes, then ``batch_s`` for the
-        rest. Paced: sleep until the read before the loop's next wake-up and look then (one
-        wake-up of the thread per read); the bytes' arrival is taken as the previous read's time,
-        the earliest they can have come (a latency measured from it is an upper bound)."""
-        if self._pace is None:
-            if not ready(0.2):
-                return None
-            got = time.perf_counter_ns(), time.time_ns()
-            self._stop.wait(batch_s)
-            return got
-        since = self._read_at or (time.perf_counter_ns(), time.time_ns())
-        self._settle()
-        self._read_at = time.perf_counter_ns(), time.time_ns()
-        return since if ready(0.0) else None
+        nothing came (within 0.2 s). ``ready(timeout_s)`` says whether there is something to
+        read; the rest of the batch is given ``batch_s`` after its first bytes."""
+        if not ready(0.2):
+            return None
+        got = time.perf_counter_ns(), time.time_ns()
+        self._stop.wait(batch_s)
+        return got
 
     #: The session's loop may read the source itself (:meth:`begin`, then :meth:`poll` once
-    #: per wake-up) instead of a thread reading just before it: one wake-up per interval, not two.
+    #: per wake-up) instead of its thread: one wake-up per interval, not two.
     pollable: bool = False
 
     def begin(self) -> None:
@@ -786,8 +753,8 @@ class WsSource(Source):
             ws.close()
 
     def _frames(self, ws: WsConnection) -> list[tuple]:
-        """Every message of one read: ``(data, arrival, wall)`` (the arrival of the batch's first
-        bytes, or the previous read's time when paced, for each)."""
+        """Every message of one read in the thread: ``(data, arrival, wall)`` (the arrival of
+        the batch's first bytes, for each)."""
         got = self._await(ws.wait, self.batch_s)
         if got is None:
             return []
