@@ -312,10 +312,11 @@ SUB = ("foxglove.websocket.v1", "foxglove.sdk.v1")
 if which == "sync":
     from websockets.sync.client import connect
     import contextlib
-    stack = contextlib.ExitStack()  # closed at exit
+    stack = contextlib.ExitStack()
     ws = stack.enter_context(
         connect(url, subprotocols=list(SUB), max_size=None, compression=None, proxy=None)
     )
+    close = stack.close
     def batch():
         out = [ws.recv(timeout=30)]
         t_end = time.perf_counter() + batch_s
@@ -328,6 +329,7 @@ if which == "sync":
 else:
     from imu_dcm.live.sources import WsConnection
     ws = WsConnection(url, SUB)
+    close = ws.close
     def batch():
         out = ws.recv_messages(30)
         time.sleep(batch_s)
@@ -345,7 +347,8 @@ while got < n:
             if cpu0 is None:
                 cpu0 = time.process_time()
             got += 1
-print(time.process_time() - cpu0)
+print(time.process_time() - cpu0, flush=True)
+close()  # the closing handshake (the server logs a reset otherwise)
 """
 
 
