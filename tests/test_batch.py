@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import csv
 import dataclasses
+import json
 import os
 import shutil
 import signal
@@ -274,6 +275,28 @@ def test_cli_bad_input_is_one_line_and_exit_2(logs, tmp_path, capsys, monkeypatc
     )
     err = capsys.readouterr().err
     assert "pip install 'imu_dcm[dask]'" in err and err.count("\n") == 1
+
+
+@pytest.mark.parametrize("flag", [[], ["--force"], ["--resume"]])
+def test_a_curves_file_it_did_not_write_is_refused_and_kept(logs, tmp_path, capsys, flag):
+    # the table's curves file is appended to, and removed by --force: a file of that name this
+    # tool did not write stops the run before anything is read or written
+    out = tmp_path / "t.csv"
+    curves = tmp_path / "t.curves.jsonl"
+    curves.write_text("my own notes\n")
+    assert batch_main([logs[-1], "--table", str(out), "--no-chart", "--quiet", *flag]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.count("\n") == 0 and "curves file beside the table" in err, err
+    assert curves.read_text() == "my own notes\n" and not out.exists()
+
+
+def test_force_replaces_its_own_table_and_curves(logs, tmp_path):
+    out = tmp_path / "t.csv"
+    for extra in ([], ["--force"]):
+        assert batch_main([logs[-1], "--table", str(out), "--no-chart", "--quiet", *extra]) == 0
+    assert len(_lines(out)) == 2  # header and one row, not two
+    curves = (tmp_path / "t.curves.jsonl").read_text().splitlines()
+    assert len(curves) == 1 and json.loads(curves[0])["path"] == os.path.abspath(logs[-1])
 
 
 def test_failed_logs_give_exit_code_1(logs, tmp_path, capsys):

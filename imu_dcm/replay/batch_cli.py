@@ -99,6 +99,29 @@ def _check_outputs(args) -> None:
                 f"Expected --force or --resume on a batch table this tool wrote (header "
                 f"{','.join(COLUMNS[:3])},...), got {head[:40]!r} in {str(table)!r}"
             )
+    _check_curves(curves_path(table))
+
+
+def _check_curves(path: Path) -> None:
+    """The curves file beside the table is appended to, or removed by ``--force``: if it
+    exists, it must be one this tool wrote (JSON lines with ``path``, ``t_s``, ``error_deg``)."""
+    import json
+
+    from imu_dcm.outputs import OutputError
+
+    if not path.exists() or not path.stat().st_size:
+        return
+    with open(path, encoding="utf-8", errors="replace") as f:
+        head = f.readline(1 << 20)
+    try:
+        ours = set(json.loads(head)) == {"path", "t_s", "error_deg"}
+    except (ValueError, TypeError):
+        ours = False
+    if not ours:
+        raise OutputError(
+            f"Expected the curves file beside the table to be one this tool wrote (JSON lines "
+            f"of path, t_s, error_deg), got {head[:40]!r} in {str(path)!r}"
+        )
 
 
 class _Bar:
