@@ -5,6 +5,7 @@ server ends in ConnectionClosed."""
 
 from __future__ import annotations
 
+import contextlib
 import threading
 import time
 
@@ -13,6 +14,17 @@ import pytest
 from imu_dcm.live.sources import WsConnection
 
 server_mod = pytest.importorskip("websockets.sync.server")
+
+
+@contextlib.contextmanager
+def connected(handler):
+    """websockets' server on 127.0.0.1 serving ``handler``, and a client connected to it."""
+    with server_mod.serve(
+        handler, "127.0.0.1", 0, subprotocols=["foxglove.websocket.v1"], compression=None
+    ) as server:
+        threading.Thread(target=server.serve_forever, daemon=True).start()
+        port = server.socket.getsockname()[1]
+        yield server, WsConnection(f"ws://127.0.0.1:{port}", ("foxglove.websocket.v1",))
 
 
 def test_ws_connection_assembles_answers_pings_and_sees_the_close():
@@ -27,12 +39,7 @@ def test_ws_connection_assembles_answers_pings_and_sees_the_close():
         assert conn.recv(timeout=5) == "hello"
         conn.close()
 
-    with server_mod.serve(
-        handler, "127.0.0.1", 0, subprotocols=["foxglove.websocket.v1"], compression=None
-    ) as server:
-        threading.Thread(target=server.serve_forever, daemon=True).start()
-        port = server.socket.getsockname()[1]
-        ws = WsConnection(f"ws://127.0.0.1:{port}", ("foxglove.websocket.v1",))
+    with connected(handler) as (server, ws):
         assert ws.subprotocol == "foxglove.websocket.v1"
         messages: list = []
         deadline = time.monotonic() + 10
@@ -141,12 +148,7 @@ def test_client_close_completes_the_handshake_while_the_server_streams():
         except ConnectionClosed as exc:
             seen["rcvd"] = exc.rcvd
 
-    with server_mod.serve(
-        handler, "127.0.0.1", 0, subprotocols=["foxglove.websocket.v1"], compression=None
-    ) as server:
-        threading.Thread(target=server.serve_forever, daemon=True).start()
-        port = server.socket.getsockname()[1]
-        ws = WsConnection(f"ws://127.0.0.1:{port}", ("foxglove.websocket.v1",))
+    with connected(handler) as (server, ws):
         deadline = time.monotonic() + 10
         while not ws.recv_messages(0.2) and time.monotonic() < deadline:
             pass
