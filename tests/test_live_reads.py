@@ -5,6 +5,7 @@ read's time (the earliest the bytes can have come); every line sent over UDP arr
 
 from __future__ import annotations
 
+import contextlib
 import os
 import socket
 import threading
@@ -123,3 +124,71 @@ def test_loop_reads_a_line_source_inline_on_its_cadence(monkeypatch, view_interv
     span = polls[-1] - polls[0]
     assert len(polls) >= 2
     assert len(polls) <= span / every_s + 2
+
+
+def test_udp_datagrams_the_system_drops_are_counted_and_said():
+    # a receive buffer far too small for what is sent between two reads: the system drops
+    # datagrams, and the source says how many (the kernel's own count, SO_RXQ_OVFL)
+    import sys
+
+    if not sys.platform.startswith("linux"):
+        pytest.skip("the drop count is Linux's SO_RXQ_OVFL")
+    src = UdpSource("127.0.0.1", 0, "rad/s", "s")
+    src.sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 4096)
+    src.begin()
+    n = 2000
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as tx, contextlib.closing(src.sock):
+        for k in range(n):
+            tx.sendto(f"{k / 1000:.3f},0,0,1".encode(), src.address)
+        time.sleep(0.05)
+        src.poll()
+        assert src.crowded
+        got, said = _drain_events(src)
+        assert 0 < got < n
+        # the count comes with the datagrams queued after the drops: the stream goes on
+        tx.sendto(f"{n / 1000:.3f},0,0,1".encode(), src.address)
+        time.sleep(0.05)
+        src.poll()
+    more, said2 = _drain_events(src)
+    src.stop()
+    assert more == 1
+    assert src.lost == n - got  # every datagram not read was dropped, and counted
+    assert any(f"dropped {n - got} datagram(s)" in line for line in said + said2), said2
+
+
+def _drain_events(src) -> tuple[int, list[str]]:
+    """Samples decoded and lines said from the source's queued events."""
+    got, said = 0, []
+    while not src.events.empty():
+        ev = src.events.get_nowait()
+        if ev[0] == "raw":
+            got += sum(len(e[1].t_ns) for e in src.decode(ev[1], ev[2]) if e[0] == "data")
+        elif ev[0] == "info":
+            said.append(ev[1])
+    return got, said
+
+
+def test_a_filling_pipe_makes_the_loop_read_sooner(monkeypatch):
+    # without a view the loop wakes every 0.25 s; a writer that fills half of the pipe
+    # between two reads makes it wake sooner (a full pipe would block the writer), and says so
+    from imu_dcm.live import run
+
+    polls = _count_polls(monkeypatch)
+    r, w = os.pipe()
+    n = 4000  # ~70 KB, more than a 64 KiB pipe holds
+
+    def feed():
+        with os.fdopen(w, "wb") as f:
+            f.write(b"".join(f"{k / 1000:.3f},0,0,1\n".encode() for k in range(n)))
+
+    said: list[str] = []
+    feeder = threading.Thread(target=feed)
+    feeder.start()
+    try:
+        res = run("-", stdin_fd=r, rerun="off", status=False, bias="none", say=said.append)
+    finally:
+        feeder.join()
+        os.close(r)
+    assert res.summary["samples"] == n and res.summary["stopped"] == "end of input"
+    assert any(line.startswith("reading every 125 ms") for line in said), said
+    assert len(polls) >= 2

@@ -179,6 +179,7 @@ def format_summary(s: dict) -> str:
         f"{s['dropped_backward']} late/backward stamps, {s['malformed']} malformed; "
         f"{s['reordered']} put back in order; {gaps} gap{'s' if gaps != 1 else ''} over "
         f"5x the median step; {s['reconnects']} reconnects"
+        + (f"; {s['lost_by_system']} datagrams lost by the system" if s["lost_by_system"] else "")
     )
     import numpy as np
 

@@ -159,13 +159,7 @@ def parse_csv_blob(
     The stamps are read exactly and the line structure checked by one compiled scan
     (:func:`imu_dcm.kernel.csv_scan`); the rates by one float parse of them all, correctly
     rounded as Python's ``float``."""
-    bulk = _parse_csv_bulk(blob, 1.0, TIME_UNITS[time_units])
-    if bulk is None:
-        return None
-    t, w, bad = bulk
-    if gyro_units == "deg/s":
-        w *= DEG
-    return t, w, bad
+    return _parse_csv_bulk(blob, DEG if gyro_units == "deg/s" else 1.0, TIME_UNITS[time_units])
 
 
 def _parse_csv_bulk(blob: bytes, gyro_scale: float, t_scale: int):

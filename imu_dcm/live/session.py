@@ -245,7 +245,8 @@ def run(
     LiveResult
         Summary keys: ``source, imu_topic, imu_type, truth_topic, truth_type, samples,
         duration_s, rate_hz, dropped_nonfinite, dropped_duplicate, dropped_backward,
-        reordered, malformed, gaps, reconnects, gyro_units, bias_mode, bias_rad_s,
+        reordered, malformed, gaps, reconnects, lost_by_system (UDP datagrams the system
+        dropped, its buffer full), gyro_units, bias_mode, bias_rad_s,
         bias_segments, method, start_time_s, unscored_before_s, initial_quat_xyzw,
         final_quat_xyzw, final_t_s, truth_samples_used, rms/max error/inclination/heading (deg,
         None without truth), latency_p50_ms, latency_p99_ms, stopped, record, cpu_s (process
@@ -412,6 +413,8 @@ class _Loop:
         while not self.stop.wait(max(0.0, self.next_flush - time.monotonic())):
             if self.inline:
                 self.src.poll()
+                if self.src.crowded:
+                    self._sooner()
             if self._take():
                 return
             now = time.monotonic()
@@ -427,6 +430,19 @@ class _Loop:
             if self.idle_stop_s is not None and now - self.idle_since > self.idle_stop_s:
                 self.reason = f"no sample for {self.idle_stop_s:g} s"
                 return
+
+    def _sooner(self) -> None:
+        """A read found the source's buffer filling between wake-ups: halve the interval (down
+        to the shortest inline one), and say so."""
+        self.src.crowded = False
+        if self.interval_s <= _INLINE_MIN_S:
+            return
+        self.interval_s = max(self.interval_s / 2, _INLINE_MIN_S)
+        self.next_flush = min(self.next_flush, time.monotonic() + self.interval_s)
+        self.say(
+            f"reading every {self.interval_s * 1e3:.0f} ms: the source's buffer was filling "
+            f"between reads"
+        )
 
     def _take(self, data_only: bool = False) -> bool:
         """Every event queued by now, in order; raw items decoded once per key (the source's
@@ -545,6 +561,7 @@ def _summary(
         "malformed": int(pipe.malformed),
         "gaps": [{"t_s": a, "length_s": d} for a, d in pipe.gaps],
         "reconnects": int(getattr(src, "reconnects", 0)),
+        "lost_by_system": int(src.lost),
         "gyro_units": o.gyro_units,
         "bias_mode": pipe.bias_mode,
         "bias_rad_s": bias_mean,

@@ -50,6 +50,7 @@ import queue
 import select
 import socket
 import struct
+import sys
 import threading
 import time
 from dataclasses import dataclass, field
@@ -122,6 +123,41 @@ class SourceOptions:
     give_up_s: float | None = 30.0
     stdin_fd: int | None = None
     batch_s: float = BATCH_S
+
+
+#: ``SO_RXQ_OVFL`` (Linux): each datagram read carries the socket's count of dropped datagrams.
+_SO_RXQ_OVFL = getattr(socket, "SO_RXQ_OVFL", 40)
+_OVFL_SPACE = socket.CMSG_SPACE(4) if hasattr(socket, "CMSG_SPACE") else 0
+
+
+def _enable_drop_count(sock: socket.socket) -> bool:
+    """Ask the system to tell the socket's drop count with each datagram (Linux); False where
+    it cannot."""
+    if not _OVFL_SPACE or not sys.platform.startswith("linux"):
+        return False
+    try:
+        sock.setsockopt(socket.SOL_SOCKET, _SO_RXQ_OVFL, 1)
+    except OSError:
+        return False
+    return True
+
+
+def _pipe_size(fd: int) -> int | None:
+    """The bytes the pipe ``fd`` holds (Linux ``F_GETPIPE_SZ``; 64 KiB elsewhere), or None when
+    ``fd`` is not a pipe."""
+    import stat
+
+    try:
+        if not stat.S_ISFIFO(os.fstat(fd).st_mode):
+            return None
+    except OSError:
+        return None
+    try:
+        import fcntl
+
+        return int(fcntl.fcntl(fd, getattr(fcntl, "F_GETPIPE_SZ", 1032)))
+    except (ImportError, OSError):
+        return 65536
 
 
 def _readable(fd, timeout_s: float) -> bool:
@@ -209,6 +245,11 @@ class Source:
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._guarded, name=type(self).__name__, daemon=True)
         self._read_at: tuple[int, int] | None = None  # the last inline read (perf, wall ns)
+        #: Set by a read that found the system's buffer filling (the reader should come
+        #: sooner: a full buffer loses datagrams or blocks the writer).
+        self.crowded = False
+        #: Datagrams the system dropped because its buffer was full (UDP, where it tells).
+        self.lost = 0
 
     def _await(self, ready, batch_s: float) -> tuple[int, int] | None:
         """Wait for a batch to read: ``(arrival_ns, wall_ns)`` of its first bytes, or None when
@@ -352,6 +393,8 @@ class UdpSource(_LineSource):
             self.sock.close()
             raise InputError(f"Expected to bind udp://{host}:{port}, got {exc}") from None
         self.address = self.sock.getsockname()
+        self._room = 4  # datagrams the receive buffer holds at least (set by begin)
+        self._ovfl = _enable_drop_count(self.sock)
 
     def _close(self) -> None:
         self.sock.close()
@@ -361,20 +404,46 @@ class UdpSource(_LineSource):
         self.events.put(("channel", Channel("imu", where, "", "", "", "lines")))
         self.events.put(("info", f"listening on {where}"))
         self.sock.setblocking(False)
+        # a small datagram takes ~0.8 KB of the buffer (the system's bookkeeping with it)
+        self._room = max(4, self.sock.getsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF) // 1024)
 
     def _ready(self, timeout_s: float) -> bool:
         return _readable(self.sock, timeout_s)
 
     def _read(self, arrival_ns: int, wall_ns: int) -> bool:
         chunks: list[bytes] = []
+        last = None  # the last datagram's ancillary data: the system's drop count then
         try:
             while len(chunks) < _DRAIN_MAX:
-                chunks.append(self.sock.recv(65536))
+                if self._ovfl:
+                    data, anc, _, _ = self.sock.recvmsg(65536, _OVFL_SPACE)
+                    last = anc or last
+                else:
+                    data = self.sock.recv(65536)
+                chunks.append(data)
         except (BlockingIOError, InterruptedError):
             pass
         if chunks:  # parsed by the session's loop (decode), with the other items
             self.events.put(("raw", "lines", [(b"\n".join(chunks), arrival_ns, wall_ns)]))
+        self.crowded = len(chunks) >= self._room // 4
+        if last:
+            self._count_drops(last)
         return True
+
+    def _count_drops(self, anc: list) -> None:
+        """The system's count of datagrams dropped on this socket (``SO_RXQ_OVFL``): say each
+        rise, once."""
+        for level, kind, data in anc:
+            if level == socket.SOL_SOCKET and kind == _SO_RXQ_OVFL and len(data) >= 4:
+                lost = int.from_bytes(data[:4], sys.byteorder)
+                if lost > self.lost:
+                    self.crowded = True
+                    why = (
+                        f"udp: the system dropped {lost - self.lost} datagram(s) (its receive "
+                        f"buffer was full; {lost} in all): samples were lost"
+                    )
+                    self.events.put(("info", why))
+                    self.lost = lost
 
 
 class StdinSource(_LineSource):
@@ -390,6 +459,7 @@ class StdinSource(_LineSource):
         super().__init__(gyro_units, time_units, batch_s)
         self.fd = 0 if fd is None else fd
         self._rest = b""  # a line not yet ended
+        self._room = _pipe_size(self.fd)  # bytes a pipe holds (None: not a pipe)
 
     def begin(self) -> None:
         self.events.put(("channel", Channel("imu", "stdin", "", "", "", "lines")))
@@ -399,6 +469,9 @@ class StdinSource(_LineSource):
 
     def _read(self, arrival_ns: int, wall_ns: int) -> bool:
         data = os.read(self.fd, 1 << 20)
+        # a pipe half full or more: its writer would soon block (a datagram socket, which
+        # loses rather than blocks, asks for a reader sooner, at a quarter)
+        self.crowded = self._room is not None and len(data) >= self._room // 2
         if not data:
             if self._rest:
                 self.events.put(("raw", "lines", [(self._rest, arrival_ns, wall_ns)]))
