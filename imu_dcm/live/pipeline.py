@@ -51,6 +51,14 @@ _ERROR_GIVE_UP_NS = 2_000_000_000  # an estimate uncovered by truth this long: n
 _ANCHOR_KEEP_NS = 10_000_000_000  # samples kept to re-anchor on a late truth, ns
 _RECENT = 65  # stamps kept for the gap rule and the rate (64 steps)
 _IDENTITY = np.array([0.0, 0.0, 0.0, 1.0])
+#: Latency histogram: bins this wide in relative terms, from _LAT_MIN_MS up (~1e6 ms).
+LATENCY_REL = 1e-3
+_LAT_MIN_MS = 1e-3
+_LAT_BINS = 20_800
+#: Latencies kept as values for :attr:`LiveResult.latency_ms` (the newest ones).
+LATENCY_KEEP = 1 << 20
+#: Gaps kept with their times (the count goes on past them).
+GAPS_KEEP = 1000
 
 
 @dataclass(frozen=True)
@@ -63,7 +71,8 @@ class LiveResult:
     q_w_b : float64 (4,) or None — final attitude ``[x, y, z, w]`` at ``t_ns`` (None if the
         estimate never started).
     t_ns : int or None — source stamp of the final attitude, ns.
-    latency_ms : float64 (n,) — receive -> view log call, per sample logged, ms.
+    latency_ms : float64 (n,) — receive -> view log call of the newest samples logged (at most
+        :data:`LATENCY_KEEP` and one batch: memory stays bounded), ms.
     """
 
     summary: dict
@@ -105,6 +114,45 @@ class _Rows:
             newest = self.chunks[-1][0][-1]
             while len(self.chunks) > 1 and self.chunks[1][0][0] <= newest - keep:
                 del self.chunks[0]
+
+
+class Latency:
+    """Receive -> view latencies in bounded memory: a histogram of every sample's (bins
+    :data:`LATENCY_REL` wide in relative terms, so a percentile is read to 0.1 %), the newest
+    batch (the status line) and the newest :data:`LATENCY_KEEP` values (the result's array).
+
+    A live run of any length holds the same: 27 bytes a sample grew without bound when every
+    latency was kept (836 MB after 31 M samples).
+    """
+
+    def __init__(self) -> None:
+        self.counts = np.zeros(_LAT_BINS, np.int64)
+        self.n = 0
+        self.last = np.zeros(0)
+        self._recent: list[NDArray] = []
+        self._recent_n = 0
+
+    def add(self, ms: NDArray) -> None:
+        """Latencies of one batch, ms."""
+        self.last = ms
+        self.n += len(ms)
+        k = np.log(np.maximum(ms, _LAT_MIN_MS) / _LAT_MIN_MS) / np.log1p(LATENCY_REL)
+        self.counts += np.bincount(np.minimum(k.astype(np.int64), _LAT_BINS - 1), None, _LAT_BINS)
+        self._recent.append(ms)
+        self._recent_n += len(ms)
+        while self._recent_n - len(self._recent[0]) >= LATENCY_KEEP:
+            self._recent_n -= len(self._recent.pop(0))
+
+    def percentile(self, p: float) -> float | None:
+        """The ``p`` th percentile of every latency, ms (the centre of its bin), or None."""
+        if not self.n:
+            return None
+        k = int(np.searchsorted(np.cumsum(self.counts), max(1, math.ceil(p / 100 * self.n))))
+        return float(_LAT_MIN_MS * (1 + LATENCY_REL) ** (k + 0.5))
+
+    def recent(self) -> NDArray:
+        """The newest latencies kept (at most :data:`LATENCY_KEEP` and one batch), ms."""
+        return np.concatenate(self._recent) if self._recent else np.zeros(0)
 
 
 class _Stats:
@@ -164,7 +212,8 @@ class Pipeline:
         self.t0_ns: int | None = None
         self.n = 0
         self.malformed = 0
-        self.gaps: list[tuple[float, float]] = []
+        self.gaps: list[tuple[float, float]] = []  # the first GAPS_KEEP
+        self.gap_count = 0
         self.recent_t_s = np.zeros(0)  # the newest stamps, s
         self.rates_checked = False
         self.integ: DcmIntegrator | None = None
@@ -195,7 +244,7 @@ class Pipeline:
         self.est = _Rows(*_ESTIMATES)
         self.err_pending = _Rows(*_ESTIMATES)
         self.truth_rows = _Rows((np.int64,), (float, 4))
-        self.latency: list[NDArray] = []
+        self.latency = Latency()
         self.samples_before_start = 0
         self.cpu_s: float | None = None
 
@@ -276,7 +325,8 @@ class Pipeline:
         after = self.recent_t_s[-1] if len(self.recent_t_s) else -math.inf
         new = tuple(g for g in find_gaps(stamps) if g[0] >= after)  # the new steps' gaps
         if new:
-            self.gaps.extend(new)
+            self.gap_count += len(new)
+            self.gaps.extend(new[: max(0, GAPS_KEEP - len(self.gaps))])
             self.say(gap_message(new))
         self.recent_t_s = stamps[-_RECENT:]
         if not self.rates_checked and len(stamps) >= 17:
@@ -500,6 +550,6 @@ class Pipeline:
                 err_deg=err,
             )
         if len(g_arr):
-            self.latency.append((time.perf_counter_ns() - g_arr) * 1e-6)
+            self.latency.add((time.perf_counter_ns() - g_arr) * 1e-6)
         if self.recorder is not None and len(est[0]):
             self.recorder.add_estimate(est[0], est[2])

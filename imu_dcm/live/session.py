@@ -23,7 +23,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
-from numpy.typing import ArrayLike, NDArray
+from numpy.typing import ArrayLike
 
 from imu_dcm.errors import GapWarning, InputError
 from imu_dcm.integrate import METHODS
@@ -130,10 +130,6 @@ def _check_outputs(record, force: bool, summary_json, rerun) -> None:
                 raise OutputError(
                     f"Expected {what} outside the --record bag {str(bag)!r}, got {str(path)!r}"
                 )
-
-
-def _pct(a: NDArray, p: float) -> float | None:
-    return float(np.percentile(a, p)) if len(a) else None
 
 
 @dataclass(frozen=True)
@@ -244,7 +240,8 @@ def run(
     -------
     LiveResult
         Summary keys: ``source, imu_topic, imu_type, truth_topic, truth_type, samples,
-        duration_s, rate_hz, dropped_nonfinite, dropped_duplicate, dropped_backward,
+        duration_s, rate_hz, dropped_nonfinite, dropped_implausible (a rate over
+        :data:`imu_dcm.rates.MAX_RATE_RAD_S`, replay's rule), dropped_duplicate, dropped_backward,
         reordered, malformed, gaps, reconnects, lost_by_system (UDP datagrams the system
         dropped, its buffer full), gyro_units, bias_mode, bias_rad_s,
         bias_segments, method, start_time_s, unscored_before_s, initial_quat_xyzw,
@@ -280,14 +277,13 @@ def run(
     finally:
         gc.unfreeze()
         _close(src, view, recorder, say, o.keep_viewer)
-    lat = np.concatenate(pipe.latency) if pipe.latency else np.zeros(0)
-    summary = _summary(pipe, src, source, o, bias_v, reason, lat, recorder, started)
+    summary = _json_safe(_summary(pipe, src, source, o, bias_v, reason, recorder, started))
     if o.summary_json is not None:
         from imu_dcm.outputs import write_json
 
         write_json(o.summary_json, summary, what="--summary-json file")
     q = None if pipe.q_last is None else np.asarray(pipe.q_last, dtype=float)
-    return LiveResult(summary, q, pipe.t_last_ns, lat)
+    return LiveResult(summary, q, pipe.t_last_ns, pipe.latency.recent())
 
 
 def _batch_s(o: LiveOptions) -> float:
@@ -507,10 +503,16 @@ class _Loop:
 
 def _status(pipe: Pipeline, tty: bool) -> None:
     r = pipe.reorder
-    dropped = r.dropped_duplicate + r.dropped_backward + r.dropped_nonfinite + pipe.malformed
+    dropped = (
+        r.dropped_duplicate
+        + r.dropped_backward
+        + r.dropped_nonfinite
+        + r.dropped_implausible
+        + pipe.malformed
+    )
     step = pipe.median_step_s
     rate = 1.0 / step if step else 0.0
-    lat = pipe.latency[-1] if pipe.latency else np.zeros(0)
+    lat = pipe.latency.last
     p50 = f"{np.median(lat):.1f}" if len(lat) else "-"
     b = pipe.rest.bias_rad_s if pipe.rest is not None else pipe.fixed_bias
     rest = " (at rest)" if pipe.rest is not None and pipe.rest.at_rest else ""
@@ -522,6 +524,18 @@ def _status(pipe: Pipeline, tty: bool) -> None:
     sys.stderr.flush()
 
 
+def _json_safe(value):
+    """``value`` with every non-finite float replaced by None (JSON has no NaN or Inf; a value
+    that cannot be measured is none, never a number that is not one)."""
+    if isinstance(value, dict):
+        return {k: _json_safe(v) for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return [_json_safe(v) for v in value]
+    if isinstance(value, float) and not np.isfinite(value):
+        return None
+    return value
+
+
 def _summary(
     pipe: Pipeline,
     src: Source,
@@ -529,7 +543,6 @@ def _summary(
     o: LiveOptions,
     bias_v,
     reason: str,
-    lat: NDArray,
     recorder,
     started: float,
 ) -> dict:
@@ -555,11 +568,13 @@ def _summary(
         "duration_s": float(dur),
         "rate_hz": 1.0 / step if step else None,
         "dropped_nonfinite": r.dropped_nonfinite,
+        "dropped_implausible": r.dropped_implausible,
         "dropped_duplicate": r.dropped_duplicate,
         "dropped_backward": r.dropped_backward,
         "reordered": r.reordered,
         "malformed": int(pipe.malformed),
         "gaps": [{"t_s": a, "length_s": d} for a, d in pipe.gaps],
+        "gap_count": pipe.gap_count,
         "reconnects": int(getattr(src, "reconnects", 0)),
         "lost_by_system": int(src.lost),
         "gyro_units": o.gyro_units,
@@ -583,8 +598,8 @@ def _summary(
         "max_inclination_deg": float(st.max[1]) if have else None,
         "rms_heading_deg": float(rms_v[2]) if have else None,
         "max_heading_deg": float(st.max[2]) if have else None,
-        "latency_p50_ms": _pct(lat, 50),
-        "latency_p99_ms": _pct(lat, 99),
+        "latency_p50_ms": pipe.latency.percentile(50),
+        "latency_p99_ms": pipe.latency.percentile(99),
         "stopped": reason,
         "record": str(recorder.path) if recorder is not None else None,
         "cpu_s": pipe.cpu_s,

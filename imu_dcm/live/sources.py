@@ -250,6 +250,14 @@ class Source:
         self.crowded = False
         #: Datagrams the system dropped because its buffer was full (UDP, where it tells).
         self.lost = 0
+        self._said: set[str] = set()
+
+    def drop(self, what: str, text: str) -> None:
+        """A bad message dropped: counted as malformed, said once per kind ``what``."""
+        self.events.put(("malformed", 1))
+        if what not in self._said:
+            self._said.add(what)
+            self.events.put(("info", f"dropped {text} (counted as malformed; said once)"))
 
     def _await(self, ready, batch_s: float) -> tuple[int, int] | None:
         """Wait for a batch to read: ``(arrival_ns, wall_ns)`` of its first bytes, or None when
@@ -310,7 +318,8 @@ class Source:
         try:
             self._run()
         except Exception as exc:
-            self.events.put(("end", f"source failed: {type(exc).__name__}: {exc}"))
+            why = f"the source stopped on an error it cannot recover from ({type(exc).__name__})"
+            self.events.put(("end", why))
 
     def _run(self) -> None:  # pragma: no cover - abstract
         raise NotImplementedError
@@ -704,6 +713,35 @@ class _WsSession:
     next_sub: int = 1
 
 
+def _json_message(text: str, src: Source):
+    """A server's JSON message, or None (dropped, counted and said once) when it is no JSON
+    this client can read (not JSON, or nested deeper than Python's parser goes)."""
+    try:
+        return json.loads(text)
+    except (ValueError, RecursionError):
+        src.drop("json", "a text message that is not JSON (or nested too deep to read)")
+        return None
+
+
+def _channel(ch) -> dict | None:
+    """An advertised channel as this client uses it (``id`` an int, ``topic``, ``encoding``,
+    ``schemaName``, ``schemaEncoding`` and ``schema`` strings, ``kind`` as classified), or None
+    when a field is missing or of another type."""
+    if not isinstance(ch, dict) or not isinstance(ch.get("id"), int):
+        return None
+    fields = ("topic", "encoding", "schemaName", "schemaEncoding", "schema")
+    out = {k: ch.get(k, "") for k in fields}
+    if not out["topic"] or not all(isinstance(v, str) for v in out.values()):
+        return None
+    kind = None
+    if out["encoding"] == "cdr":
+        try:
+            kind = classify_schema(out["schemaName"], out["schemaEncoding"], out["schema"])
+        except (ValueError, KeyError, TypeError, IndexError, RecursionError):
+            kind = None
+    return {**out, "id": ch["id"], "kind": kind}
+
+
 class WsSource(Source):
     """A Foxglove WebSocket client (see the module doc)."""
 
@@ -793,6 +831,9 @@ class WsSource(Source):
                 delay = 0.2
             except (OSError, InvalidHandshake, TimeoutError) as exc:
                 why = f"cannot connect ({type(exc).__name__}: {exc})"
+            except Exception:  # a message this client could not take: a new connection
+                why = "connection lost (the server sent a message this client cannot read)"
+                delay = 0.2
             if self._stop.is_set():
                 return
             if why.startswith(("connection lost", "the server")):
@@ -866,7 +907,7 @@ class WsSource(Source):
         pending: dict[int, list] = {}
         for data, arrival, wall in frames:
             if isinstance(data, str):
-                fatal = self._on_text(ws, st, json.loads(data))
+                fatal = self._on_text(ws, st, _json_message(data, self))
                 if fatal:
                     return fatal
             elif len(data) >= _MSG_HEAD.size and data[0] == _BIN_MESSAGE:
@@ -882,21 +923,31 @@ class WsSource(Source):
         """A JSON message: channels advertised (pick and subscribe) or withdrawn."""
         op = msg.get("op") if isinstance(msg, dict) else None
         if op == "advertise":
-            for ch in msg.get("channels", []):
-                enc, text = ch.get("schemaEncoding", ""), ch.get("schema", "")
-                kind = (
-                    classify_schema(ch.get("schemaName", ""), enc, text)
-                    if ch.get("encoding") == "cdr"
-                    else None
-                )
-                st.channels[int(ch["id"])] = {**ch, "kind": kind}
+            channels = msg.get("channels")
+            if not isinstance(channels, list):
+                channels = []
+                self.drop("advertise", "an advertise whose channels are not a list")
+            for ch in channels:
+                checked = _channel(ch)
+                if checked is None:
+                    self.drop(
+                        "channel",
+                        "an advertised channel without an integer id, a topic "
+                        "or text schema fields",
+                    )
+                    continue
+                st.channels[checked["id"]] = checked
             for kind, topic in (("imu", self.imu_topic), ("truth", self.truth_topic)):
                 if kind not in st.picked and topic != "none":
                     fatal = self._pick_and_subscribe(ws, st, kind, topic)
                     if fatal:
                         return fatal
         elif op == "unadvertise":
-            gone = set(msg.get("channelIds", []))
+            ids = msg.get("channelIds")
+            if not isinstance(ids, list) or not all(isinstance(i, int) for i in ids):
+                self.drop("unadvertise", "an unadvertise whose channelIds are not integers")
+                return None
+            gone = set(ids)
             for kind, cid in list(st.picked.items()):
                 if cid in gone:
                     del st.picked[kind]
