@@ -56,7 +56,7 @@ LATENCY_REL = 1e-3
 _LAT_MIN_MS = 1e-3
 _LAT_BINS = 20_800
 #: Latencies kept as values for :attr:`LiveResult.latency_ms` (the newest ones).
-LATENCY_KEEP = 1 << 20
+LATENCY_KEEP = 1 << 16
 #: Gaps kept with their times (the count goes on past them).
 GAPS_KEEP = 1000
 
