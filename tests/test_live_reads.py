@@ -192,3 +192,30 @@ def test_a_filling_pipe_makes_the_loop_read_sooner(monkeypatch):
     assert res.summary["samples"] == n and res.summary["stopped"] == "end of input"
     assert any(line.startswith("reading every 125 ms") for line in said), said
     assert len(polls) >= 2
+
+
+def test_every_datagram_the_system_drops_is_counted_at_stop(monkeypatch):
+    # a 4 KiB receive buffer flooded, then nothing more: the datagrams dropped after the last
+    # one read are counted at stop (the socket's own count, /proc/net/udp), so the summary's
+    # lost_by_system is exactly what was sent and not integrated
+    import sys
+
+    if not sys.platform.startswith("linux"):
+        pytest.skip("the drop count is Linux's")
+    from test_live_ws import live_thread
+
+    from imu_dcm.live import sources
+
+    monkeypatch.setattr(sources, "UDP_RCVBUF", 4096)
+    live = live_thread("udp://127.0.0.1:0", bias="none", idle_stop_s=1.0)
+    assert live.ready.wait(20)
+    n = 3000
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as tx:
+        for k in range(n):
+            tx.sendto(f"{k / 1000:.3f},0,0,1".encode(), live.addr["address"])
+    live.thread.join(30)
+    assert not live.thread.is_alive()
+    s = live.out["result"].summary
+    assert s["malformed"] == s["dropped_duplicate"] == s["dropped_backward"] == 0
+    assert 0 < s["lost_by_system"] < n
+    assert s["lost_by_system"] == n - s["samples"]

@@ -142,6 +142,26 @@ def _enable_drop_count(sock: socket.socket) -> bool:
     return True
 
 
+#: The receive buffer a UDP source asks for, bytes (the system caps it at ``net.core.rmem_max``).
+UDP_RCVBUF = 4 << 20
+
+
+def _proc_udp_drops(inode: int) -> int | None:
+    """The ``drops`` count of the UDP socket with ``inode`` in ``/proc/net/udp`` (or ``udp6``),
+    or None where there is no such file or row (not Linux)."""
+    for name in ("/proc/net/udp", "/proc/net/udp6"):
+        try:
+            with open(name) as f:
+                rows = f.read().splitlines()[1:]
+        except OSError:
+            continue
+        for row in rows:
+            cells = row.split()
+            if len(cells) >= 13 and cells[9] == str(inode):
+                return int(cells[12])
+    return None
+
+
 def _pipe_size(fd: int) -> int | None:
     """The bytes the pipe ``fd`` holds (Linux ``F_GETPIPE_SZ``; 64 KiB elsewhere), or None when
     ``fd`` is not a pipe."""
@@ -395,7 +415,7 @@ class UdpSource(_LineSource):
     ) -> None:
         super().__init__(gyro_units, time_units, batch_s)
         self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-        self.sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 4 << 20)
+        self.sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, UDP_RCVBUF)
         try:
             self.sock.bind((host, port))
         except OSError as exc:
@@ -403,10 +423,29 @@ class UdpSource(_LineSource):
             raise InputError(f"Expected to bind udp://{host}:{port}, got {exc}") from None
         self.address = self.sock.getsockname()
         self._room = 4  # datagrams the receive buffer holds at least (set by begin)
+        self._got = 0  # datagrams the last read took
         self._ovfl = _enable_drop_count(self.sock)
 
     def _close(self) -> None:
-        self.sock.close()
+        """At the end: read what the socket still holds, take the system's final count of the
+        datagrams it dropped (those after the last one read tell nobody else), then close."""
+        try:
+            self.sock.setblocking(False)
+            at = self._read_at or (time.perf_counter_ns(), time.time_ns())
+            while self._read(*at) and self._got == _DRAIN_MAX:
+                pass
+            self._count_final_drops()
+        except OSError:
+            pass
+        finally:
+            self.sock.close()
+
+    def _count_final_drops(self) -> None:
+        """The socket's drop count from ``/proc/net/udp`` (Linux: the ``drops`` column of the
+        row of this socket's inode), said as a rise is said."""
+        drops = _proc_udp_drops(os.fstat(self.sock.fileno()).st_ino)
+        if drops is not None and drops > self.lost:
+            self._say_lost(drops)
 
     def begin(self) -> None:
         where = f"udp://{self.address[0]}:{self.address[1]}"
@@ -434,6 +473,7 @@ class UdpSource(_LineSource):
             pass
         if chunks:  # parsed by the session's loop (decode), with the other items
             self.events.put(("raw", "lines", [(b"\n".join(chunks), arrival_ns, wall_ns)]))
+        self._got = len(chunks)
         self.crowded = len(chunks) >= self._room // 4
         if last:
             self._count_drops(last)
@@ -447,12 +487,15 @@ class UdpSource(_LineSource):
                 lost = int.from_bytes(data[:4], sys.byteorder)
                 if lost > self.lost:
                     self.crowded = True
-                    why = (
-                        f"udp: the system dropped {lost - self.lost} datagram(s) (its receive "
-                        f"buffer was full; {lost} in all): samples were lost"
-                    )
-                    self.events.put(("info", why))
-                    self.lost = lost
+                    self._say_lost(lost)
+
+    def _say_lost(self, lost: int) -> None:
+        why = (
+            f"udp: the system dropped {lost - self.lost} datagram(s) (its receive "
+            f"buffer was full; {lost} in all): samples were lost"
+        )
+        self.events.put(("info", why))
+        self.lost = lost
 
 
 class StdinSource(_LineSource):
