@@ -248,6 +248,16 @@ def test_time_unit_hint_names_the_unit_that_makes_an_imu_rate():
     from imu_dcm.live.lines import time_unit_hint
 
     assert time_unit_hint(0.005, 0.005, "s") is None  # 200 Hz
+    # the stated range, 1 Hz to 100 kHz, ends included, as steps of float seconds give them
+    t0 = 1_700_000_000 * 10**9
+    for step_ns in (10_000, 1_000_000_000):
+        t_s = (t0 + step_ns * np.arange(100, dtype=np.int64) - t0 - 17 * step_ns) * 1e-9
+        step = float(np.median(np.diff(t_s)))
+        assert time_unit_hint(step, step, "s") is None, step
+    for step in (np.nextafter(1e-5, 0.0), np.nextafter(1.0, 2.0)):  # a rounding off the ends
+        assert time_unit_hint(step, step, "s") is None
+    assert time_unit_hint(0.99e-5, 0.99e-5, "s") is not None  # 101 kHz
+    assert time_unit_hint(1.01, 1.01, "s") is not None
     assert time_unit_hint(0.005, 7200.0, "s").endswith(
         "check the unit of the stamps (--time-units)"
     )

@@ -33,14 +33,20 @@ TIME_UNITS = {"s": 1_000_000_000, "ms": 1_000_000, "us": 1_000, "ns": 1}
 DEG = math.pi / 180.0
 
 
+#: The range's ends are inclusive: a step is a difference of float64 seconds, exact to ~1e-16
+#: of the stamps' magnitude; 1e-6 relative is far above that and far below a unit's factor.
+_STEP_ROUNDING = 1e-6
+
+
 def time_unit_hint(median_step_s: float, max_step_s: float, time_units: str | None) -> str | None:
-    """One line when the steps are of no IMU (a rate below 1 Hz or above 100 kHz, or a step of
-    hours), naming the likely stamp unit; None when they look like an IMU's.
+    """One line when the steps are of no IMU (a rate below 1 Hz or above 100 kHz, the ends
+    included in the range, or a step of hours), naming the likely stamp unit; None when they
+    look like an IMU's.
 
     ``time_units``: the unit the stamps were declared in (None: the source's own stamps). The
     likely unit is the one that makes the median step 0.1-100 ms (10 Hz to 10 kHz).
     """
-    if median_step_s > 1.0 or median_step_s < 1e-5:
+    if median_step_s > 1.0 * (1 + _STEP_ROUNDING) or median_step_s < 1e-5 * (1 - _STEP_ROUNDING):
         got = f"a median step of {median_step_s:.6g} s ({1.0 / median_step_s:.6g} Hz)"
     elif max_step_s > 3600.0:
         got = f"a step of {max_step_s / 3600.0:.3g} h"

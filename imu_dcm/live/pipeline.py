@@ -247,6 +247,7 @@ class Pipeline:
         self.latency = Latency()
         self.samples_before_start = 0
         self.cpu_s: float | None = None
+        self.read_interval_s: float | None = None  # the loop's final cadence
 
     # -- input -----------------------------------------------------------------------------
     def on_imu(self, rec: Received) -> None:

@@ -97,6 +97,13 @@ _BATCH_MAX_S = 0.02
 #: reads each sample a batch_s after its first bytes, not held for the next wake-up's read (worth
 #: a 10 ms interval's p99).
 _INLINE_MIN_S = 0.025
+#: The shortest cadence the loop takes when a source's rate needs it, s.
+_CADENCE_MIN_S = 0.01
+#: The loop reads a source whose buffer fills this much between two reads at most (a quarter:
+#: a rate that doubles, or a read that comes late, still finds room).
+_FILL_TARGET = 0.25
+#: After the first bytes of a source, the next read comes this soon, to measure the rate, s.
+_PROBE_S = 0.01
 #: The loop's wake-up interval by default: the view's display rate, or, without a view, four
 #: times a second (the status line, the recording and the reorder window's release need no
 #: more; each wake-up costs CPU of its own, most of it in caches gone cold while asleep).
@@ -370,6 +377,10 @@ class _Loop:
         self.idle_since = time.monotonic()
         self.next_flush = self.idle_since + self.interval_s  # the next wake-up of _receive
         self.inline = src.pollable and self.interval_s >= _INLINE_MIN_S  # read in the loop
+        self.default_interval_s = self.interval_s
+        self._last_read: float | None = None  # when the previous inline read began
+        self._probed = False  # the read after the first bytes is set (_cadence)
+        self._pending_next: float | None = None
 
     def _on_signal(self, signum, frame) -> None:
         self.reason = f"stopped by {signal.Signals(signum).name}"
@@ -389,6 +400,13 @@ class _Loop:
                     self.on_ready({"address": getattr(self.src, "address", None)})
                 self._receive()
                 self._drain()
+                if self.interval_s < self.default_interval_s:
+                    self.say(
+                        f"read every {self.interval_s * 1e3:.0f} ms (not "
+                        f"{self.default_interval_s * 1e3:.0f}): the source's rate filled its "
+                        f"buffer sooner"
+                    )
+                self.pipe.read_interval_s = self.interval_s
                 self.pipe.finish()
                 self.pipe.flush(final=True)
                 self.pipe.cpu_s = time.process_time() - cpu_start
@@ -406,11 +424,11 @@ class _Loop:
         now = time.monotonic()
         self.next_flush, next_status = now + self.interval_s, now + self.status_every
         window_s = pipe.reorder.window_ns * 1e-9
-        while not self.stop.wait(max(0.0, self.next_flush - time.monotonic())):
+        while not self._wait(max(0.0, self.next_flush - time.monotonic())):
             if self.inline:
+                before = time.monotonic()
                 self.src.poll()
-                if self.src.crowded:
-                    self._sooner()
+                self._cadence(before)
             if self._take():
                 return
             now = time.monotonic()
@@ -419,7 +437,10 @@ class _Loop:
             pipe.flush()
             if self.recorder is not None:
                 self.recorder.maybe_flush()
-            self.next_flush = max(self.next_flush + self.interval_s, now)  # a steady cadence
+            if self._pending_next is not None:  # the probe read after the first bytes
+                self.next_flush, self._pending_next = self._pending_next, None
+            else:
+                self.next_flush = max(self.next_flush + self.interval_s, now)  # steady cadence
             if self.status and now >= next_status:
                 _status(pipe, self.tty)
                 next_status = now + self.status_every
@@ -427,18 +448,43 @@ class _Loop:
                 self.reason = f"no sample for {self.idle_stop_s:g} s"
                 return
 
-    def _sooner(self) -> None:
-        """A read found the source's buffer filling between wake-ups: halve the interval (down
-        to the shortest inline one), and say so."""
-        self.src.crowded = False
-        if self.interval_s <= _INLINE_MIN_S:
+    def _wait(self, timeout_s: float) -> bool:
+        """Sleep until the next read; True when stopped. A line source that has sent nothing yet
+        is watched meanwhile (in slices, so that ``stop`` is seen), and read at its first
+        bytes: the cadence its rate needs is set from the first reads, before its buffer can
+        fill (:meth:`_cadence`)."""
+        if not (self.inline and self.src.watchable and not self.src.flowing):
+            return self.stop.wait(timeout_s)
+        end = time.monotonic() + timeout_s
+        while not self.stop.is_set():
+            left = end - time.monotonic()
+            if left <= 0:
+                return False
+            if self.src.ready(min(left, 0.05)):
+                self.next_flush = time.monotonic()
+                return self.stop.is_set()
+        return True
+
+    def _cadence(self, read_at: float) -> None:
+        """The interval the source's rate needs, from the read that just ran: the buffer filled
+        ``fill`` in the time since the previous read, so a read every ``dt * target / fill``
+        finds it at most a quarter full (down to :data:`_CADENCE_MIN_S`; never longer than the
+        interval set). The first read with data is followed by one after :data:`_PROBE_S`,
+        which measures the rate."""
+        src, prev = self.src, self._last_read
+        self._last_read = read_at
+        if not src.flowing:
             return
-        self.interval_s = max(self.interval_s / 2, _INLINE_MIN_S)
-        self.next_flush = min(self.next_flush, time.monotonic() + self.interval_s)
-        self.say(
-            f"reading every {self.interval_s * 1e3:.0f} ms: the source's buffer was filling "
-            f"between reads"
-        )
+        if not self._probed:
+            self._probed = True
+            self._pending_next = read_at + _PROBE_S
+            return
+        fill = src.fill
+        if fill is None or prev is None or fill <= 0:
+            return
+        need = max(_CADENCE_MIN_S, (read_at - prev) * _FILL_TARGET / fill)
+        if need < 0.9 * self.interval_s:
+            self.interval_s = need  # from the next wake-up on
 
     def _take(self, data_only: bool = False) -> bool:
         """Every event queued by now, in order; raw items decoded once per key (the source's
@@ -603,5 +649,6 @@ def _summary(
         "stopped": reason,
         "record": str(recorder.path) if recorder is not None else None,
         "cpu_s": pipe.cpu_s,
+        "read_interval_s": pipe.read_interval_s,
         "elapsed_s": time.perf_counter() - started,
     }

@@ -146,20 +146,36 @@ def _enable_drop_count(sock: socket.socket) -> bool:
 UDP_RCVBUF = 4 << 20
 
 
-def _proc_udp_drops(inode: int) -> int | None:
-    """The ``drops`` count of the UDP socket with ``inode`` in ``/proc/net/udp`` (or ``udp6``),
-    or None where there is no such file or row (not Linux)."""
+def _proc_udp_row(inode: int) -> list[str] | None:
+    """The row of the UDP socket with ``inode`` in ``/proc/net/udp`` (or ``udp6``), as cells, or
+    None where there is no such file or row (not Linux)."""
+    key = f" {inode} "
     for name in ("/proc/net/udp", "/proc/net/udp6"):
         try:
             with open(name) as f:
-                rows = f.read().splitlines()[1:]
+                text = f.read()
         except OSError:
             continue
-        for row in rows:
-            cells = row.split()
-            if len(cells) >= 13 and cells[9] == str(inode):
-                return int(cells[12])
+        at = text.find(key)
+        while at >= 0:  # the inode's column (the 10th), not a number elsewhere in a row
+            row = text[text.rfind("\n", 0, at) + 1 : text.find("\n", at)].split()
+            if len(row) >= 13 and row[9] == str(inode):
+                return row
+            at = text.find(key, at + 1)
     return None
+
+
+def _proc_udp_drops(inode: int) -> int | None:
+    """The ``drops`` count of the UDP socket with ``inode`` (``/proc/net/udp``), or None."""
+    row = _proc_udp_row(inode)
+    return None if row is None else int(row[12])
+
+
+def _proc_udp_queue(inode: int) -> int | None:
+    """The bytes queued on the UDP socket with ``inode`` (``rx_queue``, the buffer's use as the
+    system counts it against ``SO_RCVBUF``), or None."""
+    row = _proc_udp_row(inode)
+    return None if row is None else int(row[4].partition(":")[2], 16)
 
 
 def _pipe_size(fd: int) -> int | None:
@@ -268,6 +284,11 @@ class Source:
         #: Set by a read that found the system's buffer filling (the reader should come
         #: sooner: a full buffer loses datagrams or blocks the writer).
         self.crowded = False
+        #: How full the system's buffer was at the last read, 0 to 1 (None: not known), and
+        #: whether a read has found anything yet: the session's loop sets its cadence from
+        #: them (:meth:`imu_dcm.live.session._Loop._cadence`).
+        self.fill: float | None = None
+        self.flowing = False
         #: Datagrams the system dropped because its buffer was full (UDP, where it tells).
         self.lost = 0
         self._said: set[str] = set()
@@ -288,6 +309,9 @@ class Source:
         got = time.perf_counter_ns(), time.time_ns()
         self._stop.wait(batch_s)
         return got
+
+    #: The session's loop may watch the source for its first bytes (:meth:`ready`).
+    watchable: bool = False
 
     #: The session's loop may read the source itself (:meth:`begin`, then :meth:`poll` once
     #: per wake-up) instead of its thread: one wake-up per interval, not two.
@@ -347,6 +371,12 @@ class Source:
 
 class _LineSource(Source):
     converts_gyro_units = True
+    #: The session's loop may watch it for its first bytes (:meth:`ready`).
+    watchable = True
+
+    def ready(self, timeout_s: float) -> bool:
+        """Whether there is something to read within ``timeout_s``."""
+        return self._ready(timeout_s)
 
     def __init__(self, gyro_units: str, time_units: str, batch_s: float = BATCH_S) -> None:
         super().__init__()
@@ -424,6 +454,7 @@ class UdpSource(_LineSource):
         self.address = self.sock.getsockname()
         self._room = 4  # datagrams the receive buffer holds at least (set by begin)
         self._got = 0  # datagrams the last read took
+        self._rcvbuf, self._inode = 1 << 20, 0  # set by begin
         self._ovfl = _enable_drop_count(self.sock)
 
     def _close(self) -> None:
@@ -432,7 +463,7 @@ class UdpSource(_LineSource):
         try:
             self.sock.setblocking(False)
             at = self._read_at or (time.perf_counter_ns(), time.time_ns())
-            while self._read(*at) and self._got == _DRAIN_MAX:
+            while self._read(*at) and self._got >= _DRAIN_MAX:
                 pass
             self._count_final_drops()
         except OSError:
@@ -453,16 +484,21 @@ class UdpSource(_LineSource):
         self.events.put(("info", f"listening on {where}"))
         self.sock.setblocking(False)
         # a small datagram takes ~0.8 KB of the buffer (the system's bookkeeping with it)
-        self._room = max(4, self.sock.getsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF) // 1024)
+        self._rcvbuf = self.sock.getsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF)
+        self._room = max(4, self._rcvbuf // 1024)
+        ino = os.fstat(self.sock.fileno()).st_ino
+        self._inode = ino if _proc_udp_row(ino) is not None else 0
 
     def _ready(self, timeout_s: float) -> bool:
         return _readable(self.sock, timeout_s)
 
     def _read(self, arrival_ns: int, wall_ns: int) -> bool:
+        queued = _proc_udp_queue(self._inode) if self._inode else None
         chunks: list[bytes] = []
         last = None  # the last datagram's ancillary data: the system's drop count then
+        most = max(_DRAIN_MAX, 2 * self._room)  # all the buffer can hold, and what came since
         try:
-            while len(chunks) < _DRAIN_MAX:
+            while len(chunks) < most:
                 if self._ovfl:
                     data, anc, _, _ = self.sock.recvmsg(65536, _OVFL_SPACE)
                     last = anc or last
@@ -474,7 +510,11 @@ class UdpSource(_LineSource):
         if chunks:  # parsed by the session's loop (decode), with the other items
             self.events.put(("raw", "lines", [(b"\n".join(chunks), arrival_ns, wall_ns)]))
         self._got = len(chunks)
-        self.crowded = len(chunks) >= self._room // 4
+        self.flowing |= bool(chunks)
+        # the buffer's use before the read (the system's own count, /proc/net/udp), or from
+        # the datagrams read at a conservative ~1 KB each
+        self.fill = queued / self._rcvbuf if queued is not None else len(chunks) / self._room
+        self.crowded = self.fill >= 0.25
         if last:
             self._count_drops(last)
         return True
@@ -523,6 +563,8 @@ class StdinSource(_LineSource):
         data = os.read(self.fd, 1 << 20)
         # a pipe half full or more: its writer would soon block (a datagram socket, which
         # loses rather than blocks, asks for a reader sooner, at a quarter)
+        self.fill = None if self._room is None else min(1.0, len(data) / self._room)
+        self.flowing |= bool(data)
         self.crowded = self._room is not None and len(data) >= self._room // 2
         if not data:
             if self._rest:
