@@ -35,7 +35,7 @@ def _truth_end() -> np.ndarray:
     return Rotation.from_rotvec([0, 0, np.radians(SPIN_DEG_S) * (N - 1) / RATE_HZ]).as_quat()
 
 
-def _run_stdin(lines: list[bytes], tmp_path, **kw):
+def _run_stdin(lines: list[bytes], tmp_path, gyro_units_given: str = "deg/s", **kw):
     r, w = os.pipe()
 
     def feed():
@@ -51,7 +51,7 @@ def _run_stdin(lines: list[bytes], tmp_path, **kw):
             stdin_fd=r,
             rerun="off",
             status=False,
-            gyro_units="deg/s",
+            gyro_units=gyro_units_given,
             say=lambda _s: None,
             summary_json=summary,
             **kw,
@@ -103,3 +103,54 @@ def test_over_udp_too(tmp_path):
     assert s["dropped_implausible"] == 2 and s["bias_segments"] == []
     assert angle_between_deg(res.q_w_b, _truth_end()) < 1e-9
     json.dumps(s, allow_nan=False)
+
+
+def _json_lines(rate_given: float, rate_true_rad_s: float, n: int = 3001) -> list[bytes]:
+    """JSON lines at 1 kHz: the gyro ``rate_given`` about z, and the truth of a body turning
+    at ``rate_true_rad_s`` about z."""
+    out = []
+    for k in range(n):
+        t = k / RATE_HZ
+        q = Rotation.from_rotvec([0, 0, rate_true_rad_s * t]).as_quat().tolist()
+        out.append(json.dumps({"t_s": t, "omega_b": [0, 0, rate_given], "q_w_b": q}).encode())
+    return out
+
+
+@pytest.mark.parametrize(
+    ("given", "true_rad_s", "flagged", "why"),
+    [
+        (20.0, np.radians(20.0), True, "57.3"),  # 20 deg/s given as rad/s: the truth says so
+        (1.5, 1.5, False, None),  # a real 1.5 rad/s spin, its truth agreeing
+    ],
+)
+def test_deg_per_s_given_as_rad_per_s_is_flagged_against_the_truth(
+    given, true_rad_s, flagged, why, tmp_path
+):
+    r, w = os.pipe()
+    lines = _json_lines(given, true_rad_s)
+
+    def feed():
+        with os.fdopen(w, "wb") as f:
+            f.write(b"\n".join(lines) + b"\n")
+
+    said: list[str] = []
+    feeder = threading.Thread(target=feed)
+    feeder.start()
+    try:
+        res = run("-", stdin_fd=r, rerun="off", status=False, bias="none", say=said.append)
+    finally:
+        feeder.join()
+        os.close(r)
+    s = res.summary
+    hits = [line for line in said if line.startswith("the rates look like deg/s")]
+    assert bool(hits) is flagged and bool(s["units_evidence"]) is flagged
+    if flagged:
+        assert len(hits) == 1 and why in hits[0] and "--gyro-units deg/s" in hits[0]
+
+
+def test_deg_per_s_given_as_rad_per_s_is_flagged_by_the_full_scale_without_truth(tmp_path):
+    # 90 deg/s as "90 rad/s": above the +-2000 deg/s = 34.9 rad/s full scale of common gyros
+    res, _ = _run_stdin(_spin_lines({}), tmp_path, bias="none", gyro_units_given="rad/s")
+    assert "full scale" in res.summary["units_evidence"]
+    res, _ = _run_stdin(_spin_lines({}), tmp_path, bias="none")  # declared deg/s: not judged
+    assert res.summary["units_evidence"] is None

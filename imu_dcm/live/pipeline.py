@@ -40,6 +40,7 @@ from imu_dcm.live.lines import time_unit_hint
 from imu_dcm.live.reorder import ReorderBuffer
 from imu_dcm.live.sources import Received
 from imu_dcm.metrics import attitude_error_deg
+from imu_dcm.rates import deg_evidence
 from imu_dcm.rest import CausalRestBias
 from imu_dcm.streaming import DcmIntegrator
 
@@ -57,6 +58,10 @@ _LAT_MIN_MS = 1e-3
 _LAT_BINS = 20_800
 #: Latencies kept as values for :attr:`LiveResult.latency_ms` (the newest ones).
 LATENCY_KEEP = 1 << 16
+#: The first seconds of rates (source time) judged for deg/s declared as rad/s, and at most
+#: this many samples of them (bounded memory: 1.6 MB).
+UNITS_PROBE_S = 5.0
+UNITS_PROBE_MAX = 50_000
 #: Gaps kept with their times (the count goes on past them).
 GAPS_KEEP = 1000
 
@@ -190,8 +195,12 @@ class Pipeline:
         recorder,
         say,
         time_units: str | None = None,
+        check_units: bool = False,
     ) -> None:
         self.method = method
+        #: rates declared rad/s: their first seconds are judged once for deg/s (_units_probe)
+        self.units_probe = _Rows(*_SAMPLES) if check_units else None
+        self.units_evidence: str | None = None
         self.bias_mode = (
             "auto"
             if isinstance(bias, str) and bias == "auto"
@@ -291,6 +300,8 @@ class Pipeline:
             self.t0_ns = int(t_ns[0])
         t_s = (t_ns - self.t0_ns) * 1e-9
         self._check_steps(t_s)
+        if self.units_probe is not None:
+            self._probe_units(t_ns, t_s, w)
         if self.rest is not None:
             n_seg = len(self.rest.segments)
             b = self.rest.update_many(w, t_s)
@@ -336,6 +347,28 @@ class Pipeline:
             hint = time_unit_hint(float(np.median(steps)), float(steps.max()), self.time_units)
             if hint:
                 self.say(hint)
+
+    def _probe_units(self, t_ns: NDArray, t_s: NDArray, w: NDArray, final: bool = False) -> None:
+        """Rates declared rad/s that look like deg/s, judged once on the first
+        :data:`UNITS_PROBE_S` s (at most :data:`UNITS_PROBE_MAX` samples) by replay's rule
+        (:func:`imu_dcm.rates.deg_evidence`: against the truth's rotation rate where the truth
+        covers them, else the gyro full-scale bound); said in one line, and in the summary."""
+        probe = self.units_probe
+        probe.add(t_ns, t_s, w)
+        n = len(probe)
+        if not final and n < UNITS_PROBE_MAX and t_s[-1] < UNITS_PROBE_S:
+            return
+        self.units_probe = None
+        pt_ns, pt_s, pw = probe.take()
+        if len(pt_ns) < 20:
+            return
+        q = np.full((len(pt_ns), 4), np.nan)
+        if self.truth_t:
+            q = _slerp(*self._truth_arrays(), pt_ns)
+        evidence = deg_evidence(pw, pt_s, q)
+        if evidence:
+            self.units_evidence = evidence
+            self.say(f"the rates look like deg/s: {evidence}; pass --gyro-units deg/s to convert")
 
     @property
     def median_step_s(self) -> float | None:
@@ -483,6 +516,9 @@ class Pipeline:
         t_ns, w, arrival = self.reorder.flush()
         if len(t_ns):
             self._process(t_ns, w, arrival)
+        if self.units_probe is not None and len(self.units_probe):
+            empty = np.zeros(0)
+            self._probe_units(empty.astype(np.int64), empty, np.zeros((0, 3)), final=True)
         if self.integ is None and len(self.waiting):
             t_ns, t_s, wc = self.waiting.take()
             self.waiting.add(t_ns, t_s, wc)

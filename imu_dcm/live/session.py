@@ -278,6 +278,7 @@ def run(
             recorder=recorder,
             say=say,
             time_units=o.time_units if src.converts_gyro_units else None,
+            check_units=o.gyro_units == "rad/s",
         )
         gc.freeze()  # the start-up's objects: not traversed by every collection while live
         reason = _Loop(src, pipe, o, stop or threading.Event(), say, on_ready).run()
@@ -624,6 +625,7 @@ def _summary(
         "reconnects": int(getattr(src, "reconnects", 0)),
         "lost_by_system": int(src.lost),
         "gyro_units": o.gyro_units,
+        "units_evidence": pipe.units_evidence,
         "bias_mode": pipe.bias_mode,
         "bias_rad_s": bias_mean,
         "bias_final_rad_s": list(pipe.rest.bias_rad_s) if pipe.rest else list(pipe.fixed_bias),
