@@ -154,3 +154,21 @@ def test_deg_per_s_given_as_rad_per_s_is_flagged_by_the_full_scale_without_truth
     assert "full scale" in res.summary["units_evidence"]
     res, _ = _run_stdin(_spin_lines({}), tmp_path, bias="none")  # declared deg/s: not judged
     assert res.summary["units_evidence"] is None
+
+
+def test_the_summary_holds_no_value_json_cannot_hold():
+    from imu_dcm.live.session import _json_safe
+
+    got = _json_safe({"a": float("nan"), "b": [1.0, float("inf")], "c": {"d": -float("inf")}})
+    assert got == {"a": None, "b": [1.0, None], "c": {"d": None}}
+    json.dumps(got, allow_nan=False)
+
+
+def test_live_help_names_every_source():
+    from imu_dcm.live.__main__ import build_parser
+    from imu_dcm.live.sources import SOURCES
+
+    text = build_parser().format_help()
+    for scheme in SOURCES:
+        assert (scheme if scheme == "-" else f"{scheme}:") in text
+    assert "mavlink:udpin:HOST:PORT" in text

@@ -249,12 +249,14 @@ def run(
         Summary keys: ``source, imu_topic, imu_type, truth_topic, truth_type, samples,
         duration_s, rate_hz, dropped_nonfinite, dropped_implausible (a rate over
         :data:`imu_dcm.rates.MAX_RATE_RAD_S`, replay's rule), dropped_duplicate, dropped_backward,
-        reordered, malformed, gaps, reconnects, lost_by_system (UDP datagrams the system
-        dropped, its buffer full), gyro_units, bias_mode, bias_rad_s,
+        reordered, malformed, gaps (the first 1000), gap_count, reconnects, lost_by_system (UDP
+        datagrams the system dropped, its buffer full, counted to the stop), gyro_units,
+        units_evidence (why the rates look like deg/s, or None), bias_mode, bias_rad_s,
         bias_segments, method, start_time_s, unscored_before_s, initial_quat_xyzw,
         final_quat_xyzw, final_t_s, truth_samples_used, rms/max error/inclination/heading (deg,
         None without truth), latency_p50_ms, latency_p99_ms, stopped, record, cpu_s (process
-        CPU time while receiving, all threads), elapsed_s``.
+        CPU time while receiving, all threads), read_interval_s (the loop's final cadence),
+        elapsed_s``; no value is NaN or Inf (None where it cannot be measured).
     """
     started = time.perf_counter()
     o = LiveOptions(**options)
