@@ -172,3 +172,16 @@ def test_live_help_names_every_source():
     for scheme in SOURCES:
         assert (scheme if scheme == "-" else f"{scheme}:") in text
     assert "mavlink:udpin:HOST:PORT" in text
+
+
+def test_a_line_without_end_costs_itself_not_memory(tmp_path):
+    # 1 MB with no line end between two good stretches: dropped as one malformed line (said
+    # once), never held whole; the samples around it are integrated
+    from imu_dcm.live.sources import MAX_LINE_BYTES
+
+    lines = _spin_lines({})
+    junk = b"9" * (16 * MAX_LINE_BYTES)
+    res, _ = _run_stdin([*lines[:1000], junk, *lines[1000:]], tmp_path, bias="none")
+    s = res.summary
+    assert s["malformed"] == 1 and s["samples"] == N
+    assert angle_between_deg(res.q_w_b, _truth_end()) < 1e-9

@@ -142,6 +142,8 @@ def _enable_drop_count(sock: socket.socket) -> bool:
     return True
 
 
+#: A stdin line longer than this (bytes, no line end) is dropped as malformed, not kept whole.
+MAX_LINE_BYTES = 1 << 16
 #: The receive buffer a UDP source asks for, bytes (the system caps it at ``net.core.rmem_max``).
 UDP_RCVBUF = 4 << 20
 
@@ -551,6 +553,7 @@ class StdinSource(_LineSource):
         super().__init__(gyro_units, time_units, batch_s)
         self.fd = 0 if fd is None else fd
         self._rest = b""  # a line not yet ended
+        self._skipping = False  # the rest of a line too long to keep
         self._room = _pipe_size(self.fd)  # bytes a pipe holds (None: not a pipe)
 
     def begin(self) -> None:
@@ -572,9 +575,16 @@ class StdinSource(_LineSource):
                 self._rest = b""
             self.events.put(("end", "end of input"))
             return False
-        whole, newline, self._rest = (self._rest + data).rpartition(b"\n")
+        buf = self._rest + data
+        if self._skipping:  # the rest of a line dropped as too long, up to its end
+            _, end, buf = buf.partition(b"\n")
+            self._skipping = not end
+        whole, newline, self._rest = buf.rpartition(b"\n")
         if newline:  # parsed by the session's loop (decode), with the other items
             self.events.put(("raw", "lines", [(whole, arrival_ns, wall_ns)]))
+        if len(self._rest) > MAX_LINE_BYTES:  # no line end in sight: memory stays bounded
+            self._rest, self._skipping = b"", True
+            self.drop("long-line", f"a line longer than {MAX_LINE_BYTES} bytes")
         return True
 
 
