@@ -453,9 +453,9 @@ class _Loop:
 
     def _wait(self, timeout_s: float) -> bool:
         """Sleep until the next read; True when stopped. A line source that has sent nothing yet
-        is watched meanwhile (in slices, so that ``stop`` is seen), and read at its first
-        bytes: the cadence its rate needs is set from the first reads, before its buffer can
-        fill (:meth:`_cadence`)."""
+        is watched meanwhile, and read at its first bytes: the cadence its rate needs is set
+        from the first reads, before its buffer can fill (:meth:`_cadence`). ``stop`` is seen
+        at the end of the interval, as when sleeping (no more wake-ups than the cadence's)."""
         if not (self.inline and self.src.watchable and not self.src.flowing):
             return self.stop.wait(timeout_s)
         end = time.monotonic() + timeout_s
@@ -463,7 +463,7 @@ class _Loop:
             left = end - time.monotonic()
             if left <= 0:
                 return False
-            if self.src.ready(min(left, 0.05)):
+            if self.src.ready(left):
                 self.next_flush = time.monotonic()
                 return self.stop.is_set()
         return True
