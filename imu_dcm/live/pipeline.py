@@ -36,6 +36,7 @@ from numpy.typing import NDArray
 
 from imu_dcm.errors import GapWarning
 from imu_dcm.integrate import find_gaps, gap_message, integrate_quat
+from imu_dcm.live.latency import LATENCY_KEEP, Latency
 from imu_dcm.live.lines import time_unit_hint
 from imu_dcm.live.reorder import ReorderBuffer
 from imu_dcm.live.sources import Received
@@ -44,7 +45,7 @@ from imu_dcm.rates import deg_evidence
 from imu_dcm.rest import CausalRestBias
 from imu_dcm.streaming import DcmIntegrator
 
-__all__ = ["LiveResult", "Pipeline"]
+__all__ = ["LATENCY_KEEP", "Latency", "LiveResult", "Pipeline"]
 
 DEG = math.pi / 180.0
 _TRUTH_KEEP_NS = 5_000_000_000  # truth kept for slerp, ns behind the newest
@@ -52,12 +53,6 @@ _ERROR_GIVE_UP_NS = 2_000_000_000  # an estimate uncovered by truth this long: n
 _ANCHOR_KEEP_NS = 10_000_000_000  # samples kept to re-anchor on a late truth, ns
 _RECENT = 65  # stamps kept for the gap rule and the rate (64 steps)
 _IDENTITY = np.array([0.0, 0.0, 0.0, 1.0])
-#: Latency histogram: bins this wide in relative terms, from _LAT_MIN_MS up (~1e6 ms).
-LATENCY_REL = 1e-3
-_LAT_MIN_MS = 1e-3
-_LAT_BINS = 20_800
-#: Latencies kept as values for :attr:`LiveResult.latency_ms` (the newest ones).
-LATENCY_KEEP = 1 << 16
 #: The first seconds of rates (source time) judged for deg/s declared as rad/s, and at most
 #: this many samples of them (bounded memory: 1.6 MB).
 UNITS_PROBE_S = 5.0
@@ -119,45 +114,6 @@ class _Rows:
             newest = self.chunks[-1][0][-1]
             while len(self.chunks) > 1 and self.chunks[1][0][0] <= newest - keep:
                 del self.chunks[0]
-
-
-class Latency:
-    """Receive -> view latencies in bounded memory: a histogram of every sample's (bins
-    :data:`LATENCY_REL` wide in relative terms, so a percentile is read to 0.1 %), the newest
-    batch (the status line) and the newest :data:`LATENCY_KEEP` values (the result's array).
-
-    A live run of any length holds the same: 27 bytes a sample grew without bound when every
-    latency was kept (836 MB after 31 M samples).
-    """
-
-    def __init__(self) -> None:
-        self.counts = np.zeros(_LAT_BINS, np.int64)
-        self.n = 0
-        self.last = np.zeros(0)
-        self._recent: list[NDArray] = []
-        self._recent_n = 0
-
-    def add(self, ms: NDArray) -> None:
-        """Latencies of one batch, ms."""
-        self.last = ms
-        self.n += len(ms)
-        k = np.log(np.maximum(ms, _LAT_MIN_MS) / _LAT_MIN_MS) / np.log1p(LATENCY_REL)
-        self.counts += np.bincount(np.minimum(k.astype(np.int64), _LAT_BINS - 1), None, _LAT_BINS)
-        self._recent.append(ms)
-        self._recent_n += len(ms)
-        while self._recent_n - len(self._recent[0]) >= LATENCY_KEEP:
-            self._recent_n -= len(self._recent.pop(0))
-
-    def percentile(self, p: float) -> float | None:
-        """The ``p`` th percentile of every latency, ms (the centre of its bin), or None."""
-        if not self.n:
-            return None
-        k = int(np.searchsorted(np.cumsum(self.counts), max(1, math.ceil(p / 100 * self.n))))
-        return float(_LAT_MIN_MS * (1 + LATENCY_REL) ** (k + 0.5))
-
-    def recent(self) -> NDArray:
-        """The newest latencies kept (at most :data:`LATENCY_KEEP` and one batch), ms."""
-        return np.concatenate(self._recent) if self._recent else np.zeros(0)
 
 
 class _Stats:
