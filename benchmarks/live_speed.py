@@ -1,7 +1,9 @@
 """Live CPU and latency of ``python -m imu_dcm.live`` per source and view setting, fed at a rate.
 
 ``python -m benchmarks.live_speed [--rate 1000] [--duration 20] [--sources ws,udp,stdin]
-[--latency-duration 20] [--replay-rounds 3] [--ws-clients]``
+[--latency-duration 20] [--replay-rounds 3] [--ws-clients]``; ``--fast [--fast-rate 100000]
+[--fast-duration 10]`` for the fast rows only; ``--soak`` for the memory of a long run
+(:mod:`benchmarks.live_soak`).
 
 What is measured (the live command runs as a child process, as a user runs it):
 
@@ -31,6 +33,10 @@ What is measured (the live command runs as a child process, as a user runs it):
   run after 50 ms asleep as live's loop runs it. Where a sleeping process's caches and
   page tables go cold (a shared or nested virtual machine), the second is many times the first;
   live's CPU, made of such wake-ups, rises and falls with it.
+* **Fast rows** (``--fast``): UDP at 100 000 samples/s for 10 s, one, 10 and 100 lines a
+  datagram, the view off: samples sent, integrated, lost (and of those, counted by the system
+  as dropped), the loop's final read cadence and live's CPU as a fraction of one core. Target:
+  0 lost, within 40 % of a core.
 * The report's first line gives the machine's cores and its load average at start and end (the
   CPU figures rise with the load of other jobs: measure before and after one after the other).
 """
@@ -171,16 +177,19 @@ def wait_bound(proc, port: int) -> None:
     raise TimeoutError("live did not bind the UDP port")
 
 
-def feed_udp(t_ns, w, rate_hz: float, port: int):
+def feed_udp(t_ns, w, rate_hz: float, port: int, per_datagram: int = 1):
+    """Datagrams of ``per_datagram`` lines each, paced to ``rate_hz`` samples/s."""
     lines = lines_of(t_ns, w)
+    grams = [b"\n".join(lines[k : k + per_datagram]) for k in range(0, len(lines), per_datagram)]
 
     def feed(proc):
         wait_bound(proc, port)
         time.sleep(0.5)
         s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-        for lo, hi in paced(len(lines), rate_hz):
-            for line in lines[lo:hi]:
-                s.sendto(line, ("127.0.0.1", port))
+        send, to = s.sendto, ("127.0.0.1", port)
+        for lo, hi in paced(len(grams), rate_hz / per_datagram):
+            for gram in grams[lo:hi]:
+                send(gram, to)
         s.close()
 
     return feed
@@ -242,13 +251,14 @@ def sustain(
     tmp: Path,
     window_ms: float = 50.0,
     view_ms: float | None = None,
+    per_datagram: int = 1,
 ):
     t_ns, w = coning(rate_hz, duration_s)
     if kind == "udp":
         port = free_port()
         s = run_live(
             f"udp://127.0.0.1:{port}",
-            feed_udp(t_ns, w, rate_hz, port),
+            feed_udp(t_ns, w, rate_hz, port, per_datagram),
             tmp,
             window_ms,
             view_ms=view_ms,
@@ -281,7 +291,33 @@ def sustain(
         "cpu_per_khz": s["cpu_s"] / duration_s / (rate_hz / 1000.0),
         "p50_ms": s["latency_p50_ms"],
         "p99_ms": s["latency_p99_ms"],
+        "lines_per_datagram": per_datagram,
+        "lost_by_system": s["lost_by_system"],
+        "read_ms": 1e3 * (s.get("read_interval_s") or 0.0),
     }
+
+
+def fast_rows(args, tmp: Path) -> list[dict]:
+    """UDP at ``--fast-rate`` samples/s, 1, 10 and 100 lines a datagram, the view off."""
+    VIEW["mode"] = "off"
+    return [
+        sustain("udp", args.fast_rate, args.fast_duration, tmp, per_datagram=k)
+        for k in (1, 10, 100)
+    ]
+
+
+def report_fast(rows: list[dict]) -> None:
+    print(
+        f"{'source':<7}{'lines/dgram':>12}{'rate Hz':>9}{'dur s':>7}{'sent':>9}"
+        f"{'integrated':>11}{'lost':>6}{'by system':>10}{'read every':>11}{'CPU s':>7}"
+        f"{'% of a core':>12}"
+    )
+    for r in rows:
+        print(
+            f"{'udp':<7}{r['lines_per_datagram']:>12}{r['rate_hz']:>9.0f}{r['duration_s']:>7.0f}"
+            f"{r['sent']:>9}{r['integrated']:>11}{r['lost']:>6}{r['lost_by_system']:>10}"
+            f"{r['read_ms']:>9.0f}ms{r['cpu_s']:>7.2f}{100 * r['cpu_s'] / r['duration_s']:>11.1f}%"
+        )
 
 
 def replay_cpu(rate_hz: float, duration_s: float, tmp: Path, rounds: int) -> float:
@@ -448,8 +484,31 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--no-latency", action="store_true", help="skip the low-latency rows")
     p.add_argument("--ws-clients", action="store_true", help="also the two WebSocket clients")
     p.add_argument("--json", type=Path, help="also write the rows as JSON")
+    p.add_argument(
+        "--fast",
+        action="store_true",
+        help="only the fast rows: UDP at --fast-rate, 1, 10 and 100 lines a datagram, view off",
+    )
+    p.add_argument("--fast-rate", type=float, default=100_000.0, help="samples/s (100000)")
+    p.add_argument("--fast-duration", type=float, default=10.0, help="s (default 10)")
+    p.add_argument(
+        "--soak",
+        action="store_true",
+        help="the memory of a long run instead: python -m benchmarks.live_soak's defaults",
+    )
     args = p.parse_args(argv)
+    if args.soak:  # its own module (which uses this one's helpers), as a user runs it
+        return subprocess.call([sys.executable, "-m", "benchmarks.live_soak"], cwd=REPO)
     limit_threads_env()
+    if args.fast:
+        with tempfile.TemporaryDirectory(prefix="live_speed_") as d:
+            rows = fast_rows(args, Path(d))
+        print(
+            f"imu_dcm live speed, fast rows: {os.cpu_count()} cores, load average "
+            f"{os.getloadavg()[0]:.1f} at the end; live as a child process, bias none, magnus4"
+        )
+        report_fast(rows)
+        return 0
     import platform
 
     import numpy as np

@@ -74,10 +74,13 @@ def test_the_largest_stamp_and_a_rate_that_is_no_number():
     assert t.tolist() == [1_000_000_000] and bad == 1
 
 
-def test_non_finite_rates_are_malformed_rows():
-    t_ns, w, bad = parse_csv_blob(b"1,0,0,1\n2,nan,0,0\n3,0,inf,0\n4,1,1,1", gyro_units="deg/s")
-    assert bad == 2 and t_ns.tolist() == [1_000_000_000, 4_000_000_000]
-    assert np.array_equal(w, np.radians([[0, 0, 1], [1, 1, 1]]))
+def test_non_finite_rates_are_rows_the_pipeline_judges():
+    # not malformed: the pipeline drops and counts them with every other non-finite rate
+    blob = b"1,0,0,1\n2,nan,0,0\n3,0,inf,0\n4,1,1,1\n5,1.7e308,0,0"
+    t_ns, w, bad = parse_csv_blob(blob, gyro_units="deg/s")
+    assert bad == 0 and t_ns.tolist() == [k * 1_000_000_000 for k in range(1, 6)]
+    assert np.array_equal(w[[0, 3]], np.radians([[0, 0, 1], [1, 1, 1]]))
+    assert np.isnan(w[1, 0]) and np.isinf(w[2, 1]) and w[4, 0] == np.radians(1.7e308)
 
 
 def test_built_scan_equals_numba_compile():

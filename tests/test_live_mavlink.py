@@ -42,6 +42,10 @@ for k in range(751):                      # gyro every 4 ms from 10 s since boot
     t_us = (T0_MS + 4 * k) * 1000
     if kind == "highres":
         m = mav.highres_imu_encode(t_us, 0, 0, -9.8, *w, 0, 0, 0, 0, 0, 0, 0, 0x3F)
+    elif kind == "hostile":               # 3e38 rad/s every 50th; one stamp of 2^64 - 1 us
+        ww = (3e38, 0.0, 0.0) if k % 50 == 25 else w
+        m = mav.highres_imu_encode(2**64 - 1 if k == 200 else t_us, 0, 0, -9.8, *ww, 0, 0, 0,
+                                   0, 0, 0, 0, 0x3F)
     elif kind == "scaled":                # mrad/s as int16: 250, -125, 500 exactly
         m = mav.scaled_imu_encode(t_us // 1000, 0, 0, -1000, *(int(v * 1000) for v in w), 0, 0, 0)
     else:                                 # raw counts at 0.5 mrad/s per count
@@ -129,3 +133,24 @@ def test_source_strings():
     ):
         with pytest.raises(InputError, match="Expected SOURCE mavlink:udpin:HOST:PORT"):
             parse_url(bad)
+
+
+def test_mavlink_survives_implausible_rates_and_an_overflowing_stamp():
+    # HIGHRES_IMU with 3e38 rad/s in every 50th packet (15 of 751) and one time_usec of
+    # 2^64 - 1: the rates are dropped and counted as replay drops them, the stamp is a
+    # malformed message, and the stream goes on to the end on the exact attitude
+    res = _run_with_sender("hostile", method="magnus4", bias="none")
+    s = res.summary
+    assert s["dropped_implausible"] == 15
+    assert s["malformed"] >= 2  # the garbage datagram and the stamp
+    assert "error" not in s["stopped"] and "Overflow" not in s["stopped"]
+    assert s["samples"] >= 751 - 15 - 1 - 5  # the last few may be in flight at the stop
+    t_ms = res.t_ns / 1e6
+    # a constant rate about a fixed axis integrates exactly over any step, dropped ones too
+    assert angle_between_deg(res.q_w_b, _truth_at(t_ms)) <= TOL_DEG
+
+
+@pytest.mark.parametrize("scale", ["nan", "inf", "-inf", "0", "abc"])
+def test_raw_gyro_scale_that_is_no_finite_number_is_refused(scale):
+    with pytest.raises(InputError, match="a finite number other than 0"):
+        parse_url(f"mavlink:udpin:127.0.0.1:14550?raw_gyro_scale={scale}")

@@ -13,6 +13,7 @@ import time
 
 import pytest
 
+from imu_dcm.live import sources
 from imu_dcm.live.sources import Source, UdpSource
 
 
@@ -168,18 +169,22 @@ def _drain_events(src) -> tuple[int, list[str]]:
     return got, said
 
 
-def test_a_filling_pipe_makes_the_loop_read_sooner(monkeypatch):
-    # without a view the loop wakes every 0.25 s; a writer that fills half of the pipe
-    # between two reads makes it wake sooner (a full pipe would block the writer), and says so
+def test_a_filling_pipe_sets_the_cadence_its_rate_needs_and_says_it_once(monkeypatch):
+    # without a view the loop wakes every 0.25 s; a writer that would fill the pipe in ~0.4 s
+    # makes it read as often as that rate needs (a full pipe would block the writer): the
+    # cadence is set from the first reads, and said once, at the end, with its value
     from imu_dcm.live import run
 
     polls = _count_polls(monkeypatch)
     r, w = os.pipe()
-    n = 4000  # ~70 KB, more than a 64 KiB pipe holds
+    n, per = 8000, 40  # 18-byte lines, 40 every 2 ms: ~360 kB/s, a 64 KiB pipe in ~0.2 s
 
     def feed():
         with os.fdopen(w, "wb") as f:
-            f.write(b"".join(f"{k / 1000:.3f},0,0,1\n".encode() for k in range(n)))
+            for k in range(0, n, per):
+                f.write(b"".join(f"{j / 1000:.3f},0,0,1\n".encode() for j in range(k, k + per)))
+                f.flush()
+                time.sleep(0.002)
 
     said: list[str] = []
     feeder = threading.Thread(target=feed)
@@ -189,6 +194,66 @@ def test_a_filling_pipe_makes_the_loop_read_sooner(monkeypatch):
     finally:
         feeder.join()
         os.close(r)
-    assert res.summary["samples"] == n and res.summary["stopped"] == "end of input"
-    assert any(line.startswith("reading every 125 ms") for line in said), said
-    assert len(polls) >= 2
+    s = res.summary
+    assert s["samples"] == n and s["stopped"] == "end of input"
+    lines = [line for line in said if line.startswith("read every")]
+    assert len(lines) == 1 and lines[0].endswith("the source's rate filled its buffer sooner")
+    assert s["read_interval_s"] < 0.25 and f"{s['read_interval_s'] * 1e3:.0f} ms" in lines[0]
+    assert len(polls) >= 4
+
+
+def test_every_datagram_the_system_drops_is_counted_at_stop(monkeypatch):
+    # a 4 KiB receive buffer flooded, then nothing more: the datagrams dropped after the last
+    # one read are counted at stop (the socket's own count, /proc/net/udp), so the summary's
+    # lost_by_system is exactly what was sent and not integrated
+    import sys
+
+    if not sys.platform.startswith("linux"):
+        pytest.skip("the drop count is Linux's")
+    from test_live_ws import live_thread
+
+    from imu_dcm.live import sources
+
+    monkeypatch.setattr(sources, "UDP_RCVBUF", 4096)
+    live = live_thread("udp://127.0.0.1:0", bias="none", idle_stop_s=1.0)
+    assert live.ready.wait(20)
+    n = 3000
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as tx:
+        for k in range(n):
+            tx.sendto(f"{k / 1000:.3f},0,0,1".encode(), live.addr["address"])
+    live.thread.join(30)
+    assert not live.thread.is_alive()
+    s = live.out["result"].summary
+    assert s["malformed"] == s["dropped_duplicate"] == s["dropped_backward"] == 0
+    assert 0 < s["lost_by_system"] < n
+    assert s["lost_by_system"] == n - s["samples"]
+
+
+def test_a_fast_udp_stream_is_read_at_its_cadence_from_the_first_datagram():
+    # one sample a datagram at the rate that fills the socket's buffer in 0.2 s, whatever the
+    # machine gives it (with the default 0.25 s cadence the first wake-up would come too late):
+    # the loop reads at the first datagram, measures the rate on the next read, and reads as
+    # often as the rate needs; no datagram is lost
+    from test_live_ws import live_thread
+
+    live = live_thread("udp://127.0.0.1:0", bias="none", idle_stop_s=0.75)
+    assert live.ready.wait(20)
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as probe:
+        probe.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, sources.UDP_RCVBUF)
+        rcvbuf = probe.getsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF)
+    rate = rcvbuf / 832 / 0.2  # a one-line datagram takes 832 bytes of it (Linux, loopback)
+    n = int(rate)  # one second
+    lines = [f"{k * 1e-5:.5f},0,0,1".encode() for k in range(n)]
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as tx:
+        start = time.perf_counter()
+        for k in range(0, n, 100):
+            while time.perf_counter() - start < k / rate:
+                time.sleep(0.0002)
+            for line in lines[k : k + 100]:
+                tx.sendto(line, live.addr["address"])
+    live.thread.join(30)
+    assert not live.thread.is_alive()
+    s = live.out["result"].summary
+    assert s["lost_by_system"] == 0 and s["samples"] == n
+    assert s["read_interval_s"] <= 0.06  # a quarter of the 0.2 s to fill, and some rounding
+    assert not [line for line in live.said if "Expected the steps" in line]  # 100 kHz stamps

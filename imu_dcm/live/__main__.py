@@ -44,7 +44,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument(
         "source",
         help="ws://HOST:PORT (Foxglove WebSocket, e.g. foxglove_bridge), "
-        "udp://HOST:PORT (lines) or - (lines on stdin)",
+        "udp://HOST:PORT (lines), - (lines on stdin), or mavlink:CONNECTION "
+        "(pymavlink's: mavlink:udpin:HOST:PORT, mavlink:tcp:HOST:PORT, ...; "
+        "?raw_gyro_scale=RAD_S_PER_COUNT for RAW_IMU)",
     )
     _add_input_options(p)
     _add_output_options(p)
@@ -173,9 +175,10 @@ def format_summary(s: dict) -> str:
         )
     else:
         lines.append("truth      none (no error can be measured)")
-    gaps = len(s["gaps"])
+    gaps = s.get("gap_count", len(s["gaps"]))
     lines.append(
-        f"dropped    {s['dropped_nonfinite']} NaN/Inf, {s['dropped_duplicate']} duplicate, "
+        f"dropped    {s['dropped_nonfinite']} NaN/Inf, {s['dropped_implausible']} implausible, "
+        f"{s['dropped_duplicate']} duplicate, "
         f"{s['dropped_backward']} late/backward stamps, {s['malformed']} malformed; "
         f"{s['reordered']} put back in order; {gaps} gap{'s' if gaps != 1 else ''} over "
         f"5x the median step; {s['reconnects']} reconnects"

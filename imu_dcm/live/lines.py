@@ -8,8 +8,10 @@ an object with the stamp as ``t_ns`` (int, ns) or ``t_s`` (s), the rates as ``om
 parsed as exact decimals (``1700000026.505500000`` s is exactly 1700000026505500000 ns; a float64
 would round it to ~0.2 µs).
 
-Anything else — wrong field count, not a number, non-finite values — is a malformed line:
-:func:`parse_lines` counts it and goes on.
+Anything else — wrong field count, not a number, a non-finite stamp or quaternion — is a
+malformed line: :func:`parse_lines` counts it and goes on. A line whose rates are NaN or Inf is a
+sample, not a malformed line: the pipeline drops and counts it with the other non-finite rates
+(one count, ``NaN/Inf``, whatever the source).
 """
 
 from __future__ import annotations
@@ -31,14 +33,20 @@ TIME_UNITS = {"s": 1_000_000_000, "ms": 1_000_000, "us": 1_000, "ns": 1}
 DEG = math.pi / 180.0
 
 
+#: The range's ends are inclusive: a step is a difference of float64 seconds, exact to ~1e-16
+#: of the stamps' magnitude; 1e-6 relative is far above that and far below a unit's factor.
+_STEP_ROUNDING = 1e-6
+
+
 def time_unit_hint(median_step_s: float, max_step_s: float, time_units: str | None) -> str | None:
-    """One line when the steps are of no IMU (a rate below 1 Hz or above 100 kHz, or a step of
-    hours), naming the likely stamp unit; None when they look like an IMU's.
+    """One line when the steps are of no IMU (a rate below 1 Hz or above 100 kHz, the ends
+    included in the range, or a step of hours), naming the likely stamp unit; None when they
+    look like an IMU's.
 
     ``time_units``: the unit the stamps were declared in (None: the source's own stamps). The
     likely unit is the one that makes the median step 0.1-100 ms (10 Hz to 10 kHz).
     """
-    if median_step_s > 1.0 or median_step_s < 1e-5:
+    if median_step_s > 1.0 * (1 + _STEP_ROUNDING) or median_step_s < 1e-5 * (1 - _STEP_ROUNDING):
         got = f"a median step of {median_step_s:.6g} s ({1.0 / median_step_s:.6g} Hz)"
     elif max_step_s > 3600.0:
         got = f"a step of {max_step_s / 3600.0:.3g} h"
@@ -124,7 +132,8 @@ def parse_lines(
     truth_t_ns : int64 (m,)
     truth_q_w_b : float64 (m, 4), ``[x, y, z, w]``
     malformed : int
-        Lines that are neither a CSV sample nor a JSON sample (or hold non-finite values).
+        Lines that are neither a CSV sample nor a JSON sample (non-finite rates are returned
+        as they are: the pipeline counts them).
 
     Notes
     -----
@@ -153,7 +162,7 @@ def parse_csv_blob(
     blob: bytes, *, gyro_units: str = "rad/s", time_units: str = "s"
 ) -> tuple[NDArray, NDArray, int] | None:
     """Plain CSV lines ``t,gx,gy,gz`` (lines end in ``\\n``; blank lines are skipped; no header)
-    in one pass: ``(t_ns, omega_b, malformed)``, a line with a non-finite rate malformed; None
+    in one pass: ``(t_ns, omega_b, malformed)``, non-finite rates returned as they are; None
     when a line is not of that form (then :func:`parse_lines` judges the lines one by one).
 
     The stamps are read exactly and the line structure checked by one compiled scan
@@ -179,11 +188,9 @@ def _parse_csv_bulk(blob: bytes, gyro_scale: float, t_scale: int):
         return None  # a rate field that is not a number
     w = w.reshape(rows, 3)
     if gyro_scale != 1.0:
-        w *= gyro_scale
-    ok = np.isfinite(w).all(axis=1)
-    if ok.all():
-        return t_ns, w, 0
-    return t_ns[ok], w[ok], rows - int(ok.sum())
+        with np.errstate(over="ignore"):  # 1.7e308 deg/s: inf, dropped by the pipeline
+            w *= gyro_scale
+    return t_ns, w, 0
 
 
 def _parse_each(
@@ -242,8 +249,6 @@ def _parse_one(line: bytes, gyro_scale: float, t_scale: int, *, header_ok: bool)
         q = None
     if not 0 <= t_ns < 2**63:
         raise ValueError("stamp out of range")
-    if omega is not None and not all(math.isfinite(v) for v in omega):
-        raise ValueError("non-finite rate")
     if q is not None and not all(math.isfinite(v) for v in q):
         raise ValueError("non-finite quaternion")
     return t_ns, omega, q

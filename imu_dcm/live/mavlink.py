@@ -20,10 +20,15 @@ Truth: ``ATTITUDE_QUATERNION`` (``q1..q4`` = w, x, y, z), stamped ``time_boot_ms
 autopilot's own estimate. Frames: MAVLink states body rates in FRD and attitude FRD to NED;
 both are converted to body FLU and world ENU, ``[x, y, z, w]``, as the log readers do
 (:mod:`imu_dcm.logio.ned`).
+
+One bad message costs itself: a frame pymavlink cannot take, or a stamp outside 0 to 2^63 ns,
+is counted as malformed and the stream goes on. Rates go on to the pipeline, which drops and
+counts non-finite and implausible ones (:func:`imu_dcm.rates.implausible_rates`).
 """
 
 from __future__ import annotations
 
+import math
 import socket
 import time
 from urllib.parse import parse_qs
@@ -45,6 +50,9 @@ GYRO = {
 }
 TRUTH = "ATTITUDE_QUATERNION"
 RAW_WAIT_S = 1.0
+#: Stamps from 0 to here (ns, int64's end) are a clock's; a message stamped outside (a
+#: ``time_usec`` of 2^64 - 1) is malformed: counted, never fatal.
+_STAMP_END_NS = 2**63
 BATCH_S = 0.005
 
 
@@ -64,10 +72,12 @@ def parse_url(url: str) -> tuple[str, str, int, float | None]:
         or not host
         or not 0 <= port_n < 65536
         or set(opts) - {"raw_gyro_scale"}
+        or not all(math.isfinite(v) and v != 0.0 for v in opts.values())
     ):
         raise InputError(
             f"Expected SOURCE mavlink:udpin:HOST:PORT or mavlink:tcp:HOST:PORT "
-            f"(optionally ?raw_gyro_scale=RAD_S_PER_COUNT), got {url!r}"
+            f"(optionally ?raw_gyro_scale=RAD_S_PER_COUNT, a finite number other than 0), "
+            f"got {url!r}"
         )
     return mode, host, port_n, opts.get("raw_gyro_scale")
 
@@ -176,18 +186,13 @@ class MavlinkSource(Source):
         truth: list[tuple] = []
         bad = 0
         for chunk in chunks:
-            for m in self.mav.parse_buffer(chunk) or ():
-                name = m.get_type()
-                if name == "BAD_DATA":
-                    bad += 1
-                elif name == TRUTH:
-                    if self.truth:
-                        truth.append((m.time_boot_ms * 1_000_000, m.q1, m.q2, m.q3, m.q4))
-                elif name in GYRO and self._use(name):
-                    unit, stamp, ns = GYRO[name]
-                    scale = self.raw_scale if unit is None else unit
-                    t = getattr(m, stamp) * ns
-                    gyro.append((t, m.xgyro * scale, m.ygyro * scale, m.zgyro * scale))
+            try:
+                messages = self.mav.parse_buffer(chunk) or ()
+            except Exception:  # pymavlink on a frame it cannot take: that datagram only
+                bad += 1
+                continue
+            for m in messages:
+                bad += not self._take(m, gyro, truth)
         if bad:
             self.events.put(("malformed", bad))
         if truth:
@@ -198,6 +203,27 @@ class MavlinkSource(Source):
             a = np.array(gyro, dtype=np.float64)
             t = np.array([r[0] for r in gyro], dtype=np.int64)
             self._put("imu", t, a[:, 1:4] * FLU_FROM_FRD, arrival, wall)
+
+    def _take(self, m, gyro: list, truth: list) -> bool:
+        """One parsed message into ``gyro`` or ``truth`` rows; False for a malformed one (a bad
+        frame, or a stamp no clock gives: outside 0 to 2^63 ns)."""
+        name = m.get_type()
+        if name == "BAD_DATA":
+            return False
+        if name == TRUTH:
+            if self.truth:
+                t = m.time_boot_ms * 1_000_000
+                if not 0 <= t < _STAMP_END_NS:
+                    return False
+                truth.append((t, m.q1, m.q2, m.q3, m.q4))
+        elif name in GYRO and self._use(name):
+            unit, stamp, ns = GYRO[name]
+            scale = self.raw_scale if unit is None else unit
+            t = getattr(m, stamp) * ns
+            if not 0 <= t < _STAMP_END_NS:
+                return False
+            gyro.append((t, m.xgyro * scale, m.ygyro * scale, m.zgyro * scale))
+        return True
 
     def _put(self, kind: str, t_ns, values, arrival: int, wall: int) -> None:
         n = len(t_ns)

@@ -36,14 +36,16 @@ from numpy.typing import NDArray
 
 from imu_dcm.errors import GapWarning
 from imu_dcm.integrate import find_gaps, gap_message, integrate_quat
+from imu_dcm.live.latency import LATENCY_KEEP, Latency
 from imu_dcm.live.lines import time_unit_hint
 from imu_dcm.live.reorder import ReorderBuffer
 from imu_dcm.live.sources import Received
 from imu_dcm.metrics import attitude_error_deg
+from imu_dcm.rates import deg_evidence
 from imu_dcm.rest import CausalRestBias
 from imu_dcm.streaming import DcmIntegrator
 
-__all__ = ["LiveResult", "Pipeline"]
+__all__ = ["LATENCY_KEEP", "Latency", "LiveResult", "Pipeline"]
 
 DEG = math.pi / 180.0
 _TRUTH_KEEP_NS = 5_000_000_000  # truth kept for slerp, ns behind the newest
@@ -51,6 +53,12 @@ _ERROR_GIVE_UP_NS = 2_000_000_000  # an estimate uncovered by truth this long: n
 _ANCHOR_KEEP_NS = 10_000_000_000  # samples kept to re-anchor on a late truth, ns
 _RECENT = 65  # stamps kept for the gap rule and the rate (64 steps)
 _IDENTITY = np.array([0.0, 0.0, 0.0, 1.0])
+#: The first seconds of rates (source time) judged for deg/s declared as rad/s, and at most
+#: this many samples of them (bounded memory: 1.6 MB).
+UNITS_PROBE_S = 5.0
+UNITS_PROBE_MAX = 50_000
+#: Gaps kept with their times (the count goes on past them).
+GAPS_KEEP = 1000
 
 
 @dataclass(frozen=True)
@@ -63,7 +71,8 @@ class LiveResult:
     q_w_b : float64 (4,) or None — final attitude ``[x, y, z, w]`` at ``t_ns`` (None if the
         estimate never started).
     t_ns : int or None — source stamp of the final attitude, ns.
-    latency_ms : float64 (n,) — receive -> view log call, per sample logged, ms.
+    latency_ms : float64 (n,) — receive -> view log call of the newest samples logged (at most
+        :data:`LATENCY_KEEP` and one batch: memory stays bounded), ms.
     """
 
     summary: dict
@@ -142,8 +151,12 @@ class Pipeline:
         recorder,
         say,
         time_units: str | None = None,
+        check_units: bool = False,
     ) -> None:
         self.method = method
+        #: rates declared rad/s: their first seconds are judged once for deg/s (_units_probe)
+        self.units_probe = _Rows(*_SAMPLES) if check_units else None
+        self.units_evidence: str | None = None
         self.bias_mode = (
             "auto"
             if isinstance(bias, str) and bias == "auto"
@@ -164,7 +177,8 @@ class Pipeline:
         self.t0_ns: int | None = None
         self.n = 0
         self.malformed = 0
-        self.gaps: list[tuple[float, float]] = []
+        self.gaps: list[tuple[float, float]] = []  # the first GAPS_KEEP
+        self.gap_count = 0
         self.recent_t_s = np.zeros(0)  # the newest stamps, s
         self.rates_checked = False
         self.integ: DcmIntegrator | None = None
@@ -195,9 +209,10 @@ class Pipeline:
         self.est = _Rows(*_ESTIMATES)
         self.err_pending = _Rows(*_ESTIMATES)
         self.truth_rows = _Rows((np.int64,), (float, 4))
-        self.latency: list[NDArray] = []
+        self.latency = Latency()
         self.samples_before_start = 0
         self.cpu_s: float | None = None
+        self.read_interval_s: float | None = None  # the loop's final cadence
 
     # -- input -----------------------------------------------------------------------------
     def on_imu(self, rec: Received) -> None:
@@ -241,6 +256,8 @@ class Pipeline:
             self.t0_ns = int(t_ns[0])
         t_s = (t_ns - self.t0_ns) * 1e-9
         self._check_steps(t_s)
+        if self.units_probe is not None:
+            self._probe_units(t_ns, t_s, w)
         if self.rest is not None:
             n_seg = len(self.rest.segments)
             b = self.rest.update_many(w, t_s)
@@ -276,7 +293,8 @@ class Pipeline:
         after = self.recent_t_s[-1] if len(self.recent_t_s) else -math.inf
         new = tuple(g for g in find_gaps(stamps) if g[0] >= after)  # the new steps' gaps
         if new:
-            self.gaps.extend(new)
+            self.gap_count += len(new)
+            self.gaps.extend(new[: max(0, GAPS_KEEP - len(self.gaps))])
             self.say(gap_message(new))
         self.recent_t_s = stamps[-_RECENT:]
         if not self.rates_checked and len(stamps) >= 17:
@@ -285,6 +303,28 @@ class Pipeline:
             hint = time_unit_hint(float(np.median(steps)), float(steps.max()), self.time_units)
             if hint:
                 self.say(hint)
+
+    def _probe_units(self, t_ns: NDArray, t_s: NDArray, w: NDArray, final: bool = False) -> None:
+        """Rates declared rad/s that look like deg/s, judged once on the first
+        :data:`UNITS_PROBE_S` s (at most :data:`UNITS_PROBE_MAX` samples) by replay's rule
+        (:func:`imu_dcm.rates.deg_evidence`: against the truth's rotation rate where the truth
+        covers them, else the gyro full-scale bound); said in one line, and in the summary."""
+        probe = self.units_probe
+        probe.add(t_ns, t_s, w)
+        n = len(probe)
+        if not final and n < UNITS_PROBE_MAX and t_s[-1] < UNITS_PROBE_S:
+            return
+        self.units_probe = None
+        pt_ns, pt_s, pw = probe.take()
+        if len(pt_ns) < 20:
+            return
+        q = np.full((len(pt_ns), 4), np.nan)
+        if self.truth_t:
+            q = _slerp(*self._truth_arrays(), pt_ns)
+        evidence = deg_evidence(pw, pt_s, q)
+        if evidence:
+            self.units_evidence = evidence
+            self.say(f"the rates look like deg/s: {evidence}; pass --gyro-units deg/s to convert")
 
     @property
     def median_step_s(self) -> float | None:
@@ -432,6 +472,9 @@ class Pipeline:
         t_ns, w, arrival = self.reorder.flush()
         if len(t_ns):
             self._process(t_ns, w, arrival)
+        if self.units_probe is not None and len(self.units_probe):
+            empty = np.zeros(0)
+            self._probe_units(empty.astype(np.int64), empty, np.zeros((0, 3)), final=True)
         if self.integ is None and len(self.waiting):
             t_ns, t_s, wc = self.waiting.take()
             self.waiting.add(t_ns, t_s, wc)
@@ -500,6 +543,6 @@ class Pipeline:
                 err_deg=err,
             )
         if len(g_arr):
-            self.latency.append((time.perf_counter_ns() - g_arr) * 1e-6)
+            self.latency.add((time.perf_counter_ns() - g_arr) * 1e-6)
         if self.recorder is not None and len(est[0]):
             self.recorder.add_estimate(est[0], est[2])

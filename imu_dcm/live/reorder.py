@@ -4,8 +4,10 @@ A sample is held until a sample stamped at least ``window_ns`` later has arrived
 in stamp order. A sample stamped at or before the last released one is too late: a duplicate
 stamp (equal, or equal to one still held) is dropped as ``duplicate``, an earlier one as
 ``backward`` (out of order by more than the window, or a clock that jumped back). Non-finite
-rates are dropped as ``nonfinite``. :meth:`ReorderBuffer.flush` releases everything held (at
-stop). Stamps are the source's, never arrival times.
+rates are dropped as ``nonfinite``, and rates no gyro produces
+(:func:`imu_dcm.rates.implausible_rates`, the rule replay's cleaning applies) as ``implausible``,
+before anything else (the rest rule, the integrator) sees them. :meth:`ReorderBuffer.flush`
+releases everything held (at stop). Stamps are the source's, never arrival times.
 
 Samples come and go as arrays (one batch per wake-up of the source). A batch in order and after
 everything seen is merged by slicing; only a batch with a sample out of order, or a duplicate, is
@@ -18,6 +20,8 @@ import bisect
 
 import numpy as np
 from numpy.typing import NDArray
+
+from imu_dcm.rates import implausible_rates
 
 __all__ = ["ReorderBuffer"]
 
@@ -45,6 +49,7 @@ class ReorderBuffer:
         self.dropped_duplicate = 0
         self.dropped_backward = 0
         self.dropped_nonfinite = 0
+        self.dropped_implausible = 0
         self.reordered = 0  # samples that arrived out of order and were put back in order
 
     def __len__(self) -> int:
@@ -58,16 +63,19 @@ class ReorderBuffer:
         Parameters
         ----------
         t_ns : int64 (n,) — stamps, ns.
-        omega_b : float64 (n, 3) — rates (any unit; only their finiteness is judged).
+        omega_b : float64 (n, 3) — rates, rad/s (judged finite and plausible).
         arrival_ns : int64 (n,) — carried along with each sample.
 
         Returns
         -------
         t_ns, omega_b, arrival_ns of the released samples, stamps strictly increasing.
         """
-        ok = np.isfinite(omega_b).all(axis=1)
+        finite = np.isfinite(omega_b).all(axis=1)
+        ok = finite & ~implausible_rates(omega_b)
         if not ok.all():
-            self.dropped_nonfinite += int(len(ok) - ok.sum())
+            n_bad = len(ok) - int(finite.sum())
+            self.dropped_nonfinite += n_bad
+            self.dropped_implausible += len(ok) - int(ok.sum()) - n_bad
             t_ns, omega_b, arrival_ns = t_ns[ok], omega_b[ok], arrival_ns[ok]
         if not len(t_ns):
             return self._release(-1)  # nothing new: nothing to release

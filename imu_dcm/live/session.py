@@ -23,7 +23,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
-from numpy.typing import ArrayLike, NDArray
+from numpy.typing import ArrayLike
 
 from imu_dcm.errors import GapWarning, InputError
 from imu_dcm.integrate import METHODS
@@ -97,6 +97,13 @@ _BATCH_MAX_S = 0.02
 #: reads each sample a batch_s after its first bytes, not held for the next wake-up's read (worth
 #: a 10 ms interval's p99).
 _INLINE_MIN_S = 0.025
+#: The shortest cadence the loop takes when a source's rate needs it, s.
+_CADENCE_MIN_S = 0.01
+#: The loop reads a source whose buffer fills this much between two reads at most (a quarter:
+#: a rate that doubles, or a read that comes late, still finds room).
+_FILL_TARGET = 0.25
+#: After the first bytes of a source, the next read comes this soon, to measure the rate, s.
+_PROBE_S = 0.01
 #: The loop's wake-up interval by default: the view's display rate, or, without a view, four
 #: times a second (the status line, the recording and the reorder window's release need no
 #: more; each wake-up costs CPU of its own, most of it in caches gone cold while asleep).
@@ -130,10 +137,6 @@ def _check_outputs(record, force: bool, summary_json, rerun) -> None:
                 raise OutputError(
                     f"Expected {what} outside the --record bag {str(bag)!r}, got {str(path)!r}"
                 )
-
-
-def _pct(a: NDArray, p: float) -> float | None:
-    return float(np.percentile(a, p)) if len(a) else None
 
 
 @dataclass(frozen=True)
@@ -244,13 +247,16 @@ def run(
     -------
     LiveResult
         Summary keys: ``source, imu_topic, imu_type, truth_topic, truth_type, samples,
-        duration_s, rate_hz, dropped_nonfinite, dropped_duplicate, dropped_backward,
-        reordered, malformed, gaps, reconnects, lost_by_system (UDP datagrams the system
-        dropped, its buffer full), gyro_units, bias_mode, bias_rad_s,
+        duration_s, rate_hz, dropped_nonfinite, dropped_implausible (a rate over
+        :data:`imu_dcm.rates.MAX_RATE_RAD_S`, replay's rule), dropped_duplicate, dropped_backward,
+        reordered, malformed, gaps (the first 1000), gap_count, reconnects, lost_by_system (UDP
+        datagrams the system dropped, its buffer full, counted to the stop), gyro_units,
+        units_evidence (why the rates look like deg/s, or None), bias_mode, bias_rad_s,
         bias_segments, method, start_time_s, unscored_before_s, initial_quat_xyzw,
         final_quat_xyzw, final_t_s, truth_samples_used, rms/max error/inclination/heading (deg,
         None without truth), latency_p50_ms, latency_p99_ms, stopped, record, cpu_s (process
-        CPU time while receiving, all threads), elapsed_s``.
+        CPU time while receiving, all threads), read_interval_s (the loop's final cadence),
+        elapsed_s``; no value is NaN or Inf (None where it cannot be measured).
     """
     started = time.perf_counter()
     o = LiveOptions(**options)
@@ -274,20 +280,20 @@ def run(
             recorder=recorder,
             say=say,
             time_units=o.time_units if src.converts_gyro_units else None,
+            check_units=o.gyro_units == "rad/s",
         )
         gc.freeze()  # the start-up's objects: not traversed by every collection while live
         reason = _Loop(src, pipe, o, stop or threading.Event(), say, on_ready).run()
     finally:
         gc.unfreeze()
         _close(src, view, recorder, say, o.keep_viewer)
-    lat = np.concatenate(pipe.latency) if pipe.latency else np.zeros(0)
-    summary = _summary(pipe, src, source, o, bias_v, reason, lat, recorder, started)
+    summary = _json_safe(_summary(pipe, src, source, o, bias_v, reason, recorder, started))
     if o.summary_json is not None:
         from imu_dcm.outputs import write_json
 
         write_json(o.summary_json, summary, what="--summary-json file")
     q = None if pipe.q_last is None else np.asarray(pipe.q_last, dtype=float)
-    return LiveResult(summary, q, pipe.t_last_ns, lat)
+    return LiveResult(summary, q, pipe.t_last_ns, pipe.latency.recent())
 
 
 def _batch_s(o: LiveOptions) -> float:
@@ -374,6 +380,10 @@ class _Loop:
         self.idle_since = time.monotonic()
         self.next_flush = self.idle_since + self.interval_s  # the next wake-up of _receive
         self.inline = src.pollable and self.interval_s >= _INLINE_MIN_S  # read in the loop
+        self.default_interval_s = self.interval_s
+        self._last_read: float | None = None  # when the previous inline read began
+        self._probed = False  # the read after the first bytes is set (_cadence)
+        self._pending_next: float | None = None
 
     def _on_signal(self, signum, frame) -> None:
         self.reason = f"stopped by {signal.Signals(signum).name}"
@@ -393,6 +403,13 @@ class _Loop:
                     self.on_ready({"address": getattr(self.src, "address", None)})
                 self._receive()
                 self._drain()
+                if self.interval_s < self.default_interval_s:
+                    self.say(
+                        f"read every {self.interval_s * 1e3:.0f} ms (not "
+                        f"{self.default_interval_s * 1e3:.0f}): the source's rate filled its "
+                        f"buffer sooner"
+                    )
+                self.pipe.read_interval_s = self.interval_s
                 self.pipe.finish()
                 self.pipe.flush(final=True)
                 self.pipe.cpu_s = time.process_time() - cpu_start
@@ -410,11 +427,11 @@ class _Loop:
         now = time.monotonic()
         self.next_flush, next_status = now + self.interval_s, now + self.status_every
         window_s = pipe.reorder.window_ns * 1e-9
-        while not self.stop.wait(max(0.0, self.next_flush - time.monotonic())):
+        while not self._wait(max(0.0, self.next_flush - time.monotonic())):
             if self.inline:
+                before = time.monotonic()
                 self.src.poll()
-                if self.src.crowded:
-                    self._sooner()
+                self._cadence(before)
             if self._take():
                 return
             now = time.monotonic()
@@ -423,7 +440,10 @@ class _Loop:
             pipe.flush()
             if self.recorder is not None:
                 self.recorder.maybe_flush()
-            self.next_flush = max(self.next_flush + self.interval_s, now)  # a steady cadence
+            if self._pending_next is not None:  # the probe read after the first bytes
+                self.next_flush, self._pending_next = self._pending_next, None
+            else:
+                self.next_flush = max(self.next_flush + self.interval_s, now)  # steady cadence
             if self.status and now >= next_status:
                 _status(pipe, self.tty)
                 next_status = now + self.status_every
@@ -431,18 +451,43 @@ class _Loop:
                 self.reason = f"no sample for {self.idle_stop_s:g} s"
                 return
 
-    def _sooner(self) -> None:
-        """A read found the source's buffer filling between wake-ups: halve the interval (down
-        to the shortest inline one), and say so."""
-        self.src.crowded = False
-        if self.interval_s <= _INLINE_MIN_S:
+    def _wait(self, timeout_s: float) -> bool:
+        """Sleep until the next read; True when stopped. A line source that has sent nothing yet
+        is watched meanwhile, and read at its first bytes: the cadence its rate needs is set
+        from the first reads, before its buffer can fill (:meth:`_cadence`). ``stop`` is seen
+        at the end of the interval, as when sleeping (no more wake-ups than the cadence's)."""
+        if not (self.inline and self.src.watchable and not self.src.flowing):
+            return self.stop.wait(timeout_s)
+        end = time.monotonic() + timeout_s
+        while not self.stop.is_set():
+            left = end - time.monotonic()
+            if left <= 0:
+                return False
+            if self.src.ready(left):
+                self.next_flush = time.monotonic()
+                return self.stop.is_set()
+        return True
+
+    def _cadence(self, read_at: float) -> None:
+        """The interval the source's rate needs, from the read that just ran: the buffer filled
+        ``fill`` in the time since the previous read, so a read every ``dt * target / fill``
+        finds it at most a quarter full (down to :data:`_CADENCE_MIN_S`; never longer than the
+        interval set). The first read with data is followed by one after :data:`_PROBE_S`,
+        which measures the rate."""
+        src, prev = self.src, self._last_read
+        self._last_read = read_at
+        if not src.flowing:
             return
-        self.interval_s = max(self.interval_s / 2, _INLINE_MIN_S)
-        self.next_flush = min(self.next_flush, time.monotonic() + self.interval_s)
-        self.say(
-            f"reading every {self.interval_s * 1e3:.0f} ms: the source's buffer was filling "
-            f"between reads"
-        )
+        if not self._probed:
+            self._probed = True
+            self._pending_next = read_at + _PROBE_S
+            return
+        fill = src.fill
+        if fill is None or prev is None or fill <= 0:
+            return
+        need = max(_CADENCE_MIN_S, (read_at - prev) * _FILL_TARGET / fill)
+        if need < 0.9 * self.interval_s:
+            self.interval_s = need  # from the next wake-up on
 
     def _take(self, data_only: bool = False) -> bool:
         """Every event queued by now, in order; raw items decoded once per key (the source's
@@ -507,10 +552,16 @@ class _Loop:
 
 def _status(pipe: Pipeline, tty: bool) -> None:
     r = pipe.reorder
-    dropped = r.dropped_duplicate + r.dropped_backward + r.dropped_nonfinite + pipe.malformed
+    dropped = (
+        r.dropped_duplicate
+        + r.dropped_backward
+        + r.dropped_nonfinite
+        + r.dropped_implausible
+        + pipe.malformed
+    )
     step = pipe.median_step_s
     rate = 1.0 / step if step else 0.0
-    lat = pipe.latency[-1] if pipe.latency else np.zeros(0)
+    lat = pipe.latency.last
     p50 = f"{np.median(lat):.1f}" if len(lat) else "-"
     b = pipe.rest.bias_rad_s if pipe.rest is not None else pipe.fixed_bias
     rest = " (at rest)" if pipe.rest is not None and pipe.rest.at_rest else ""
@@ -522,6 +573,18 @@ def _status(pipe: Pipeline, tty: bool) -> None:
     sys.stderr.flush()
 
 
+def _json_safe(value):
+    """``value`` with every non-finite float replaced by None (JSON has no NaN or Inf; a value
+    that cannot be measured is none, never a number that is not one)."""
+    if isinstance(value, dict):
+        return {k: _json_safe(v) for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return [_json_safe(v) for v in value]
+    if isinstance(value, float) and not np.isfinite(value):
+        return None
+    return value
+
+
 def _summary(
     pipe: Pipeline,
     src: Source,
@@ -529,7 +592,6 @@ def _summary(
     o: LiveOptions,
     bias_v,
     reason: str,
-    lat: NDArray,
     recorder,
     started: float,
 ) -> dict:
@@ -555,14 +617,17 @@ def _summary(
         "duration_s": float(dur),
         "rate_hz": 1.0 / step if step else None,
         "dropped_nonfinite": r.dropped_nonfinite,
+        "dropped_implausible": r.dropped_implausible,
         "dropped_duplicate": r.dropped_duplicate,
         "dropped_backward": r.dropped_backward,
         "reordered": r.reordered,
         "malformed": int(pipe.malformed),
         "gaps": [{"t_s": a, "length_s": d} for a, d in pipe.gaps],
+        "gap_count": pipe.gap_count,
         "reconnects": int(getattr(src, "reconnects", 0)),
         "lost_by_system": int(src.lost),
         "gyro_units": o.gyro_units,
+        "units_evidence": pipe.units_evidence,
         "bias_mode": pipe.bias_mode,
         "bias_rad_s": bias_mean,
         "bias_final_rad_s": list(pipe.rest.bias_rad_s) if pipe.rest else list(pipe.fixed_bias),
@@ -583,10 +648,11 @@ def _summary(
         "max_inclination_deg": float(st.max[1]) if have else None,
         "rms_heading_deg": float(rms_v[2]) if have else None,
         "max_heading_deg": float(st.max[2]) if have else None,
-        "latency_p50_ms": _pct(lat, 50),
-        "latency_p99_ms": _pct(lat, 99),
+        "latency_p50_ms": pipe.latency.percentile(50),
+        "latency_p99_ms": pipe.latency.percentile(99),
         "stopped": reason,
         "record": str(recorder.path) if recorder is not None else None,
         "cpu_s": pipe.cpu_s,
+        "read_interval_s": pipe.read_interval_s,
         "elapsed_s": time.perf_counter() - started,
     }

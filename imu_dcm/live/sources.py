@@ -142,6 +142,44 @@ def _enable_drop_count(sock: socket.socket) -> bool:
     return True
 
 
+#: A stdin line longer than this (bytes, no line end) is dropped as malformed, not kept whole.
+MAX_LINE_BYTES = 1 << 16
+#: The receive buffer a UDP source asks for, bytes (the system caps it at ``net.core.rmem_max``).
+UDP_RCVBUF = 4 << 20
+
+
+def _proc_udp_row(inode: int) -> list[str] | None:
+    """The row of the UDP socket with ``inode`` in ``/proc/net/udp`` (or ``udp6``), as cells, or
+    None where there is no such file or row (not Linux)."""
+    key = f" {inode} "
+    for name in ("/proc/net/udp", "/proc/net/udp6"):
+        try:
+            with open(name) as f:
+                text = f.read()
+        except OSError:
+            continue
+        at = text.find(key)
+        while at >= 0:  # the inode's column (the 10th), not a number elsewhere in a row
+            row = text[text.rfind("\n", 0, at) + 1 : text.find("\n", at)].split()
+            if len(row) >= 13 and row[9] == str(inode):
+                return row
+            at = text.find(key, at + 1)
+    return None
+
+
+def _proc_udp_drops(inode: int) -> int | None:
+    """The ``drops`` count of the UDP socket with ``inode`` (``/proc/net/udp``), or None."""
+    row = _proc_udp_row(inode)
+    return None if row is None else int(row[12])
+
+
+def _proc_udp_queue(inode: int) -> int | None:
+    """The bytes queued on the UDP socket with ``inode`` (``rx_queue``, the buffer's use as the
+    system counts it against ``SO_RCVBUF``), or None."""
+    row = _proc_udp_row(inode)
+    return None if row is None else int(row[4].partition(":")[2], 16)
+
+
 def _pipe_size(fd: int) -> int | None:
     """The bytes the pipe ``fd`` holds (Linux ``F_GETPIPE_SZ``; 64 KiB elsewhere), or None when
     ``fd`` is not a pipe."""
@@ -248,8 +286,21 @@ class Source:
         #: Set by a read that found the system's buffer filling (the reader should come
         #: sooner: a full buffer loses datagrams or blocks the writer).
         self.crowded = False
+        #: How full the system's buffer was at the last read, 0 to 1 (None: not known), and
+        #: whether a read has found anything yet: the session's loop sets its cadence from
+        #: them (:meth:`imu_dcm.live.session._Loop._cadence`).
+        self.fill: float | None = None
+        self.flowing = False
         #: Datagrams the system dropped because its buffer was full (UDP, where it tells).
         self.lost = 0
+        self._said: set[str] = set()
+
+    def drop(self, what: str, text: str) -> None:
+        """A bad message dropped: counted as malformed, said once per kind ``what``."""
+        self.events.put(("malformed", 1))
+        if what not in self._said:
+            self._said.add(what)
+            self.events.put(("info", f"dropped {text} (counted as malformed; said once)"))
 
     def _await(self, ready, batch_s: float) -> tuple[int, int] | None:
         """Wait for a batch to read: ``(arrival_ns, wall_ns)`` of its first bytes, or None when
@@ -260,6 +311,9 @@ class Source:
         got = time.perf_counter_ns(), time.time_ns()
         self._stop.wait(batch_s)
         return got
+
+    #: The session's loop may watch the source for its first bytes (:meth:`ready`).
+    watchable: bool = False
 
     #: The session's loop may read the source itself (:meth:`begin`, then :meth:`poll` once
     #: per wake-up) instead of its thread: one wake-up per interval, not two.
@@ -310,7 +364,8 @@ class Source:
         try:
             self._run()
         except Exception as exc:
-            self.events.put(("end", f"source failed: {type(exc).__name__}: {exc}"))
+            why = f"the source stopped on an error it cannot recover from ({type(exc).__name__})"
+            self.events.put(("end", why))
 
     def _run(self) -> None:  # pragma: no cover - abstract
         raise NotImplementedError
@@ -318,6 +373,12 @@ class Source:
 
 class _LineSource(Source):
     converts_gyro_units = True
+    #: The session's loop may watch it for its first bytes (:meth:`ready`).
+    watchable = True
+
+    def ready(self, timeout_s: float) -> bool:
+        """Whether there is something to read within ``timeout_s``."""
+        return self._ready(timeout_s)
 
     def __init__(self, gyro_units: str, time_units: str, batch_s: float = BATCH_S) -> None:
         super().__init__()
@@ -386,7 +447,7 @@ class UdpSource(_LineSource):
     ) -> None:
         super().__init__(gyro_units, time_units, batch_s)
         self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-        self.sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 4 << 20)
+        self.sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, UDP_RCVBUF)
         try:
             self.sock.bind((host, port))
         except OSError as exc:
@@ -394,10 +455,31 @@ class UdpSource(_LineSource):
             raise InputError(f"Expected to bind udp://{host}:{port}, got {exc}") from None
         self.address = self.sock.getsockname()
         self._room = 4  # datagrams the receive buffer holds at least (set by begin)
+        self._got = 0  # datagrams the last read took
+        self._rcvbuf, self._inode = 1 << 20, 0  # set by begin
+        self._measure = False  # read inline: measure the buffer's use at each read
         self._ovfl = _enable_drop_count(self.sock)
 
     def _close(self) -> None:
-        self.sock.close()
+        """At the end: read what the socket still holds, take the system's final count of the
+        datagrams it dropped (those after the last one read tell nobody else), then close."""
+        try:
+            self.sock.setblocking(False)
+            at = self._read_at or (time.perf_counter_ns(), time.time_ns())
+            while self._read(*at) and self._got >= _DRAIN_MAX:
+                pass
+            self._count_final_drops()
+        except OSError:
+            pass
+        finally:
+            self.sock.close()
+
+    def _count_final_drops(self) -> None:
+        """The socket's drop count from ``/proc/net/udp`` (Linux: the ``drops`` column of the
+        row of this socket's inode), said as a rise is said."""
+        drops = _proc_udp_drops(os.fstat(self.sock.fileno()).st_ino)
+        if drops is not None and drops > self.lost:
+            self._say_lost(drops)
 
     def begin(self) -> None:
         where = f"udp://{self.address[0]}:{self.address[1]}"
@@ -405,16 +487,27 @@ class UdpSource(_LineSource):
         self.events.put(("info", f"listening on {where}"))
         self.sock.setblocking(False)
         # a small datagram takes ~0.8 KB of the buffer (the system's bookkeeping with it)
-        self._room = max(4, self.sock.getsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF) // 1024)
+        self._rcvbuf = self.sock.getsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF)
+        self._room = max(4, self._rcvbuf // 1024)
+        ino = os.fstat(self.sock.fileno()).st_ino
+        self._inode = ino if _proc_udp_row(ino) is not None else 0
 
     def _ready(self, timeout_s: float) -> bool:
         return _readable(self.sock, timeout_s)
 
+    def poll(self) -> None:
+        """Inline (see :meth:`Source.poll`): each read also measures the buffer's use (the
+        loop's cadence follows it; a thread's read, 2.5 ms after the first bytes, needs none)."""
+        self._measure = True
+        super().poll()
+
     def _read(self, arrival_ns: int, wall_ns: int) -> bool:
+        queued = _proc_udp_queue(self._inode) if self._inode and self._measure else None
         chunks: list[bytes] = []
         last = None  # the last datagram's ancillary data: the system's drop count then
+        most = max(_DRAIN_MAX, 2 * self._room)  # all the buffer can hold, and what came since
         try:
-            while len(chunks) < _DRAIN_MAX:
+            while len(chunks) < most:
                 if self._ovfl:
                     data, anc, _, _ = self.sock.recvmsg(65536, _OVFL_SPACE)
                     last = anc or last
@@ -425,7 +518,12 @@ class UdpSource(_LineSource):
             pass
         if chunks:  # parsed by the session's loop (decode), with the other items
             self.events.put(("raw", "lines", [(b"\n".join(chunks), arrival_ns, wall_ns)]))
-        self.crowded = len(chunks) >= self._room // 4
+        self._got = len(chunks)
+        self.flowing |= bool(chunks)
+        # the buffer's use before the read (the system's own count, /proc/net/udp), or from
+        # the datagrams read at a conservative ~1 KB each
+        self.fill = queued / self._rcvbuf if queued is not None else len(chunks) / self._room
+        self.crowded = self.fill >= 0.25
         if last:
             self._count_drops(last)
         return True
@@ -438,12 +536,15 @@ class UdpSource(_LineSource):
                 lost = int.from_bytes(data[:4], sys.byteorder)
                 if lost > self.lost:
                     self.crowded = True
-                    why = (
-                        f"udp: the system dropped {lost - self.lost} datagram(s) (its receive "
-                        f"buffer was full; {lost} in all): samples were lost"
-                    )
-                    self.events.put(("info", why))
-                    self.lost = lost
+                    self._say_lost(lost)
+
+    def _say_lost(self, lost: int) -> None:
+        why = (
+            f"udp: the system dropped {lost - self.lost} datagram(s) (its receive "
+            f"buffer was full; {lost} in all): samples were lost"
+        )
+        self.events.put(("info", why))
+        self.lost = lost
 
 
 class StdinSource(_LineSource):
@@ -459,6 +560,7 @@ class StdinSource(_LineSource):
         super().__init__(gyro_units, time_units, batch_s)
         self.fd = 0 if fd is None else fd
         self._rest = b""  # a line not yet ended
+        self._skipping = False  # the rest of a line too long to keep
         self._room = _pipe_size(self.fd)  # bytes a pipe holds (None: not a pipe)
 
     def begin(self) -> None:
@@ -471,6 +573,8 @@ class StdinSource(_LineSource):
         data = os.read(self.fd, 1 << 20)
         # a pipe half full or more: its writer would soon block (a datagram socket, which
         # loses rather than blocks, asks for a reader sooner, at a quarter)
+        self.fill = None if self._room is None else min(1.0, len(data) / self._room)
+        self.flowing |= bool(data)
         self.crowded = self._room is not None and len(data) >= self._room // 2
         if not data:
             if self._rest:
@@ -478,9 +582,16 @@ class StdinSource(_LineSource):
                 self._rest = b""
             self.events.put(("end", "end of input"))
             return False
-        whole, newline, self._rest = (self._rest + data).rpartition(b"\n")
+        buf = self._rest + data
+        if self._skipping:  # the rest of a line dropped as too long, up to its end
+            _, end, buf = buf.partition(b"\n")
+            self._skipping = not end
+        whole, newline, self._rest = buf.rpartition(b"\n")
         if newline:  # parsed by the session's loop (decode), with the other items
             self.events.put(("raw", "lines", [(whole, arrival_ns, wall_ns)]))
+        if len(self._rest) > MAX_LINE_BYTES:  # no line end in sight: memory stays bounded
+            self._rest, self._skipping = b"", True
+            self.drop("long-line", f"a line longer than {MAX_LINE_BYTES} bytes")
         return True
 
 
@@ -704,6 +815,35 @@ class _WsSession:
     next_sub: int = 1
 
 
+def _json_message(text: str, src: Source):
+    """A server's JSON message, or None (dropped, counted and said once) when it is no JSON
+    this client can read (not JSON, or nested deeper than Python's parser goes)."""
+    try:
+        return json.loads(text)
+    except (ValueError, RecursionError):
+        src.drop("json", "a text message that is not JSON (or nested too deep to read)")
+        return None
+
+
+def _channel(ch) -> dict | None:
+    """An advertised channel as this client uses it (``id`` an int, ``topic``, ``encoding``,
+    ``schemaName``, ``schemaEncoding`` and ``schema`` strings, ``kind`` as classified), or None
+    when a field is missing or of another type."""
+    if not isinstance(ch, dict) or not isinstance(ch.get("id"), int):
+        return None
+    fields = ("topic", "encoding", "schemaName", "schemaEncoding", "schema")
+    out = {k: ch.get(k, "") for k in fields}
+    if not out["topic"] or not all(isinstance(v, str) for v in out.values()):
+        return None
+    kind = None
+    if out["encoding"] == "cdr":
+        try:
+            kind = classify_schema(out["schemaName"], out["schemaEncoding"], out["schema"])
+        except (ValueError, KeyError, TypeError, IndexError, RecursionError):
+            kind = None
+    return {**out, "id": ch["id"], "kind": kind}
+
+
 class WsSource(Source):
     """A Foxglove WebSocket client (see the module doc)."""
 
@@ -793,6 +933,9 @@ class WsSource(Source):
                 delay = 0.2
             except (OSError, InvalidHandshake, TimeoutError) as exc:
                 why = f"cannot connect ({type(exc).__name__}: {exc})"
+            except Exception:  # a message this client could not take: a new connection
+                why = "connection lost (the server sent a message this client cannot read)"
+                delay = 0.2
             if self._stop.is_set():
                 return
             if why.startswith(("connection lost", "the server")):
@@ -866,7 +1009,7 @@ class WsSource(Source):
         pending: dict[int, list] = {}
         for data, arrival, wall in frames:
             if isinstance(data, str):
-                fatal = self._on_text(ws, st, json.loads(data))
+                fatal = self._on_text(ws, st, _json_message(data, self))
                 if fatal:
                     return fatal
             elif len(data) >= _MSG_HEAD.size and data[0] == _BIN_MESSAGE:
@@ -882,21 +1025,31 @@ class WsSource(Source):
         """A JSON message: channels advertised (pick and subscribe) or withdrawn."""
         op = msg.get("op") if isinstance(msg, dict) else None
         if op == "advertise":
-            for ch in msg.get("channels", []):
-                enc, text = ch.get("schemaEncoding", ""), ch.get("schema", "")
-                kind = (
-                    classify_schema(ch.get("schemaName", ""), enc, text)
-                    if ch.get("encoding") == "cdr"
-                    else None
-                )
-                st.channels[int(ch["id"])] = {**ch, "kind": kind}
+            channels = msg.get("channels")
+            if not isinstance(channels, list):
+                channels = []
+                self.drop("advertise", "an advertise whose channels are not a list")
+            for ch in channels:
+                checked = _channel(ch)
+                if checked is None:
+                    self.drop(
+                        "channel",
+                        "an advertised channel without an integer id, a topic "
+                        "or text schema fields",
+                    )
+                    continue
+                st.channels[checked["id"]] = checked
             for kind, topic in (("imu", self.imu_topic), ("truth", self.truth_topic)):
                 if kind not in st.picked and topic != "none":
                     fatal = self._pick_and_subscribe(ws, st, kind, topic)
                     if fatal:
                         return fatal
         elif op == "unadvertise":
-            gone = set(msg.get("channelIds", []))
+            ids = msg.get("channelIds")
+            if not isinstance(ids, list) or not all(isinstance(i, int) for i in ids):
+                self.drop("unadvertise", "an unadvertise whose channelIds are not integers")
+                return None
+            gone = set(ids)
             for kind, cid in list(st.picked.items()):
                 if cid in gone:
                     del st.picked[kind]

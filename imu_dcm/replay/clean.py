@@ -32,14 +32,12 @@ from numpy.typing import ArrayLike, NDArray
 
 from imu_dcm.errors import GapWarning, ImuDcmWarning
 from imu_dcm.integrate import find_gaps, gap_message
-from imu_dcm.so3 import median, percentile, quat_angle_rad, row_finite, row_max, row_norm
+from imu_dcm.rates import FULL_SCALE_RAD_S, MAX_RATE_RAD_S, implausible_rates
+from imu_dcm.rates import deg_evidence as _deg_evidence  # noqa: F401 - replay.core's
+from imu_dcm.so3 import median, percentile, row_finite
 
-__all__ = ["MAX_RATE_RAD_S", "SPIKE_RATIO", "CleanedImu", "clean_imu"]
+__all__ = ["FULL_SCALE_RAD_S", "MAX_RATE_RAD_S", "SPIKE_RATIO", "CleanedImu", "clean_imu"]
 
-#: Full scale of common MEMS gyros (±2000 °/s): rates above it suggest a deg/s log.
-FULL_SCALE_RAD_S = 2000.0 * np.pi / 180.0
-#: Rates above this are no gyro's (rad/s): 10⁴ rad/s = 5.7e5 °/s.
-MAX_RATE_RAD_S = 1.0e4
 #: An isolated sample this many times above the log's 99.9th percentile and its neighbours is
 #: a spike.
 SPIKE_RATIO = 8.0
@@ -198,7 +196,7 @@ def clean_imu(t_ns: ArrayLike, omega_b: ArrayLike, topic: str = "IMU") -> Cleane
     n_bad = int(nonfinite.sum())
     drop(nonfinite)
 
-    huge = row_max(np.abs(w)) > MAX_RATE_RAD_S
+    huge = implausible_rates(w)  # the rule live applies too
     bad_t = [t[huge]]
     drop(huge)
 
@@ -289,34 +287,3 @@ def _report(topic, t, t0, n_bad, bad, n_dup, n_conf, n_wild, wild_t, n_sorted):
     if gaps:
         warn(gap_message(gaps), GapWarning)
     return tuple(messages), gaps
-
-
-def _deg_evidence(omega_b: NDArray, t_s: NDArray, q_truth: NDArray) -> str | None:
-    """Evidence that rates are in deg/s, or None. Compares with the truth's rate if possible."""
-    ok = row_finite(q_truth)
-    pair = ok[:-1] & ok[1:]
-    if pair.sum() > 10:
-        # pairs (i, i + 1) as views when all are covered (the usual case), else gathered
-        every = bool(pair.all())
-        i = slice(None, -1) if every else np.flatnonzero(pair)
-        j = slice(1, None) if every else i + 1
-        ang = quat_angle_rad(q_truth[i], q_truth[j])
-        truth_rate = ang / np.diff(t_s)[slice(None) if every else i]
-        gyro_rate = row_norm(0.5 * (omega_b[i] + omega_b[j]))
-        moving = truth_rate > 0.2  # rad/s: motion well above noise
-        if moving.sum() > 10:
-            ratio = median(gyro_rate[moving] / truth_rate[moving])
-            if abs(ratio / (180 / np.pi) - 1) < 0.2:
-                return (
-                    f"the gyro rate is {ratio:.1f}x the truth's rotation rate "
-                    f"(180/π = 57.3 for deg/s)"
-                )
-            return None
-    p99 = percentile(row_norm(omega_b), 99) if len(omega_b) else 0.0
-    if p99 > FULL_SCALE_RAD_S:
-        return (
-            f"the 99th percentile of |omega| is {p99:.0f} rad/s, above the ±2000 °/s = "
-            f"{FULL_SCALE_RAD_S:.1f} rad/s full scale of common gyros (as deg/s it would be "
-            f"{np.radians(p99):.2f} rad/s)"
-        )
-    return None

@@ -1,0 +1,95 @@
+"""What no gyro produces: the rate rules replay and live share.
+
+Replay's cleaning (:mod:`imu_dcm.replay.clean`) and live's pipeline (:mod:`imu_dcm.live.pipeline`)
+judge every sample with these, so a rate one drops the other drops too.
+
+* :func:`implausible_rates`: a component above :data:`MAX_RATE_RAD_S` (10⁴ rad/s = 5.7e5 °/s).
+  The bound is physics, not a sensor's: the fastest MEMS full scale is ±4000 °/s = 70 rad/s, and
+  even that read as deg/s (a unit error) stays under it; a flipped exponent bit (1e30, 3e38,
+  1.7e308) is far above.
+* :func:`deg_evidence`: evidence that rates declared rad/s are deg/s: against the truth's own
+  rotation rate when a truth covers the samples (a ratio of 180/π), else a 99th percentile of
+  ``|ω|`` above :data:`FULL_SCALE_RAD_S`, the ±2000 °/s full scale of common MEMS gyros (a body
+  that turns faster than the usual full scale for 1 % of the time is far more likely a deg/s
+  stream than a real motion).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from imu_dcm.so3 import median, percentile, quat_angle_rad, row_finite, row_max, row_norm
+
+__all__ = ["FULL_SCALE_RAD_S", "MAX_RATE_RAD_S", "deg_evidence", "implausible_rates"]
+
+#: Full scale of common MEMS gyros (±2000 °/s): rates above it suggest a deg/s log.
+FULL_SCALE_RAD_S = 2000.0 * np.pi / 180.0
+#: Rates above this are no gyro's (rad/s): 10⁴ rad/s = 5.7e5 °/s.
+MAX_RATE_RAD_S = 1.0e4
+#: Truth rotation rates above this (rad/s) are motion well above a gyro's noise.
+_MOVING_RAD_S = 0.2
+
+
+def implausible_rates(omega_b: ArrayLike) -> NDArray[np.bool_]:
+    """Rows with a component above :data:`MAX_RATE_RAD_S` (finite rows; NaN compares False).
+
+    Parameters
+    ----------
+    omega_b : array_like, float (N, 3)
+        Body rates, rad/s.
+
+    Returns
+    -------
+    bool (N,)
+    """
+    w = np.asarray(omega_b, dtype=float).reshape(-1, 3)
+    return row_max(np.abs(w)) > MAX_RATE_RAD_S
+
+
+def deg_evidence(omega_b: NDArray, t_s: NDArray, q_truth: NDArray) -> str | None:
+    """Evidence that rates given as rad/s are deg/s, as one phrase, or None.
+
+    Parameters
+    ----------
+    omega_b : float64 (N, 3)
+        Body rates as declared rad/s.
+    t_s : float64 (N,)
+        Their stamps, s, increasing.
+    q_truth : float64 (N, 4)
+        The truth ``q_w_b`` ``[x, y, z, w]`` at each stamp (NaN rows where none covers it).
+
+    Returns
+    -------
+    str or None
+        With more than 10 moving covered pairs: the median ratio of the gyro's rate to the
+        truth's, when it is within 20 % of 180/π. Else: the 99th percentile of ``|ω|`` when it
+        is above :data:`FULL_SCALE_RAD_S`.
+    """
+    ok = row_finite(q_truth)
+    pair = ok[:-1] & ok[1:]
+    if pair.sum() > 10:
+        # pairs (i, i + 1) as views when all are covered (the usual case), else gathered
+        every = bool(pair.all())
+        i = slice(None, -1) if every else np.flatnonzero(pair)
+        j = slice(1, None) if every else i + 1
+        ang = quat_angle_rad(q_truth[i], q_truth[j])
+        truth_rate = ang / np.diff(t_s)[slice(None) if every else i]
+        gyro_rate = row_norm(0.5 * (omega_b[i] + omega_b[j]))
+        moving = truth_rate > _MOVING_RAD_S
+        if moving.sum() > 10:
+            ratio = median(gyro_rate[moving] / truth_rate[moving])
+            if abs(ratio / (180 / np.pi) - 1) < 0.2:
+                return (
+                    f"the gyro rate is {ratio:.1f}x the truth's rotation rate "
+                    f"(180/π = 57.3 for deg/s)"
+                )
+            return None
+    p99 = percentile(row_norm(omega_b), 99) if len(omega_b) else 0.0
+    if p99 > FULL_SCALE_RAD_S:
+        return (
+            f"the 99th percentile of |omega| is {p99:.0f} rad/s, above the ±2000 °/s = "
+            f"{FULL_SCALE_RAD_S:.1f} rad/s full scale of common gyros (as deg/s it would be "
+            f"{np.radians(p99):.2f} rad/s)"
+        )
+    return None

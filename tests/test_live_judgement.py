@@ -1,0 +1,187 @@
+"""Live judges every sample as replay does: non-finite and implausible rates are dropped and
+counted before the rest rule or the integrator sees them (:func:`imu_dcm.rates.implausible_rates`,
+the rule of replay's cleaning), so no NaN or Inf reaches the attitude, the console or the JSON,
+and a NaN line is counted once, as NaN/Inf, not as malformed."""
+
+from __future__ import annotations
+
+import json
+import os
+import socket
+import threading
+
+import numpy as np
+import pytest
+from scipy.spatial.transform import Rotation
+from test_live_ws import live_thread
+
+from imu_dcm.live import run
+from imu_dcm.live.__main__ import format_summary
+from imu_dcm.rates import MAX_RATE_RAD_S, implausible_rates
+from imu_dcm.so3 import angle_between_deg
+
+RATE_HZ, SPIN_DEG_S, N = 1000, 90.0, 2001  # 2 s at 90 deg/s about z: a half turn
+
+
+def _spin_lines(bad: dict[int, str]) -> list[bytes]:
+    """``t,gx,gy,gz`` in deg/s, 1 kHz, a constant 90 deg/s about z; line k replaced by the
+    rate text ``bad[k]`` on z."""
+    return [f"{k / RATE_HZ:.3f},0,0,{bad.get(k, repr(SPIN_DEG_S))}".encode() for k in range(N)]
+
+
+def _truth_end() -> np.ndarray:
+    # a constant rate about a fixed axis integrates exactly by every method, over any step
+    # (a dropped sample only makes one step twice as long)
+    return Rotation.from_rotvec([0, 0, np.radians(SPIN_DEG_S) * (N - 1) / RATE_HZ]).as_quat()
+
+
+def _run_stdin(lines: list[bytes], tmp_path, gyro_units_given: str = "deg/s", **kw):
+    r, w = os.pipe()
+
+    def feed():
+        with os.fdopen(w, "wb") as f:
+            f.write(b"\n".join(lines) + b"\n")
+
+    feeder = threading.Thread(target=feed)
+    feeder.start()
+    summary = tmp_path / "summary.json"
+    try:
+        res = run(
+            "-",
+            stdin_fd=r,
+            rerun="off",
+            status=False,
+            gyro_units=gyro_units_given,
+            say=lambda _s: None,
+            summary_json=summary,
+            **kw,
+        )
+    finally:
+        feeder.join()
+        os.close(r)
+    return res, json.loads(summary.read_text())
+
+
+def test_the_rule_is_replays():
+    w = np.array([[0, 0, MAX_RATE_RAD_S], [0, -1.0001 * MAX_RATE_RAD_S, 0], [np.nan, 0, 0]])
+    assert implausible_rates(w).tolist() == [False, True, False]
+
+
+@pytest.mark.parametrize("text", ["1e30", "1.7e308", "-3e38"])
+def test_one_absurd_line_in_a_spin_is_dropped_and_counted(text, tmp_path):
+    res, saved = _run_stdin(_spin_lines({1000: text}), tmp_path, bias="auto")
+    s = res.summary
+    assert s["dropped_implausible"] == 1 and s["dropped_nonfinite"] == 0
+    assert s["malformed"] == 0 and s["samples"] == N - 1
+    assert s["bias_segments"] == []  # turning at 90 deg/s: no rest, whatever one sample says
+    assert s["bias_rad_s"] == [0.0, 0.0, 0.0]
+    assert np.all(np.isfinite(res.q_w_b))
+    assert angle_between_deg(res.q_w_b, _truth_end()) < 1e-9
+    assert saved == s  # the JSON holds the summary as it is
+    assert "1 implausible" in format_summary(s)
+
+
+def test_a_nan_line_is_counted_once_as_nan(tmp_path):
+    res, _ = _run_stdin(_spin_lines({500: "nan", 501: "inf"}), tmp_path, bias="none")
+    s = res.summary
+    assert s["dropped_nonfinite"] == 2 and s["malformed"] == 0
+    assert "2 NaN/Inf" in format_summary(s) and "0 malformed" in format_summary(s)
+    assert angle_between_deg(res.q_w_b, _truth_end()) < 1e-9
+
+
+def test_over_udp_too(tmp_path):
+    live = live_thread("udp://127.0.0.1:0", gyro_units="deg/s", bias="auto", idle_stop_s=0.5)
+    assert live.ready.wait(20)
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as tx:
+        for line in _spin_lines({1000: "1e30", 1500: "1.7e308"}):
+            tx.sendto(line, live.addr["address"])
+    live.thread.join(30)
+    assert not live.thread.is_alive()
+    res = live.out["result"]
+    s = res.summary
+    assert s["lost_by_system"] == 0 and s["samples"] == N - 2
+    assert s["dropped_implausible"] == 2 and s["bias_segments"] == []
+    assert angle_between_deg(res.q_w_b, _truth_end()) < 1e-9
+    json.dumps(s, allow_nan=False)
+
+
+def _json_lines(rate_given: float, rate_true_rad_s: float, n: int = 3001) -> list[bytes]:
+    """JSON lines at 1 kHz: the gyro ``rate_given`` about z, and the truth of a body turning
+    at ``rate_true_rad_s`` about z."""
+    out = []
+    for k in range(n):
+        t = k / RATE_HZ
+        q = Rotation.from_rotvec([0, 0, rate_true_rad_s * t]).as_quat().tolist()
+        out.append(json.dumps({"t_s": t, "omega_b": [0, 0, rate_given], "q_w_b": q}).encode())
+    return out
+
+
+@pytest.mark.parametrize(
+    ("given", "true_rad_s", "flagged", "why"),
+    [
+        (20.0, np.radians(20.0), True, "57.3"),  # 20 deg/s given as rad/s: the truth says so
+        (1.5, 1.5, False, None),  # a real 1.5 rad/s spin, its truth agreeing
+    ],
+)
+def test_deg_per_s_given_as_rad_per_s_is_flagged_against_the_truth(
+    given, true_rad_s, flagged, why, tmp_path
+):
+    r, w = os.pipe()
+    lines = _json_lines(given, true_rad_s)
+
+    def feed():
+        with os.fdopen(w, "wb") as f:
+            f.write(b"\n".join(lines) + b"\n")
+
+    said: list[str] = []
+    feeder = threading.Thread(target=feed)
+    feeder.start()
+    try:
+        res = run("-", stdin_fd=r, rerun="off", status=False, bias="none", say=said.append)
+    finally:
+        feeder.join()
+        os.close(r)
+    s = res.summary
+    hits = [line for line in said if line.startswith("the rates look like deg/s")]
+    assert bool(hits) is flagged and bool(s["units_evidence"]) is flagged
+    if flagged:
+        assert len(hits) == 1 and why in hits[0] and "--gyro-units deg/s" in hits[0]
+
+
+def test_deg_per_s_given_as_rad_per_s_is_flagged_by_the_full_scale_without_truth(tmp_path):
+    # 90 deg/s as "90 rad/s": above the +-2000 deg/s = 34.9 rad/s full scale of common gyros
+    res, _ = _run_stdin(_spin_lines({}), tmp_path, bias="none", gyro_units_given="rad/s")
+    assert "full scale" in res.summary["units_evidence"]
+    res, _ = _run_stdin(_spin_lines({}), tmp_path, bias="none")  # declared deg/s: not judged
+    assert res.summary["units_evidence"] is None
+
+
+def test_the_summary_holds_no_value_json_cannot_hold():
+    from imu_dcm.live.session import _json_safe
+
+    got = _json_safe({"a": float("nan"), "b": [1.0, float("inf")], "c": {"d": -float("inf")}})
+    assert got == {"a": None, "b": [1.0, None], "c": {"d": None}}
+    json.dumps(got, allow_nan=False)
+
+
+def test_live_help_names_every_source():
+    from imu_dcm.live.__main__ import build_parser
+    from imu_dcm.live.sources import SOURCES
+
+    text = build_parser().format_help()
+    for scheme in SOURCES:
+        assert (scheme if scheme == "-" else f"{scheme}:") in text
+    assert "mavlink:udpin:HOST:PORT" in text
+
+
+def test_a_line_without_end_costs_itself_not_memory(tmp_path):
+    # 1 MB with no line end between two good stretches: dropped as one malformed line (said
+    # once), never held whole; the samples around it are integrated
+    from imu_dcm.live.sources import MAX_LINE_BYTES
+
+    lines = _spin_lines({})
+    junk = b"9" * (16 * MAX_LINE_BYTES)
+    res, _ = _run_stdin([*lines[:1000], junk, *lines[1000:]], tmp_path, bias="none")
+    s = res.summary
+    assert s["malformed"] == 1 and s["samples"] == N
+    assert angle_between_deg(res.q_w_b, _truth_end()) < 1e-9
