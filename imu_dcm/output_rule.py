@@ -28,6 +28,7 @@ __all__ = [
     "ensure_parent",
     "file_kind",
     "is_own_bag",
+    "open_stream",
     "writes_to_stdout",
 ]
 
@@ -202,6 +203,37 @@ def _std_stream(st: os.stat_result | None) -> str | None:
     return None
 
 
+#: FIFOs claimed, by (st_dev, st_ino): their write end, opened at the claim (so a missing reader
+#: is refused before the work, and the reader waits for the output instead of seeing an end).
+_HELD_FIFOS: dict[tuple[int, int], int] = {}
+
+
+def open_stream(path: Path, what: str) -> int:
+    """A write descriptor of the FIFO, pipe or character device ``path``: the one held since its
+    claim, or opened now without waiting; a FIFO nobody reads is one OutputError line."""
+    with contextlib.suppress(OSError):
+        st = os.stat(path)
+        fd = _HELD_FIFOS.pop((st.st_dev, st.st_ino), None)
+        if fd is not None:
+            return fd
+    try:
+        fd = os.open(path, os.O_WRONLY | os.O_NONBLOCK | os.O_NOCTTY)
+    except OSError as exc:
+        if exc.errno == 6:  # ENXIO: a FIFO that nobody reads
+            raise OutputError(
+                f"Expected a reader on the FIFO {what} {str(path)!r}, got none (start the "
+                "reader first)"
+            ) from None
+        raise
+    os.set_blocking(fd, True)
+    return fd
+
+
+def _hold_fifo(path: Path, what: str, st: os.stat_result) -> None:
+    if (st.st_dev, st.st_ino) not in _HELD_FIFOS:
+        _HELD_FIFOS[(st.st_dev, st.st_ino)] = open_stream(path, what)
+
+
 def _check_owner(out: Path, kind: str, what: str) -> None:
     """Refuse an existing regular file this tool did not write (:mod:`imu_dcm.signatures`)."""
     from imu_dcm.signatures import KINDS, is_own
@@ -272,6 +304,8 @@ def claim_output(
         _parent_writable(out, what)
         return Claim(out, kind, what, inputs, "file")
     if to_stream:
+        if stat.S_ISFIFO(st.st_mode):
+            _hold_fifo(out, what, st)  # a reader now, or a refusal now: never a wait at the end
         return Claim(out, kind, what, inputs, "device")
     if not stat.S_ISREG(st.st_mode):
         raise OutputError(

@@ -68,6 +68,7 @@ from imu_dcm.output_rule import (
     ensure_parent,
     file_kind,
     is_own_bag,
+    open_stream,
     writes_to_stdout,
 )
 
@@ -125,7 +126,8 @@ def _replace_with(tmp: Path, out: Path) -> None:
 
 def _write_stream(claim: Claim, data: bytes) -> None:
     """Write ``data`` to a stream claim: the process's stdout / stderr, or a FIFO, pipe or
-    character device opened without waiting (a FIFO without a reader is refused)."""
+    character device (:func:`~imu_dcm.output_rule.open_stream`: a FIFO's end held since its
+    claim; one without a reader is refused, never waited on)."""
     if claim.stream in ("stdout", "stderr"):
         stream = sys.stdout if claim.stream == "stdout" else sys.stderr
         stream.flush()
@@ -136,17 +138,8 @@ def _write_stream(claim: Claim, data: bytes) -> None:
             buffer.write(data)
         stream.flush()
         return
+    fd = open_stream(claim.path, claim.what)
     try:
-        fd = os.open(claim.path, os.O_WRONLY | os.O_NONBLOCK | os.O_NOCTTY)
-    except OSError as exc:
-        if exc.errno == 6:  # ENXIO: a FIFO that nobody reads
-            raise OutputError(
-                f"Expected a reader on the FIFO {claim.what} {str(claim.path)!r}, got none "
-                "(start the reader first)"
-            ) from None
-        raise
-    try:
-        os.set_blocking(fd, True)
         view = memoryview(data)
         while view:
             view = view[os.write(fd, view) :]

@@ -197,26 +197,28 @@ def test_dash_and_the_stdout_file_are_standard_output(tmp_path, capsys):
 def test_a_fifo_is_written_directly_and_one_without_reader_is_refused(tmp_path):
     fifo = tmp_path / "pipe"
     os.mkfifo(fifo)
-    claim = claim_output(fifo, "json")
-    assert claim.stream == "device"
-    with pytest.raises(OutputError, match="reader on the FIFO"):  # never waits
-        write_json(claim, {"x": 1})
+    with pytest.raises(OutputError, match="reader on the FIFO"):  # at the claim: never waits
+        claim_output(fifo, "json")
     got = []
 
     def read():
-        with open(fifo, "rb") as f:
+        with open(fifo, "rb") as f:  # blocks until a writer opens
             got.append(f.read())
 
     reader = threading.Thread(target=read)
     reader.start()
-    for _ in range(200):  # the reader's open blocks until a writer opens: retry until it is there
+    for _ in range(500):  # claim once the reader is in its open()
         try:
-            write_json(claim, {"x": 1})
+            claim = claim_output(fifo, "json")
             break
         except OutputError:
             threading.Event().wait(0.01)
+    assert claim.stream == "device"
+    threading.Event().wait(0.2)
+    assert not got  # the reader waits for the output: the claim holds the write end
+    write_json(claim, {"x": 1})
     reader.join(5)
-    assert got and got[0].startswith(b'{\n  "written_by"')
+    assert got and got[0].startswith(b'{\n  "written_by"') and got[0].endswith(b"}\n")
     assert os.path.exists(fifo) and not os.path.isfile(fifo)
 
 
