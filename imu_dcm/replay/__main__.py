@@ -3,8 +3,10 @@
 Replays a ROS 2 bag / MCAP gyro log through the integrator, prints a summary of the estimate's
 error against the log's truth, and optionally writes the estimate as a bag (``--out``), TUM
 files for evo (``--export-tum``), the summary as JSON (``--summary-json``) and a rerun view
-(``--rerun``). Every option and output path is checked before the log is read, so a bad one
-leaves nothing behind; no output may be, hold or lie inside the input.
+(``--rerun``). Every option is checked and every output claimed before the log is read
+(:mod:`imu_dcm.outputs`: new or this tool's own file, never an input, no link to a file), so a
+bad one leaves nothing behind. ``--summary-json -`` puts the JSON alone on stdout and the lines
+for people on stderr.
 ``python -m imu_dcm.replay convert-csv ...`` turns a CSV log into a ROS 2 MCAP bag.
 
 Bad input gives one line on stderr and exit code 2; recoverable oddities are printed as
@@ -42,7 +44,12 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.add_argument("log", help=f"the log: {kinds}")
     add_replay_options(p)
-    p.add_argument("--summary-json", metavar="PATH", help="write the summary as JSON")
+    p.add_argument(
+        "--summary-json",
+        metavar="PATH",
+        help="write the summary as JSON (- for stdout: the summary lines then go to stderr); "
+        "an existing file is replaced only when this tool wrote it",
+    )
     p.add_argument(
         "--out", metavar="DIR", help="write the estimate as a ROS 2 bag (/estimate/orientation)"
     )
