@@ -217,7 +217,7 @@ def open_stream(path: Path, what: str) -> int:
         if fd is not None:
             return fd
     try:
-        fd = os.open(path, os.O_WRONLY | os.O_NONBLOCK | os.O_NOCTTY)
+        fd = os.open(path, os.O_WRONLY | os.O_NONBLOCK | getattr(os, "O_NOCTTY", 0))
     except OSError as exc:
         if exc.errno == 6:  # ENXIO: a FIFO that nobody reads
             raise OutputError(
