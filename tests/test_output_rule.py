@@ -267,3 +267,27 @@ def test_live_recording_is_written_whole_and_again_and_never_emptied(tmp_path):
     r = _run(argv, tmp_path, LINES, RERUN="off")
     _refused(r.returncode, r.stderr, "imu-dcm-live", "RERUN=off")
     assert (tmp_path / "v.rrd").read_bytes() == rrd
+
+
+@pytest.mark.parametrize("signame,code", [("SIGINT", 130), ("SIGTERM", 143)])
+def test_serve_stopped_by_a_signal_exits_128_plus_it(signame, code, monkeypatch, capsys):
+    import signal
+    import threading
+
+    import imu_dcm.viz
+
+    stopped = []
+
+    class Served:  # the web viewer, as far as the command sees it: a running process
+        line = "rerun: web viewer at http://127.0.0.1:1 (127.0.0.1 only)"
+        viewer = type("V", (), {"process": type("P", (), {"poll": lambda self: None})()})()
+
+        def stop(self):
+            stopped.append(True)
+
+    monkeypatch.setattr(imu_dcm.viz, "serve_replay", lambda view, realtime: Served())
+    sig = getattr(signal, signame)
+    threading.Timer(0.5, os.kill, (os.getpid(), sig)).start()
+    assert main([str(FLIP), "--quiet", "--rerun", "serve"]) == code
+    out = capsys.readouterr().out
+    assert stopped == [True] and "web viewer stopped" in out
