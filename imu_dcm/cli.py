@@ -213,3 +213,31 @@ def parse_init_quat(text: str | None) -> list[float] | None:
     if sum(v * v for v in q) < 1e-12:
         raise InputError(f"Expected a non-zero --init-quat x,y,z,w, got {text!r}")
     return q
+
+
+#: Values of the environment variable ``RERUN`` with which rerun's SDK records nothing (its own
+#: switch; compared without case: ``0``, ``false``, ``off``; any other value leaves it on).
+RERUN_OFF_VALUES = ("0", "false", "off")
+
+
+def rerun_switched_off() -> bool:
+    """True when ``RERUN`` in the environment turns rerun's SDK off (:data:`RERUN_OFF_VALUES`):
+    a recording would then be empty, and a viewer would get nothing."""
+    return os.environ.get("RERUN", "").lower() in RERUN_OFF_VALUES
+
+
+def check_rerun_switch(mode: str | None) -> str | None:
+    """The ``--rerun`` mode to use under the environment's ``RERUN`` switch: ``mode`` itself
+    when rerun is on; ``"off"`` for the default (None) when it is off. A view asked for by name
+    (spawn, serve, save:) while it is off is refused in one line (:class:`InputError`): rerun
+    would write an empty ``.rrd`` over the target, or show nothing."""
+    if mode == "off" or not rerun_switched_off():
+        return mode
+    if mode is None:
+        return "off"
+    from imu_dcm.errors import InputError
+
+    raise InputError(
+        f"Expected rerun switched on for --rerun {mode}, got RERUN={os.environ['RERUN']} in "
+        "the environment (rerun's own switch: unset it, or use --rerun off)"
+    )

@@ -1,20 +1,44 @@
-"""Output-path safety shared by every command that writes files (replay, convert-csv, data_synth).
+"""Output-path safety shared by every command that writes files (replay, batch, live,
+convert-csv, data_synth): ONE OUTPUT RULE, checked before any work is done and again just
+before a file is replaced.
 
-Rules, checked before any work is done and again just before a file is replaced:
+* **Ours or new.** An existing file is replaced only when this tool wrote it, recognised by its
+  content (:mod:`imu_dcm.signatures`: a JSON key, a comment line, PNG metadata, the ``.rrd``
+  application id, the batch table's header). Anything else is refused in one line, ``--force``
+  or not (``--force`` only lets this tool's own batch table or bag folder be replaced). An empty
+  file holds nothing to lose and may be replaced.
+* **Never an input.** An output is never an input (same path, or same device and inode: a hard
+  link, a symlink, the file on standard input), never holds one and never lies inside an input
+  folder (a bag folder is an input as a whole).
+* **No symbolic link to a file.** An output whose last component is a symbolic link is refused
+  when the link leads to a file, a folder or nowhere (nothing is ever written through a link
+  into another file; the link itself is not replaced either). A link to a stream (``/dev/stdout``
+  -> a pipe) is written through.
+* **Streams are written directly.** ``-`` is standard output; a path that is the process's
+  standard output or error (``/dev/stdout``, ``/proc/self/fd/1``, even a regular file the shell
+  redirected stdout to) is written to that stream; a FIFO, a pipe or a character device
+  (``/dev/null``, a terminal) is opened and written, never replaced; a FIFO without a reader is
+  refused, never waited on. Folders, block devices and sockets are refused.
+* **Whole or not at all.** A file is written to a temporary sibling, then ``os.replace``; on any
+  error the temporary file is removed and the target is untouched. A replaced file keeps its
+  mode; a new one gets the umask's (``0o666 & ~umask``), not the temporary file's 0o600. A
+  stream gets the bytes only once the whole output exists.
+* **Missing parent folders** are created when the output is written, and removed again if that
+  write fails (``--out out/top``, ``--summary-json out/flip.json``); the nearest existing one must
+  be a writable folder. A run that fails before writing creates none.
 
-* An output is never an input, never contains an input (a folder holding the log) and never lies
-  inside an input folder (a bag folder is an input as a whole).
-* An existing output must be a regular file (or, for folder outputs, a folder): devices, FIFOs
-  and sockets are refused (``/dev/full`` stays a device).
-* ``force`` replaces only what this project wrote: a bag folder made by
-  :func:`imu_dcm.logio.writer.write_bag` (``metadata.yaml`` plus one ``<name>.mcap`` whose MCAP
-  header names ``imu_dcm.bag_writer``). Anything else is refused even with ``force``.
-* Missing parent folders of an output are created when it is written (``--out out/top``); the
-  nearest existing one must be a writable folder.
-* Files are written atomically by one helper, :func:`atomic_path`: a temporary sibling, then
-  ``os.replace``; on any error the temporary file is removed and the target is untouched. A
-  replaced file keeps its mode; a new one gets the umask's (``0o666 & ~umask``), not the
-  temporary file's 0o600.
+For a file named by a user, call :func:`claim_output` before the work and :func:`write_atomic`
+(or :func:`claimed_path` / :class:`PendingOutput` for a writer that needs a path) after it::
+
+    claim = claim_output(args.export_csv, "csv", inputs, what="--export-csv")  # before the work
+    ...                                                                         # the work
+    write_atomic(claim, comment_line("estimate") + text)   # imu_dcm.signatures.comment_line
+    with claimed_path(claim_output(path, "chart", inputs)) as tmp:  # a writer needing a path
+        fig.savefig(tmp, format="png", metadata={"Software": signature("chart")})
+
+A new kind of output gets its signature and recogniser in :data:`imu_dcm.signatures.KINDS`.
+:func:`atomic_path` and :func:`write_text_atomic` are the low-level writes for files inside an
+output folder already claimed (a bag's ``metadata.yaml``).
 
 Errors are :class:`imu_dcm.errors.OutputError` with one line "Expected ..., got ...".
 """
@@ -24,182 +48,50 @@ from __future__ import annotations
 import contextlib
 import os
 import stat
+import sys
 import tempfile
 import threading
 from collections.abc import Iterable, Iterator
 from pathlib import Path
 
-from imu_dcm.errors import LogError
+from imu_dcm.output_rule import (
+    Claim,
+    OutputError,
+    _make_parents,
+    _plain_file,
+    _remove_made,
+    check_not_input,
+    check_output_dir,
+    check_output_file,
+    check_output_folder,
+    claim_output,
+    ensure_parent,
+    file_kind,
+    is_own_bag,
+    open_stream,
+    writes_to_stdout,
+)
 
 __all__ = [
+    "Claim",
     "OutputError",
+    "PendingOutput",
     "atomic_path",
-    "ensure_parent",
     "check_not_input",
     "check_output_dir",
-    "file_kind",
     "check_output_file",
-    "is_own_bag",
     "check_output_folder",
+    "claim_output",
+    "claimed_path",
+    "ensure_parent",
+    "file_kind",
+    "is_own_bag",
     "save_figure",
+    "write_atomic",
     "write_json",
     "write_text_atomic",
+    "writes_to_stdout",
 ]
-
-_MCAP_MAGIC = b"\x89MCAP0\r\n"
-#: MCAP header ``library`` values of the project's bag writers (replay/convert-csv/data_synth,
-#: and live's recorder).
-_OWN_LIBRARIES = (b"imu_dcm.bag_writer", b"imu_dcm.live")
-
-
-class OutputError(LogError):
-    """An output path that would destroy an input, a special file or something not ours (also a
-    :class:`~imu_dcm.errors.LogError` and a ``ValueError``)."""
-
-
-def _resolved(path: str | os.PathLike) -> Path:
-    return Path(os.path.abspath(os.path.realpath(os.fspath(path))))
-
-
-def _stat(out: Path, what: str) -> os.stat_result | None:
-    """``os.stat(out)``, None when nothing is there; any other failure is one OutputError line."""
-    try:
-        return os.stat(out)
-    except FileNotFoundError:
-        return None
-    except OSError as exc:
-        raise OutputError(
-            f"Expected a usable path for {what}, got {exc.strerror}: {str(out)!r}"
-        ) from None
-
-
-def check_not_input(out: Path, inputs: Iterable[str | os.PathLike], what: str) -> None:
-    """Refuse ``out`` (resolved) when it is an input, holds one, or lies inside an input folder."""
-    for item in inputs:
-        src = _resolved(item)
-        if out == src:
-            raise OutputError(f"Expected {what} other than the input, got {str(out)!r}")
-        if src.is_relative_to(out):
-            raise OutputError(
-                f"Expected {what} that does not contain the input {str(src)!r}, got {str(out)!r}"
-            )
-        if src.is_dir() and out.is_relative_to(src):
-            raise OutputError(
-                f"Expected {what} outside the input folder {str(src)!r}, got {str(out)!r}"
-            )
-
-
-def file_kind(mode: int) -> str:
-    """What a ``st_mode`` is, in words: "FIFO", "character device", "folder", ..."""
-    for test, name in (
-        (stat.S_ISCHR, "character device"),
-        (stat.S_ISBLK, "block device"),
-        (stat.S_ISFIFO, "FIFO"),
-        (stat.S_ISSOCK, "socket"),
-        (stat.S_ISDIR, "folder"),
-        (stat.S_ISREG, "regular file"),
-    ):
-        if test(mode):
-            return name
-    return "special file"
-
-
-def _parent_writable(out: Path, what: str) -> None:
-    """The nearest existing ancestor of ``out`` is a writable folder (missing ones are created
-    when the output is written, by :func:`ensure_parent`)."""
-    parent = out.parent
-    while not parent.exists() and not parent.is_symlink() and parent != parent.parent:
-        parent = parent.parent
-    if not parent.is_dir():
-        raise OutputError(f"Expected a folder for {what}, got no folder {str(parent)!r}")
-    if not os.access(parent, os.W_OK | os.X_OK):
-        raise OutputError(f"Expected a writable folder for {what}, got read-only {str(parent)!r}")
-
-
-def ensure_parent(path: str | os.PathLike, what: str = "output") -> Path:
-    """Create the missing parent folders of ``path`` (umask modes); returns the parent."""
-    parent = Path(path).parent
-    try:
-        parent.mkdir(parents=True, exist_ok=True)
-    except OSError as exc:
-        raise OutputError(
-            f"Expected to create the folder {str(parent)!r} for {what}, got "
-            f"{type(exc).__name__}: {exc.strerror or exc}"
-        ) from None
-    return parent
-
-
-def check_output_file(
-    path: str | os.PathLike, inputs: Iterable[str | os.PathLike] = (), what: str = "output file"
-) -> Path:
-    """Check a file output before anything is written; returns the resolved path.
-
-    An existing regular file may be replaced (it is only swapped in whole); a folder, device,
-    FIFO or socket is refused, as is any path that is, holds or lies inside an input.
-    """
-    out = _resolved(path)
-    check_not_input(out, inputs, what)
-    st = _stat(out, what)
-    if st is not None and not stat.S_ISREG(st.st_mode):
-        raise OutputError(
-            f"Expected {what} to be a regular file or new, got a {file_kind(st.st_mode)} "
-            f"{str(out)!r}"
-        )
-    _parent_writable(out, what)
-    return out
-
-
-def is_own_bag(path: str | os.PathLike) -> bool:
-    """True for a bag folder written by :func:`imu_dcm.logio.writer.write_bag` and nothing else.
-
-    The folder holds exactly ``metadata.yaml`` and ``<folder name>.mcap``, and the MCAP header
-    record names the library ``imu_dcm.bag_writer``.
-    """
-    p = Path(path)
-    if p.is_symlink() or not p.is_dir():
-        return False
-    names = {c.name for c in p.iterdir()}
-    mcap = p / f"{p.name}.mcap"
-    if names != {"metadata.yaml", mcap.name} or not mcap.is_file() or mcap.is_symlink():
-        return False
-    with open(mcap, "rb") as f:
-        head = f.read(256)
-    return head.startswith(_MCAP_MAGIC) and any(lib in head for lib in _OWN_LIBRARIES)
-
-
-def check_output_dir(
-    path: str | os.PathLike,
-    inputs: Iterable[str | os.PathLike] = (),
-    *,
-    force: bool = False,
-    what: str = "output folder",
-    writer: str = "imu_dcm",
-) -> Path:
-    """Check a bag-folder output before anything is written; returns the resolved path.
-
-    A missing path is fine (its parent must be a writable folder). An existing one needs
-    ``force`` and must be a bag folder this project wrote (:func:`is_own_bag`); ``writer``
-    names the command in the refusal.
-    """
-    out = _resolved(path)
-    check_not_input(out, inputs, what)
-    raw = Path(os.path.abspath(os.fspath(path)))
-    if raw.is_symlink():
-        raise OutputError(f"Expected {what} that is not a symbolic link, got {str(raw)!r}")
-    st = _stat(out, what)
-    if st is not None:
-        if not force:
-            raise OutputError(
-                f"Expected {what} {str(out)!r} not to exist (use --force), got an "
-                f"existing {file_kind(st.st_mode)}"
-            )
-        if not is_own_bag(out):
-            raise OutputError(
-                f"Expected --force to replace only a bag this tool wrote (written by "
-                f"{writer}), got {file_kind(st.st_mode)} {str(out)!r} (remove it yourself)"
-            )
-    _parent_writable(out, what)
-    return out
 
 
 _UMASK_LOCK = threading.Lock()
@@ -220,42 +112,169 @@ def _umask() -> int:
     return mask
 
 
+def _replace_with(tmp: Path, out: Path) -> None:
+    """Give ``tmp`` the mode ``out`` has (or the umask's), sync it, and rename it onto ``out``."""
+    try:
+        mode = stat.S_IMODE(os.stat(out).st_mode)
+    except FileNotFoundError:
+        mode = 0o666 & ~_umask()
+    os.chmod(tmp, mode)
+    with open(tmp, "rb") as f:
+        os.fsync(f.fileno())
+    os.replace(tmp, out)
+
+
+def _write_stream(claim: Claim, data: bytes) -> None:
+    """Write ``data`` to a stream claim: the process's stdout / stderr, or a FIFO, pipe or
+    character device (:func:`~imu_dcm.output_rule.open_stream`: a FIFO's end held since its
+    claim; one without a reader is refused, never waited on)."""
+    if claim.stream in ("stdout", "stderr"):
+        stream = sys.stdout if claim.stream == "stdout" else sys.stderr
+        stream.flush()
+        buffer = getattr(stream, "buffer", None)
+        if buffer is None:
+            stream.write(data.decode("utf-8"))
+        else:
+            buffer.write(data)
+        stream.flush()
+        return
+    fd = open_stream(claim.path, claim.what)
+    try:
+        view = memoryview(data)
+        while view:
+            view = view[os.write(fd, view) :]
+    finally:
+        os.close(fd)
+
+
+def _write_failed(claim: Claim, exc: OSError) -> OutputError:
+    return OutputError(
+        f"Expected to write {claim.what} {str(claim.path)!r}, got {type(exc).__name__}: "
+        f"{exc.strerror or exc}"
+    )
+
+
+class PendingOutput:
+    """An output being written: fill :attr:`path` (a temporary file), then :meth:`commit`
+    makes it the output, whole, or :meth:`abort` removes it. For a writer that needs a path and
+    takes long (a live recording): :func:`claimed_path` is the short form.
+
+    A file claim's temporary file is a hidden sibling of the target (same folder, so the rename
+    is atomic; missing parent folders are made here and removed again on :meth:`abort`). A
+    stream claim's is in the system's temporary folder; :meth:`commit` copies it to the stream.
+    """
+
+    def __init__(self, claim: Claim) -> None:
+        self.claim = claim
+        self._made: list[Path] = []
+        folder, prefix = None, ".imu_dcm."
+        if claim.stream == "file":
+            self._made = _make_parents(claim.path, claim.what)
+            folder, prefix = claim.path.parent, f".{claim.path.name}."
+        try:
+            fd, name = tempfile.mkstemp(prefix=prefix, suffix=".tmp", dir=folder)
+            os.close(fd)
+        except OSError as exc:
+            _remove_made(self._made)
+            raise _write_failed(claim, exc) from None
+        self.path = Path(name)
+
+    def commit(self) -> Path:
+        """Check the target again, then replace it with the temporary file (or copy that to the
+        stream); returns the output's path. On failure nothing of the output is left."""
+        c = self.claim
+        try:
+            if c.stream == "file":
+                again = claim_output(c.path, c.kind, c.inputs, what=c.what)
+                if again.stream != "file":
+                    raise OutputError(
+                        f"Expected {c.what} to stay a file until written, got a stream "
+                        f"{str(c.path)!r}"
+                    )
+                _replace_with(self.path, c.path)
+            else:
+                _write_stream(c, self.path.read_bytes())
+                self.path.unlink(missing_ok=True)
+        except BrokenPipeError:
+            self.abort()
+            raise  # ... | head: the reader had what it wanted (the commands end quietly)
+        except OSError as exc:
+            self.abort()
+            raise _write_failed(c, exc) from None
+        except BaseException:
+            self.abort()
+            raise
+        return c.path
+
+    def abort(self) -> None:
+        """Remove the temporary file and the folders made for it; the target is untouched."""
+        self.path.unlink(missing_ok=True)
+        _remove_made(self._made)
+
+
+@contextlib.contextmanager
+def claimed_path(claim: Claim) -> Iterator[Path]:
+    """Yield a temporary path to write the output ``claim`` to; on leaving the block it becomes
+    the output (:meth:`PendingOutput.commit`); on an exception it is removed and the target is
+    untouched."""
+    pending = PendingOutput(claim)
+    try:
+        yield pending.path
+    except BaseException:
+        pending.abort()
+        raise
+    pending.commit()
+
+
+def write_atomic(claim: Claim, data: str | bytes) -> Path:
+    """Write ``data`` (text as UTF-8) as the output ``claim``, whole or not at all; returns its
+    path. A stream gets the bytes in one go; a file is replaced by a rename."""
+    raw = data.encode("utf-8") if isinstance(data, str) else bytes(data)
+    if claim.stream == "file":
+        with claimed_path(claim) as tmp:
+            tmp.write_bytes(raw)
+        return claim.path
+    try:
+        _write_stream(claim, raw)
+    except BrokenPipeError:
+        raise
+    except OSError as exc:
+        raise _write_failed(claim, exc) from None
+    return claim.path
+
+
 @contextlib.contextmanager
 def atomic_path(path: str | os.PathLike, what: str = "output") -> Iterator[Path]:
     """Yield a temporary sibling of ``path`` to write; on success it replaces ``path`` whole.
 
-    The one atomic write of the project (text, JSON, tables, ``.rrd`` files, ``metadata.yaml``).
-    Missing parent folders are created. The result keeps the mode of the file it replaces, or
-    gets ``0o666 & ~umask`` when new. On any error (or an exception in the ``with`` body) the
+    The low-level write for files inside an output folder already checked (a bag's
+    ``metadata.yaml``), and for the benchmarks' figures; a file a user names goes through
+    :func:`claim_output` and :func:`claimed_path` instead. Missing parent folders are created
+    (and removed again on failure). The result keeps the mode of the file it replaces, or gets
+    ``0o666 & ~umask`` when new. On any error (or an exception in the ``with`` body) the
     temporary file is removed, ``path`` is untouched and an ``OSError`` becomes one
-    :class:`OutputError` line. Checks of the target (:func:`check_output_file`) are the
-    caller's.
+    :class:`OutputError` line.
     """
     out = Path(path)
-    ensure_parent(out, what)
+    made = _make_parents(out, what)
     tmp = None
     try:
         fd, name = tempfile.mkstemp(prefix=f".{out.name}.", suffix=".tmp", dir=out.parent)
         os.close(fd)
         tmp = Path(name)
         yield tmp
-        try:
-            mode = stat.S_IMODE(os.stat(out).st_mode)
-        except FileNotFoundError:
-            mode = 0o666 & ~_umask()
-        os.chmod(tmp, mode)
-        with open(tmp, "rb") as f:
-            os.fsync(f.fileno())
-        os.replace(tmp, out)
+        _replace_with(tmp, out)
     except OSError as exc:
         if tmp is not None:
             tmp.unlink(missing_ok=True)
+        _remove_made(made)
         raise OutputError(
             f"Expected to write {str(out)!r}, got {type(exc).__name__}: {exc.strerror or exc}"
         ) from None
     except BaseException:
         if tmp is not None:
             tmp.unlink(missing_ok=True)
+        _remove_made(made)
         raise
 
 
@@ -265,13 +284,14 @@ def write_text_atomic(
     inputs: Iterable[str | os.PathLike] = (),
     what: str = "output file",
 ) -> Path:
-    """Write ``text`` to ``path`` whole or not at all (:func:`atomic_path`).
+    """Write ``text`` to ``path`` whole or not at all (:func:`atomic_path`): the low-level write
+    of a file inside a checked output folder (no signature is asked of an existing file).
 
-    Re-checks the target with :func:`check_output_file` first. Raises :class:`OutputError` for
-    an unsafe target or a write that fails (permission, disk full), leaving no temporary file;
-    the mode of a replaced file is kept.
+    Re-checks that the target is not an input and is a regular file or new. Raises
+    :class:`OutputError` for an unsafe target or a write that fails (permission, disk full),
+    leaving no temporary file; the mode of a replaced file is kept.
     """
-    out = check_output_file(path, inputs, what)
+    out = _plain_file(path, inputs, what)
     with atomic_path(out, what) as tmp:
         tmp.write_text(text, encoding="utf-8")
     return out
@@ -287,40 +307,29 @@ def _json_default(o):
 
 
 def write_json(
-    path: str | os.PathLike,
+    path: str | os.PathLike | Claim,
     data,
     inputs: Iterable[str | os.PathLike] = (),
     what: str = "JSON file",
+    writer: str = "summary",
 ) -> Path:
-    """Write ``data`` as indented JSON (numpy values as numbers; NaN refused) with
-    :func:`write_text_atomic`."""
+    """Write the mapping ``data`` as indented JSON (numpy values as numbers; NaN refused), signed
+    with a first key ``"written_by": "imu_dcm <version> <writer>"``, as the output ``path``
+    (a :class:`Claim`, or a path claimed here as kind ``json``)."""
     import json
 
-    text = json.dumps(data, indent=2, default=_json_default, allow_nan=False) + "\n"
-    return write_text_atomic(path, text, inputs, what)
+    from imu_dcm.signatures import signature
 
-
-def check_output_folder(
-    path: str | os.PathLike, inputs: Iterable[str | os.PathLike] = (), what: str = "--out folder"
-) -> Path:
-    """Check a folder that files are written into (benchmarks' ``--out``): an existing folder or
-    a new path whose nearest existing ancestor is a writable folder; never an input, holding
-    one or inside one. Returns the resolved path (created later, by the writes)."""
-    out = _resolved(path)
-    check_not_input(out, inputs, what)
-    st = _stat(out, what)
-    if st is not None and not stat.S_ISDIR(st.st_mode):
-        raise OutputError(f"Expected {what} to be a folder, got a {file_kind(st.st_mode)} {out!s}")
-    if st is None:
-        _parent_writable(out, what)
-    elif not os.access(out, os.W_OK | os.X_OK):
-        raise OutputError(f"Expected a writable folder for {what}, got read-only {str(out)!r}")
-    return out
+    claim = path if isinstance(path, Claim) else claim_output(path, "json", inputs, what=what)
+    rest = {k: v for k, v in data.items() if k != "written_by"}
+    signed = {"written_by": signature(writer), **rest}
+    text = json.dumps(signed, indent=2, default=_json_default, allow_nan=False) + "\n"
+    return write_atomic(claim, text)
 
 
 def save_figure(fig, path: str | os.PathLike, **savefig_kwargs) -> Path:
     """``fig.savefig`` (matplotlib) whole or not at all, through :func:`atomic_path`."""
-    out = check_output_file(path, (), "figure")
+    out = _plain_file(path, (), "figure")
     fmt = savefig_kwargs.pop("format", None) or out.suffix.lstrip(".") or "png"
     with atomic_path(out, "figure") as tmp:
         fig.savefig(tmp, format=fmt, **savefig_kwargs)

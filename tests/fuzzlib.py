@@ -459,6 +459,11 @@ def judge(
     )
     if replaced:
         v.append(f"special file replaced or removed: {replaced}")
+    files = sorted(
+        k for k, node in before_out.items() if node[0] == "file" and after_out.get(k) != node
+    )
+    if files:
+        v.append(f"file replaced or removed: {files[:3]}")
     samples = None
     if kind in CLI_KINDS:
         prefix = CLI_KINDS[kind]
@@ -532,6 +537,24 @@ class _Hang(BaseException):
     """Raised by SIGALRM inside a case that runs too long."""
 
 
+@contextlib.contextmanager
+def _stdin_from(path: str | None):
+    """fd 0 reads ``path`` for the block (the worker's requests wait in ``sys.stdin``'s buffer
+    and on the saved fd, restored after)."""
+    if path is None:
+        yield
+        return
+    saved = os.dup(0)
+    fd = os.open(path, os.O_RDONLY)
+    try:
+        os.dup2(fd, 0)
+        yield
+    finally:
+        os.dup2(saved, 0)
+        os.close(saved)
+        os.close(fd)
+
+
 def _run_case(op: dict) -> dict:
     # The one import line of the reader: repoint when the reader moves (imu_dcm.logio).
     import warnings
@@ -546,6 +569,7 @@ def _run_case(op: dict) -> dict:
     out, err = io.StringIO(), io.StringIO()
     try:
         with (
+            _stdin_from(op.get("stdin")),
             contextlib.redirect_stdout(out),
             contextlib.redirect_stderr(err),
             warnings.catch_warnings(record=True) as caught,
@@ -750,6 +774,8 @@ def run_one(w: Worker, case: Case, kind: str, d: Path, base: Base | None) -> Ver
     (d / "in").mkdir(parents=True)
     (d / "out").mkdir()
     log, extra = case.make(d)
+    stdin = [a[len("--stdin=") :] for a in extra if a.startswith("--stdin=")]
+    extra = [a for a in extra if not a.startswith("--stdin=")]
     summary = d / "out" / "summary.json"
     before_in, before_out = snapshot(d / "in"), snapshot(d / "out")
     if kind == "cli":
@@ -765,6 +791,8 @@ def run_one(w: Worker, case: Case, kind: str, d: Path, base: Base | None) -> Ver
     else:
         op = {"kind": kind, "path": str(log)}
     op["timeout"] = CASE_TIMEOUT_S
+    if stdin:  # the case's file on the worker's standard input (``cmd < FILE``)
+        op["stdin"] = stdin[0]
     r = w.ask(op, CASE_TIMEOUT_S + 20.0)
     if kind == "cli" and r.get("rc") == 0 and "--summary-json" not in extra:
         with contextlib.suppress(OSError, ValueError, KeyError, TypeError):

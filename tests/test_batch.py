@@ -135,8 +135,10 @@ def test_bad_logs_get_error_rows_and_the_others_complete(logs, tmp_path):
     (tmp_path / "half.mcap").write_bytes(data[: len(data) // 2])  # readable up to the cut
     (tmp_path / "notes.csv").write_text("t,x\n0,1\n")
     bad = [tmp_path / "header_only.mcap", tmp_path / "notes.csv", tmp_path / "missing.mcap"]
+    (tmp_path / "listed.txt").write_text("missing.mcap\n")  # a list naming a log that is gone
+    named = [*bad[:2], tmp_path / "listed.txt"]  # (named itself, a missing path is bad input)
     res = replay_many(
-        [good[0], *bad, tmp_path / "half.mcap", *good[1:]], tmp_path / "t.csv", jobs=2, chart=None
+        [good[0], *named, tmp_path / "half.mcap", *good[1:]], tmp_path / "t.csv", jobs=2, chart=None
     )
     by = {Path(r.path).name: r for r in res.rows}
     assert res.failed == 3 and len(res.rows) == 7
@@ -286,7 +288,8 @@ def test_a_curves_file_it_did_not_write_is_refused_and_kept(logs, tmp_path, caps
     curves.write_text("my own notes\n")
     assert batch_main([logs[-1], "--table", str(out), "--no-chart", "--quiet", *flag]) == 2
     err = capsys.readouterr().err.strip()
-    assert err.count("\n") == 0 and "curves file beside the table" in err, err
+    assert err.count("\n") == 0 and "t.curves.jsonl beside --table" in err, err
+    assert "not written by imu_dcm" in err, err
     assert curves.read_text() == "my own notes\n" and not out.exists()
 
 

@@ -97,15 +97,20 @@ def test_live_record_force_replaces_its_own_recording(tmp_path):
 
 @pytest.mark.parametrize("mode", [0o644, 0o640, 0o600, 0o664])
 def test_a_replaced_file_keeps_its_mode(mode, tmp_path):
-    p = tmp_path / "s.json"
+    p = tmp_path / "metadata.yaml"  # the low-level write (a file inside a checked bag folder)
     p.write_text("old\n")
     os.chmod(p, mode)
     write_text_atomic(p, "new\n")
     assert p.read_text() == "new\n"
     assert stat.S_IMODE(p.stat().st_mode) == mode
-    write_json(p, {"x": np.float64(1.5), "v": np.arange(2)})
-    assert stat.S_IMODE(p.stat().st_mode) == mode
-    assert p.read_text() == '{\n  "x": 1.5,\n  "v": [\n    0,\n    1\n  ]\n}\n'
+    js = tmp_path / "s.json"  # a summary: replaced only when this tool wrote it
+    write_json(js, {"x": 0})
+    os.chmod(js, mode)
+    write_json(js, {"x": np.float64(1.5), "v": np.arange(2)})
+    assert stat.S_IMODE(js.stat().st_mode) == mode
+    text = js.read_text()
+    assert text.startswith('{\n  "written_by": "imu_dcm ')
+    assert text.endswith('  "x": 1.5,\n  "v": [\n    0,\n    1\n  ]\n}\n')
 
 
 @pytest.mark.parametrize("umask", [0o022, 0o027, 0o077])
@@ -141,10 +146,11 @@ def test_a_failed_write_leaves_the_target_and_no_temporary(tmp_path):
 
 def test_replay_summary_json_keeps_the_mode_of_the_file_it_replaces(tmp_path):
     js = tmp_path / "s.json"
-    js.write_text("{}\n")
-    os.chmod(js, 0o644)
     log = REPO_ROOT / "replay" / "free_body_flip_100hz_delta"
-    r = run(["imu_dcm.replay", str(log), "--rerun", "off", "--summary-json", str(js)], tmp_path)
+    argv = ["imu_dcm.replay", str(log), "--rerun", "off", "--summary-json", str(js)]
+    assert run(argv, tmp_path).returncode == 0  # its own summary, then replaced
+    os.chmod(js, 0o644)
+    r = run(argv, tmp_path)
     assert r.returncode == 0, r.stderr
     assert stat.S_IMODE(js.stat().st_mode) == 0o644
     assert js.read_text().startswith("{\n")
@@ -422,7 +428,7 @@ def test_replay_serve_stops_its_viewer_and_removes_its_file_at_ctrl_c(tmp_path):
         if proc.poll() is None:
             proc.kill()
             proc.communicate()
-    assert proc.returncode == 0, err
+    assert proc.returncode == 130, err  # Ctrl-C is 130 on every path (the README's code)
     assert "rerun: web viewer stopped" in out
     assert _port_closed(line)
     assert not any(p.name.startswith("imu_dcm_rerun_") for p in tmp.iterdir())

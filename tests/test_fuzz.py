@@ -62,6 +62,7 @@ CLASSES = (
     "json_message",
     "special_input",
     "output_path",
+    "output_onto",
 )
 #: The two largest classes run the CLI (which calls replay() in-process: an exception other than
 #: ImuDcmError escapes it too) and the reader; the others also call replay() directly.
@@ -640,7 +641,9 @@ def output_path_cases(base: Base) -> list[Case]:
         case("out-symlink-to-input", link_dir_to_input),
         case("summary-json-fifo", fifo("--summary-json")),
         case("out-fifo-force", fifo("--out", force=True)),
-        case("summary-json-null-device", dev(3)),
+        # a character device is a stream: /dev/null takes the JSON (exit 0), /dev/full refuses
+        # it at the write (ENOSPC, exit 2); either way the device stays a device
+        case("summary-json-null-device", dev(3), refuse=False, fix="outputs: streams direct"),
         case("summary-json-full-device", dev(7)),
         case("summary-json-folder", lambda d, b: ["--summary-json", str(d / "out")]),
         case("summary-json-parent-is-file", parent_is_file),
@@ -688,12 +691,6 @@ def live_batch_output_cases(base: Base) -> list[Case]:
         os.mkfifo(d / "out" / name)
         return d / "out" / name
 
-    def device(d):
-        p = d / "out" / "dev3"
-        if not _mknod(p, 3):
-            os.mkfifo(p)
-        return p
-
     def folder(d, name):
         (d / "out" / name).mkdir()
         (d / "out" / name / "notes.txt").write_text("mine\n")
@@ -720,7 +717,7 @@ def live_batch_output_cases(base: Base) -> list[Case]:
             live_fix,
         ),
         case("live", "summary-json-fifo", lambda d: ["--summary-json", str(fifo(d))], live_fix),
-        case("live", "summary-json-device", lambda d: ["--summary-json", str(device(d))], live_fix),
+        # (a character device is a stream, written at stop: the CLI's device cases cover it)
         case("live", "summary-json-folder", lambda d: ["--summary-json", str(d / "out")], live_fix),
         case(
             "live",
@@ -755,6 +752,96 @@ def live_batch_output_cases(base: Base) -> list[Case]:
             batch_fix,
         ),
     ]
+
+
+#: Every output a user names, by command: (name, how it is asked for, the file it writes, under
+#: ``out/``). The file is made foreign, a link, or the input before the run.
+_ONTO_OUTPUTS = {
+    "cli": [
+        ("summary-json", lambda f: ["--summary-json", str(f)], "s.json"),
+        ("export-tum-estimate", lambda f: ["--export-tum", str(f.parent)], "tum/estimate.tum"),
+        ("export-tum-truth", lambda f: ["--export-tum", str(f.parent)], "tum/truth.tum"),
+        ("rerun-save", lambda f: ["--rerun", f"save:{f}"], "v.rrd"),
+    ],
+    "live": [
+        ("summary-json", lambda f: ["--summary-json", str(f)], "s.json"),
+        ("rerun-save", lambda f: ["--rerun", f"save:{f}"], "v.rrd"),
+    ],
+    "batch": [
+        ("table", lambda f: ["--table", str(f)], "t.csv"),
+        ("table-md", lambda f: ["--table", str(f.with_suffix(".csv"))], "t.md"),
+        ("table-png", lambda f: ["--table", str(f.with_suffix(".csv"))], "t.png"),
+        ("table-curves", lambda f: ["--table", str(f.parent / "t.csv")], "t.curves.jsonl"),
+        ("chart", lambda f: ["--table", str(f.parent / "t.csv"), "--chart", str(f)], "c.png"),
+    ],
+}
+_USER_BYTES = b"a user's file: not imu_dcm's\n"
+
+
+def output_onto_cases(base: Base) -> list[Case]:
+    """Every output onto a file this tool did not write (with and without ``--force``), a
+    symbolic link (to a user's file, or to nothing), and an input (a hard link to the log, the
+    file on standard input): each refused (exit 2, one line), nothing under ``out/`` or ``in/``
+    changed, nothing created."""
+    import importlib.util
+
+    has_chart = importlib.util.find_spec("matplotlib") is not None
+
+    def foreign(d, f):
+        f.write_bytes(_USER_BYTES)
+
+    def link(d, f):
+        (d / "out" / "mine.txt").write_bytes(_USER_BYTES)
+        f.symlink_to(d / "out" / "mine.txt")
+
+    def dangling(d, f):
+        f.symlink_to(d / "out" / "nothing-here")
+
+    def hard_link(d, f):
+        os.link(d / "in" / base.folder.name / base.mcap.name, f)
+
+    targets = {
+        "foreign": (foreign, []),
+        "foreign-force": (foreign, ["--force"]),
+        "symlink-to-user-file": (link, []),
+        "symlink-dangling": (dangling, []),
+        "hard-link-to-input": (hard_link, []),
+        "stdin-file": (None, []),  # the output is the file standard input reads
+    }
+    cases = []
+    for kind, outputs in _ONTO_OUTPUTS.items():
+        for out_name, argv, rel in outputs:
+            if rel.endswith(".png") and not has_chart:
+                continue
+            for target, (prepare, extra) in targets.items():
+                if kind == "live" and target == "hard-link-to-input":
+                    continue  # live's input is its stream (stdin-file is its file input)
+
+                def make(d, argv=argv, rel=rel, prepare=prepare, extra=extra, target=target):
+                    bag = _bag(d, base)
+                    f = d / "out" / rel
+                    f.parent.mkdir(parents=True, exist_ok=True)
+                    if prepare is not None:
+                        prepare(d, f)
+                        return bag, [*argv(f), *extra]
+                    named = d / "in" / rel  # an input outside the bag folder, on stdin
+                    named.parent.mkdir(parents=True, exist_ok=True)
+                    named.write_text("0,0,0,0.1\n")
+                    return bag, [*argv(named), *extra, f"--stdin={named}"]
+
+                cases.append(
+                    Case(
+                        "output_onto",
+                        f"{kind}-{out_name}-{target}",
+                        base.name,
+                        make,
+                        None,
+                        (kind,),
+                        True,
+                        "outputs: claim_output (ours or new, no link to a file, never an input)",
+                    )
+                )
+    return cases
 
 
 # -------------------------------------------------------------------------------- campaign
@@ -829,6 +916,7 @@ class Campaign:
         self.cases["special_input"] = special_input_cases(self.bases["broad07"])
         self.cases["output_path"] = output_path_cases(self.bases["broad07"])
         self.cases["output_path"] += live_batch_output_cases(self.bases["broad07"])
+        self.cases["output_onto"] = output_onto_cases(self.bases["broad07"])
         broad = self.bases["broad07"]
         self.pool = fuzzlib.Pool(
             REPO_ROOT, n=2, warmup={"kind": "replay", "path": str(broad.folder)}
@@ -882,3 +970,30 @@ def test_fuzz_class(campaign, cls):
     )
     report = "\n".join(v.line() for v in bad)
     assert not bad, f"{len(bad)} of {len(verdicts)} {cls} runs broke a rule\n{fixes}\n{report}"
+
+
+def _counts(verdicts: list[fuzzlib.Verdict]) -> dict[str, int]:
+    """What a campaign found, by rule: runs, tracebacks, hangs, inputs modified, files replaced
+    (a user's file, a link's target, a special file), silent results (exit 0 where only a
+    refusal is safe), and runs breaking any rule."""
+    found = defaultdict(int)
+    found["runs"] = len(verdicts)
+    for v in verdicts:
+        text = " ".join(v.violations)
+        found["tracebacks"] += "traceback" in text
+        found["hangs"] += "hang" in text
+        found["inputs modified"] += "input changed" in text
+        found["files replaced"] += "replaced or removed" in text or "left behind or" in text
+        found["silent results"] += "exit 0 where" in text
+        found["broken"] += bool(v.violations)
+    return dict(found)
+
+
+def test_every_output_onto_a_foreign_file_a_link_and_an_input_is_refused(campaign, capsys):
+    verdicts = campaign.verdicts("output_onto")
+    counts = _counts(verdicts)
+    with capsys.disabled():
+        print(f"\noutput_onto: {counts}")
+    kinds = {v.kind for v in verdicts}
+    assert kinds == {"cli", "live", "batch"} and counts["runs"] >= 50, counts
+    assert counts["broken"] == 0, counts

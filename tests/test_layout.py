@@ -54,6 +54,8 @@ CORE = (
     "peers",
     "errors",
     "outputs",
+    "output_rule",
+    "signatures",
     "cli",
 )
 # the bag writer belongs to log I/O wherever it sits: imu_dcm/bag_writer.py or inside logio

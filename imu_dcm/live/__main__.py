@@ -22,6 +22,7 @@ from imu_dcm.cli import (
     EXIT_OK,
     EXIT_TERMINATED,
     OneLineArgumentParser,
+    check_rerun_switch,
     end_quietly_on_broken_pipe,
     parse_bias,
     parse_init_quat,
@@ -127,7 +128,12 @@ def _add_output_options(p) -> None:
         action="store_true",
         help="replace an existing --record bag (only one this tool wrote)",
     )
-    p.add_argument("--summary-json", metavar="PATH", help="write the summary as JSON at stop")
+    p.add_argument(
+        "--summary-json",
+        metavar="PATH",
+        help="write the summary as JSON at stop (- for stdout: the summary lines then go to "
+        "stderr)",
+    )
 
 
 def _add_stop_options(p) -> None:
@@ -240,9 +246,11 @@ def _main(argv: list[str]) -> int:
     from imu_dcm.live.session import run
     from imu_dcm.live.sources import parse_source
     from imu_dcm.live.view import check_mode
+    from imu_dcm.outputs import writes_to_stdout
 
     parse_source(args.source)
     check_mode(args.rerun)
+    rerun = check_rerun_switch(args.rerun)  # RERUN=off: no default view; a named one refused
     bias = parse_bias(args.bias)
     result = run(
         args.source,
@@ -255,7 +263,7 @@ def _main(argv: list[str]) -> int:
         init_quat=parse_init_quat(args.init_quat),
         reorder_window_s=args.reorder_window * 1e-3,
         view_interval_s=None if args.view_interval is None else args.view_interval * 1e-3,
-        rerun=args.rerun,
+        rerun=rerun,
         keep_viewer=args.keep_viewer,
         record=args.record,
         force=args.force,
@@ -265,8 +273,9 @@ def _main(argv: list[str]) -> int:
         status=not args.no_status,
     )
     code = exit_code(result.summary)
-    if not args.quiet:
-        print(format_summary(result.summary), flush=True)
+    if not args.quiet:  # the JSON on stdout (--summary-json -): the lines for people on stderr
+        out = sys.stderr if writes_to_stdout(args.summary_json) else sys.stdout
+        print(format_summary(result.summary), file=out, flush=True)
     if code == EXIT_FAILED:
         print(f"{PROG}: no sample received ({result.summary['stopped']})", file=sys.stderr)
     return code

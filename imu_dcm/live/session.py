@@ -126,9 +126,10 @@ def _check_outputs(record, force: bool, summary_json, rerun) -> None:
     check_mode(rerun)
     files = []
     if summary_json is not None:
-        files.append((check_output_file(summary_json, (), "--summary-json file"), "--summary-json"))
+        path = check_output_file(summary_json, (), "--summary-json", kind="json")
+        files.append((path, "--summary-json"))
     if isinstance(rerun, str) and rerun.startswith("save:"):
-        path = check_output_file(rerun[len("save:") :], (), "--rerun save: file")
+        path = check_output_file(rerun[len("save:") :], (), "--rerun save:", kind="rrd")
         files.append((path, "--rerun save:"))
     if record is not None:  # the other outputs must not land in (or be) the bag folder
         bag = check_output_dir(record, force=force, what="--record bag")

@@ -103,8 +103,13 @@ def pa_array(values, dtype):
 
 
 def check_mode(mode: str | None) -> None:
-    """Raise InputError for a mode other than None, spawn, serve, off or save:PATH.rrd."""
+    """Raise InputError for a mode other than None, spawn, serve, off or save:PATH.rrd, and
+    for a view asked for while ``RERUN=off`` turns rerun off
+    (:func:`imu_dcm.cli.check_rerun_switch`)."""
+    from imu_dcm.cli import check_rerun_switch
+
     if mode is None or mode in ("spawn", "serve", "off"):
+        check_rerun_switch(mode)
         return
     if (
         isinstance(mode, str)
@@ -112,6 +117,7 @@ def check_mode(mode: str | None) -> None:
         and mode.endswith(".rrd")
         and len(mode) > len("save:.rrd")
     ):
+        check_rerun_switch(mode)
         return
     raise InputError(f"Expected --rerun spawn, serve, save:PATH.rrd or off, got {mode!r}")
 
@@ -141,12 +147,20 @@ def _axes(q: NDArray) -> NDArray:
     return quat_rotate(q[:, None, :], np.eye(3)[None, :, :])
 
 
-def _save(rec, target: str, blueprint) -> None:
-    """Stream the recording into ``target`` (.rrd), its missing folders created."""
-    from imu_dcm.outputs import ensure_parent
+def _save(rec, target: str, blueprint):
+    """Stream the recording into a temporary sibling of ``target`` (.rrd; new or a recording
+    this tool wrote, :func:`imu_dcm.outputs.claim_output`); the returned
+    :class:`~imu_dcm.outputs.PendingOutput` makes it ``target`` whole at :meth:`LiveView.close`
+    (the target is never emptied, and never half written)."""
+    from imu_dcm.outputs import PendingOutput, claim_output
 
-    ensure_parent(target, "--rerun save: file")
-    rec.save(target, default_blueprint=blueprint)
+    pending = PendingOutput(claim_output(target, "rrd", what="--rerun save:"))
+    try:
+        rec.save(pending.path, default_blueprint=blueprint)
+    except BaseException:
+        pending.abort()
+        raise
+    return pending
 
 
 class LiveView:
@@ -164,6 +178,7 @@ class LiveView:
         self.say = say
         self.served = None
         self.viewer_pid = None
+        self._pending = None
         self.rr = rr
         self.entity = viz.ENTITY
         self.timeline = viz.TIMELINE
@@ -221,7 +236,7 @@ class LiveView:
                 raise
             say(f"rerun: open {self.served.url} (web viewer, 127.0.0.1 only)")
         else:
-            _save(rec, mode[len("save:") :], blueprint)
+            self._pending = _save(rec, mode[len("save:") :], blueprint)
         rec.send_recording_name(title)
         self.rec = rec
         self._static()
@@ -346,10 +361,17 @@ class LiveView:
 
     def close(self) -> str:
         """Flush and disconnect; return the line to print about the viewer."""
-        for key in ("est", "truth"):  # the rows held for the next 3D send
-            self._axes_rows(key, np.zeros(0), np.zeros((0, 4)), final=True)
-        self.rec.flush(timeout_sec=_FLUSH_TIMEOUT_S)
-        self.rec.disconnect()
+        try:
+            for key in ("est", "truth"):  # the rows held for the next 3D send
+                self._axes_rows(key, np.zeros(0), np.zeros((0, 4)), final=True)
+            self.rec.flush(timeout_sec=_FLUSH_TIMEOUT_S)
+            self.rec.disconnect()
+        except BaseException:
+            if self._pending is not None:
+                self._pending.abort()
+            raise
+        if self._pending is not None:
+            return f"rerun: saved {self._pending.commit()}"
         if self.served is not None:
             return (
                 f"rerun: the web viewer stays at {self.served.url} (127.0.0.1 only; stop it "
@@ -357,4 +379,4 @@ class LiveView:
             )
         if self.viewer_pid is not None:
             return f"rerun: viewer running (pid {self.viewer_pid})"
-        return f"rerun: saved {self.mode[len('save:') :]}"
+        return ""

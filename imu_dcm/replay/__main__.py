@@ -3,8 +3,10 @@
 Replays a ROS 2 bag / MCAP gyro log through the integrator, prints a summary of the estimate's
 error against the log's truth, and optionally writes the estimate as a bag (``--out``), TUM
 files for evo (``--export-tum``), the summary as JSON (``--summary-json``) and a rerun view
-(``--rerun``). Every option and output path is checked before the log is read, so a bad one
-leaves nothing behind; no output may be, hold or lie inside the input.
+(``--rerun``). Every option is checked and every output claimed before the log is read
+(:mod:`imu_dcm.outputs`: new or this tool's own file, never an input, no link to a file), so a
+bad one leaves nothing behind. ``--summary-json -`` puts the JSON alone on stdout and the lines
+for people on stderr.
 ``python -m imu_dcm.replay convert-csv ...`` turns a CSV log into a ROS 2 MCAP bag.
 
 Bad input gives one line on stderr and exit code 2; recoverable oddities are printed as
@@ -14,6 +16,7 @@ one-line warnings.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import os
 import sys
 import warnings
@@ -41,7 +44,12 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.add_argument("log", help=f"the log: {kinds}")
     add_replay_options(p)
-    p.add_argument("--summary-json", metavar="PATH", help="write the summary as JSON")
+    p.add_argument(
+        "--summary-json",
+        metavar="PATH",
+        help="write the summary as JSON (- for stdout: the summary lines then go to stderr); "
+        "an existing file is replaced only when this tool wrote it",
+    )
     p.add_argument(
         "--out", metavar="DIR", help="write the estimate as a ROS 2 bag (/estimate/orientation)"
     )
@@ -94,10 +102,11 @@ def _write_out(out: Path, result, force: bool, inputs: tuple) -> Path:
     )
 
 
-def _show(result, mode: str | None, realtime: bool, keep: bool) -> str:
-    """Hand the replay to the rerun view. ``serve`` keeps the web viewer up until Ctrl-C (or,
-    with ``keep``, leaves it running and says how to stop it)."""
-    from imu_dcm.viz import ViewData, serve_replay, show_replay
+def _show(result, mode: str | None, realtime: bool, keep: bool, claim=None) -> tuple[str, int]:
+    """Hand the replay to the rerun view; returns the line to print and the exit code. ``serve``
+    keeps the web viewer up until Ctrl-C (130) or SIGTERM (143), or, with ``keep``, leaves it
+    running and says how to stop it. ``claim``: the checked ``save:`` file."""
+    from imu_dcm.viz import ViewData, save_rrd, saved_line, serve_replay, show_replay
 
     view = ViewData(
         t_s=result.t_s,
@@ -110,25 +119,33 @@ def _show(result, mode: str | None, realtime: bool, keep: bool) -> str:
         title=Path(str(result.summary.path).rstrip("/")).name,
         omega_raw_b=result.omega_raw_b,
     )
+    if claim is not None:
+        return saved_line(save_rrd(view, claim)), 0
     if mode != "serve" or keep:
-        return show_replay(view, mode, realtime=realtime)
+        return show_replay(view, mode, realtime=realtime), 0
     served = serve_replay(view, realtime)
     try:
-        _serve_until_stopped(served)
+        signum = _serve_until_stopped(served)
     finally:
         served.stop()
-    return "rerun: web viewer stopped"
+    return "rerun: web viewer stopped", 128 + signum if signum else 0
 
 
-def _serve_until_stopped(served) -> None:
-    """Print the viewer's URL, then wait for Ctrl-C, SIGTERM or the server's own exit (the
-    ending the user asked for: not an interruption of the command)."""
+def _serve_until_stopped(served) -> int:
+    """Print the viewer's URL, then wait for Ctrl-C, SIGTERM or the server's own exit; returns
+    the signal that ended the wait (0: the server exited), for the exit code 128 + signal."""
     import signal
     import threading
 
     stop = threading.Event()
+    got = []
     signals = (signal.SIGINT, signal.SIGTERM)
-    old = {sig: signal.signal(sig, lambda signum, frame: stop.set()) for sig in signals}
+
+    def on_signal(signum, frame):
+        got.append(signum)
+        stop.set()
+
+    old = {sig: signal.signal(sig, on_signal) for sig in signals}
     try:
         print(f"{served.line}; Ctrl-C stops it", flush=True)
         while not stop.wait(0.2) and served.viewer.process.poll() is None:
@@ -136,14 +153,16 @@ def _serve_until_stopped(served) -> None:
     finally:
         for sig, handler in old.items():
             signal.signal(sig, handler)
+    return int(got[0]) if got else 0
 
 
-def _check_rerun(mode: str | None, inputs: tuple) -> None:
-    """Validate --rerun before anything is read or written."""
+def _check_rerun(mode: str | None, inputs: tuple):
+    """Validate --rerun before anything is read or written; the claimed ``save:`` file (or
+    None)."""
     from imu_dcm.errors import InputError
 
     if mode is None or mode in ("off", "serve"):
-        return
+        return None
     if mode == "spawn":
         from imu_dcm.viz import has_display
 
@@ -152,15 +171,14 @@ def _check_rerun(mode: str | None, inputs: tuple) -> None:
                 "Expected a display (DISPLAY or WAYLAND_DISPLAY) for --rerun spawn, "
                 "got none; use --rerun save:PATH.rrd or serve"
             )
-        return
+        return None
     if mode.startswith("save:"):
         target = mode[len("save:") :]
         if not target.endswith(".rrd") or len(target) <= len(".rrd"):
             raise InputError(f"Expected --rerun save:PATH.rrd, got {mode!r}")
-        from imu_dcm.outputs import check_output_file
+        from imu_dcm.outputs import claim_output
 
-        check_output_file(target, inputs, "--rerun save: file")
-        return
+        return claim_output(target, "rrd", inputs, what="--rerun save:")
     raise InputError(f"Expected --rerun spawn, serve, save:PATH.rrd or off, got {mode!r}")
 
 
@@ -213,32 +231,36 @@ def _not_a_folder_of_logs(log: str) -> None:
         )
 
 
-def _options(args) -> dict:
-    """Every option parsed and checked, before any input is read or output written."""
+def _options(args) -> tuple[dict, dict]:
+    """Every option parsed and checked, and every output claimed (:mod:`imu_dcm.outputs`),
+    before any input is read or output written: the replay's keywords and the claims."""
+    from imu_dcm.cli import check_rerun_switch
+
     keywords = replay_keywords(args)
+    args.rerun = check_rerun_switch(args.rerun)
     _not_a_folder_of_logs(args.log)
     inputs = _inputs(args.log)
     _distinct_outputs(args)
+    claims = {}
     if args.out:
         from imu_dcm.outputs import check_output_dir
 
         check_output_dir(args.out, inputs, force=args.force, what="--out bag")
     if args.summary_json:
-        from imu_dcm.outputs import check_output_file
+        from imu_dcm.outputs import claim_output
 
-        check_output_file(args.summary_json, inputs, "--summary-json file")
+        claims["summary"] = claim_output(args.summary_json, "json", inputs, what="--summary-json")
     if args.export_tum:
-        from imu_dcm.replay.export import check_export_dir
+        from imu_dcm.replay.export import claim_export
 
-        check_export_dir(args.export_tum, inputs)
-    _check_rerun(args.rerun, inputs)
-    return keywords
+        claims["tum"] = claim_export(args.export_tum, inputs)
+    claims["rrd"] = _check_rerun(args.rerun, inputs)
+    return keywords, claims
 
 
 def _replay_main(argv: list[str]) -> int:
     args = build_parser().parse_args(argv)
-    options = _options(args)  # every option checked before the log is read
-    from imu_dcm.errors import ImuDcmError
+    options, claims = _options(args)  # every option checked before the log is read
     from imu_dcm.replay.core import replay
     from imu_dcm.replay.summary import format_summary
 
@@ -257,41 +279,50 @@ def _replay_main(argv: list[str]) -> int:
 
         k = slice(result.start_index, None)
         files = export_tum(
-            args.export_tum,
+            claims["tum"],
             result.t_ns[k],
             result.q_est[k],
             result.q_truth[k] if result.summary.truth_topic else None,
-            inputs,
         )
         lines.append(f"tum        {', '.join(str(f) for f in files)}")
-    if args.summary_json:
-        import json
+    summary = claims.get("summary")
+    if summary is not None:
+        from imu_dcm.outputs import write_json
 
-        from imu_dcm.outputs import write_text_atomic
-
-        text = json.dumps(result.summary.to_dict(), indent=2, allow_nan=False) + "\n"
-        write_text_atomic(args.summary_json, text, inputs)
+        write_json(summary, result.summary.to_dict(), writer="replay summary")
+    # the JSON on stdout (--summary-json -): every line for people goes to stderr
+    to_stderr = summary is not None and summary.stream == "stdout"
+    stream = sys.stderr if to_stderr else sys.stdout
     if not args.quiet:
-        print(format_summary(result.summary))
+        print(format_summary(result.summary), file=stream)
         for line in lines:
-            print(line)
-    if args.rerun != "off":
-        try:
-            line = _show(result, args.rerun, args.realtime, args.keep_viewer)
-        except Exception as exc:
-            if isinstance(exc, (ImuDcmError, OSError)) and args.rerun is not None:
-                raise  # asked for: a failure is an error (exit 2, one line)
-            first = str(exc).splitlines()[0] if str(exc) else ""
-            if args.rerun is not None:
-                raise ImuDcmError(
-                    f"Expected the rerun view {args.rerun!r} to work, got "
-                    f"{type(exc).__name__}: {first}"
-                ) from None
-            warnings.warn(f"rerun view skipped: {type(exc).__name__}: {first}", stacklevel=1)
-            line = ""
-        if line:
-            print(line)
-    return 0
+            print(line, file=stream)
+    if args.rerun == "off":
+        return 0
+    with contextlib.redirect_stdout(stream):
+        line, code = _view(result, args, claims["rrd"])
+    if line:
+        print(line, file=stream)
+    return code
+
+
+def _view(result, args, claim) -> tuple[str, int]:
+    """:func:`_show`, its failures one line: an error when the view was asked for, else a
+    warning (the default view is a convenience)."""
+    from imu_dcm.errors import ImuDcmError
+
+    try:
+        return _show(result, args.rerun, args.realtime, args.keep_viewer, claim)
+    except Exception as exc:
+        if isinstance(exc, (ImuDcmError, OSError)) and args.rerun is not None:
+            raise  # asked for: a failure is an error (exit 2, one line)
+        first = str(exc).splitlines()[0] if str(exc) else ""
+        if args.rerun is not None:
+            raise ImuDcmError(
+                f"Expected the rerun view {args.rerun!r} to work, got {type(exc).__name__}: {first}"
+            ) from None
+        warnings.warn(f"rerun view skipped: {type(exc).__name__}: {first}", stacklevel=1)
+        return "", 0
 
 
 def _message(exc: BaseException) -> str:

@@ -32,6 +32,7 @@ from imu_dcm.replay.table import (
     append_rows,
     curves_path,
     decimate_curve,
+    markdown_path,
     one_line,
     read_curves,
     read_table,
@@ -41,7 +42,14 @@ from imu_dcm.replay.table import (
     write_table,
 )
 
-__all__ = ["BatchResult", "find_logs", "replay_many", "replay_one", "row_from_result"]
+__all__ = [
+    "BatchResult",
+    "claim_batch_outputs",
+    "find_logs",
+    "replay_many",
+    "replay_one",
+    "row_from_result",
+]
 
 #: Files read as lists of logs (one path a line, relative to the list; ``#`` comments).
 LIST_SUFFIXES = (".txt", ".list", ".lst")
@@ -225,9 +233,11 @@ def replay_many(
         No logs found, a bad ``jobs``, an existing table without ``resume`` or ``overwrite``,
         an unreadable table, ``chart`` asked without matplotlib, ``dask`` without Dask.
     """
+    paths = list(paths)
     logs, jobs = _check_batch(paths, jobs, replay_options)
     chart_path = _chart_path(chart, table)
     table = None if table is None else Path(table)
+    claim_batch_outputs(table, chart_path, [*paths, *logs])
     old = _open_table(table, resume, overwrite)
     # A row whose worker died is not the log's verdict: replay that log again.
     done = {k: r for k, r in old.items() if not (r.error and f": {LOST}: " in r.error)}
@@ -249,6 +259,11 @@ def _check_batch(
     paths: Iterable[str | Path], jobs: int | None, replay_options: Mapping[str, Any]
 ) -> tuple[list[str], int]:
     """The logs of a batch (at least one) and the worker count (default: the usable cores)."""
+    for p in paths:  # a path named that is not there is bad input, not a failed log
+        if not os.path.lexists(p):
+            raise InputError(
+                f"Expected a log, a folder of logs or a list of logs, got no such path: {p}"
+            )
     logs = find_logs(paths)
     if not logs:
         raise InputError("Expected at least one log in the batch, got none")
@@ -278,9 +293,35 @@ def _chart_path(chart: str | Path | None, table: str | Path | None) -> Path | No
         return None
     if chart is None:
         return None
+    if Path(chart).suffix.lower() != ".png":  # the chart is signed in its PNG metadata
+        raise InputError(f"Expected the chart to be a PATH.png, got {str(chart)!r}")
     if not chart_available():
         raise InputError(f"Expected matplotlib for the chart, got it not installed: {INSTALL_HINT}")
     return Path(chart)
+
+
+def claim_batch_outputs(
+    table: Path | None, chart: Path | None, inputs: Iterable[str | Path]
+) -> None:
+    """Check the table, the files beside it and the chart by :mod:`imu_dcm.outputs`' rule,
+    before any log is read: each new or this tool's own file of its kind (header row, comment
+    line, JSON lines, PNG metadata), never an input, inside an input folder or a symbolic link;
+    the table, its markdown and its curves regular files (they are appended to and read)."""
+    from imu_dcm.outputs import OutputError, claim_output
+
+    beside = []
+    if table is not None:
+        beside = [(table, "table", "--table"), (markdown_path(table), "markdown", None)]
+        beside.append((curves_path(table), "curves", None))
+    if chart is not None:
+        beside.append((chart, "chart", "the chart"))
+    for path, kind, what in beside:
+        what = what or f"the {Path(path).name} beside --table"
+        claim = claim_output(path, kind, inputs, what=what)
+        if claim.stream != "file" and kind != "chart":
+            raise OutputError(
+                f"Expected {what} to be a regular file or new, got a stream {str(claim.path)!r}"
+            )
 
 
 def _open_table(table: Path | None, resume: bool, overwrite: bool) -> dict[str, LogRow]:
@@ -289,7 +330,10 @@ def _open_table(table: Path | None, resume: bool, overwrite: bool) -> dict[str, 
     if table is None:
         return {}
     if table.exists() and table.stat().st_size and not (resume or overwrite):
-        raise InputError(f"Expected a new table, got an existing {table} (resume or overwrite it)")
+        raise InputError(
+            f"Expected a new table, got an existing {table}: add to it with resume=True "
+            "(--resume), or start afresh with overwrite=True (--force)"
+        )
     if overwrite and not resume:
         for p in (table, curves_path(table)):
             p.unlink(missing_ok=True)

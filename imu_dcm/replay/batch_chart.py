@@ -27,7 +27,7 @@ def chart_available() -> bool:
 
 
 def write_chart(path: str | Path, rows: Sequence[LogRow], curves: dict[str, Curve]) -> Path:
-    """Draw the batch chart to ``path`` (PNG, or any format matplotlib knows by its suffix).
+    """Draw the batch chart to ``path`` (PNG, signed ``Software: imu_dcm ...`` in its metadata).
 
     Top: total RMS attitude error of each log, deg, log scale (failed logs marked, logs without
     truth listed as such). Bottom: the total error over time of every log with a curve, deg,
@@ -46,9 +46,13 @@ def write_chart(path: str | Path, rows: Sequence[LogRow], curves: dict[str, Curv
     colors = [f"C{k % 10}" for k in range(len(rows))]
     _rms_panel(ax_rms, rows, names, colors, named)
     _curves_panel(ax_t, rows, names, colors, curves)
-    out = Path(path)
-    fig.savefig(out, dpi=110)
-    return out
+    from imu_dcm.outputs import claim_output, claimed_path
+    from imu_dcm.signatures import signature
+
+    claim = claim_output(path, "chart", what="the chart")  # new or this tool's own PNG
+    with claimed_path(claim) as tmp:  # whole or not at all, signed in its PNG metadata
+        fig.savefig(tmp, format="png", dpi=110, metadata={"Software": signature("batch chart")})
+    return claim.path
 
 
 def _rms_panel(ax, rows: Sequence[LogRow], names: list[str], colors: list[str], named: bool):

@@ -14,7 +14,6 @@ import sys
 import threading
 import time
 import warnings
-from pathlib import Path
 
 from imu_dcm.cli import end_quietly_on_broken_pipe
 from imu_dcm.errors import ImuDcmError, InputError
@@ -64,7 +63,11 @@ def build_parser() -> argparse.ArgumentParser:
         action="store_true",
         help="skip logs that already have a row in OUT (failed ones too)",
     )
-    p.add_argument("--force", action="store_true", help="start OUT afresh if it exists")
+    p.add_argument(
+        "--force",
+        action="store_true",
+        help="start OUT afresh if it exists (only a table this tool wrote)",
+    )
     chart = p.add_mutually_exclusive_group()
     chart.add_argument(
         "--chart",
@@ -75,53 +78,6 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--quiet", action="store_true", help="print only the summary and errors")
     add_replay_options(p.add_argument_group("replay options (the same for every log)"))
     return p
-
-
-def _check_outputs(args) -> None:
-    """The table and the files beside it, by :mod:`imu_dcm.outputs`' rule, before any log is
-    read: regular files (or new), never an input or inside one; ``--force`` starts afresh only
-    a table this tool wrote (its header row)."""
-    from imu_dcm.outputs import OutputError, check_output_file
-    from imu_dcm.replay.table import COLUMNS, curves_path, markdown_path
-
-    inputs = tuple(args.paths)
-    table = check_output_file(args.table, inputs, "--table")
-    beside = [markdown_path(table), curves_path(table)]
-    if not args.no_chart:
-        beside.append(args.chart or table.with_suffix(".png"))
-    for path in beside:
-        check_output_file(path, inputs, f"--table's {Path(path).name}")
-    if (args.force or args.resume) and table.exists() and table.stat().st_size:
-        with open(table, encoding="utf-8", errors="replace") as f:
-            head = f.readline().rstrip("\r\n")
-        if head != ",".join(COLUMNS):
-            raise OutputError(
-                f"Expected --force or --resume on a batch table this tool wrote (header "
-                f"{','.join(COLUMNS[:3])},...), got {head[:40]!r} in {str(table)!r}"
-            )
-    _check_curves(curves_path(table))
-
-
-def _check_curves(path: Path) -> None:
-    """The curves file beside the table is appended to, or removed by ``--force``: if it
-    exists, it must be one this tool wrote (JSON lines with ``path``, ``t_s``, ``error_deg``)."""
-    import json
-
-    from imu_dcm.outputs import OutputError
-
-    if not path.exists() or not path.stat().st_size:
-        return
-    with open(path, encoding="utf-8", errors="replace") as f:
-        head = f.readline(1 << 20)
-    try:
-        ours = set(json.loads(head)) == {"path", "t_s", "error_deg"}
-    except (ValueError, TypeError):
-        ours = False
-    if not ours:
-        raise OutputError(
-            f"Expected the curves file beside the table to be one this tool wrote (JSON lines "
-            f"of path, t_s, error_deg), got {head[:40]!r} in {str(path)!r}"
-        )
 
 
 class _Bar:
@@ -175,8 +131,7 @@ def main(argv: list[str] | None = None) -> int:
                 raise InputError(f"Expected --table ending in .csv, got {args.table!r}")
             from imu_dcm.replay.options import replay_keywords
 
-            options = replay_keywords(args)
-            _check_outputs(args)
+            options = replay_keywords(args)  # the outputs are claimed by replay_many first
             bar = _Bar()
             t0 = time.perf_counter()
             try:

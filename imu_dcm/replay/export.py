@@ -1,6 +1,8 @@
 """Export a replay for other tools: TUM trajectory files for evo.
 
-``estimate.tum`` and ``truth.tum`` hold one line per sample, ``t x y z qx qy qz qw``: the stamp
+``estimate.tum`` and ``truth.tum`` begin with one comment line ``# imu_dcm <version> ...`` (the
+signature by which a later run recognises its own file, :mod:`imu_dcm.signatures`; evo and the
+TUM tools skip ``#`` lines), then hold one line per sample, ``t x y z qx qy qz qw``: the stamp
 in seconds (the log's clock, nanosecond digits), a zero position (attitude only) and ``q_w_b``
 ``[x, y, z, w]``. ``evo_ape tum truth.tum estimate.tum`` then compares the attitudes (use
 ``--pose_relation angle_deg``).
@@ -16,9 +18,10 @@ import numpy as np
 from numpy.typing import NDArray
 
 from imu_dcm.errors import InputError
-from imu_dcm.outputs import OutputError, check_not_input, check_output_file, write_text_atomic
+from imu_dcm.outputs import Claim, OutputError, check_not_input, claim_output, write_atomic
+from imu_dcm.signatures import comment_line
 
-__all__ = ["check_export_dir", "export_tum", "tum_text"]
+__all__ = ["TUM_NAMES", "claim_export", "export_tum", "tum_text"]
 
 TUM_NAMES = ("estimate.tum", "truth.tum")
 
@@ -38,43 +41,35 @@ def tum_text(t_ns: NDArray[np.int64], q_w_b: NDArray[np.float64]) -> str:
     return "".join(line + "\n" for line in lines)
 
 
-def check_export_dir(folder: str | os.PathLike, inputs: Iterable[str | os.PathLike] = ()) -> Path:
+def claim_export(
+    folder: str | os.PathLike, inputs: Iterable[str | os.PathLike] = ()
+) -> tuple[Claim, Claim]:
     """Check ``--export-tum DIR`` before anything is written: DIR is a folder (or new, with an
-    existing parent), not an input and not holding one; the two files in it are regular or new.
-    """
+    existing parent), not an input and not holding one; ``estimate.tum`` and ``truth.tum`` in it
+    are new or TUM files this tool wrote (:func:`imu_dcm.outputs.claim_output`, kind ``tum``).
+    Returns the two files' claims."""
     out = Path(os.path.abspath(os.path.realpath(os.fspath(folder))))
     inputs = tuple(inputs)
     check_not_input(out, inputs, "--export-tum folder")
-    if not out.exists():
-        check_output_file(out, inputs, "--export-tum folder")  # a writable parent folder
-    elif not out.is_dir():
+    if out.exists() and not out.is_dir():
         raise OutputError(f"Expected --export-tum to name a folder, got a file {str(out)!r}")
-    else:
-        for name in TUM_NAMES:
-            check_output_file(out / name, inputs, f"--export-tum {name}")
-    return out
+    est, truth = (claim_output(out / n, "tum", inputs, what=f"--export-tum {n}") for n in TUM_NAMES)
+    return est, truth
 
 
 def export_tum(
-    folder: str | os.PathLike,
+    claims: tuple[Claim, Claim],
     t_ns: NDArray[np.int64],
     q_est: NDArray[np.float64],
     q_truth: NDArray[np.float64] | None,
-    inputs: Iterable[str | os.PathLike] = (),
 ) -> list[Path]:
-    """Write ``estimate.tum`` (and ``truth.tum`` when a truth row is finite) into ``folder``.
-
-    Returns the files written. Each file is whole or absent (atomic replace).
-    """
-    inputs = tuple(inputs)
-    out = check_export_dir(folder, inputs)
-    try:
-        out.mkdir(parents=True, exist_ok=True)
-    except OSError as exc:
-        raise OutputError(
-            f"Expected to create the folder {str(out)!r}, got {type(exc).__name__}: {exc.strerror}"
-        ) from None
-    written = [write_text_atomic(out / "estimate.tum", tum_text(t_ns, q_est), inputs)]
+    """Write ``estimate.tum`` (and ``truth.tum`` when a truth row is finite), claimed by
+    :func:`claim_export`. Returns the files written. Each file is whole or absent (atomic
+    replace)."""
+    est, truth = claims
+    head = "q_w_b of the {}: t x y z qx qy qz qw"
+    written = [write_atomic(est, comment_line(head.format("estimate")) + tum_text(t_ns, q_est))]
     if q_truth is not None and np.isfinite(q_truth).all(axis=1).any():
-        written.append(write_text_atomic(out / "truth.tum", tum_text(t_ns, q_truth), inputs))
+        text = comment_line(head.format("truth")) + tum_text(t_ns, q_truth)
+        written.append(write_atomic(truth, text))
     return written

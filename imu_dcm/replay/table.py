@@ -10,7 +10,11 @@ Files written next to each other for a table ``OUT.csv``:
 - ``OUT.curves.jsonl``: the error-over-time curve of each log (at most :data:`CURVE_POINTS`
   points, the largest error in each time bin), appended before the row, for the chart.
 - ``OUT.md``: the table for people, with a summary line; rewritten (write, then rename) at the
-  end of a batch.
+  end of a batch. Its first line is an HTML comment ``<!-- imu_dcm ... -->`` (invisible when
+  rendered): the signature by which a later batch recognises its own file.
+
+Each file is replaced or appended to only when it is new or this tool's (its header row, its
+JSON lines, its comment line: :mod:`imu_dcm.signatures`); appends never follow a symbolic link.
 """
 
 from __future__ import annotations
@@ -28,7 +32,8 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from imu_dcm.errors import InputError
-from imu_dcm.outputs import write_text_atomic
+from imu_dcm.outputs import claim_output, write_atomic
+from imu_dcm.signatures import signature
 
 __all__ = [
     "COLUMNS",
@@ -188,7 +193,8 @@ def curves_path(table: str | Path) -> Path:
 def _append(path: Path, text: str) -> None:
     """Append whole lines with one ``write`` call (retried on a short write), then fsync."""
     data = memoryview(text.encode())
-    fd = os.open(path, os.O_WRONLY | os.O_APPEND | os.O_CREAT, 0o644)
+    flags = os.O_WRONLY | os.O_APPEND | os.O_CREAT | getattr(os, "O_NOFOLLOW", 0)
+    fd = os.open(path, flags, 0o644)
     try:
         while data:
             data = data[os.write(fd, data) :]
@@ -197,9 +203,10 @@ def _append(path: Path, text: str) -> None:
         os.close(fd)
 
 
-def _replace(path: Path, text: str) -> None:
-    """Replace ``path`` with ``text`` whole (:func:`imu_dcm.outputs.write_text_atomic`)."""
-    write_text_atomic(path, text, what="batch table")
+def _replace(path: Path, text: str, kind: str) -> None:
+    """Replace ``path`` with ``text`` whole, if it is new or this tool's file of ``kind``
+    (:func:`imu_dcm.outputs.claim_output`, then :func:`~imu_dcm.outputs.write_atomic`)."""
+    write_atomic(claim_output(path, kind, what=f"the batch {kind} file"), text)
 
 
 def append_rows(table: str | Path, rows: Sequence[LogRow]) -> None:
@@ -211,7 +218,7 @@ def append_rows(table: str | Path, rows: Sequence[LogRow]) -> None:
 
 def write_table(table: str | Path, rows: Sequence[LogRow]) -> None:
     """Replace the CSV ``table`` with ``rows`` (rename over the old file: never half written)."""
-    _replace(Path(table), format_lines(rows, header=True))
+    _replace(Path(table), format_lines(rows, header=True), "table")
 
 
 def read_table(table: str | Path) -> list[LogRow]:
@@ -231,7 +238,7 @@ def read_table(table: str | Path) -> list[LogRow]:
     text = p.read_text()
     if text and not text.endswith("\n"):
         text = text[: text.rfind("\n") + 1]
-        _replace(p, text)
+        _replace(p, text, "table")
     lines = list(csv.reader(io.StringIO(text)))
     if not lines:
         return []
@@ -267,9 +274,8 @@ def read_curves(table: str | Path) -> dict[str, Curve]:
 
 
 def write_curves(table: str | Path, curves: Iterable[Curve]) -> None:
-    _replace(
-        curves_path(table), "".join(json.dumps(c.__dict__, allow_nan=True) + "\n" for c in curves)
-    )
+    text = "".join(json.dumps(c.__dict__, allow_nan=True) + "\n" for c in curves)
+    _replace(curves_path(table), text, "curves")
 
 
 # ---------------------------------------------------------------------------- markdown
@@ -325,10 +331,11 @@ def markdown(rows: Sequence[LogRow]) -> str:
             r.error or "",
         ]
         lines.append("| " + " | ".join(c.replace("|", "\\|") for c in cells) + " |")
-    return "\n".join(lines) + "\n\n" + summary_line(rows) + "\n"
+    sign = f"<!-- {signature('batch table: replay of many logs')} -->"
+    return "\n".join([sign, "", *lines]) + "\n\n" + summary_line(rows) + "\n"
 
 
 def write_markdown(table: str | Path, rows: Sequence[LogRow]) -> Path:
     p = markdown_path(table)
-    _replace(p, markdown(rows))
+    _replace(p, markdown(rows), "markdown")
     return p

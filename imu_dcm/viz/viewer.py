@@ -16,8 +16,9 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
+from imu_dcm.cli import check_rerun_switch
 from imu_dcm.errors import ImuDcmError, InputError
-from imu_dcm.outputs import atomic_path
+from imu_dcm.outputs import Claim, claim_output, claimed_path
 from imu_dcm.viz.log import _new_recording, make_blueprint, send_view
 from imu_dcm.viz.view_data import ViewData
 
@@ -25,31 +26,45 @@ _MODES = ("spawn", "serve", "save:PATH.rrd", "off", None)
 _FLUSH_TIMEOUT_S = 60.0  # a viewer that went away must not hang the replay
 
 
-def save_rrd(view: ViewData, path: str | os.PathLike) -> Path:
+def save_rrd(view: ViewData, path: str | os.PathLike | Claim) -> Path:
     """Write the view (data and blueprint) to an ``.rrd`` file, atomically.
 
     Parameters
     ----------
     view : ViewData
-    path : path-like
-        Destination; must end in ``.rrd``. Parent folders are created.
+    path : path-like or Claim
+        Destination; must end in ``.rrd``. A path is claimed here (kind ``rrd``: new, or a
+        recording this tool wrote, :func:`imu_dcm.outputs.claim_output`); a command passes the
+        claim it checked before its work. Parent folders are created.
 
     Returns
     -------
     Path
         The file written.
     """
-    path = Path(path)
-    if path.suffix != ".rrd":
-        raise InputError(f"Expected an .rrd path, got {str(path)!r}")
+    claim = path if isinstance(path, Claim) else None
+    target = claim.path if claim is not None else Path(path)
+    if target.suffix != ".rrd":
+        raise InputError(f"Expected an .rrd path, got {str(target)!r}")
+    if claim is None:
+        claim = claim_output(target, "rrd", what="--rerun save: file")
+    check_rerun_switch(f"save:{target}")  # RERUN=off: rerun would save an empty file
     rec = _new_recording(view)
-    with atomic_path(path, "--rerun save: file") as tmp:
+    with claimed_path(claim) as tmp:
         rec.save(tmp, default_blueprint=make_blueprint(view))
         rec.send_recording_name(view.title)
         send_view(view, rec)
         rec.flush()
         rec.disconnect()
-    return path
+    return claim.path
+
+
+def saved_line(path: str | os.PathLike) -> str:
+    """The line printed after a view was saved: how to open it, with and without a display."""
+    return (
+        f"rerun: saved {path}; open it with: rerun {path} (without a display: "
+        f"rerun --serve-web --bind 127.0.0.1 {path})"
+    )
 
 
 # ------------------------------------------------------------------------------------------------
@@ -376,9 +391,13 @@ def show_replay(
     Raises
     ------
     InputError
-        For an unknown mode, a ``save:`` path not ending in ``.rrd``, or ``"spawn"`` without a
-        display.
+        For an unknown mode, a ``save:`` path not ending in ``.rrd``, ``"spawn"`` without a
+        display, or a mode other than ``"off"`` while ``RERUN=off`` turns rerun's SDK off
+        (:func:`imu_dcm.cli.check_rerun_switch`; the default then shows nothing).
     """
+    if not isinstance(mode, str | None):
+        raise InputError(f"Expected rerun mode one of {_MODES}, got {mode!r}")
+    mode = check_rerun_switch(mode)  # RERUN=off: the default shows nothing, a named mode refused
     if mode is None:
         if not has_display():
             return HEADLESS_HINT
@@ -391,11 +410,7 @@ def show_replay(
         target = mode[len("save:") :]
         if not target.endswith(".rrd") or len(target) <= len(".rrd"):
             raise InputError(f"Expected rerun mode save:PATH.rrd, got {mode!r}")
-        path = save_rrd(view, target)
-        return (
-            f"rerun: saved {path}; open it with: rerun {path} (without a display: "
-            f"rerun --serve-web --bind 127.0.0.1 {path})"
-        )
+        return saved_line(save_rrd(view, target))
     if mode == "serve":
         served = serve_replay(view, realtime)
         return (
