@@ -5,7 +5,8 @@ error against the log's truth, and optionally writes the estimate as a bag (``--
 files for evo (``--export-tum``), the summary as JSON (``--summary-json``) and a rerun view
 (``--rerun``). Every option and output path is checked before the log is read, so a bad one
 leaves nothing behind; no output may be, hold or lie inside the input.
-``python -m imu_dcm.replay convert-csv ...`` turns a CSV log into a ROS 2 MCAP bag.
+``python -m imu_dcm.replay convert-csv ...`` turns a CSV log into a ROS 2 MCAP bag;
+``python -m imu_dcm.replay info LOG`` says what a log holds (:mod:`imu_dcm.replay.info`).
 
 Bad input gives one line on stderr and exit code 2; recoverable oddities are printed as
 one-line warnings.
@@ -36,8 +37,8 @@ def build_parser() -> argparse.ArgumentParser:
         description=f"Replay a recorded gyro log ({kinds}) through the DCM integrator and "
         "compare the estimate with the log's truth. "
         f"Many logs at once: {PROG} batch PATH... --table OUT.csv (see {PROG} batch --help). "
-        f"A CSV log: {PROG} convert-csv --help. Exit codes: 0 done, 2 bad input or options, "
-        "130/143 interrupted.",
+        f"A CSV log: {PROG} convert-csv --help. What a log holds: {PROG} info LOG. "
+        "Exit codes: 0 done, 2 bad input or options, 130/143 interrupted.",
     )
     p.add_argument("log", help=f"the log: {kinds}")
     add_replay_options(p)
@@ -323,6 +324,10 @@ def main(argv: list[str] | None = None) -> int:
                 from imu_dcm.replay.csv_import import convert_main
 
                 code = convert_main(argv[1:])
+            elif argv and argv[0] == "info":
+                from imu_dcm.replay.info import info_main
+
+                code = info_main(argv[1:], PROG)
             else:
                 code = _replay_main(argv)
         except BrokenPipeError:  # ... | head: the reader had what it wanted
