@@ -15,6 +15,7 @@ one-line warnings.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import os
 import sys
 import warnings
@@ -249,10 +250,10 @@ def _replay_main(argv: list[str]) -> int:
         result = replay(args.log, progress=progress, **options)
     finally:
         progress.close()
-    lines = []
+    written: list[str] = []
     if args.out:
         out = _write_out(Path(args.out), result, args.force, inputs)
-        lines.append(f"out        {out} (/estimate/orientation)")
+        written.append(f"{out} (bag: /estimate/orientation)")
     if args.export_tum:
         from imu_dcm.replay.export import export_tum
 
@@ -264,18 +265,21 @@ def _replay_main(argv: list[str]) -> int:
             result.q_truth[k] if result.summary.truth_topic else None,
             inputs,
         )
-        lines.append(f"tum        {', '.join(str(f) for f in files)}")
+        written += [str(f) for f in files]
+    if args.summary_json:
+        written.append(str(args.summary_json))
+    if args.rerun and args.rerun.startswith("save:"):
+        written.append(args.rerun[len("save:") :])
+    summary = dataclasses.replace(result.summary, written=tuple(written))
     if args.summary_json:
         import json
 
         from imu_dcm.outputs import write_text_atomic
 
-        text = json.dumps(result.summary.to_dict(), indent=2, allow_nan=False) + "\n"
+        text = json.dumps(summary.to_dict(), indent=2, allow_nan=False) + "\n"
         write_text_atomic(args.summary_json, text, inputs)
     if not args.quiet:
-        print(format_summary(result.summary))
-        for line in lines:
-            print(line)
+        print(format_summary(summary))
     if args.rerun != "off":
         try:
             line = _show(result, args.rerun, args.realtime, args.keep_viewer)

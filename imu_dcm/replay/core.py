@@ -37,6 +37,7 @@ from imu_dcm.replay.clean import CleanedImu, _deg_evidence, clean_imu
 from imu_dcm.replay.mounting import Mounting, estimate_mounting, from_rotation
 from imu_dcm.replay.mounting_tf import MountingChoice, choose_mounting, tf_mounting
 from imu_dcm.replay.options import check_options
+from imu_dcm.replay.outcome import outcome
 from imu_dcm.replay.settings import ReplaySettings, check_mounting
 from imu_dcm.replay.summary import ReplayResult, ReplaySummary
 from imu_dcm.replay.truth import (
@@ -419,8 +420,10 @@ def _replay(path, s: ReplaySettings, report, notes: list[str]) -> ReplayResult:
     report("integrate", 1.0)
     error, both = _score(q_est, q_truth)
     summary = _summary(log, s, g, bias_est, judged, pf_summary, anchors, error, both)
-    summary = dataclasses.replace(summary, truth_candidates=candidates)
     start = anchors[0]
+    summary = dataclasses.replace(
+        summary, truth_candidates=candidates, **outcome(g.t_s, omega, q_est, start)
+    )
     return ReplayResult(
         g.t_ns, g.t_s, g.omega, omega, bias_est.bias_b, q_est, q_truth, error, start,
         bias_est, summary,

@@ -27,9 +27,12 @@ class ReplaySummary:
     summed up in ``stopped_at`` / ``damage``). ``truth_check`` is the rate comparison of truth
     and gyro (:class:`imu_dcm.replay.truth.TruthCheck`) as a dict, or None without truth.
     ``mounting`` is the motion's estimate of the mounting (or the quaternion given);
-    ``mounting_used`` says which rotation was applied to the rates ("estimated", "given", "tf"
-    for the one ``/tf_static`` declares, "" for none); ``mounting_tf`` is the declared one with
-    its frames and its distance to the estimate (:mod:`imu_dcm.replay.mounting_tf`), or None.
+    ``final_q_w_b``, ``rotation_deg``, ``turned_deg`` are the result with or without truth
+    (:mod:`imu_dcm.replay.outcome`); ``written`` lists the files and folders the command wrote
+    (empty from Python). ``mounting_used`` says which rotation was applied to the rates
+    ("estimated", "given", "tf" for the one ``/tf_static`` declares, "" for none);
+    ``mounting_tf`` is the declared one with its frames and its distance to the estimate
+    (:mod:`imu_dcm.replay.mounting_tf`), or None.
     """
 
     path: str
@@ -85,6 +88,10 @@ class ReplaySummary:
     scored_segments: tuple[dict, ...] = ()
     truth_estimate_of: str = ""
     truth_candidates: tuple[dict, ...] = ()
+    final_q_w_b: tuple[float, float, float, float] | None = None
+    rotation_deg: float | None = None
+    turned_deg: float | None = None
+    written: tuple[str, ...] = ()
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready dict: tuples become lists, gaps ``{"t_s", "length_s"}`` objects, NaN None."""
@@ -290,6 +297,15 @@ def format_summary(s: ReplaySummary) -> str:
             f"{_fmt(s.max_inclination_deg)}; heading RMS {_fmt(s.rms_heading_deg)}, "
             f"max {_fmt(s.max_heading_deg)}"
         )
+    from imu_dcm.replay.outcome import outcome_line
+
+    lines.append(outcome_line(s.final_q_w_b, s.rotation_deg, s.turned_deg))
+    lines.append(
+        f"written    {', '.join(s.written)}"
+        if s.written
+        else "written    nothing (--out DIR, --export-tum DIR, --summary-json PATH or "
+        "--rerun save:F.rrd write the estimate)"
+    )
     if s.stopped_at:
         lines.append(f"stopped    {s.stopped_at}")
     lines.append(f"elapsed    {s.elapsed_s:.3f} s")
