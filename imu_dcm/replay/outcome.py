@@ -48,12 +48,21 @@ def outcome(
     }
 
 
-def outcome_line(final_q_w_b, rotation_deg, turned_deg) -> str:
-    """``result     final q_w_b (x, y, z, w) ...; rotation ...° from the start, turned ...°``."""
+def outcome_lines(final_q_w_b, rotation_deg, turned_deg, written) -> list[str]:
+    """The ``result`` line (final ``q_w_b``, rotation from the start, angle turned) and the
+    ``written`` line (every output, or how to get one)."""
     if final_q_w_b is None:
-        return "result     no estimate (no sample was integrated)"
-    q = ", ".join(f"{v:+.6f}" for v in final_q_w_b)
-    return (
-        f"result     final q_w_b ({q}) [x, y, z, w]; {rotation_deg:.2f}° from the start "
-        f"attitude, {turned_deg:.1f}° turned on the way"
+        result = "result     no estimate (no sample was integrated)"
+    else:
+        q = ", ".join(f"{v:+.6f}" for v in final_q_w_b)
+        result = (
+            f"result     final q_w_b ({q}) [x, y, z, w]; {rotation_deg:.2f}° from the start "
+            f"attitude, {turned_deg:.1f}° turned on the way"
+        )
+    wrote = (
+        f"written    {', '.join(written)}"
+        if written
+        else "written    nothing (--out DIR, --export-tum DIR, --summary-json PATH or "
+        "--rerun save:F.rrd write the estimate)"
     )
+    return [result, wrote]

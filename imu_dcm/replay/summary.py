@@ -29,7 +29,11 @@ class ReplaySummary:
     ``mounting`` is the motion's estimate of the mounting (or the quaternion given);
     ``final_q_w_b``, ``rotation_deg``, ``turned_deg`` are the result with or without truth
     (:mod:`imu_dcm.replay.outcome`); ``written`` lists the files and folders the command wrote
-    (empty from Python). ``mounting_used`` says which rotation was applied to the rates
+    (empty from Python). ``score_window`` says which samples were scored
+    (:mod:`imu_dcm.replay.window`; ``truth_samples_used`` counts them); ``offset_auto_rms_deg``
+    is the RMS ``--truth-offset auto`` would give (:mod:`imu_dcm.replay.offset_hint`; None when
+    it was applied or the shift is under half a step). ``mounting_used`` says
+    which rotation was applied to the rates
     ("estimated", "given", "tf" for the one ``/tf_static`` declares, "" for none);
     ``mounting_tf`` is the declared one with its frames and its distance to the estimate
     (:mod:`imu_dcm.replay.mounting_tf`), or None.
@@ -92,6 +96,8 @@ class ReplaySummary:
     rotation_deg: float | None = None
     turned_deg: float | None = None
     written: tuple[str, ...] = ()
+    score_window: str = "all"
+    offset_auto_rms_deg: float | None = None
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready dict: tuples become lists, gaps ``{"t_s", "length_s"}`` objects, NaN None."""
@@ -227,6 +233,23 @@ def _judgement_lines(s: ReplaySummary) -> list[str]:
     return lines
 
 
+def _shift_line(s: ReplaySummary, check: dict) -> str:
+    """The rate check with its best shift, and what ``--truth-offset auto`` would score."""
+    from imu_dcm.replay.offset_hint import shift_ms
+
+    verdict = "follows the gyro" if check["follows"] else "does NOT follow the gyro"
+    hint = ""
+    if s.offset_auto_rms_deg is not None and s.rms_error_deg is not None:
+        hint = (
+            f" (--truth-offset auto applies it: RMS {_fmt(s.offset_auto_rms_deg)} instead "
+            f"of {_fmt(s.rms_error_deg)})"
+        )
+    return (
+        f"truth rate {verdict}: correlation {check['correlation']:.2f}, best shift "
+        f"{shift_ms(check['shift_s'])}{hint}, residual {check['residual_rad_s']:.3f} rad/s"
+    )
+
+
 def format_summary(s: ReplaySummary) -> str:
     """The summary for a person, one fact per line."""
     lines = [
@@ -257,12 +280,7 @@ def format_summary(s: ReplaySummary) -> str:
             f"{check['residual_rad_s']:.3f} rad/s"
         )
     elif check and check.get("checked"):
-        verdict = "follows the gyro" if check["follows"] else "does NOT follow the gyro"
-        lines.append(
-            f"truth rate {verdict}: correlation {check['correlation']:.2f}, best shift "
-            f"{check['shift_s'] * 1e3:+.1f} ms, residual {check['residual_rad_s']:.3f} "
-            f"rad/s"
-        )
+        lines.append(_shift_line(s, check))
     lines.extend(_judgement_lines(s))
     n_gaps = len(s.gaps)
     lines.append(
@@ -290,6 +308,8 @@ def format_summary(s: ReplaySummary) -> str:
         lines.append(f"bias       {s.bias_mode}: {bias}")
     pf = f", pre-filter {s.prefilter}" if s.prefilter else ""
     lines.append(f"method     {s.method}{pf}; estimate from t = {s.start_time_s:.3f} s")
+    if s.score_window != "all":
+        lines.append(f"scored     {s.score_window} ({s.truth_samples_used} samples)")
     if s.rms_error_deg is not None:
         lines.append(
             f"error      total RMS {_fmt(s.rms_error_deg)}, max {_fmt(s.max_error_deg)}; "
@@ -297,15 +317,9 @@ def format_summary(s: ReplaySummary) -> str:
             f"{_fmt(s.max_inclination_deg)}; heading RMS {_fmt(s.rms_heading_deg)}, "
             f"max {_fmt(s.max_heading_deg)}"
         )
-    from imu_dcm.replay.outcome import outcome_line
+    from imu_dcm.replay.outcome import outcome_lines
 
-    lines.append(outcome_line(s.final_q_w_b, s.rotation_deg, s.turned_deg))
-    lines.append(
-        f"written    {', '.join(s.written)}"
-        if s.written
-        else "written    nothing (--out DIR, --export-tum DIR, --summary-json PATH or "
-        "--rerun save:F.rrd write the estimate)"
-    )
+    lines += outcome_lines(s.final_q_w_b, s.rotation_deg, s.turned_deg, s.written)
     if s.stopped_at:
         lines.append(f"stopped    {s.stopped_at}")
     lines.append(f"elapsed    {s.elapsed_s:.3f} s")
