@@ -17,7 +17,7 @@ from drone_logs import STRANGERS
 
 from imu_dcm.logio.writer import StampedSeries, write_bag
 from imu_dcm.replay.__main__ import main
-from imu_dcm.replay.info import ESTIMATE, INDEPENDENT
+from imu_dcm.replay.kinds import ESTIMATE, INDEPENDENT
 
 T0_NS = 1_700_000_000_000_000_000
 PERIOD_NS = 5_000_000  # 200 Hz

@@ -24,6 +24,7 @@ from typing import Any
 
 from imu_dcm.errors import ImuDcmWarning, InputError
 from imu_dcm.logio import find_logs as find_logs_in
+from imu_dcm.replay.kinds import truth_kind
 from imu_dcm.replay.runners import LOST, run_dask, run_local
 from imu_dcm.replay.table import (
     Curve,
@@ -126,6 +127,7 @@ def row_from_result(path: str, result, warnings_seen: Iterable[str], elapsed_s: 
         rate_hz=float(s.rate_hz),
         imu_topic=s.imu_topic,
         truth_topic=s.truth_topic,
+        truth_kind=truth_kind(s.truth_estimate_of if s.truth_topic else None),
         bias_x_rad_s=bx,
         bias_y_rad_s=by,
         bias_z_rad_s=bz,

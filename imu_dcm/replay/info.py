@@ -23,27 +23,14 @@ import numpy as np
 
 from imu_dcm.integrate import find_gaps, gap_message
 from imu_dcm.logio.intervals import declared_intervals
+from imu_dcm.replay.kinds import ESTIMATE, POSITIONS, truth_kind
 
-#: The kinds of truth, as the table's ``truth_kind`` column and the info lines say them.
-INDEPENDENT, ESTIMATE, POSITIONS, NO_TRUTH = (
-    "independent reference",
-    "the vehicle's own estimate",
-    "positions only",
-    "none",
-)
 #: Channels that give a position and no attitude: by type, or the position estimates of PX4 and
 #: ArduPilot by name (a truth candidate a user may look for, and that cannot score an attitude).
 _POSITION_TYPES = ("geometry_msgs/msg/PointStamped", "geometry_msgs/msg/PointStamped[]")
 _POSITION_NAME = re.compile(
     r"^(vehicle_(local|global|gps)_position|POS|GPS|/ground_truth/.*position.*)$"
 )
-
-
-def truth_kind(estimate_of: str | None) -> str:
-    """The kind of a truth: :data:`INDEPENDENT`, :data:`ESTIMATE`, or :data:`NO_TRUTH` (None)."""
-    if estimate_of is None:
-        return NO_TRUTH
-    return ESTIMATE if estimate_of else INDEPENDENT
 
 
 @dataclass(frozen=True, slots=True)
