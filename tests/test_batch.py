@@ -23,6 +23,7 @@ import numpy as np
 import pytest
 
 from data_synth.cli import main as synth_main
+from imu_dcm.errors import ImuDcmWarning
 from imu_dcm.replay import replay, replay_many
 from imu_dcm.replay.batch import find_logs
 from imu_dcm.replay.batch_cli import main as batch_main
@@ -193,7 +194,8 @@ def test_find_logs_searches_folders_and_lists(synth_dir, tmp_path):
         "# the same loose log again, and one more\n\ndata/b/loose.mcap\n"
         f"{synth_dir / 'top_noisy'}  # absolute\n"
     )
-    found = find_logs([root, listing, root / "a" / "bag"])
+    with pytest.warns(ImuDcmWarning, match=r"1 file that is not a log \(b/readme.md\)"):
+        found = find_logs([root, listing, root / "a" / "bag"])
     assert found == [str(root / "a" / "bag"), str(loose), str(synth_dir / "top_noisy")]
 
 
