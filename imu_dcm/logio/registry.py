@@ -130,7 +130,9 @@ def _open_inside(folder: Path, progress: Progress | None) -> LogSource:
 
 SOURCES: tuple[SourceEntry, ...] = (
     SourceEntry("rosbag2 folder (metadata.yaml + storage files)", is_bag_folder, open_folder),
-    SourceEntry("a bag's metadata.yaml (reads its folder)", _is_metadata, _open_metadata, False),
+    SourceEntry(
+        "a bag's own file (metadata.yaml, read as its folder)", _is_metadata, _open_metadata, False
+    ),
     SourceEntry(
         "EuRoC / ASL dataset folder (mav0/imu0/data.csv)", is_euroc, _later("euroc", "EurocSource")
     ),
