@@ -311,7 +311,10 @@ def _open_table(table: Path | None, resume: bool, overwrite: bool) -> dict[str, 
     if table is None:
         return {}
     if table.exists() and table.stat().st_size and not (resume or overwrite):
-        raise InputError(f"Expected a new table, got an existing {table} (resume or overwrite it)")
+        raise InputError(
+            f"Expected a new table, got an existing {table} (resume=True / --resume keeps its "
+            f"rows, overwrite=True / --force replaces it)"
+        )
     if overwrite and not resume:
         for p in (table, curves_path(table)):
             p.unlink(missing_ok=True)
