@@ -234,7 +234,21 @@ def _options(args) -> dict:
 
         check_export_dir(args.export_tum, inputs)
     _check_rerun(args.rerun, inputs)
+    _check_view_options(args)
     return keywords
+
+
+def _check_view_options(args) -> None:
+    """``--keep-viewer`` and ``--realtime`` act only on a view: refused where there is none."""
+    from imu_dcm.errors import InputError
+
+    mode = args.rerun or "the default (no view without a display)"
+    if args.keep_viewer and args.rerun != "serve":
+        raise InputError(f"Expected --rerun serve with --keep-viewer, got --rerun {mode}")
+    if args.realtime and (args.rerun in ("off",) or (args.rerun or "").startswith("save:")):
+        raise InputError(
+            f"Expected --rerun spawn or serve with --realtime (it paces a view), got --rerun {mode}"
+        )
 
 
 def _replay_main(argv: list[str]) -> int:

@@ -408,8 +408,6 @@ def _score(q_est: NDArray, q_truth: NDArray) -> tuple[AttitudeError, NDArray]:
 
 def _replay(path, s: ReplaySettings, report, notes: list[str]) -> ReplayResult:
     log = path if isinstance(path, LogData) else _read(path, s, report)
-    for note in log.notes:  # the reader's findings (a refused channel, a better one used)
-        _warn(notes, note)
     g = _gyro(log, s, notes)
     report("bias", 0.0)
     bias_est, omega = _remove_bias(s, g)
@@ -423,6 +421,12 @@ def _replay(path, s: ReplaySettings, report, notes: list[str]) -> ReplayResult:
     q_est = _integrate(s, omega, g.t_s, q_truth, anchors, log.imu.topic)
     report("integrate", 1.0)
     error, both = _score(q_est, q_truth)
+    if s.q_init is not None and np.isfinite(q_truth[anchors[0]]).all():
+        _warn(
+            notes,
+            "--init-quat not used: the estimate starts from the truth's attitude "
+            f"({judged.aligned.truth.topic}); --truth-topic none starts it from --init-quat",
+        )
     inside, scored_on = window_mask(s.score_window, g.t_ns, log.custom_data, str(log.path))
     both = both if inside is None else both & inside
     auto_rms = auto_offset_rms_deg(judged.aligned, g.base, g.t_ns, q_est, anchors, both)
@@ -432,6 +436,7 @@ def _replay(path, s: ReplaySettings, report, notes: list[str]) -> ReplayResult:
         summary,
         truth_candidates=candidates,
         score_window=scored_on,
+        notes=tuple(log.notes),  # the reader's findings (a refused channel, a better one used)
         offset_auto_rms_deg=auto_rms,
         **outcome(g.t_s, omega, q_est, start),
     )

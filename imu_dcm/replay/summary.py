@@ -98,6 +98,7 @@ class ReplaySummary:
     written: tuple[str, ...] = ()
     score_window: str = "all"
     offset_auto_rms_deg: float | None = None
+    notes: tuple[str, ...] = ()
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready dict: tuples become lists, gaps ``{"t_s", "length_s"}`` objects, NaN None."""
@@ -282,6 +283,8 @@ def format_summary(s: ReplaySummary) -> str:
     elif check and check.get("checked"):
         lines.append(_shift_line(s, check))
     lines.extend(_judgement_lines(s))
+    if s.notes:
+        lines.append("notes      " + "; ".join(s.notes))
     n_gaps = len(s.gaps)
     lines.append(
         f"dropped    {s.dropped_nonfinite} NaN/Inf, {s.dropped_implausible} implausible, "
