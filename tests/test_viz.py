@@ -286,6 +286,9 @@ def test_serve_mode_serves_the_web_viewer_on_loopback(tmp_path):
     import urllib.request
 
     line = show_replay(_view(n=40), "serve", tmp_path)
+    # its temporary .rrd lies under the folder given (tests write only under tmp_path)
+    (folder,) = [p for p in tmp_path.iterdir() if p.name.startswith("imu_dcm_rerun_")]
+    assert [p.suffix for p in folder.iterdir()] == [".rrd"]
     m = re.search(r"web viewer at (http://127\.0\.0\.1:(\d+)/\?url=\S+) .*kill (\d+)\)", line)
     assert m, line
     url, pid = m.group(1), int(m.group(3))

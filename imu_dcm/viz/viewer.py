@@ -312,11 +312,14 @@ class ServedReplay:
             shutil.rmtree(self.folder, ignore_errors=True)
 
 
-def serve_replay(view: ViewData, realtime: bool = False) -> ServedReplay:
+def serve_replay(
+    view: ViewData, realtime: bool = False, tmp_parent: str | os.PathLike | None = None
+) -> ServedReplay:
     """Serve a replay in rerun's web viewer on 127.0.0.1; the caller stops it.
 
     ``realtime``: stream to the server at the recorded speed (the URL is printed first);
-    otherwise the view is saved to a temporary ``.rrd`` that :meth:`ServedReplay.stop` removes.
+    otherwise the view is saved to a temporary ``.rrd`` that :meth:`ServedReplay.stop` removes,
+    in a folder made under ``tmp_parent`` (default: the system's temporary folder).
     """
     if realtime:
         served = serve_rrd(None)
@@ -332,7 +335,7 @@ def serve_replay(view: ViewData, realtime: bool = False) -> ServedReplay:
             served.stop()
             raise
         return ServedReplay(served, None)
-    folder = Path(tempfile.mkdtemp(prefix="imu_dcm_rerun_"))
+    folder = Path(tempfile.mkdtemp(prefix="imu_dcm_rerun_", dir=tmp_parent))
     try:
         served = serve_rrd(save_rrd(view, folder / (_safe_stem(view.title) + ".rrd")))
     except BaseException:
@@ -362,7 +365,8 @@ def show_replay(
         the file. ``"off"``: nothing. ``None``: ``"spawn"`` when a display exists, else
         nothing at all (the line is :data:`HEADLESS_HINT`).
     save_dir : path-like, optional
-        Unused (the headless default writes no file); kept for callers.
+        Where ``"serve"`` makes the temporary folder of its ``.rrd`` (default: the system's
+        temporary folder). The headless default writes no file.
     realtime : bool
         Pace the data at the recorded speed in small chunks (for live viewing with ``"spawn"``
         and ``"serve"``; with ``"serve"`` the URL is printed before streaming). Files are
@@ -397,7 +401,7 @@ def show_replay(
             f"rerun --serve-web --bind 127.0.0.1 {path})"
         )
     if mode == "serve":
-        served = serve_replay(view, realtime)
+        served = serve_replay(view, realtime, save_dir)
         return (
             f"rerun: web viewer at {served.viewer.url} (127.0.0.1 only; stop it with: "
             f"kill {served.viewer.process.pid})"
