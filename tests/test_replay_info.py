@@ -14,6 +14,7 @@ import sys
 import numpy as np
 import pytest
 from drone_logs import STRANGERS
+from test_logio_euroc import SHIPPED, _csv, _dataset
 
 from imu_dcm.logio.writer import StampedSeries, write_bag
 from imu_dcm.replay.__main__ import main
@@ -92,8 +93,8 @@ def test_info_as_a_module_and_on_bad_input(bag, tmp_path):
 
 
 def test_info_on_broad_declares_its_movement_phases(broad_dir, capsys):
-    trial = broad_dir / "05_undisturbed_slow_rotation_with_breaks_B"
-    assert main(["info", str(trial), "--json"]) == 0
+    bag = broad_dir / "05_undisturbed_slow_rotation_with_breaks_B"
+    assert main(["info", str(bag), "--json"]) == 0
     got = json.loads(capsys.readouterr().out)
     # the BROAD README: 59212 IMU samples, 57203 ground-truth messages, 4 movement phases
     assert got["gyro_count"] == 59212
@@ -159,3 +160,23 @@ def test_info_counts_the_same_in_other_containers(bag, tmp_path, container, caps
     counts = {c["topic"]: c["count"] for c in got["channels"]}
     assert counts == {"/imu/data": 1900, "/ground_truth/orientation": 1000, "/imu/mag": 2000}
     assert len(got["gaps"]) == 1 and got["truths"][0]["kind"] == "independent reference"
+
+
+def test_info_on_a_euroc_dataset_names_leica_as_positions_only(tmp_path, capsys):
+    from imu_dcm.logio import read_log
+
+    log = read_log(SHIPPED)  # the shipped trial, written as an ASL dataset
+    trial = (log, log.imu.accel_b)
+    root = _dataset(tmp_path / "ds", trial)
+    _csv(
+        root / "mav0" / "leica0" / "data.csv",
+        "#timestamp [ns], p_RS_R_x [m], p_RS_R_y [m], p_RS_R_z [m]",
+        trial[0].truth.t_ns[:5],
+        np.zeros((5, 3)),
+    )
+    assert main(["info", str(root), "--json"]) == 0
+    got = json.loads(capsys.readouterr().out)
+    kinds = {t["topic"]: (t["kind"], t["count"]) for t in got["truths"]}
+    assert kinds["state_groundtruth_estimate0"][0] == INDEPENDENT
+    assert kinds["leica0"] == ("positions only", 5)
+    assert got["gyro"] == "imu0" and got["gyro_count"] == len(trial[0].imu.t_ns)

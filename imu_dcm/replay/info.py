@@ -27,7 +27,7 @@ from imu_dcm.replay.kinds import ESTIMATE, POSITIONS, truth_kind
 
 #: Channels that give a position and no attitude: by type, or the position estimates of PX4 and
 #: ArduPilot by name (a truth candidate a user may look for, and that cannot score an attitude).
-_POSITION_TYPES = ("geometry_msgs/msg/PointStamped", "geometry_msgs/msg/PointStamped[]")
+_POSITION_TYPES = ("geometry_msgs/msg/PointStamped", "asl data.csv (positions)")
 _POSITION_NAME = re.compile(
     r"^(vehicle_(local|global|gps)_position|POS|GPS|/ground_truth/.*position.*)$"
 )
