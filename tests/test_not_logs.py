@@ -71,6 +71,6 @@ def test_batch_names_the_files_it_skipped(bag, tmp_path, capsys):
     assert "1 log, 0 failed" in captured.out
     assert (
         f"skipped under {tmp_path / 'logs'}: 2 files that are not logs (gyro.csv, notes.md); "
-        f"1 text table (gyro.csv): `python -m imu_dcm.replay convert-csv FILE --out BAG ...` "
+        f"1 text table (gyro.csv): `python -m imu_dcm.replay convert-csv FILE OUT.mcap ...` "
         f"converts it into a bag"
     ) in captured.err

@@ -105,7 +105,7 @@ def convert_hint(files: list[Path]) -> str:
     n = len(csvs)
     return (
         f"; {n} text table{'s' if n != 1 else ''} ({csvs[0].name}"
-        f"{', ...' if n > 1 else ''}): `python -m imu_dcm.replay convert-csv FILE --out BAG "
+        f"{', ...' if n > 1 else ''}): `python -m imu_dcm.replay convert-csv FILE OUT.mcap "
         f"...` converts {'each' if n > 1 else 'it'} into a bag"
     )
 
