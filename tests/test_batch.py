@@ -23,6 +23,7 @@ import numpy as np
 import pytest
 
 from data_synth.cli import main as synth_main
+from imu_dcm.errors import ImuDcmWarning
 from imu_dcm.replay import replay, replay_many
 from imu_dcm.replay.batch import find_logs
 from imu_dcm.replay.batch_cli import main as batch_main
@@ -103,6 +104,8 @@ def test_rows_are_the_bare_replay_bit_for_bit_sequential_pool_and_dask(logs, tmp
                 )
             elif key == "gaps":
                 want = len(s.gaps)
+            elif key == "truth_kind":  # data_synth's truth is exact: an independent reference
+                want = "independent reference" if s.truth_topic else "none"
             else:
                 want = getattr(s, key)
             got = getattr(row, key)
@@ -168,7 +171,7 @@ def test_markdown_summary_and_chart(logs, tmp_path):
     rms = [float(c["rms_error_deg"]) for c in cells if c["rms_error_deg"]]
     assert len(cells) == 4 and len(rms) == 3
     want = (
-        f"4 logs, 1 failed; RMS error over 3 logs with truth: mean "
+        f"4 logs, 1 failed; RMS error over 3 logs with truth (independent reference): mean "
         f"{statistics.fmean(rms):.4g}°, median {statistics.median(rms):.4g}°"
     )
     assert res.summary == want
@@ -193,7 +196,8 @@ def test_find_logs_searches_folders_and_lists(synth_dir, tmp_path):
         "# the same loose log again, and one more\n\ndata/b/loose.mcap\n"
         f"{synth_dir / 'top_noisy'}  # absolute\n"
     )
-    found = find_logs([root, listing, root / "a" / "bag"])
+    with pytest.warns(ImuDcmWarning, match=r"1 file that is not a log \(b/readme.md\)"):
+        found = find_logs([root, listing, root / "a" / "bag"])
     assert found == [str(root / "a" / "bag"), str(loose), str(synth_dir / "top_noisy")]
 
 

@@ -5,6 +5,10 @@ as one bash script (``set -eo pipefail``) in a fresh copy of the repository's fi
 tracks or would track; no ``.git``; a plain copy when there is no git checkout), with ``python``
 being the Python that runs these tests, ``CI=true``, no display, and a timeout; it must exit 0.
 
+A page that holds ```python blocks is also one test (``test_page_runs_in_order``): every block of
+the page, shell and Python, runs in the page's order in one fresh copy, as a reader working down
+the page would run them (a Python block sees the files the shell blocks above it wrote).
+
 Not run, each reported as a skip with its reason:
 
 - a block whose line above (blank lines aside) is ``<!-- needs: WHAT -->``: it needs a display, a
@@ -58,6 +62,7 @@ class Example:
     where: str  # "docs/replay.md:12", the line of the opening fence
     script: str  # what runs; empty when nothing does
     skip: str  # why it does not run; empty when it runs
+    lang: str = "bash"  # "bash" or "python"
 
 
 def _logical_lines(body: list[str]) -> list[str]:
@@ -103,8 +108,19 @@ def _examples(page: str) -> list[Example]:
         )
         if m.group(2) in SHELLS:
             found += _block(page, i, lines, lines[i + 1 : end])
+        elif m.group(2) == "python":
+            found.append(_python_block(page, i, lines, lines[i + 1 : end]))
         i = end + 1
     return found
+
+
+def _python_block(page: str, i: int, lines: list[str], body: list[str]) -> Example:
+    where = f"{page}:{i + 1}"
+    above = next((x.strip() for x in reversed(lines[:i]) if x.strip()), "")
+    needs = NEEDS.match(above)
+    if needs:
+        return Example(where, "", f"{where} needs {needs.group(1)}", "python")
+    return Example(where, "\n".join(body) + "\n", "", "python")
 
 
 def _block(page: str, i: int, lines: list[str], body: list[str]) -> list[Example]:
@@ -126,7 +142,10 @@ def _block(page: str, i: int, lines: list[str], body: list[str]) -> list[Example
     ]
 
 
-EXAMPLES = [e for page in PAGES for e in _examples(page)]
+PAGE_EXAMPLES = {page: _examples(page) for page in PAGES}
+EXAMPLES = [e for page in PAGES for e in PAGE_EXAMPLES[page] if e.lang == "bash"]
+#: Pages with Python blocks: each runs as a whole, in order (module docstring).
+PYTHON_PAGES = [p for p in PAGES if any(e.lang == "python" for e in PAGE_EXAMPLES[p])]
 
 
 def _source_files() -> list[str] | None:
@@ -194,14 +213,16 @@ def _env(base: Path, repo: Path) -> dict[str, str]:
     return env
 
 
-@pytest.mark.slow
-@pytest.mark.parametrize("example", EXAMPLES, ids=[e.where for e in EXAMPLES])
-def test_shell_example_runs(example: Example, workspace: Path):
-    if example.skip:
-        pytest.skip(example.skip)
-    repo = _fresh_copy(workspace)
+def _run(workspace: Path, repo: Path, example: Example) -> tuple[int, str]:
+    """Run one block in ``repo`` (a Python block from a file beside the copy): (exit, output)."""
+    if example.lang == "python":
+        script = workspace / "block.py"
+        script.write_text(example.script, encoding="utf-8")
+        argv = [sys.executable, str(script)]
+    else:
+        argv = ["bash", "-c", "set -eo pipefail\n" + example.script]
     proc = subprocess.Popen(
-        ["bash", "-c", "set -eo pipefail\n" + example.script],
+        argv,
         cwd=repo,
         env=_env(workspace, repo),
         stdin=subprocess.DEVNULL,
@@ -220,9 +241,34 @@ def test_shell_example_runs(example: Example, workspace: Path):
     finally:
         with contextlib.suppress(ProcessLookupError):  # what the block left running, if anything
             os.killpg(proc.pid, signal.SIGKILL)
-    assert proc.returncode == 0, (
-        f"{example.where}: exit {proc.returncode}\n{example.script}\n{out[-3000:]}"
-    )
+    return proc.returncode, out
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("example", EXAMPLES, ids=[e.where for e in EXAMPLES])
+def test_shell_example_runs(example: Example, workspace: Path):
+    if example.skip:
+        pytest.skip(example.skip)
+    repo = _fresh_copy(workspace)
+    code, out = _run(workspace, repo, example)
+    assert code == 0, f"{example.where}: exit {code}\n{example.script}\n{out[-3000:]}"
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("page", PYTHON_PAGES)
+def test_page_runs_in_order(page: str, workspace: Path):
+    repo = _fresh_copy(workspace)
+    ran = 0
+    for example in PAGE_EXAMPLES[page]:
+        if example.skip or not example.script.strip():
+            continue
+        code, out = _run(workspace, repo, example)
+        assert code == 0, (
+            f"{example.where} (after the blocks above it): exit {code}\n{example.script}\n"
+            f"{out[-3000:]}"
+        )
+        ran += 1
+    assert ran, f"{page}: no block ran"
 
 
 def test_examples_were_found():
@@ -230,6 +276,8 @@ def test_examples_were_found():
     where = {e.where.split(" ")[0] for e in EXAMPLES}
     assert any(w.startswith("README.md:") for w in where), where
     assert len([e for e in EXAMPLES if not e.skip]) >= 5, EXAMPLES
+    # the README's usage block is Python: the page test runs it
+    assert "README.md" in PYTHON_PAGES, PYTHON_PAGES
 
 
 LINK = re.compile(r"\]\(([^)\s]+)\)")

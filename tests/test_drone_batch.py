@@ -7,6 +7,7 @@ import os
 
 import pytest
 
+from imu_dcm.errors import ImuDcmWarning
 from imu_dcm.logio import find_logs
 from imu_dcm.replay.batch import find_logs as batch_find_logs
 from tests.drone_logs import trial_dataflash, trial_ulog
@@ -33,7 +34,10 @@ def test_find_logs_takes_ulogs_and_dataflash_by_their_bytes(fleet):
 
 
 def test_replay_batch_searches_folders_for_them(fleet):
-    got = sorted(os.path.relpath(p, fleet) for p in batch_find_logs([fleet]))
+    with pytest.warns(
+        ImuDcmWarning, match=r"2 files that are not logs \(ardupilot/params.parm, px4/notes.txt\)$"
+    ):
+        got = sorted(os.path.relpath(p, fleet) for p in batch_find_logs([fleet]))
     assert got == [
         os.path.join("ardupilot", "2026-12-01", "00000042.BIN"),
         os.path.join("px4", "flight.ulg"),

@@ -57,6 +57,7 @@ CORE = (
     "output_rule",
     "signatures",
     "cli",
+    "__main__",  # python -m imu_dcm: the list of commands (imports nothing of the project)
 )
 # the bag writer belongs to log I/O wherever it sits: imu_dcm/bag_writer.py or inside logio
 LOG_IO = ("logio", "bag_writer")

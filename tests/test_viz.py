@@ -286,7 +286,10 @@ def test_serve_mode_serves_the_web_viewer_on_loopback(tmp_path):
     import urllib.request
 
     line = show_replay(_view(n=40), "serve", tmp_path)
-    m = re.search(r"web viewer at (http://127\.0\.0\.1:(\d+)/\?url=\S+) .*kill (\d+)\)", line)
+    # its temporary .rrd lies under the folder given (tests write only under tmp_path)
+    (folder,) = [p for p in tmp_path.iterdir() if p.name.startswith("imu_dcm_rerun_")]
+    assert [p.suffix for p in folder.iterdir()] == [".rrd"]
+    m = re.search(r"web viewer at (http://127\.0\.0\.1:(\d+)/\?url=\S+) .*kill (\d+);", line)
     assert m, line
     url, pid = m.group(1), int(m.group(3))
     try:
@@ -298,3 +301,27 @@ def test_serve_mode_serves_the_web_viewer_on_loopback(tmp_path):
     finally:
         os.killpg(pid, signal.SIGTERM)  # the server runs in its own process group
         os.waitpid(pid, 0)
+
+
+def test_a_kept_web_viewer_stops_with_the_one_kill_it_names_and_leaves_nothing(tmp_path):
+    import os
+    import re
+    import socket
+    import time
+
+    line = show_replay(_view(n=40), "serve", tmp_path)
+    m = re.search(r"stop it with: kill (\d+);.*ssh -L (\d+):127\.0\.0\.1:\2 -L (\d+):127", line)
+    assert m, line
+    pid, ports = int(m.group(1)), (int(m.group(2)), int(m.group(3)))
+    (folder,) = [p for p in tmp_path.iterdir() if p.name.startswith("imu_dcm_rerun_")]
+    for port in ports:  # both ports listen, on loopback
+        socket.create_connection(("127.0.0.1", port), timeout=5).close()
+    os.kill(pid, 15)  # what the line says: SIGTERM to that one pid, not to its group
+    os.waitpid(pid, 0)
+    deadline = time.monotonic() + 10
+    while folder.exists() and time.monotonic() < deadline:
+        time.sleep(0.05)
+    assert not folder.exists()  # its temporary .rrd is gone with it
+    for port in ports:  # and the server itself, not only its keeper
+        with pytest.raises(OSError), socket.create_connection(("127.0.0.1", port), timeout=2):
+            pass

@@ -53,6 +53,8 @@ from imu_dcm.so3 import quat_conjugate, quat_from_matrix, quat_multiply
 
 KIND = "euroc/asl folder"
 CSV_TYPE = "asl data.csv"
+#: The type of a truth folder holding positions only (``leica0``).
+POSITIONS_TYPE = "asl data.csv (positions)"
 #: Columns read from the IMU's data.csv: timestamp, 3 rates, 3 specific forces.
 IMU_COLUMNS = 7
 #: Largest sensor.yaml read (bytes); real ones are under 1 kB.
@@ -267,6 +269,7 @@ class EurocSource:
         notes: list[str] = []
         series = self._truths(request.truth_topic, notes)
         channels += [ChannelInfo(s.topic, CSV_TYPE, "csv", len(s.t_ns)) for s in series]
+        channels += self._position_channels()
         truth = series[0] if series and request.truth_topic != "none" else None
         if progress is not None:
             progress(1.0)
@@ -280,6 +283,17 @@ class EurocSource:
             truth_candidates=tuple(series[1:]),
             notes=tuple(notes),
         )
+
+    def _position_channels(self) -> list[ChannelInfo]:
+        """The truth folders with positions only (``leica0``), their rows counted, not read."""
+        out = []
+        for t in TRUTHS:
+            f = self.mav / t.name / "data.csv"
+            if not t.attitude and f.is_file():
+                with open(f, "rb") as lines:
+                    rows = sum(1 for line in lines if line.strip() and not line.startswith(b"#"))
+                out.append(ChannelInfo(t.name, POSITIONS_TYPE, "csv", rows))
+        return out
 
     def _imu(self, name: str) -> ImuSeries:
         folder = self.mav / name

@@ -11,7 +11,7 @@ from pathlib import Path
 
 from imu_dcm.errors import LogError
 from imu_dcm.logio.lfs import is_lfs_pointer, refuse_lfs_pointer
-from imu_dcm.logio.paths import read_head
+from imu_dcm.logio.paths import mav_folder, read_head
 from imu_dcm.logio.source import LogSource, Progress, SourceEntry
 
 #: Text tables: convert-csv turns them into a bag.
@@ -46,6 +46,25 @@ def _refuse_text(path: Path, _progress: Progress | None) -> LogSource:
     )
 
 
+def euroc_root(path: Path) -> Path | None:
+    """The EuRoC/ASL dataset folder a ``<sensor>/data.csv`` lies in (``mav0``'s parent, or
+    ``mav0`` itself when it has no parent dataset folder), or None."""
+    if path.name != "data.csv":
+        return None
+    mav = path.parent.parent
+    if mav_folder(mav) is None:
+        return None
+    return mav.parent if mav.name == "mav0" else mav
+
+
+def _refuse_euroc_file(path: Path, _progress: Progress | None) -> LogSource:
+    root = euroc_root(path)
+    raise LogError(
+        f"Expected a log, got a file of the EuRoC/ASL dataset {root}: {path}; give the dataset "
+        f"folder: `python -m imu_dcm.replay {root}`"
+    )
+
+
 REFUSALS: tuple[SourceEntry, ...] = (
     SourceEntry("an empty file", _is_empty_file, _refuse_empty, search=False),
     SourceEntry("a Git LFS pointer", is_lfs_pointer, refuse_lfs_pointer, search=False),
@@ -61,6 +80,12 @@ REFUSALS: tuple[SourceEntry, ...] = (
         "a .mcap file that is not MCAP",
         lambda p, head: p.suffix == ".mcap" and bool(head),
         _refuse_not_mcap,
+        search=False,
+    ),
+    SourceEntry(
+        "a CSV file of a EuRoC/ASL dataset",
+        lambda p, head: bool(head) and euroc_root(p) is not None,
+        _refuse_euroc_file,
         search=False,
     ),
     SourceEntry(

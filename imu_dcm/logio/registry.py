@@ -20,7 +20,7 @@ from pathlib import Path
 
 from imu_dcm.errors import LogError
 from imu_dcm.logio import meta
-from imu_dcm.logio.foreign import REFUSALS
+from imu_dcm.logio.foreign import REFUSALS, TEXT_SUFFIXES
 from imu_dcm.logio.mcap import MAGIC as MCAP_MAGIC
 from imu_dcm.logio.mcap import McapSource
 from imu_dcm.logio.paths import check_regular, is_dataflash, is_euroc, is_ulog, read_head
@@ -71,12 +71,55 @@ def _is_folder(path: Path, head: bytes) -> bool:
     return not head and path.is_dir()
 
 
+def _is_metadata(path: Path, head: bytes) -> bool:
+    return path.name == "metadata.yaml" and bool(head) and is_bag_folder(path.parent, b"")
+
+
+def _open_metadata(path: Path, progress: Progress | None) -> LogSource:
+    """A bag's ``metadata.yaml``: the bag folder it describes."""
+    return open_folder(path.parent, progress)
+
+
+def _is_table(path: Path) -> bool:
+    """A text file (by suffix) whose first two lines have at least 4 fields alike (a time and
+    three rates, what convert-csv needs), split by comma, semicolon or tab."""
+    if path.suffix.lower() not in TEXT_SUFFIXES:
+        return False
+    try:
+        with open(path, encoding="utf-8", errors="replace") as f:
+            lines = [f.readline() for _ in range(2)]
+    except OSError:
+        return False
+    return any(
+        len(lines[0].split(sep)) >= 4 and len(lines[1].split(sep)) == len(lines[0].split(sep))
+        for sep in (",", ";", "\t")
+    )
+
+
+def convert_hint(files: list[Path]) -> str:
+    """``; N text tables (a.csv, ...): `python -m imu_dcm.replay convert-csv FILE ...`
+    converts each`` for the files that look like tables (or "")."""
+    csvs = [f for f in files if _is_table(f)]
+    if not csvs:
+        return ""
+    n = len(csvs)
+    return (
+        f"; {n} text table{'s' if n != 1 else ''} ({csvs[0].name}"
+        f"{', ...' if n > 1 else ''}): `python -m imu_dcm.replay convert-csv FILE OUT.mcap "
+        f"...` converts {'each' if n > 1 else 'it'} into a bag"
+    )
+
+
 def _open_inside(folder: Path, progress: Progress | None) -> LogSource:
     """A folder holding exactly one log file (not a bag folder): that file's source."""
     found = _logs_inside(folder)
     if not found:
-        names = ", ".join(sorted(x.name for x in folder.iterdir())[:8]) or "nothing"
-        raise LogError(f"Expected a bag folder with a .mcap file, got {folder} holding {names}")
+        entries = sorted(folder.iterdir())
+        names = ", ".join(x.name for x in entries[:8]) or "nothing"
+        raise LogError(
+            f"Expected a bag folder with a .mcap file, got {folder} holding {names}"
+            + convert_hint([x for x in entries if x.is_file()])
+        )
     if len(found) > 1:
         raise LogError(
             f"Expected one .mcap file in {folder}, got {len(found)}: "
@@ -87,6 +130,9 @@ def _open_inside(folder: Path, progress: Progress | None) -> LogSource:
 
 SOURCES: tuple[SourceEntry, ...] = (
     SourceEntry("rosbag2 folder (metadata.yaml + storage files)", is_bag_folder, open_folder),
+    SourceEntry(
+        "a bag's own file (metadata.yaml, read as its folder)", _is_metadata, _open_metadata, False
+    ),
     SourceEntry(
         "EuRoC / ASL dataset folder (mav0/imu0/data.csv)", is_euroc, _later("euroc", "EurocSource")
     ),
@@ -170,6 +216,23 @@ def find_logs(folder: str | Path) -> list[Path]:
         if x.is_dir() and not x.name.startswith("."):
             out.extend(find_logs(x))
         elif _is_log_file(x):
+            out.append(x)
+    return out
+
+
+def not_logs(folder: str | Path) -> list[Path]:
+    """The regular, not hidden files under ``folder`` that :func:`find_logs` does not take
+    (nor any log folder holds), sorted: what a batch over ``folder`` skips."""
+    p = Path(folder)
+    if not p.is_dir() or _accepts(p):
+        return []
+    out: list[Path] = []
+    for x in sorted(p.iterdir()):
+        if x.name.startswith("."):
+            continue
+        if x.is_dir():
+            out.extend(not_logs(x))
+        elif x.is_file() and not _is_log_file(x):
             out.append(x)
     return out
 

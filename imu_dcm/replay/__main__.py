@@ -7,7 +7,8 @@ files for evo (``--export-tum``), the summary as JSON (``--summary-json``) and a
 (:mod:`imu_dcm.outputs`: new or this tool's own file, never an input, no link to a file), so a
 bad one leaves nothing behind. ``--summary-json -`` puts the JSON alone on stdout and the lines
 for people on stderr.
-``python -m imu_dcm.replay convert-csv ...`` turns a CSV log into a ROS 2 MCAP bag.
+``python -m imu_dcm.replay convert-csv ...`` turns a CSV log into a ROS 2 MCAP bag;
+``python -m imu_dcm.replay info LOG`` says what a log holds (:mod:`imu_dcm.replay.info`).
 
 Bad input gives one line on stderr and exit code 2; recoverable oddities are printed as
 one-line warnings.
@@ -17,6 +18,7 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import dataclasses
 import os
 import sys
 import warnings
@@ -39,8 +41,8 @@ def build_parser() -> argparse.ArgumentParser:
         description=f"Replay a recorded gyro log ({kinds}) through the DCM integrator and "
         "compare the estimate with the log's truth. "
         f"Many logs at once: {PROG} batch PATH... --table OUT.csv (see {PROG} batch --help). "
-        f"A CSV log: {PROG} convert-csv --help. Exit codes: 0 done, 2 bad input or options, "
-        "130/143 interrupted.",
+        f"A CSV log: {PROG} convert-csv --help. What a log holds: {PROG} info LOG. "
+        "Exit codes: 0 done, 2 bad input or options, 130/143 interrupted.",
     )
     p.add_argument("log", help=f"the log: {kinds}")
     add_replay_options(p)
@@ -255,7 +257,21 @@ def _options(args) -> tuple[dict, dict]:
 
         claims["tum"] = claim_export(args.export_tum, inputs)
     claims["rrd"] = _check_rerun(args.rerun, inputs)
+    _check_view_options(args)
     return keywords, claims
+
+
+def _check_view_options(args) -> None:
+    """``--keep-viewer`` and ``--realtime`` act only on a view: refused where there is none."""
+    from imu_dcm.errors import InputError
+
+    mode = args.rerun or "the default (no view without a display)"
+    if args.keep_viewer and args.rerun != "serve":
+        raise InputError(f"Expected --rerun serve with --keep-viewer, got --rerun {mode}")
+    if args.realtime and (args.rerun in ("off",) or (args.rerun or "").startswith("save:")):
+        raise InputError(
+            f"Expected --rerun spawn or serve with --realtime (it paces a view), got --rerun {mode}"
+        )
 
 
 def _replay_main(argv: list[str]) -> int:
@@ -270,10 +286,10 @@ def _replay_main(argv: list[str]) -> int:
         result = replay(args.log, progress=progress, **options)
     finally:
         progress.close()
-    lines = []
+    written: list[str] = []
     if args.out:
         out = _write_out(Path(args.out), result, args.force, inputs)
-        lines.append(f"out        {out} (/estimate/orientation)")
+        written.append(f"{out} (bag: /estimate/orientation)")
     if args.export_tum:
         from imu_dcm.replay.export import export_tum
 
@@ -284,19 +300,22 @@ def _replay_main(argv: list[str]) -> int:
             result.q_est[k],
             result.q_truth[k] if result.summary.truth_topic else None,
         )
-        lines.append(f"tum        {', '.join(str(f) for f in files)}")
-    summary = claims.get("summary")
-    if summary is not None:
+        written += [str(f) for f in files]
+    summary_claim = claims.get("summary")
+    if summary_claim is not None and summary_claim.stream != "stdout":
+        written.append(str(args.summary_json))
+    if args.rerun and args.rerun.startswith("save:"):
+        written.append(args.rerun[len("save:") :])
+    summary = dataclasses.replace(result.summary, written=tuple(written))
+    if summary_claim is not None:
         from imu_dcm.outputs import write_json
 
-        write_json(summary, result.summary.to_dict(), writer="replay summary")
+        write_json(summary_claim, summary.to_dict(), writer="replay summary")
     # the JSON on stdout (--summary-json -): every line for people goes to stderr
-    to_stderr = summary is not None and summary.stream == "stdout"
+    to_stderr = summary_claim is not None and summary_claim.stream == "stdout"
     stream = sys.stderr if to_stderr else sys.stdout
     if not args.quiet:
-        print(format_summary(result.summary), file=stream)
-        for line in lines:
-            print(line, file=stream)
+        print(format_summary(summary), file=stream)
     if args.rerun == "off":
         return 0
     with contextlib.redirect_stdout(stream):
@@ -354,6 +373,10 @@ def main(argv: list[str] | None = None) -> int:
                 from imu_dcm.replay.csv_import import convert_main
 
                 code = convert_main(argv[1:])
+            elif argv and argv[0] == "info":
+                from imu_dcm.replay.info import info_main
+
+                code = info_main(argv[1:], PROG)
             else:
                 code = _replay_main(argv)
         except BrokenPipeError:  # ... | head: the reader had what it wanted

@@ -24,6 +24,8 @@ from typing import Any
 
 from imu_dcm.errors import ImuDcmWarning, InputError
 from imu_dcm.logio import find_logs as find_logs_in
+from imu_dcm.logio.registry import convert_hint, not_logs
+from imu_dcm.replay.kinds import truth_kind
 from imu_dcm.replay.runners import LOST, run_dask, run_local
 from imu_dcm.replay.table import (
     Curve,
@@ -91,8 +93,9 @@ def find_logs(paths: Iterable[str | Path]) -> list[str]:
     def add(p: Path, from_list: bool) -> None:
         if p.is_dir():
             found = list(find_logs_in(p))
-            if not found:
-                warnings.warn(f"no logs found under {p}", ImuDcmWarning, stacklevel=3)
+            said = _skipped(p, found)
+            if said:
+                warnings.warn(said, ImuDcmWarning, stacklevel=3)
             out.update((os.path.abspath(f), None) for f in found)
         elif p.suffix in LIST_SUFFIXES and p.is_file() and not from_list:
             for line in p.read_text().splitlines():
@@ -105,6 +108,24 @@ def find_logs(paths: Iterable[str | Path]) -> list[str]:
     for p in paths:
         add(Path(p), False)
     return list(out)
+
+
+def _skipped(folder: Path, found: list) -> str:
+    """One line naming the files under ``folder`` that are not logs (and which convert-csv
+    converts), or "" when every file is a log."""
+    skipped = not_logs(folder)
+    if found and not skipped:
+        return ""
+    names = ", ".join(str(f.relative_to(folder)) for f in skipped[:6])
+    more = f" and {len(skipped) - 6} more" if len(skipped) > 6 else ""
+    files = (
+        f"{len(skipped)} files that are not logs"
+        if len(skipped) != 1
+        else "1 file that is not a log"
+    )
+    head = f"no logs found under {folder}" if not found else f"skipped under {folder}"
+    listed = f": {files} ({names}{more})" if skipped else ""
+    return head + listed + convert_hint(skipped)
 
 
 def _size(path: str) -> int:
@@ -134,6 +155,7 @@ def row_from_result(path: str, result, warnings_seen: Iterable[str], elapsed_s: 
         rate_hz=float(s.rate_hz),
         imu_topic=s.imu_topic,
         truth_topic=s.truth_topic,
+        truth_kind=truth_kind(s.truth_estimate_of if s.truth_topic else None),
         bias_x_rad_s=bx,
         bias_y_rad_s=by,
         bias_z_rad_s=bz,

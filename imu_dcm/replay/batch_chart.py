@@ -29,30 +29,61 @@ def chart_available() -> bool:
 def write_chart(path: str | Path, rows: Sequence[LogRow], curves: dict[str, Curve]) -> Path:
     """Draw the batch chart to ``path`` (PNG, signed ``Software: imu_dcm ...`` in its metadata).
 
-    Top: total RMS attitude error of each log, deg, log scale (failed logs marked, logs without
-    truth listed as such). Bottom: the total error over time of every log with a curve, deg,
-    log scale, seconds since each log's first sample.
+    Top: total RMS attitude error of each log, deg, largest first, each bar labelled with the
+    log's name and value (failed logs and logs without truth last, said as such); a log scale
+    only when the values span more than a factor 20, the axis fitted to them. Bottom: the total
+    error over time of every log with a curve, deg, log scale, seconds since each log's first
+    sample.
     """
+    from imu_dcm.outputs import claim_output, claimed_path
+    from imu_dcm.signatures import signature
+
+    fig = chart_figure(rows, curves)
+    claim = claim_output(path, "chart", what="the chart")  # new or this tool's own PNG
+    with claimed_path(claim) as tmp:  # whole or not at all, signed in its PNG metadata
+        fig.savefig(tmp, format="png", dpi=110, metadata={"Software": signature("batch chart")})
+    return claim.path
+
+
+def chart_figure(rows: Sequence[LogRow], curves: dict[str, Curve]):
+    """The matplotlib ``Figure`` :func:`write_chart` saves (axes: the bars, then the curves)."""
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
 
+    rows = sorted_rows(rows)
     names = short_names([r.path for r in rows])
     named = len(rows) <= MAX_NAMED
     top_h = 0.28 * len(rows) + 1.6 if named else 3.0
     fig = Figure(figsize=(10, top_h + 4.5), layout="constrained")
     FigureCanvasAgg(fig)
     ax_rms, ax_t = fig.subplots(2, 1, height_ratios=[top_h, 4.5])
-    fig.suptitle(summary_line(rows), fontsize=10)
-    colors = [f"C{k % 10}" for k in range(len(rows))]
+    fig.suptitle(summary_line(rows), fontsize=9, wrap=True)
+    colors = log_colors(len(rows))
     _rms_panel(ax_rms, rows, names, colors, named)
     _curves_panel(ax_t, rows, names, colors, curves)
-    from imu_dcm.outputs import claim_output, claimed_path
-    from imu_dcm.signatures import signature
+    return fig
 
-    claim = claim_output(path, "chart", what="the chart")  # new or this tool's own PNG
-    with claimed_path(claim) as tmp:  # whole or not at all, signed in its PNG metadata
-        fig.savefig(tmp, format="png", dpi=110, metadata={"Software": signature("batch chart")})
-    return claim.path
+
+def sorted_rows(rows: Sequence[LogRow]) -> list[LogRow]:
+    """Logs with an RMS error, largest first; then logs without truth; then failed logs."""
+
+    def key(r: LogRow):
+        if r.rms_error_deg is not None:
+            return (0, -r.rms_error_deg)
+        return (2 if r.failed else 1, 0.0)
+
+    return sorted(rows, key=key)
+
+
+def log_colors(n: int) -> list:
+    """``n`` colours, all different: matplotlib's ten, then evenly spaced hues beyond ten (the
+    bars, labelled with each log's name, are the legend of the curves below)."""
+    if n <= 10:
+        return [f"C{k}" for k in range(n)]
+    from matplotlib import colormaps
+
+    cmap = colormaps["turbo"]
+    return [cmap(0.05 + 0.9 * k / (n - 1)) for k in range(n)]
 
 
 def _rms_panel(ax, rows: Sequence[LogRow], names: list[str], colors: list[str], named: bool):
@@ -63,9 +94,14 @@ def _rms_panel(ax, rows: Sequence[LogRow], names: list[str], colors: list[str], 
     floor = float(good.min()) / 3 if len(good) else 1e-3
     top = float(good.max()) if len(good) else 1.0
     if named:
-        _rms_bars(ax, rows, names, colors, rms, floor)
-        ax.set_xscale("log")
-        ax.set_xlim(floor, top * 30)
+        wide = len(good) > 1 and top / float(good.min()) > 20  # a log axis only for decades
+        floor = floor if wide else 0.0
+        _rms_bars(ax, rows, names, colors, rms, floor if wide else top * 0.01)
+        if wide:
+            ax.set_xscale("log")
+            ax.set_xlim(floor, top * 2.5)  # room for the value labels, no more
+        else:
+            ax.set_xlim(0, top * 1.18)
     else:
         order = np.sort(good)
         ax.plot(np.arange(1, len(order) + 1), order, ".", ms=3)
@@ -118,7 +154,8 @@ def _curves_panel(ax, rows, names, colors, curves: dict[str, Curve]) -> None:
         ax.add_collection(LineCollection(segs, colors=seg_colors, linewidths=1.0, alpha=alpha))
         allpts = np.concatenate(segs)
         ax.set_xlim(0, float(allpts[:, 0].max()) * 1.02 or 1.0)
-        ax.set_ylim(float(allpts[:, 1].min()) / 2, float(allpts[:, 1].max()) * 2)
+        low = max(float(np.percentile(allpts[:, 1], 1)), float(allpts[:, 1].max()) * 1e-4)
+        ax.set_ylim(low / 2, float(allpts[:, 1].max()) * 1.5)
         if len(segs) <= 12:
             from matplotlib.lines import Line2D
 
@@ -139,5 +176,8 @@ def _curves_panel(ax, rows, names, colors, curves: dict[str, Curve]) -> None:
     ax.set_yscale("log")
     ax.set_xlabel("time since the log's first sample, s")
     ax.set_ylabel("total attitude error, deg")
-    ax.set_title("error over time, every log (largest error per time bin)", fontsize=10, loc="left")
+    colours = "" if len(segs) <= 12 else ", colours as in the bars above"
+    ax.set_title(
+        f"error over time, every log (largest error per time bin{colours})", fontsize=10, loc="left"
+    )
     ax.grid(True, which="major", alpha=0.3)

@@ -36,7 +36,9 @@ from imu_dcm.replay.bias import BIAS_RULE, BiasEstimate, RestConfig, estimate_bi
 from imu_dcm.replay.clean import CleanedImu, _deg_evidence, clean_imu
 from imu_dcm.replay.mounting import Mounting, estimate_mounting, from_rotation
 from imu_dcm.replay.mounting_tf import MountingChoice, choose_mounting, tf_mounting
+from imu_dcm.replay.offset_hint import auto_offset_rms_deg
 from imu_dcm.replay.options import check_options
+from imu_dcm.replay.outcome import outcome
 from imu_dcm.replay.settings import ReplaySettings, check_mounting
 from imu_dcm.replay.summary import ReplayResult, ReplaySummary
 from imu_dcm.replay.truth import (
@@ -46,6 +48,7 @@ from imu_dcm.replay.truth import (
     choose_time,
     find_jumps,
 )
+from imu_dcm.replay.window import check_score_window, window_mask
 from imu_dcm.resample import slerp_truth
 from imu_dcm.so3 import median, quat_as_matrix, row_finite
 from imu_dcm.stamps import NS_PER_UNIT, timing_doubt
@@ -72,6 +75,7 @@ def replay(
     rest_config: RestConfig | None = None,
     mounting: str | ArrayLike = "auto",
     progress: Callable[[str, float], None] | None = None,
+    score_window: str | tuple[float, float] = "all",
 ) -> ReplayResult:
     """Replay a gyro log: integrate its rates and compare the attitude with its truth.
 
@@ -81,7 +85,7 @@ def replay(
         ROS 2 bag folder or log file (never modified), or a log already read (then the topic
         and frame choices are those it was read with).
     imu_topic, truth_topic, truth_frame, time, method, bias, gyro_units, init_q_w_b, prefilter,
-    prefilter_config, truth_offset_s, rest_config, mounting
+    prefilter_config, truth_offset_s, rest_config, mounting, score_window
         How to replay: each is a field of :class:`imu_dcm.replay.settings.ReplaySettings`
         (``init_q_w_b`` is its ``q_init``), documented there.
     progress : callable(stage, fraction), optional
@@ -119,6 +123,7 @@ def replay(
         offset,
         rest_config,
         check_mounting(mounting),
+        check_score_window(score_window),
     )
     notes: list[str] = []  # this replay's warnings, for the summary (no global state)
     result = _replay(path, settings, progress or (lambda stage, frac: None), notes)
@@ -403,8 +408,6 @@ def _score(q_est: NDArray, q_truth: NDArray) -> tuple[AttitudeError, NDArray]:
 
 def _replay(path, s: ReplaySettings, report, notes: list[str]) -> ReplayResult:
     log = path if isinstance(path, LogData) else _read(path, s, report)
-    for note in log.notes:  # the reader's findings (a refused channel, a better one used)
-        _warn(notes, note)
     g = _gyro(log, s, notes)
     report("bias", 0.0)
     bias_est, omega = _remove_bias(s, g)
@@ -418,9 +421,25 @@ def _replay(path, s: ReplaySettings, report, notes: list[str]) -> ReplayResult:
     q_est = _integrate(s, omega, g.t_s, q_truth, anchors, log.imu.topic)
     report("integrate", 1.0)
     error, both = _score(q_est, q_truth)
+    if s.q_init is not None and np.isfinite(q_truth[anchors[0]]).all():
+        _warn(
+            notes,
+            "--init-quat not used: the estimate starts from the truth's attitude "
+            f"({judged.aligned.truth.topic}); --truth-topic none starts it from --init-quat",
+        )
+    inside, scored_on = window_mask(s.score_window, g.t_ns, log.custom_data, str(log.path))
+    both = both if inside is None else both & inside
+    auto_rms = auto_offset_rms_deg(judged.aligned, g.base, g.t_ns, q_est, anchors, both)
     summary = _summary(log, s, g, bias_est, judged, pf_summary, anchors, error, both)
-    summary = dataclasses.replace(summary, truth_candidates=candidates)
     start = anchors[0]
+    summary = dataclasses.replace(
+        summary,
+        truth_candidates=candidates,
+        score_window=scored_on,
+        notes=tuple(log.notes),  # the reader's findings (a refused channel, a better one used)
+        offset_auto_rms_deg=auto_rms,
+        **outcome(g.t_s, omega, q_est, start),
+    )
     return ReplayResult(
         g.t_ns, g.t_s, g.omega, omega, bias_est.bias_b, q_est, q_truth, error, start,
         bias_est, summary,

@@ -98,6 +98,25 @@ def check_options(
     return bias, q_init, truth_offset_s
 
 
+def _add_scoring_options(g) -> None:
+    """``--truth-offset`` and ``--score-window``: how the estimate meets the truth."""
+    g.add_argument(
+        "--truth-offset",
+        default="0",
+        metavar="auto|SECONDS",
+        help="shift added to the truth stamps: seconds (default 0) or auto (the "
+        "shift that best aligns the truth's rotation rate with the gyro's)",
+    )
+    g.add_argument(
+        "--score-window",
+        default="all",
+        metavar="all|declared|T0:T1",
+        help="samples the error is scored on: all (default), declared (the intervals the log's "
+        "metadata declares, such as BROAD's movement phases), or T0:T1 in seconds from the "
+        "log's start",
+    )
+
+
 def add_replay_options(g) -> None:
     """The options that choose how one log is replayed (shared by ``replay`` and ``batch``)."""
     g.add_argument("--imu-topic", help="IMU channel (default: the one Imu-typed channel)")
@@ -112,13 +131,7 @@ def add_replay_options(g) -> None:
         metavar="CHILD",
         help="child frame of a /tf truth, where several frames move",
     )
-    g.add_argument(
-        "--truth-offset",
-        default="0",
-        metavar="auto|SECONDS",
-        help="shift added to the truth stamps: seconds (default 0) or auto (the "
-        "shift that best aligns the truth's rotation rate with the gyro's)",
-    )
+    _add_scoring_options(g)
     g.add_argument(
         "--time",
         choices=TIME_BASES,
@@ -180,6 +193,8 @@ def add_replay_options(g) -> None:
 def replay_keywords(args) -> dict:
     """The keywords of :func:`imu_dcm.replay.replay` from :func:`add_replay_options`' options,
     parsed and checked (string parsing lives here, not in the library)."""
+    from imu_dcm.replay.window import parse_score_window
+
     bias = parse_bias(args.bias)
     init = parse_init_quat(args.init_quat)
     mounting = parse_mounting(args.mounting)
@@ -212,4 +227,5 @@ def replay_keywords(args) -> dict:
         "prefilter_config": config,
         "truth_offset_s": offset,
         "mounting": mounting,
+        "score_window": parse_score_window(args.score_window),
     }

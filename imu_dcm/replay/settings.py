@@ -57,6 +57,9 @@ class ReplaySettings:
         frame (:mod:`imu_dcm.replay.mounting`). ``"auto"``: estimated, and applied when the
         motion determines it and it exceeds a few degrees; ``"none"``: estimated and reported,
         never applied; a quaternion: applied as given (and compared with the estimate).
+    score_window : "all", "declared" or (t0_s, t1_s)
+        The samples the error is scored on (:mod:`imu_dcm.replay.window`): all (default), the
+        intervals the log's metadata declares, or seconds from the log's start.
     """
 
     imu_topic: str | None = None
@@ -72,6 +75,7 @@ class ReplaySettings:
     truth_offset_s: float | str = 0.0
     rest_config: RestConfig | None = None
     mounting: str | NDArray[np.float64] = "auto"
+    score_window: str | tuple[float, float] = "all"
 
 
 def check_mounting(mounting: str | ArrayLike) -> str | NDArray[np.float64]:

@@ -27,9 +27,16 @@ class ReplaySummary:
     summed up in ``stopped_at`` / ``damage``). ``truth_check`` is the rate comparison of truth
     and gyro (:class:`imu_dcm.replay.truth.TruthCheck`) as a dict, or None without truth.
     ``mounting`` is the motion's estimate of the mounting (or the quaternion given);
-    ``mounting_used`` says which rotation was applied to the rates ("estimated", "given", "tf"
-    for the one ``/tf_static`` declares, "" for none); ``mounting_tf`` is the declared one with
-    its frames and its distance to the estimate (:mod:`imu_dcm.replay.mounting_tf`), or None.
+    ``final_q_w_b``, ``rotation_deg``, ``turned_deg`` are the result with or without truth
+    (:mod:`imu_dcm.replay.outcome`); ``written`` lists the files and folders the command wrote
+    (empty from Python). ``score_window`` says which samples were scored
+    (:mod:`imu_dcm.replay.window`; ``truth_samples_used`` counts them); ``offset_auto_rms_deg``
+    is the RMS ``--truth-offset auto`` would give (:mod:`imu_dcm.replay.offset_hint`; None when
+    it was applied or the shift is under half a step). ``mounting_used`` says
+    which rotation was applied to the rates
+    ("estimated", "given", "tf" for the one ``/tf_static`` declares, "" for none);
+    ``mounting_tf`` is the declared one with its frames and its distance to the estimate
+    (:mod:`imu_dcm.replay.mounting_tf`), or None.
     """
 
     path: str
@@ -85,6 +92,13 @@ class ReplaySummary:
     scored_segments: tuple[dict, ...] = ()
     truth_estimate_of: str = ""
     truth_candidates: tuple[dict, ...] = ()
+    final_q_w_b: tuple[float, float, float, float] | None = None
+    rotation_deg: float | None = None
+    turned_deg: float | None = None
+    written: tuple[str, ...] = ()
+    score_window: str = "all"
+    offset_auto_rms_deg: float | None = None
+    notes: tuple[str, ...] = ()
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready dict: tuples become lists, gaps ``{"t_s", "length_s"}`` objects, NaN None."""
@@ -220,6 +234,23 @@ def _judgement_lines(s: ReplaySummary) -> list[str]:
     return lines
 
 
+def _shift_line(s: ReplaySummary, check: dict) -> str:
+    """The rate check with its best shift, and what ``--truth-offset auto`` would score."""
+    from imu_dcm.replay.offset_hint import shift_ms
+
+    verdict = "follows the gyro" if check["follows"] else "does NOT follow the gyro"
+    hint = ""
+    if s.offset_auto_rms_deg is not None and s.rms_error_deg is not None:
+        hint = (
+            f" (--truth-offset auto applies it: RMS {_fmt(s.offset_auto_rms_deg)} instead "
+            f"of {_fmt(s.rms_error_deg)})"
+        )
+    return (
+        f"truth rate {verdict}: correlation {check['correlation']:.2f}, best shift "
+        f"{shift_ms(check['shift_s'])}{hint}, residual {check['residual_rad_s']:.3f} rad/s"
+    )
+
+
 def format_summary(s: ReplaySummary) -> str:
     """The summary for a person, one fact per line."""
     lines = [
@@ -250,13 +281,10 @@ def format_summary(s: ReplaySummary) -> str:
             f"{check['residual_rad_s']:.3f} rad/s"
         )
     elif check and check.get("checked"):
-        verdict = "follows the gyro" if check["follows"] else "does NOT follow the gyro"
-        lines.append(
-            f"truth rate {verdict}: correlation {check['correlation']:.2f}, best shift "
-            f"{check['shift_s'] * 1e3:+.1f} ms, residual {check['residual_rad_s']:.3f} "
-            f"rad/s"
-        )
+        lines.append(_shift_line(s, check))
     lines.extend(_judgement_lines(s))
+    if s.notes:
+        lines.append("notes      " + "; ".join(s.notes))
     n_gaps = len(s.gaps)
     lines.append(
         f"dropped    {s.dropped_nonfinite} NaN/Inf, {s.dropped_implausible} implausible, "
@@ -283,6 +311,8 @@ def format_summary(s: ReplaySummary) -> str:
         lines.append(f"bias       {s.bias_mode}: {bias}")
     pf = f", pre-filter {s.prefilter}" if s.prefilter else ""
     lines.append(f"method     {s.method}{pf}; estimate from t = {s.start_time_s:.3f} s")
+    if s.score_window != "all":
+        lines.append(f"scored     {s.score_window} ({s.truth_samples_used} samples)")
     if s.rms_error_deg is not None:
         lines.append(
             f"error      total RMS {_fmt(s.rms_error_deg)}, max {_fmt(s.max_error_deg)}; "
@@ -290,6 +320,9 @@ def format_summary(s: ReplaySummary) -> str:
             f"{_fmt(s.max_inclination_deg)}; heading RMS {_fmt(s.rms_heading_deg)}, "
             f"max {_fmt(s.max_heading_deg)}"
         )
+    from imu_dcm.replay.outcome import outcome_lines
+
+    lines += outcome_lines(s.final_q_w_b, s.rotation_deg, s.turned_deg, s.written)
     if s.stopped_at:
         lines.append(f"stopped    {s.stopped_at}")
     lines.append(f"elapsed    {s.elapsed_s:.3f} s")

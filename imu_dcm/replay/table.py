@@ -70,6 +70,8 @@ class LogRow:
     duration_s : float — first to last replayed sample, s.
     rate_hz : float — 1 / median sample step, Hz.
     imu_topic, truth_topic : str — channels used (truth None when the log has none).
+    truth_kind : str — what the error is against (:mod:`imu_dcm.replay.kinds`): "independent
+        reference", "the vehicle's own estimate" or "none"; None when the log failed.
     bias_x_rad_s, bias_y_rad_s, bias_z_rad_s : float — mean gyro bias removed, body axes, rad/s.
     rms_error_deg, max_error_deg : float — total attitude error against the truth, deg.
     rms_inclination_deg, max_inclination_deg : float — tilt part of the error, deg.
@@ -87,6 +89,7 @@ class LogRow:
     rate_hz: float | None = None
     imu_topic: str | None = None
     truth_topic: str | None = None
+    truth_kind: str | None = None
     bias_x_rad_s: float | None = None
     bias_y_rad_s: float | None = None
     bias_z_rad_s: float | None = None
@@ -283,17 +286,36 @@ def _num(x: float | None, digits: int = 3) -> str:
     return "" if x is None else f"{x:.{digits}g}"
 
 
+def _stats(rms: list[float]) -> str:
+    return f"mean {statistics.fmean(rms):.4g}°, median {statistics.median(rms):.4g}°"
+
+
 def summary_line(rows: Sequence[LogRow]) -> str:
-    """``N logs, F failed; RMS error over M logs with truth: mean X°, median Y°``."""
+    """``N logs, F failed; RMS error over M logs with truth (KIND): mean X°, median Y°``, one
+    mean per kind of truth (:mod:`imu_dcm.replay.kinds`) when the logs have several: an error
+    against a vehicle's own estimate is never averaged with one against a reference."""
+    from imu_dcm.replay.kinds import KINDS
+
     failed = sum(r.failed for r in rows)
-    rms = [r.rms_error_deg for r in rows if r.rms_error_deg is not None]
+    by_kind: dict[str, list[float]] = {}
+    for r in rows:
+        if r.rms_error_deg is not None:
+            by_kind.setdefault(r.truth_kind or "kind not recorded", []).append(r.rms_error_deg)
     head = f"{len(rows)} log{'s' if len(rows) != 1 else ''}, {failed} failed"
-    if not rms:
+    if not by_kind:
         return f"{head}; no log with truth, no RMS error"
-    return (
-        f"{head}; RMS error over {len(rms)} log{'s' if len(rms) != 1 else ''} with truth: "
-        f"mean {statistics.fmean(rms):.4g}°, median {statistics.median(rms):.4g}°"
-    )
+    order = sorted(by_kind, key=lambda k: KINDS.index(k) if k in KINDS else len(KINDS))
+    if len(order) == 1:
+        rms = by_kind[order[0]]
+        return (
+            f"{head}; RMS error over {len(rms)} log{'s' if len(rms) != 1 else ''} with truth "
+            f"({order[0]}): {_stats(rms)}"
+        )
+    parts = [
+        f"{k}, {len(by_kind[k])} log{'s' if len(by_kind[k]) != 1 else ''}: {_stats(by_kind[k])}"
+        for k in order
+    ]
+    return f"{head}; RMS error by kind of truth: " + "; ".join(parts)
 
 
 def short_names(paths: Sequence[str]) -> list[str]:
@@ -310,13 +332,14 @@ def short_names(paths: Sequence[str]) -> list[str]:
 def markdown(rows: Sequence[LogRow]) -> str:
     """The table for people: one line per log, errors in degrees, and the summary line."""
     head = (
-        "| log | samples | duration s | rate Hz | RMS ° | max ° | RMS incl. ° | "
+        "| log | truth | samples | duration s | rate Hz | RMS ° | max ° | RMS incl. ° | "
         "RMS heading ° | dropped | gaps | warnings | elapsed s | error |"
     )
     lines = [head, "|" + "---|" * head.count(" | ") + "---|"]
     for name, r in zip(short_names([r.path for r in rows]), rows, strict=False):
         cells = [
             name,
+            r.truth_kind or "",
             "" if r.samples is None else str(r.samples),
             _num(r.duration_s, 4),
             _num(r.rate_hz, 4),

@@ -62,8 +62,10 @@ def save_rrd(view: ViewData, path: str | os.PathLike | Claim) -> Path:
 def saved_line(path: str | os.PathLike) -> str:
     """The line printed after a view was saved: how to open it, with and without a display."""
     return (
-        f"rerun: saved {path}; open it with: rerun {path} (without a display: "
-        f"rerun --serve-web --bind 127.0.0.1 {path})"
+        f"rerun: saved {path}; open it with: rerun {path} (without a display: rerun "
+        f"--serve-web --bind 127.0.0.1 --port 9876 --web-viewer-port 9090 {path}, then "
+        f"http://127.0.0.1:9090; Ctrl-C stops it; from another machine forward both ports: "
+        f"ssh -L 9090:127.0.0.1:9090 -L 9876:127.0.0.1:9876 HOST)"
     )
 
 
@@ -215,6 +217,7 @@ def serve_rrd(
     web_port: int | None = None,
     timeout_s: float = 20.0,
     log_path: str | os.PathLike | None = None,
+    remove_after: str | os.PathLike | None = None,
 ) -> ServedViewer:
     """Serve an ``.rrd`` (or, with ``path=None``, a live gRPC proxy) in rerun's web viewer.
 
@@ -231,6 +234,10 @@ def serve_rrd(
         How long to wait for the ports, s.
     log_path : path-like, optional
         File receiving the server's stdout/stderr (default: discarded).
+    remove_after : path-like, optional
+        A folder removed when the server ends, however it ends: the server then runs under
+        :mod:`imu_dcm.viz.keeper`, whose pid ``process`` is, so that ``kill PID`` stops the
+        server and removes the folder (for a server left running for the user).
     """
     if path is not None and not Path(path).is_file():
         raise InputError(f"Expected an existing .rrd file, got {str(path)!r}")
@@ -248,6 +255,9 @@ def serve_rrd(
     ]
     if path is not None:
         cmd.append(str(path))
+    if remove_after is not None:
+        keeper = Path(__file__).with_name("keeper.py")
+        cmd = [sys.executable, str(keeper), str(remove_after), "--", *cmd]
     proc = _start(cmd, log_path)
     grpc_url = f"rerun+http://127.0.0.1:{grpc_port}/proxy"
     served = ServedViewer(
@@ -327,11 +337,19 @@ class ServedReplay:
             shutil.rmtree(self.folder, ignore_errors=True)
 
 
-def serve_replay(view: ViewData, realtime: bool = False) -> ServedReplay:
+def serve_replay(
+    view: ViewData,
+    realtime: bool = False,
+    tmp_parent: str | os.PathLike | None = None,
+    keep: bool = False,
+) -> ServedReplay:
     """Serve a replay in rerun's web viewer on 127.0.0.1; the caller stops it.
 
     ``realtime``: stream to the server at the recorded speed (the URL is printed first);
-    otherwise the view is saved to a temporary ``.rrd`` that :meth:`ServedReplay.stop` removes.
+    otherwise the view is saved to a temporary ``.rrd`` that :meth:`ServedReplay.stop` removes,
+    in a folder made under ``tmp_parent`` (default: the system's temporary folder). ``keep``:
+    the server is left running for the user, so it removes that folder itself when it ends
+    (``serve_rrd``'s ``remove_after``).
     """
     if realtime:
         served = serve_rrd(None)
@@ -347,9 +365,10 @@ def serve_replay(view: ViewData, realtime: bool = False) -> ServedReplay:
             served.stop()
             raise
         return ServedReplay(served, None)
-    folder = Path(tempfile.mkdtemp(prefix="imu_dcm_rerun_"))
+    folder = Path(tempfile.mkdtemp(prefix="imu_dcm_rerun_", dir=tmp_parent))
     try:
-        served = serve_rrd(save_rrd(view, folder / (_safe_stem(view.title) + ".rrd")))
+        rrd = save_rrd(view, folder / (_safe_stem(view.title) + ".rrd"))
+        served = serve_rrd(rrd, remove_after=folder if keep else None)
     except BaseException:
         import shutil
 
@@ -377,7 +396,8 @@ def show_replay(
         the file. ``"off"``: nothing. ``None``: ``"spawn"`` when a display exists, else
         nothing at all (the line is :data:`HEADLESS_HINT`).
     save_dir : path-like, optional
-        Unused (the headless default writes no file); kept for callers.
+        Where ``"serve"`` makes the temporary folder of its ``.rrd`` (default: the system's
+        temporary folder). The headless default writes no file.
     realtime : bool
         Pace the data at the recorded speed in small chunks (for live viewing with ``"spawn"``
         and ``"serve"``; with ``"serve"`` the URL is printed before streaming). Files are
@@ -412,10 +432,13 @@ def show_replay(
             raise InputError(f"Expected rerun mode save:PATH.rrd, got {mode!r}")
         return saved_line(save_rrd(view, target))
     if mode == "serve":
-        served = serve_replay(view, realtime)
+        served = serve_replay(view, realtime, save_dir, keep=True)
+        v = served.viewer
         return (
-            f"rerun: web viewer at {served.viewer.url} (127.0.0.1 only; stop it with: "
-            f"kill {served.viewer.process.pid})"
+            f"rerun: web viewer at {v.url} (127.0.0.1 only; it keeps a thread busy while it "
+            f"runs: stop it with: kill {v.process.pid}; from another machine forward both "
+            f"ports: ssh -L {v.web_port}:127.0.0.1:{v.web_port} "
+            f"-L {v.grpc_port}:127.0.0.1:{v.grpc_port} HOST)"
         )
     if mode == "spawn":
         if not has_display():
