@@ -47,6 +47,7 @@ from imu_dcm.replay.truth import (
     find_jumps,
 )
 from imu_dcm.resample import slerp_truth
+from imu_dcm.rest import truth_noise_rad
 from imu_dcm.so3 import median, quat_as_matrix, row_finite
 from imu_dcm.stamps import NS_PER_UNIT, timing_doubt
 
@@ -337,8 +338,25 @@ def _pick_truth(log: LogData, g: _Gyro, omega: NDArray) -> tuple[LogData, tuple[
     return dataclasses.replace(log, truth=rows[best][1]), described
 
 
-def _remove_bias(s: ReplaySettings, g: _Gyro) -> tuple[BiasEstimate, NDArray]:
-    bias_est = estimate_bias(g.omega, g.t_s, s.bias, s.rest_config, g.accel)
+def _remove_bias(
+    s: ReplaySettings, g: _Gyro, judged: _Judged | None = None
+) -> tuple[BiasEstimate, NDArray]:
+    """The bias from rest (judged by the truth's motion too, when ``judged`` has a truth; its
+    jumps, the truth's own, judge nothing)."""
+    q, noise, r_t_g = None, 0.0, None
+    if judged is not None and judged.mounting.applied is not None:
+        r_t_g = quat_as_matrix(judged.mounting.applied.q_t_g)
+    if judged is not None and judged.aligned.truth is not None:
+        q = _scored_truth(judged.aligned.q_truth, g.t_s, judged.jumps)[0]
+        tt = (judged.truth_t_ns - g.t_ns[0]) * 1e-9
+        step_ok = np.ones(len(tt) - 1, dtype=bool)
+        for j in judged.jumps:
+            step_ok &= (tt[1:] < j.t0_s) | (tt[:-1] > j.t1_s)
+        noise = truth_noise_rad(judged.aligned.truth.q_w_b, step_ok)
+    bias_est = estimate_bias(
+        g.omega, g.t_s, s.bias, s.rest_config, g.accel, truth_q_w_b=q, truth_noise=noise,
+        r_t_g=r_t_g,
+    )  # fmt: skip
     return bias_est, g.omega - bias_est.bias_b
 
 
@@ -410,6 +428,10 @@ def _replay(path, s: ReplaySettings, report, notes: list[str]) -> ReplayResult:
     bias_est, omega = _remove_bias(s, g)
     log, candidates = _pick_truth(log, g, omega)
     judged = _judge_truth(log, s, g, omega, notes)
+    if judged.aligned.truth is not None and isinstance(s.bias, str):  # its motion judges rest
+        bias_est, omega = _remove_bias(s, g, judged)
+    if bias_est.conflict:
+        _warn(notes, bias_est.conflict)
     if judged.mounting.applied is not None:  # omega_T = R(q_t_g) omega_G, row by row
         omega = omega @ quat_as_matrix(judged.mounting.applied.q_t_g).T
     omega, pf_summary = _prefilter(s, omega, g.t_s)
@@ -470,10 +492,7 @@ def _summary(log, s, g: _Gyro, bias_est, judged: _Judged, pf_summary, anchors, e
         gyro_units=s.gyro_units,
         bias_mode=bias_est.mode,
         bias_rad_s=tuple(float(x) for x in bias_est.bias_b[start:].mean(axis=0)),
-        bias_segments=tuple(
-            {"start_s": x.start_s, "end_s": x.end_s, "bias_rad_s": [float(v) for v in x.bias_rad_s]}
-            for x in bias_est.segments
-        ),
+        bias_segments=tuple(x.as_dict() for x in bias_est.segments),
         prefilter=s.prefilter,
         prefilter_summary=pf_summary,
         start_time_s=float(t_s[start]),
@@ -501,6 +520,7 @@ def _summary(log, s, g: _Gyro, bias_est, judged: _Judged, pf_summary, anchors, e
         bias_rule=BIAS_RULE if bias_est.mode == "auto" else "",
         rest_confirmed=bias_est.confirmed,
         no_rest=bias_est.no_rest,
+        rest_conflict=bias_est.conflict,
         mounting=dataclasses.asdict(mount.reported) if mount.reported is not None else None,
         mounting_applied=mount.applied is not None,
         mounting_used=mount.used,

@@ -77,6 +77,7 @@ class ReplaySummary:
     bias_rule: str = ""
     rest_confirmed: bool = False
     no_rest: str = ""
+    rest_conflict: str = ""
     mounting: dict | None = None
     mounting_applied: bool = False
     mounting_used: str = ""
@@ -91,6 +92,18 @@ class ReplaySummary:
         d = dataclasses.asdict(self)
         d["gaps"] = [{"t_s": a, "length_s": b} for a, b in self.gaps]
         return _plain(d)
+
+
+def _rest_evidence(s: ReplaySummary) -> str:
+    """Which signals judged the rests, e.g. "by gyro floor, accelerometer, truth (part)"."""
+    seen: list[str] = []
+    for seg in s.bias_segments:
+        for e in seg.get("evidence", ()):
+            if e not in seen:
+                seen.append(e)
+    if s.rest_confirmed:
+        return "still by " + ", ".join(seen)
+    return "unconfirmed: gyro floor alone, mean rate under 2 °/s"
 
 
 def _plain(x: Any) -> Any:
@@ -270,11 +283,7 @@ def format_summary(s: ReplaySummary) -> str:
         lines.append(f"bias       auto: no rest found: {s.no_rest}; no bias removed")
     elif s.bias_mode == "auto":
         nseg = len(s.bias_segments)
-        how = (
-            "still by the accelerometer"
-            if s.rest_confirmed
-            else "unconfirmed: no accelerometer, mean rate under 2 °/s"
-        )
+        how = _rest_evidence(s)
         lines.append(
             f"bias       auto: {nseg} rest segment{'s' if nseg != 1 else ''} ({how}; "
             f"{s.bias_rule}), mean {bias} = ({bdeg[0]:+.3f}, {bdeg[1]:+.3f}, {bdeg[2]:+.3f}) °/s"
