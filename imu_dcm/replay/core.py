@@ -441,12 +441,28 @@ def _replay(path, s: ReplaySettings, report, notes: list[str]) -> ReplayResult:
     report("integrate", 1.0)
     error, both = _score(q_est, q_truth)
     summary = _summary(log, s, g, bias_est, judged, pf_summary, anchors, error, both)
-    summary = dataclasses.replace(summary, truth_candidates=candidates)
+    unbiased = _score_without_bias(s, g, bias_est, judged, q_truth, anchors, log.imu.topic)
+    summary = dataclasses.replace(
+        summary, truth_candidates=candidates, rms_error_no_bias_deg=unbiased
+    )
     start = anchors[0]
     return ReplayResult(
         g.t_ns, g.t_s, g.omega, omega, bias_est.bias_b, q_est, q_truth, error, start,
         bias_est, summary,
     )  # fmt: skip
+
+
+def _score_without_bias(s, g: _Gyro, bias_est, judged: _Judged, q_truth, anchors, topic):
+    """The total RMS error with no bias removed, when a bias from rest was (None otherwise, or
+    with a pre-filter, whose cost a second run would double)."""
+    if not bias_est.segments or s.prefilter is not None or not row_finite(q_truth).any():
+        return None
+    omega = g.omega
+    if judged.mounting.applied is not None:
+        omega = omega @ quat_as_matrix(judged.mounting.applied.q_t_g).T
+    q_est = _integrate(s, omega, g.t_s, q_truth, anchors, topic)
+    error, both = _score(q_est, q_truth)
+    return float(rms(error.total_deg[both])) if both.any() else None
 
 
 def _segments(t_s: NDArray, anchors: list[int], error: AttitudeError, both) -> tuple:

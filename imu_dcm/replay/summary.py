@@ -78,6 +78,7 @@ class ReplaySummary:
     rest_confirmed: bool = False
     no_rest: str = ""
     rest_conflict: str = ""
+    rms_error_no_bias_deg: float | None = None
     mounting: dict | None = None
     mounting_applied: bool = False
     mounting_used: str = ""
@@ -104,6 +105,18 @@ def _rest_evidence(s: ReplaySummary) -> str:
     if s.rest_confirmed:
         return "still by " + ", ".join(seen)
     return "unconfirmed: gyro floor alone, mean rate under 2 °/s"
+
+
+def _bias_choice_line(s: ReplaySummary) -> list[str]:
+    """The score without the bias, when removing it changes the score by more than 2x."""
+    a, b = s.rms_error_deg, s.rms_error_no_bias_deg
+    if a is None or b is None or not (a > 0 and b > 0) or max(a / b, b / a) <= 2.0:
+        return []
+    line = (
+        f"error      without the bias from rest: total RMS {_fmt(b)} (the bias choice changes "
+        f"the score {max(a / b, b / a):.1f}x: --bias none scores without it)"
+    )
+    return [line]
 
 
 def _plain(x: Any) -> Any:
@@ -299,6 +312,7 @@ def format_summary(s: ReplaySummary) -> str:
             f"{_fmt(s.max_inclination_deg)}; heading RMS {_fmt(s.rms_heading_deg)}, "
             f"max {_fmt(s.max_heading_deg)}"
         )
+    lines.extend(_bias_choice_line(s))
     if s.stopped_at:
         lines.append(f"stopped    {s.stopped_at}")
     lines.append(f"elapsed    {s.elapsed_s:.3f} s")
