@@ -34,6 +34,7 @@ from imu_dcm.logio import LogData, read_log
 from imu_dcm.metrics import AttitudeError, attitude_error_deg, rms
 from imu_dcm.replay.bias import BIAS_RULE, BiasEstimate, RestConfig, estimate_bias
 from imu_dcm.replay.clean import CleanedImu, _deg_evidence, clean_imu
+from imu_dcm.replay.convention import ConventionChoice, check_convention, choose_convention, convert
 from imu_dcm.replay.mounting import Mounting, estimate_mounting, from_rotation
 from imu_dcm.replay.mounting_tf import MountingChoice, choose_mounting, tf_mounting
 from imu_dcm.replay.options import check_options
@@ -73,6 +74,7 @@ def replay(
     rest_config: RestConfig | None = None,
     mounting: str | ArrayLike = "auto",
     progress: Callable[[str, float], None] | None = None,
+    truth_convention: str = "auto",
 ) -> ReplayResult:
     """Replay a gyro log: integrate its rates and compare the attitude with its truth.
 
@@ -82,7 +84,7 @@ def replay(
         ROS 2 bag folder or log file (never modified), or a log already read (then the topic
         and frame choices are those it was read with).
     imu_topic, truth_topic, truth_frame, time, method, bias, gyro_units, init_q_w_b, prefilter,
-    prefilter_config, truth_offset_s, rest_config, mounting
+    prefilter_config, truth_offset_s, rest_config, mounting, truth_convention
         How to replay: each is a field of :class:`imu_dcm.replay.settings.ReplaySettings`
         (``init_q_w_b`` is its ``q_init``), documented there.
     progress : callable(stage, fraction), optional
@@ -120,6 +122,7 @@ def replay(
         offset,
         rest_config,
         check_mounting(mounting),
+        check_convention(truth_convention),
     )
     notes: list[str] = []  # this replay's warnings, for the summary (no global state)
     result = _replay(path, settings, progress or (lambda stage, frac: None), notes)
@@ -338,6 +341,25 @@ def _pick_truth(log: LogData, g: _Gyro, omega: NDArray) -> tuple[LogData, tuple[
     return dataclasses.replace(log, truth=rows[best][1]), described
 
 
+def _convention(log: LogData, s: ReplaySettings, g: _Gyro, omega, notes):
+    """The truth read in the convention stated, or the one its body rates fit clearly."""
+    truth = log.truth
+    if truth is None:
+        return log, ConventionChoice()
+    tt = truth.t_ns if g.base == "header" else truth.log_t_ns
+    choice = choose_convention(g.t_ns, omega, tt, truth.q_w_b, s.truth_convention, truth.topic)
+    if choice.line:
+        _warn(notes, choice.line)
+    if choice.used == "as-is":
+        return log, choice
+    q = convert(truth.q_w_b, choice.used)
+    return dataclasses.replace(log, truth=dataclasses.replace(truth, q_w_b=q)), choice
+
+
+def _plain_convention(c: ConventionChoice) -> dict:
+    return {"used": c.used, "how": c.how, "fits": [list(f) for f in c.fits], "line": c.line}
+
+
 def _remove_bias(
     s: ReplaySettings, g: _Gyro, judged: _Judged | None = None
 ) -> tuple[BiasEstimate, NDArray]:
@@ -427,6 +449,7 @@ def _replay(path, s: ReplaySettings, report, notes: list[str]) -> ReplayResult:
     report("bias", 0.0)
     bias_est, omega = _remove_bias(s, g)
     log, candidates = _pick_truth(log, g, omega)
+    log, convention = _convention(log, s, g, omega, notes)
     judged = _judge_truth(log, s, g, omega, notes)
     if judged.aligned.truth is not None and isinstance(s.bias, str):  # its motion judges rest
         bias_est, omega = _remove_bias(s, g, judged)
@@ -443,7 +466,10 @@ def _replay(path, s: ReplaySettings, report, notes: list[str]) -> ReplayResult:
     summary = _summary(log, s, g, bias_est, judged, pf_summary, anchors, error, both)
     unbiased = _score_without_bias(s, g, bias_est, judged, q_truth, anchors, log.imu.topic)
     summary = dataclasses.replace(
-        summary, truth_candidates=candidates, rms_error_no_bias_deg=unbiased
+        summary,
+        truth_candidates=candidates,
+        rms_error_no_bias_deg=unbiased,
+        truth_convention=_plain_convention(convention) if log.truth is not None else None,
     )
     start = anchors[0]
     return ReplayResult(

@@ -57,6 +57,10 @@ class ReplaySettings:
         frame (:mod:`imu_dcm.replay.mounting`). ``"auto"``: estimated, and applied when the
         motion determines it and it exceeds a few degrees; ``"none"``: estimated and reported,
         never applied; a quaternion: applied as given (and compared with the estimate).
+    truth_convention : str
+        How the truth's quaternions are read (:mod:`imu_dcm.replay.convention`): ``"auto"``
+        (as read unless the fit determines another clearly), or one of ``"as-is"``,
+        ``"conjugate"``, ``"w-first"``, ``"w-last"``, applied as stated.
     """
 
     imu_topic: str | None = None
@@ -72,6 +76,7 @@ class ReplaySettings:
     truth_offset_s: float | str = 0.0
     rest_config: RestConfig | None = None
     mounting: str | NDArray[np.float64] = "auto"
+    truth_convention: str = "auto"
 
 
 def check_mounting(mounting: str | ArrayLike) -> str | NDArray[np.float64]:

@@ -79,6 +79,7 @@ class ReplaySummary:
     no_rest: str = ""
     rest_conflict: str = ""
     rms_error_no_bias_deg: float | None = None
+    truth_convention: dict | None = None
     mounting: dict | None = None
     mounting_applied: bool = False
     mounting_used: str = ""

@@ -288,10 +288,15 @@ def check_truth(
     g_rms0 = float(np.sqrt(np.mean(g0**2)))
     if np.std(g0) < STILL_RAD_S or np.std(h0) < STILL_RAD_S:
         # A norm that hardly varies (a still body, a steady spin) has no shape to correlate:
-        # only a still truth under a clearly turning gyro is evidence against it.
-        still_truth = float(np.mean(h0)) < STILL_RAD_S
-        turning = float(np.mean(g0)) > 10 * STILL_RAD_S
-        return TruthCheck(True, not (still_truth and turning), None, None, resid0, g_rms0)
+        # only one still under the other clearly turning is evidence against it (either way:
+        # an all-zero gyro under a turning truth is no gyro of that body)
+        still_truth, still_gyro = float(np.mean(h0)) < STILL_RAD_S, float(np.mean(g0)) < STILL_RAD_S
+        turning_g, turning_t = (
+            float(np.mean(g0)) > 10 * STILL_RAD_S,
+            float(np.mean(h0)) > 10 * STILL_RAD_S,
+        )
+        against = (still_truth and turning_g) or (still_gyro and turning_t)
+        return TruthCheck(True, not against, None, None, resid0, g_rms0)
     span_s = (grid.edges_ns[-1] - grid.edges_ns[0]) * 1e-9
     lags = int(min(MAX_SHIFT_S, span_s / 4) / dt)
     corr, count = lagged_correlation(g, h, valid, lags)
