@@ -10,6 +10,7 @@ import warnings
 import numpy as np
 import pytest
 from conftest import REPO_ROOT
+from scipy.spatial.transform import Rotation
 
 from imu_dcm.logio import read_log
 from imu_dcm.replay import replay
@@ -92,3 +93,47 @@ def test_an_all_zero_gyro_follows_no_truth(log):
     spin = np.tile([0.0, 0.0, 1.0], (len(t), 1))
     assert check_truth(t, spin, t, q).follows
     assert choose_convention(t, spin, t, q).used == "as-is"
+
+
+def _crashed(log, crash_s: float):
+    # At crash_s the body stops (the gyro reads what it read at rest, before the truth began)
+    # and its motion-capture pose flips 180° about x every 0.5 s (the markers' ambiguity)
+    t_imu = (log.imu.t_ns - log.imu.t_ns[0]) * 1e-9
+    after = t_imu >= crash_s
+    w = log.imu.omega_b.copy()
+    w[after] = w[: after.sum()]  # the first seconds of the log are at rest
+    ts = (log.truth.t_ns - log.imu.t_ns[0]) * 1e-9
+    late = ts >= crash_s
+    q = log.truth.q_w_b.copy()
+    lying = Rotation.from_quat(q[np.flatnonzero(late)[0]])
+    flipped = lying * Rotation.from_rotvec([np.pi, 0.0, 0.0])
+    odd = np.floor((ts[late] - crash_s) / 0.5) % 2 == 1
+    q[late] = np.where(odd[:, None], flipped.as_quat(), lying.as_quat())
+    imu = dataclasses.replace(log.imu, omega_b=w)
+    return dataclasses.replace(_with_truth(log, q), imu=imu)
+
+
+def test_a_truth_that_follows_until_a_crash_is_scored_until_it(log):
+    # The whole truth no longer follows (its rate norms correlate badly); between its jumps it
+    # follows until the first flip, 0.5 s after the crash (the body lies still as the gyro
+    # does until then): scored there, exactly as the clean truth is, and nothing after
+    crash_s, flip_s = 60.0, 60.5
+    clean = _quiet(log, bias="none")
+    res = _quiet(_crashed(log, crash_s), bias="none")
+    assert res.summary.truth_check["correlation"] < 0.6
+    line = next(w for w in res.summary.warnings if "does not follow the gyro as a whole" in w)
+    first = line.split("it follows in ")[1].split(" s (")[0]
+    lo, hi = (float(x) for x in first.split("-"))
+    assert lo == 0.0 and abs(hi - flip_s) < 0.01, line
+    # every flip is a jump; the stretches after the first are all refused, as one span
+    ts = (log.truth.t_ns - log.imu.t_ns[0]) * 1e-9
+    late = ts[ts >= crash_s]
+    flips = int(np.count_nonzero(np.diff(np.floor((late - crash_s) / 0.5) % 2)))
+    assert f"between its {flips} jumps" in line and "not in 60.50-" in line
+    assert f"({flips} stretches)" in line
+    before = res.t_s < crash_s - 0.1
+    scored = np.isfinite(res.error.total_deg)
+    assert not scored[res.t_s > flip_s + 0.01].any()
+    mine, theirs = res.error.total_deg[before & scored], clean.error.total_deg[before & scored]
+    assert scored[before].sum() > 0.9 * (before & np.isfinite(clean.error.total_deg)).sum()
+    assert np.max(np.abs(mine - theirs)) < 1e-6
