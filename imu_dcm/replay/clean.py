@@ -34,7 +34,7 @@ from imu_dcm.errors import GapWarning, ImuDcmWarning
 from imu_dcm.integrate import find_gaps, gap_message
 from imu_dcm.so3 import median, percentile, quat_angle_rad, row_finite, row_max, row_norm
 
-__all__ = ["MAX_RATE_RAD_S", "SPIKE_RATIO", "CleanedImu", "clean_imu"]
+__all__ = ["MAX_RATE_RAD_S", "SPIKE_RATIO", "CleanedImu", "clean_imu", "truth_rate_ratio"]
 
 #: Full scale of common MEMS gyros (±2000 °/s): rates above it suggest a deg/s log.
 FULL_SCALE_RAD_S = 2000.0 * np.pi / 180.0
@@ -291,27 +291,35 @@ def _report(topic, t, t0, n_bad, bad, n_dup, n_conf, n_wild, wild_t, n_sorted):
     return tuple(messages), gaps
 
 
-def _deg_evidence(omega_b: NDArray, t_s: NDArray, q_truth: NDArray) -> str | None:
-    """Evidence that rates are in deg/s, or None. Compares with the truth's rate if possible."""
+def truth_rate_ratio(omega_b: NDArray, t_s: NDArray, q_truth: NDArray) -> float | None:
+    """Median ratio of the gyro's rate norm to the truth's rotation rate where the truth moves
+    (over 0.2 rad/s, well above noise), or None with fewer than 10 such steps."""
     ok = row_finite(q_truth)
     pair = ok[:-1] & ok[1:]
-    if pair.sum() > 10:
-        # pairs (i, i + 1) as views when all are covered (the usual case), else gathered
-        every = bool(pair.all())
-        i = slice(None, -1) if every else np.flatnonzero(pair)
-        j = slice(1, None) if every else i + 1
-        ang = quat_angle_rad(q_truth[i], q_truth[j])
-        truth_rate = ang / np.diff(t_s)[slice(None) if every else i]
-        gyro_rate = row_norm(0.5 * (omega_b[i] + omega_b[j]))
-        moving = truth_rate > 0.2  # rad/s: motion well above noise
-        if moving.sum() > 10:
-            ratio = median(gyro_rate[moving] / truth_rate[moving])
-            if abs(ratio / (180 / np.pi) - 1) < 0.2:
-                return (
-                    f"the gyro rate is {ratio:.1f}x the truth's rotation rate "
-                    f"(180/π = 57.3 for deg/s)"
-                )
-            return None
+    if pair.sum() <= 10:
+        return None
+    # pairs (i, i + 1) as views when all are covered (the usual case), else gathered
+    every = bool(pair.all())
+    i = slice(None, -1) if every else np.flatnonzero(pair)
+    j = slice(1, None) if every else i + 1
+    ang = quat_angle_rad(q_truth[i], q_truth[j])
+    truth_rate = ang / np.diff(t_s)[slice(None) if every else i]
+    gyro_rate = row_norm(0.5 * (omega_b[i] + omega_b[j]))
+    moving = truth_rate > 0.2  # rad/s: motion well above noise
+    if moving.sum() <= 10:
+        return None
+    return median(gyro_rate[moving] / truth_rate[moving])
+
+
+def _deg_evidence(omega_b: NDArray, t_s: NDArray, q_truth: NDArray) -> str | None:
+    """Evidence that rates are in deg/s, or None. Compares with the truth's rate if possible."""
+    ratio = truth_rate_ratio(omega_b, t_s, q_truth)
+    if ratio is not None:
+        if abs(ratio / (180 / np.pi) - 1) < 0.2:
+            return (
+                f"the gyro rate is {ratio:.1f}x the truth's rotation rate (180/π = 57.3 for deg/s)"
+            )
+        return None
     p99 = percentile(row_norm(omega_b), 99) if len(omega_b) else 0.0
     if p99 > FULL_SCALE_RAD_S:
         return (

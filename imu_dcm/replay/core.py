@@ -33,7 +33,7 @@ from imu_dcm.integrate import integrate_quat
 from imu_dcm.logio import LogData, read_log
 from imu_dcm.metrics import AttitudeError, attitude_error_deg, rms
 from imu_dcm.replay.bias import BIAS_RULE, BiasEstimate, RestConfig, estimate_bias
-from imu_dcm.replay.clean import CleanedImu, _deg_evidence, clean_imu
+from imu_dcm.replay.clean import CleanedImu, _deg_evidence, clean_imu, truth_rate_ratio
 from imu_dcm.replay.convention import ConventionChoice, check_convention, choose_convention, convert
 from imu_dcm.replay.mounting import Mounting, estimate_mounting, from_rotation
 from imu_dcm.replay.mounting_tf import MountingChoice, choose_mounting, tf_mounting
@@ -220,7 +220,7 @@ def _gyro(log: LogData, s: ReplaySettings, notes: list[str]) -> _Gyro:
         if base == "header" and len(np.unique(imu.log_t_ns[:1000])) > 1:
             hint = "; the log times differ: try --time log"
         raise LogError(f"Expected at least 2 valid gyro samples on {imu.topic}, got {n}{hint}")
-    doubt = timing_doubt(clean.t_ns)
+    doubt = timing_doubt(clean.t_ns, omega_b=clean.omega_b)
     if doubt is not None:
         clause, fix = doubt
         factor = NS_PER_UNIT["s"] // NS_PER_UNIT[fix] if fix else 0
@@ -266,6 +266,15 @@ def _judge_truth(
                 notes,
                 f"{imu.topic}: the rates look like deg/s: {evidence}; pass "
                 f"--gyro-units deg/s to convert",
+            )
+    else:  # declared deg/s: a rad/s log converted reads 57.3x slower than its truth turns
+        ratio = truth_rate_ratio(g.omega, g.t_s, aligned.q_truth)
+        if ratio is not None and abs(ratio * (180 / np.pi) - 1) < 0.2:
+            _warn(
+                notes,
+                f"{imu.topic}: the rates look like rad/s: converted from deg/s, the gyro rate "
+                f"is 1/{1 / ratio:.1f} of the truth's rotation rate (1/57.3 for rad/s read as "
+                f"deg/s); drop --gyro-units deg/s",
             )
     truth = aligned.truth
     if truth is None:
