@@ -137,3 +137,34 @@ def test_a_truth_that_follows_until_a_crash_is_scored_until_it(log):
     mine, theirs = res.error.total_deg[before & scored], clean.error.total_deg[before & scored]
     assert scored[before].sum() > 0.9 * (before & np.isfinite(clean.error.total_deg)).sum()
     assert np.max(np.abs(mine - theirs)) < 1e-6
+
+
+def test_after_a_gap_the_gyro_did_not_see_the_estimate_re_anchors(log):
+    # 10 s of gyro samples lost (60-70 s) while the body turns: the integrator would bridge the
+    # gap with the rates at its ends. The estimate re-anchors at the first sample after it, and
+    # that segment scores exactly as a replay whose truth begins there.
+    keep = ~((log.imu.t_ns - log.imu.t_ns[0] > 60e9) & (log.imu.t_ns - log.imu.t_ns[0] < 70e9))
+    imu = dataclasses.replace(
+        log.imu, t_ns=log.imu.t_ns[keep], log_t_ns=log.imu.log_t_ns[keep],
+        omega_b=log.imu.omega_b[keep], accel_b=log.imu.accel_b[keep],
+    )  # fmt: skip
+    gapped = dataclasses.replace(log, imu=imu)
+    res = _quiet(gapped, bias="none")
+    (gap,) = res.summary.gap_reanchors
+    # the last sample before the gap and the first after it (3.5 ms apart)
+    assert 59.99 < gap["t0_s"] <= 60.0 and 70.0 <= gap["t1_s"] < 70.01
+    line = next(w for w in res.summary.warnings if "the gyro did not see" in w)
+    assert "re-anchors to the truth" in line
+    segs = res.summary.scored_segments
+    assert len(segs) == 2 and abs(segs[1]["start_s"] - gap["t1_s"]) < 1e-9
+    a = int(np.searchsorted(res.t_s, gap["t1_s"]))
+    cut = log.truth.t_ns >= res.t_ns[a]
+    truth = dataclasses.replace(
+        log.truth, t_ns=log.truth.t_ns[cut], log_t_ns=log.truth.log_t_ns[cut],
+        q_w_b=log.truth.q_w_b[cut],
+    )  # fmt: skip
+    ref = _quiet(dataclasses.replace(gapped, truth=truth), bias="none")
+    assert ref.start_index == a
+    mine, theirs = res.error.total_deg[a:-1], ref.error.total_deg[a:-1]
+    ok = np.isfinite(mine)
+    assert ok.sum() > 0.9 * len(mine) and np.max(np.abs(mine[ok] - theirs[ok])) < 1e-6

@@ -41,7 +41,9 @@ from imu_dcm.replay.options import check_options
 from imu_dcm.replay.settings import ReplaySettings, check_mounting
 from imu_dcm.replay.summary import ReplayResult, ReplaySummary
 from imu_dcm.replay.truth import (
+    JUMP_DEG,
     AlignedTruth,
+    TruthJump,
     align_truth,
     check_truth,
     choose_time,
@@ -49,7 +51,7 @@ from imu_dcm.replay.truth import (
 )
 from imu_dcm.resample import slerp_truth
 from imu_dcm.rest import truth_noise_rad
-from imu_dcm.so3 import median, quat_as_matrix, row_finite
+from imu_dcm.so3 import median, quat_angle_rad, quat_as_matrix, row_finite, row_norm
 from imu_dcm.stamps import NS_PER_UNIT, timing_doubt
 
 __all__ = ["CleanedImu", "ReplayResult", "ReplaySummary", "clean_imu", "replay", "slerp_truth"]
@@ -168,7 +170,7 @@ class _Judged:
     ``truth_t_ns``: the stamps of the truth used, at the applied offset (or None).
     """
 
-    __slots__ = ("aligned", "truth_t_ns", "jumps", "mounting")
+    __slots__ = ("aligned", "truth_t_ns", "jumps", "mounting", "gaps")
 
     def __init__(
         self,
@@ -176,6 +178,7 @@ class _Judged:
         truth_t_ns: NDArray[np.int64] | None,
         jumps: tuple,
         mounting: MountingChoice,
+        gaps: tuple = (),
     ) -> None:
         self.aligned, self.truth_t_ns, self.jumps, self.mounting = (
             aligned,
@@ -183,6 +186,7 @@ class _Judged:
             jumps,
             mounting,
         )
+        self.gaps = gaps  # gyro gaps re-anchored (TruthJump records over each gap)
 
 
 def _read(path, s: ReplaySettings, report) -> LogData:
@@ -314,7 +318,37 @@ def _judge_truth(
     choice = choose_mounting(s.mounting, est, declared, given, frames)
     if choice.line:
         _warn(notes, choice.line)
-    return _Judged(aligned, tt, jumps, choice)
+    gaps = _unseen_gaps(g, omega, aligned.q_truth, notes)
+    return _Judged(aligned, tt, jumps, choice, gaps)
+
+
+def _unseen_gaps(g: _Gyro, omega: NDArray, q_truth: NDArray, notes: list[str]) -> tuple:
+    """The gyro's gaps whose rotation it did not see: where the truth turns across the gap, or
+    the integrator's bridge of it (the mean of the rates at its ends times its length) would,
+    more than a truth jump's :data:`JUMP_DEG`. The estimate re-anchors after each."""
+    out = []
+    speed = row_norm(omega)
+    for t_gap, length in g.clean.gaps:
+        k = int(np.searchsorted(g.t_s, t_gap))
+        if k + 1 >= len(g.t_s) or not (row_finite(q_truth[k : k + 2]).all()):
+            continue
+        truth_deg = float(np.degrees(quat_angle_rad(q_truth[k], q_truth[k + 1])))
+        bridge_deg = float(np.degrees(0.5 * (speed[k] + speed[k + 1]) * length))
+        if max(truth_deg, bridge_deg) > JUMP_DEG:
+            out.append(TruthJump(float(g.t_s[k]), float(g.t_s[k + 1]), truth_deg, bridge_deg))
+    if out:
+        shown = "; ".join(
+            f"{j.t1_s - j.t0_s:.3f} s at {j.t0_s:.3f} s (the truth turns {j.truth_deg:.1f}°, "
+            f"the integrator would bridge {j.gyro_deg:.1f}°)"
+            for j in out[:5]
+        )
+        more = f" and {len(out) - 5} more" if len(out) > 5 else ""
+        _warn(
+            notes,
+            f"{len(out)} gap{'s' if len(out) > 1 else ''} the gyro did not see: {shown}{more}; "
+            f"the estimate re-anchors to the truth after each and the segments are scored",
+        )
+    return tuple(out)
 
 
 def _given(q) -> Mounting:
@@ -467,7 +501,8 @@ def _replay(path, s: ReplaySettings, report, notes: list[str]) -> ReplayResult:
     if judged.mounting.applied is not None:  # omega_T = R(q_t_g) omega_G, row by row
         omega = omega @ quat_as_matrix(judged.mounting.applied.q_t_g).T
     omega, pf_summary = _prefilter(s, omega, g.t_s)
-    q_truth, anchors = _scored_truth(judged.aligned.q_truth, g.t_s, judged.jumps)
+    breaks = tuple(sorted((*judged.jumps, *judged.gaps), key=lambda j: j.t0_s))
+    q_truth, anchors = _scored_truth(judged.aligned.q_truth, g.t_s, breaks)
     report("integrate", 0.0)
     q_est = _integrate(s, omega, g.t_s, q_truth, anchors, log.imu.topic)
     report("integrate", 1.0)
@@ -577,6 +612,7 @@ def _summary(log, s, g: _Gyro, bias_est, judged: _Judged, pf_summary, anchors, e
         mounting_used=mount.used,
         mounting_tf=mount.tf,
         truth_jumps=tuple(dataclasses.asdict(j) for j in judged.jumps),
-        scored_segments=_segments(t_s, anchors, error, both) if judged.jumps else (),
+        scored_segments=_segments(t_s, anchors, error, both) if judged.jumps or judged.gaps else (),
+        gap_reanchors=tuple(dataclasses.asdict(j) for j in judged.gaps),
         truth_estimate_of=getattr(truth, "estimate_of", "") if truth is not None else "",
     )

@@ -80,6 +80,7 @@ class ReplaySummary:
     rest_conflict: str = ""
     rms_error_no_bias_deg: float | None = None
     truth_convention: dict | None = None
+    gap_reanchors: tuple[dict, ...] = ()
     mounting: dict | None = None
     mounting_applied: bool = False
     mounting_used: str = ""
