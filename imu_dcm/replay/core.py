@@ -38,6 +38,7 @@ from imu_dcm.replay.convention import ConventionChoice, check_convention, choose
 from imu_dcm.replay.mounting import Mounting, estimate_mounting, from_rotation
 from imu_dcm.replay.mounting_tf import MountingChoice, choose_mounting, tf_mounting
 from imu_dcm.replay.options import check_options
+from imu_dcm.replay.sampling import sampling_error_deg
 from imu_dcm.replay.settings import ReplaySettings, check_mounting
 from imu_dcm.replay.summary import ReplayResult, ReplaySummary
 from imu_dcm.replay.truth import (
@@ -509,8 +510,12 @@ def _replay(path, s: ReplaySettings, report, notes: list[str]) -> ReplayResult:
     error, both = _score(q_est, q_truth)
     summary = _summary(log, s, g, bias_est, judged, pf_summary, anchors, error, both)
     unbiased = _score_without_bias(s, g, bias_est, judged, q_truth, anchors, log.imu.topic)
+    end = anchors[1] if len(anchors) > 1 else len(g.t_s)
+    a0 = anchors[0]
+    sampling = sampling_error_deg(omega[a0:end], g.t_s[a0:end], q_est[a0:end], s.method)
     summary = dataclasses.replace(
         summary,
+        sampling_error_deg=sampling,
         truth_candidates=candidates,
         rms_error_no_bias_deg=unbiased,
         truth_convention=_plain_convention(convention) if log.truth is not None else None,

@@ -12,6 +12,7 @@ from numpy.typing import NDArray
 
 from imu_dcm.metrics import AttitudeError
 from imu_dcm.replay.bias import BiasEstimate
+from imu_dcm.replay.sampling import TOO_SLOW_SHARE
 
 __all__ = ["ReplayResult", "ReplaySummary", "format_summary"]
 
@@ -81,6 +82,7 @@ class ReplaySummary:
     rms_error_no_bias_deg: float | None = None
     truth_convention: dict | None = None
     gap_reanchors: tuple[dict, ...] = ()
+    sampling_error_deg: float | None = None
     mounting: dict | None = None
     mounting_applied: bool = False
     mounting_used: str = ""
@@ -107,6 +109,19 @@ def _rest_evidence(s: ReplaySummary) -> str:
     if s.rest_confirmed:
         return "still by " + ", ".join(seen)
     return "unconfirmed: gyro floor alone, mean rate under 2 °/s"
+
+
+def _sampling_line(s: ReplaySummary) -> list[str]:
+    """The method's own error when it is half the score or more: the rate is too low."""
+    e, r = s.sampling_error_deg, s.rms_error_deg
+    if e is None or r is None or not r > 0 or e < TOO_SLOW_SHARE * r:
+        return []
+    line = (
+        f"sampling   {s.rate_hz:.4g} Hz is too slow for this motion: the method's own error "
+        f"is about {_fmt(e)} RMS (Richardson, from the rates at half the rate), "
+        f"{100 * e / r:.0f} % of the score"
+    )
+    return [line]
 
 
 def _bias_choice_line(s: ReplaySummary) -> list[str]:
@@ -315,6 +330,7 @@ def format_summary(s: ReplaySummary) -> str:
             f"max {_fmt(s.max_heading_deg)}"
         )
     lines.extend(_bias_choice_line(s))
+    lines.extend(_sampling_line(s))
     if s.stopped_at:
         lines.append(f"stopped    {s.stopped_at}")
     lines.append(f"elapsed    {s.elapsed_s:.3f} s")
