@@ -106,7 +106,8 @@ def test_replay_names_the_evidence_of_each_rest():
     t_ns = 1_000_000_000 + np.arange(n, dtype=np.int64) * 5_000_000
     _bias, w = _static_adis(rng, n)
     imu = ImuSeries(t_ns, t_ns, w, None, "/imu", "sensor_msgs/msg/Imu", "imu")
-    q = np.tile([0.0, 0.0, 0.0, 1.0], (n, 1))
+    # the sensor sits still on a table that is not quite level (2° and 1° of tilt)
+    q = np.tile(Rotation.from_euler("xy", [2.0, 1.0], degrees=True).as_quat(), (n, 1))
     truth = TruthSeries(t_ns, t_ns, q, "/truth", "geometry_msgs/msg/PoseStamped", "world")
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")

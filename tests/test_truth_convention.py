@@ -168,3 +168,34 @@ def test_after_a_gap_the_gyro_did_not_see_the_estimate_re_anchors(log):
     mine, theirs = res.error.total_deg[a:-1], ref.error.total_deg[a:-1]
     ok = np.isfinite(mine)
     assert ok.sum() > 0.9 * len(mine) and np.max(np.abs(mine[ok] - theirs[ok])) < 1e-6
+
+
+def test_a_heading_only_truth_is_scored_on_heading_only():
+    # A robot yaws (ψ = 2 sin 0.5t) and rocks 5° about its x axis (φ = 5° sin 3t); its planar
+    # odometry carries only ψ. The estimate follows the true attitude Rz(ψ) Rx(φ); against the
+    # planar truth its error is the rocking, a swing about a horizontal axis: no heading error.
+    from imu_dcm.logio.types import ImuSeries, LogData, TruthSeries
+    from imu_dcm.replay.summary import format_summary
+
+    t = np.arange(0.0, 20.0, 0.005)
+    t_ns = (1_000_000_000 + np.round(t * 1e9)).astype(np.int64)
+    psi, dpsi = 2.0 * np.sin(0.5 * t), np.cos(0.5 * t)
+    amp = np.radians(5.0)
+    phi, dphi = amp * np.sin(3.0 * t), 3.0 * amp * np.cos(3.0 * t)
+    # body rates of Rz(ψ) Rx(φ): Rx(φ)ᵀ (0, 0, ψ') + (φ', 0, 0)
+    w = np.stack([dphi, np.sin(phi) * dpsi, np.cos(phi) * dpsi], axis=1)
+    q_planar = Rotation.from_rotvec(np.outer(psi, [0.0, 0.0, 1.0])).as_quat()
+    q_planar[:, :2] = 0.0  # by construction, as 2D odometry writes it
+    imu = ImuSeries(t_ns, t_ns, w, None, "/imu", "Imu", "base_link")
+    truth = TruthSeries(t_ns, t_ns, q_planar, "/odom", "nav_msgs/msg/Odometry", "odom", "base_link")
+    s = _quiet(LogData("planar", imu, truth, ()), bias="none").summary
+    assert s.scored_on == "heading" and s.rms_inclination_deg is None
+    assert s.rms_error_deg < 1e-6  # magnus4 at 200 Hz on ~1 rad/s: (ω dt)⁴ ~ 1e-9 a step
+    line = next(x for x in format_summary(s).splitlines() if x.startswith("error "))
+    assert "heading only" in line
+    # scored on the whole attitude, the rocking would be the score: 5°/√2 RMS
+    full = _quiet(
+        LogData("tilted", imu, dataclasses.replace(truth, q_w_b=q_planar + [1e-6, 0, 0, 0]), ()),
+        bias="none",
+    ).summary
+    assert full.scored_on == "attitude" and abs(full.rms_error_deg - 5.0 / np.sqrt(2)) < 0.05

@@ -537,7 +537,19 @@ def _score_without_bias(s, g: _Gyro, bias_est, judged: _Judged, q_truth, anchors
         omega = omega @ quat_as_matrix(judged.mounting.applied.q_t_g).T
     q_est = _integrate(s, omega, g.t_s, q_truth, anchors, topic)
     error, both = _score(q_est, q_truth)
-    return float(rms(error.total_deg[both])) if both.any() else None
+    scored = error.heading_deg if _heading_only(q_truth) else error.total_deg
+    return float(rms(scored[both])) if both.any() else None
+
+
+#: A truth component this small is zero by construction (float32 rounding of a unit
+#: quaternion's components is ~6e-8).
+PLANAR_TOL = 1e-9
+
+
+def _heading_only(q_truth: NDArray) -> bool:
+    """Every truth sample turns about the world's vertical only (x and y components zero)."""
+    q = q_truth[row_finite(q_truth)]
+    return bool(len(q)) and float(np.max(np.abs(q[:, :2]))) <= PLANAR_TOL
 
 
 def _segments(t_s: NDArray, anchors: list[int], error: AttitudeError, both) -> tuple:
@@ -566,6 +578,10 @@ def _summary(log, s, g: _Gyro, bias_est, judged: _Judged, pf_summary, anchors, e
     def stat_(a: NDArray, f) -> float | None:
         return float(f(a[both])) if both.any() else None
 
+    # a truth that carries only heading (2D odometry, a planar pose) is scored on heading only
+    planar = _heading_only(judged.aligned.q_truth)
+    total = error.heading_deg if planar else error.total_deg
+
     mount = judged.mounting
     return ReplaySummary(
         path=str(log.path),
@@ -591,10 +607,10 @@ def _summary(log, s, g: _Gyro, bias_est, judged: _Judged, pf_summary, anchors, e
         truth_samples_used=int(both.sum()),
         truth_offset_s=aligned.offset_s,
         truth_check=dataclasses.asdict(aligned.check) if aligned.check is not None else None,
-        rms_error_deg=stat_(error.total_deg, rms),
-        max_error_deg=stat_(error.total_deg, np.max),
-        rms_inclination_deg=stat_(error.inclination_deg, rms),
-        max_inclination_deg=stat_(error.inclination_deg, np.max),
+        rms_error_deg=stat_(total, rms),
+        max_error_deg=stat_(total, np.max),
+        rms_inclination_deg=None if planar else stat_(error.inclination_deg, rms),
+        max_inclination_deg=None if planar else stat_(error.inclination_deg, np.max),
         rms_heading_deg=stat_(error.heading_deg, rms),
         max_heading_deg=stat_(error.heading_deg, np.max),
         dropped_nonfinite=clean.dropped_nonfinite,
@@ -619,5 +635,6 @@ def _summary(log, s, g: _Gyro, bias_est, judged: _Judged, pf_summary, anchors, e
         truth_jumps=tuple(dataclasses.asdict(j) for j in judged.jumps),
         scored_segments=_segments(t_s, anchors, error, both) if judged.jumps or judged.gaps else (),
         gap_reanchors=tuple(dataclasses.asdict(j) for j in judged.gaps),
+        scored_on="heading" if planar else "attitude",
         truth_estimate_of=getattr(truth, "estimate_of", "") if truth is not None else "",
     )

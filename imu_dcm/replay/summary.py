@@ -83,6 +83,7 @@ class ReplaySummary:
     truth_convention: dict | None = None
     gap_reanchors: tuple[dict, ...] = ()
     sampling_error_deg: float | None = None
+    scored_on: str = "attitude"
     mounting: dict | None = None
     mounting_applied: bool = False
     mounting_used: str = ""
@@ -322,7 +323,12 @@ def format_summary(s: ReplaySummary) -> str:
         lines.append(f"bias       {s.bias_mode}: {bias}")
     pf = f", pre-filter {s.prefilter}" if s.prefilter else ""
     lines.append(f"method     {s.method}{pf}; estimate from t = {s.start_time_s:.3f} s")
-    if s.rms_error_deg is not None:
+    if s.rms_error_deg is not None and s.scored_on == "heading":
+        lines.append(
+            f"error      heading RMS {_fmt(s.rms_error_deg)}, max {_fmt(s.max_error_deg)}: the "
+            f"truth carries heading only (roll and pitch zero in every sample), scored on it"
+        )
+    elif s.rms_error_deg is not None:
         lines.append(
             f"error      total RMS {_fmt(s.rms_error_deg)}, max {_fmt(s.max_error_deg)}; "
             f"inclination RMS {_fmt(s.rms_inclination_deg)}, max "
