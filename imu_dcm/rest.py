@@ -304,12 +304,11 @@ def _conditions(w, t, m: int, cfg: RestConfig, sig: _Signals):
         mean_limit[:] = cfg.max_bias_rad_s
     truth = None
     if sig.truth_q_w_b is not None:
-        # the truth's rate is nearer to none than to the gyro's mean (beyond its own noise and
-        # the gyro mean's): the mean is bias, whatever its size
+        # the truth's rate is nearer to none than to the gyro's mean, or within its own noise:
+        # the mean is bias, whatever its size
         truth = _truth_rates(sig.truth_q_w_b, t, m)
         n_t = cfg.floor_spreads * math.sqrt(6.0) * sig.truth_noise_rad / (t[m - 1] - t[0])
-        n_g = cfg.floor_spreads * math.sqrt(3.0 * floor_var / m)
-        mean_limit[truth <= np.maximum(max(n_t, n_g), 0.5 * rate)] = np.inf
+        mean_limit[truth <= np.maximum(n_t, 0.5 * rate)] = np.inf
     name = "mean |omega|" if sig.accel_b is not None else "mean |omega| (no accelerometer)"
     conds.append(("gyro floor", name, rate, mean_limit, "rad/s"))
     return conds, std_limit, truth
