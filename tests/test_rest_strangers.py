@@ -48,6 +48,8 @@ def test_ardupilot_ground_log_is_one_rest():
     # the README's whole-log figure, to within the scoring's start (the truth's first sample
     # here against the gyro's first) and print rounding: half the no-bias error is far off
     assert res.summary.rms_error_deg < 0.12 < 0.5 * 0.72
+    # its simulated attitude is level to the last bit, but it never turns: scored whole
+    assert res.summary.scored_on == "attitude"
 
 
 def test_ardupilot_flight_rests_before_the_take_off_roll():

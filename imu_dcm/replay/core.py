@@ -547,9 +547,14 @@ PLANAR_TOL = 1e-9
 
 
 def _heading_only(q_truth: NDArray) -> bool:
-    """Every truth sample turns about the world's vertical only (x and y components zero)."""
+    """The truth turns (its heading spans more than a truth jump's :data:`JUMP_DEG`) yet every
+    sample turns about the world's vertical only (x and y components zero): planar by
+    construction. A still, level truth is not: it is scored whole."""
     q = q_truth[row_finite(q_truth)]
-    return bool(len(q)) and float(np.max(np.abs(q[:, :2]))) <= PLANAR_TOL
+    if not len(q) or float(np.max(np.abs(q[:, :2]))) > PLANAR_TOL:
+        return False
+    heading = np.unwrap(2.0 * np.arctan2(q[:, 2], q[:, 3]))
+    return float(np.degrees(np.ptp(heading))) > JUMP_DEG
 
 
 def _segments(t_s: NDArray, anchors: list[int], error: AttitudeError, both) -> tuple:
