@@ -557,10 +557,11 @@ def _heading_only(q_truth: NDArray) -> bool:
     return float(np.degrees(np.ptp(heading))) > JUMP_DEG
 
 
-def _segments(t_s: NDArray, anchors: list[int], error: AttitudeError, both) -> tuple:
+def _segments(t_s: NDArray, anchors: list[int], scored: NDArray, both) -> tuple:
+    """Each segment's times and RMS of ``scored`` (the total error, or the heading's)."""
     out = []
     for a, b in zip(anchors, [*anchors[1:], len(t_s)], strict=True):
-        e = error.total_deg[a:b][both[a:b]]
+        e = scored[a:b][both[a:b]]
         out.append(
             {
                 "start_s": float(t_s[a]),
@@ -638,7 +639,7 @@ def _summary(log, s, g: _Gyro, bias_est, judged: _Judged, pf_summary, anchors, e
         mounting_used=mount.used,
         mounting_tf=mount.tf,
         truth_jumps=tuple(dataclasses.asdict(j) for j in judged.jumps),
-        scored_segments=_segments(t_s, anchors, error, both) if judged.jumps or judged.gaps else (),
+        scored_segments=_segments(t_s, anchors, total, both) if judged.jumps or judged.gaps else (),
         gap_reanchors=tuple(dataclasses.asdict(j) for j in judged.gaps),
         scored_on="heading" if planar else "attitude",
         truth_estimate_of=getattr(truth, "estimate_of", "") if truth is not None else "",
