@@ -21,7 +21,13 @@ from numpy.typing import ArrayLike, NDArray
 
 from imu_dcm.so3 import median, percentile, quat_angle_rad, row_finite, row_max, row_norm
 
-__all__ = ["FULL_SCALE_RAD_S", "MAX_RATE_RAD_S", "deg_evidence", "implausible_rates"]
+__all__ = [
+    "FULL_SCALE_RAD_S",
+    "MAX_RATE_RAD_S",
+    "deg_evidence",
+    "implausible_rates",
+    "truth_rate_ratio",
+]
 
 #: Full scale of common MEMS gyros (±2000 °/s): rates above it suggest a deg/s log.
 FULL_SCALE_RAD_S = 2000.0 * np.pi / 180.0
@@ -47,6 +53,29 @@ def implausible_rates(omega_b: ArrayLike) -> NDArray[np.bool_]:
     return row_max(np.abs(w)) > MAX_RATE_RAD_S
 
 
+def truth_rate_ratio(omega_b: NDArray, t_s: NDArray, q_truth: NDArray) -> float | None:
+    """Median ratio of the gyro's rate norm to the truth's rotation rate where the truth moves
+    (over :data:`_MOVING_RAD_S`, well above noise), or None with 10 or fewer such steps.
+
+    ``omega_b`` float64 (N, 3) rad/s as declared; ``t_s`` (N,) s; ``q_truth`` (N, 4) ``q_w_b``
+    ``[x, y, z, w]`` (NaN rows where none covers the stamp)."""
+    ok = row_finite(q_truth)
+    pair = ok[:-1] & ok[1:]
+    if pair.sum() <= 10:
+        return None
+    # pairs (i, i + 1) as views when all are covered (the usual case), else gathered
+    every = bool(pair.all())
+    i = slice(None, -1) if every else np.flatnonzero(pair)
+    j = slice(1, None) if every else i + 1
+    ang = quat_angle_rad(q_truth[i], q_truth[j])
+    truth_rate = ang / np.diff(t_s)[slice(None) if every else i]
+    gyro_rate = row_norm(0.5 * (omega_b[i] + omega_b[j]))
+    moving = truth_rate > _MOVING_RAD_S
+    if moving.sum() <= 10:
+        return None
+    return median(gyro_rate[moving] / truth_rate[moving])
+
+
 def deg_evidence(omega_b: NDArray, t_s: NDArray, q_truth: NDArray) -> str | None:
     """Evidence that rates given as rad/s are deg/s, as one phrase, or None.
 
@@ -66,25 +95,13 @@ def deg_evidence(omega_b: NDArray, t_s: NDArray, q_truth: NDArray) -> str | None
         truth's, when it is within 20 % of 180/π. Else: the 99th percentile of ``|ω|`` when it
         is above :data:`FULL_SCALE_RAD_S`.
     """
-    ok = row_finite(q_truth)
-    pair = ok[:-1] & ok[1:]
-    if pair.sum() > 10:
-        # pairs (i, i + 1) as views when all are covered (the usual case), else gathered
-        every = bool(pair.all())
-        i = slice(None, -1) if every else np.flatnonzero(pair)
-        j = slice(1, None) if every else i + 1
-        ang = quat_angle_rad(q_truth[i], q_truth[j])
-        truth_rate = ang / np.diff(t_s)[slice(None) if every else i]
-        gyro_rate = row_norm(0.5 * (omega_b[i] + omega_b[j]))
-        moving = truth_rate > _MOVING_RAD_S
-        if moving.sum() > 10:
-            ratio = median(gyro_rate[moving] / truth_rate[moving])
-            if abs(ratio / (180 / np.pi) - 1) < 0.2:
-                return (
-                    f"the gyro rate is {ratio:.1f}x the truth's rotation rate "
-                    f"(180/π = 57.3 for deg/s)"
-                )
-            return None
+    ratio = truth_rate_ratio(omega_b, t_s, q_truth)
+    if ratio is not None:
+        if abs(ratio / (180 / np.pi) - 1) < 0.2:
+            return (
+                f"the gyro rate is {ratio:.1f}x the truth's rotation rate (180/π = 57.3 for deg/s)"
+            )
+        return None
     p99 = percentile(row_norm(omega_b), 99) if len(omega_b) else 0.0
     if p99 > FULL_SCALE_RAD_S:
         return (

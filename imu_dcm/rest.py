@@ -1,26 +1,42 @@
-"""Rest detection: the still segments of a gyro log, and the windowed statistics behind them.
+"""Rest: the still segments of a gyro log, the evidence behind each, and the bias they give.
 
-A gyro at rest measures its bias plus noise. Rest is stillness, judged over windows of
-``min_duration_s`` (0.5 s):
+One rule serves replay (offline: it looks both ways) and live (causal). A window of
+``min_duration_s`` (0.5 s) is still when every independent signal the log has agrees that the
+body does not rotate:
 
-* the rate is at its noise floor: every per-axis standard deviation below ``max_std_rad_s``;
-* where the log has an accelerometer (``accel_b``, m/s²), it is still too: every per-axis
-  standard deviation below ``max_accel_std_m_s2`` (vibration of smooth driving shows here,
-  not in the gyro), and ``|mean a|`` within ``max_gravity_error_m_s2`` of g. Stillness is then
-  confirmed, and the rate's mean (the bias) may be as large as ``max_bias_rad_s`` (several
-  °/s: a EuRoC ADIS16448 sits at 4.6 °/s);
-* without an accelerometer nothing tells a smooth constant turn from a bias, so the mean rate
-  must stay below ``max_rate_rad_s`` (2 °/s, above most MEMS biases): such rest is
-  *unconfirmed*, and a larger bias needs ``--bias x,y,z``.
+* **gyro floor**: every per-axis rate standard deviation is at the log's own noise floor. The
+  floor is the spread of the log's stillest window (replay: of the whole log; live: of the
+  windows seen so far), at least the output's quantisation (step²/12). A window passes up to
+  ``exp(2 z / sqrt(2 (m - 1)))`` times the floor (``m`` samples, ``z = floor_spreads`` = 4):
+  the log of a window's spread varies by ``1 / sqrt(2 (m - 1))`` for Gaussian noise, the floor
+  window lies about ``z`` of those below the typical one, and a still window may lie ``z``
+  above it. No bound comes from one sensor.
+* **accelerometer** (where ``accel_b`` is given, m/s²): its per-axis spread at its own floor by
+  the same rule, and ``|mean a|`` within ``max_gravity_error_m_s2`` (0.05 g, the scale and bias
+  error of MEMS accelerometers) of g. Necessary, not sufficient: a constant velocity and a
+  hover pass it too.
+* **truth** (where a reference attitude covers the window): its rotation over the window, as a
+  mean rate ``|omega_T|``, is at most ``max(n_T, |mean omega| / 2)``: nearer to no rotation
+  than to the gyro's mean rate. ``n_T`` is the truth's own noise, measured from the second
+  differences of its rotation sample to sample (:func:`truth_noise_rad`), as a rate over the
+  window (``z`` spreads). Where the truth rotates as the gyro does, the gyro's mean is motion,
+  not bias.
+* **mean rate**: where the truth shows no rotation there is no bound on the mean (it is the
+  bias); where only the accelerometer confirms, it may be up to ``max_bias_rad_s`` (10 °/s, the
+  largest biases of uncalibrated MEMS: an accelerometer cannot tell a constant turn from a
+  bias); with the gyro alone, nothing tells a smooth constant turn from a bias, so the mean must
+  stay under ``max_rate_rad_s`` (2 °/s) and the rest is *unconfirmed*.
 
-A sample is at rest when a still window covers it; consecutive rest samples form a rest segment.
-When none is found, :func:`explain_no_rest` names the condition that failed and by how much.
-The bias estimate (:mod:`imu_dcm.replay.bias`), the pre-filter's noise estimate
-(:mod:`imu_dcm.prefilter`) and the live command's causal bias (:class:`CausalRestBias`, the
-rule without accelerometer, online) all start from here.
+A run of consecutive still windows (starts ``[p, q)``) is one rest segment, samples
+``[p, q - 1 + m)``. Its bias is the mean rate over it, leaving out one window next to motion
+(windows that straddle a slow start of motion still pass), or its middle half when that leaves
+less than a window (:func:`bias_span`). :func:`rest_segments` is the rule over a whole log;
+:class:`CausalRestBias` runs it sample by sample and ends each segment on the same value.
+:func:`detect_rest` marks the samples a still window covers (the pre-filter's rest), and
+:func:`explain_no_rest` names the condition that failed where no window passed.
 
-Conventions: ``omega_b`` (N, 3) body rate relative to the world in body axes, rad/s; ``t_s`` (N,)
-seconds, increasing.
+Conventions: ``omega_b`` (N, 3) body rate relative to the world in body axes, rad/s; ``t_s``
+(N,) seconds, increasing; ``q_w_b`` Hamilton ``[x, y, z, w]``, body to world.
 """
 
 from __future__ import annotations
@@ -32,7 +48,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from imu_dcm.errors import InputError
-from imu_dcm.so3 import median, row_max, row_norm
+from imu_dcm.so3 import log_quat, median, quat_conjugate, quat_multiply, row_max, row_norm
 
 #: Standard gravity, m/s² (a still accelerometer reads about this much).
 GRAVITY_M_S2 = 9.80665
@@ -41,42 +57,76 @@ __all__ = [
     "GRAVITY_M_S2",
     "CausalRestBias",
     "RestConfig",
+    "RestSegment",
+    "bias_span",
     "detect_rest",
     "explain_no_rest",
+    "floor_factor",
     "longest_run",
     "quietest_std",
+    "rest_segments",
     "runs",
+    "truth_noise_rad",
     "window_samples",
     "windowed_mean_var",
 ]
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, slots=True)
 class RestConfig:
-    """Thresholds of the rest detector.
+    """Bounds of the rest rule (see the module docstring for where each comes from).
 
     Attributes
     ----------
-    min_duration_s : shortest rest that counts, s (default 0.5).
-    max_rate_rad_s : largest magnitude of the window-mean rate, rad/s (default 0.035 ≈ 2 °/s;
-        above the largest MEMS biases seen, far below deliberate motion).
-    max_std_rad_s : largest per-axis standard deviation in the window, rad/s (default 0.01 ≈
-        0.6 °/s; 2–5x the noise of a consumer gyro at a few hundred Hz).
-    max_bias_rad_s : largest window-mean rate magnitude when an accelerometer confirms the
-        stillness, rad/s (default 0.175 = 10 °/s: the largest biases of uncalibrated MEMS).
-    max_accel_std_m_s2 : largest per-axis accelerometer standard deviation in the window, m/s²
-        (default 0.2 ≈ 0.02 g: 3x the noise of the BROAD accelerometers at rest; vibration of a
-        driving vehicle is several times more).
+    min_duration_s : window and shortest rest, s (default 0.5).
+    max_rate_rad_s : largest window-mean rate magnitude when nothing but the gyro judges the
+        window, rad/s (default 0.035 ≈ 2 °/s).
+    max_std_rad_s : largest per-axis rate standard deviation, rad/s; None (default): from the
+        log's own noise floor.
+    max_bias_rad_s : largest window-mean rate magnitude when only the accelerometer confirms
+        the stillness, rad/s (default 0.175 = 10 °/s).
+    max_accel_std_m_s2 : largest per-axis accelerometer standard deviation, m/s²; None
+        (default): from the accelerometer's own floor.
     max_gravity_error_m_s2 : largest difference between ``|mean a|`` and g, m/s² (default 0.5
-        ≈ 0.05 g: scale errors and biases of MEMS accelerometers).
+        ≈ 0.05 g).
+    floor_spreads : ``z``, spreads of a window's noise between the floor and a still window.
     """
 
     min_duration_s: float = 0.5
     max_rate_rad_s: float = 0.035
-    max_std_rad_s: float = 0.01
+    max_std_rad_s: float | None = None
     max_bias_rad_s: float = 0.175
-    max_accel_std_m_s2: float = 0.2
+    max_accel_std_m_s2: float | None = None
     max_gravity_error_m_s2: float = 0.5
+    floor_spreads: float = 4.0
+
+
+@dataclass(frozen=True, slots=True)
+class RestSegment:
+    """One rest segment: samples ``[start, stop)``, times (s), its bias (rad/s, body axes).
+
+    ``lo``, ``hi``: the samples ``[lo, hi)`` whose mean is the bias. ``evidence``: the signals
+    that judged every window of it ("gyro floor", "accelerometer", "truth"; "truth (part)" when
+    the truth covered only some windows).
+    """
+
+    start: int
+    stop: int
+    start_s: float
+    end_s: float
+    bias_rad_s: tuple[float, float, float]
+    lo: int = 0
+    hi: int = 0
+    evidence: tuple[str, ...] = ()
+
+    def as_dict(self) -> dict:
+        """The segment for a summary: times, bias and evidence."""
+        return {
+            "start_s": self.start_s,
+            "end_s": self.end_s,
+            "bias_rad_s": [float(v) for v in self.bias_rad_s],
+            "evidence": list(self.evidence),
+        }
 
 
 def window_samples(t_s: NDArray, duration_s: float) -> int:
@@ -144,7 +194,197 @@ def quietest_std(omega_b: NDArray, t_s: NDArray, window_s: float) -> float:
     return float(np.sqrt(row_max(var).min()))
 
 
-def _checked(omega_b: ArrayLike, t_s: ArrayLike, accel_b: ArrayLike | None):
+def floor_factor(m: int, spreads: float = 4.0) -> float:
+    """How far above the floor a still window's spread may lie: ``exp(2 z / sqrt(2 (m - 1)))``.
+
+    ``m`` samples a window (at least 2), ``z`` = ``spreads`` (see the module docstring).
+    """
+    return math.exp(2.0 * spreads / math.sqrt(2.0 * max(m - 1, 1)))
+
+
+def _min_steps(x: NDArray) -> NDArray:
+    """The smallest positive step of each column (inf where none)."""
+    d = np.abs(np.diff(x, axis=0))
+    return np.where(d > 0, d, np.inf).min(axis=0) if len(d) else np.full(x.shape[1], np.inf)
+
+
+def _step_var(steps: NDArray) -> float:
+    """The output's quantisation noise, step²/12 (largest axis with a step; 0 without)."""
+    finite = steps[np.isfinite(steps)]
+    return float(finite.max()) ** 2 / 12.0 if len(finite) else 0.0
+
+
+def truth_noise_rad(q_w_b: ArrayLike, step_ok: ArrayLike | None = None) -> float:
+    """The truth's own angle noise per sample, rad: from second differences of its rotation.
+
+    Each step's rotation ``log(q_k⁻¹ q_{k+1})`` differs from the next by the motion's change
+    (``alpha dt²``, small at a truth's rate) and by white angle noise of variance ``6 σ²`` per
+    axis. ``σ`` is taken robustly (1.4826 median absolute value / √6, largest axis); 0 with
+    fewer than 3 finite samples. ``step_ok`` (M - 1,) marks the steps to use (default all; a
+    jump of the truth's own is not its noise).
+    """
+    q = np.asarray(q_w_b, dtype=float)
+    ok = np.all(np.isfinite(q), axis=1)
+    step = ok[:-1] & ok[1:]
+    if step_ok is not None:
+        step &= np.asarray(step_ok, dtype=bool)
+    pair = step[:-1] & step[1:]
+    if not pair.any():
+        return 0.0
+    qq = np.where(ok[:, None], q, [0.0, 0.0, 0.0, 1.0])
+    d = log_quat(quat_multiply(quat_conjugate(qq[:-1]), qq[1:]))
+    dd = np.abs(np.diff(d, axis=0))[pair]
+    return float(1.4826 * np.median(dd, axis=0).max() / math.sqrt(6.0))
+
+
+def _truth_rates(q: NDArray, t: NDArray, m: int) -> NDArray:
+    """``|omega_T|`` of every window of ``m`` samples, rad/s (NaN where the truth is missing).
+
+    ``omega_T`` is the mean of the truth's body rate step by step, ``log(q_k⁻¹ q_{k+1}) / dt``
+    over the window's ``m - 1`` steps: the rate the gyro would read without bias (a rotation
+    of many turns over the window is not folded into ±π).
+    """
+    ok = np.all(np.isfinite(q), axis=1)
+    qq = np.where(ok[:, None], q, [0.0, 0.0, 0.0, 1.0])
+    d = log_quat(quat_multiply(quat_conjugate(qq[:-1]), qq[1:])) / np.diff(t)[:, None]
+    valid = ok[:-1] & ok[1:]
+    d[~valid] = 0.0
+    sums = np.concatenate([np.zeros((1, 3)), np.cumsum(d, axis=0)])
+    count = np.concatenate([[0], np.cumsum(valid)])
+    rate = row_norm(sums[m - 1 :] - sums[: len(sums) - m + 1]) / (m - 1)
+    rate[count[m - 1 :] - count[: len(count) - m + 1] < m - 1] = np.nan
+    return rate
+
+
+@dataclass(frozen=True, slots=True)
+class _Signals:
+    """The signals of one log that judge its windows: accelerometer (N, 3) m/s², truth (N, 4)
+    on the gyro rows, its angle noise (rad) and the rotation (3, 3) taking gyro axes to the
+    truth's body axes (identity when not known)."""
+
+    accel_b: NDArray | None = None
+    truth_q_w_b: NDArray | None = None
+    truth_noise_rad: float = 0.0
+    r_t_g: NDArray | None = None
+
+
+def _std_limit(floor_var, m: int, cfg: RestConfig):
+    """The gyro's bound on a window's spread, rad/s, from its floor (variance, rad²/s²)."""
+    if cfg.max_std_rad_s is not None:
+        return cfg.max_std_rad_s
+    return np.sqrt(floor_var) * floor_factor(m, cfg.floor_spreads)
+
+
+def _conditions(w, t, m: int, cfg: RestConfig, sig: _Signals):
+    """Each condition over every window of ``m`` samples, and what the segments' check needs.
+
+    Returns ``(conds, std_limit, truth)``: ``conds`` a list of (signal, name, value, limit,
+    unit), a window passing a condition when its value is at most the limit; ``std_limit`` the
+    gyro's bound, rad/s; ``truth`` each window's ``|omega_T|`` (rad/s, NaN without truth) or
+    None.
+    """
+    z = floor_factor(m, cfg.floor_spreads)
+    mean, var = windowed_mean_var(w, m)
+    spread = np.sqrt(row_max(var))
+    rate = row_norm(mean)
+    floor_var = max(float(spread.min()) ** 2, _step_var(_min_steps(w)))
+    std_limit = _std_limit(floor_var, m, cfg)
+    conds = [("gyro floor", "rate std", spread, std_limit, "rad/s")]
+    mean_limit = np.full(len(rate), cfg.max_rate_rad_s)
+    if sig.accel_b is not None:
+        a_mean, a_var = windowed_mean_var(sig.accel_b, m)
+        a_spread = np.sqrt(row_max(a_var))
+        a_floor = math.sqrt(max(float(a_spread.min()) ** 2, _step_var(_min_steps(sig.accel_b))))
+        a_limit = cfg.max_accel_std_m_s2 if cfg.max_accel_std_m_s2 is not None else a_floor * z
+        g_err = np.abs(row_norm(a_mean) - GRAVITY_M_S2)
+        conds += [
+            ("accelerometer", "accel std", a_spread, a_limit, "m/s²"),
+            ("accelerometer", "| |a| - g |", g_err, cfg.max_gravity_error_m_s2, "m/s²"),
+        ]
+        mean_limit[:] = cfg.max_bias_rad_s
+    truth = None
+    if sig.truth_q_w_b is not None:
+        # the truth's rate is nearer to none than to the gyro's mean, or within its own noise:
+        # the mean is bias, whatever its size
+        truth = _truth_rates(sig.truth_q_w_b, t, m)
+        n_t = cfg.floor_spreads * math.sqrt(6.0) * sig.truth_noise_rad / (t[m - 1] - t[0])
+        mean_limit[truth <= np.maximum(n_t, 0.5 * rate)] = np.inf
+    name = "mean |omega|" if sig.accel_b is not None else "mean |omega| (no accelerometer)"
+    conds.append(("gyro floor", name, rate, mean_limit, "rad/s"))
+    return conds, std_limit, truth
+
+
+def _segment_doubt(w, t, lo: int, hi: int, m: int, std_limit: float, cfg, sig) -> str:
+    """Why rest ``[lo, hi)`` (its bias span) is not a rest, "" when nothing says so.
+
+    Only the truth can tell a rest from a motion the gyro's windows do not show (offline, over
+    the whole span; ``z`` = ``floor_spreads``). The body moved where the truth's rotation is
+    above its noise and nearer, as a vector in the truth's body axes, to what the gyro says
+    than to none:
+
+    * **turn**: the truth's rotation over the span against the gyro's mean turned over it (a
+      slow steady turn, a hover: the mean is a turn, not bias); its noise ``z √6 σ``;
+    * **sway**: the truth's path from the span's start, less its steady turn, against the
+      gyro's rates less their mean, integrated: the RMS of their difference under half the
+      truth path's RMS, and each path's largest excursion above its noise (the truth's
+      ``z √6 σ``; the gyro's random walk ``z std_limit dt √n``).
+
+    A truth that turns where the gyro does not is the truth's own wander (a motion capture's
+    jitter, an estimator's correction), and a gyro that wanders alone has a wandering bias.
+    """
+    q = sig.truth_q_w_b
+    if q is None:
+        return ""
+    span_q = q[lo:hi]
+    ok = np.all(np.isfinite(span_q), axis=1)
+    if not (ok[0] and ok[-1]):
+        return ""
+    r = np.eye(3) if sig.r_t_g is None else sig.r_t_g
+    rel = log_quat(quat_multiply(quat_conjugate(span_q[0]), span_q))
+    rel[~ok] = np.nan
+    turn = rel[-1]
+    mean = w[lo:hi].mean(axis=0)
+    gyro_turn = r @ mean * (t[hi - 1] - t[lo])
+    noise_t = cfg.floor_spreads * math.sqrt(6.0) * sig.truth_noise_rad
+    if np.linalg.norm(turn) > noise_t and np.linalg.norm(turn - gyro_turn) < np.linalg.norm(turn):
+        return (
+            f"the truth turns {np.degrees(np.linalg.norm(turn)):.2f}° as the gyro's mean "
+            f"would, {np.degrees(np.linalg.norm(gyro_turn)):.2f}°"
+        )
+    frac = ((t[lo:hi] - t[lo]) / (t[hi - 1] - t[lo]))[:, None]
+    path_t = (rel - frac * turn)[ok]
+    path_g = (_gyro_path(w, t, lo, hi) @ r.T)[ok]
+    swing_t, swing_g = float(row_norm(path_t).max()), float(row_norm(path_g).max())
+    noise_g = _gyro_path_noise(t, lo, hi, std_limit, cfg)
+    apart = math.sqrt(float(np.mean(np.sum((path_t - path_g) ** 2, axis=1))))
+    if swing_t > noise_t and swing_g > noise_g and apart < 0.5 * _rms_norm(path_t):
+        return (
+            f"the truth sways {np.degrees(swing_t):.2f}° as the gyro does, "
+            f"{np.degrees(swing_g):.2f}°"
+        )
+    return ""
+
+
+def _rms_norm(v: NDArray) -> float:
+    return math.sqrt(float(np.mean(np.sum(v * v, axis=1))))
+
+
+def _gyro_path(w, t, lo: int, hi: int) -> NDArray:
+    """The gyro's rates over ``[lo, hi)`` less their mean, integrated (rad, gyro axes)."""
+    dt = np.diff(t[lo:hi], prepend=t[lo])
+    return np.cumsum((w[lo:hi] - w[lo:hi].mean(axis=0)) * dt[:, None], axis=0)
+
+
+def _gyro_path_noise(t, lo: int, hi: int, std_limit: float, cfg) -> float:
+    """The random walk the gyro's noise allows its path over ``[lo, hi)``: ``z std dt √n``."""
+    return cfg.floor_spreads * std_limit * float(np.median(np.diff(t[lo:hi]))) * math.sqrt(hi - lo)
+
+
+def _passes(value, limit) -> NDArray:
+    return ~(value > limit)  # NaN (undecided) passes
+
+
+def _checked(omega_b: ArrayLike, t_s: ArrayLike, accel_b: ArrayLike | None, truth=None):
     w = np.asarray(omega_b, dtype=float)
     t = np.asarray(t_s, dtype=float)
     if w.ndim != 2 or w.shape[1] != 3 or len(t) != len(w):
@@ -152,34 +392,125 @@ def _checked(omega_b: ArrayLike, t_s: ArrayLike, accel_b: ArrayLike | None):
     acc = None if accel_b is None else np.asarray(accel_b, dtype=float)
     if acc is not None and acc.shape != w.shape:
         raise InputError(f"Expected accel_b of shape {w.shape}, got {acc.shape}")
-    return w, t, acc
+    q = None if truth is None else np.asarray(truth, dtype=float)
+    if q is not None and q.shape != (len(w), 4):
+        raise InputError(f"Expected truth_q_w_b of shape {(len(w), 4)}, got {q.shape}")
+    return w, t, acc, q
 
 
-def _window_conditions(
-    w: NDArray, acc: NDArray | None, win: int, cfg: RestConfig
-) -> list[tuple[str, NDArray, float, str]]:
-    """Each rest condition over every window of ``win`` samples: (name, value, limit, unit).
+def bias_span(a: int, b: int, n: int, m: int) -> tuple[int, int]:
+    """The samples ``[lo, hi)`` of rest ``[a, b)`` (of ``n``) whose mean is its bias.
 
-    A window passes a condition when its value is below the limit.
+    One window ``m`` is left out next to motion (not at the ends of the log); when less than a
+    window remains, the middle half.
     """
-    mean, var = windowed_mean_var(w, win)
-    rate = row_norm(mean)
-    conds = [("rate std", np.sqrt(row_max(var)), cfg.max_std_rad_s, "rad/s")]
-    if acc is None:
-        conds.append(("mean |omega| (no accelerometer)", rate, cfg.max_rate_rad_s, "rad/s"))
-        return conds
-    a_mean, a_var = windowed_mean_var(acc, win)
-    conds += [
-        ("mean |omega|", rate, cfg.max_bias_rad_s, "rad/s"),
-        ("accel std", np.sqrt(row_max(a_var)), cfg.max_accel_std_m_s2, "m/s²"),
-        (
-            "| |a| - g |",
-            np.abs(row_norm(a_mean) - GRAVITY_M_S2),
-            cfg.max_gravity_error_m_s2,
-            "m/s²",
-        ),
-    ]
-    return conds
+    lo = a + m if a > 0 else a
+    hi = b - m if b < n else b
+    if hi - lo < m:
+        lo, hi = a + (b - a) // 4, b - (b - a) // 4
+    return lo, hi
+
+
+def _still(conds) -> NDArray:
+    still = np.ones(len(conds[0][2]), dtype=bool)
+    for _sig, _name, value, limit, _unit in conds:
+        still &= _passes(value, limit)
+    return still
+
+
+def _evidence(conds, truth, p: int, q: int) -> tuple[str, ...]:
+    """The signals that judged windows ``[p, q)``: all of them, or "(part)" of them."""
+    out = list(dict.fromkeys(c[0] for c in conds))
+    if truth is not None:
+        decided = np.isfinite(truth[p:q])
+        out += ["truth"] if decided.all() else ["truth (part)"] if decided.any() else []
+    return tuple(out)
+
+
+def rest_segments(
+    omega_b: ArrayLike,
+    t_s: ArrayLike,
+    config: RestConfig | None = None,
+    accel_b: ArrayLike | None = None,
+    truth_q_w_b: ArrayLike | None = None,
+    truth_noise: float = 0.0,
+    r_t_g: ArrayLike | None = None,
+) -> tuple[list[RestSegment], str]:
+    """The rest segments of a log, and one line on conflicting evidence ("" when none).
+
+    Parameters
+    ----------
+    omega_b : array_like, shape (N, 3)
+        Body rates, rad/s.
+    t_s : array_like, shape (N,)
+        Sample times, s, increasing.
+    config : RestConfig, optional
+    accel_b : array_like, shape (N, 3), optional
+        Specific force on the same rows, m/s², finite.
+    truth_q_w_b : array_like, shape (N, 4), optional
+        Reference attitude on the same rows (NaN rows where it has none).
+    truth_noise : float
+        The truth's angle noise per sample, rad (:func:`truth_noise_rad`).
+    r_t_g : array_like, shape (3, 3), optional
+        Rotation from the gyro's axes to the truth's body axes (default identity).
+    """
+    cfg = config or RestConfig()
+    w, t, acc, q = _checked(omega_b, t_s, accel_b, truth_q_w_b)
+    n, m = len(w), window_samples(t, cfg.min_duration_s)
+    if n < m:
+        return [], ""
+    sig = _Signals(acc, q, truth_noise, None if r_t_g is None else np.asarray(r_t_g, float))
+    conds, std_limit, truth = _conditions(w, t, m, cfg, sig)
+    segs, doubts = [], []
+    for p, q_ in _touching(runs(_still(conds)), m):
+        a, b = p, q_ - 1 + m
+        lo, hi = bias_span(a, b, n, m)
+        doubt = _segment_doubt(w, t, lo, hi, m, std_limit, cfg, sig)
+        if doubt:
+            doubts.append(f"{t[a]:.2f}-{t[b - 1]:.2f} s ({doubt})")
+            continue
+        if segs:  # a disturbance that moves nothing: the rest before goes on
+            a0, p0 = segs[-1][0], segs[-1][2]
+            lo0, hi0 = bias_span(a0, b, n, m)
+            swing = float(row_norm(_gyro_path(w, t, lo0, hi0)).max())
+            if swing <= _gyro_path_noise(t, lo0, hi0, std_limit, cfg) and not _segment_doubt(
+                w, t, lo0, hi0, m, std_limit, cfg, sig
+            ):
+                segs[-1] = (a0, b, p0, q_)
+                continue
+        segs.append((a, b, p, q_))
+    out = []
+    for a, b, p, q_ in segs:
+        lo, hi = bias_span(a, b, n, m)
+        bias = tuple(w[lo:hi].mean(axis=0).tolist())
+        evidence = _evidence(conds, truth, p, q_)
+        out.append(RestSegment(a, b, float(t[a]), float(t[b - 1]), bias, lo, hi, evidence))
+    return out, _conflict(conds, doubts)
+
+
+def _touching(found: list[tuple[int, int]], m: int) -> list[tuple[int, int]]:
+    """Runs of still windows merged where the samples they cover touch (a gap under ``m``)."""
+    out: list[tuple[int, int]] = []
+    for p, q in found:
+        if out and p <= out[-1][1] - 1 + m:
+            out[-1] = (out[-1][0], q)
+        else:
+            out.append((p, q))
+    return out
+
+
+def _conflict(conds, doubts: list[str]) -> str:
+    """One line for the stretches the windows call still that are not rests ("" for none)."""
+    if not doubts:
+        return ""
+    signals = "the gyro and the accelerometer" if conds[1][0] == "accelerometer" else "the gyro"
+    more = f" and {len(doubts) - 3} more" if len(doubts) > 3 else ""
+    return (
+        f"rest evidence conflicts: {signals} call {len(doubts)} stretch"
+        f"{'es' if len(doubts) != 1 else ''} still that are not rest: "
+        + "; ".join(doubts[:3])
+        + more
+    )
 
 
 def detect_rest(
@@ -188,7 +519,7 @@ def detect_rest(
     config: RestConfig | None = None,
     accel_b: ArrayLike | None = None,
 ) -> NDArray:
-    """Boolean mask (N,) of samples at rest (see the module docstring for the rule).
+    """Boolean mask (N,) of the samples a still window covers (the module docstring's rule).
 
     Parameters
     ----------
@@ -201,18 +532,13 @@ def detect_rest(
         Specific force on the same rows, m/s², finite; confirms stillness when given.
     """
     cfg = config or RestConfig()
-    w, t, acc = _checked(omega_b, t_s, accel_b)
-    n = len(w)
-    win = window_samples(t, cfg.min_duration_s)
+    w, t, acc, _q = _checked(omega_b, t_s, accel_b)
+    n, win = len(w), window_samples(t, cfg.min_duration_s)
     rest = np.zeros(n, dtype=bool)
     if n < win:
         return rest
-    still = np.ones(n - win + 1, dtype=bool)  # window starting at i: samples [i, i + win)
-    for _name, value, limit, _unit in _window_conditions(w, acc, win, cfg):
-        still &= value < limit
-    # a sample is at rest when any still window covers it: spread each still start over win
-    cover = np.zeros(n + 1, dtype=np.int64)
-    starts = np.flatnonzero(still)
+    starts = np.flatnonzero(_still(_conditions(w, t, win, cfg, _Signals(acc))[0]))
+    cover = np.zeros(n + 1, dtype=np.int64)  # spread each still start over its window
     np.add.at(cover, starts, 1)
     np.add.at(cover, starts + win, -1)
     rest[:] = np.cumsum(cover[:-1]) > 0
@@ -224,6 +550,8 @@ def explain_no_rest(
     t_s: ArrayLike,
     config: RestConfig | None = None,
     accel_b: ArrayLike | None = None,
+    truth_q_w_b: ArrayLike | None = None,
+    truth_noise: float = 0.0,
 ) -> str:
     """Why no window passed: the conditions that failed in the window closest to passing.
 
@@ -231,17 +559,22 @@ def explain_no_rest(
     one clause, e.g. ``"the stillest 0.50 s, at 12.30 s, has rate std 0.015 rad/s > 0.01 (1.5x)"``.
     """
     cfg = config or RestConfig()
-    w, t, acc = _checked(omega_b, t_s, accel_b)
+    w, t, acc, q = _checked(omega_b, t_s, accel_b, truth_q_w_b)
     win = window_samples(t, cfg.min_duration_s)
     if len(w) < win:
         return f"the log ({t[-1] - t[0]:.2f} s) is shorter than a {cfg.min_duration_s:.2f} s window"
-    conds = _window_conditions(w, acc, win, cfg)
-    worst = np.max([value / limit for _n, value, limit, _u in conds], axis=0)
+    conds = _conditions(w, t, win, cfg, _Signals(acc, q, truth_noise))[0]
+    with np.errstate(invalid="ignore", divide="ignore"):
+        ratios = [np.nan_to_num(v / np.broadcast_to(lim, v.shape)) for _s, _n, v, lim, _u in conds]
+    worst = np.max(ratios, axis=0)
     i = int(np.argmin(worst))
+    if worst[i] <= 1.0:
+        return "every stretch the windows call still was found not to be rest"
     failed = [
-        f"{name} {value[i]:.4g} {unit} > {limit:.4g} ({value[i] / limit:.1f}x)"
-        for name, value, limit, unit in conds
-        if value[i] >= limit
+        f"{name} {value[i]:.4g} {unit} > {np.broadcast_to(limit, value.shape)[i]:.4g} "
+        f"({ratio[i]:.1f}x)"
+        for (_s, name, value, limit, unit), ratio in zip(conds, ratios, strict=True)
+        if ratio[i] > 1.0
     ]
     return f"the stillest {cfg.min_duration_s:.2f} s, at {t[i] - t[0]:.2f} s, has " + ", ".join(
         failed
@@ -249,55 +582,45 @@ def explain_no_rest(
 
 
 class CausalRestBias:
-    """Online rest detector and bias estimate: the causal twin of :func:`detect_rest`.
+    """The rest rule of :func:`rest_segments`, run causally as samples arrive (live).
 
-    It runs the rule without an accelerometer (a live gyro stream carries none): rate spread at
-    the noise floor and mean rate under ``max_rate_rad_s``, the same thresholds as the batch rule
-    given no ``accel_b`` (a test holds the two equal).
-
-    The gyro bias from rest, estimated causally as samples arrive (replay's rule, online).
-
-    Replay's rule (``imu_dcm.replay.bias``): a sample is at rest when a window of ``win`` samples
-    (``min_duration_s`` over the step) covering it has a mean rate magnitude below
-    ``max_rate_rad_s`` and every per-axis standard deviation below ``max_std_rad_s``; consecutive
-    rest samples form a segment ``[a, b)`` whose bias is the mean over ``[a + win, b - win)``
-    (``a`` itself at the start of the log), the middle half when that is shorter than a window.
-
-    Online, the window ending at the newest sample ``k`` is tested when ``k`` arrives. While the
-    segment lasts, the bias is the mean over ``[a + win, k + 1 - win)``: one window behind the
-    newest sample. When motion starts, the last still window ends at ``b - 1``, so the last update
-    covers exactly ``[a + win, b - win)``, replay's value for the segment. The bias applied to a
-    sample is the estimate available when it arrives (causal; replay applies a segment's bias from
-    its start). :meth:`update_many` applies the same rule to a batch as arrays (windows from
-    :func:`windowed_mean_var`, the segment's running mean from cumulative sums) and returns,
-    for each sample, what :meth:`update` would have returned (to rounding). The step ``dt`` is
-    the median of the first ``probe`` steps (replay: of the whole log).
+    A live gyro stream carries no accelerometer or truth, so the gyro judges alone: the noise
+    floor is the stillest window seen so far (offline: of the whole log), and the mean rate
+    stays under ``max_rate_rad_s``. The window ending at the newest sample ``k`` is judged
+    when ``k`` arrives. While a segment ``[a, ...)`` lasts, the bias is the mean over
+    ``[lo, k + 1 - m)`` (``lo`` from :func:`bias_span`): one window behind the newest sample.
+    When motion starts, the last still window ends at ``b - 1``, and the segment's bias becomes
+    :func:`bias_span`'s for ``[a, b)`` (its first ``3 m`` samples are kept for the middle half
+    of a short rest), the value :func:`rest_segments` gives it under the same floor. The bias
+    applied to a sample is the estimate available when it arrives. :meth:`update_many` applies
+    the rule to a batch as arrays and returns, for each sample, what :meth:`update` would have
+    returned (to rounding). The window length comes from the median of the first ``probe``
+    steps (offline: of the whole log).
 
     Parameters
     ----------
     config : RestConfig, optional
-        The rest rule (default ``RestConfig()``, as :func:`detect_rest`).
+        The rest rule (default ``RestConfig()``).
     probe : int
         Steps used to fix the window length (median step).
 
     Attributes
     ----------
     bias_rad_s : tuple of 3 floats — current estimate, body axes, rad/s (zeros before any rest).
-    segments : list of dict — ``start_s``, ``end_s``, ``bias_rad_s`` of each finished segment.
+    segments : list of RestSegment — each finished segment (``lo``/``hi`` as in replay).
     updates : int — how many times the estimate changed.
     """
 
     def __init__(self, config: RestConfig | None = None, probe: int = 64) -> None:
-        config = config or RestConfig()
-        self.min_duration_s = config.min_duration_s
-        self.max_rate = config.max_rate_rad_s
-        self.max_var = config.max_std_rad_s**2
+        self.config = config or RestConfig()
         self.probe = probe
         self.bias_rad_s = (0.0, 0.0, 0.0)
-        self.segments: list[dict] = []
+        self.segments: list[RestSegment] = []
         self.updates = 0
         self.at_rest = False
         self.win = 0
+        self._floor_var = math.inf  # the stillest window so far (variance, largest axis)
+        self._min_steps = np.full(3, np.inf)  # the smallest step of each axis so far
         self._probe_w: list[NDArray] = []  # samples before the window length is known
         self._probe_t: list[NDArray] = []
         self._tail_w = np.zeros((0, 3))  # the last win samples
@@ -305,7 +628,9 @@ class CausalRestBias:
         self._k = -1  # index of the newest sample
         self._seg_start = -1  # a, or -1 when not in a segment
         self._seg_t0 = 0.0
+        self._seg_end = 0  # b - 1 of the open segment so far
         self._seg_end_t = 0.0
+        self._head = np.zeros((0, 3))  # the open segment's first 3 win samples
         self._lo = 0  # the segment's bias averages the samples [lo, acc_hi)
         self._acc_hi = 0
         self._acc = np.zeros(3)
@@ -342,10 +667,23 @@ class CausalRestBias:
         p = self.probe
         steps = np.diff(pt[:p])
         dt = float(np.sort(steps)[len(steps) // 2]) if len(steps) else 1.0
-        self.win = max(2, math.ceil(self.min_duration_s / dt))
+        self.win = max(2, math.ceil(self.config.min_duration_s / dt))
         before = np.tile(self.bias_rad_s, (p - 1 - (seen - len(w)), 1))  # this call's, held
         out = self._steps(pw, pt)
         return np.concatenate([before, out[p - 1 :]])[-len(w) :]
+
+    def _still(self, X: NDArray, T: NDArray, rows: NDArray) -> NDArray:
+        """The rule for the windows starting at ``rows`` of ``X``, the floor as it was then."""
+        m, cfg = self.win, self.config
+        mean, var = windowed_mean_var(X, m)
+        mean, var = mean[rows], var[rows]
+        self._min_steps = np.minimum(self._min_steps, _min_steps(X))
+        floor = np.minimum.accumulate(np.minimum(row_max(var), self._floor_var))
+        floor = np.maximum(floor, _step_var(self._min_steps))
+        if len(floor):
+            self._floor_var = float(floor[-1])
+        limit = _std_limit(floor, m, cfg)
+        return (np.sqrt(row_max(var)) <= limit) & (row_norm(mean) <= cfg.max_rate_rad_s)
 
     def _steps(self, w: NDArray, t: NDArray) -> NDArray:
         """The rule over a batch: windows ending at each sample, then the segments' runs."""
@@ -357,21 +695,17 @@ class CausalRestBias:
         still = np.zeros(n, dtype=bool)
         first_full = max(0, m - 1 - k0)  # the first sample whose window is full
         if first_full < n:
-            mean, var = windowed_mean_var(X, m)
             rows = np.arange(first_full, n) + (k0 - base) - m + 1  # window ending at sample j
-            still[first_full:] = (np.linalg.norm(mean[rows], axis=1) < self.max_rate) & np.all(
-                var[rows] < self.max_var, axis=1
-            )
+            still[first_full:] = self._still(X, T, rows)
         out = np.full((n, 3), np.nan)
         before = self.bias_rad_s
-        pos = 0
         for p, q in runs(still):
-            if self._seg_start >= 0 and p > pos:
-                self._close_segment()  # motion between the open segment and this run
+            if self._seg_start >= 0 and k0 + p - m + 1 > self._seg_end + 1:
+                self._close_segment(out, k0)  # motion of a window or more since its end
             self._run(X, T, base, k0, p, q, out)
-            pos = q
-        if self._seg_start >= 0 and pos < n:
-            self._close_segment()
+        self.at_rest = bool(n and still[-1])
+        if self._seg_start >= 0 and k0 + n - 1 >= self._seg_end + m:
+            self._close_segment(out, k0)  # no window that can still come touches it
         # each sample keeps the newest estimate at its arrival (forward fill)
         have = ~np.isnan(out[:, 0])
         if have.any():
@@ -387,11 +721,15 @@ class CausalRestBias:
         """Still samples ``p..q-1`` of the batch: open (or go on with) the segment and write the
         bias after each sample into ``out`` (NaN while the segment has no sample yet)."""
         m = self.win
-        if self._seg_start < 0 or p > 0:
+        if self._seg_start < 0:
             a = k0 + p - m + 1  # a segment starts with the first sample of its first still window
             self._seg_start, self._seg_t0 = a, float(T[a - base])
             self._lo = a if a == 0 else a + m
             self._acc_hi, self._acc = self._lo, np.zeros(3)
+            self._head = X[a - base : a - base + 3 * m].copy()
+        elif len(self._head) < 3 * m:
+            have = self._seg_start + len(self._head) - base
+            self._head = np.concatenate([self._head, X[have : have + 3 * m - len(self._head)]])
         hi = k0 + np.arange(p, q) + 1 - m  # sample k's estimate: the mean over [lo, k + 1 - m)
         grow = hi > self._acc_hi  # a suffix of the run: hi grows by one per sample
         if self._acc_hi > self._lo:  # samples whose window adds nothing keep the estimate
@@ -407,17 +745,33 @@ class CausalRestBias:
             self.updates += len(sums)
         if not np.isnan(out[q - 1, 0]):
             self.bias_rad_s = tuple(out[q - 1].tolist())
-        self.at_rest = True
+        self._seg_end = k0 + q - 1
         self._seg_end_t = float(T[k0 + q - 1 - base])
 
-    def _close_segment(self) -> None:
+    def _close_segment(self, out: NDArray | None = None, k0: int = 0, at_end: bool = False) -> None:
+        """End the open segment ``[a, b)``; its final bias holds from sample ``b - 1 + m`` (row
+        of ``out`` for a batch starting at sample ``k0``). ``at_end``: the stream ended in it."""
+        a, b, m = self._seg_start, self._seg_end + 1, self.win
+        lo, hi = bias_span(a, b, b + (0 if at_end else 1), m)
+        if at_end and hi > self._acc_hi:  # the last window's samples: the tail
+            self._acc = self._acc + self._tail_w[len(self._tail_w) - (hi - self._acc_hi) :].sum(0)
+            self._acc_hi = hi
+        if lo != self._lo or hi != self._acc_hi:  # a short rest: its middle half
+            self.bias_rad_s = tuple(self._head[lo - a : hi - a].mean(axis=0).tolist())
+        elif hi > lo:
+            self.bias_rad_s = tuple((self._acc / (hi - lo)).tolist())
         self.segments.append(
-            {"start_s": self._seg_t0, "end_s": self._seg_end_t, "bias_rad_s": list(self.bias_rad_s)}
+            RestSegment(
+                a, b, self._seg_t0, self._seg_end_t, self.bias_rad_s, lo, hi, ("gyro floor",)
+            )
         )
         self._seg_start = -1
-        self.at_rest = False
+        j = b - 1 + m - k0
+        if out is not None and 0 <= j < len(out):
+            out[j] = self.bias_rad_s
 
     def finish(self) -> None:
-        """Close an open segment (at stop)."""
+        """Close an open segment (at stop): the stream ended in it."""
         if self._seg_start >= 0:
-            self._close_segment()
+            self._close_segment(at_end=True)
+            self.at_rest = False

@@ -159,6 +159,10 @@ def rest_motion_log(seed: int = 3, rate_hz: float = 256.0):
 
 
 def test_causal_rest_bias_ends_each_segment_on_replays_value():
+    # Live runs replay's rule causally: every segment (the last too, closed at the end of the
+    # stream) ends on replay's samples and mean (a sum of n samples: relative rounding <= n eps).
+    # The rests share one noise level, so the floor seen so far is replay's to within the
+    # windows' spread.
     w, t = rest_motion_log()
     batch = estimate_bias(w, t, "auto")
     live = CausalRestBias()
@@ -167,19 +171,55 @@ def test_causal_rest_bias_ends_each_segment_on_replays_value():
     )
     live.finish()
     assert len(live.segments) == len(batch.segments) == 3
-    # segments that end before the log does: the last causal update is replay's segment mean
-    # (a sum of n samples: relative rounding <= n eps)
-    for seg_live, seg in zip(live.segments[:2], batch.segments[:2], strict=False):
+    for seg_live, seg in zip(live.segments, batch.segments, strict=True):
         n = seg.stop - seg.start
-        assert seg_live["bias_rad_s"] == pytest.approx(
+        assert (seg_live.start, seg_live.stop, seg_live.lo, seg_live.hi) == (
+            seg.start,
+            seg.stop,
+            seg.lo,
+            seg.hi,
+        )
+        assert seg_live.bias_rad_s == pytest.approx(
             seg.bias_rad_s, abs=4 * n * np.finfo(float).eps * 0.01
         )
-        assert seg_live["start_s"] == seg.start_s and seg_live["end_s"] == seg.end_s
+        assert seg_live.start_s == seg.start_s and seg_live.end_s == seg.end_s
     # causal: the bias uses samples one window behind the newest, so the first sample with a
     # bias is number win (the first still window ends at win - 1 and holds nothing older)
     win = math.ceil(0.5 / (t[1] - t[0]))
     assert np.all(applied[:win] == 0.0)
     assert np.all(applied[win] == w[0])
+
+
+def test_causal_rest_bias_takes_a_short_rests_middle_half_as_replay_does():
+    # A rest of 0.9 s (1.8 windows) between motions: one window off each side would leave
+    # nothing, so both take its middle half, known once motion starts again.
+    rng = np.random.default_rng(4)
+    rate_hz, bias = 200.0, np.array([0.004, -0.002, 0.003])
+    parts = []
+    for kind, dur in [("rest", 2.0), ("move", 1.0), ("rest", 0.9), ("move", 1.0)]:
+        n = int(dur * rate_hz)
+        x = rng.normal(0, 0.002, (n, 3)) + bias
+        if kind == "move":
+            x[:, 2] += 1.0
+        parts.append(x)
+    w = np.concatenate(parts)
+    t = np.arange(len(w)) / rate_hz
+    batch = estimate_bias(w, t, "auto")
+    live = CausalRestBias()
+    live.update_many(w, t)
+    live.finish()
+    assert len(batch.segments) == len(live.segments) == 2
+    short, short_live = batch.segments[1], live.segments[1]
+    a, b = short.start, short.stop
+    assert b - a < 3 * 100 and (short.lo, short.hi) == (a + (b - a) // 4, b - (b - a) // 4)
+    assert (short_live.start, short_live.stop, short_live.lo, short_live.hi) == (
+        a,
+        b,
+        short.lo,
+        short.hi,
+    )
+    np.testing.assert_allclose(short_live.bias_rad_s, w[short.lo : short.hi].mean(axis=0))
+    np.testing.assert_allclose(short.bias_rad_s, w[short.lo : short.hi].mean(axis=0))
 
 
 def run_cli(args: list[str], stdin: bytes = b"", timeout: float = 60):
@@ -319,8 +359,8 @@ def test_causal_rest_bias_in_batches_equals_sample_by_sample():
         )
         many.finish()
         np.testing.assert_allclose(got, ref, rtol=0, atol=len(w) * np.finfo(float).eps * 0.02)
-        assert [(s["start_s"], s["end_s"]) for s in many.segments] == [
-            (s["start_s"], s["end_s"]) for s in one.segments
+        assert [(s.start_s, s.end_s) for s in many.segments] == [
+            (s.start_s, s.end_s) for s in one.segments
         ]
         assert many.updates == one.updates
 

@@ -4,6 +4,7 @@ accelerometer reading |a| = g. Each case is simulated with a known answer."""
 from __future__ import annotations
 
 import numpy as np
+from scipy.spatial.transform import Rotation
 
 from imu_dcm.replay.bias import estimate_bias
 from imu_dcm.rest import GRAVITY_M_S2, RestConfig, detect_rest, explain_no_rest
@@ -17,17 +18,32 @@ def _still_accel(n: int, rng, sigma: float = 0.03) -> np.ndarray:
 
 
 def test_smooth_constant_rate_with_vibration_is_not_rest():
-    # A vehicle driving with a steady yaw rate of 1.5 °/s: its gyro is as smooth as at rest
-    # (rate noise 0.002 rad/s), but its accelerometer vibrates (0.5 m/s² per axis).
+    # A vehicle stands for 3 s (accelerometer noise 0.03 m/s²), then drives with a steady yaw
+    # rate of 1.5 °/s: its gyro is as smooth as at rest (rate noise 0.002 rad/s throughout), but
+    # its accelerometer vibrates (0.5 m/s² per axis), far above its own floor at the stand.
     rng = np.random.default_rng(1)
-    n = int(20 * RATE_HZ)
+    n0, n = int(3 * RATE_HZ), int(20 * RATE_HZ)
     t = np.arange(n) / RATE_HZ
-    w = np.array([0.0, 0.0, 1.5 * DEG]) + 0.002 * rng.standard_normal((n, 3))
-    acc = _still_accel(n, rng, sigma=0.5)
-    assert not detect_rest(w, t, accel_b=acc).any()
+    w = 0.002 * rng.standard_normal((n, 3))
+    w[n0:, 2] += 1.5 * DEG
+    acc = _still_accel(n, rng)
+    acc[n0:] = _still_accel(n - n0, rng, sigma=0.5)
+    rest = detect_rest(w, t, accel_b=acc)
+    assert rest[: n0 - 10].all() and not rest[n0 + 10 :].any()
     est = estimate_bias(w, t, "auto", accel_b=acc)
-    assert not est.segments and np.all(est.bias_b == 0.0)
-    assert "accel std" in est.no_rest and "> 0.2" in est.no_rest, est.no_rest
+    assert len(est.segments) == 1 and est.segments[0].stop <= n0 + 1
+    assert est.segments[0].evidence == ("gyro floor", "accelerometer")
+    # without the stand nothing in the gyro or accelerometer tells the drive from rest (their
+    # floors are the drive's): the truth does, turning at the gyro's 1.5 °/s about z
+    drive, td = w[n0:], t[n0:] - t[n0]
+    assert estimate_bias(drive, td, "auto", accel_b=acc[n0:]).segments
+    q = Rotation.from_rotvec(np.outer(1.5 * DEG * td, [0, 0, 1])).as_quat()
+    est = estimate_bias(drive, td, "auto", accel_b=acc[n0:], truth_q_w_b=q)
+    assert not est.segments
+    assert est.conflict.startswith("rest evidence conflicts: the gyro and the accelerometer")
+    # the whole drive is one stretch; the truth turns 1.5 °/s over it (to print rounding)
+    turned = float(est.conflict.split("the truth turns ")[1].split("°")[0])
+    assert abs(turned - 1.5 * td[-1]) < 0.006, est.conflict
 
 
 def test_large_bias_at_rest_is_found_with_an_accelerometer():

@@ -98,3 +98,46 @@ def test_git_lfs_pointer_is_named_with_git_lfs_pull(tmp_path):
     msg = str(info.value)
     assert "a Git LFS pointer to a 52.4 MB file" in msg and "`git lfs pull`" in msg
     assert "\n" not in msg
+
+
+def test_ms_stamps_declared_as_s_at_1_khz_are_caught_by_the_gyros_content():
+    # 1 kHz for 20 s stamped in ms and declared as s: 1 Hz over 20 000 s, a rate an IMU may
+    # have. The content contradicts it: a 2 rad/s turn, smooth sample to sample (resolved), would
+    # turn 2 rad per 1 s step. As ms: 1000 Hz over 20 s.
+    rng = np.random.default_rng(7)
+    n = 20_000
+    t_ns = np.arange(n, dtype=np.int64) * 1_000_000_000  # each ms read as a second
+    tt = np.arange(n) / 1000.0
+    w = np.stack([2.0 * np.sin(tt), 2.0 * np.cos(0.5 * tt), 0.1 + 0 * tt], axis=1)
+    w += 1e-3 * rng.standard_normal((n, 3))
+    clause, fix = timing_doubt(t_ns, "s", w)
+    assert fix == "ms" and "1 Hz" in clause and "as ms: 1000 Hz over 20 s" in clause
+    assert "smooth" in clause
+    # the same stamps with rates that really change from second to second are a slow log
+    assert timing_doubt(t_ns, "s", rng.standard_normal((n, 3))) is None
+    # and a slow log that hardly turns per step is plausible
+    assert timing_doubt(t_ns, "s", 0.01 * w) is None
+
+
+@pytest.mark.parametrize("declared", ["deg/s", "rad/s"])
+def test_gyro_units_are_judged_against_the_truth_both_ways(declared):
+    # The shipped trial's rates are rad/s. Declared deg/s they read 57.3x slower than the truth
+    # turns; written in deg/s and declared rad/s, 57.3x faster. Either way one line says so.
+    from conftest import REPO_ROOT
+
+    log = read_log(REPO_ROOT / "replay" / "broad_07_undisturbed_fast_rotation_B")
+    if declared == "rad/s":
+        import dataclasses
+
+        log = dataclasses.replace(
+            log, imu=dataclasses.replace(log.imu, omega_b=np.degrees(log.imu.omega_b))
+        )
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        res = replay(log, gyro_units=declared)
+    lines = [w for w in res.summary.warnings if "the rates look like" in w]
+    assert len(lines) == 1, res.summary.warnings
+    if declared == "deg/s":
+        assert "look like rad/s" in lines[0] and "1/57" in lines[0]
+    else:
+        assert "look like deg/s" in lines[0] and "57." in lines[0]

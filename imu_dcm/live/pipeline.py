@@ -262,9 +262,9 @@ class Pipeline:
             n_seg = len(self.rest.segments)
             b = self.rest.update_many(w, t_s)
             for seg in self.rest.segments[n_seg:]:
-                v = seg["bias_rad_s"]
+                v = seg.bias_rad_s
                 self.say(
-                    f"bias from rest {seg['start_s']:.3f}-{seg['end_s']:.3f} s: "
+                    f"bias from rest {seg.start_s:.3f}-{seg.end_s:.3f} s: "
                     f"({v[0]:+.5f}, {v[1]:+.5f}, {v[2]:+.5f}) rad/s"
                 )
             wc = w - b

@@ -603,7 +603,7 @@ def _summary(
     st = pipe.stats
     have = st.n > 0
     rms_v = np.sqrt(st.sq / st.n) if have else [None] * 3
-    segs = list(pipe.rest.segments) if pipe.rest is not None else []
+    segs = [x.as_dict() for x in pipe.rest.segments] if pipe.rest is not None else []
     bias_mean = (pipe.bias_sum / pipe.bias_n).tolist() if pipe.bias_n else [0.0, 0.0, 0.0]
     return {
         "source": source,

@@ -1,10 +1,9 @@
-"""Gyro bias from rest: the bias of each still segment of a log, applied sample by sample.
+"""Gyro bias from rest: the bias of each rest segment of a log, applied sample by sample.
 
-Rest segments come from :func:`imu_dcm.rest.detect_rest` (re-exported here with
-:class:`~imu_dcm.rest.RestConfig`). The bias of a segment is the mean rate over it, leaving out
-one window next to each motion (windows that straddle a slow start of motion still pass the
-thresholds). Where the log has an accelerometer, it confirms the stillness (see
-:mod:`imu_dcm.rest`). The bias applied to a sample follows :data:`BIAS_RULE`:
+Rest segments and their evidence come from :func:`imu_dcm.rest.rest_segments` (the rule live
+runs causally; :class:`~imu_dcm.rest.RestConfig`, :class:`~imu_dcm.rest.RestSegment` and
+:func:`~imu_dcm.rest.detect_rest` are re-exported here). The bias applied to a sample follows
+:data:`BIAS_RULE`:
 
 * ``"latest"``: that of the latest rest segment that began at or before it (the estimate is
   *updated at each rest*); samples before the first rest use the first segment's bias;
@@ -25,7 +24,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from imu_dcm.errors import InputError
-from imu_dcm.rest import RestConfig, detect_rest, explain_no_rest, runs, window_samples
+from imu_dcm.rest import RestConfig, RestSegment, detect_rest, explain_no_rest, rest_segments
 
 __all__ = [
     "BIAS_RULES",
@@ -41,33 +40,18 @@ BIAS_RULES = ("latest", "interpolate")
 BIAS_RULE = "interpolate"
 
 
-@dataclass(frozen=True)
-class RestSegment:
-    """One rest segment: sample indices ``[start, stop)``, times (s) and its bias (rad/s).
-
-    ``lo``, ``hi``: the samples ``[lo, hi)`` whose mean is the bias.
-    """
-
-    start: int
-    stop: int
-    start_s: float
-    end_s: float
-    bias_rad_s: tuple[float, float, float]
-    lo: int = 0
-    hi: int = 0
-
-
-@dataclass(frozen=True)
+@dataclass(frozen=True, slots=True)
 class BiasEstimate:
     """Bias applied at each sample and the rest segments it came from.
 
     Attributes
     ----------
     bias_b : float64 (N, 3) — bias subtracted from each sample, body axes, rad/s.
-    segments : the rest segments found (empty when none).
+    segments : the rest segments found (empty when none), each with its evidence.
     mode : "auto", "none" or "fixed".
-    confirmed : True when an accelerometer confirmed the stillness of the rests.
+    confirmed : True when a signal besides the gyro (accelerometer, truth) judged every rest.
     no_rest : why no rest was found ("" when found, or not "auto").
+    conflict : one line where the evidence conflicts ("" when it does not).
     """
 
     bias_b: NDArray[np.float64]
@@ -75,6 +59,7 @@ class BiasEstimate:
     mode: str
     confirmed: bool = False
     no_rest: str = ""
+    conflict: str = ""
 
 
 def estimate_bias(
@@ -84,6 +69,9 @@ def estimate_bias(
     config: RestConfig | None = None,
     accel_b: ArrayLike | None = None,
     rule: str | None = None,
+    truth_q_w_b: ArrayLike | None = None,
+    truth_noise: float = 0.0,
+    r_t_g: ArrayLike | None = None,
 ) -> BiasEstimate:
     """The gyro bias to subtract at each sample.
 
@@ -97,11 +85,17 @@ def estimate_bias(
         ``"auto"``: from rest segments (zero if there is no rest); ``"none"``: zero; a vector:
         that constant bias in rad/s.
     config : RestConfig, optional
-        Rest detector thresholds (auto only).
+        Rest rule bounds (auto only).
     accel_b : array_like, shape (N, 3), optional
-        Accelerometer on the same rows, m/s², finite: confirms stillness (auto only).
+        Accelerometer on the same rows, m/s², finite (auto only).
     rule : "latest" or "interpolate", optional
         How the bias between rests is applied (default :data:`BIAS_RULE`).
+    truth_q_w_b : array_like, shape (N, 4), optional
+        Reference attitude ``[x, y, z, w]`` on the same rows, NaN where none (auto only).
+    truth_noise : float
+        Its angle noise per sample, rad (:func:`imu_dcm.rest.truth_noise_rad`).
+    r_t_g : array_like, shape (3, 3), optional
+        Rotation from the gyro's axes to the truth's body axes (the mounting; identity).
 
     Returns
     -------
@@ -123,30 +117,14 @@ def estimate_bias(
     if rule not in BIAS_RULES:
         raise InputError(f"Expected a bias rule in {BIAS_RULES}, got {rule!r}")
     cfg = config or RestConfig()
-    segs = _rest_segments(w, t, cfg, accel_b)
+    segs, conflict = rest_segments(w, t, cfg, accel_b, truth_q_w_b, truth_noise, r_t_g)
     if not segs:
-        why = explain_no_rest(w, t, cfg, accel_b)
-        return BiasEstimate(np.zeros((n, 3)), (), "auto", accel_b is not None, why)
-    return BiasEstimate(_bias_at(segs, t, rule), tuple(segs), "auto", accel_b is not None)
-
-
-def _rest_segments(
-    w: NDArray, t: NDArray, cfg: RestConfig, accel_b: ArrayLike | None
-) -> list[RestSegment]:
-    n = len(w)
-    mask = detect_rest(w, t, cfg, accel_b)
-    trim = window_samples(t, cfg.min_duration_s)
-    segs = []
-    for a, b in runs(mask):
-        # Windows that straddle the start of a slow motion still pass the thresholds: leave
-        # out one window next to motion (not at the ends of the log) when enough remains.
-        lo = a + trim if a > 0 else a
-        hi = b - trim if b < n else b
-        if hi - lo < trim:
-            lo, hi = a + (b - a) // 4, b - (b - a) // 4
-        bias = w[lo:hi].mean(axis=0)
-        segs.append(RestSegment(a, b, float(t[a]), float(t[b - 1]), tuple(bias.tolist()), lo, hi))
-    return segs
+        why = explain_no_rest(w, t, cfg, accel_b, truth_q_w_b, truth_noise)
+        if conflict:  # windows passed, and their stretches were found not to be rest
+            why = conflict.split(": ", 1)[1]
+        return BiasEstimate(np.zeros((n, 3)), (), "auto", False, why, conflict)
+    confirmed = all(any(e != "gyro floor" for e in s.evidence) for s in segs)
+    return BiasEstimate(_bias_at(segs, t, rule), tuple(segs), "auto", confirmed, "", conflict)
 
 
 def _bias_at(segs: list[RestSegment], t: NDArray, rule: str) -> NDArray[np.float64]:

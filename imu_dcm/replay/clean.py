@@ -32,11 +32,18 @@ from numpy.typing import ArrayLike, NDArray
 
 from imu_dcm.errors import GapWarning, ImuDcmWarning
 from imu_dcm.integrate import find_gaps, gap_message
-from imu_dcm.rates import FULL_SCALE_RAD_S, MAX_RATE_RAD_S, implausible_rates
+from imu_dcm.rates import FULL_SCALE_RAD_S, MAX_RATE_RAD_S, implausible_rates, truth_rate_ratio
 from imu_dcm.rates import deg_evidence as _deg_evidence  # noqa: F401 - replay.core's
 from imu_dcm.so3 import median, percentile, row_finite
 
-__all__ = ["FULL_SCALE_RAD_S", "MAX_RATE_RAD_S", "SPIKE_RATIO", "CleanedImu", "clean_imu"]
+__all__ = [
+    "FULL_SCALE_RAD_S",
+    "MAX_RATE_RAD_S",
+    "SPIKE_RATIO",
+    "CleanedImu",
+    "clean_imu",
+    "truth_rate_ratio",
+]
 
 #: An isolated sample this many times above the log's 99.9th percentile and its neighbours is
 #: a spike.

@@ -33,16 +33,20 @@ from imu_dcm.integrate import integrate_quat
 from imu_dcm.logio import LogData, read_log
 from imu_dcm.metrics import AttitudeError, attitude_error_deg, rms
 from imu_dcm.replay.bias import BIAS_RULE, BiasEstimate, RestConfig, estimate_bias
-from imu_dcm.replay.clean import CleanedImu, _deg_evidence, clean_imu
+from imu_dcm.replay.clean import CleanedImu, _deg_evidence, clean_imu, truth_rate_ratio
+from imu_dcm.replay.convention import ConventionChoice, check_convention, choose_convention, convert
 from imu_dcm.replay.mounting import Mounting, estimate_mounting, from_rotation
 from imu_dcm.replay.mounting_tf import MountingChoice, choose_mounting, tf_mounting
 from imu_dcm.replay.offset_hint import auto_offset_rms_deg
 from imu_dcm.replay.options import check_options
 from imu_dcm.replay.outcome import outcome
+from imu_dcm.replay.sampling import sampling_error_deg
 from imu_dcm.replay.settings import ReplaySettings, check_mounting
 from imu_dcm.replay.summary import ReplayResult, ReplaySummary
 from imu_dcm.replay.truth import (
+    JUMP_DEG,
     AlignedTruth,
+    TruthJump,
     align_truth,
     check_truth,
     choose_time,
@@ -50,7 +54,8 @@ from imu_dcm.replay.truth import (
 )
 from imu_dcm.replay.window import check_score_window, window_mask
 from imu_dcm.resample import slerp_truth
-from imu_dcm.so3 import median, quat_as_matrix, row_finite
+from imu_dcm.rest import truth_noise_rad
+from imu_dcm.so3 import median, quat_angle_rad, quat_as_matrix, row_finite, row_norm
 from imu_dcm.stamps import NS_PER_UNIT, timing_doubt
 
 __all__ = ["CleanedImu", "ReplayResult", "ReplaySummary", "clean_imu", "replay", "slerp_truth"]
@@ -76,6 +81,7 @@ def replay(
     mounting: str | ArrayLike = "auto",
     progress: Callable[[str, float], None] | None = None,
     score_window: str | tuple[float, float] = "all",
+    truth_convention: str = "auto",
 ) -> ReplayResult:
     """Replay a gyro log: integrate its rates and compare the attitude with its truth.
 
@@ -85,7 +91,7 @@ def replay(
         ROS 2 bag folder or log file (never modified), or a log already read (then the topic
         and frame choices are those it was read with).
     imu_topic, truth_topic, truth_frame, time, method, bias, gyro_units, init_q_w_b, prefilter,
-    prefilter_config, truth_offset_s, rest_config, mounting, score_window
+    prefilter_config, truth_offset_s, rest_config, mounting, score_window, truth_convention
         How to replay: each is a field of :class:`imu_dcm.replay.settings.ReplaySettings`
         (``init_q_w_b`` is its ``q_init``), documented there.
     progress : callable(stage, fraction), optional
@@ -124,6 +130,7 @@ def replay(
         rest_config,
         check_mounting(mounting),
         check_score_window(score_window),
+        check_convention(truth_convention),
     )
     notes: list[str] = []  # this replay's warnings, for the summary (no global state)
     result = _replay(path, settings, progress or (lambda stage, frac: None), notes)
@@ -169,7 +176,7 @@ class _Judged:
     ``truth_t_ns``: the stamps of the truth used, at the applied offset (or None).
     """
 
-    __slots__ = ("aligned", "truth_t_ns", "jumps", "mounting")
+    __slots__ = ("aligned", "truth_t_ns", "jumps", "mounting", "gaps")
 
     def __init__(
         self,
@@ -177,6 +184,7 @@ class _Judged:
         truth_t_ns: NDArray[np.int64] | None,
         jumps: tuple,
         mounting: MountingChoice,
+        gaps: tuple = (),
     ) -> None:
         self.aligned, self.truth_t_ns, self.jumps, self.mounting = (
             aligned,
@@ -184,6 +192,7 @@ class _Judged:
             jumps,
             mounting,
         )
+        self.gaps = gaps  # gyro gaps re-anchored (TruthJump records over each gap)
 
 
 def _read(path, s: ReplaySettings, report) -> LogData:
@@ -221,7 +230,7 @@ def _gyro(log: LogData, s: ReplaySettings, notes: list[str]) -> _Gyro:
         if base == "header" and len(np.unique(imu.log_t_ns[:1000])) > 1:
             hint = "; the log times differ: try --time log"
         raise LogError(f"Expected at least 2 valid gyro samples on {imu.topic}, got {n}{hint}")
-    doubt = timing_doubt(clean.t_ns)
+    doubt = timing_doubt(clean.t_ns, omega_b=clean.omega_b)
     if doubt is not None:
         clause, fix = doubt
         factor = NS_PER_UNIT["s"] // NS_PER_UNIT[fix] if fix else 0
@@ -268,6 +277,15 @@ def _judge_truth(
                 f"{imu.topic}: the rates look like deg/s: {evidence}; pass "
                 f"--gyro-units deg/s to convert",
             )
+    else:  # declared deg/s: a rad/s log converted reads 57.3x slower than its truth turns
+        ratio = truth_rate_ratio(g.omega, g.t_s, aligned.q_truth)
+        if ratio is not None and abs(ratio * (180 / np.pi) - 1) < 0.2:
+            _warn(
+                notes,
+                f"{imu.topic}: the rates look like rad/s: converted from deg/s, the gyro rate "
+                f"is 1/{1 / ratio:.1f} of the truth's rotation rate (1/57.3 for rad/s read as "
+                f"deg/s); drop --gyro-units deg/s",
+            )
     truth = aligned.truth
     if truth is None:
         given = None if isinstance(s.mounting, str) else _given(s.mounting)
@@ -306,7 +324,37 @@ def _judge_truth(
     choice = choose_mounting(s.mounting, est, declared, given, frames)
     if choice.line:
         _warn(notes, choice.line)
-    return _Judged(aligned, tt, jumps, choice)
+    gaps = _unseen_gaps(g, omega, aligned.q_truth, notes)
+    return _Judged(aligned, tt, jumps, choice, gaps)
+
+
+def _unseen_gaps(g: _Gyro, omega: NDArray, q_truth: NDArray, notes: list[str]) -> tuple:
+    """The gyro's gaps whose rotation it did not see: where the truth turns across the gap, or
+    the integrator's bridge of it (the mean of the rates at its ends times its length) would,
+    more than a truth jump's :data:`JUMP_DEG`. The estimate re-anchors after each."""
+    out = []
+    speed = row_norm(omega)
+    for t_gap, length in g.clean.gaps:
+        k = int(np.searchsorted(g.t_s, t_gap))
+        if k + 1 >= len(g.t_s) or not (row_finite(q_truth[k : k + 2]).all()):
+            continue
+        truth_deg = float(np.degrees(quat_angle_rad(q_truth[k], q_truth[k + 1])))
+        bridge_deg = float(np.degrees(0.5 * (speed[k] + speed[k + 1]) * length))
+        if max(truth_deg, bridge_deg) > JUMP_DEG:
+            out.append(TruthJump(float(g.t_s[k]), float(g.t_s[k + 1]), truth_deg, bridge_deg))
+    if out:
+        shown = "; ".join(
+            f"{j.t1_s - j.t0_s:.3f} s at {j.t0_s:.3f} s (the truth turns {j.truth_deg:.1f}°, "
+            f"the integrator would bridge {j.gyro_deg:.1f}°)"
+            for j in out[:5]
+        )
+        more = f" and {len(out) - 5} more" if len(out) > 5 else ""
+        _warn(
+            notes,
+            f"{len(out)} gap{'s' if len(out) > 1 else ''} the gyro did not see: {shown}{more}; "
+            f"the estimate re-anchors to the truth after each and the segments are scored",
+        )
+    return tuple(out)
 
 
 def _given(q) -> Mounting:
@@ -342,8 +390,44 @@ def _pick_truth(log: LogData, g: _Gyro, omega: NDArray) -> tuple[LogData, tuple[
     return dataclasses.replace(log, truth=rows[best][1]), described
 
 
-def _remove_bias(s: ReplaySettings, g: _Gyro) -> tuple[BiasEstimate, NDArray]:
-    bias_est = estimate_bias(g.omega, g.t_s, s.bias, s.rest_config, g.accel)
+def _convention(log: LogData, s: ReplaySettings, g: _Gyro, omega, notes):
+    """The truth read in the convention stated, or the one its body rates fit clearly."""
+    truth = log.truth
+    if truth is None:
+        return log, ConventionChoice()
+    tt = truth.t_ns if g.base == "header" else truth.log_t_ns
+    choice = choose_convention(g.t_ns, omega, tt, truth.q_w_b, s.truth_convention, truth.topic)
+    if choice.line:
+        _warn(notes, choice.line)
+    if choice.used == "as-is":
+        return log, choice
+    q = convert(truth.q_w_b, choice.used)
+    return dataclasses.replace(log, truth=dataclasses.replace(truth, q_w_b=q)), choice
+
+
+def _plain_convention(c: ConventionChoice) -> dict:
+    return {"used": c.used, "how": c.how, "fits": [list(f) for f in c.fits], "line": c.line}
+
+
+def _remove_bias(
+    s: ReplaySettings, g: _Gyro, judged: _Judged | None = None
+) -> tuple[BiasEstimate, NDArray]:
+    """The bias from rest (judged by the truth's motion too, when ``judged`` has a truth; its
+    jumps, the truth's own, judge nothing)."""
+    q, noise, r_t_g = None, 0.0, None
+    if judged is not None and judged.mounting.applied is not None:
+        r_t_g = quat_as_matrix(judged.mounting.applied.q_t_g)
+    if judged is not None and judged.aligned.truth is not None:
+        q = _scored_truth(judged.aligned.q_truth, g.t_s, judged.jumps)[0]
+        tt = (judged.truth_t_ns - g.t_ns[0]) * 1e-9
+        step_ok = np.ones(len(tt) - 1, dtype=bool)
+        for j in judged.jumps:
+            step_ok &= (tt[1:] < j.t0_s) | (tt[:-1] > j.t1_s)
+        noise = truth_noise_rad(judged.aligned.truth.q_w_b, step_ok)
+    bias_est = estimate_bias(
+        g.omega, g.t_s, s.bias, s.rest_config, g.accel, truth_q_w_b=q, truth_noise=noise,
+        r_t_g=r_t_g,
+    )  # fmt: skip
     return bias_est, g.omega - bias_est.bias_b
 
 
@@ -412,11 +496,17 @@ def _replay(path, s: ReplaySettings, report, notes: list[str]) -> ReplayResult:
     report("bias", 0.0)
     bias_est, omega = _remove_bias(s, g)
     log, candidates = _pick_truth(log, g, omega)
+    log, convention = _convention(log, s, g, omega, notes)
     judged = _judge_truth(log, s, g, omega, notes)
+    if judged.aligned.truth is not None and isinstance(s.bias, str):  # its motion judges rest
+        bias_est, omega = _remove_bias(s, g, judged)
+    if bias_est.conflict:
+        _warn(notes, bias_est.conflict)
     if judged.mounting.applied is not None:  # omega_T = R(q_t_g) omega_G, row by row
         omega = omega @ quat_as_matrix(judged.mounting.applied.q_t_g).T
     omega, pf_summary = _prefilter(s, omega, g.t_s)
-    q_truth, anchors = _scored_truth(judged.aligned.q_truth, g.t_s, judged.jumps)
+    breaks = tuple(sorted((*judged.jumps, *judged.gaps), key=lambda j: j.t0_s))
+    q_truth, anchors = _scored_truth(judged.aligned.q_truth, g.t_s, breaks)
     report("integrate", 0.0)
     q_est = _integrate(s, omega, g.t_s, q_truth, anchors, log.imu.topic)
     report("integrate", 1.0)
@@ -431,6 +521,17 @@ def _replay(path, s: ReplaySettings, report, notes: list[str]) -> ReplayResult:
     both = both if inside is None else both & inside
     auto_rms = auto_offset_rms_deg(judged.aligned, g.base, g.t_ns, q_est, anchors, both)
     summary = _summary(log, s, g, bias_est, judged, pf_summary, anchors, error, both)
+    unbiased = _score_without_bias(s, g, bias_est, judged, q_truth, anchors, log.imu.topic, inside)
+    end = anchors[1] if len(anchors) > 1 else len(g.t_s)
+    a0 = anchors[0]
+    sampling = sampling_error_deg(omega[a0:end], g.t_s[a0:end], q_est[a0:end], s.method)
+    summary = dataclasses.replace(
+        summary,
+        sampling_error_deg=sampling,
+        truth_candidates=candidates,
+        rms_error_no_bias_deg=unbiased,
+        truth_convention=_plain_convention(convention) if log.truth is not None else None,
+    )
     start = anchors[0]
     summary = dataclasses.replace(
         summary,
@@ -446,10 +547,43 @@ def _replay(path, s: ReplaySettings, report, notes: list[str]) -> ReplayResult:
     )  # fmt: skip
 
 
-def _segments(t_s: NDArray, anchors: list[int], error: AttitudeError, both) -> tuple:
+def _score_without_bias(s, g: _Gyro, bias_est, judged: _Judged, q_truth, anchors, topic, inside):
+    """The total RMS error with no bias removed, when a bias from rest was (None otherwise, or
+    with a pre-filter, whose cost a second run would double), over the same scored window
+    (``inside``: its mask, or None for all)."""
+    if not bias_est.segments or s.prefilter is not None or not row_finite(q_truth).any():
+        return None
+    omega = g.omega
+    if judged.mounting.applied is not None:
+        omega = omega @ quat_as_matrix(judged.mounting.applied.q_t_g).T
+    q_est = _integrate(s, omega, g.t_s, q_truth, anchors, topic)
+    error, both = _score(q_est, q_truth)
+    both = both if inside is None else both & inside
+    scored = error.heading_deg if _heading_only(q_truth) else error.total_deg
+    return float(rms(scored[both])) if both.any() else None
+
+
+#: A truth component this small is zero by construction (float32 rounding of a unit
+#: quaternion's components is ~6e-8).
+PLANAR_TOL = 1e-9
+
+
+def _heading_only(q_truth: NDArray) -> bool:
+    """The truth turns (its heading spans more than a truth jump's :data:`JUMP_DEG`) yet every
+    sample turns about the world's vertical only (x and y components zero): planar by
+    construction. A still, level truth is not: it is scored whole."""
+    q = q_truth[row_finite(q_truth)]
+    if not len(q) or float(np.max(np.abs(q[:, :2]))) > PLANAR_TOL:
+        return False
+    heading = np.unwrap(2.0 * np.arctan2(q[:, 2], q[:, 3]))
+    return float(np.degrees(np.ptp(heading))) > JUMP_DEG
+
+
+def _segments(t_s: NDArray, anchors: list[int], scored: NDArray, both) -> tuple:
+    """Each segment's times and RMS of ``scored`` (the total error, or the heading's)."""
     out = []
     for a, b in zip(anchors, [*anchors[1:], len(t_s)], strict=True):
-        e = error.total_deg[a:b][both[a:b]]
+        e = scored[a:b][both[a:b]]
         out.append(
             {
                 "start_s": float(t_s[a]),
@@ -472,6 +606,10 @@ def _summary(log, s, g: _Gyro, bias_est, judged: _Judged, pf_summary, anchors, e
     def stat_(a: NDArray, f) -> float | None:
         return float(f(a[both])) if both.any() else None
 
+    # a truth that carries only heading (2D odometry, a planar pose) is scored on heading only
+    planar = _heading_only(judged.aligned.q_truth)
+    total = error.heading_deg if planar else error.total_deg
+
     mount = judged.mounting
     return ReplaySummary(
         path=str(log.path),
@@ -489,10 +627,7 @@ def _summary(log, s, g: _Gyro, bias_est, judged: _Judged, pf_summary, anchors, e
         gyro_units=s.gyro_units,
         bias_mode=bias_est.mode,
         bias_rad_s=tuple(float(x) for x in bias_est.bias_b[start:].mean(axis=0)),
-        bias_segments=tuple(
-            {"start_s": x.start_s, "end_s": x.end_s, "bias_rad_s": [float(v) for v in x.bias_rad_s]}
-            for x in bias_est.segments
-        ),
+        bias_segments=tuple(x.as_dict() for x in bias_est.segments),
         prefilter=s.prefilter,
         prefilter_summary=pf_summary,
         start_time_s=float(t_s[start]),
@@ -500,10 +635,10 @@ def _summary(log, s, g: _Gyro, bias_est, judged: _Judged, pf_summary, anchors, e
         truth_samples_used=int(both.sum()),
         truth_offset_s=aligned.offset_s,
         truth_check=dataclasses.asdict(aligned.check) if aligned.check is not None else None,
-        rms_error_deg=stat_(error.total_deg, rms),
-        max_error_deg=stat_(error.total_deg, np.max),
-        rms_inclination_deg=stat_(error.inclination_deg, rms),
-        max_inclination_deg=stat_(error.inclination_deg, np.max),
+        rms_error_deg=stat_(total, rms),
+        max_error_deg=stat_(total, np.max),
+        rms_inclination_deg=None if planar else stat_(error.inclination_deg, rms),
+        max_inclination_deg=None if planar else stat_(error.inclination_deg, np.max),
         rms_heading_deg=stat_(error.heading_deg, rms),
         max_heading_deg=stat_(error.heading_deg, np.max),
         dropped_nonfinite=clean.dropped_nonfinite,
@@ -520,11 +655,14 @@ def _summary(log, s, g: _Gyro, bias_est, judged: _Judged, pf_summary, anchors, e
         bias_rule=BIAS_RULE if bias_est.mode == "auto" else "",
         rest_confirmed=bias_est.confirmed,
         no_rest=bias_est.no_rest,
+        rest_conflict=bias_est.conflict,
         mounting=dataclasses.asdict(mount.reported) if mount.reported is not None else None,
         mounting_applied=mount.applied is not None,
         mounting_used=mount.used,
         mounting_tf=mount.tf,
         truth_jumps=tuple(dataclasses.asdict(j) for j in judged.jumps),
-        scored_segments=_segments(t_s, anchors, error, both) if judged.jumps else (),
+        scored_segments=_segments(t_s, anchors, total, both) if judged.jumps or judged.gaps else (),
+        gap_reanchors=tuple(dataclasses.asdict(j) for j in judged.gaps),
+        scored_on="heading" if planar else "attitude",
         truth_estimate_of=getattr(truth, "estimate_of", "") if truth is not None else "",
     )

@@ -159,6 +159,7 @@ def add_replay_options(g) -> None:
         "the rates, applied when determined and above 3°; default), none (reported only), or "
         "x,y,z,w",
     )
+    _add_truth_convention(g)
     g.add_argument(
         "--gyro-units",
         choices=GYRO_UNITS,
@@ -187,6 +188,17 @@ def add_replay_options(g) -> None:
         type=float,
         metavar="RAD_S2",
         help="pre-filter: angular-acceleration scale, rad/s² (default: fitted)",
+    )
+
+
+def _add_truth_convention(g) -> None:
+    g.add_argument(
+        "--truth-convention",
+        choices=("auto", "as-is", "conjugate", "w-first", "w-last"),
+        default="auto",
+        help="how the truth's quaternions are to be read: auto (as read, unless its body rates "
+        "fit the gyro clearly only in another convention; default), as-is, conjugate (world "
+        "to body), w-first ([w,x,y,z] read as [x,y,z,w]), w-last (the reverse)",
     )
 
 
@@ -228,4 +240,5 @@ def replay_keywords(args) -> dict:
         "truth_offset_s": offset,
         "mounting": mounting,
         "score_window": parse_score_window(args.score_window),
+        "truth_convention": args.truth_convention,
     }

@@ -60,6 +60,10 @@ class ReplaySettings:
     score_window : "all", "declared" or (t0_s, t1_s)
         The samples the error is scored on (:mod:`imu_dcm.replay.window`): all (default), the
         intervals the log's metadata declares, or seconds from the log's start.
+    truth_convention : str
+        How the truth's quaternions are read (:mod:`imu_dcm.replay.convention`): ``"auto"``
+        (as read unless the fit determines another clearly), or one of ``"as-is"``,
+        ``"conjugate"``, ``"w-first"``, ``"w-last"``, applied as stated.
     """
 
     imu_topic: str | None = None
@@ -76,6 +80,7 @@ class ReplaySettings:
     rest_config: RestConfig | None = None
     mounting: str | NDArray[np.float64] = "auto"
     score_window: str | tuple[float, float] = "all"
+    truth_convention: str = "auto"
 
 
 def check_mounting(mounting: str | ArrayLike) -> str | NDArray[np.float64]:

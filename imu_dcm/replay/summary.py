@@ -12,6 +12,7 @@ from numpy.typing import NDArray
 
 from imu_dcm.metrics import AttitudeError
 from imu_dcm.replay.bias import BiasEstimate
+from imu_dcm.replay.sampling import TOO_SLOW_SHARE
 
 __all__ = ["ReplayResult", "ReplaySummary", "format_summary"]
 
@@ -84,6 +85,12 @@ class ReplaySummary:
     bias_rule: str = ""
     rest_confirmed: bool = False
     no_rest: str = ""
+    rest_conflict: str = ""
+    rms_error_no_bias_deg: float | None = None
+    truth_convention: dict | None = None
+    gap_reanchors: tuple[dict, ...] = ()
+    sampling_error_deg: float | None = None
+    scored_on: str = "attitude"
     mounting: dict | None = None
     mounting_applied: bool = False
     mounting_used: str = ""
@@ -105,6 +112,43 @@ class ReplaySummary:
         d = dataclasses.asdict(self)
         d["gaps"] = [{"t_s": a, "length_s": b} for a, b in self.gaps]
         return _plain(d)
+
+
+def _rest_evidence(s: ReplaySummary) -> str:
+    """Which signals judged the rests, e.g. "by gyro floor, accelerometer, truth (part)"."""
+    seen: list[str] = []
+    for seg in s.bias_segments:
+        for e in seg.get("evidence", ()):
+            if e not in seen:
+                seen.append(e)
+    if s.rest_confirmed:
+        return "still by " + ", ".join(seen)
+    return "unconfirmed: gyro floor alone, mean rate under 2 °/s"
+
+
+def _sampling_line(s: ReplaySummary) -> list[str]:
+    """The method's own error when it is half the score or more: the rate is too low."""
+    e, r = s.sampling_error_deg, s.rms_error_deg
+    if e is None or r is None or not r > 0 or e < TOO_SLOW_SHARE * r:
+        return []
+    line = (
+        f"sampling   {s.rate_hz:.4g} Hz is too slow for this motion: the method's own error "
+        f"is about {_fmt(e)} RMS (Richardson, from the rates at half the rate), "
+        f"{100 * e / r:.0f} % of the score"
+    )
+    return [line]
+
+
+def _bias_choice_line(s: ReplaySummary) -> list[str]:
+    """The score without the bias, when removing it changes the score by more than 2x."""
+    a, b = s.rms_error_deg, s.rms_error_no_bias_deg
+    if a is None or b is None or not (a > 0 and b > 0) or max(a / b, b / a) <= 2.0:
+        return []
+    line = (
+        f"error      without the bias from rest: total RMS {_fmt(b)} (the bias choice changes "
+        f"the score {max(a / b, b / a):.1f}x: --bias none scores without it)"
+    )
+    return [line]
 
 
 def _plain(x: Any) -> Any:
@@ -298,11 +342,7 @@ def format_summary(s: ReplaySummary) -> str:
         lines.append(f"bias       auto: no rest found: {s.no_rest}; no bias removed")
     elif s.bias_mode == "auto":
         nseg = len(s.bias_segments)
-        how = (
-            "still by the accelerometer"
-            if s.rest_confirmed
-            else "unconfirmed: no accelerometer, mean rate under 2 °/s"
-        )
+        how = _rest_evidence(s)
         lines.append(
             f"bias       auto: {nseg} rest segment{'s' if nseg != 1 else ''} ({how}; "
             f"{s.bias_rule}), mean {bias} = ({bdeg[0]:+.3f}, {bdeg[1]:+.3f}, {bdeg[2]:+.3f}) °/s"
@@ -313,13 +353,20 @@ def format_summary(s: ReplaySummary) -> str:
     lines.append(f"method     {s.method}{pf}; estimate from t = {s.start_time_s:.3f} s")
     if s.score_window != "all":
         lines.append(f"scored     {s.score_window} ({s.truth_samples_used} samples)")
-    if s.rms_error_deg is not None:
+    if s.rms_error_deg is not None and s.scored_on == "heading":
+        lines.append(
+            f"error      heading RMS {_fmt(s.rms_error_deg)}, max {_fmt(s.max_error_deg)}: the "
+            f"truth carries heading only (roll and pitch zero in every sample), scored on it"
+        )
+    elif s.rms_error_deg is not None:
         lines.append(
             f"error      total RMS {_fmt(s.rms_error_deg)}, max {_fmt(s.max_error_deg)}; "
             f"inclination RMS {_fmt(s.rms_inclination_deg)}, max "
             f"{_fmt(s.max_inclination_deg)}; heading RMS {_fmt(s.rms_heading_deg)}, "
             f"max {_fmt(s.max_heading_deg)}"
         )
+    lines.extend(_bias_choice_line(s))
+    lines.extend(_sampling_line(s))
     from imu_dcm.replay.outcome import outcome_lines
 
     lines += outcome_lines(s.final_q_w_b, s.rotation_deg, s.turned_deg, s.written)

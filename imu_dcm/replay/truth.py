@@ -19,6 +19,7 @@ whether the truth is the IMU's attitude at all.
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Callable
 from dataclasses import dataclass
 
@@ -288,10 +289,15 @@ def check_truth(
     g_rms0 = float(np.sqrt(np.mean(g0**2)))
     if np.std(g0) < STILL_RAD_S or np.std(h0) < STILL_RAD_S:
         # A norm that hardly varies (a still body, a steady spin) has no shape to correlate:
-        # only a still truth under a clearly turning gyro is evidence against it.
-        still_truth = float(np.mean(h0)) < STILL_RAD_S
-        turning = float(np.mean(g0)) > 10 * STILL_RAD_S
-        return TruthCheck(True, not (still_truth and turning), None, None, resid0, g_rms0)
+        # only one still under the other clearly turning is evidence against it (either way:
+        # an all-zero gyro under a turning truth is no gyro of that body)
+        still_truth, still_gyro = float(np.mean(h0)) < STILL_RAD_S, float(np.mean(g0)) < STILL_RAD_S
+        turning_g, turning_t = (
+            float(np.mean(g0)) > 10 * STILL_RAD_S,
+            float(np.mean(h0)) > 10 * STILL_RAD_S,
+        )
+        against = (still_truth and turning_g) or (still_gyro and turning_t)
+        return TruthCheck(True, not against, None, None, resid0, g_rms0)
     span_s = (grid.edges_ns[-1] - grid.edges_ns[0]) * 1e-9
     lags = int(min(MAX_SHIFT_S, span_s / 4) / dt)
     corr, count = lagged_correlation(g, h, valid, lags)
@@ -399,6 +405,17 @@ def align_truth(
         q_truth = slerp_truth(tt, truth.q_w_b, t_ns)
     frame = truth.child_frame_id or truth.frame_id
     what = f"truth {truth.topic} ({truth.type}{f', frame {frame}' if frame else ''})"
+    if not check.follows:
+        part = _following_part(t_ns, omega_b, tt, truth)
+        if part is not None:
+            kept, line = part
+            warn(f"{what} does not follow the gyro as a whole ({check.describe()}); {line}")
+            q_truth = slerp_truth(tt[kept], truth.q_w_b[kept], t_ns)
+            sub = dataclasses.replace(
+                truth, t_ns=truth.t_ns[kept], log_t_ns=truth.log_t_ns[kept],
+                q_w_b=truth.q_w_b[kept],
+            )  # fmt: skip
+            return AlignedTruth(q_truth, sub, check, applied, None)
     if not check.follows and truth.auto:
         warn(
             f"{what} does not follow the gyro ({check.describe()}): replaying without truth; "
@@ -408,6 +425,51 @@ def align_truth(
     if not check.follows:
         warn(f"{what} does not follow the gyro ({check.describe()}); scored anyway, as asked")
     return AlignedTruth(q_truth, truth, check, applied, None)
+
+
+def _following_part(t_ns, omega_b, tt, truth):
+    """The truth samples of the stretches between its jumps that follow the gyro, and one line
+    naming them and the others with their times; None when no stretch, or every one, does.
+
+    A stretch follows when :func:`check_truth` correlates its rates with the gyro's (enough
+    overlap and motion) and finds it follows: a truth good for a while (until a crash flips the
+    pose) is scored there. A stretch too still to correlate shows nothing and is left out.
+    """
+    jumps = find_jumps(t_ns, omega_b, tt, truth.q_w_b)
+    if not jumps:
+        return None
+    t0 = int(t_ns[0])
+    cuts = [(-np.inf, jumps[0].t0_s)]
+    cuts += [(a.t1_s, b.t0_s) for a, b in zip(jumps[:-1], jumps[1:], strict=True)]
+    cuts.append((jumps[-1].t1_s, np.inf))
+    te = (tt - t0) * 1e-9
+    kept = np.zeros(len(tt), dtype=bool)
+    good: list[str] = []
+    bad: list[tuple[float, float, int]] = []
+    last_good = False
+    for a, b in cuts:
+        sel = (te >= a) & (te <= b)
+        lo, hi = max(a, 0.0), min(b, (t_ns[-1] - t0) * 1e-9)
+        g = (t_ns >= t0 + a * 1e9) & (t_ns <= t0 + b * 1e9)
+        chk = check_truth(t_ns[g], omega_b[g], tt[sel], truth.q_w_b[sel]) if g.sum() > 3 else None
+        if chk is not None and chk.correlation is not None and chk.follows:
+            kept |= sel
+            good.append(f"{lo:.2f}-{hi:.2f} s ({chk.describe()})")
+            last_good = True
+        elif hi > lo:
+            if bad and not last_good:  # stretches apart only by a jump: one span
+                bad[-1] = (bad[-1][0], hi, bad[-1][2] + 1)
+            else:
+                bad.append((lo, hi, 1))
+            last_good = False
+    if not good or not bad:
+        return None
+    shown = ", ".join(f"{a:.2f}-{b:.2f} s ({n} stretch{'es' if n > 1 else ''})" for a, b, n in bad)
+    line = (
+        f"between its {len(jumps)} jumps it follows in {'; '.join(good)}: scored there only; "
+        f"not in {shown}"
+    )
+    return kept, line
 
 
 #: A truth step that turns this much more than the gyro over the same interval is a jump, deg.
