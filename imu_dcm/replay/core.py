@@ -147,6 +147,19 @@ def _record(obj) -> dict:
     return dict(vars(obj))
 
 
+def _rest_conflict(log: LogData, notes: list[str], msg: str) -> LogData:
+    """Evidence on rest that conflicts: a warning against an independent truth; against the
+    vehicle's own estimate (which integrates this gyro, so it turns with its bias) one of the
+    log's notes, since the conflict is then expected and says nothing about the log's health."""
+    who = log.truth.estimate_of if log.truth is not None else ""
+    if who:
+        return dataclasses.replace(
+            log, notes=(*log.notes, f"{msg} (the truth is {who}'s own estimate)")
+        )
+    _warn(notes, msg)
+    return log
+
+
 def _warn(notes: list[str], msg: str) -> None:
     notes.append(msg)
     warnings.warn(msg, ImuDcmWarning, stacklevel=3)
@@ -501,7 +514,7 @@ def _replay(path, s: ReplaySettings, report, notes: list[str]) -> ReplayResult:
     if judged.aligned.truth is not None and isinstance(s.bias, str):  # its motion judges rest
         bias_est, omega = _remove_bias(s, g, judged)
     if bias_est.conflict:
-        _warn(notes, bias_est.conflict)
+        log = _rest_conflict(log, notes, bias_est.conflict)
     if judged.mounting.applied is not None:  # omega_T = R(q_t_g) omega_G, row by row
         omega = omega @ quat_as_matrix(judged.mounting.applied.q_t_g).T
     omega, pf_summary = _prefilter(s, omega, g.t_s)
