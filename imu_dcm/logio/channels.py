@@ -323,6 +323,11 @@ def _merge(rows: list[tuple[NDArray[np.int64], list[NDArray]]]) -> list[NDArray]
     return out
 
 
+#: Rows whose norms judge a gyro candidate (a long log is judged on every k-th row: the
+#: quartiles of 131 072 norms are within ~0.5 % of the whole log's).
+_DOUBT_ROWS = 1 << 17
+
+
 def gyro_doubt(got: Collected, conns: list[tuple[Conn, str]]) -> str | None:
     """Why the decoded samples of a gyro candidate are no gyro's, or None when they may be.
 
@@ -341,7 +346,8 @@ def gyro_doubt(got: Collected, conns: list[tuple[Conn, str]]) -> str | None:
     if len(flagged) and np.all(flagged == True):  # noqa: E712 (a NaN-filled join is not True)
         return "its messages mark the angular velocity absent (angular_velocity_covariance[0] = -1)"
     w = omegas[0] if len(omegas) == 1 else np.concatenate([np.zeros((0, 3)), *omegas])
-    norm = row_norm(w)[row_finite(w)]  # (norms of the rows, not a copy of them)
+    w = w[:: len(w) // _DOUBT_ROWS + 1]  # quartiles of norms: every k-th row tells them
+    norm = row_norm(w)[row_finite(w)]
     if len(norm) < 10:
         return None
     med = median(norm)

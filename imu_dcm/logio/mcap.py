@@ -428,20 +428,21 @@ class McapSource(RosSource):
         start, end = bases[chunk], bases[chunk] + sizes[chunk]
         if not ((offs >= start) & (offs + _MSG_HEADER <= end)).all():
             return False
-        length_u = gather(buf, offs + 1, "u8")
-        ok = (
-            (buf[offs] == _MESSAGE)
-            & (length_u >= 22)
-            & (length_u <= (end - offs - 9).astype(np.uint64))
-        )
+        # opcode, length, channel id, sequence, log time: one run of bytes per record
+        head = gather(buf, offs, "u1", 23).reshape(len(offs), 23)
+        length_u = head[:, 1:9].view("<u8")[:, 0]
+        room = (end - offs - 9).astype(np.uint64)
+        ok = (head[:, 0] == _MESSAGE) & (length_u >= 22) & (length_u <= room)
         if not ok.all():
             return False
         length = length_u.astype(np.int64)
         ends = offs + 9 + length
         ok = ends <= np.minimum(np.concatenate([offs[1:], [end[-1]]]), end)
-        ok &= gather(buf, offs + 9, "u2") == icid
+        ok &= head[:, 9:11].view("<u2")[:, 0] == icid
         if not ok.all() or not all(c in self.channels for j in group for c in j.key[4]):
             return False
+        lt = head[:, 15:23].view("<u8")[:, 0].astype(np.int64)
+        del head
         self._n_kept = 0
         # schema and channel records between the indexed messages: walked chunk by chunk
         gap_a = np.sort(np.concatenate([ends, bases]))
@@ -453,7 +454,6 @@ class McapSource(RosSource):
             self._walk(group[g].out, a - base, b - base, pos, seq, span=(t0, t1))
         seqs = np.array([j.key[0] for j in group], np.int64)
         order = (seqs[chunk] << 32) + (offs - start)
-        lt = gather(buf, offs + 15, "u8").astype(np.int64)
         self._keep_spans(buf, offs, length, icid, lt, order, int(group[0].key[1]))
         return True
 
