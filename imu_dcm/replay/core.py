@@ -208,7 +208,8 @@ def _gyro(log: LogData, s: ReplaySettings, notes: list[str]) -> _Gyro:
         _warn(notes, f"time: using log time, not header stamps: {why}")
     imu_t = imu.t_ns if base == "header" else imu.log_t_ns
     scale = DEG if s.gyro_units == "deg/s" else 1.0
-    clean = clean_imu(imu_t, np.asarray(imu.omega_b, dtype=float) * scale, imu.topic)
+    omega = np.asarray(imu.omega_b, dtype=float)
+    clean = clean_imu(imu_t, omega * scale if scale != 1.0 else omega, imu.topic)  # no copy
     notes.extend(clean.messages)
     n = len(clean.t_ns)
     if n < 2:
@@ -355,7 +356,7 @@ def _prefilter(s: ReplaySettings, omega: NDArray, t_s: NDArray):
 
 def _scored_truth(q_truth: NDArray, t_s: NDArray, jumps) -> tuple[NDArray, list[int]]:
     """Truth usable for scoring (NaN across each jump) and the anchor samples of the segments."""
-    q = q_truth.copy()
+    q = q_truth.copy() if jumps else q_truth  # a copy only where jumps are blanked out
     has = row_finite(q)
     anchors = [int(np.flatnonzero(has)[0])] if has.any() else [0]
     for j in jumps:
