@@ -1,12 +1,15 @@
 """MCAP, read our own way: only the chunks that hold kept channels, each bounded and checked.
 
 With a summary (the normal case) the chunk indexes say which channels every chunk holds, so
-chunks of other channels (a camera) are never read. Without one (a truncated file) the file is
-walked forward record by record, one chunk in memory at a time; a chunk is skipped unread when
-the message indexes behind it show no kept channel. Each chunk is refused when its declared
-size is beyond :func:`size_bound`, and never decompresses past its declared size. A damaged
-chunk costs only itself: it becomes a :class:`Damage` (file offset, time range, messages lost)
-and reading goes on with the next chunk (from the index, or a scan for the next valid chunk).
+chunks of other channels (a camera) are never read; the others are read in batches
+(:mod:`imu_dcm.logio.chunks`: decompressed on worker threads into one buffer) and the messages
+of a whole batch located and checked at once from their message indexes. Without one (a
+truncated file) the file is walked forward record by record, one chunk in memory at a time; a
+chunk is skipped unread when the message indexes behind it show no kept channel. Each chunk is
+refused when its declared size is beyond :func:`size_bound`, and never decompresses past its
+declared size. A damaged chunk costs only itself: it becomes a :class:`Damage` (file offset,
+time range, messages lost) and reading goes on with the next chunk (from the index, or a scan
+for the next valid chunk).
 """
 
 from __future__ import annotations
