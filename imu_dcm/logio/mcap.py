@@ -22,6 +22,7 @@ from pathlib import Path
 import numpy as np
 
 from imu_dcm.errors import LogError
+from imu_dcm.logio.cdr import gather
 from imu_dcm.logio.chunks import Decompressor, Job, batches
 from imu_dcm.logio.ros import RosSource
 from imu_dcm.logio.types import Collected, Conn, Damage, Payloads, Sink
@@ -52,9 +53,12 @@ def size_bound(compressed: int) -> int:
 def compact(d: np.ndarray, start: np.ndarray, length: np.ndarray) -> tuple:
     """Copy the byte ranges ``d[start:start+length]`` into one buffer, in order; returns
     (buffer, new starts, lengths)."""
+    out_start = np.concatenate([[0], np.cumsum(length)[:-1]]).astype(np.int64)
+    if len(length) and length.min() == length.max() > 0:  # one layout: one run per message
+        buf = gather(d, start, "u1", int(length[0])).reshape(-1)
+        return buf, out_start, length.astype(np.int64)
     mv = memoryview(d)
     buf = b"".join([mv[s : s + n] for s, n in zip(start.tolist(), length.tolist(), strict=False)])
-    out_start = np.concatenate([[0], np.cumsum(length)[:-1]]).astype(np.int64)
     return np.frombuffer(buf, np.uint8), out_start, length.astype(np.int64)
 
 
@@ -415,8 +419,6 @@ class McapSource(RosSource):
         """The batch's messages from their indexes, checked together (opcode, length, channel,
         no overlap, inside their chunk) with one numpy pass per field; False, with nothing
         kept, when any record does not check out."""
-        from imu_dcm.logio.cdr import gather
-
         sizes = np.array([j.usize for j in group], np.int64)
         bases = np.array([j.start for j in group], np.int64)  # damaged chunks leave holes
         offs, icid = [], []
@@ -474,8 +476,6 @@ class McapSource(RosSource):
         overlap): a damaged message record costs only itself. Without, the chunk is walked
         record by record, and a damaged record costs the rest of the chunk.
         """
-        from imu_dcm.logio.cdr import gather
-
         d = np.frombuffer(data, np.uint8)
         size = len(data)
         if entries:
