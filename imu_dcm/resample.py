@@ -18,6 +18,9 @@ __all__ = ["TRUTH_BRIDGE_STEPS", "slerp_truth"]
 
 #: Gaps between truth samples longer than this many median truth steps are not bridged.
 TRUTH_BRIDGE_STEPS = 2.0
+#: Query stamps resampled at a time: each query's result depends on it alone, so blocks give
+#: the whole-log result exactly, with ~100 MB less of temporaries per million queries.
+BLOCK = 1 << 17
 
 
 def slerp_truth(truth_t_ns: ArrayLike, q_w_b: ArrayLike, t_ns: ArrayLike) -> NDArray[np.float64]:
@@ -57,13 +60,21 @@ def slerp_truth(truth_t_ns: ArrayLike, q_w_b: ArrayLike, t_ns: ArrayLike) -> NDA
     out = np.full((len(t), 4), np.nan)
     if len(tt) == 0:
         return out
+    bridged = None
+    if len(tt) > 1:  # each truth step is bridged or not, once; a query takes its step's verdict
+        bridged = steps <= TRUTH_BRIDGE_STEPS * median(steps) * (1 + 1e-6)
+    for a in range(0, len(t), BLOCK):  # the temporaries of one block, not of the whole log
+        _slerp_block(tt, q, steps, bridged, t[a : a + BLOCK], out[a : a + BLOCK])
+    return out
+
+
+def _slerp_block(tt, q, steps, bridged, t, out) -> None:
+    """:func:`slerp_truth` for the queries ``t``, written into ``out`` (rows of ``t``)."""
     j = np.searchsorted(tt, t, side="right") - 1  # tt[j] <= t < tt[j+1]
     exact = (j >= 0) & (tt[np.clip(j, 0, None)] == t)
     out[exact] = q[j[exact]]
-    if len(tt) < 2:
-        return out
-    # each truth step is bridged or not, once; a query inside takes its step's verdict
-    bridged = steps <= TRUTH_BRIDGE_STEPS * median(steps) * (1 + 1e-6)
+    if bridged is None:
+        return
     inner = ~exact & (j >= 0) & (j < len(tt) - 1)
     inner &= bridged[np.clip(j, 0, len(tt) - 2)]
     idx = np.flatnonzero(inner)
@@ -73,4 +84,3 @@ def slerp_truth(truth_t_ns: ArrayLike, q_w_b: ArrayLike, t_ns: ArrayLike) -> NDA
     rel = quat_multiply(quat_conjugate(q0), q[jj + 1])
     rel = np.where(rel[:, 3:4] < 0, -rel, rel)  # shortest arc
     out[idx] = quat_multiply(q0, exp_quat(u[:, None] * log_quat(rel)))
-    return out

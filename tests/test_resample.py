@@ -51,3 +51,21 @@ def test_slerp_truth_halfway_to_90_deg_about_z_is_45_deg_about_z():
     want = Rotation.from_euler("z", 45, degrees=True).as_quat()
     # a log, an exp and one product of unit quaternions: a few ulps of 1 each (2e-16)
     np.testing.assert_allclose(out[0], want, rtol=0, atol=2e-15)
+
+
+def test_slerp_truth_in_blocks_equals_one_block(monkeypatch):
+    """Queries resampled block by block (7 at a time, across a gap and both ends) give the
+    one-block result bit for bit: each query depends on its own stamp only."""
+    import imu_dcm.resample as resample
+
+    rng = np.random.default_rng(5)
+    tt = np.cumsum(rng.integers(9_000_000, 11_000_000, 300)).astype(np.int64)
+    tt[150:] += 500_000_000  # a gap that is never bridged
+    q = Rotation.random(300, random_state=6).as_quat()
+    t = np.sort(rng.integers(tt[0] - 10**8, tt[-1] + 10**8, 1000)).astype(np.int64)
+    t = np.sort(np.concatenate([t, tt[::30]]))  # some queries exactly on truth samples
+    whole = slerp_truth(tt, q, t)
+    monkeypatch.setattr(resample, "BLOCK", 7)
+    blocks = slerp_truth(tt, q, t)
+    assert np.isnan(whole).any() and np.isfinite(whole).any()
+    np.testing.assert_array_equal(blocks, whole)

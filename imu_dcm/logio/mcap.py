@@ -1,12 +1,15 @@
 """MCAP, read our own way: only the chunks that hold kept channels, each bounded and checked.
 
 With a summary (the normal case) the chunk indexes say which channels every chunk holds, so
-chunks of other channels (a camera) are never read. Without one (a truncated file) the file is
-walked forward record by record, one chunk in memory at a time; a chunk is skipped unread when
-the message indexes behind it show no kept channel. Each chunk is refused when its declared
-size is beyond :func:`size_bound`, and never decompresses past its declared size. A damaged
-chunk costs only itself: it becomes a :class:`Damage` (file offset, time range, messages lost)
-and reading goes on with the next chunk (from the index, or a scan for the next valid chunk).
+chunks of other channels (a camera) are never read; the others are read in batches
+(:mod:`imu_dcm.logio.chunks`: decompressed on worker threads into one buffer) and the messages
+of a whole batch located and checked at once from their message indexes. Without one (a
+truncated file) the file is walked forward record by record, one chunk in memory at a time; a
+chunk is skipped unread when the message indexes behind it show no kept channel. Each chunk is
+refused when its declared size is beyond :func:`size_bound`, and never decompresses past its
+declared size. A damaged chunk costs only itself: it becomes a :class:`Damage` (file offset,
+time range, messages lost) and reading goes on with the next chunk (from the index, or a scan
+for the next valid chunk).
 """
 
 from __future__ import annotations
@@ -19,6 +22,8 @@ from pathlib import Path
 import numpy as np
 
 from imu_dcm.errors import LogError
+from imu_dcm.logio.cdr import gather
+from imu_dcm.logio.chunks import Decompressor, Job, batches
 from imu_dcm.logio.ros import RosSource
 from imu_dcm.logio.types import Collected, Conn, Damage, Payloads, Sink
 
@@ -48,9 +53,12 @@ def size_bound(compressed: int) -> int:
 def compact(d: np.ndarray, start: np.ndarray, length: np.ndarray) -> tuple:
     """Copy the byte ranges ``d[start:start+length]`` into one buffer, in order; returns
     (buffer, new starts, lengths)."""
+    out_start = np.concatenate([[0], np.cumsum(length)[:-1]]).astype(np.int64)
+    if len(length) and length.min() == length.max() > 0:  # one layout: one run per message
+        buf = gather(d, start, "u1", int(length[0])).reshape(-1)
+        return buf, out_start, length.astype(np.int64)
     mv = memoryview(d)
     buf = b"".join([mv[s : s + n] for s, n in zip(start.tolist(), length.tolist(), strict=False)])
-    out_start = np.concatenate([[0], np.cumsum(length)[:-1]]).astype(np.int64)
     return np.frombuffer(buf, np.uint8), out_start, length.astype(np.int64)
 
 
@@ -95,6 +103,37 @@ def decompress(compression: str, data: bytes, size: int) -> bytes:
             f"not its declared {size}"
         )
     return out
+
+
+def decompress_into(compression: str, data: bytes, out: memoryview) -> str | None:
+    """Decompress a chunk into ``out``, filling it exactly; returns why not (one line) or None."""
+    size = len(out)
+    try:
+        if compression == "zstd":
+            import zstandard
+
+            declared = zstandard.frame_content_size(data) if len(data) >= 4 else -2
+            if declared not in (-1, size):
+                return f"its zstd frame declares {declared} bytes, the chunk {size}"
+            try:
+                with zstandard.ZstdDecompressor().stream_reader(data) as r:
+                    n = 0
+                    while n < size:
+                        k = r.readinto(out[n:])
+                        if not k:
+                            break
+                        n += k
+                    more = n == size and bool(r.read(1))
+            except zstandard.ZstdError as exc:
+                return f"it does not decompress ({str(exc)[:60]})"
+            if n != size or more:
+                return f"it decompresses to {n}{'+' if more else ''} bytes, not its declared {size}"
+            return None
+        got = decompress(compression, data, size)
+    except _Bad as exc:
+        return str(exc)
+    out[:] = got
+    return None
 
 
 def _schema(buf, pos: int, out: dict) -> None:
@@ -271,10 +310,10 @@ class McapSource(RosSource):
         return sorted(chunks)
 
     def _read_indexed(self, f, index: list[tuple]) -> None:
+        """Read the chunks holding kept channels, in batches decompressed on worker threads."""
         wanted = {c for c in self.channels if self._is_kept(c)}
+        jobs = []
         for k, (start, clen, t0, t1, offsets, _ilen, _c, _cs, _us) in enumerate(index):
-            if self.progress is not None:
-                self.progress(k / max(len(index), 1))
             if offsets and not (wanted & offsets.keys()):
                 continue
             entries = self._message_index(f, offsets, set(offsets))
@@ -285,14 +324,53 @@ class McapSource(RosSource):
                 op, length = _REC.unpack(f.read(9))
                 if op != _CHUNK or 9 + length != clen:
                     raise _Bad("its index does not point at a chunk record")
-                self._chunk(f, start, length, k, entries)
+                at, n, usize, comp, crc = self._chunk_head(f, start, length)
             except _Bad as exc:
-                lost = (
-                    sum(len(e[0]) for c, e in entries.items() if c in wanted) if (entries) else None
-                )
-                self.damage.append(
-                    Damage(start, f"chunk {k + 1} of {len(index)} is damaged: {exc}", t0, t1, lost)
-                )
+                self._lost_chunk(k, len(index), start, t0, t1, entries, wanted, str(exc))
+                continue
+            jobs.append(Job((k, start, t0, t1, entries), at, n, usize, comp, crc))
+        done = 0
+        for buf, group in Decompressor(f.fileno(), decompress_into).run(batches(jobs)):
+            if self.progress is not None:
+                self.progress(done / max(len(jobs), 1))
+            done += len(group)
+            good = []
+            for j in group:
+                k, start, t0, t1, entries = j.key
+                if j.out is None:
+                    self._lost_chunk(k, len(index), start, t0, t1, entries, wanted, j.why)
+                else:
+                    good.append(j)
+            self._take_batch(buf, good)
+            del buf, good  # the batch's buffer can then be reused for the next batch
+
+    def _lost_chunk(self, k, n_chunks, start, t0, t1, entries, wanted, why: str) -> None:
+        lost = sum(len(e[0]) for c, e in entries.items() if c in wanted) if entries else None
+        self.damage.append(
+            Damage(start, f"chunk {k + 1} of {n_chunks} is damaged: {why}", t0, t1, lost)
+        )
+
+    def _chunk_head(self, f, pos: int, length: int) -> tuple[int, int, int, str, int]:
+        """The chunk record at ``pos`` (file positioned after its opcode and length), checked:
+        (file offset of its records, their compressed size, uncompressed size, compression,
+        CRC). Raises _Bad."""
+        if length < 40 or pos + 9 + length > self.size:
+            raise _Bad(f"its record of {length} bytes runs past the end of the file")
+        head = f.read(min(length, 4096))
+        _t0, _t1, usize, crc = _CHUNK_HEAD.unpack_from(head, 0)
+        comp, p = _str(head, 28)
+        (n,) = struct.unpack_from("<Q", head, p)
+        if p + 8 + n != length:
+            raise _Bad(f"its records size {n} does not match its record length {length}")
+        if usize > size_bound(n):
+            raise _Bad(
+                f"it declares {usize} bytes uncompressed from {n} (refused, beyond {size_bound(n)})"
+            )
+        if comp == "" and usize != n:
+            raise _Bad(f"it is uncompressed but declares {usize} bytes for {n}")
+        if comp not in ("", "zstd", "lz4"):
+            raise LogError(f"Expected chunk compression zstd, lz4 or none, got {comp!r}")
+        return pos + 9 + p + 8, n, usize, comp, crc
 
     def _message_index(self, f, offsets: dict[int, int], wanted: set[int]) -> dict:
         """Message index entries (log times, offsets) of the kept channels of one chunk."""
@@ -318,25 +396,71 @@ class McapSource(RosSource):
 
     def _chunk(self, f, pos: int, length: int, seq: int, entries: dict | None) -> None:
         """Read, check and decompress the chunk record at file offset ``pos``; keep payloads."""
-        if length < 40 or pos + 9 + length > self.size:
-            raise _Bad(f"its record of {length} bytes runs past the end of the file")
-        head = f.read(min(length, 4096))
-        _t0, _t1, usize, crc = _CHUNK_HEAD.unpack_from(head, 0)
-        comp, p = _str(head, 28)
-        (n,) = struct.unpack_from("<Q", head, p)
-        if p + 8 + n != length:
-            raise _Bad(f"its records size {n} does not match its record length {length}")
-        if usize > size_bound(n):
-            raise _Bad(
-                f"it declares {usize} bytes uncompressed from {n} (refused, beyond {size_bound(n)})"
-            )
-        if comp == "" and usize != n:
-            raise _Bad(f"it is uncompressed but declares {usize} bytes for {n}")
-        f.seek(pos + 9 + p + 8)
+        at, n, usize, comp, crc = self._chunk_head(f, pos, length)
+        f.seek(pos + 9)
+        _t0, _t1 = struct.unpack("<QQ", f.read(16))
+        f.seek(at)
         data = decompress(comp, f.read(n), usize)
         if crc != 0 and zlib.crc32(data) != crc:
             raise _Bad("it fails its CRC check")
         self._take(data, pos, seq, entries, (_t0, _t1))
+
+    def _take_batch(self, buf: np.ndarray, group: list[Job]) -> None:
+        """Keep the messages of a batch of decompressed chunks (``buf``, one slice each):
+        located all at once where every chunk's message indexes check out, else chunk by
+        chunk (:meth:`_take`: damaged records cost only themselves)."""
+        if group and all(j.key[4] for j in group) and self._take_located(buf, group):
+            return
+        for j in group:
+            k, start, t0, t1, entries = j.key
+            self._take(j.out, start, k, entries, (t0, t1))
+
+    def _take_located(self, buf: np.ndarray, group: list[Job]) -> bool:
+        """The batch's messages from their indexes, checked together (opcode, length, channel,
+        no overlap, inside their chunk) with one numpy pass per field; False, with nothing
+        kept, when any record does not check out."""
+        sizes = np.array([j.usize for j in group], np.int64)
+        bases = np.array([j.start for j in group], np.int64)  # damaged chunks leave holes
+        offs, icid = [], []
+        for j, base in zip(group, bases.tolist(), strict=True):
+            for c, e in j.key[4].items():
+                offs.append(e[0] + base)
+                icid.append(np.full(len(e[0]), c, np.int64))
+        offs, icid = np.concatenate(offs), np.concatenate(icid)
+        k = np.argsort(offs, kind="stable")
+        offs, icid = offs[k], icid[k]
+        chunk = np.searchsorted(bases, offs, side="right") - 1
+        start, end = bases[chunk], bases[chunk] + sizes[chunk]
+        if not ((offs >= start) & (offs + _MSG_HEADER <= end)).all():
+            return False
+        # opcode, length, channel id, sequence, log time: one run of bytes per record
+        head = gather(buf, offs, "u1", 23).reshape(len(offs), 23)
+        length_u = head[:, 1:9].view("<u8")[:, 0]
+        room = (end - offs - 9).astype(np.uint64)
+        ok = (head[:, 0] == _MESSAGE) & (length_u >= 22) & (length_u <= room)
+        if not ok.all():
+            return False
+        length = length_u.astype(np.int64)
+        ends = offs + 9 + length
+        ok = ends <= np.minimum(np.concatenate([offs[1:], [end[-1]]]), end)
+        ok &= head[:, 9:11].view("<u2")[:, 0] == icid
+        if not ok.all() or not all(c in self.channels for j in group for c in j.key[4]):
+            return False
+        lt = head[:, 15:23].view("<u8")[:, 0].astype(np.int64)
+        del head
+        self._n_kept = 0
+        # schema and channel records between the indexed messages: walked chunk by chunk
+        gap_a = np.sort(np.concatenate([ends, bases]))
+        gap_b = np.sort(np.concatenate([offs, bases + sizes]))
+        for a, b in zip(gap_a[gap_b > gap_a].tolist(), gap_b[gap_b > gap_a].tolist(), strict=True):
+            g = int(np.searchsorted(bases, a, side="right")) - 1
+            seq, pos, t0, t1, _ = group[g].key
+            base = int(bases[g])
+            self._walk(group[g].out, a - base, b - base, pos, seq, span=(t0, t1))
+        seqs = np.array([j.key[0] for j in group], np.int64)
+        order = (seqs[chunk] << 32) + (offs - start)
+        self._keep_spans(buf, offs, length, icid, lt, order, int(group[0].key[1]))
+        return True
 
     def _take(
         self,
@@ -352,8 +476,6 @@ class McapSource(RosSource):
         overlap): a damaged message record costs only itself. Without, the chunk is walked
         record by record, and a damaged record costs the rest of the chunk.
         """
-        from imu_dcm.logio.cdr import gather
-
         d = np.frombuffer(data, np.uint8)
         size = len(data)
         if entries:
@@ -399,14 +521,17 @@ class McapSource(RosSource):
                             lost,
                         )
                     )
-            self._keep_spans(d, offs[valid], length[valid], cid[valid], lt[valid], seq, pos)
+            o = offs[valid]
+            self._keep_spans(d, o, length[valid], cid[valid], lt[valid], (seq << 32) + o, pos)
             return
         self._n_kept = 0
         self._walk(data, 0, size, pos, seq, span=span, expected=None)
 
     def _keep_spans(
-        self, d, offs, length, cid, log_time, seq: int, pos: int = -1, note_unknown: bool = True
+        self, d, offs, length, cid, log_time, order, pos: int = -1, note_unknown: bool = True
     ) -> None:
+        """Hand the kept channels' payloads (message records at ``offs`` of ``d``) to the sink;
+        ``order`` is each message's file-order key."""
         kept = []
         for c in np.flatnonzero(np.bincount(cid)).tolist():  # the ids present, ascending
             m = cid == c
@@ -424,7 +549,7 @@ class McapSource(RosSource):
         for c, m, s, n in kept:
             self._n_kept += len(s)
             buf = (d, s, n) if share else compact(d, s, n)
-            self.sink.add(c, Payloads(*buf, log_time[m], (seq << 32) + offs[m]))
+            self.sink.add(c, Payloads(*buf, log_time[m], order[m]))
 
     def _walk(
         self,
@@ -460,14 +585,14 @@ class McapSource(RosSource):
                 break
             p = end
         if offs:
-            d = np.frombuffer(data, np.uint8)
+            o = np.asarray(offs, np.int64)
             self._keep_spans(
-                d,
-                np.asarray(offs, np.int64),
+                np.frombuffer(data, np.uint8),
+                o,
                 np.asarray(lens, np.int64),
                 np.asarray(cids, np.int64),
                 np.asarray(times, np.int64),
-                seq,
+                (seq << 32) + o,
                 pos,
                 note_unknown=not quiet,
             )

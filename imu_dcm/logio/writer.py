@@ -26,10 +26,12 @@ library ``imu_dcm.bag_writer``, the module's name before it moved into :mod:`imu
 bags written then stay replaceable).
 
 Speed: the fixed-layout CDR payloads and the MCAP message records and message indexes are built
-in bulk with numpy (one byte array per topic), chunks are compressed whole, and only the few
-summary records go through ``mcap.records``. Measured here: 150 000 messages (50 000 each of Imu,
-QuaternionStamped, Vector3Stamped) in ~0.3 s, against ~1.5 s through ``mcap.writer.Writer`` with
-the same payloads and 44 µs per Imu message through ``mcap_ros2.writer``.
+in bulk with numpy (one byte array per topic and chunk), each chunk is built, compressed and
+written before the next (memory holds the input series and one chunk, never every payload),
+and only the few summary records go through ``mcap.records``. Measured here: 150 000 messages
+(50 000 each of Imu, QuaternionStamped, Vector3Stamped) in ~0.3 s, against ~1.5 s through
+``mcap.writer.Writer`` with the same payloads and 44 µs per Imu message through
+``mcap_ros2.writer``.
 """
 
 from __future__ import annotations
@@ -39,7 +41,7 @@ import shutil
 import struct
 import uuid
 import zlib
-from collections.abc import Iterable, Mapping
+from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass
 from itertools import pairwise
 from pathlib import Path
@@ -215,23 +217,40 @@ def _u8le(values: NDArray, width: int) -> NDArray[np.uint8]:
 
 # ------------------------------------------------------------------------------- MCAP file
 _MAGIC = b"\x89MCAP0\r\n"
-#: (topic, msgtype, log times t_ns (N,), CDR payload rows (N, size)) of one channel.
-Encoded = tuple[str, str, NDArray[np.int64], NDArray[np.uint8]]
+
+
+class Encoded:
+    """One channel to write: its messages' MCAP log times and how to build their CDR payloads.
+
+    ``payloads(rows)`` returns the (len(rows), ``size``) CDR payload bytes of the messages
+    ``rows`` (indices into ``t_ns``), so a file is encoded one chunk at a time and never holds
+    every payload at once.
+    """
+
+    __slots__ = ("topic", "msgtype", "t_ns", "size", "payloads")
+
+    def __init__(self, topic: str, msgtype: str, t_ns: NDArray[np.int64], size: int, payloads):
+        self.topic, self.msgtype, self.t_ns, self.size = topic, msgtype, t_ns, size
+        self.payloads = payloads
 
 
 @dataclass(frozen=True)
 class _Messages:
-    """Every message record of the file in (log time, topic) order, as one byte string.
+    """Where every message record of the file goes, in (log time, topic) order.
 
-    ``stamps``, ``chan`` (0-based topic index), ``starts``/``ends`` (byte range in ``body``)
-    have one entry per message, in file order.
+    ``stamps`` (log times), ``chan`` (0-based topic index), ``row`` (the message's index in its
+    topic) and ``ends`` (byte offset after its record, counted from the first record) have one
+    entry per message, in file order; ``sizes`` is the record size of each topic.
     """
 
     stamps: NDArray[np.int64]
-    chan: NDArray[np.int64]
-    starts: NDArray[np.int64]
+    chan: NDArray[np.uint16]
+    row: NDArray[np.int64]
     ends: NDArray[np.int64]
-    body: bytes
+    sizes: NDArray[np.int64]
+
+    def starts(self, a: int, b: int) -> NDArray[np.int64]:
+        return self.ends[a:b] - self.sizes[self.chan[a:b]]
 
 
 def _schemas_and_channels(topics: list[Encoded]) -> tuple[dict, list]:
@@ -240,7 +259,8 @@ def _schemas_and_channels(topics: list[Encoded]) -> tuple[dict, list]:
 
     schemas: dict[str, Schema] = {}
     channels: list[Channel] = []
-    for cid, (name, msgtype, _, _) in enumerate(topics, start=1):
+    for cid, t in enumerate(topics, start=1):
+        name, msgtype = t.topic, t.msgtype
         if msgtype not in schemas:
             schemas[msgtype] = Schema(
                 id=len(schemas) + 1,
@@ -260,39 +280,59 @@ def _schemas_and_channels(topics: list[Encoded]) -> tuple[dict, list]:
     return schemas, channels
 
 
-def _message_records(topics: list[Encoded]) -> _Messages:
-    """All message records (opcode 0x05), built in bulk per topic, merged in log-time order."""
-    stamps = np.concatenate([t[2] for t in topics])
-    chan = np.concatenate([np.full(t[2].size, i) for i, t in enumerate(topics)])
-    row = np.concatenate([np.arange(t[2].size) for t in topics])
+def _message_order(topics: list[Encoded]) -> _Messages:
+    """The file order of all messages (merged by log time, stable across topics)."""
+    stamps = np.concatenate([t.t_ns for t in topics])
     order = np.argsort(stamps, kind="stable")
-    stamps, chan, row = stamps[order], chan[order], row[order]
-    sizes = np.array([31 + t[3].shape[1] for t in topics], dtype=np.int64)[chan]
-    ends = np.cumsum(sizes)
-    records: list[list[bytes]] = []
-    for i, (_, _, t_ns, payload) in enumerate(topics):
-        n, size = payload.shape
-        rec = np.empty((n, 31 + size), dtype=np.uint8)
-        rec[:, 0] = 0x05  # opcode Message
-        rec[:, 1:9] = _u8le(np.full(n, 22 + size), 8)  # record length
-        rec[:, 9:11] = _u8le(np.full(n, i + 1), 2)  # channel id
-        rec[:, 11:15] = 0  # sequence
-        rec[:, 15:23] = _u8le(t_ns, 8)  # log time
-        rec[:, 23:31] = rec[:, 15:23]  # publish time
-        rec[:, 31:] = payload
-        flat = rec.tobytes()
-        step = 31 + size
-        records.append([flat[k : k + step] for k in range(0, n * step, step)])
-    body = b"".join([records[c][j] for c, j in zip(chan.tolist(), row.tolist(), strict=False)])
-    return _Messages(stamps, chan, ends - sizes, ends, body)
+    stamps = stamps[order]
+    first = np.cumsum([0] + [t.t_ns.size for t in topics])
+    chan = (np.searchsorted(first, order, side="right") - 1).astype(np.uint16)
+    row = order - first[chan]
+    del order
+    sizes = np.array([31 + t.size for t in topics], dtype=np.int64)
+    return _Messages(stamps, chan, row, np.cumsum(sizes[chan]), sizes)
+
+
+def _records(topic: Encoded, cid: int, rows: NDArray[np.int64]) -> NDArray[np.uint8]:
+    """Message records (opcode 0x05) of ``rows`` of one topic, one row of bytes each."""
+    payload = topic.payloads(rows)
+    n, size = payload.shape
+    rec = np.empty((n, 31 + size), dtype=np.uint8)
+    rec[:, 0] = 0x05  # opcode Message
+    rec[:, 1:9] = _u8le(np.full(n, 22 + size), 8)  # record length
+    rec[:, 9:11] = _u8le(np.full(n, cid), 2)  # channel id
+    rec[:, 11:15] = 0  # sequence
+    rec[:, 15:23] = _u8le(topic.t_ns[rows], 8)  # log time
+    rec[:, 23:31] = rec[:, 15:23]  # publish time
+    rec[:, 31:] = payload
+    return rec
+
+
+def _chunk_body(topics: list[Encoded], m: _Messages, a: int, b: int) -> bytes:
+    """The records of messages ``[a, b)`` in file order, built in bulk per topic."""
+    starts = m.starts(a, b)
+    lo = int(starts[0])
+    body = np.empty(int(m.ends[b - 1]) - lo, dtype=np.uint8)
+    chan = m.chan[a:b]
+    for i in np.unique(chan).tolist():
+        sel = np.flatnonzero(chan == i)
+        rec = _records(topics[i], i + 1, m.row[a:b][sel])
+        # rows of record bytes placed at their offsets: one copy per record
+        places = np.lib.stride_tricks.as_strided(
+            body, (len(body) - rec.shape[1] + 1, rec.shape[1]), (1, 1), writeable=True
+        )
+        places[starts[sel] - lo] = rec
+    return body.tobytes()
 
 
 def _chunk_bounds(m: _Messages, chunk_size: int) -> list[int]:
     """Message indices where chunks start (and the end): a chunk closes at ``chunk_size``."""
     bounds = [0]
     while bounds[-1] < m.stamps.size:
-        j = int(np.searchsorted(m.ends, m.starts[bounds[-1]] + chunk_size, side="left")) + 1
-        bounds.append(min(max(j, bounds[-1] + 1), m.stamps.size))
+        a = bounds[-1]
+        start = int(m.ends[a]) - int(m.sizes[m.chan[a]])
+        j = int(np.searchsorted(m.ends, start + chunk_size, side="left")) + 1
+        bounds.append(min(max(j, a + 1), m.stamps.size))
     return bounds
 
 
@@ -300,19 +340,24 @@ def _message_indexes(m: _Messages, a: int, b: int, lo: int, pos: int, index) -> 
     """The message index records (0x07) following the chunk of messages ``[a, b)``."""
     parts: list[bytes] = []
     sub_chan = m.chan[a:b]
+    starts = m.starts(a, b)
     for i in np.unique(sub_chan).tolist():
         sel = np.flatnonzero(sub_chan == i)
         pairs = np.empty((sel.size, 16), dtype=np.uint8)
         pairs[:, :8] = _u8le(m.stamps[a:b][sel], 8)
-        pairs[:, 8:] = _u8le(m.starts[a:b][sel] - lo, 8)
+        pairs[:, 8:] = _u8le(starts[sel] - lo, 8)
         head = struct.pack("<BQHI", 0x07, 2 + 4 + 16 * sel.size, i + 1, 16 * sel.size)
         index.message_index_offsets[i + 1] = pos + sum(len(p) for p in parts)
         parts.append(head + pairs.tobytes())
     return b"".join(parts)
 
 
-def _write_chunks(f, out, m: _Messages, chunk_size: int) -> list:
-    """Write the zstd chunks, each followed by its message indexes; returns the chunk indexes."""
+def _write_chunks(f, out, topics: list[Encoded], m: _Messages, chunk_size: int) -> list:
+    """Write the zstd chunks, each followed by its message indexes; returns the chunk indexes.
+
+    Each chunk's records are built, compressed and written before the next one's: memory
+    holds one chunk, not the file.
+    """
     import zstandard
     from mcap.records import Chunk, ChunkIndex
 
@@ -320,8 +365,8 @@ def _write_chunks(f, out, m: _Messages, chunk_size: int) -> list:
     compressor = zstandard.ZstdCompressor()
     chunk_indexes: list[ChunkIndex] = []
     for a, b in pairwise(_chunk_bounds(m, chunk_size)):
-        lo, hi = int(m.starts[a]), int(m.ends[b - 1])
-        raw = m.body[lo:hi]
+        lo = int(m.ends[a]) - int(m.sizes[m.chan[a]])
+        raw = _chunk_body(topics, m, a, b)
         data = compressor.compress(raw)
         t0, t1 = int(m.stamps[a:b].min()), int(m.stamps[a:b].max())
         Chunk(
@@ -391,22 +436,23 @@ def write_mcap(
 ) -> None:
     """Write an indexed MCAP file (profile ros2, zstd chunks) with all records built in bulk.
 
-    ``topics`` holds ``(topic, msgtype, t_ns, payloads)`` with ``payloads`` the (N, size) CDR
-    rows. Schemas and channels are written in the data section and repeated in the summary;
-    every chunk is followed by its message indexes; the summary has statistics, chunk and
-    metadata indexes and summary offsets (the layout of the mcap library's own writer).
+    ``topics`` holds one :class:`Encoded` per channel; each chunk's payloads are built when it
+    is written (the bytes do not depend on how the payloads are produced). Schemas and channels
+    are written in the data section and repeated in the summary; every chunk is followed by
+    its message indexes; the summary has statistics, chunk and metadata indexes and summary
+    offsets (the layout of the mcap library's own writer).
     """
     from mcap.data_stream import RecordBuilder
     from mcap.records import DataEnd, Header, Metadata, MetadataIndex, Statistics
 
     schemas, channels = _schemas_and_channels(topics)
-    m = _message_records(topics)
+    m = _message_order(topics)
     out = RecordBuilder()
     Header(profile="ros2", library=OWN_LIBRARY).write(out)
     for record in (*schemas.values(), *channels):
         record.write(out)
     f.write(_MAGIC + out.end())
-    chunk_indexes = _write_chunks(f, out, m, chunk_size)
+    chunk_indexes = _write_chunks(f, out, topics, m, chunk_size)
     Metadata(name="rosbag2", metadata=metadata).write(out)
     meta_bytes = out.end()
     meta_index = MetadataIndex(offset=f.tell(), length=len(meta_bytes), name="rosbag2")
@@ -422,7 +468,7 @@ def write_mcap(
         chunk_count=len(chunk_indexes),
         message_start_time=int(m.stamps[0]),
         message_end_time=int(m.stamps[-1]),
-        channel_message_counts={i + 1: int(t[2].size) for i, t in enumerate(topics)},
+        channel_message_counts={i + 1: int(t.t_ns.size) for i, t in enumerate(topics)},
     )
     groups = [
         (0x03, list(schemas.values())),
@@ -435,8 +481,8 @@ def write_mcap(
 
 
 # ------------------------------------------------------------------------------- the bag
-#: (topic, msgtype, series, the float64 after each message's header)
-_Topic = tuple[str, str, StampedSeries, NDArray[np.float64]]
+#: (topic, msgtype, series, rows -> the float64 after each of those messages' headers)
+_Topic = tuple[str, str, StampedSeries, Callable[[NDArray[np.int64]], NDArray[np.float64]]]
 
 
 def _imu_topic(
@@ -459,7 +505,11 @@ def _imu_topic(
             raise InputError(
                 f"Expected imu_angular_velocity_covariance of shape (3, 3), got {c.shape}"
             )
-    return (imu_topic, "sensor_msgs/msg/Imu", imu, imu_doubles(imu.values, a, c))
+
+    def doubles(rows: NDArray[np.int64]) -> NDArray[np.float64]:
+        return imu_doubles(imu.values[rows], None if a is None else a[rows], c)
+
+    return (imu_topic, "sensor_msgs/msg/Imu", imu, doubles)
 
 
 def _check_topic_names(topics: list[_Topic]) -> None:
@@ -474,16 +524,24 @@ def _check_topic_names(topics: list[_Topic]) -> None:
             raise InputError(f"Expected topic names starting with '/', got {name!r}")
 
 
+def _encoded(topic: str, msgtype: str, s: StampedSeries, doubles) -> Encoded:
+    """A topic's channel, its CDR payloads built for the rows each chunk asks for."""
+    width = doubles(np.zeros(1, np.int64)).shape[1]
+    size = cdr_messages(np.zeros(1, np.int64), s.frame_id, np.zeros((1, width))).shape[1]
+
+    def payloads(rows: NDArray[np.int64]) -> NDArray[np.uint8]:
+        return cdr_messages(s.t_ns[rows], s.frame_id, doubles(rows))
+
+    return Encoded(topic, msgtype, s.file_t_ns, size, payloads)
+
+
 def _write_into(folder: Path, name: str, topics: list[_Topic], custom: dict[str, str]) -> None:
     """``<name>.mcap`` and ``metadata.yaml`` of the bag, written into ``folder``."""
     mcap_name = f"{name}.mcap"
     stamps = np.concatenate([t[2].file_t_ns for t in topics])
     counts = [(t[0], t[1], int(t[2].t_ns.size)) for t in topics]
     body = metadata_body(mcap_name, counts, int(stamps.min()), int(stamps.max()), custom)
-    encoded = [
-        (topic, msgtype, s.file_t_ns, cdr_messages(s.t_ns, s.frame_id, d))
-        for topic, msgtype, s, d in topics
-    ]
+    encoded = [_encoded(*t) for t in topics]
     with open(folder / mcap_name, "wb") as f:
         write_mcap(f, encoded, {"serialized_metadata": body})
     (folder / "metadata.yaml").write_text(metadata_document(body), encoding="utf-8")
@@ -596,10 +654,10 @@ def write_bag(
         )
     for name, s in dict(quaternions or {}).items():
         _check_series(f"quaternions[{name!r}]", s, 4)
-        topics.append((name, "geometry_msgs/msg/QuaternionStamped", s, s.values))
+        topics.append((name, "geometry_msgs/msg/QuaternionStamped", s, s.values.__getitem__))
     for name, s in dict(vectors or {}).items():
         _check_series(f"vectors[{name!r}]", s, 3)
-        topics.append((name, "geometry_msgs/msg/Vector3Stamped", s, s.values))
+        topics.append((name, "geometry_msgs/msg/Vector3Stamped", s, s.values.__getitem__))
     _check_topic_names(topics)
     _write_atomic(out, topics, custom, inputs, force)
     return out
