@@ -10,14 +10,18 @@ What is read
   pitch and yaw in degrees, ArduPilot's own estimate, named as such
   (:attr:`TruthSeries.estimate_of`); ``AHR2`` (its backup estimator) is kept as a candidate.
   ``truth_topic`` names one; ``"none"`` reads none.
-* Stamps: ``TimeUS`` (µs since boot) as int64 ns, for both ``t_ns`` and ``log_t_ns``.
+* Stamps: ``TimeUS`` (µs since boot; logs since 2015) or ``TimeMS`` (ms; logs of 2013-2015)
+  as int64 ns, for both ``t_ns`` and ``log_t_ns``. A message with neither is refused (IMU) or
+  skipped with a note (truth), as is a column whose FMT types it a string.
 
 Frames: body FRD, world NED, Euler angles in the 3-2-1 sequence; the gyro, accelerometer and
 truth are converted to body FLU, world ENU, ``[x, y, z, w]`` (:mod:`imu_dcm.logio.ned`).
 
-How it is read: pymavlink's ``DFReader_binary`` (ArduPilot's own reader) indexes the records of
-every message type; the wanted types are then decoded in bulk with numpy through the layouts
-the log's FMT records declare (no per-message Python objects). pymavlink is an optional extra:
+How it is read: :mod:`imu_dcm.logio.dataflash` indexes the records of every message type,
+resynchronising after a damaged record (each damaged part is counted and said once, with its
+byte offset); the wanted types are then decoded in bulk with numpy through the layouts the
+log's FMT records declare (no per-message Python objects). The format characters' sizes and
+multipliers are pymavlink's (ArduPilot's own reader), an optional extra:
 ``pip install 'imu_dcm[mavlink]'``.
 """
 
