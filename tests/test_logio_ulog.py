@@ -321,3 +321,29 @@ def test_read_request_through_the_entry(trial_ulg):
     assert src.kind == "px4 ulog"
     got = src.read(ReadRequest(truth_topic="none"))
     assert got.truth is None and len(got.imu.t_ns) == len(trial_arrays().t_ns)
+
+
+# ------------------------------------------------------------------ a format without stamps
+def _untimed(t: UTopic) -> UTopic:
+    """``t`` whose format has no ``timestamp`` field (the values still order the records)."""
+    return UTopic(t.name, [f for f in t.fields if f[2] != "timestamp"], t.values, t.instance)
+
+
+def test_a_gyro_topic_without_timestamp_is_skipped_and_named(tmp_path):
+    comb, gyro, att = _topics()
+    d = read_log(write_ulog(tmp_path / "a.ulg", ULogSpec([_untimed(comb), gyro, att])))
+    assert d.imu.topic == "sensor_gyro" and len(d.imu.t_ns) == 400
+    assert any("no timestamp field): sensor_combined" in n for n in d.notes)
+
+
+def test_an_attitude_topic_without_timestamp_is_skipped_and_named(tmp_path):
+    comb, gyro, att = _topics()
+    d = read_log(write_ulog(tmp_path / "b.ulg", ULogSpec([comb, gyro, _untimed(att)])))
+    assert d.truth is None and any("no timestamp field): vehicle_attitude" in n for n in d.notes)
+
+
+def test_the_only_gyro_without_timestamp_is_one_line(tmp_path):
+    comb, _gyro, att = _topics()
+    p = write_ulog(tmp_path / "c.ulg", ULogSpec([_untimed(comb), att]))
+    with pytest.raises(LogError, match="Expected a timestamp field in the format of sensor_combi"):
+        read_log(p)

@@ -354,9 +354,10 @@ def scan(path: Path, wanted: frozenset[str], progress: Progress | None = None) -
 
 def _dropout_times(s: Scanned) -> list[int]:
     """Each dropout's time: the last kept record (µs) before it in the file."""
-    pos = np.concatenate([t.positions for t in s.topics] + [np.zeros(0, np.int64)])
+    timed = [t for t in s.topics if "timestamp" in t.fields]
+    pos = np.concatenate([t.positions for t in timed] + [np.zeros(0, np.int64)])
     ts = np.concatenate(
-        [t.fields["timestamp"].astype(np.int64) for t in s.topics] + [np.zeros(0, np.int64)]
+        [t.fields["timestamp"].astype(np.int64) for t in timed] + [np.zeros(0, np.int64)]
     )
     order = np.argsort(pos, kind="stable")
     pos, ts = pos[order], ts[order]
@@ -558,6 +559,24 @@ def _reset_note(t: Topic, label, start_us: int) -> str | None:
     )
 
 
+def _timed(topics: list[Topic], label) -> tuple[list[Topic], str | None]:
+    """The topics whose format has a ``timestamp`` field, and a note naming the gyro and
+    attitude topics without one (skipped). Refused in one line when no gyro topic is left."""
+    bad = [t for t in topics if "timestamp" not in t.fields and len(t.positions)]
+    if not bad:
+        return topics, None
+    good = [t for t in topics if "timestamp" in t.fields]
+    names = ", ".join(label(t.name, t.multi_id) for t in bad)
+    if not any(t.name in GYRO_TOPICS and _omega_frd(t) is not None for t in good):
+        gyro = [label(t.name, t.multi_id) for t in bad if t.name in GYRO_TOPICS]
+        if gyro:
+            raise LogError(
+                f"Expected a timestamp field in the format of {', '.join(gyro)} in the ULog, "
+                "got none"
+            )
+    return good, f"skipped (their format has no timestamp field): {names}"
+
+
 # --------------------------------------------------------------------------- source
 class UlogSource:
     """One PX4 ULog file (see the module doc for what is read and how frames convert)."""
@@ -576,12 +595,13 @@ class UlogSource:
         progress = request.progress or self.progress
         s = scan(self.path, frozenset(wanted), progress)
         label = _labeller(s.counts)
-        gyro, gyro_note = _pick_gyro(s.topics, label, request.imu_topic)
-        imu = imu_series(gyro, s.topics, label)
-        att, truth_note = _pick_truth(s.topics, label, request.truth_topic)
+        topics, untimed = _timed(s.topics, label)
+        gyro, gyro_note = _pick_gyro(topics, label, request.imu_topic)
+        imu = imu_series(gyro, topics, label)
+        att, truth_note = _pick_truth(topics, label, request.truth_topic)
         auto = request.truth_topic is None
         series = [truth_series(t, label, auto) for t in att]
-        notes = [gyro_note, truth_note, _multi_note(s.counts), _dropout_note(s)]
+        notes = [untimed, gyro_note, truth_note, _multi_note(s.counts), _dropout_note(s)]
         notes += [_reset_note(t, label, s.start_us) for t in att] + s.notes
         channels = tuple(
             ChannelInfo(label(n, i), fmt, "ulog", c) for (n, i, fmt), c in sorted(s.counts.items())
