@@ -347,3 +347,39 @@ def test_the_only_gyro_without_timestamp_is_one_line(tmp_path):
     p = write_ulog(tmp_path / "c.ulg", ULogSpec([_untimed(comb), att]))
     with pytest.raises(LogError, match="Expected a timestamp field in the format of sensor_combi"):
         read_log(p)
+
+
+# -------------------------------------------------------------- the bias in the log's axes
+def test_the_bias_is_said_in_the_logs_frd_axes_too(tmp_path):
+    """A PX4 log at rest, gyro FRD = b + white noise: the bias is the mean over the rest, so
+    within 5 sigma/sqrt(N) of b in the log's axes (FRD) and of (b_x, -b_y, -b_z) in FLU."""
+    from imu_dcm.replay import replay
+    from imu_dcm.replay.summary import format_summary
+
+    n, sigma = 2000, 1e-3
+    b_frd = np.array([0.01, 0.02, -0.03])
+    rng = np.random.default_rng(26)
+    t = (np.arange(n) * 5000 + 1_000_000).astype(np.uint64)
+    comb = UTopic(
+        "sensor_combined",
+        [
+            ("uint64_t", 0, "timestamp"),
+            ("float", 3, "gyro_rad"),
+            ("float", 3, "accelerometer_m_s2"),
+        ],
+        {
+            "timestamp": t,
+            "gyro_rad": b_frd + rng.normal(scale=sigma, size=(n, 3)),
+            "accelerometer_m_s2": np.array([0.0, 0.0, -9.81]) + rng.normal(scale=0.01, size=(n, 3)),
+        },
+    )
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        s = replay(write_ulog(tmp_path / "rest.ulg", ULogSpec([comb])), bias="auto").summary
+    tol = 5 * sigma / np.sqrt(n)
+    assert s.bias_segments and s.log_axes == "FRD"
+    assert np.allclose(s.bias_log_rad_s, b_frd, atol=tol, rtol=0)
+    assert np.allclose(s.bias_rad_s, b_frd * [1, -1, -1], atol=tol, rtol=0)
+    assert s.to_dict()["bias_log_rad_s"] == list(s.bias_log_rad_s)
+    line = next(x for x in format_summary(s).splitlines() if x.startswith("bias"))
+    assert "in FLU, the replay's axes" in line and "°/s in FRD, the log's axes" in line

@@ -190,6 +190,7 @@ def imu_series(cols: dict[str, NDArray], label: str) -> ImuSeries:
         type="IMU",
         frame_id="body",
         accel_b=accel,
+        log_axes="FRD",
     )
 
 

@@ -481,6 +481,7 @@ def imu_series(gyro: Topic, topics: list[Topic], label) -> ImuSeries:
         type=gyro.name,
         frame_id="body",
         accel_b=_accel(gyro, topics, t_ns),
+        log_axes="FRD",
     )
 
 
