@@ -353,3 +353,18 @@ def test_a_log_with_no_time_column_is_one_line(tmp_path):
     p = write_dataflash(tmp_path / "v30.bin", [imu], order_by="GyrX")
     with pytest.raises(LogError, match="Expected a TimeUS or TimeMS column in IMU"):
         read_log(p)
+
+
+def test_every_cut_inside_a_record_is_said(tmp_path, small_log):
+    """Cut at each of the last 80 offsets: a cut at a record boundary is a shorter log (no
+    warning); any other cut leaves a record incomplete, whatever its type, and says so once.
+    (Only a cut IMU record was said; a cut ATT header lost the IMU samples after it silently.)"""
+    raw, _ = small_log
+    bounds, ofs = set(), 89 * 3
+    while ofs < len(raw):
+        ofs += 36 if raw[ofs + 2] == 0x81 else 23
+        bounds.add(ofs)
+    for cut in range(len(raw) - 80, len(raw)):
+        d, said = _read_damaged(tmp_path, raw[:cut])
+        assert len(said) == (0 if cut in bounds else 1), cut
+        assert all("cut short" in s or "bytes skipped" in s for s in said)

@@ -274,13 +274,21 @@ class DataFlashSource:
         return self._read(index, codes, request, progress)
 
     def _read(self, index: Index, codes, request: ReadRequest, progress) -> LogData:
-        imus, cut = _instances(index, codes)
+        imus, _ = _instances(index, codes)
         label, imu_note = _pick_imu(imus, request.imu_topic)
         imu = imu_series(imus[label], label)
         truths, truth_notes = _truths(index, codes, request.truth_topic)
         damage = list(index.damage)
-        if cut:
-            damage.append(Damage(-1, f"DataFlash log cut short: {cut} IMU record(s) incomplete"))
+        if index.cut_at is not None:
+            name = index.formats[int(index.data[index.cut_at + 2])].name
+            read = {"IMU", "IMU2", "IMU3", *(t.topic for t in truths)}
+            damage.append(
+                Damage(
+                    index.cut_at,
+                    f"DataFlash log cut short: its last record ({name}) incomplete",
+                    messages_lost=int(name in read),
+                )
+            )
         stopped_at = warn_damage(self.path, damage)
         channels = tuple(
             ChannelInfo(f.name, f.name, "dataflash", len(index.offsets[t]))

@@ -76,6 +76,7 @@ class Index:
     offsets : dict int -> int64 (k,) — byte offsets of the records of each type, file order
         (a last record cut short by the end of the file included).
     damage : tuple of Damage — the damaged parts skipped, file order.
+    cut_at : int or None — byte offset of a last record cut short by the end of the file.
     """
 
     data: NDArray[np.uint8]
@@ -83,6 +84,7 @@ class Index:
     name_to_id: dict[str, int]
     offsets: dict[int, NDArray[np.int64]]
     damage: tuple[Damage, ...]
+    cut_at: int | None = None
 
 
 def _cstr(raw: bytes) -> str | None:
@@ -160,9 +162,10 @@ def _links(b, starts, lengths):
     return ends, nxt
 
 
-def _walk(b, starts, ends, nxt, formats) -> tuple[list[int], list[Damage]]:
+def _walk(b, starts, ends, nxt, formats) -> tuple[list[int], list[Damage], int | None]:
     """Follow the chain of records from offset 0, resynchronising after each break: the
-    indices of the records kept, and the damaged parts skipped."""
+    indices of the records kept, the damaged parts skipped, and the offset of a last record
+    cut short by the end of the file (None if none)."""
     n, m = len(b), len(starts)
     ok = nxt >= 0
     ok_next = np.zeros(m, bool)
@@ -172,6 +175,7 @@ def _walk(b, starts, ends, nxt, formats) -> tuple[list[int], list[Damage]]:
     nxt_l = nxt.tolist()
     keep: list[int] = []
     damage: list[Damage] = []
+    cut_at = None
 
     def resync(after: int) -> int:
         k = int(np.searchsorted(strong_at, after, side="left"))
@@ -193,7 +197,8 @@ def _walk(b, starts, ends, nxt, formats) -> tuple[list[int], list[Damage]]:
         if end == start:  # a type no FMT declares
             keep.pop()
             damage.append(_gap(b, start, stop, formats))
-        elif j == m and end > n:  # the last record, cut short (counted by the decoder)
+        elif j == m and end > n:  # the last record, cut short (its type decides what is lost)
+            cut_at = start
             break
         elif end <= stop and _one_record(b, end, stop, formats):
             if not _padding(b, end, stop):  # kept; only what follows it is lost
@@ -202,14 +207,14 @@ def _walk(b, starts, ends, nxt, formats) -> tuple[list[int], list[Damage]]:
             keep.pop()
             damage.append(_gap(b, start, stop, formats))
         i = j
-    return keep, damage
+    return keep, damage, cut_at
 
 
 def _one_record(b, start: int, stop: int, formats) -> bool:
     """True when [start, stop) is end-of-file padding or one record whose sync bytes are
     damaged (its type byte is declared and its length is the span)."""
     if _padding(b, start, stop) or stop - start < 3:
-        return _padding(b, start, stop)
+        return _padding(b, start, stop) or stop == len(b)  # or a header cut short
     f = formats.get(int(b[start + 2]))
     return f is not None and f.length == stop - start
 
@@ -252,10 +257,10 @@ def index_log(path: Path, struct_codes: dict) -> Index:
     for f in formats.values():
         lengths[f.type] = f.length
     ends, nxt = _links(b, starts, lengths)
-    keep, walked = _walk(b, starts, ends, nxt, formats)
+    keep, walked, cut_at = _walk(b, starts, ends, nxt, formats)
     kept = starts[np.asarray(keep, np.int64)]
     types = b[kept + 2]
     offsets = {t: kept[types == t] for t in np.unique(types).tolist()}
     name_to_id = {f.name: t for t, f in formats.items()}
     damage = sorted(damage + walked, key=lambda d: d.offset)
-    return Index(b, formats, name_to_id, offsets, tuple(damage))
+    return Index(b, formats, name_to_id, offsets, tuple(damage), cut_at)
