@@ -10,7 +10,9 @@ corrupt schemas; corrupt ``metadata.yaml`` (alias bomb, non-mapping, non-UTF-8);
 message in a JSON IMU channel (stamps 1e300, 2^70, Infinity; 100 000-deep nesting); special files
 as input; hostile output paths (inside the input, FIFOs, device nodes made in a temporary folder,
 read-only folders), for replay and also for live (`--record`, `--summary-json`, `--rerun save:`)
-and batch (`--table`).
+and batch (`--table`); a corrupted record (byte flips, truncations) in each container beside
+MCAP: a PX4 ULog, an ArduPilot DataFlash log, a EuRoC folder and a split bag whose
+metadata.yaml holds YAML aliases (``tests/fuzz_containers.py``).
 
 Each case names the fix it exercises (``Case.fix``); a failing class lists its cases by fix.
 The reader is imported in one line (``fuzzlib._run_case``): repoint it when the reader moves.

@@ -279,14 +279,13 @@ class DataFlashSource:
         imu = imu_series(imus[label], label)
         truths, truth_notes = _truths(index, codes, request.truth_topic)
         damage = list(index.damage)
-        if index.cut_at is not None:
-            name = index.formats[int(index.data[index.cut_at + 2])].name
-            read = {"IMU", "IMU2", "IMU3", *(t.topic for t in truths)}
+        cut = index.formats[int(index.data[index.cut_at + 2])].name if index.cut_at else ""
+        if cut in {"IMU", "IMU2", "IMU3", *(t.topic for t in truths)}:  # read: its loss said
             damage.append(
                 Damage(
                     index.cut_at,
-                    f"DataFlash log cut short: its last record ({name}) incomplete",
-                    messages_lost=int(name in read),
+                    f"DataFlash log cut short: its last record ({cut}) incomplete",
+                    messages_lost=1,
                 )
             )
         stopped_at = warn_damage(self.path, damage)
