@@ -246,7 +246,7 @@ def test_an_unknown_record_costs_only_itself(tmp_path, small_log, capfd):
     want = np.delete(np.arange(2000), 1000) * 0.01
     assert np.array_equal(d.imu.omega_b[:, 0], np.float32(want))
     assert len(said) == 1 and "unknown type 0x7f" in said[0]
-    assert f"file offset {imu_at[1000]}" in said[0] and "1 messages" in said[0]
+    assert f"file offset {imu_at[1000]}" in said[0] and "one IMU record" in said[0]
     assert capfd.readouterr() == ("", "")  # no other program's line
 
 

@@ -241,8 +241,9 @@ def _gap(b, start: int, stop: int, formats) -> Damage:
         )
     else:
         cause = "bytes with no record header"
-    lost = 1 if any(f.length == size for f in formats.values()) else None
-    return Damage(start, f"DataFlash {cause}: {size} bytes skipped", messages_lost=lost)
+    fits = sorted({f.name for f in formats.values() if f.length == size})
+    one = f", the length of one {' or '.join(fits[:3])} record" if 0 < len(fits) <= 3 else ""
+    return Damage(start, f"DataFlash {cause}: {size} bytes skipped{one}")
 
 
 def index_log(path: Path, struct_codes: dict) -> Index:
