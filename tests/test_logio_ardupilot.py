@@ -7,6 +7,7 @@ written by :func:`tests.drone_logs.write_dataflash`.
 
 from __future__ import annotations
 
+import json
 import warnings
 
 import numpy as np
@@ -368,3 +369,37 @@ def test_every_cut_inside_a_record_is_said(tmp_path, small_log):
         d, said = _read_damaged(tmp_path, raw[:cut])
         assert len(said) == (0 if cut in bounds else 1), cut
         assert all("cut short" in s or "bytes skipped" in s for s in said)
+
+
+def test_the_command_line_on_damaged_and_old_logs(tmp_path, small_log, capsys):
+    """Through the command: an unknown record is one warning and exit 0 with 1999 samples; a
+    TimeMS log replays (it ended in KeyError 'TimeUS'); a string-typed gyro is one error line."""
+    from imu_dcm.replay.__main__ import main
+
+    raw, imu_at = small_log
+    bad = tmp_path / "bad.bin"
+    bad.write_bytes(_patched(raw, imu_at[1000] + 2, 0x7F))
+    out = tmp_path / "s.json"
+    assert main([str(bad), "--rerun", "off", "--quiet", "--summary-json", str(out)]) == 0
+    err = [x for x in capsys.readouterr().err.splitlines() if "truncated or corrupt" in x]
+    assert len(err) == 1 and "unknown type 0x7f" in err[0]
+    assert json.loads(out.read_text())["samples"] == 1999
+
+    old = DFMessage(
+        "IMU",
+        "Iffffff",
+        ["TimeMS", "GyrX", "GyrY", "GyrZ", "AccX", "AccY", "AccZ"],
+        [(100 + 5 * i, 0.0, 0.0, 0.5, 0.0, 0.0, -9.81) for i in range(400)],
+    )
+    p = write_dataflash(tmp_path / "old.bin", [old], order_by="TimeMS")
+    assert main([str(p), "--rerun", "off", "--quiet"]) == 0
+    assert "Traceback" not in capsys.readouterr().err
+
+    rows = [(1000 + 2500 * i, 0, b"x", 0.5, -0.25) for i in range(50)]
+    s = write_dataflash(
+        tmp_path / "s.bin",
+        [DFMessage("IMU", "QBZff", ["TimeUS", "I", "GyrX", "GyrY", "GyrZ"], rows)],
+    )
+    assert main([str(s), "--rerun", "off", "--quiet"]) == 2
+    lines = [x for x in capsys.readouterr().err.splitlines() if x.strip()]
+    assert len(lines) == 1 and "Expected numbers in IMU[0].GyrX" in lines[0]
