@@ -149,10 +149,14 @@ def _rate_hz(t_ns: NDArray) -> float:
     return 1e9 / float(np.median(d)) if len(d) and np.median(d) > 0 else 0.0
 
 
-def _pick_imu(imus: dict, imu_topic: str | None) -> tuple[str, str]:
+def _pick_imu(imus: dict, imu_topic: str | None, names=()) -> tuple[str, str]:
     have = [k for k, v in imus.items() if "GyrZ" in v and len(v["GyrZ"])]
     if not have:
-        raise LogError("Expected IMU messages (GyrX, GyrY, GyrZ) in the DataFlash log, got none")
+        listed = ", ".join(sorted(names)[:40]) or "no message declared"
+        raise LogError(
+            f"Expected IMU messages (GyrX, GyrY, GyrZ) in the DataFlash log, got none "
+            f"(its messages: {listed})"
+        )
     if imu_topic is None:
         chosen = "IMU[0]" if "IMU[0]" in have else have[0]
     else:
@@ -275,7 +279,8 @@ class DataFlashSource:
 
     def _read(self, index: Index, codes, request: ReadRequest, progress) -> LogData:
         imus, _ = _instances(index, codes)
-        label, imu_note = _pick_imu(imus, request.imu_topic)
+        names = [f.name for t, f in index.formats.items() if len(index.offsets.get(t, ()))]
+        label, imu_note = _pick_imu(imus, request.imu_topic, names)
         imu = imu_series(imus[label], label)
         truths, truth_notes = _truths(index, codes, request.truth_topic)
         damage = list(index.damage)
