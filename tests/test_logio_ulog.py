@@ -383,3 +383,19 @@ def test_the_bias_is_said_in_the_logs_frd_axes_too(tmp_path):
     assert s.to_dict()["bias_log_rad_s"] == list(s.bias_log_rad_s)
     line = next(x for x in format_summary(s).splitlines() if x.startswith("bias"))
     assert "in FLU, the replay's axes" in line and "°/s in FRD, the log's axes" in line
+
+
+def test_a_data_message_retyped_is_skipped_and_said(tmp_path):
+    """One data message's type byte 'D' flipped to a type the format does not define: pyulog
+    skips that message (as the format says a reader must), which cost a sample silently."""
+    comb, *_ = _topics()
+    raw = bytearray(write_ulog(tmp_path / "ok.ulg", ULogSpec([comb])).read_bytes())
+    at = raw.rfind(b"D", 0, len(raw) // 2)
+    while raw[at - 2] + 256 * raw[at - 1] != 2 + comb.dtype().itemsize:  # a D message's header
+        at = raw.rfind(b"D", 0, at)
+    raw[at] = 0xFA
+    bad = tmp_path / "bad.ulg"
+    bad.write_bytes(bytes(raw))
+    with pytest.warns(ImuDcmWarning, match=rf"type the format does not define .* byte {at - 2}"):
+        d = read_log(bad)
+    assert len(d.imu.t_ns) == 99 and d.damage[0].offset == at - 2

@@ -80,7 +80,12 @@ _KNOWN = frozenset(b"FIMPQARDLCSOB")
 
 
 class _Irregular(Exception):
-    """The fast scan met something only pyulog's recovery handles."""
+    """The fast scan met something only pyulog's recovery handles; ``skipped_at`` is the byte
+    offset of a message pyulog skips (a type the format does not define), else -1."""
+
+    def __init__(self, why: str, skipped_at: int = -1):
+        super().__init__(why)
+        self.skipped_at = skipped_at
 
 
 def _check_flags(payload: bytes) -> None:
@@ -230,7 +235,8 @@ class _Scanner:
             size = int(b[at]) | int(b[at + 1]) << 8
             payload = buf[at + 3 : at + 3 + size]
             if t not in _KNOWN or size == 0:
-                raise _Irregular(f"message type {t} of {size} bytes at byte {base + at}")
+                why = f"message type {t} of {size} bytes at byte {base + at}"
+                raise _Irregular(why, base + at if size else -1)
             if t in (65, 70, 73, 79):
                 self._special(t, payload, base + at)
             elif t == 66:
@@ -340,6 +346,9 @@ def scan(path: Path, wanted: frozenset[str], progress: Progress | None = None) -
     except _Irregular as exc:
         try:
             scanned = _scan_pyulog(path, wanted, str(exc))
+            if exc.skipped_at >= 0 and not scanned.damage:  # pyulog skips it: said as damage
+                what = f"ULog message of a type the format does not define ({exc}) skipped"
+                scanned.damage.append(Damage(exc.skipped_at, what))
         except LogError:
             raise
         except Exception as err:  # pyulog's own failure on a file the fast scan refused
