@@ -162,18 +162,19 @@ def _links(b, starts, lengths):
     return ends, nxt
 
 
-def _walk(b, starts, ends, nxt, formats) -> tuple[list[int], list[Damage], int | None]:
+def _walk(b, starts, ends, nxt, formats) -> tuple[NDArray[np.int64], list[Damage], int | None]:
     """Follow the chain of records from offset 0, resynchronising after each break: the
     indices of the records kept, the damaged parts skipped, and the offset of a last record
-    cut short by the end of the file (None if none)."""
+    cut short by the end of the file (None if none). A run of records each followed by the
+    next candidate is taken whole, so the loop turns once per irregular record only."""
     n, m = len(b), len(starts)
     ok = nxt >= 0
     ok_next = np.zeros(m, bool)
     ok_next[ok] = np.append(ok, True)[nxt[ok]]
     strong = np.flatnonzero(ok & ok_next)  # starts two confirmed records (or the last one)
     strong_at = starts[strong]
-    nxt_l = nxt.tolist()
-    keep: list[int] = []
+    odd = np.flatnonzero(nxt != np.arange(1, m + 1))  # not followed by the next candidate
+    keep: list[NDArray[np.int64]] = []
     damage: list[Damage] = []
     cut_at = None
 
@@ -186,28 +187,34 @@ def _walk(b, starts, ends, nxt, formats) -> tuple[list[int], list[Damage], int |
         i = resync(0)
         damage.append(_gap(b, 0, int(starts[i]) if i < m else n, formats))
     while i < m:
-        keep.append(i)
-        j = nxt_l[i]
+        k = int(np.searchsorted(odd, i))
+        r = int(odd[k]) if k < len(odd) else m
+        if r > i:  # records i .. r-1 each followed by the next: r is reached too
+            keep.append(np.arange(i, r))
+            i = r
+            continue
+        j = int(nxt[i])
         if j >= 0:
+            keep.append(np.array([i]))
             i = j
             continue
         start, end = int(starts[i]), int(ends[i])
         j = resync(start + 1)
         stop = int(starts[j]) if j < m else n
         if end == start:  # a type no FMT declares
-            keep.pop()
             damage.append(_gap(b, start, stop, formats))
         elif j == m and end > n:  # the last record, cut short (its type decides what is lost)
+            keep.append(np.array([i]))
             cut_at = start
             break
         elif end <= stop and _one_record(b, end, stop, formats):
+            keep.append(np.array([i]))
             if not _padding(b, end, stop):  # kept; only what follows it is lost
                 damage.append(_gap(b, end, stop, formats))
         else:
-            keep.pop()
             damage.append(_gap(b, start, stop, formats))
         i = j
-    return keep, damage, cut_at
+    return np.concatenate([*keep, np.zeros(0, np.int64)]).astype(np.int64), damage, cut_at
 
 
 def _one_record(b, start: int, stop: int, formats) -> bool:
