@@ -10,7 +10,9 @@ is the case's ``lost`` (so a reader that loses more, or loses any without a warn
 * DataFlash: a flipped byte after the FMT records costs at most 2 IMU records (the record hit,
   and the one before it when its end can no longer be confirmed); a truncation costs the IMU
   records not wholly before the cut.
-* ULog: a truncation costs the data messages not wholly before the cut.
+* ULog: a flipped byte after the definitions costs at most 2 data messages (the one hit, and
+  the one before it when its size is what was damaged); a truncation costs the data messages
+  not wholly before the cut.
 * A flip in an FMT or ULog definition, a EuRoC CSV (refused whole by design: a line that is
   not numbers names its line) or a metadata.yaml may cost anything: only the rules above.
 """
@@ -214,6 +216,8 @@ def container_cases(bases: dict[str, Base], rng: np.random.Generator) -> list[Ca
             ends = _ulog_data_ends(raw)
         for at in sorted({int(x) for x in rng.integers(0, len(raw), FLIPS)}):
             lost = 2 if name == "dataflash" and at >= 89 * 3 else None
+            if name == "ulog" and at >= ends[0] - 40:  # after the definitions
+                lost = 2
             out.append(
                 Case(
                     "container_record",

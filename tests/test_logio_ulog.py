@@ -294,17 +294,21 @@ def test_truncated_ulog_loses_only_its_last_message(tmp_path):
     assert len(d.imu.t_ns) + len(d_comb.imu.t_ns) == n - 1
 
 
-def test_a_corrupt_ulog_goes_through_pyulog(tmp_path):
-    raw = bytearray(write_ulog(tmp_path / "ok.ulg", ULogSpec(_topics())).read_bytes())
+def test_a_corrupt_ulog_resumes_after_the_damage(tmp_path):
+    """3 bytes mid-file overwritten by a header of an undefined type: the scan resumes at the
+    next sound messages, so at most the two messages the bytes touched are lost (the one hit
+    and, as its size cannot be trusted, the one before), and the damage is said with its
+    offset. (pyulog's recovery, used before, found no sync marker and lost the rest.)"""
+    ok = write_ulog(tmp_path / "ok.ulg", ULogSpec(_topics()))
+    raw = bytearray(ok.read_bytes())
     k = len(raw) // 2
-    raw[k : k + 3] = b"\x05\x00\xee"  # an unknown message type mid-file
+    raw[k : k + 3] = b"\x05\x00\xee"
     bad = tmp_path / "bad.ulg"
     bad.write_bytes(bytes(raw))
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", ImuDcmWarning)
+    with pytest.warns(ImuDcmWarning, match="ULog damaged message at byte"):
         d = read_log(bad)
-    assert any("read through pyulog's parser" in n for n in d.notes)
-    assert len(d.imu.t_ns) > 300
+    assert len(d.imu.t_ns) >= len(read_log(ok).imu.t_ns) - 2
+    assert abs(d.damage[0].offset - k) < 100
 
 
 def test_probe():
@@ -386,8 +390,9 @@ def test_the_bias_is_said_in_the_logs_frd_axes_too(tmp_path):
 
 
 def test_a_data_message_retyped_is_skipped_and_said(tmp_path):
-    """One data message's type byte 'D' flipped to a type the format does not define: pyulog
-    skips that message (as the format says a reader must), which cost a sample silently."""
+    """One data message's type byte 'D' flipped to a type the format does not define: that
+    message is skipped and said (pyulog skipped it, as the format says a reader must, which
+    cost a sample silently)."""
     comb, *_ = _topics()
     raw = bytearray(write_ulog(tmp_path / "ok.ulg", ULogSpec([comb])).read_bytes())
     at = raw.rfind(b"D", 0, len(raw) // 2)
@@ -396,6 +401,24 @@ def test_a_data_message_retyped_is_skipped_and_said(tmp_path):
     raw[at] = 0xFA
     bad = tmp_path / "bad.ulg"
     bad.write_bytes(bytes(raw))
-    with pytest.warns(ImuDcmWarning, match=rf"type the format does not define .* byte {at - 2}"):
+    n = 3 + 2 + comb.dtype().itemsize  # the one message
+    with pytest.warns(ImuDcmWarning, match=rf"damaged message at byte {at - 2}: {n} bytes skipped"):
         d = read_log(bad)
     assert len(d.imu.t_ns) == 99 and d.damage[0].offset == at - 2
+
+
+@pytest.mark.parametrize("new_size_high", [0x01, 0x6C, 0xFF])
+def test_a_damaged_size_costs_two_messages_not_the_rest(tmp_path, new_size_high):
+    """A data message's size made 256 to 65 000 bytes too long, a third into the log: the
+    scan resumes at the next sound messages (at most that message and the one before it are
+    lost, whichever was damaged). pyulog's recovery, with no sync marker, lost the rest."""
+    comb, *_ = _topics(n_comb=2000, rate_comb=400.0, n_gyro=0, truth=())
+    raw = bytearray(write_ulog(tmp_path / "ok.ulg", ULogSpec([comb])).read_bytes())
+    size = 2 + comb.dtype().itemsize
+    at = raw.find(bytes([size, 0]) + b"D", len(raw) // 3)
+    raw[at + 1] = new_size_high
+    bad = tmp_path / "bad.ulg"
+    bad.write_bytes(bytes(raw))
+    with pytest.warns(ImuDcmWarning, match="ULog damaged message"):
+        d = read_log(bad, imu_topic="sensor_combined")
+    assert len(d.imu.t_ns) >= 1998
