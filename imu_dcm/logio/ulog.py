@@ -240,12 +240,13 @@ class _Scanner(Resync):
         pos, typ, used = kernel.record_chain(b, 0)
         bad, ids = self._first_unsound(b, pos, typ)
         ahead = len(pos) if bad is None else bad  # formats and subscriptions first: the
-        for i in np.flatnonzero((typ[:ahead] == 65) | (typ[:ahead] == 70)).tolist():  # layouts
-            at = int(pos[i])  # that judge the data messages' sizes
-            self._special(
-                int(typ[i]), buf[at + 3 : at + 3 + (int(b[at]) | int(b[at + 1]) << 8)], base + at
-            )
-        bad, ids = self._first_unsound(b, pos, typ)
+        new = np.flatnonzero((typ[:ahead] == 65) | (typ[:ahead] == 70)).tolist()  # layouts
+        for i in new:  # that judge the data messages' sizes
+            at = int(pos[i])
+            size = int(b[at]) | int(b[at + 1]) << 8
+            self._special(int(typ[i]), buf[at + 3 : at + 3 + size], base + at)
+        if new:
+            bad, ids = self._first_unsound(b, pos, typ)
         found = None
         if bad is not None:
             found = self._resync(b, pos, bad, ids, final)
