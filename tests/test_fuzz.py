@@ -910,11 +910,11 @@ def test_fuzz_class(campaign, cls):
         f"  needs {fix}: {len(ids)} runs, e.g. {', '.join(ids[:3])}" for fix, ids in by_fix.items()
     )
     report = "\n".join(v.line() for v in bad)
-    print(_counts(cls, len(campaign.cases[cls]), verdicts))  # shown with pytest -s
+    print(_class_counts(cls, len(campaign.cases[cls]), verdicts))  # shown with pytest -s
     assert not bad, f"{len(bad)} of {len(verdicts)} {cls} runs broke a rule\n{fixes}\n{report}"
 
 
-def _counts(cls: str, n_cases: int, verdicts: list[fuzzlib.Verdict]) -> str:
+def _class_counts(cls: str, n_cases: int, verdicts: list[fuzzlib.Verdict]) -> str:
     """One line of the class's counts: cases, runs, and runs breaking each kind of rule."""
     kinds = {
         "tracebacks": ("traceback", "raised "),
