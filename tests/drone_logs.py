@@ -43,7 +43,8 @@ _NP = {
 @dataclass
 class UTopic:
     """One ULog topic instance: its format fields ``(ctype, array length or 0, name)`` and one
-    array per field (``(N,)`` or ``(N, n)``); ``timestamp`` (µs) must be among them."""
+    array per field (``(N,)`` or ``(N, n)``); ``timestamp`` (µs) must be among the values (it
+    orders the records), and is among the fields unless a test leaves it out."""
 
     name: str
     fields: list[tuple[str, int, str]]
@@ -88,10 +89,9 @@ def write_ulog(path: Path, spec: ULogSpec) -> Path:
         rec = np.zeros(len(t.values["timestamp"]), t.dtype())
         for f in rec.dtype.names:
             rec[f] = t.values[f]
-        for i, r in enumerate(rec):
-            records.append(
-                (int(r["timestamp"]), msg_id, i, struct.pack("<H", msg_id) + r.tobytes())
-            )
+        for i, r in enumerate(rec):  # ordered by values["timestamp"], a field or not
+            stamp = int(t.values["timestamp"][i])
+            records.append((stamp, msg_id, i, struct.pack("<H", msg_id) + r.tobytes()))
     records.sort(key=lambda x: (x[0], x[1], x[2]))
     drops = dict(spec.dropouts)
     for k, (_t, _m, _i, payload) in enumerate(records):

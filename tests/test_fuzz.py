@@ -10,7 +10,9 @@ corrupt schemas; corrupt ``metadata.yaml`` (alias bomb, non-mapping, non-UTF-8);
 message in a JSON IMU channel (stamps 1e300, 2^70, Infinity; 100 000-deep nesting); special files
 as input; hostile output paths (inside the input, FIFOs, device nodes made in a temporary folder,
 read-only folders), for replay and also for live (`--record`, `--summary-json`, `--rerun save:`)
-and batch (`--table`).
+and batch (`--table`); a corrupted record (byte flips, truncations) in each container beside
+MCAP: a PX4 ULog, an ArduPilot DataFlash log, a EuRoC folder and a split bag whose
+metadata.yaml holds YAML aliases (``tests/fuzz_containers.py``).
 
 Each case names the fix it exercises (``Case.fix``); a failing class lists its cases by fix.
 The reader is imported in one line (``fuzzlib._run_case``): repoint it when the reader moves.
@@ -39,6 +41,7 @@ import struct
 from collections import defaultdict
 from pathlib import Path
 
+import fuzz_containers
 import fuzzlib
 import numpy as np
 import pytest
@@ -63,6 +66,7 @@ CLASSES = (
     "special_input",
     "output_path",
     "output_onto",
+    "container_record",
 )
 #: The two largest classes run the CLI (which calls replay() in-process: an exception other than
 #: ImuDcmError escapes it too) and the reader; the others also call replay() directly.
@@ -927,12 +931,29 @@ class Campaign:
         )
         for v in self.clean:  # the floor of each rule: what the clean log gives
             self.bases[v.case.base].clean[v.kind] = v.result.get("samples")
+        self._containers(tmp)
         self._done: dict[str, list[fuzzlib.Verdict]] = {}
+
+    def _containers(self, tmp: Path) -> None:
+        """The ULog, DataFlash, EuRoC and split-bag bases (tests/fuzz_containers.py), their
+        clean runs (the floor of each rule) and their damaged-record cases."""
+        self.other = fuzz_containers.bases(tmp / "containers")
+        clean = [
+            Case("clean", "clean", b.name, fuzz_containers._copy_with(b, b.mcap.read_bytes()), None)
+            for b in self.other.values()
+        ]
+        jobs = [(c, k) for c in clean for k in fuzz_containers.KINDS]
+        self.other_clean = self.pool.run(jobs, tmp / "clean-containers", self.other)
+        for v in self.other_clean:
+            self.other[v.case.base].clean[v.kind] = v.result.get("samples")
+        rng = np.random.default_rng(SEED + 27)
+        self.cases["container_record"] = fuzz_containers.container_cases(self.other, rng)
 
     def verdicts(self, cls: str) -> list[fuzzlib.Verdict]:
         if cls not in self._done:
             jobs = [(c, k) for c in self.cases[cls] for k in c.kinds]
-            self._done[cls] = self.pool.run(jobs, self.tmp / cls, self.bases)
+            bases = {**self.bases, **self.other} if cls == "container_record" else self.bases
+            self._done[cls] = self.pool.run(jobs, self.tmp / cls, bases)
         return self._done[cls]
 
     def close(self) -> None:
@@ -957,6 +978,14 @@ def test_clean_logs_replay_with_all_samples(campaign):
         assert b.clean["replay"] > 0.99 * b.imu_total, b.name
 
 
+def test_clean_containers_read_every_sample(campaign):
+    bad = [v.line() for v in campaign.other_clean if v.violations]
+    assert not bad, "\n".join(bad)
+    for b in campaign.other.values():
+        assert b.clean["read_log"] == fuzz_containers.N, b.name
+        assert b.clean["cli"] > 0.99 * fuzz_containers.N, b.name
+
+
 @pytest.mark.parametrize("cls", CLASSES)
 def test_fuzz_class(campaign, cls):
     verdicts = campaign.verdicts(cls)
@@ -969,6 +998,7 @@ def test_fuzz_class(campaign, cls):
         f"  needs {fix}: {len(ids)} runs, e.g. {', '.join(ids[:3])}" for fix, ids in by_fix.items()
     )
     report = "\n".join(v.line() for v in bad)
+    print(_class_counts(cls, len(campaign.cases[cls]), verdicts))  # shown with pytest -s
     assert not bad, f"{len(bad)} of {len(verdicts)} {cls} runs broke a rule\n{fixes}\n{report}"
 
 
@@ -997,3 +1027,19 @@ def test_every_output_onto_a_foreign_file_a_link_and_an_input_is_refused(campaig
     kinds = {v.kind for v in verdicts}
     assert kinds == {"cli", "live", "batch"} and counts["runs"] >= 50, counts
     assert counts["broken"] == 0, counts
+
+
+def _class_counts(cls: str, n_cases: int, verdicts: list[fuzzlib.Verdict]) -> str:
+    """One line of the class's counts: cases, runs, and runs breaking each kind of rule."""
+    kinds = {
+        "tracebacks": ("traceback", "raised "),
+        "hangs": ("hang",),
+        "inputs modified": ("input changed",),
+        "silent results": ("without a warning", "expected >="),
+    }
+    got = {
+        k: sum(any(m in x for x in v.violations for m in marks) for v in verdicts)
+        for k, marks in kinds.items()
+    }
+    said = ", ".join(f"{n} {k}" for k, n in got.items())
+    return f"{cls}: {n_cases} cases, {len(verdicts)} runs; {said}"

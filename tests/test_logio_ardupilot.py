@@ -7,6 +7,7 @@ written by :func:`tests.drone_logs.write_dataflash`.
 
 from __future__ import annotations
 
+import json
 import warnings
 
 import numpy as np
@@ -196,3 +197,209 @@ def test_probe():
     assert ardupilot.probe(None, b"\xa3\x95\x80\x80\x59BBnNZ")
     assert not ardupilot.probe(None, b"ULog\x01\x12\x35\x01")
     assert not ardupilot.probe(None, b"")
+
+
+# --------------------------------------------------------------------------- damage
+def _imu_offsets(raw: bytes, n_types: int, imu_len: int, other_len: int) -> list[int]:
+    """Byte offsets of the IMU records of a log of write_dataflash (FMTs first, then records
+    of type 0x81 = IMU and 0x82 by time), found by walking the known lengths."""
+    ofs, out = 89 * (1 + n_types), []
+    while ofs < len(raw):
+        t = raw[ofs + 2]
+        if t == 0x81:
+            out.append(ofs)
+        ofs += imu_len if t == 0x81 else other_len
+    return out
+
+
+@pytest.fixture(scope="module")
+def small_log(tmp_path_factory):
+    """2000 IMU records of 36 bytes (QB and six f), 400 ATT records of 23 bytes (Qfff)."""
+    rows = [(1000 + 2500 * i, 0, 0.01 * i, 0.5, -0.25, 0.0, 0.0, -9.81) for i in range(2000)]
+    imu = DFMessage(
+        "IMU", "QBffffff", ["TimeUS", "I", "GyrX", "GyrY", "GyrZ", "AccX", "AccY", "AccZ"], rows
+    )
+    p = write_dataflash(tmp_path_factory.mktemp("dmg") / "log.bin", [imu, _att(400)])
+    raw = p.read_bytes()
+    return raw, _imu_offsets(raw, 2, 3 + 8 + 1 + 24, 3 + 8 + 12)
+
+
+def _read_damaged(tmp_path, raw: bytes):
+    p = tmp_path / "d.bin"
+    p.write_bytes(raw)
+    with warnings.catch_warnings(record=True) as said:
+        warnings.simplefilter("always")
+        d = read_log(p)
+    return d, [str(w.message) for w in said]
+
+
+def _patched(raw: bytes, at: int, byte: int) -> bytes:
+    out = bytearray(raw)
+    out[at] = byte
+    return bytes(out)
+
+
+def test_an_unknown_record_costs_only_itself(tmp_path, small_log, capfd):
+    """Record 1000's type byte set to 0x7f (no FMT declares it): the other 1999 samples are
+    read, and one line says where (pymavlink stopped there, silently: 1000 samples)."""
+    raw, imu_at = small_log
+    d, said = _read_damaged(tmp_path, _patched(raw, imu_at[1000] + 2, 0x7F))
+    want = np.delete(np.arange(2000), 1000) * 0.01
+    assert np.array_equal(d.imu.omega_b[:, 0], np.float32(want))
+    assert len(said) == 1 and "unknown type 0x7f" in said[0]
+    assert f"file offset {imu_at[1000]}" in said[0] and "one IMU record" in said[0]
+    assert capfd.readouterr() == ("", "")  # no other program's line
+
+
+def test_a_record_retagged_as_fmt_costs_only_itself(tmp_path, small_log, capfd):
+    raw, imu_at = small_log
+    d, said = _read_damaged(tmp_path, _patched(raw, imu_at[700] + 2, 0x80))
+    assert len(d.imu.t_ns) == 1999 and 1000 + 2500 * 700 not in d.imu.t_ns // 1000
+    assert len(said) == 1 and f"file offset {imu_at[700]}" in said[0]
+    assert capfd.readouterr() == ("", "")
+
+
+def test_a_flipped_sync_byte_costs_only_its_record(tmp_path, small_log, capfd):
+    raw, imu_at = small_log
+    d, said = _read_damaged(tmp_path, _patched(raw, imu_at[300], 0x00))
+    assert len(d.imu.t_ns) == 1999 and 1000 + 2500 * 300 not in d.imu.t_ns // 1000
+    assert len(said) == 1 and "no record header" in said[0]
+    assert capfd.readouterr() == ("", "")
+
+
+def test_random_flipped_bytes_cost_at_most_two_records(tmp_path, small_log, capfd):
+    """Any byte of the records (after the FMTs) flipped: a header byte breaks the chain at
+    its record (and at worst the record before, whose end can no longer be confirmed), a
+    payload byte changes one record's values. So at least 1997 of the 2000 rows are read
+    unchanged. pymavlink's indexer lost 79 % for one such flip."""
+    raw, _ = small_log
+    want = {(1000 + 2500 * i, np.float32(0.01 * i)) for i in range(2000)}
+    rng = np.random.default_rng(27)
+    for at in rng.integers(89 * 3, len(raw), 40).tolist():
+        d, said = _read_damaged(tmp_path, _patched(raw, at, raw[at] ^ int(rng.integers(1, 256))))
+        got = set(zip((d.imu.t_ns // 1000).tolist(), np.float32(d.imu.omega_b[:, 0]), strict=True))
+        assert len(got & want) >= 1997, at
+        assert len(said) <= 1
+    assert capfd.readouterr() == ("", "")
+
+
+def test_an_imu_fmt_length_off_by_one_is_read_by_its_format(tmp_path, small_log, capfd):
+    """The IMU FMT (the second one, at 89) declares 37 bytes where its characters give 36:
+    pymavlink printed a line for every record; the records chain at 36, and one line says so."""
+    raw, _ = small_log
+    d, said = _read_damaged(tmp_path, _patched(raw, 89 + 4, 37))
+    assert len(d.imu.t_ns) == 2000 and d.truth is not None
+    assert len(said) == 1 and "declaring 37 bytes" in said[0] and "read as 36" in said[0]
+    assert capfd.readouterr() == ("", "")
+
+
+def test_padding_at_the_end_is_not_damage(tmp_path, small_log):
+    raw, _ = small_log
+    for pad in (b"\0" * 249, b"\xff" * 100):
+        d, said = _read_damaged(tmp_path, raw + pad)
+        assert len(d.imu.t_ns) == 2000 and said == []
+
+
+def test_a_gyro_column_typed_as_a_string_is_one_line(tmp_path):
+    rows = [(1000 + 2500 * i, 0, b"x", 0.5, -0.25) for i in range(50)]
+    imu = DFMessage("IMU", "QBZff", ["TimeUS", "I", "GyrX", "GyrY", "GyrZ"], rows)
+    p = write_dataflash(tmp_path / "s.bin", [imu, _att()])
+    with pytest.raises(LogError, match=r"Expected numbers in IMU\[0\]\.GyrX .* a string"):
+        read_log(p)
+
+
+def test_a_truth_column_typed_as_a_string_skips_that_truth(tmp_path):
+    att = DFMessage("ATT", "QZff", ["TimeUS", "Roll", "Pitch", "Yaw"], [(1000, b"x", 0.0, 0.0)] * 5)
+    d = read_log(write_dataflash(tmp_path / "t.bin", [_imu({0: 0.1}), att]))
+    assert d.truth is None and any("ATT skipped as truth" in n for n in d.notes)
+
+
+# --------------------------------------------------------------- logs of 2013-2015
+def test_timems_logs_of_2013_to_2015(tmp_path):
+    """ArduCopter 3.1/3.2 logs: IMU ``Iffffff`` (TimeMS, gyro, accel), ATT ``IccccCC`` with
+    centidegrees. Stamps are ms -> ns exactly; angles are the centidegree integers / 100; the
+    truth against scipy's ZYX Euler of those angles (FRD/NED -> FLU/ENU by hand)."""
+    n = 60
+    imu = DFMessage(
+        "IMU",
+        "Iffffff",
+        ["TimeMS", "GyrX", "GyrY", "GyrZ", "AccX", "AccY", "AccZ"],
+        [(100 + 20 * i, 0.25, 0.5, -1.0, 0.0, 0.0, -9.81) for i in range(n)],
+    )
+    att_rows = [(100 + 100 * i, 0, 1234 + i, 0, -567, 0, 35990 - i) for i in range(n // 5)]
+    att = DFMessage(
+        "ATT",
+        "IccccCC",
+        ["TimeMS", "DesRoll", "Roll", "DesPitch", "Pitch", "DesYaw", "Yaw"],
+        att_rows,
+    )
+    d = read_log(write_dataflash(tmp_path / "old.bin", [imu, att], order_by="TimeMS"))
+    assert np.array_equal(d.imu.t_ns, (100 + 20 * np.arange(n)) * 1_000_000)
+    assert np.array_equal(d.imu.omega_b, np.tile([0.25, -0.5, 1.0], (n, 1)))
+    assert np.allclose(d.imu.accel_b, [0, 0, 9.81], rtol=0, atol=1e-6)
+    assert np.array_equal(d.truth.t_ns, (100 + 100 * np.arange(n // 5)) * 1_000_000)
+    rpy = np.array([(r[2] / 100, r[4] / 100, r[6] / 100) for r in att_rows])
+    r_ned_frd = Rotation.from_euler("ZYX", rpy[:, ::-1], degrees=True)
+    m_enu_ned = np.array([[0.0, 1, 0], [1, 0, 0], [0, 0, -1]])
+    want = (
+        Rotation.from_matrix(m_enu_ned) * r_ned_frd * Rotation.from_matrix(np.diag([1.0, -1, -1]))
+    )
+    got = Rotation.from_quat(d.truth.q_w_b)
+    assert np.max((got.inv() * want).magnitude()) < 1e-9  # doubles after a centidegree scale
+
+
+def test_a_log_with_no_time_column_is_one_line(tmp_path):
+    imu = DFMessage("IMU", "ffffff", ["GyrX", "GyrY", "GyrZ", "AccX", "AccY", "AccZ"], [])
+    imu.rows = [(0.1, 0.2, 0.3, 0.0, 0.0, -9.8)] * 10
+    p = write_dataflash(tmp_path / "v30.bin", [imu], order_by="GyrX")
+    with pytest.raises(LogError, match="Expected a TimeUS or TimeMS column in IMU"):
+        read_log(p)
+
+
+def test_every_cut_inside_a_record_is_said(tmp_path, small_log):
+    """Cut at each of the last 80 offsets: a cut at a record boundary is a shorter log (no
+    warning); any other cut leaves a record incomplete, whatever its type, and says so once.
+    (Only a cut IMU record was said; a cut ATT header lost the IMU samples after it silently.)"""
+    raw, _ = small_log
+    bounds, ofs = set(), 89 * 3
+    while ofs < len(raw):
+        ofs += 36 if raw[ofs + 2] == 0x81 else 23
+        bounds.add(ofs)
+    for cut in range(len(raw) - 80, len(raw)):
+        d, said = _read_damaged(tmp_path, raw[:cut])
+        assert len(said) == (0 if cut in bounds else 1), cut
+        assert all("cut short" in s or "bytes skipped" in s for s in said)
+
+
+def test_the_command_line_on_damaged_and_old_logs(tmp_path, small_log, capsys):
+    """Through the command: an unknown record is one warning and exit 0 with 1999 samples; a
+    TimeMS log replays (it ended in KeyError 'TimeUS'); a string-typed gyro is one error line."""
+    from imu_dcm.replay.__main__ import main
+
+    raw, imu_at = small_log
+    bad = tmp_path / "bad.bin"
+    bad.write_bytes(_patched(raw, imu_at[1000] + 2, 0x7F))
+    out = tmp_path / "s.json"
+    assert main([str(bad), "--rerun", "off", "--quiet", "--summary-json", str(out)]) == 0
+    err = [x for x in capsys.readouterr().err.splitlines() if "truncated or corrupt" in x]
+    assert len(err) == 1 and "unknown type 0x7f" in err[0]
+    assert json.loads(out.read_text())["samples"] == 1999
+
+    old = DFMessage(
+        "IMU",
+        "Iffffff",
+        ["TimeMS", "GyrX", "GyrY", "GyrZ", "AccX", "AccY", "AccZ"],
+        [(100 + 5 * i, 0.0, 0.0, 0.5, 0.0, 0.0, -9.81) for i in range(400)],
+    )
+    p = write_dataflash(tmp_path / "old.bin", [old], order_by="TimeMS")
+    assert main([str(p), "--rerun", "off", "--quiet"]) == 0
+    assert "Traceback" not in capsys.readouterr().err
+
+    rows = [(1000 + 2500 * i, 0, b"x", 0.5, -0.25) for i in range(50)]
+    s = write_dataflash(
+        tmp_path / "s.bin",
+        [DFMessage("IMU", "QBZff", ["TimeUS", "I", "GyrX", "GyrY", "GyrZ"], rows)],
+    )
+    assert main([str(s), "--rerun", "off", "--quiet"]) == 2
+    lines = [x for x in capsys.readouterr().err.splitlines() if x.strip()]
+    assert len(lines) == 1 and "Expected numbers in IMU[0].GyrX" in lines[0]

@@ -5,6 +5,7 @@ MCAP; the motion-capture variants recover the IMU's attitude through ``T_BS`` (s
 
 from __future__ import annotations
 
+import shutil
 import warnings
 from pathlib import Path
 
@@ -159,8 +160,11 @@ def test_truth_order_candidates_and_leica(tmp_path, trial):
     assert read_log(root, truth_topic="none").truth is None
     with pytest.raises(LogError, match="positions only"):
         read_log(root, truth_topic="leica0")
-    (mav / "state_groundtruth_estimate0" / "data.csv").unlink()
-    (mav / "vicon0" / "data.csv").unlink()
+    (mav / "state_groundtruth_estimate0" / "data.csv").unlink()  # a truth folder, no data
+    with pytest.raises(LogError, match="state_groundtruth_estimate0/data.csv, got none"):
+        read_log(root)
+    shutil.rmtree(mav / "state_groundtruth_estimate0")
+    shutil.rmtree(mav / "vicon0")
     only_leica = read_log(root)
     assert only_leica.truth is None and any("leica0" in n for n in only_leica.notes)
 
@@ -205,3 +209,55 @@ def test_find_logs_takes_a_dataset_as_one_log(tmp_path, trial):
     (tmp_path / "data" / "notes").mkdir()
     found = find_logs(tmp_path / "data")
     assert found == [root]
+
+
+# ----------------------------------------------------------------- bad folders, one line
+def _small(root: Path) -> Path:
+    """imu0 (50 samples) and a vicon0 truth (the identity), no sensor.yaml."""
+    t = 1_000_000_000 + 5_000_000 * np.arange(50)
+    _csv(root / "mav0" / "imu0" / "data.csv", IMU_HEADER, t, np.tile([0.0] * 5 + [9.81], (50, 1)))
+    _csv(
+        root / "mav0" / "vicon0" / "data.csv",
+        POSE_HEADER,
+        t,
+        np.tile([0.0] * 3 + [1, 0, 0, 0], (50, 1)),
+    )
+    return root
+
+
+def test_an_imu_line_with_extra_cells_is_refused(tmp_path):
+    for extra in (1, 100_000):
+        root = _small(tmp_path / f"x{extra}")
+        csv = root / "mav0" / "imu0" / "data.csv"
+        lines = csv.read_text().splitlines()
+        lines[20] += ",0" * extra
+        csv.write_text("\n".join(lines) + "\n")
+        with pytest.raises(
+            LogError, match=rf"got {7 + extra} columns at line 21 \(the first .*7\)"
+        ):
+            read_log(root)
+
+
+@pytest.mark.parametrize("what", ["fifo", "folder", "missing"])
+def test_a_truth_data_csv_that_is_not_a_file_is_one_line(tmp_path, what):
+    import os
+
+    root = _small(tmp_path / what)
+    csv = root / "mav0" / "vicon0" / "data.csv"
+    csv.unlink()
+    if what == "fifo":
+        os.mkfifo(csv)  # a reader that opened it would wait for a writer (no test timeout here)
+    elif what == "folder":
+        csv.mkdir()
+    want = {"fifo": "a FIFO", "folder": "a folder", "missing": "none"}[what]
+    with pytest.raises(LogError, match=f"vicon0/data.csv.*{want}.*--truth-topic none"):
+        read_log(root)
+    assert read_log(root, truth_topic="none").truth is None
+
+
+def test_a_missing_imu_data_csv_is_named(tmp_path):
+    root = _small(tmp_path / "d")
+    (root / "mav0" / "imu0" / "data.csv").unlink()
+    for given in (root, root / "mav0"):
+        with pytest.raises(LogError, match=r"Expected a regular file imu0/data.csv, got none"):
+            read_log(given)

@@ -166,3 +166,27 @@ def test_alias_bound_is_the_documented_growth(tmp_path):
         else:
             with pytest.raises(LogError, match="without YAML aliases"):
                 meta.load_metadata(bag)
+
+
+def test_an_integer_past_pythons_digit_limit_is_one_line(tmp_path):
+    bag = tmp_path / "bag"
+    bag.mkdir()
+    (bag / "metadata.yaml").write_text(
+        "rosbag2_bagfile_information:\n  storage_identifier: mcap\n  message_count: "
+        + "9" * 5000
+        + "\n"
+    )
+    with pytest.raises(LogError, match="Expected a rosbag2 metadata.yaml of plain values") as info:
+        meta.load_metadata(bag)
+    assert "\n" not in str(info.value)
+
+
+def test_a_file_listed_twice_through_an_alias_is_refused(split_bag):
+    """relative_file_paths naming split_0.mcap twice (an alias to one list item, or written
+    out): the reader read it twice, doubling every message."""
+    bag, *_ = split_bag
+    info = YAML(typ="safe").load((bag / "metadata.yaml").read_text())
+    info["rosbag2_bagfile_information"]["relative_file_paths"] = ["split_0.mcap"] * 2
+    (bag / "metadata.yaml").write_text(yaml.dump(info))
+    with pytest.raises(LogError, match="listed once in metadata.yaml, got split_0.mcap twice"):
+        read_log(bag)

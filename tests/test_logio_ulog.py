@@ -294,17 +294,21 @@ def test_truncated_ulog_loses_only_its_last_message(tmp_path):
     assert len(d.imu.t_ns) + len(d_comb.imu.t_ns) == n - 1
 
 
-def test_a_corrupt_ulog_goes_through_pyulog(tmp_path):
-    raw = bytearray(write_ulog(tmp_path / "ok.ulg", ULogSpec(_topics())).read_bytes())
+def test_a_corrupt_ulog_resumes_after_the_damage(tmp_path):
+    """3 bytes mid-file overwritten by a header of an undefined type: the scan resumes at the
+    next sound messages, so at most the two messages the bytes touched are lost (the one hit
+    and, as its size cannot be trusted, the one before), and the damage is said with its
+    offset. (pyulog's recovery, used before, found no sync marker and lost the rest.)"""
+    ok = write_ulog(tmp_path / "ok.ulg", ULogSpec(_topics()))
+    raw = bytearray(ok.read_bytes())
     k = len(raw) // 2
-    raw[k : k + 3] = b"\x05\x00\xee"  # an unknown message type mid-file
+    raw[k : k + 3] = b"\x05\x00\xee"
     bad = tmp_path / "bad.ulg"
     bad.write_bytes(bytes(raw))
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", ImuDcmWarning)
+    with pytest.warns(ImuDcmWarning, match="ULog damaged message at byte"):
         d = read_log(bad)
-    assert any("read through pyulog's parser" in n for n in d.notes)
-    assert len(d.imu.t_ns) > 300
+    assert len(d.imu.t_ns) >= len(read_log(ok).imu.t_ns) - 2
+    assert abs(d.damage[0].offset - k) < 100
 
 
 def test_probe():
@@ -321,3 +325,100 @@ def test_read_request_through_the_entry(trial_ulg):
     assert src.kind == "px4 ulog"
     got = src.read(ReadRequest(truth_topic="none"))
     assert got.truth is None and len(got.imu.t_ns) == len(trial_arrays().t_ns)
+
+
+# ------------------------------------------------------------------ a format without stamps
+def _untimed(t: UTopic) -> UTopic:
+    """``t`` whose format has no ``timestamp`` field (the values still order the records)."""
+    return UTopic(t.name, [f for f in t.fields if f[2] != "timestamp"], t.values, t.instance)
+
+
+def test_a_gyro_topic_without_timestamp_is_skipped_and_named(tmp_path):
+    comb, gyro, att = _topics()
+    d = read_log(write_ulog(tmp_path / "a.ulg", ULogSpec([_untimed(comb), gyro, att])))
+    assert d.imu.topic == "sensor_gyro" and len(d.imu.t_ns) == 400
+    assert any("no timestamp field): sensor_combined" in n for n in d.notes)
+
+
+def test_an_attitude_topic_without_timestamp_is_skipped_and_named(tmp_path):
+    comb, gyro, att = _topics()
+    d = read_log(write_ulog(tmp_path / "b.ulg", ULogSpec([comb, gyro, _untimed(att)])))
+    assert d.truth is None and any("no timestamp field): vehicle_attitude" in n for n in d.notes)
+
+
+def test_the_only_gyro_without_timestamp_is_one_line(tmp_path):
+    comb, _gyro, att = _topics()
+    p = write_ulog(tmp_path / "c.ulg", ULogSpec([_untimed(comb), att]))
+    with pytest.raises(LogError, match="Expected a timestamp field in the format of sensor_combi"):
+        read_log(p)
+
+
+# -------------------------------------------------------------- the bias in the log's axes
+def test_the_bias_is_said_in_the_logs_frd_axes_too(tmp_path):
+    """A PX4 log at rest, gyro FRD = b + white noise: the bias is the mean over the rest, so
+    within 5 sigma/sqrt(N) of b in the log's axes (FRD) and of (b_x, -b_y, -b_z) in FLU."""
+    from imu_dcm.replay import replay
+    from imu_dcm.replay.summary import format_summary
+
+    n, sigma = 2000, 1e-3
+    b_frd = np.array([0.01, 0.02, -0.03])
+    rng = np.random.default_rng(26)
+    t = (np.arange(n) * 5000 + 1_000_000).astype(np.uint64)
+    comb = UTopic(
+        "sensor_combined",
+        [
+            ("uint64_t", 0, "timestamp"),
+            ("float", 3, "gyro_rad"),
+            ("float", 3, "accelerometer_m_s2"),
+        ],
+        {
+            "timestamp": t,
+            "gyro_rad": b_frd + rng.normal(scale=sigma, size=(n, 3)),
+            "accelerometer_m_s2": np.array([0.0, 0.0, -9.81]) + rng.normal(scale=0.01, size=(n, 3)),
+        },
+    )
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        s = replay(write_ulog(tmp_path / "rest.ulg", ULogSpec([comb])), bias="auto").summary
+    tol = 5 * sigma / np.sqrt(n)
+    assert s.bias_segments and s.log_axes == "FRD"
+    assert np.allclose(s.bias_log_rad_s, b_frd, atol=tol, rtol=0)
+    assert np.allclose(s.bias_rad_s, b_frd * [1, -1, -1], atol=tol, rtol=0)
+    assert s.to_dict()["bias_log_rad_s"] == list(s.bias_log_rad_s)
+    line = next(x for x in format_summary(s).splitlines() if x.startswith("bias"))
+    assert "in FLU, the replay's axes" in line and "°/s in FRD, the log's axes" in line
+
+
+def test_a_data_message_retyped_is_skipped_and_said(tmp_path):
+    """One data message's type byte 'D' flipped to a type the format does not define: that
+    message is skipped and said (pyulog skipped it, as the format says a reader must, which
+    cost a sample silently)."""
+    comb, *_ = _topics()
+    raw = bytearray(write_ulog(tmp_path / "ok.ulg", ULogSpec([comb])).read_bytes())
+    at = raw.rfind(b"D", 0, len(raw) // 2)
+    while raw[at - 2] + 256 * raw[at - 1] != 2 + comb.dtype().itemsize:  # a D message's header
+        at = raw.rfind(b"D", 0, at)
+    raw[at] = 0xFA
+    bad = tmp_path / "bad.ulg"
+    bad.write_bytes(bytes(raw))
+    n = 3 + 2 + comb.dtype().itemsize  # the one message
+    with pytest.warns(ImuDcmWarning, match=rf"damaged message at byte {at - 2}: {n} bytes skipped"):
+        d = read_log(bad)
+    assert len(d.imu.t_ns) == 99 and d.damage[0].offset == at - 2
+
+
+@pytest.mark.parametrize("new_size_high", [0x01, 0x6C, 0xFF])
+def test_a_damaged_size_costs_two_messages_not_the_rest(tmp_path, new_size_high):
+    """A data message's size made 256 to 65 000 bytes too long, a third into the log: the
+    scan resumes at the next sound messages (at most that message and the one before it are
+    lost, whichever was damaged). pyulog's recovery, with no sync marker, lost the rest."""
+    comb, *_ = _topics(n_comb=2000, rate_comb=400.0, n_gyro=0, truth=())
+    raw = bytearray(write_ulog(tmp_path / "ok.ulg", ULogSpec([comb])).read_bytes())
+    size = 2 + comb.dtype().itemsize
+    at = raw.find(bytes([size, 0]) + b"D", len(raw) // 3)
+    raw[at + 1] = new_size_high
+    bad = tmp_path / "bad.ulg"
+    bad.write_bytes(bytes(raw))
+    with pytest.warns(ImuDcmWarning, match="ULog damaged message"):
+        d = read_log(bad, imu_topic="sensor_combined")
+    assert len(d.imu.t_ns) >= 1998

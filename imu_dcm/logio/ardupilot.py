@@ -10,21 +10,23 @@ What is read
   pitch and yaw in degrees, ArduPilot's own estimate, named as such
   (:attr:`TruthSeries.estimate_of`); ``AHR2`` (its backup estimator) is kept as a candidate.
   ``truth_topic`` names one; ``"none"`` reads none.
-* Stamps: ``TimeUS`` (µs since boot) as int64 ns, for both ``t_ns`` and ``log_t_ns``.
+* Stamps: ``TimeUS`` (µs since boot; logs since 2015) or ``TimeMS`` (ms; logs of 2013-2015)
+  as int64 ns, for both ``t_ns`` and ``log_t_ns``. A message with neither is refused (IMU) or
+  skipped with a note (truth), as is a column whose FMT types it a string.
 
 Frames: body FRD, world NED, Euler angles in the 3-2-1 sequence; the gyro, accelerometer and
 truth are converted to body FLU, world ENU, ``[x, y, z, w]`` (:mod:`imu_dcm.logio.ned`).
 
-How it is read: pymavlink's ``DFReader_binary`` (ArduPilot's own reader) indexes the records of
-every message type; the wanted types are then decoded in bulk with numpy through the layouts
-the log's FMT records declare (no per-message Python objects). pymavlink is an optional extra:
+How it is read: :mod:`imu_dcm.logio.dataflash` indexes the records of every message type,
+resynchronising after a damaged record (each damaged part is counted and said once, with its
+byte offset); the wanted types are then decoded in bulk with numpy through the layouts the
+log's FMT records declare (no per-message Python objects). The format characters' sizes and
+multipliers are pymavlink's (ArduPilot's own reader), an optional extra:
 ``pip install 'imu_dcm[mavlink]'``.
 """
 
 from __future__ import annotations
 
-import contextlib
-import io
 import re
 from pathlib import Path
 
@@ -33,6 +35,7 @@ from numpy.typing import NDArray
 
 from imu_dcm.errors import LogError
 from imu_dcm.logio.damage import warn_damage
+from imu_dcm.logio.dataflash import Format, Index, index_log
 from imu_dcm.logio.ned import FLU_FROM_FRD, q_enu_flu, q_wxyz_from_euler_deg
 from imu_dcm.logio.paths import DATAFLASH_MAGIC as MAGIC  # noqa: F401 (tests write it)
 from imu_dcm.logio.paths import is_dataflash as probe  # noqa: F401 (the reader's probe, here too)
@@ -73,48 +76,60 @@ def _dfreader():
 
 
 # ----------------------------------------------------------------------------- decode
-def _dtype(fmt, struct_codes: dict) -> np.dtype:
-    names = list(fmt.columns)
+def _dtype(fmt: Format, struct_codes: dict) -> np.dtype:
     codes = [struct_codes[c][0] for c in fmt.format]
-    if len(names) != len(codes):
-        raise LogError(
-            f"Expected as many columns as format characters in {fmt.name}, got "
-            f"{len(names)} and {len(codes)}"
-        )
-    return np.dtype([(n, _NP[c]) for n, c in zip(names, codes, strict=True)])
+    return np.dtype([(n, _NP[c]) for n, c in zip(fmt.columns, codes, strict=True)])
 
 
-def decode(df, name: str, struct_codes: dict) -> tuple[dict[str, NDArray], int]:
-    """Every record of message ``name`` as columns (pymavlink's multipliers applied), and how
-    many records were cut short by the end of the file."""
-    type_id = df.name_to_id.get(name)
+def decode(index: Index, name: str, struct_codes: dict) -> tuple[dict[str, NDArray], int]:
+    """Every record of message ``name`` as columns (the format characters' multipliers
+    applied), and how many records were cut short by the end of the file."""
+    type_id = index.name_to_id.get(name)
     if type_id is None:
         return {}, 0
-    fmt = df.formats[type_id]
+    fmt = index.formats[type_id]
     dtype = _dtype(fmt, struct_codes)
-    offs = np.asarray(df.offsets[type_id], dtype=np.int64)
-    whole = offs + 3 + dtype.itemsize <= df.data_len
+    offs = index.offsets.get(type_id, np.zeros(0, np.int64))
+    whole = offs + 3 + dtype.itemsize <= len(index.data)
     offs = offs[whole]
     rows = np.zeros((0, dtype.itemsize), np.uint8)
     if len(offs):  # whole records only, so the window fits the data
-        b = np.frombuffer(df.data_map, np.uint8)
-        try:  # a copy of the records' bytes only (no N x itemsize index matrix)
-            rows = np.lib.stride_tricks.sliding_window_view(b, dtype.itemsize)[offs + 3]
-        finally:
-            del b  # the reader's mmap must have no exported buffer when it closes
+        rows = np.lib.stride_tricks.sliding_window_view(index.data, dtype.itemsize)[offs + 3]
     rec = np.ascontiguousarray(rows).view(dtype)[:, 0]
     cols = {}
-    for col, mult in zip(dtype.names, fmt.msg_mults, strict=False):
+    for col, mult in zip(dtype.names, fmt.mults, strict=True):
         cols[col] = rec[col] * mult if mult is not None else rec[col]
     return cols, int(np.count_nonzero(~whole))
 
 
+def stamps_ns(cols: dict[str, NDArray], what: str) -> NDArray[np.int64]:
+    """``TimeUS`` (µs, logs since 2015) or ``TimeMS`` (ms, 2013-2015 logs) as int64 ns."""
+    for col, ns in (("TimeUS", 1000), ("TimeMS", 1_000_000)):
+        if col in cols:
+            return numbers(cols, col, what).astype(np.int64) * ns
+    raise LogError(
+        f"Expected a TimeUS or TimeMS column in {what} of the DataFlash log, got "
+        f"{', '.join(cols) or 'no columns'}"
+    )
+
+
+def numbers(cols: dict[str, NDArray], col: str, what: str) -> NDArray:
+    """Column ``col`` of message ``what``, refused in one line unless its FMT types it a number."""
+    v = cols[col]
+    if v.dtype.kind not in "iuf":
+        raise LogError(
+            f"Expected numbers in {what}.{col} of the DataFlash log, got its FMT typing it "
+            f"{v.dtype.kind == 'S' and 'a string' or 'an array'}"
+        )
+    return v
+
+
 # ------------------------------------------------------------------------ the series
-def _instances(df, struct_codes) -> tuple[dict[str, dict[str, NDArray]], int]:
+def _instances(index: Index, struct_codes) -> tuple[dict[str, dict[str, NDArray]], int]:
     """IMU instances by label (``IMU[0]``, ``IMU[1]``, ...), from the ``I`` column or the
     ``IMU2``/``IMU3`` messages of older logs; and the IMU records cut short."""
     out: dict[str, dict[str, NDArray]] = {}
-    cols, cut = decode(df, "IMU", struct_codes)
+    cols, cut = decode(index, "IMU", struct_codes)
     if cols and "I" in cols:
         inst = cols["I"].astype(np.int64)
         for k in np.unique(inst).tolist():
@@ -123,21 +138,28 @@ def _instances(df, struct_codes) -> tuple[dict[str, dict[str, NDArray]], int]:
     elif cols:
         out["IMU[0]"] = cols
     for k in (2, 3):
-        more, _ = decode(df, f"IMU{k}", struct_codes)
+        more, _ = decode(index, f"IMU{k}", struct_codes)
         if more:
             out[f"IMU[{k - 1}]"] = more
     return out, cut
 
 
-def _rate_hz(t_us: NDArray) -> float:
-    d = np.diff(np.unique(t_us.astype(np.int64)))
-    return 1e6 / float(np.median(d)) if len(d) and np.median(d) > 0 else 0.0
+def _rate_hz(t_ns: NDArray) -> float:
+    """The median step between distinct stamps, as Hz (a sort: numpy's unique hashes, 3 s for
+    2 M stamps)."""
+    d = np.diff(np.sort(t_ns))
+    d = d[d > 0]
+    return 1e9 / float(np.median(d)) if len(d) else 0.0
 
 
-def _pick_imu(imus: dict, imu_topic: str | None) -> tuple[str, str]:
+def _pick_imu(imus: dict, imu_topic: str | None, names=()) -> tuple[str, str]:
     have = [k for k, v in imus.items() if "GyrZ" in v and len(v["GyrZ"])]
     if not have:
-        raise LogError("Expected IMU messages (GyrX, GyrY, GyrZ) in the DataFlash log, got none")
+        listed = ", ".join(sorted(names)[:40]) or "no message declared"
+        raise LogError(
+            f"Expected IMU messages (GyrX, GyrY, GyrZ) in the DataFlash log, got none "
+            f"(its messages: {listed})"
+        )
     if imu_topic is None:
         chosen = "IMU[0]" if "IMU[0]" in have else have[0]
     else:
@@ -150,20 +172,22 @@ def _pick_imu(imus: dict, imu_topic: str | None) -> tuple[str, str]:
             raise LogError(
                 f"Expected IMU topic {imu_topic!r} in the DataFlash log, got {', '.join(have)}"
             )
-    listed = "; ".join(
-        f"{k}: {len(imus[k]['TimeUS'])} samples at {_rate_hz(imus[k]['TimeUS']):.3g} Hz"
-        for k in have
-    )
+    t = {k: stamps_ns(imus[k], k) for k in have}
+    listed = "; ".join(f"{k}: {len(t[k])} samples at {_rate_hz(t[k]):.3g} Hz" for k in have)
     return chosen, f"{listed}; used {chosen}" if len(have) > 1 else f"used {chosen}"
 
 
+def _xyz(cols: dict[str, NDArray], names: tuple[str, str, str], what: str) -> NDArray:
+    return np.stack([numbers(cols, c, what).astype(np.float64) for c in names], axis=1)
+
+
 def imu_series(cols: dict[str, NDArray], label: str) -> ImuSeries:
-    t_ns = cols["TimeUS"].astype(np.int64) * 1000
-    omega = np.stack([cols[c].astype(np.float64) for c in ("GyrX", "GyrY", "GyrZ")], axis=1)
+    """The gyro (and accelerometer, where the FMT has it) of one IMU instance, FRD as FLU."""
+    t_ns = stamps_ns(cols, label)
+    omega = _xyz(cols, ("GyrX", "GyrY", "GyrZ"), label)
     accel = None
     if all(c in cols for c in ("AccX", "AccY", "AccZ")):
-        accel = np.stack([cols[c].astype(np.float64) for c in ("AccX", "AccY", "AccZ")], axis=1)
-        accel = accel * FLU_FROM_FRD
+        accel = _xyz(cols, ("AccX", "AccY", "AccZ"), label) * FLU_FROM_FRD
     return ImuSeries(
         t_ns=t_ns,
         log_t_ns=t_ns.copy(),
@@ -173,13 +197,15 @@ def imu_series(cols: dict[str, NDArray], label: str) -> ImuSeries:
         type="IMU",
         frame_id="body",
         accel_b=accel,
+        log_axes="FRD",
     )
 
 
 def truth_series(name: str, cols: dict[str, NDArray], auto: bool) -> TruthSeries:
     """Roll, pitch, yaw (degrees, FRD to NED) as ``q_w_b`` FLU to ENU."""
-    q = q_wxyz_from_euler_deg(cols["Roll"], cols["Pitch"], cols["Yaw"])
-    t_ns = cols["TimeUS"].astype(np.int64) * 1000
+    rpy = _xyz(cols, ("Roll", "Pitch", "Yaw"), name)
+    q = q_wxyz_from_euler_deg(rpy[:, 0], rpy[:, 1], rpy[:, 2])
+    t_ns = stamps_ns(cols, name)
     estimate_of = "" if name == "SIM" else ARDUPILOT_ESTIMATE
     if name == "AHR2":
         estimate_of = f"{ARDUPILOT_ESTIMATE} (its backup estimator, AHR2)"
@@ -196,31 +222,39 @@ def truth_series(name: str, cols: dict[str, NDArray], auto: bool) -> TruthSeries
     )
 
 
-def _truths(df, struct_codes, truth_topic: str | None) -> tuple[list[TruthSeries], str]:
+def _truths(index: Index, struct_codes, truth_topic: str | None) -> tuple[list[TruthSeries], list]:
+    """The attitude messages found (the one named first), and notes: what was taken, and each
+    one skipped with why."""
     if truth_topic == "none":
-        return [], ""
+        return [], []
     names = list(TRUTHS)
     if truth_topic is not None:
-        if truth_topic not in df.name_to_id:
-            have = ", ".join(n for n in TRUTHS if n in df.name_to_id) or "no attitude message"
+        if truth_topic not in index.name_to_id:
+            have = ", ".join(n for n in TRUTHS if n in index.name_to_id) or "no attitude message"
             raise LogError(f"Expected truth topic {truth_topic!r} in the DataFlash log, got {have}")
         names = [truth_topic] + [n for n in TRUTHS if n != truth_topic]
-    found = []
+    found, notes = [], []
     for name in names:
-        cols, _ = decode(df, name, struct_codes)
-        if cols and all(c in cols for c in ("TimeUS", "Roll", "Pitch", "Yaw")) and len(cols["Yaw"]):
+        cols, _ = decode(index, name, struct_codes)
+        if not cols or not all(c in cols for c in ("Roll", "Pitch", "Yaw")) or not len(cols["Yaw"]):
+            continue
+        try:
             found.append(truth_series(name, cols, truth_topic is None))
+        except LogError as exc:
+            if name == truth_topic:
+                raise
+            notes.append(f"{name} skipped as truth: {exc}")
     if truth_topic is not None and (not found or found[0].topic != truth_topic):
         raise LogError(
-            f"Expected TimeUS, Roll, Pitch and Yaw in {truth_topic} of the DataFlash log, got none"
+            f"Expected Roll, Pitch and Yaw in {truth_topic} of the DataFlash log, got none"
         )
     if not found:
-        return [], "no attitude in the log (SIM, ATT, AHR2)"
+        return [], [*notes, "no attitude in the log (SIM, ATT, AHR2)"]
     first = found[0]
     if not first.estimate_of:
-        return found, f"truth: {first.topic} (the simulator's attitude)"
+        return found, [f"truth: {first.topic} (the simulator's attitude)", *notes]
     why = "" if truth_topic else " (no SIM in the log)"
-    return found, f"truth: {first.topic}, {first.estimate_of}{why}"
+    return found, [f"truth: {first.topic}, {first.estimate_of}{why}", *notes]
 
 
 # --------------------------------------------------------------------------- source
@@ -233,51 +267,40 @@ class DataFlashSource:
         self.path = Path(path)
         self.progress = progress
 
-    def _open(self, progress: Progress | None):
-        dfr = _dfreader()
-
-        class _Indexed(dfr.DFReader_binary):
-            """pymavlink's reader without its clock search: in a log with no GPS week it
-            parses every message once to find none; this reader uses TimeUS only."""
-
-            def init_clock(self):
-                self.init_clock_usec()
-                self._rewind(keep_messages=True)
-
-        report = (lambda pct: progress(min(pct / 100.0, 0.99))) if progress else None
-        said = io.StringIO()
-        try:
-            with contextlib.redirect_stdout(said), contextlib.redirect_stderr(said):
-                df = _Indexed(str(self.path), progress_callback=report)
-        except Exception as exc:  # pymavlink raises anything on a damaged file
-            raise LogError(
-                f"Expected a readable DataFlash log, got {type(exc).__name__}: {exc} in {self.path}"
-            ) from None
-        return dfr, df, said.getvalue().strip()
-
     def read(self, request: ReadRequest) -> LogData:
         progress = request.progress or self.progress
-        dfr, df, said = self._open(progress)
+        codes = _dfreader().FORMAT_TO_STRUCT
         try:
-            return self._read(df, dfr.FORMAT_TO_STRUCT, said, request, progress)
-        finally:
-            df.close()
+            index = index_log(self.path, codes)
+        except OSError as exc:
+            raise LogError(
+                f"Expected a readable DataFlash log, got {exc.strerror or exc} in {self.path}"
+            ) from None
+        if progress is not None:
+            progress(0.5)
+        return self._read(index, codes, request, progress)
 
-    def _read(self, df, codes, said: str, request: ReadRequest, progress) -> LogData:
-        imus, cut = _instances(df, codes)
-        label, imu_note = _pick_imu(imus, request.imu_topic)
+    def _read(self, index: Index, codes, request: ReadRequest, progress) -> LogData:
+        imus, _ = _instances(index, codes)
+        names = [f.name for t, f in index.formats.items() if len(index.offsets.get(t, ()))]
+        label, imu_note = _pick_imu(imus, request.imu_topic, names)
         imu = imu_series(imus[label], label)
-        truths, truth_note = _truths(df, codes, request.truth_topic)
-        damage = []
-        if cut:
-            damage.append(Damage(-1, f"DataFlash log cut short: {cut} IMU record(s) incomplete"))
-        if said:
-            damage.append(Damage(-1, f"pymavlink skipped damaged bytes: {said.splitlines()[0]}"))
+        truths, truth_notes = _truths(index, codes, request.truth_topic)
+        damage = list(index.damage)
+        cut = index.formats[int(index.data[index.cut_at + 2])].name if index.cut_at else ""
+        if cut in {"IMU", "IMU2", "IMU3", *(t.topic for t in truths)}:  # read: its loss said
+            damage.append(
+                Damage(
+                    index.cut_at,
+                    f"DataFlash log cut short: its last record ({cut}) incomplete",
+                    messages_lost=1,
+                )
+            )
         stopped_at = warn_damage(self.path, damage)
         channels = tuple(
-            ChannelInfo(name, name, "dataflash", len(df.offsets[tid]))
-            for name, tid in sorted(df.name_to_id.items())
-            if len(df.offsets[tid])
+            ChannelInfo(f.name, f.name, "dataflash", len(index.offsets[t]))
+            for t, f in sorted(index.formats.items(), key=lambda kv: kv[1].name)
+            if len(index.offsets.get(t, ()))
         )
         if progress is not None:
             progress(1.0)
@@ -290,7 +313,7 @@ class DataFlashSource:
             damage=tuple(damage),
             stopped_at=stopped_at,
             truth_candidates=tuple(truths[1:]),
-            notes=tuple(n for n in (imu_note, truth_note) if n),
+            notes=tuple(n for n in (imu_note, *truth_notes) if n),
         )
 
 

@@ -31,12 +31,14 @@ and ``sensor.yaml``.
 Channels: ``imu_topic`` names the IMU folder (default ``imu0``), ``truth_topic`` a truth
 folder or ``"none"``. The CSVs are read by Arrow's CSV reader (exact float parsing, many times
 a per-row loop; see ``benchmarks.replay_speed``); a bad CSV (too few columns, a line of another
-length, a field that is not a number, stamps not increasing) raises
-:class:`~imu_dcm.errors.LogError` naming the file and the line.
+length than the first, a field that is not a number, stamps not increasing) raises
+:class:`~imu_dcm.errors.LogError` naming the file and the line, as does a ``data.csv`` that is
+missing, a folder or a special file (a truth's too, with the hint ``--truth-topic none``).
 """
 
 from __future__ import annotations
 
+import stat
 import warnings
 from dataclasses import dataclass
 from pathlib import Path
@@ -100,14 +102,17 @@ def _header_lines(path: Path) -> int:
 
 
 def _first_bad_line(path: Path, skip: int, n_columns: int) -> str | None:
-    """What is wrong with the first bad data line, with its line number (None if none is)."""
+    """What is wrong with the first bad data line, with its line number (None if none is): too
+    few columns, another number of columns than the first data line, or not numbers."""
+    width = None
     with open(path, encoding="utf-8", errors="replace") as f:
         for number, line in enumerate(f, start=1):
             if number <= skip or not line.strip():
                 continue
             fields = line.rstrip("\r\n").split(",")
-            if len(fields) < n_columns:
-                return f"{len(fields)} columns at line {number}"
+            width = width or len(fields)
+            if len(fields) < n_columns or len(fields) != width:
+                return f"{len(fields)} columns at line {number} (the first line: {width})"
             try:
                 int(fields[0])
                 [float(x) for x in fields[1:n_columns]]
@@ -148,7 +153,7 @@ def read_csv(path: Path, n_columns: int) -> tuple[NDArray[np.int64], NDArray[np.
     """
     import pyarrow as pa
 
-    check_regular(path)
+    regular_csv(path)
     skip = _header_lines(path)
     where = f"{path.parent.name}/{path.name} ({path})"
     bad = None
@@ -172,6 +177,24 @@ def read_csv(path: Path, n_columns: int) -> tuple[NDArray[np.int64], NDArray[np.
             f"{int(t_ns[i - 1])} at line {skip + i + 1}"
         )
     return t_ns, values
+
+
+def regular_csv(path: Path) -> None:
+    """Refuse in one line a ``data.csv`` that is missing, a folder or a special file (only its
+    status is read: a FIFO is never opened, which would wait for a writer)."""
+    try:
+        mode = path.stat().st_mode
+    except FileNotFoundError:
+        what = "none (no such file)"
+    except OSError as exc:
+        what = f"an unreadable path ({exc.strerror})"
+    else:
+        if stat.S_ISREG(mode):
+            return
+        from imu_dcm.outputs import file_kind  # as paths.check_regular does
+
+        what = "a folder" if stat.S_ISDIR(mode) else f"a {file_kind(mode)} (a special file)"
+    raise LogError(f"Expected a regular file {path.parent.name}/{path.name}, got {what}: {path}")
 
 
 def _read_loadtxt(path: Path, skip: int, n_columns: int, where: str) -> tuple[NDArray, NDArray]:
@@ -297,7 +320,7 @@ class EurocSource:
 
     def _imu(self, name: str) -> ImuSeries:
         folder = self.mav / name
-        if not (folder / "data.csv").is_file():
+        if not folder.is_dir():
             raise LogError(
                 f"Expected the IMU folder {name!r} (with data.csv) in {self.mav}, got "
                 f"{', '.join(self._sensors()) or 'no sensor folders'}"
@@ -307,7 +330,7 @@ class EurocSource:
 
     def _truths(self, named: str | None, notes: list[str]) -> list[TruthSeries]:
         """The truth series, the one to use first, then the other attitude candidates."""
-        present = [t for t in TRUTHS if (self.mav / t.name / "data.csv").is_file()]
+        present = [t for t in TRUTHS if (self.mav / t.name).exists()]  # data.csv: checked
         for t in present:
             if not t.attitude:
                 notes.append(f"{t.name}: {t.about}; no attitude, so not a truth")
@@ -328,7 +351,7 @@ class EurocSource:
                 out.append(self._truth(t, auto=named is None, notes=notes))
             except LogError as exc:
                 if k == 0:
-                    raise
+                    raise LogError(f"{exc}; --truth-topic none replays without a truth") from None
                 notes.append(f"{t.name}: not read as a candidate truth: {exc}")
         if out:
             notes.insert(0, f"truth: {out[0].topic} ({TRUTHS_BY_NAME[out[0].topic].about})")

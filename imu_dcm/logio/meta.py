@@ -132,6 +132,9 @@ def load_yaml(text: str, where: Path, what: str = "rosbag2 metadata.yaml") -> An
         ) from None
     except RecursionError:
         raise LogError(f"Expected a {what}, got nesting too deep in {where}") from None
+    except ValueError as exc:  # an integer of over 4300 digits (Python's conversion limit)
+        line = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+        raise LogError(f"Expected a {what} of plain values, got in {where}: {line}") from None
 
 
 def _check_nesting(raw: bytes, where: Path) -> None:
@@ -215,10 +218,15 @@ def file_list(info: dict[str, Any], folder: Path) -> list[Path]:
     out = []
     for name in rel:
         p = folder / Path(name).name  # never outside the folder
-        if not p.is_file():
+        if p in out:
             raise LogError(
-                f"Expected the bag file {p.name} listed in metadata.yaml, got no such "
-                f"file in {folder}"
+                f"Expected each bag file listed once in metadata.yaml, got {p.name} twice in "
+                f"{folder}"
+            )
+        if not p.is_file():
+            what = "a special file or folder" if p.exists() else "no such file"
+            raise LogError(
+                f"Expected the bag file {p.name} listed in metadata.yaml, got {what} in {folder}"
             )
         out.append(p)
     return out

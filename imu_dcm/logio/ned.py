@@ -24,6 +24,16 @@ _HALF = np.sqrt(0.5)
 Q_ENU_NED = np.array([_HALF, _HALF, 0.0, 0.0])  # [x, y, z, w]
 Q_FRD_FLU = np.array([1.0, 0.0, 0.0, 0.0])
 FLU_FROM_FRD = np.array([1.0, -1.0, -1.0])
+#: A log's body axes -> the per-axis signs that take its vectors to FLU (their own inverse).
+LOG_AXES = {"FRD": FLU_FROM_FRD}
+
+
+def in_log_axes(v_flu: ArrayLike, log_axes: str) -> tuple[float, float, float] | None:
+    """A body vector in FLU, shape (3,), in the log's own axes ``log_axes`` (a key of
+    :data:`LOG_AXES`); None when ``log_axes`` is "" (the log's axes are the toolkit's)."""
+    if not log_axes:
+        return None
+    return tuple(float(x) for x in np.asarray(v_flu, dtype=np.float64) * LOG_AXES[log_axes])
 
 
 def q_enu_flu(q_wxyz_ned_frd: ArrayLike) -> NDArray[np.float64]:

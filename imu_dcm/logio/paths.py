@@ -58,13 +58,16 @@ def is_dataflash(path: Path, head: bytes) -> bool:
 
 
 def mav_folder(path: Path) -> Path | None:
-    """The ``mav0`` folder of a EuRoC dataset given as itself or its parent (None if neither)."""
-    for mav in (path / "mav0", path):
-        if (mav / "imu0" / "data.csv").is_file():
-            return mav
+    """The ``mav0`` folder of a EuRoC dataset given as itself or its parent (None if neither):
+    a ``mav0`` folder, or a folder holding ``imu0`` (whose ``data.csv`` the reader checks, so
+    that a missing one is named as such)."""
+    if (path / "mav0").is_dir():
+        return path / "mav0"
+    if (path / "imu0").is_dir() or (path / "imu0" / "data.csv").is_file():
+        return path
     return None
 
 
 def is_euroc(path: Path, head: bytes) -> bool:
-    """A EuRoC/ASL dataset folder or its ``mav0`` (``imu0/data.csv`` inside)."""
+    """A EuRoC/ASL dataset folder or its ``mav0`` (``mav0`` or ``imu0`` inside)."""
     return not head and path.is_dir() and mav_folder(path) is not None

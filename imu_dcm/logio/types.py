@@ -62,6 +62,9 @@ class ImuSeries:
         m/s², on the same rows as ``omega_b``; None where the log has none. Used to judge rest.
     gyro_absent : bool — the messages mark the angular velocity as absent (ROS
         ``angular_velocity_covariance[0] == -1`` on every message).
+    log_axes : str — "" when ``omega_b`` is in the log's own axes; otherwise the log's axes
+        that the reader converted from (``"FRD"``: PX4 and ArduPilot, ``omega_b = (x, -y, -z)``
+        of the log's; :data:`imu_dcm.logio.ned.LOG_AXES`).
     """
 
     t_ns: NDArray[np.int64]
@@ -73,6 +76,7 @@ class ImuSeries:
     frame_id: str
     accel_b: NDArray[np.float64] | None = None
     gyro_absent: bool = False
+    log_axes: str = ""
 
 
 @dataclass(frozen=True)

@@ -27,10 +27,13 @@ How it is read
 The ULog data section is a chain of ``[uint16 size][uint8 type][payload]`` messages (the
 format PX4 documents). The reader walks that chain itself, in blocks, and gathers the records of
 the wanted topics with numpy through the layouts the log's own format messages declare. Any
-irregularity it does not understand (an unknown message type, a data message for an unknown
-subscription, appended data) hands the file to ``pyulog`` (PX4's own parser), which recovers
-corrupt logs through their sync markers; the notes say so. A log cut short costs its last
-message and is listed in :attr:`LogData.damage`.
+damaged message (a type the format does not define, a data message of an unknown subscription
+or of another size than its format, a size past the end) costs only itself, and the one before
+it when its size may be what was damaged: the walk resumes at the next sound messages
+(:mod:`imu_dcm.logio.ulog_resync`) and each damaged part is listed in
+:attr:`LogData.damage` with its byte offset. Appended data and incompatible flags hand the
+file to ``pyulog`` (PX4's own parser); the notes say so. A log cut short costs its last
+message and is listed too.
 """
 
 from __future__ import annotations
@@ -52,6 +55,7 @@ from imu_dcm.logio.paths import ULOG_MAGIC as MAGIC
 from imu_dcm.logio.paths import is_ulog as probe  # noqa: F401 (the reader's probe, here too)
 from imu_dcm.logio.source import Progress, ReadRequest
 from imu_dcm.logio.types import ChannelInfo, Damage, ImuSeries, LogData, TruthSeries
+from imu_dcm.logio.ulog_resync import KNOWN_TYPES, MAX_MESSAGE, Resync
 
 KIND = "px4 ulog"
 GYRO_TOPICS = ("sensor_combined", "sensor_gyro")
@@ -76,11 +80,16 @@ _BASIC = {
 }
 # Message types of the ULog format: F(ormat), I(nfo), M(ulti info), P(aram), Q (param default),
 # A(dd subscription), R(emove), D(ata), L(og), C (tagged log), S(ync), O (dropout), B (flags).
-_KNOWN = frozenset(b"FIMPQARDLCSOB")
+_KNOWN = frozenset(KNOWN_TYPES)
 
 
 class _Irregular(Exception):
-    """The fast scan met something only pyulog's recovery handles."""
+    """The fast scan met something only pyulog's recovery handles; ``skipped_at`` is the byte
+    offset of a message pyulog skips (a type the format does not define), else -1."""
+
+    def __init__(self, why: str, skipped_at: int = -1):
+        super().__init__(why)
+        self.skipped_at = skipped_at
 
 
 def _check_flags(payload: bytes) -> None:
@@ -186,8 +195,9 @@ class Scanned:
     dropout_times_us: list[int] = field(default_factory=list)
 
 
-class _Scanner:
-    """Walks the message chain of a ULog in blocks, keeping the records of ``wanted`` topics."""
+class _Scanner(Resync):
+    """Walks the message chain of a ULog in blocks, keeping the records of ``wanted`` topics
+    (and resuming after a damaged message: :class:`imu_dcm.logio.ulog_resync.Resync`)."""
 
     def __init__(self, wanted: frozenset[str]):
         self.wanted = wanted
@@ -200,6 +210,7 @@ class _Scanner:
         self.short: dict[int, int] = {}
         self.dropouts: list[tuple[int, int]] = []
         self.info: dict[str, str] = {}
+        self.damage: list[Damage] = []
 
     def _special(self, typ: int, payload: bytes, at: int) -> None:
         if typ == 65:  # A: u8 instance, u16 msg_id, name
@@ -221,17 +232,54 @@ class _Scanner:
                 key = typ_key.partition(" ")[2]
                 self.info[key] = payload[1 + n :].decode("utf-8", errors="replace")
 
-    def walk(self, buf: bytes, base: int) -> int:
-        """Walk ``buf`` (file offset ``base``); gather data records; return bytes consumed."""
+    def walk(self, buf: bytes, base: int, final: bool = True) -> int:
+        """Walk ``buf`` (file offset ``base``); gather data records; return bytes consumed.
+        After a damaged message the walk resumes at the next sound ones (said in
+        ``self.damage``); with none in ``buf`` and more to come, it stops before the damage."""
         b = np.frombuffer(buf, np.uint8)
         pos, typ, used = kernel.record_chain(b, 0)
+        bad, ids = self._first_unsound(b, pos, typ)
+        ahead = len(pos) if bad is None else bad  # formats and subscriptions first: the
+        new = np.flatnonzero((typ[:ahead] == 65) | (typ[:ahead] == 70)).tolist()  # layouts
+        for i in new:  # that judge the data messages' sizes
+            at = int(pos[i])
+            size = int(b[at]) | int(b[at + 1]) << 8
+            self._special(int(typ[i]), buf[at + 3 : at + 3 + size], base + at)
+        if new:
+            bad, ids = self._first_unsound(b, pos, typ)
+        found = None
+        if bad is not None:
+            found = self._resync(b, pos, bad, ids, final)
+        elif final and len(b) - used > 3:  # a size past the end of the file, or cut short
+            resume = self._resume_after(b, int(used), ids, final)
+            found = (len(pos), int(used), resume) if resume < len(b) else None
+        if found is not None:
+            keep, start, resume = found
+            pos, typ = pos[:keep], typ[:keep]
+            if resume < 0 and start > 0:  # no sound message after it yet: retry with more
+                used = start
+            elif resume < 0:  # damage from the start of the buffer on: skip what cannot
+                used = max(len(buf) - MAX_MESSAGE, 1)  # hold the start of a sound message
+                self.damage.append(
+                    Damage(base, f"ULog damaged bytes at byte {base}: {used} bytes skipped")
+                )
+            else:
+                self.damage.append(
+                    Damage(
+                        base + start,
+                        f"ULog damaged message at byte {base + start}: {resume - start} bytes "
+                        "skipped to the next whole messages",
+                    )
+                )
+                used = resume
         for i in np.flatnonzero(typ != 68).tolist():
             at, t = int(pos[i]), int(typ[i])
             size = int(b[at]) | int(b[at + 1]) << 8
             payload = buf[at + 3 : at + 3 + size]
             if t not in _KNOWN or size == 0:
-                raise _Irregular(f"message type {t} of {size} bytes at byte {base + at}")
-            if t in (65, 70, 73, 79):
+                why = f"message type {t} of {size} bytes at byte {base + at}"
+                raise _Irregular(why, base + at if size else -1)
+            if t in (73, 79):  # A and F: taken above
                 self._special(t, payload, base + at)
             elif t == 66:
                 _check_flags(payload)
@@ -283,12 +331,13 @@ def _scan_fast(path: Path, wanted: frozenset[str], progress: Progress | None) ->
         while True:
             chunk = f.read(BLOCK_BYTES)
             buf = carry + chunk if carry else chunk
-            used = sc.walk(buf, base)
+            used = sc.walk(buf, base, final=not chunk)
             carry, base = buf[used:], base + used
             if progress is not None:
                 progress(min(base / total, 0.99))
-            if not chunk:
+            if not chunk and not (used and carry):
                 break
+    damage += sc.damage
     if carry:
         damage.append(
             Damage(base, f"ULog cut short: the last message at byte {base} is incomplete")
@@ -340,6 +389,9 @@ def scan(path: Path, wanted: frozenset[str], progress: Progress | None = None) -
     except _Irregular as exc:
         try:
             scanned = _scan_pyulog(path, wanted, str(exc))
+            if exc.skipped_at >= 0 and not scanned.damage:  # pyulog skips it: said as damage
+                what = f"ULog message of a type the format does not define ({exc}) skipped"
+                scanned.damage.append(Damage(exc.skipped_at, what))
         except LogError:
             raise
         except Exception as err:  # pyulog's own failure on a file the fast scan refused
@@ -354,9 +406,10 @@ def scan(path: Path, wanted: frozenset[str], progress: Progress | None = None) -
 
 def _dropout_times(s: Scanned) -> list[int]:
     """Each dropout's time: the last kept record (µs) before it in the file."""
-    pos = np.concatenate([t.positions for t in s.topics] + [np.zeros(0, np.int64)])
+    timed = [t for t in s.topics if "timestamp" in t.fields]
+    pos = np.concatenate([t.positions for t in timed] + [np.zeros(0, np.int64)])
     ts = np.concatenate(
-        [t.fields["timestamp"].astype(np.int64) for t in s.topics] + [np.zeros(0, np.int64)]
+        [t.fields["timestamp"].astype(np.int64) for t in timed] + [np.zeros(0, np.int64)]
     )
     order = np.argsort(pos, kind="stable")
     pos, ts = pos[order], ts[order]
@@ -480,6 +533,7 @@ def imu_series(gyro: Topic, topics: list[Topic], label) -> ImuSeries:
         type=gyro.name,
         frame_id="body",
         accel_b=_accel(gyro, topics, t_ns),
+        log_axes="FRD",
     )
 
 
@@ -558,6 +612,24 @@ def _reset_note(t: Topic, label, start_us: int) -> str | None:
     )
 
 
+def _timed(topics: list[Topic], label) -> tuple[list[Topic], str | None]:
+    """The topics whose format has a ``timestamp`` field, and a note naming the gyro and
+    attitude topics without one (skipped). Refused in one line when no gyro topic is left."""
+    bad = [t for t in topics if "timestamp" not in t.fields and len(t.positions)]
+    if not bad:
+        return topics, None
+    good = [t for t in topics if "timestamp" in t.fields]
+    names = ", ".join(label(t.name, t.multi_id) for t in bad)
+    if not any(t.name in GYRO_TOPICS and _omega_frd(t) is not None for t in good):
+        gyro = [label(t.name, t.multi_id) for t in bad if t.name in GYRO_TOPICS]
+        if gyro:
+            raise LogError(
+                f"Expected a timestamp field in the format of {', '.join(gyro)} in the ULog, "
+                "got none"
+            )
+    return good, f"skipped (their format has no timestamp field): {names}"
+
+
 # --------------------------------------------------------------------------- source
 class UlogSource:
     """One PX4 ULog file (see the module doc for what is read and how frames convert)."""
@@ -576,12 +648,13 @@ class UlogSource:
         progress = request.progress or self.progress
         s = scan(self.path, frozenset(wanted), progress)
         label = _labeller(s.counts)
-        gyro, gyro_note = _pick_gyro(s.topics, label, request.imu_topic)
-        imu = imu_series(gyro, s.topics, label)
-        att, truth_note = _pick_truth(s.topics, label, request.truth_topic)
+        topics, untimed = _timed(s.topics, label)
+        gyro, gyro_note = _pick_gyro(topics, label, request.imu_topic)
+        imu = imu_series(gyro, topics, label)
+        att, truth_note = _pick_truth(topics, label, request.truth_topic)
         auto = request.truth_topic is None
         series = [truth_series(t, label, auto) for t in att]
-        notes = [gyro_note, truth_note, _multi_note(s.counts), _dropout_note(s)]
+        notes = [untimed, gyro_note, truth_note, _multi_note(s.counts), _dropout_note(s)]
         notes += [_reset_note(t, label, s.start_us) for t in att] + s.notes
         channels = tuple(
             ChannelInfo(label(n, i), fmt, "ulog", c) for (n, i, fmt), c in sorted(s.counts.items())

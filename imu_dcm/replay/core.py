@@ -31,6 +31,7 @@ from numpy.typing import ArrayLike, NDArray
 from imu_dcm.errors import GapWarning, ImuDcmWarning, LogError
 from imu_dcm.integrate import integrate_quat
 from imu_dcm.logio import LogData, read_log
+from imu_dcm.logio.ned import in_log_axes
 from imu_dcm.metrics import AttitudeError, attitude_error_deg, rms
 from imu_dcm.replay.bias import BIAS_RULE, BiasEstimate, RestConfig, estimate_bias
 from imu_dcm.replay.clean import CleanedImu, _deg_evidence, clean_imu, truth_rate_ratio
@@ -653,6 +654,10 @@ def _summary(log, s, g: _Gyro, bias_est, judged: _Judged, pf_summary, anchors, e
         gyro_units=s.gyro_units,
         bias_mode=bias_est.mode,
         bias_rad_s=tuple(float(x) for x in bias_est.bias_b[start:].mean(axis=0)),
+        log_axes=getattr(imu, "log_axes", ""),
+        bias_log_rad_s=in_log_axes(
+            bias_est.bias_b[start:].mean(axis=0), getattr(imu, "log_axes", "")
+        ),
         bias_segments=tuple(x.as_dict() for x in bias_est.segments),
         prefilter=s.prefilter,
         prefilter_summary=pf_summary,

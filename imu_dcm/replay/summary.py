@@ -106,6 +106,8 @@ class ReplaySummary:
     score_window: str = "all"
     offset_auto_rms_deg: float | None = None
     notes: tuple[str, ...] = ()
+    log_axes: str = ""
+    bias_log_rad_s: tuple[float, float, float] | None = None
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready dict: tuples become lists, gaps ``{"t_s", "length_s"}`` objects, NaN None."""
@@ -149,6 +151,18 @@ def _bias_choice_line(s: ReplaySummary) -> list[str]:
         f"the score {max(a / b, b / a):.1f}x: --bias none scores without it)"
     )
     return [line]
+
+
+def _bias_axes(s: ReplaySummary) -> str:
+    """For a log whose axes were converted (FRD): the frame of the bias printed, and the bias
+    in the log's own axes."""
+    if s.bias_log_rad_s is None:
+        return ""
+    b = np.degrees(s.bias_log_rad_s)
+    return (
+        f" in FLU, the replay's axes; ({b[0]:+.3f}, {b[1]:+.3f}, {b[2]:+.3f}) °/s in "
+        f"{s.log_axes}, the log's axes"
+    )
 
 
 def _plain(x: Any) -> Any:
@@ -346,9 +360,10 @@ def format_summary(s: ReplaySummary) -> str:
         lines.append(
             f"bias       auto: {nseg} rest segment{'s' if nseg != 1 else ''} ({how}; "
             f"{s.bias_rule}), mean {bias} = ({bdeg[0]:+.3f}, {bdeg[1]:+.3f}, {bdeg[2]:+.3f}) °/s"
+            f"{_bias_axes(s)}"
         )
     else:
-        lines.append(f"bias       {s.bias_mode}: {bias}")
+        lines.append(f"bias       {s.bias_mode}: {bias}{_bias_axes(s)}")
     pf = f", pre-filter {s.prefilter}" if s.prefilter else ""
     lines.append(f"method     {s.method}{pf}; estimate from t = {s.start_time_s:.3f} s")
     if s.score_window != "all":
