@@ -38,6 +38,7 @@ from imu_dcm.replay.mounting import Mounting, estimate_mounting, from_rotation
 from imu_dcm.replay.mounting_tf import MountingChoice, choose_mounting, tf_mounting
 from imu_dcm.replay.options import check_options
 from imu_dcm.replay.settings import ReplaySettings, check_mounting
+from imu_dcm.replay.stats import evaluate
 from imu_dcm.replay.summary import ReplayResult, ReplaySummary
 from imu_dcm.replay.truth import (
     AlignedTruth,
@@ -419,7 +420,8 @@ def _replay(path, s: ReplaySettings, report, notes: list[str]) -> ReplayResult:
     report("integrate", 1.0)
     error, both = _score(q_est, q_truth)
     summary = _summary(log, s, g, bias_est, judged, pf_summary, anchors, error, both)
-    summary = dataclasses.replace(summary, truth_candidates=candidates)
+    evaluation = evaluate(g.t_s, q_est, q_truth, both, anchors, error, summary.bias_rad_s)
+    summary = dataclasses.replace(summary, truth_candidates=candidates, evaluation=evaluation)
     start = anchors[0]
     return ReplayResult(
         g.t_ns, g.t_s, g.omega, omega, bias_est.bias_b, q_est, q_truth, error, start,

@@ -12,6 +12,7 @@ from numpy.typing import NDArray
 
 from imu_dcm.metrics import AttitudeError
 from imu_dcm.replay.bias import BiasEstimate
+from imu_dcm.replay.stats import evaluation_lines
 
 __all__ = ["ReplayResult", "ReplaySummary", "format_summary"]
 
@@ -30,6 +31,8 @@ class ReplaySummary:
     ``mounting_used`` says which rotation was applied to the rates ("estimated", "given", "tf"
     for the one ``/tf_static`` declares, "" for none); ``mounting_tf`` is the declared one with
     its frames and its distance to the estimate (:mod:`imu_dcm.replay.mounting_tf`), or None.
+    ``evaluation`` holds the error statistics, per-axis errors, drift rates and the bias
+    self-check (:func:`imu_dcm.replay.stats.evaluate`), or None when nothing was scored.
     """
 
     path: str
@@ -85,6 +88,7 @@ class ReplaySummary:
     scored_segments: tuple[dict, ...] = ()
     truth_estimate_of: str = ""
     truth_candidates: tuple[dict, ...] = ()
+    evaluation: dict | None = None
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready dict: tuples become lists, gaps ``{"t_s", "length_s"}`` objects, NaN None."""
@@ -283,7 +287,9 @@ def format_summary(s: ReplaySummary) -> str:
         lines.append(f"bias       {s.bias_mode}: {bias}")
     pf = f", pre-filter {s.prefilter}" if s.prefilter else ""
     lines.append(f"method     {s.method}{pf}; estimate from t = {s.start_time_s:.3f} s")
-    if s.rms_error_deg is not None:
+    if s.evaluation:
+        lines += evaluation_lines(s.evaluation)
+    elif s.rms_error_deg is not None:
         lines.append(
             f"error      total RMS {_fmt(s.rms_error_deg)}, max {_fmt(s.max_error_deg)}; "
             f"inclination RMS {_fmt(s.rms_inclination_deg)}, max "
