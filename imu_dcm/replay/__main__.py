@@ -51,6 +51,18 @@ def build_parser() -> argparse.ArgumentParser:
         help="write DIR/estimate.tum and DIR/truth.tum (t x y z qx qy qz qw) for evo",
     )
     p.add_argument(
+        "--export-csv",
+        metavar="FILE",
+        help="write one row per estimate sample: stamp, q_w_b (xyzw), the truth where scored "
+        "and the errors (deg), each column named with its unit",
+    )
+    p.add_argument(
+        "--plot",
+        metavar="FILE",
+        help="draw the error over time, the gyro with its rests, the scored segments and the "
+        "truth jumps and gaps to FILE.png or FILE.svg (matplotlib)",
+    )
+    p.add_argument(
         "--force",
         action="store_true",
         help="replace an existing --out bag (only one this tool wrote)",
@@ -176,7 +188,8 @@ def _distinct_outputs(args) -> None:
     """No output is another output, and nothing is written inside the --out bag folder."""
     from imu_dcm.errors import InputError
 
-    named = [("--out", args.out), ("--summary-json", args.summary_json)]
+    named = [("--out", args.out), ("--summary-json", args.summary_json), ("--plot", args.plot)]
+    named.append(("--export-csv", args.export_csv))
     if args.export_tum:
         named += [
             ("--export-tum", os.path.join(args.export_tum, f))
@@ -232,6 +245,14 @@ def _options(args) -> dict:
 
         check_export_dir(args.export_tum, inputs)
     _check_rerun(args.rerun, inputs)
+    if args.plot:
+        from imu_dcm.replay.plot import check_plot
+
+        check_plot(args.plot, inputs)
+    if args.export_csv:
+        from imu_dcm.outputs import check_output_file
+
+        check_output_file(args.export_csv, inputs, "--export-csv file")
     return keywords
 
 
@@ -271,6 +292,14 @@ def _replay_main(argv: list[str]) -> int:
 
         text = json.dumps(result.summary.to_dict(), indent=2, allow_nan=False) + "\n"
         write_text_atomic(args.summary_json, text, inputs)
+    if args.export_csv:
+        from imu_dcm.replay.export_csv import export_csv
+
+        lines.append(f"csv        {export_csv(args.export_csv, result, inputs)}")
+    if args.plot:
+        from imu_dcm.replay.plot import plot_replay
+
+        lines.append(f"plot       {plot_replay(result, args.plot)}")
     if not args.quiet:
         print(format_summary(result.summary))
         for line in lines:
