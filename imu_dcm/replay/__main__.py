@@ -51,6 +51,13 @@ def build_parser() -> argparse.ArgumentParser:
         help="write DIR/estimate.tum and DIR/truth.tum (t x y z qx qy qz qw) for evo",
     )
     p.add_argument(
+        "--compare",
+        metavar="M1,M2,...",
+        help="also integrate the same rates from the same start with each method or peer "
+        "(magnus4, trapezoid, end, ..., vqf, imufusion, ahrs, reference, scipy): a table of "
+        "their statistics and cost; with --plot, one figure of every method's error",
+    )
+    p.add_argument(
         "--export-csv",
         metavar="FILE",
         help="write one row per estimate sample: stamp, q_w_b (xyzw), the truth where scored "
@@ -253,6 +260,10 @@ def _options(args) -> dict:
         from imu_dcm.outputs import check_output_file
 
         check_output_file(args.export_csv, inputs, "--export-csv file")
+    if args.compare is not None:
+        from imu_dcm.replay.compare import parse_compare
+
+        args.compare = parse_compare(args.compare)
     return keywords
 
 
@@ -285,18 +296,30 @@ def _replay_main(argv: list[str]) -> int:
             inputs,
         )
         lines.append(f"tum        {', '.join(str(f) for f in files)}")
+    rows = _compare(result, args, lines)
     if args.summary_json:
         import json
 
         from imu_dcm.outputs import write_text_atomic
 
-        text = json.dumps(result.summary.to_dict(), indent=2, allow_nan=False) + "\n"
+        data = result.summary.to_dict()
+        if rows is not None:
+            from imu_dcm.replay.compare import compare_json
+            from imu_dcm.replay.summary import _plain
+
+            data["compare"] = _plain(compare_json(rows))
+        text = json.dumps(data, indent=2, allow_nan=False) + "\n"
         write_text_atomic(args.summary_json, text, inputs)
     if args.export_csv:
         from imu_dcm.replay.export_csv import export_csv
 
         lines.append(f"csv        {export_csv(args.export_csv, result, inputs)}")
-    if args.plot:
+    if args.plot and rows is not None:
+        from imu_dcm.replay.plot import plot_compare
+
+        errors = {r.name: r.error.total_deg for r in rows}
+        lines.append(f"plot       {plot_compare(result, errors, args.plot)}")
+    elif args.plot:
         from imu_dcm.replay.plot import plot_replay
 
         lines.append(f"plot       {plot_replay(result, args.plot)}")
@@ -321,6 +344,17 @@ def _replay_main(argv: list[str]) -> int:
         if line:
             print(line)
     return 0
+
+
+def _compare(result, args, lines: list[str]):
+    """``--compare``: every named method on the replay's rates; its table goes to ``lines``."""
+    if args.compare is None:
+        return None
+    from imu_dcm.replay.compare import compare_lines, compare_methods
+
+    rows = compare_methods(result, args.compare)
+    lines.extend(compare_lines(rows))
+    return rows
 
 
 def _message(exc: BaseException) -> str:
