@@ -36,7 +36,8 @@ def build_parser() -> argparse.ArgumentParser:
         description=f"Replay a recorded gyro log ({kinds}) through the DCM integrator and "
         "compare the estimate with the log's truth. "
         f"Many logs at once: {PROG} batch PATH... --table OUT.csv (see {PROG} batch --help). "
-        f"A CSV log: {PROG} convert-csv --help. Exit codes: 0 done, 2 bad input or options, "
+        f"A CSV log: {PROG} convert-csv --help. The gyro's noise parameters: {PROG} noise "
+        "--help. Exit codes: 0 done, 2 bad input or options, "
         "130/143 interrupted.",
     )
     p.add_argument("log", help=f"the log: {kinds}")
@@ -382,7 +383,11 @@ def main(argv: list[str] | None = None) -> int:
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         try:
-            if argv and argv[0] == "convert-csv":
+            if argv and argv[0] == "noise":
+                from imu_dcm.replay.noise_cli import noise_main
+
+                code = noise_main(argv[1:])
+            elif argv and argv[0] == "convert-csv":
                 from imu_dcm.replay.csv_import import convert_main
 
                 code = convert_main(argv[1:])
