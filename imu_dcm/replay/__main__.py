@@ -59,6 +59,12 @@ def build_parser() -> argparse.ArgumentParser:
         "their statistics and cost; with --plot, one figure of every method's error",
     )
     p.add_argument(
+        "--noise-params",
+        metavar="IMU.yaml",
+        help="the gyro's noise (Kalibr keys, as `noise --yaml` writes): print the error "
+        "budget, how much of the error the noise and the method explain",
+    )
+    p.add_argument(
         "--export-csv",
         metavar="FILE",
         help="write one row per estimate sample: stamp, q_w_b (xyzw), the truth where scored "
@@ -261,6 +267,10 @@ def _options(args) -> dict:
         from imu_dcm.outputs import check_output_file
 
         check_output_file(args.export_csv, inputs, "--export-csv file")
+    if args.noise_params:
+        from imu_dcm.replay.budget import read_noise_params
+
+        args.noise_params = read_noise_params(args.noise_params)
     if args.compare is not None:
         from imu_dcm.replay.compare import parse_compare
 
@@ -297,33 +307,15 @@ def _replay_main(argv: list[str]) -> int:
             inputs,
         )
         lines.append(f"tum        {', '.join(str(f) for f in files)}")
-    rows = _compare(result, args, lines)
+    extra = _evaluations(result, args, inputs, lines)
     if args.summary_json:
         import json
 
         from imu_dcm.outputs import write_text_atomic
 
-        data = result.summary.to_dict()
-        if rows is not None:
-            from imu_dcm.replay.compare import compare_json
-            from imu_dcm.replay.summary import _plain
-
-            data["compare"] = _plain(compare_json(rows))
+        data = result.summary.to_dict() | extra
         text = json.dumps(data, indent=2, allow_nan=False) + "\n"
         write_text_atomic(args.summary_json, text, inputs)
-    if args.export_csv:
-        from imu_dcm.replay.export_csv import export_csv
-
-        lines.append(f"csv        {export_csv(args.export_csv, result, inputs)}")
-    if args.plot and rows is not None:
-        from imu_dcm.replay.plot import plot_compare
-
-        errors = {r.name: r.error.total_deg for r in rows}
-        lines.append(f"plot       {plot_compare(result, errors, args.plot)}")
-    elif args.plot:
-        from imu_dcm.replay.plot import plot_replay
-
-        lines.append(f"plot       {plot_replay(result, args.plot)}")
     if not args.quiet:
         print(format_summary(result.summary))
         for line in lines:
@@ -345,6 +337,40 @@ def _replay_main(argv: list[str]) -> int:
         if line:
             print(line)
     return 0
+
+
+def _evaluations(result, args, inputs: tuple, lines: list[str]) -> dict:
+    """``--compare``, ``--noise-params``, ``--export-csv`` and ``--plot``: their lines go to
+    ``lines``; returns what they add to the summary JSON."""
+    from imu_dcm.replay.summary import _plain
+
+    extra = {}
+    rows = _compare(result, args, lines)
+    if rows is not None:
+        from imu_dcm.replay.compare import compare_json
+
+        extra["compare"] = _plain(compare_json(rows))
+    if args.noise_params:
+        from imu_dcm.replay.budget import budget, budget_line
+
+        b = budget(result, args.noise_params)
+        lines.insert(0, budget_line(b))
+        if b is not None:
+            extra["budget"] = _plain(b)
+    if args.export_csv:
+        from imu_dcm.replay.export_csv import export_csv
+
+        lines.append(f"csv        {export_csv(args.export_csv, result, inputs)}")
+    if args.plot and rows is not None:
+        from imu_dcm.replay.plot import plot_compare
+
+        errors = {r.name: r.error.total_deg for r in rows}
+        lines.append(f"plot       {plot_compare(result, errors, args.plot)}")
+    elif args.plot:
+        from imu_dcm.replay.plot import plot_replay
+
+        lines.append(f"plot       {plot_replay(result, args.plot)}")
+    return extra
 
 
 def _compare(result, args, lines: list[str]):

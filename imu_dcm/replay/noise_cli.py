@@ -145,7 +145,7 @@ def report_lines(r: NoiseReport) -> list[str]:
 
 def kalibr_yaml(r: NoiseReport) -> str:
     """Kalibr's ``imu.yaml`` gyroscope keys (continuous time; the largest axis)."""
-    n, k = r.largest("N"), r.largest("K")
+    n, k, b = r.largest("N"), r.largest("K"), r.largest("B")
     bound = "" if k.reached else " (an upper bound: the +1/2 slope is not reached)"
     return (
         f"# Gyroscope noise from imu-dcm-replay noise: the Allan deviation of {r.samples} samples\n"
@@ -156,6 +156,9 @@ def kalibr_yaml(r: NoiseReport) -> str:
         f"sigma(tau) = N/sqrt(tau); discrete per-sample std = N*sqrt(update_rate)\n"
         f"gyroscope_random_walk: {k.value:.6g}  # rad/s^2/sqrt(Hz): rate random walk K, "
         f"sigma(tau) = K*sqrt(tau/3){bound}\n"
+        f"gyroscope_bias_instability: {b.value:.6g}  # rad/s: bias instability B, the Allan "
+        f"floor over 0.664{'' if b.reached else ' (an upper bound: no floor reached)'}; not a "
+        f"Kalibr key (for imu-dcm-replay --noise-params)\n"
     )
 
 
