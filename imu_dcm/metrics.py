@@ -35,6 +35,7 @@ __all__ = [
     "drift_fit",
     "error_planes_rad",
     "error_stats",
+    "error_vector_planes",
     "rms",
     "world_error_rad",
 ]
@@ -91,25 +92,61 @@ def rms(x: ArrayLike) -> float:
     return float(np.sqrt(np.mean(x * x))) if x.size else float("nan")
 
 
+def error_vector_planes(q_est: ArrayLike, q_true: ArrayLike) -> tuple[NDArray, NDArray]:
+    """World and body error vectors together, as planes ``(3, ...)``, rad: ``(e_w, e_b)``.
+
+    ``q_est ⊗ q_true*`` and ``q_true* ⊗ q_est`` share their scalar part (the dot product) and
+    so their angle, and their vector parts differ only in the sign of ``v_est × v_true``:
+    ``w_t v_e − w_e v_t ∓ v_e × v_t``. One pass gives both; both are views of one ``(6, ...)``
+    array, written in place (few temporaries: on long logs, fresh memory costs more than the
+    arithmetic).
+    """
+    E, T = np.broadcast_arrays(_planes4(q_est), _planes4(q_true))
+    shape = E.shape[1:]
+    (ex, ey, ez, ew), (tx, ty, tz, tw) = E.reshape(4, -1), T.reshape(4, -1)  # 0-d: 1-D
+    out = np.empty((6, ex.size))
+    tmp = np.empty(ex.size)
+    for k, (e, t, (a, b, c, d)) in enumerate(
+        ((ex, tx, (ey, tz, ez, ty)), (ey, ty, (ez, tx, ex, tz)), (ez, tz, (ex, ty, ey, tx)))
+    ):
+        lin, cross = out[k], out[3 + k]
+        np.multiply(tw, e, out=lin)
+        lin -= np.multiply(ew, t, out=tmp)
+        np.multiply(a, b, out=cross)
+        cross -= np.multiply(c, d, out=tmp)
+        np.add(lin, cross, out=tmp)  # body: L + c
+        lin -= cross  # world: L - c
+        cross[...] = tmp
+    w = ex * tx
+    w += ey * ty
+    w += ez * tz
+    w += ew * tw
+    s = np.einsum("i...,i...->...", out[:3], out[:3])
+    np.sqrt(s, out=s)
+    # log of a quaternion that is unit up to rounding: angle and axis are ratios of
+    # components, so no normalisation is needed; q and -q give the same vector (sign of w)
+    aw = np.abs(w)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        scale = np.where(s > 0.0, 2.0 * np.arctan2(s, aw) / s, 2.0 / aw)
+    np.copysign(scale, w, out=scale)
+    out *= scale
+    out = out.reshape(6, *shape)
+    return out[:3], out[3:]
+
+
+def _planes4(q: ArrayLike) -> NDArray:
+    q = np.asarray(q, dtype=float)
+    return np.ascontiguousarray(np.moveaxis(q, -1, 0))
+
+
 def error_planes_rad(q_est: ArrayLike, q_true: ArrayLike, frame: str = "world") -> NDArray:
     """World (``frame="world"``) or body (``"body"``) error vectors as planes, shape (3, ...), rad.
 
     The components ``x, y, z`` as contiguous rows (for the statistics, which use them one at a
     time); :func:`world_error_rad` and :func:`body_error_rad` give them as ``(..., 3)`` rows.
     """
-    if frame == "world":
-        x, y, z, w = product_planes(q_est, q_true, conj_q=True)
-    else:
-        x, y, z, w = product_planes(q_true, q_est, conj_p=True)
-    # log of a quaternion that is unit up to rounding (both factors are): the angle and the
-    # axis are ratios of components, so no normalisation is needed; q and -q give the same
-    # vector (|w| and the sign of w below)
-    s = np.sqrt(x * x + y * y + z * z)
-    aw = np.abs(w)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        scale = np.where(s > 0.0, 2.0 * np.arctan2(s, aw) / s, 2.0 / aw)
-    scale = np.copysign(scale, w)
-    return np.stack([x * scale, y * scale, z * scale])
+    e_w, e_b = error_vector_planes(q_est, q_true)
+    return e_w if frame == "world" else e_b
 
 
 def world_error_rad(q_est: ArrayLike, q_true: ArrayLike) -> NDArray[np.float64]:
@@ -151,6 +188,12 @@ class ErrorStats:
     samples: int
 
 
+def _dot(a: NDArray, b: NDArray) -> float:
+    """``a · b`` of 1-D arrays without BLAS (numpy's einsum loop): a threaded BLAS ``ddot`` on a
+    loaded machine spins threads that cost more CPU than the sum."""
+    return float(np.einsum("i,i->", a, b))
+
+
 def error_stats(x: ArrayLike) -> ErrorStats:
     """:class:`ErrorStats` of the finite values ``x`` (1-D; NaN entries are refused upstream).
 
@@ -170,10 +213,10 @@ def error_stats(x: ArrayLike) -> ErrorStats:
     mean = float(np.mean(x))
     d = x - mean
     return ErrorStats(
-        rms=float(np.sqrt(x @ x / n)),
+        rms=float(np.sqrt(_dot(x, x) / n)),
         mean=mean,
         median=float(q[0]),
-        std=float(np.sqrt(d @ d / n)),
+        std=float(np.sqrt(_dot(d, d) / n)),
         p95=float(q[1]),
         max=float(part[n - 1]),
         samples=int(n),
@@ -254,11 +297,11 @@ def drift_fit(t_s: ArrayLike, e: ArrayLike, segment: ArrayLike | None = None) ->
     if dof < 1:
         return DriftFit(nan, nan, nan, nan, n)
     tc = _centred(t, starts, counts)
-    stt = float(tc @ tc)
+    stt = _dot(tc, tc)
     if stt <= 0.0:
         return DriftFit(nan, nan, nan, nan, n)
     ec = _centred(e2, starts, counts)
-    slope = (ec @ tc) / stt
+    slope = np.einsum("ij,j->i", ec, tc) / stt
     ss_tot = np.einsum("ij,ij->i", ec, ec)
     ss_res = np.maximum(ss_tot - slope * slope * stt, 0.0)
     return DriftFit(slope, np.sqrt(ss_res / dof / stt), ss_res, ss_tot, n)

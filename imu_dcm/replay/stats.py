@@ -31,8 +31,8 @@ from imu_dcm.metrics import (
     AttitudeError,
     DriftFit,
     drift_fit,
-    error_planes_rad,
     error_stats,
+    error_vector_planes,
 )
 
 __all__ = ["DOUBT_RATIO", "LINE_R2", "evaluate", "evaluation_lines"]
@@ -111,7 +111,7 @@ def _body_stats(e_b: NDArray) -> dict:
     for i, a in enumerate(_AXES):
         x = e_b[i]
         out[a] = {
-            "rms": float(np.degrees(np.sqrt(x @ x / len(x)))),
+            "rms": float(np.degrees(np.sqrt(np.einsum("i,i->", x, x) / len(x)))),
             "mean_signed": float(np.degrees(np.mean(x))),
             "max_abs": float(np.degrees(max(np.max(x), -np.min(x)))),
         }
@@ -152,7 +152,7 @@ def evaluate(
     # the components as contiguous planes once, handed on as (N, 4) views of them
     qe = np.moveaxis(np.ascontiguousarray(q_est[idx].T), 0, -1)
     qt = np.moveaxis(np.ascontiguousarray(q_truth[idx].T), 0, -1)
-    e = np.concatenate([error_planes_rad(qe, qt, "world"), error_planes_rad(qe, qt, "body")])
+    e = np.concatenate(error_vector_planes(qe, qt))  # world rows, then body rows
     t = t_s[idx]
     drift = _drift(t, e, seg)
     return {
