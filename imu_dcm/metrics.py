@@ -88,8 +88,8 @@ def attitude_error_deg(q_est: ArrayLike, q_true: ArrayLike) -> AttitudeError:
 
 def rms(x: ArrayLike) -> float:
     """Root mean square of an array (NaN if empty)."""
-    x = np.asarray(x, dtype=float)
-    return float(np.sqrt(np.mean(x * x))) if x.size else float("nan")
+    x = np.asarray(x, dtype=float).ravel()
+    return float(np.sqrt(_dot(x, x) / x.size)) if x.size else float("nan")
 
 
 def error_vector_planes(q_est: ArrayLike, q_true: ArrayLike) -> tuple[NDArray, NDArray]:
@@ -213,7 +213,7 @@ def error_stats(x: ArrayLike) -> ErrorStats:
     mean = float(np.mean(x))
     d = x - mean
     return ErrorStats(
-        rms=float(np.sqrt(_dot(x, x) / n)),
+        rms=rms(x),
         mean=mean,
         median=float(q[0]),
         std=float(np.sqrt(_dot(d, d) / n)),
