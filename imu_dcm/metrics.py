@@ -92,14 +92,18 @@ def rms(x: ArrayLike) -> float:
     return float(np.sqrt(_dot(x, x) / x.size)) if x.size else float("nan")
 
 
-def error_vector_planes(q_est: ArrayLike, q_true: ArrayLike) -> tuple[NDArray, NDArray]:
-    """World and body error vectors together, as planes ``(3, ...)``, rad: ``(e_w, e_b)``.
+def error_vector_planes(
+    q_est: ArrayLike, q_true: ArrayLike, angle_rad: ArrayLike | None = None
+) -> NDArray:
+    """World and body error vectors together, as planes ``(6, ...)``, rad: rows 0-2 ``e_w``,
+    rows 3-5 ``e_b``.
 
     ``q_est ⊗ q_true*`` and ``q_true* ⊗ q_est`` share their scalar part (the dot product) and
     so their angle, and their vector parts differ only in the sign of ``v_est × v_true``:
-    ``w_t v_e − w_e v_t ∓ v_e × v_t``. One pass gives both; both are views of one ``(6, ...)``
-    array, written in place (few temporaries: on long logs, fresh memory costs more than the
-    arithmetic).
+    ``w_t v_e − w_e v_t ∓ v_e × v_t``. One pass gives both, written in place into one array
+    (few temporaries: on long logs, fresh memory costs more than the arithmetic).
+    ``angle_rad``, optional: the error angle when already known (the total error of
+    :func:`attitude_error_deg`, in rad), saving its computation.
     """
     E, T = np.broadcast_arrays(_planes4(q_est), _planes4(q_true))
     shape = E.shape[1:]
@@ -126,17 +130,21 @@ def error_vector_planes(q_est: ArrayLike, q_true: ArrayLike) -> tuple[NDArray, N
     # log of a quaternion that is unit up to rounding: angle and axis are ratios of
     # components, so no normalisation is needed; q and -q give the same vector (sign of w)
     aw = np.abs(w)
+    if angle_rad is None:
+        theta = 2.0 * np.arctan2(s, aw)
+    else:
+        theta = np.asarray(angle_rad, dtype=float).reshape(-1)
     with np.errstate(invalid="ignore", divide="ignore"):
-        scale = np.where(s > 0.0, 2.0 * np.arctan2(s, aw) / s, 2.0 / aw)
+        scale = np.divide(theta, s, out=2.0 / aw, where=s > 0.0)
     np.copysign(scale, w, out=scale)
     out *= scale
-    out = out.reshape(6, *shape)
-    return out[:3], out[3:]
+    return out.reshape(6, *shape)
 
 
 def _planes4(q: ArrayLike) -> NDArray:
-    q = np.asarray(q, dtype=float)
-    return np.ascontiguousarray(np.moveaxis(q, -1, 0))
+    """The components as planes ``(4, ...)``: strided views of the rows, not copies (each is
+    read a few times only; a copy costs as much as the reads)."""
+    return np.moveaxis(np.asarray(q, dtype=float), -1, 0)
 
 
 def error_planes_rad(q_est: ArrayLike, q_true: ArrayLike, frame: str = "world") -> NDArray:
@@ -145,8 +153,8 @@ def error_planes_rad(q_est: ArrayLike, q_true: ArrayLike, frame: str = "world") 
     The components ``x, y, z`` as contiguous rows (for the statistics, which use them one at a
     time); :func:`world_error_rad` and :func:`body_error_rad` give them as ``(..., 3)`` rows.
     """
-    e_w, e_b = error_vector_planes(q_est, q_true)
-    return e_w if frame == "world" else e_b
+    e = error_vector_planes(q_est, q_true)
+    return e[:3] if frame == "world" else e[3:]
 
 
 def world_error_rad(q_est: ArrayLike, q_true: ArrayLike) -> NDArray[np.float64]:
@@ -300,8 +308,11 @@ def drift_fit(t_s: ArrayLike, e: ArrayLike, segment: ArrayLike | None = None) ->
     stt = _dot(tc, tc)
     if stt <= 0.0:
         return DriftFit(nan, nan, nan, nan, n)
-    ec = _centred(e2, starts, counts)
-    slope = np.einsum("ij,j->i", ec, tc) / stt
-    ss_tot = np.einsum("ij,ij->i", ec, ec)
+    # Σ tc = 0 in every segment, so the slope needs no centred copy of e; and the sum of
+    # squares about the segment means is Σ e² − Σ_seg (Σ_seg e)² / n_seg (no copy either)
+    slope = np.einsum("ij,j->i", e2, tc) / stt
+    seg_sums = np.add.reduceat(e2, starts, axis=-1) if len(starts) > 1 else e2.sum(-1)[:, None]
+    ss_tot = np.einsum("ij,ij->i", e2, e2) - np.sum(seg_sums**2 / counts, axis=-1)
+    ss_tot = np.maximum(ss_tot, 0.0)
     ss_res = np.maximum(ss_tot - slope * slope * stt, 0.0)
     return DriftFit(slope, np.sqrt(ss_res / dof / stt), ss_res, ss_tot, n)

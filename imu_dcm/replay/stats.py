@@ -150,13 +150,14 @@ def evaluate(
     if len(anchors) > 1:
         seg = np.searchsorted(np.asarray(anchors), pick, side="right")
     # the components as contiguous planes once, handed on as (N, 4) views of them
-    qe = np.moveaxis(np.ascontiguousarray(q_est[idx].T), 0, -1)
-    qt = np.moveaxis(np.ascontiguousarray(q_truth[idx].T), 0, -1)
-    e = np.concatenate(error_vector_planes(qe, qt))  # world rows, then body rows
+    qe, qt = q_est[idx], q_truth[idx]
+    total = error.total_deg[idx]
+    # world rows, then body rows; their angle is the total error, already computed
+    e = error_vector_planes(qe, qt, np.radians(total))
     t = t_s[idx]
     drift = _drift(t, e, seg)
     return {
-        "total_deg": _stats(error.total_deg[idx]),
+        "total_deg": _stats(total),
         "inclination_deg": _stats(error.inclination_deg[idx]),
         "heading_deg": _stats(error.heading_deg[idx]),
         "body_axes_deg": _body_stats(e[3:]),
