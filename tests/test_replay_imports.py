@@ -20,7 +20,7 @@ from conftest import REPO_ROOT
 TRIAL = REPO_ROOT / "replay" / "broad_07_undisturbed_fast_rotation_B"
 ULOG = REPO_ROOT.parent / "shared" / "data" / "strangers" / "sample_log_small.ulg"
 #: Imported only by paths a plain replay does not take (--rerun, --prefilter, --out, batch, a
-#: summary file).
+#: summary file, --plot).
 NOT_ON_THE_PATH = (
     "scipy.spatial",
     "rerun",
@@ -31,6 +31,8 @@ NOT_ON_THE_PATH = (
     "imu_dcm.outputs",
     "imu_dcm.replay.batch",
     "mcap_ros2",
+    "matplotlib",
+    "imu_dcm.replay.plot",
 )
 
 

@@ -42,6 +42,7 @@ def build_parser() -> argparse.ArgumentParser:
         "compare the estimate with the log's truth. "
         f"Many logs at once: {PROG} batch PATH... --table OUT.csv (see {PROG} batch --help). "
         f"A CSV log: {PROG} convert-csv --help. What a log holds: {PROG} info LOG. "
+        f"The gyro's noise parameters: {PROG} noise --help. "
         "Exit codes: 0 done, 2 bad input or options, 130/143 interrupted.",
     )
     p.add_argument("log", help=f"the log: {kinds}")
@@ -59,6 +60,31 @@ def build_parser() -> argparse.ArgumentParser:
         "--export-tum",
         metavar="DIR",
         help="write DIR/estimate.tum and DIR/truth.tum (t x y z qx qy qz qw) for evo",
+    )
+    p.add_argument(
+        "--compare",
+        metavar="M1,M2,...",
+        help="also integrate the same rates from the same start with each method or peer "
+        "(magnus4, trapezoid, end, ..., vqf, imufusion, ahrs, reference, scipy): a table of "
+        "their statistics and cost; with --plot, one figure of every method's error",
+    )
+    p.add_argument(
+        "--noise-params",
+        metavar="IMU.yaml",
+        help="the gyro's noise (Kalibr keys, as `noise --yaml` writes): print the error "
+        "budget, how much of the error the noise and the method explain",
+    )
+    p.add_argument(
+        "--export-csv",
+        metavar="FILE",
+        help="write one row per estimate sample: stamp, q_w_b (xyzw), the truth where scored "
+        "and the errors (deg), each column named with its unit",
+    )
+    p.add_argument(
+        "--plot",
+        metavar="FILE",
+        help="draw the error over time, the gyro with its rests, the scored segments and the "
+        "truth jumps and gaps to FILE.png or FILE.svg (matplotlib)",
     )
     p.add_argument(
         "--force",
@@ -196,7 +222,8 @@ def _distinct_outputs(args) -> None:
     """No output is another output, and nothing is written inside the --out bag folder."""
     from imu_dcm.errors import InputError
 
-    named = [("--out", args.out), ("--summary-json", args.summary_json)]
+    named = [("--out", args.out), ("--summary-json", args.summary_json), ("--plot", args.plot)]
+    named.append(("--export-csv", args.export_csv))
     if args.export_tum:
         named += [
             ("--export-tum", os.path.join(args.export_tum, f))
@@ -258,6 +285,22 @@ def _options(args) -> tuple[dict, dict]:
         claims["tum"] = claim_export(args.export_tum, inputs)
     claims["rrd"] = _check_rerun(args.rerun, inputs)
     _check_view_options(args)
+    if args.plot:
+        from imu_dcm.replay.plot import check_plot
+
+        check_plot(args.plot, inputs)
+    if args.export_csv:
+        from imu_dcm.outputs import check_output_file
+
+        check_output_file(args.export_csv, inputs, "--export-csv file")
+    if args.noise_params:
+        from imu_dcm.replay.budget import read_noise_params
+
+        args.noise_params = read_noise_params(args.noise_params)
+    if args.compare is not None:
+        from imu_dcm.replay.compare import parse_compare
+
+        args.compare = parse_compare(args.compare)
     return keywords, claims
 
 
@@ -306,16 +349,21 @@ def _replay_main(argv: list[str]) -> int:
         written.append(str(args.summary_json))
     if args.rerun and args.rerun.startswith("save:"):
         written.append(args.rerun[len("save:") :])
+    lines: list[str] = []  # the evaluations' lines (budget, comparison), after the summary
+    extra = _evaluations(result, args, inputs, lines)
+    written += [str(p) for p in (args.export_csv, args.plot) if p]
     summary = dataclasses.replace(result.summary, written=tuple(written))
     if summary_claim is not None:
         from imu_dcm.outputs import write_json
 
-        write_json(summary_claim, summary.to_dict(), writer="replay summary")
+        write_json(summary_claim, summary.to_dict() | extra, writer="replay summary")
     # the JSON on stdout (--summary-json -): every line for people goes to stderr
     to_stderr = summary_claim is not None and summary_claim.stream == "stdout"
     stream = sys.stderr if to_stderr else sys.stdout
     if not args.quiet:
         print(format_summary(summary), file=stream)
+        for line in lines:
+            print(line, file=stream)
     if args.rerun == "off":
         return 0
     with contextlib.redirect_stdout(stream):
@@ -344,6 +392,51 @@ def _view(result, args, claim) -> tuple[str, int]:
         return "", 0
 
 
+def _evaluations(result, args, inputs: tuple, lines: list[str]) -> dict:
+    """``--compare``, ``--noise-params``, ``--export-csv`` and ``--plot``: their lines go to
+    ``lines``; returns what they add to the summary JSON."""
+    from imu_dcm.replay.summary import _plain
+
+    extra = {}
+    rows = _compare(result, args, lines)
+    if rows is not None:
+        from imu_dcm.replay.compare import compare_json
+
+        extra["compare"] = _plain(compare_json(rows))
+    if args.noise_params:
+        from imu_dcm.replay.budget import budget, budget_line
+
+        b = budget(result, args.noise_params)
+        lines.insert(0, budget_line(b))
+        if b is not None:
+            extra["budget"] = _plain(b)
+    if args.export_csv:
+        from imu_dcm.replay.export_csv import export_csv
+
+        export_csv(args.export_csv, result, inputs)  # named on the summary's `written` line
+    if args.plot and rows is not None:
+        from imu_dcm.replay.plot import plot_compare
+
+        errors = {r.name: r.error.total_deg for r in rows}
+        plot_compare(result, errors, args.plot)
+    elif args.plot:
+        from imu_dcm.replay.plot import plot_replay
+
+        plot_replay(result, args.plot)
+    return extra
+
+
+def _compare(result, args, lines: list[str]):
+    """``--compare``: every named method on the replay's rates; its table goes to ``lines``."""
+    if args.compare is None:
+        return None
+    from imu_dcm.replay.compare import compare_lines, compare_methods
+
+    rows = compare_methods(result, args.compare)
+    lines.extend(compare_lines(rows))
+    return rows
+
+
 def _message(exc: BaseException) -> str:
     text = str(exc).splitlines()[0] if str(exc) else ""
     if isinstance(exc, OSError):
@@ -369,7 +462,11 @@ def main(argv: list[str] | None = None) -> int:
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         try:
-            if argv and argv[0] == "convert-csv":
+            if argv and argv[0] == "noise":
+                from imu_dcm.replay.noise_cli import noise_main
+
+                code = noise_main(argv[1:])
+            elif argv and argv[0] == "convert-csv":
                 from imu_dcm.replay.csv_import import convert_main
 
                 code = convert_main(argv[1:])

@@ -43,6 +43,7 @@ from imu_dcm.replay.options import check_options
 from imu_dcm.replay.outcome import outcome
 from imu_dcm.replay.sampling import sampling_error_deg
 from imu_dcm.replay.settings import ReplaySettings, check_mounting
+from imu_dcm.replay.stats import evaluate
 from imu_dcm.replay.summary import ReplayResult, ReplaySummary
 from imu_dcm.replay.truth import (
     JUMP_DEG,
@@ -559,6 +560,8 @@ def _replay(path, s: ReplaySettings, report, notes: list[str]) -> ReplayResult:
         rms_error_no_bias_deg=unbiased,
         truth_convention=_plain_convention(convention) if log.truth is not None else None,
     )
+    evaluation = evaluate(g.t_s, q_est, q_truth, both, anchors, error, summary.bias_rad_s)
+    summary = dataclasses.replace(summary, evaluation=evaluation)
     start = anchors[0]
     summary = dataclasses.replace(
         summary,

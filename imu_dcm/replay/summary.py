@@ -13,6 +13,7 @@ from numpy.typing import NDArray
 from imu_dcm.metrics import AttitudeError
 from imu_dcm.replay.bias import BiasEstimate
 from imu_dcm.replay.sampling import TOO_SLOW_SHARE
+from imu_dcm.replay.stats import evaluation_lines
 
 __all__ = ["ReplayResult", "ReplaySummary", "format_summary"]
 
@@ -38,6 +39,8 @@ class ReplaySummary:
     ("estimated", "given", "tf" for the one ``/tf_static`` declares, "" for none);
     ``mounting_tf`` is the declared one with its frames and its distance to the estimate
     (:mod:`imu_dcm.replay.mounting_tf`), or None.
+    ``evaluation`` holds the error statistics, per-axis errors, drift rates and the bias
+    self-check (:func:`imu_dcm.replay.stats.evaluate`), or None when nothing was scored.
     """
 
     path: str
@@ -108,6 +111,7 @@ class ReplaySummary:
     notes: tuple[str, ...] = ()
     log_axes: str = ""
     bias_log_rad_s: tuple[float, float, float] | None = None
+    evaluation: dict | None = None
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready dict: tuples become lists, gaps ``{"t_s", "length_s"}`` objects, NaN None."""
@@ -373,6 +377,8 @@ def format_summary(s: ReplaySummary) -> str:
             f"error      heading RMS {_fmt(s.rms_error_deg)}, max {_fmt(s.max_error_deg)}: the "
             f"truth carries heading only (roll and pitch zero in every sample), scored on it"
         )
+    elif s.evaluation:
+        lines += evaluation_lines(s.evaluation)
     elif s.rms_error_deg is not None:
         lines.append(
             f"error      total RMS {_fmt(s.rms_error_deg)}, max {_fmt(s.max_error_deg)}; "
