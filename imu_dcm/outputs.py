@@ -327,8 +327,23 @@ def write_json(
     return write_atomic(claim, text)
 
 
-def save_figure(fig, path: str | os.PathLike, **savefig_kwargs) -> Path:
-    """``fig.savefig`` (matplotlib) whole or not at all, through :func:`atomic_path`."""
+def save_figure(fig, path: str | os.PathLike | Claim, **savefig_kwargs) -> Path:
+    """``fig.savefig`` (matplotlib) whole or not at all.
+
+    ``path`` a :class:`Claim` (kind ``"figure"``, from :func:`claim_output`): the figure is
+    signed (PNG ``Software``, SVG ``Creator`` metadata) so that a later run may replace it, and
+    written under the output rule. A plain path (the benchmarks' own figures): written through
+    :func:`atomic_path`, unsigned.
+    """
+    if isinstance(path, Claim):
+        from imu_dcm.signatures import signature
+
+        fmt = savefig_kwargs.pop("format", None) or path.path.suffix.lstrip(".") or "png"
+        key = "Creator" if fmt == "svg" else "Software"
+        meta = {key: signature(path.what), **savefig_kwargs.pop("metadata", {})}
+        with claimed_path(path) as tmp:
+            fig.savefig(tmp, format=fmt, metadata=meta, **savefig_kwargs)
+        return path.path
     out = _plain_file(path, (), "figure")
     fmt = savefig_kwargs.pop("format", None) or out.suffix.lstrip(".") or "png"
     with atomic_path(out, "figure") as tmp:

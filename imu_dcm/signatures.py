@@ -106,6 +106,15 @@ def _png(head: bytes) -> bool:
     return False
 
 
+def _figure(head: bytes) -> bool:
+    """A PNG signed as :func:`_png`, or an SVG whose metadata (matplotlib's ``Creator``, near
+    the top) names this tool."""
+    if _png(head):
+        return True
+    top = head[:4096]
+    return b"<svg" in top and b"<dc:title>" + TOOL.encode() in top
+
+
 def _curves(head: bytes) -> bool:
     try:
         first = json.loads(_first_line(head))
@@ -137,6 +146,8 @@ KINDS: dict[str, Kind] = {
     "table": Kind("its batch table", _table, needs_force=True),
     "markdown": Kind("its markdown table", _markdown),
     "chart": Kind("its PNG chart", _png),
+    "figure": Kind("its figure", _figure),
+    "yaml": Kind("its noise YAML", _commented),
     "curves": Kind("its curves file", _curves),
     "mcap": Kind("its MCAP file", _mcap),
 }

@@ -64,6 +64,9 @@ REPLAY_OUTPUTS = {  # option -> (argv, the file it writes)
     "summary": (lambda d: ["--summary-json", str(d / "s.json")], "s.json"),
     "estimate.tum": (lambda d: ["--export-tum", str(d / "tum")], "tum/estimate.tum"),
     "truth.tum": (lambda d: ["--export-tum", str(d / "tum")], "tum/truth.tum"),
+    "csv": (lambda d: ["--export-csv", str(d / "e.csv")], "e.csv"),
+    "png": (lambda d: ["--plot", str(d / "p.png")], "p.png"),
+    "svg": (lambda d: ["--plot", str(d / "p.svg")], "p.svg"),
 }
 
 
@@ -80,8 +83,13 @@ def test_replay_never_replaces_a_file_it_did_not_write(which, force, tmp_path, c
 
 def test_replay_writes_its_own_files_again(tmp_path, capsys):
     argv = [str(FLIP), "--rerun", "off", "--quiet", "--summary-json", str(tmp_path / "s.json")]
-    argv += ["--export-tum", str(tmp_path / "tum")]
+    argv += ["--export-tum", str(tmp_path / "tum"), "--export-csv", str(tmp_path / "e.csv")]
     assert main(argv) == 0 and main(argv) == 0, capsys.readouterr().err
+    for figure in ("p.png", "p.svg"):  # a figure of its own is signed, so written again
+        pytest.importorskip("matplotlib")
+        plot = [str(FLIP), "--rerun", "off", "--quiet", "--plot", str(tmp_path / figure)]
+        assert main(plot) == 0 and main(plot) == 0, capsys.readouterr().err
+    assert (tmp_path / "e.csv").read_text().startswith("# imu_dcm ")
     summary = json.loads((tmp_path / "s.json").read_text())
     assert summary["written_by"].startswith("imu_dcm ") and summary["samples"] == 3000
     for name in ("estimate.tum", "truth.tum"):

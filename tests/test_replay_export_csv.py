@@ -54,7 +54,9 @@ def jump_log(tmp_path_factory):
 
 def _read(path):
     with open(path, newline="") as f:
+        first = f.readline()
         rows = list(csv.reader(f))
+    assert first.startswith("# imu_dcm ")  # signed: a later run may replace its own export
     header, body = rows[0], rows[1:]
     cols = {
         name: np.array([float(r[i]) if r[i] else np.nan for r in body])

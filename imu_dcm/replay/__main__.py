@@ -288,11 +288,11 @@ def _options(args) -> tuple[dict, dict]:
     if args.plot:
         from imu_dcm.replay.plot import check_plot
 
-        check_plot(args.plot, inputs)
+        claims["plot"] = check_plot(args.plot, inputs)
     if args.export_csv:
-        from imu_dcm.outputs import check_output_file
+        from imu_dcm.replay.export_csv import claim_csv
 
-        check_output_file(args.export_csv, inputs, "--export-csv file")
+        claims["csv"] = claim_csv(args.export_csv, inputs)
     if args.noise_params:
         from imu_dcm.replay.budget import read_noise_params
 
@@ -350,7 +350,7 @@ def _replay_main(argv: list[str]) -> int:
     if args.rerun and args.rerun.startswith("save:"):
         written.append(args.rerun[len("save:") :])
     lines: list[str] = []  # the evaluations' lines (budget, comparison), after the summary
-    extra = _evaluations(result, args, inputs, lines)
+    extra = _evaluations(result, args, claims, lines)
     written += [str(p) for p in (args.export_csv, args.plot) if p]
     summary = dataclasses.replace(result.summary, written=tuple(written))
     if summary_claim is not None:
@@ -392,9 +392,9 @@ def _view(result, args, claim) -> tuple[str, int]:
         return "", 0
 
 
-def _evaluations(result, args, inputs: tuple, lines: list[str]) -> dict:
-    """``--compare``, ``--noise-params``, ``--export-csv`` and ``--plot``: their lines go to
-    ``lines``; returns what they add to the summary JSON."""
+def _evaluations(result, args, claims: dict, lines: list[str]) -> dict:
+    """``--compare``, ``--noise-params``, ``--export-csv`` and ``--plot`` (their outputs claimed
+    in ``claims``): their lines go to ``lines``; returns what they add to the summary JSON."""
     from imu_dcm.replay.summary import _plain
 
     extra = {}
@@ -413,16 +413,16 @@ def _evaluations(result, args, inputs: tuple, lines: list[str]) -> dict:
     if args.export_csv:
         from imu_dcm.replay.export_csv import export_csv
 
-        export_csv(args.export_csv, result, inputs)  # named on the summary's `written` line
+        export_csv(claims["csv"], result)  # named on the summary's `written` line
     if args.plot and rows is not None:
         from imu_dcm.replay.plot import plot_compare
 
         errors = {r.name: r.error.total_deg for r in rows}
-        plot_compare(result, errors, args.plot)
+        plot_compare(result, errors, claims["plot"])
     elif args.plot:
         from imu_dcm.replay.plot import plot_replay
 
-        plot_replay(result, args.plot)
+        plot_replay(result, claims["plot"])
     return extra
 
 

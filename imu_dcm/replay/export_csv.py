@@ -28,7 +28,7 @@ from pathlib import Path
 import numpy as np
 
 from imu_dcm.metrics import error_planes_rad
-from imu_dcm.outputs import atomic_path, check_output_file
+from imu_dcm.outputs import claim_output, claimed_path
 from imu_dcm.so3 import row_finite
 
 __all__ = ["CSV_COLUMNS", "export_csv"]
@@ -71,22 +71,35 @@ def _columns(result) -> list:
     ]
 
 
-def export_csv(path: str | os.PathLike, result, inputs: Iterable[str | os.PathLike] = ()) -> Path:
-    """Write the per-sample table of a :class:`imu_dcm.replay.summary.ReplayResult` to ``path``.
+def claim_csv(path: str | os.PathLike, inputs: Iterable[str | os.PathLike] = ()):
+    """Check ``--export-csv`` before the log is read (:func:`imu_dcm.outputs.claim_output`:
+    new, or a CSV export of this tool's, never an input)."""
+    return claim_output(path, "csv", tuple(inputs), what="--export-csv file")
 
-    Returns the path written (atomically: a temporary sibling, then rename).
+
+def export_csv(path, result, inputs: Iterable[str | os.PathLike] = ()) -> Path:
+    """Write the per-sample table of a :class:`imu_dcm.replay.summary.ReplayResult` to ``path``
+    (a path, or the claim of :func:`claim_csv`).
+
+    The first line is a comment naming this tool (``# imu_dcm <version> csv export``, so that a
+    later run may replace the file: read with ``comment="#"`` or skip it), then the header.
+    Returns the path written, whole or not at all.
     """
     import pyarrow as pa
     import pyarrow.csv as pacsv
 
-    out = check_output_file(path, tuple(inputs), "--export-csv file")
+    from imu_dcm.output_rule import Claim
+    from imu_dcm.signatures import comment_line
+
+    claim = path if isinstance(path, Claim) else claim_csv(path, inputs)
     arrays = [
         pa.array(np.ascontiguousarray(c), from_pandas=True)  # NaN -> null: an empty cell
         for c in _columns(result)
     ]
     table = pa.Table.from_arrays(arrays, names=list(CSV_COLUMNS))
     options = pacsv.WriteOptions(include_header=False, quoting_style="none")
-    with atomic_path(out, "--export-csv file") as tmp, open(tmp, "wb") as f:
+    with claimed_path(claim) as tmp, open(tmp, "wb") as f:
+        f.write(comment_line("csv export").encode())
         f.write((",".join(CSV_COLUMNS) + "\n").encode())  # plain names: no quotes
         pacsv.write_csv(table, f, options)
-    return out
+    return claim.path

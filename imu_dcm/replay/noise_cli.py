@@ -147,9 +147,13 @@ def kalibr_yaml(r: NoiseReport) -> str:
     """Kalibr's ``imu.yaml`` gyroscope keys (continuous time; the largest axis)."""
     n, k, b = r.largest("N"), r.largest("K"), r.largest("B")
     bound = "" if k.reached else " (an upper bound: the +1/2 slope is not reached)"
+    from imu_dcm.signatures import comment_line
+
     return (
-        f"# Gyroscope noise from imu-dcm-replay noise: the Allan deviation of {r.samples} samples\n"
-        f"# ({r.samples / r.rate_hz:.1f} s); the largest of the three axes; continuous time.\n"
+        comment_line("noise yaml")
+        + f"# Gyroscope noise from imu-dcm-replay noise: the Allan deviation of {r.samples}\n"
+        f"# samples ({r.samples / r.rate_hz:.1f} s); the largest of the three axes; continuous\n"
+        f"# time.\n"
         f"rostopic: {r.topic}\n"
         f"update_rate: {r.rate_hz:.6g}  # Hz\n"
         f"gyroscope_noise_density: {n.value:.6g}  # rad/s/sqrt(Hz): angle random walk N, "
@@ -162,34 +166,37 @@ def kalibr_yaml(r: NoiseReport) -> str:
     )
 
 
-def _outputs(args) -> tuple:
-    from imu_dcm.outputs import check_output_file
+def _outputs(args) -> dict:
+    """The outputs claimed before the log is read (:func:`imu_dcm.outputs.claim_output`: new,
+    or a file of this tool's of the same kind, never the log)."""
+    from imu_dcm.outputs import claim_output
 
     inputs = (args.log,)
+    if args.yaml and args.plot and os.path.realpath(args.yaml) == os.path.realpath(args.plot):
+        raise InputError(f"Expected --yaml and --plot to be separate paths, got {args.yaml}")
+    claims = {}
     if args.yaml:
-        check_output_file(args.yaml, inputs, "--yaml file")
+        claims["yaml"] = claim_output(args.yaml, "yaml", inputs, what="--yaml file")
     if args.plot:
         from imu_dcm.replay.plot import check_plot
 
-        check_plot(args.plot, inputs)
-    if args.yaml and args.plot and os.path.realpath(args.yaml) == os.path.realpath(args.plot):
-        raise InputError(f"Expected --yaml and --plot to be separate paths, got {args.yaml}")
-    return inputs
+        claims["plot"] = check_plot(args.plot, inputs)
+    return claims
 
 
 def noise_main(argv: list[str]) -> int:
     """Run ``noise``: print the terms, write the YAML and the plot when asked."""
     args = build_parser().parse_args(argv)
-    inputs = _outputs(args)  # checked before the log is read
+    claims = _outputs(args)  # checked before the log is read
     r = measure_noise(args.log, args.imu_topic, args.gyro_units)
     lines = report_lines(r)
     if args.yaml:
-        from imu_dcm.outputs import write_text_atomic
+        from imu_dcm.outputs import write_atomic
 
-        lines.append(f"yaml       {write_text_atomic(args.yaml, kalibr_yaml(r), inputs)}")
+        lines.append(f"yaml       {write_atomic(claims['yaml'], kalibr_yaml(r))}")
     if args.plot:
         from imu_dcm.replay.noise_plot import plot_allan
 
-        lines.append(f"plot       {plot_allan(r, args.plot, os.path.basename(args.log))}")
+        lines.append(f"plot       {plot_allan(r, claims['plot'], os.path.basename(args.log))}")
     print("\n".join(lines))
     return 0

@@ -23,7 +23,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from imu_dcm.errors import InputError
-from imu_dcm.outputs import check_output_file
+from imu_dcm.outputs import claim_output
 
 __all__ = ["PLOT_EXTRA", "check_plot", "plot_compare", "plot_replay"]
 
@@ -38,22 +38,24 @@ _DPI = 110
 _SCORED = "#e8f4e8"  # background of the scored segments
 
 
-def check_plot(path: str, inputs, flag: str = "--plot") -> Path:
-    """Check a figure path (``.png`` or ``.svg``, a safe output) and that matplotlib is installed.
+def check_plot(path: str, inputs, flag: str = "--plot"):
+    """Check a figure path (``.png`` or ``.svg``, new or a figure of this tool's: the output
+    rule of :mod:`imu_dcm.outputs`) and that matplotlib is installed; returns its claim, to
+    pass to :func:`plot_replay` / :func:`plot_compare` as their ``path``.
 
     Raises
     ------
     InputError
         Another suffix, or matplotlib missing (naming the extra that installs it).
     OutputError
-        An unsafe target (:func:`imu_dcm.outputs.check_output_file`).
+        An unsafe target or a file this tool did not write (:func:`imu_dcm.outputs.claim_output`).
     """
     suffix = os.path.splitext(path)[1].lower()
     if suffix not in _FORMATS:
         raise InputError(f"Expected {flag} FILE.png or FILE.svg, got {path!r}")
     if importlib.util.find_spec("matplotlib") is None:
         raise InputError(f"Expected matplotlib for {flag}, got none installed: {PLOT_EXTRA}")
-    return check_output_file(path, inputs, f"{flag} file")
+    return claim_output(path, "figure", inputs, what=f"{flag} file")
 
 
 def _figure(width_in: float, height_in: float):

@@ -372,10 +372,17 @@ def format_summary(s: ReplaySummary) -> str:
     lines.append(f"method     {s.method}{pf}; estimate from t = {s.start_time_s:.3f} s")
     if s.score_window != "all":
         lines.append(f"scored     {s.score_window} ({s.truth_samples_used} samples)")
-    if s.rms_error_deg is not None and s.scored_on == "heading":
+    heading_only = s.rms_error_deg is not None and s.scored_on == "heading"
+    if heading_only and s.evaluation:  # its statistics' heading line, and why only that one
+        lines += [
+            x
+            for x in evaluation_lines(s.evaluation)
+            if not x.startswith("error      ") or x.startswith("error      heading")
+        ]
+    if heading_only:
         lines.append(
-            f"error      heading RMS {_fmt(s.rms_error_deg)}, max {_fmt(s.max_error_deg)}: the "
-            f"truth carries heading only (roll and pitch zero in every sample), scored on it"
+            f"scored on  heading only (RMS {_fmt(s.rms_error_deg)}, max {_fmt(s.max_error_deg)}): "
+            f"the truth carries heading only (roll and pitch zero in every sample)"
         )
     elif s.evaluation:
         lines += evaluation_lines(s.evaluation)
