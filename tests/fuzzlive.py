@@ -62,7 +62,7 @@ def good_line(k: int, fmt: str) -> bytes:
     return json.dumps({"t_s": float(good_t(k)), "omega_b": [0, 0, SPIN_DEG_S]}).encode()
 
 
-def _garbage(rng: np.random.Generator, lo: int, hi: int) -> bytes:
+def garbage(rng: np.random.Generator, lo: int, hi: int) -> bytes:
     while True:
         b = bytes(rng.integers(0, 256, int(rng.integers(lo, hi)), dtype=np.uint8))
         b = b.replace(b"\n", b"").replace(b"\r", b"")
@@ -160,7 +160,7 @@ def _oversize(rng, k, fmt, udp):
 
 
 def _garbage_line(rng, k, fmt, udp):
-    return _garbage(rng, 1, 300)
+    return garbage(rng, 1, 300)
 
 
 LINE_DAMAGE = {
@@ -297,17 +297,22 @@ def wait_bound(port: int, proc: subprocess.Popen, timeout_s: float = 20.0) -> bo
     return False
 
 
-def send_datagrams(port: int, datagrams: list[bytes], pause_every: int = 20) -> None:
-    """One datagram each, paced (a pause every ``pause_every``) so loopback rarely drops."""
+def send_datagrams(
+    port: int, datagrams: list[bytes], pause_every: int = 20, pause_s: float = 0.004
+) -> None:
+    """One datagram each, paced (``pause_s`` every ``pause_every``) so loopback rarely drops."""
     with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as tx:
         for i, d in enumerate(datagrams):
             tx.sendto(d, ("127.0.0.1", port))
             if i % pause_every == pause_every - 1:
-                time.sleep(0.004)
+                time.sleep(pause_s)
 
 
-def violations(run: Run, *, expect_samples: bool) -> list[str]:
-    """The rules every live case keeps, whatever the source."""
+def violations(
+    run: Run, *, expect_samples: bool, rate_z_rad_s: float = math.radians(SPIN_DEG_S)
+) -> list[str]:
+    """The rules every live case keeps, whatever the source (the good samples turn the body
+    at ``rate_z_rad_s`` about its z axis, FLU)."""
     v = []
     if run.hang:
         return [f"hang (> {RUN_TIMEOUT_S:g} s)"]
@@ -329,7 +334,7 @@ def violations(run: Run, *, expect_samples: bool) -> list[str]:
             v.append("a non-finite attitude")
         else:
             # the exact spin: the angle about z is 90 deg/s times the time integrated
-            want = math.radians(SPIN_DEG_S) * s["final_t_s"]
+            want = rate_z_rad_s * s["final_t_s"]
             err = abs(2 * math.atan2(q[2], q[3]) - want)
             if err > 1e-9 or abs(q[0]) + abs(q[1]) > 1e-12:
                 v.append(f"final attitude off by {math.degrees(err):.3g} deg")
