@@ -136,7 +136,7 @@ def _deep(rng, k, fmt, udp):
 
 def _stamp(rng, k, fmt, udp):
     if fmt == "csv":
-        v = ["-0.5", "9.3e18", "1e999999999", "-1e-999999999", "1e999990", "0x10"]
+        v = ["-0.5", "9.3e18", "1e999999999", "-1e-3", "1e999990", "0x10"]
         return f"{v[int(rng.integers(len(v)))]},0,0,1".encode()
     v = [
         '"t_s": -1',
@@ -338,6 +338,8 @@ def violations(
             err = abs(2 * math.atan2(q[2], q[3]) - want)
             if err > 1e-9 or abs(q[0]) + abs(q[1]) > 1e-12:
                 v.append(f"final attitude off by {math.degrees(err):.3g} deg")
+    if v:
+        v.append(f"stderr {run.stderr.strip()[-300:]!r}")
     return v
 
 
