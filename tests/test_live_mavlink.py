@@ -154,3 +154,27 @@ def test_mavlink_survives_implausible_rates_and_an_overflowing_stamp():
 def test_raw_gyro_scale_that_is_no_finite_number_is_refused(scale):
     with pytest.raises(InputError, match="a finite number other than 0"):
         parse_url(f"mavlink:udpin:127.0.0.1:14550?raw_gyro_scale={scale}")
+
+
+def test_a_frame_cut_at_the_end_of_its_datagram_costs_only_itself():
+    # over UDP a datagram holds whole frames: the next datagram is not the cut frame's rest
+    from pymavlink.dialects.v20 import common
+
+    from imu_dcm.live.mavlink import MavlinkSource
+
+    mav = common.MAVLink(None, srcSystem=1, srcComponent=1)
+
+    def frame(t_us):
+        return mav.highres_imu_encode(t_us, 0, 0, -9.8, *W_FRD, 0, 0, 0, 0, 0, 0, 0, 0x3F).pack(mav)
+
+    src = MavlinkSource("mavlink:udpin:127.0.0.1:0", truth_topic="none")
+    try:
+        src._handle([frame(1000), frame(2000)[:20], frame(3000), frame(4000)], 0, 0)
+    finally:
+        src._close()
+    events = []
+    while not src.events.empty():
+        events.append(src.events.get())
+    assert ("malformed", 1) in events
+    (data,) = [e[1] for e in events if e[0] == "data"]
+    assert data.t_ns.tolist() == [1_000_000, 3_000_000, 4_000_000]

@@ -91,3 +91,32 @@ def test_bad_advertises_are_dropped_counted_said_once_and_the_client_reconnects(
     assert said.count("counted as malformed") == 4  # once per kind: two bad channels, one kind
     q_end = Rotation.from_rotvec([0, 0, W_Z * (N - 1) / RATE_HZ]).as_quat()
     assert angle_between_deg(live.out["result"].q_w_b, q_end) < 1e-9
+
+
+BAD_BINARY = [b"", b"\x01\x00\x00", b"\x07" + b"x" * 20, b"\xff"]
+
+
+def test_a_short_or_unknown_binary_frame_is_dropped_counted_and_said_once():
+    def handler(conn):
+        conn.send(json.dumps({"op": "serverInfo", "name": "hostile", "capabilities": []}))
+        conn.send(json.dumps({"op": "advertise", "channels": [IMU]}))
+        sid = json.loads(conn.recv(timeout=10))["subscriptions"][0]["id"]
+        for k, p in enumerate(_payloads()):
+            conn.send(struct.pack("<BIQ", 1, sid, 0) + p)
+            if k == 50:
+                for b in BAD_BINARY:
+                    conn.send(b)
+        time.sleep(3.0)
+
+    with server_mod.serve(
+        handler, "127.0.0.1", 0, subprotocols=["foxglove.websocket.v1"], compression=None
+    ) as server:
+        threading.Thread(target=server.serve_forever, daemon=True).start()
+        port = server.socket.getsockname()[1]
+        live = live_thread(f"ws://127.0.0.1:{port}", bias="none", method="magnus4", idle_stop_s=1.0)
+        live.thread.join(60)
+        server.shutdown()
+    s = live.out["result"].summary
+    assert s["malformed"] == len(BAD_BINARY) and s["samples"] == N and s["reconnects"] == 0
+    said = "\n".join(live.said)
+    assert said.count("counted as malformed") == 2  # once per kind: short, unknown opcode

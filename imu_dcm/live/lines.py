@@ -19,7 +19,7 @@ from __future__ import annotations
 import json
 import math
 import warnings
-from decimal import Decimal, InvalidOperation
+from decimal import Decimal, DecimalException
 
 import numpy as np
 from numpy.typing import NDArray
@@ -73,11 +73,22 @@ def _stamp_ns(text, scale: int) -> int:
         return text * scale
     try:
         d = Decimal(text.strip() if isinstance(text, str) else repr(float(text)))
-    except (InvalidOperation, TypeError, ValueError):
-        raise ValueError(f"not a number: {text!r}") from None
-    if not d.is_finite():
-        raise ValueError("non-finite stamp")
-    return int((d * scale).to_integral_value())
+        if not d.is_finite():
+            raise ValueError("non-finite stamp")
+        d *= scale
+    except (DecimalException, TypeError, ValueError, OverflowError):
+        # 1e999999999 s overflows the decimal context: no stamp, not a crash
+        raise ValueError(f"not a stamp: {text!r:.40}") from None
+    if not 0 <= d < 2**63:  # before int(): 1e999990 s would be a million digits
+        raise ValueError("stamp out of range")
+    return int(d.to_integral_value())
+
+
+def _json_number(v) -> float:
+    """A JSON number as a float; a bool, a string or null is no rate (``true`` is not 1)."""
+    if isinstance(v, bool) or not isinstance(v, int | float):
+        raise TypeError(f"not a number: {v!r:.40}")
+    return float(v)
 
 
 def _parse_json(obj, gyro_scale: float) -> tuple[int, list[float], list[float] | None]:
@@ -101,11 +112,11 @@ def _parse_json(obj, gyro_scale: float) -> tuple[int, list[float], list[float] |
     elif not isinstance(w, list) or len(w) != 3:
         raise ValueError("omega_b not 3 numbers")
     else:
-        omega = [float(v) * gyro_scale for v in w]
+        omega = [_json_number(v) * gyro_scale for v in w]
     if q is not None:
         if not isinstance(q, list) or len(q) != 4:
             raise ValueError("q_w_b not 4 numbers")
-        q = [float(v) for v in q]
+        q = [_json_number(v) for v in q]
     return t_ns, omega, q
 
 
@@ -232,7 +243,11 @@ def _parse_one(line: bytes, gyro_scale: float, t_scale: int, *, header_ok: bool)
     """One stripped line -> ``(t_ns, omega or None, q or None)``; ``(None, None, None)`` for a
     header; raises ValueError (or another parse error) for a malformed line."""
     if line[:1] == b"{":
-        t_ns, omega, q = _parse_json(json.loads(line), gyro_scale)
+        try:
+            obj = json.loads(line)
+        except RecursionError:  # nested deeper than Python's stack, within the 64 KiB a line has
+            raise ValueError("JSON nested too deep") from None
+        t_ns, omega, q = _parse_json(obj, gyro_scale)
     else:
         parts = line.split(b",")
         if len(parts) != 4:

@@ -21,7 +21,9 @@ autopilot's own estimate. Frames: MAVLink states body rates in FRD and attitude 
 both are converted to body FLU and world ENU, ``[x, y, z, w]``, as the log readers do
 (:mod:`imu_dcm.logio.ned`).
 
-One bad message costs itself: a frame pymavlink cannot take, or a stamp outside 0 to 2^63 ns,
+One bad message costs itself: a frame pymavlink cannot take, a frame cut off at the end of
+its datagram (over UDP a datagram holds whole frames: the next one starts afresh, never as the
+cut frame's rest), or a stamp outside 0 to 2^63 ns,
 is counted as malformed and the stream goes on. Rates go on to the pipeline, which drops and
 counts non-finite and implausible ones (:func:`imu_dcm.rates.implausible_rates`).
 """
@@ -122,8 +124,7 @@ class MavlinkSource(Source):
             )
         self.imu_topic, self.truth = imu_topic, truth_topic != "none"
         self.batch_s = batch_s
-        self.mav = _dialect().MAVLink(None)
-        self.mav.robust_parsing = True
+        self._new_parser()
         self.gyro_type: str | None = imu_topic
         self._raw_since: float | None = None
         kind = socket.SOCK_DGRAM if self.mode == "udpin" else socket.SOCK_STREAM
@@ -140,6 +141,10 @@ class MavlinkSource(Source):
             raise InputError(f"Expected to {verb} {host}:{port}, got {exc}") from None
         self.address = self.sock.getsockname()
         self.sock.settimeout(0.2)
+
+    def _new_parser(self) -> None:
+        self.mav = _dialect().MAVLink(None)
+        self.mav.robust_parsing = True
 
     def _close(self) -> None:
         self.sock.close()
@@ -193,6 +198,9 @@ class MavlinkSource(Source):
                 continue
             for m in messages:
                 bad += not self._take(m, gyro, truth)
+            if self.mode == "udpin" and self.mav.buf_len():
+                bad += 1  # a datagram holds whole frames: its cut-off end is not the next's start
+                self._new_parser()
         if bad:
             self.events.put(("malformed", bad))
         if truth:

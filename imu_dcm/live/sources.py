@@ -76,6 +76,9 @@ __all__ = [
 
 _SUBPROTOCOLS = ("foxglove.websocket.v1", "foxglove.sdk.v1")
 _BIN_MESSAGE = 0x01
+#: The binary opcodes a Foxglove server sends: message data, time, service call response,
+#: fetch asset response (any other is no message of the protocol).
+_BIN_SERVER_OPS = frozenset({0x01, 0x02, 0x03, 0x04})
 _MSG_HEAD = struct.Struct("<BIQ")  # opcode, subscription id, log time ns
 _DRAIN_MAX = 4000  # frames (datagrams) per batch at most
 #: A batch collects what arrives within this long after its first sample, s (default): per-batch
@@ -1014,8 +1017,12 @@ class WsSource(Source):
                     return fatal
             elif len(data) >= _MSG_HEAD.size and data[0] == _BIN_MESSAGE:
                 _, sid, _ = _MSG_HEAD.unpack_from(data)
-                if sid in st.subs:
+                if sid in st.subs:  # else a subscription just ended: the protocol's race
                     pending.setdefault(sid, []).append((data[_MSG_HEAD.size :], arrival, wall))
+            elif not data or data[0] == _BIN_MESSAGE:
+                self.drop("short", f"a binary message shorter than its {_MSG_HEAD.size}-byte head")
+            elif data[0] not in _BIN_SERVER_OPS:
+                self.drop("binary op", "a binary frame of an opcode the protocol has not")
         for sid, items in pending.items():  # decoded by the session's loop (decode)
             if sid in st.subs:
                 self.events.put(("raw", st.subs[sid], items))
