@@ -77,6 +77,7 @@ def test_one_absurd_line_in_a_spin_is_dropped_and_counted(text, tmp_path):
     assert s["bias_rad_s"] == [0.0, 0.0, 0.0]
     assert np.all(np.isfinite(res.q_w_b))
     assert angle_between_deg(res.q_w_b, _truth_end()) < 1e-9
+    assert saved.pop("written_by").startswith("imu_dcm ")  # signed (the output rule)
     assert saved == s  # the JSON holds the summary as it is
     assert "1 implausible" in format_summary(s)
 

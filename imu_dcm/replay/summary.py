@@ -313,6 +313,34 @@ def _shift_line(s: ReplaySummary, check: dict) -> str:
     )
 
 
+def _error_lines(s: ReplaySummary) -> list[str]:
+    """The error's lines: its statistics (one line per quantity), or, for a truth that
+    carries heading only, the heading's line and why only that one."""
+    lines: list[str] = []
+    heading_only = s.rms_error_deg is not None and s.scored_on == "heading"
+    if heading_only and s.evaluation:  # its statistics' heading line, and why only that one
+        lines += [
+            x
+            for x in evaluation_lines(s.evaluation)
+            if not x.startswith("error      ") or x.startswith("error      heading")
+        ]
+    if heading_only:
+        lines.append(
+            f"scored on  heading only (RMS {_fmt(s.rms_error_deg)}, max {_fmt(s.max_error_deg)}): "
+            f"the truth carries heading only (roll and pitch zero in every sample)"
+        )
+    elif s.evaluation:
+        lines += evaluation_lines(s.evaluation)
+    elif s.rms_error_deg is not None:
+        lines.append(
+            f"error      total RMS {_fmt(s.rms_error_deg)}, max {_fmt(s.max_error_deg)}; "
+            f"inclination RMS {_fmt(s.rms_inclination_deg)}, max "
+            f"{_fmt(s.max_inclination_deg)}; heading RMS {_fmt(s.rms_heading_deg)}, "
+            f"max {_fmt(s.max_heading_deg)}"
+        )
+    return lines
+
+
 def format_summary(s: ReplaySummary) -> str:
     """The summary for a person, one fact per line."""
     lines = [
@@ -372,27 +400,7 @@ def format_summary(s: ReplaySummary) -> str:
     lines.append(f"method     {s.method}{pf}; estimate from t = {s.start_time_s:.3f} s")
     if s.score_window != "all":
         lines.append(f"scored     {s.score_window} ({s.truth_samples_used} samples)")
-    heading_only = s.rms_error_deg is not None and s.scored_on == "heading"
-    if heading_only and s.evaluation:  # its statistics' heading line, and why only that one
-        lines += [
-            x
-            for x in evaluation_lines(s.evaluation)
-            if not x.startswith("error      ") or x.startswith("error      heading")
-        ]
-    if heading_only:
-        lines.append(
-            f"scored on  heading only (RMS {_fmt(s.rms_error_deg)}, max {_fmt(s.max_error_deg)}): "
-            f"the truth carries heading only (roll and pitch zero in every sample)"
-        )
-    elif s.evaluation:
-        lines += evaluation_lines(s.evaluation)
-    elif s.rms_error_deg is not None:
-        lines.append(
-            f"error      total RMS {_fmt(s.rms_error_deg)}, max {_fmt(s.max_error_deg)}; "
-            f"inclination RMS {_fmt(s.rms_inclination_deg)}, max "
-            f"{_fmt(s.max_inclination_deg)}; heading RMS {_fmt(s.rms_heading_deg)}, "
-            f"max {_fmt(s.max_heading_deg)}"
-        )
+    lines += _error_lines(s)
     lines.extend(_bias_choice_line(s))
     lines.extend(_sampling_line(s))
     from imu_dcm.replay.outcome import outcome_lines
