@@ -129,3 +129,19 @@ def test_ximu3_quaternion_is_marked_as_the_devices_own_estimate(tmp_path, capsys
     assert "truth is   the x-IMU3's own estimate, not an independent reference" in replay
     assert "(the x-IMU3's own estimate)" in info and kind == ESTIMATE
     assert np.isfinite(read_log(out).truth.q_w_b).all()
+
+
+def test_a_lone_broad_mcap_declares_what_its_bag_folder_does(broad_dir, tmp_path):
+    """A rosbag2-written ``.mcap`` away from its ``metadata.yaml`` keeps its custom_data (the
+    movement intervals ``--score-window declared`` scores), from its rosbag2 metadata record."""
+    import shutil
+
+    from imu_dcm.logio import read_custom_data
+
+    trial = "02_undisturbed_slow_rotation_B"
+    lone = tmp_path / f"{trial}.mcap"
+    shutil.copyfile(broad_dir / trial / f"{trial}.mcap", lone)
+    want = read_custom_data(broad_dir / trial)
+    key = "broad.movement_intervals_stamp_ns"
+    assert key in want
+    assert read_log(lone).custom_data == want
