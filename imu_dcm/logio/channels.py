@@ -580,6 +580,22 @@ def read_truth(
 #: Who estimated a truth of this type (its ``estimate_of``), when it is no independent reference.
 _ESTIMATED_BY = {"nav_msgs/msg/Odometry": "odometry (an estimate, often wheels and the IMU)"}
 IMU_ESTIMATE = "the IMU's own orientation"
+#: A bag's ``custom_data`` key ``imu_dcm.estimate_of:<topic>`` says whose own estimate the truth
+#: on ``<topic>`` is (convert-csv's ``--truth-estimate-of``); its value becomes ``estimate_of``.
+ESTIMATE_OF_KEY = "imu_dcm.estimate_of:"
+
+
+def declared_estimates(
+    truths: tuple[TruthSeries | None, ...], custom_data: dict[str, str]
+) -> tuple[TruthSeries | None, ...]:
+    """``truths`` with ``estimate_of`` set where the bag's ``custom_data`` declares it for the
+    truth's topic (:data:`ESTIMATE_OF_KEY`); a mark the reader already gave is kept."""
+    return tuple(
+        replace(t, estimate_of=custom_data[ESTIMATE_OF_KEY + t.topic])
+        if t is not None and not t.estimate_of and custom_data.get(ESTIMATE_OF_KEY + t.topic)
+        else t
+        for t in truths
+    )
 
 
 def read_truths(

@@ -29,7 +29,7 @@ from imu_dcm.logio.types import Collected, Conn, Damage, Payloads, Sink
 
 MAGIC = b"\x89MCAP0\r\n"
 _SCHEMA, _CHANNEL, _MESSAGE, _CHUNK, _MSG_INDEX, _CHUNK_INDEX, _STATS = 3, 4, 5, 6, 7, 8, 11
-_FOOTER, _DATA_END = 2, 15
+_FOOTER, _DATA_END, _METADATA, _METADATA_INDEX = 2, 15, 12, 13
 _REC = struct.Struct("<BQ")
 _MSG = struct.Struct("<BQHIQQ")  # opcode, length, channel_id, sequence, log_time, publish_time
 _MSG_HEADER = _MSG.size  # 31 bytes before the payload of a message record
@@ -151,6 +151,28 @@ def _channel(buf, pos: int, out: dict) -> None:
     out[cid] = (sid, topic, enc)
 
 
+def _rosbag2_custom_data(buf: bytes, where: Path) -> dict[str, str]:
+    """``custom_data`` of a Metadata record body named ``rosbag2`` (empty for any other name).
+
+    rosbag2 stores its bag information (the ``metadata.yaml`` body) in such a record's
+    ``serialized_metadata``, so a single ``.mcap`` carries it without the folder's file.
+    """
+    from imu_dcm.logio.meta import custom_data, load_yaml
+
+    name, p = _str(buf, 0)
+    if name != "rosbag2":
+        return {}
+    (n,) = struct.unpack_from("<I", buf, p)
+    p, end, entries = p + 4, p + 4 + n, {}
+    while p < min(end, len(buf)):
+        key, p = _str(buf, p)
+        entries[key], p = _str(buf, p)
+    doc = load_yaml(entries.get("serialized_metadata", ""), where, "rosbag2 metadata record")
+    if isinstance(doc, dict) and isinstance(doc.get("rosbag2_bagfile_information"), dict):
+        doc = doc["rosbag2_bagfile_information"]
+    return custom_data(doc) if isinstance(doc, dict) else {}
+
+
 class McapSource(RosSource):
     """One MCAP file. ``collect(sink)`` returns every channel and the data of kept ones."""
 
@@ -261,7 +283,7 @@ class McapSource(RosSource):
         buf = f.read(end - summary_start)
         if summary_crc != 0 and zlib.crc32(tail[:25], zlib.crc32(buf)) != summary_crc:
             return None  # a damaged summary: the data section is walked instead
-        schemas, channels, chunks, counts = {}, {}, [], {}
+        schemas, channels, chunks, counts, metas = {}, {}, [], {}, []
         pos = 0
         try:
             while pos + 9 <= len(buf):
@@ -292,6 +314,8 @@ class McapSource(RosSource):
                         cid, n = struct.unpack_from("<HQ", buf, q)
                         counts[cid] = n
                         q += 10
+                elif op == _METADATA_INDEX:
+                    metas.append(struct.unpack_from("<QQ", buf, p))
                 pos = rec_end
         except (struct.error, _Bad):
             return None
@@ -307,7 +331,30 @@ class McapSource(RosSource):
         self.schemas.update(schemas)
         self.channels.update(channels)
         self.counts.update(counts)
+        for off, length in metas:
+            if 9 < length <= MAX_META_RECORD and off + length <= self.size:
+                f.seek(off)
+                if f.read(1)[0] == _METADATA:
+                    f.seek(8, 1)
+                    self._metadata(f.read(length - 9), off)
         return sorted(chunks)
+
+    def _metadata(self, buf: bytes, pos: int) -> None:
+        """The bag's ``custom_data`` from a rosbag2 Metadata record (at byte ``pos``), unless
+        the bag folder's ``metadata.yaml`` gave it; a damaged record costs only itself."""
+        if self.custom_data:
+            return
+        try:
+            self.custom_data = _rosbag2_custom_data(buf, self.path)
+        except (struct.error, _Bad, LogError) as exc:
+            why = str(exc) if isinstance(exc, LogError) else "a field runs past the record"
+            self.damage.append(
+                Damage(
+                    pos,
+                    f"the metadata record at byte {pos} is damaged ({why}); its "
+                    "custom_data (declared intervals, whose estimate the truth is) is lost",
+                )
+            )
 
     def _read_indexed(self, f, index: list[tuple]) -> None:
         """Read the chunks holding kept channels, in batches decompressed on worker threads."""
@@ -635,6 +682,8 @@ class McapSource(RosSource):
                 continue
             if op in (_SCHEMA, _CHANNEL) and length <= MAX_META_RECORD:
                 self._scan_definition(f, op, pos, length)
+            elif op == _METADATA and length <= MAX_META_RECORD:
+                self._metadata(f.read(length), pos)
             elif op == _MESSAGE and length >= 22:
                 self._scan_message(f, length, seq)
                 seq += 1

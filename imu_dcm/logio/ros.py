@@ -14,7 +14,14 @@ import warnings
 from pathlib import Path
 
 from imu_dcm.errors import ImuDcmWarning, LogError
-from imu_dcm.logio.channels import describe, pick_imu_judged, plan, read_imu, read_truths
+from imu_dcm.logio.channels import (
+    declared_estimates,
+    describe,
+    pick_imu_judged,
+    plan,
+    read_imu,
+    read_truths,
+)
 from imu_dcm.logio.damage import damage_summary, warn_damage
 from imu_dcm.logio.source import Progress, ReadRequest
 from imu_dcm.logio.tf import static_transforms
@@ -77,6 +84,8 @@ def read_ros(source: RosSource, request: ReadRequest) -> LogData:
             f"Expected IMU samples on {imu.topic}, got none that decode ({undecodable} messages)"
         )
     truth, candidates = read_truths(got, imu, request.truth_topic, request.truth_frame)
+    truth, *more = declared_estimates((truth, *candidates), source.custom_data)
+    candidates = tuple(more)
     warn_damage(shown, got.damage, stacklevel=4)
     if undecodable:
         warnings.warn(

@@ -253,6 +253,7 @@ def convert_csv(
     force: bool = False,
     truth_csv: str | Path | None = None,
     truth_time_col: str | None = None,
+    truth_estimate_of: str | None = None,
     **columns,
 ) -> Path:
     """Read a CSV (see :func:`read_csv_columns` for ``columns``) and write a ROS 2 bag.
@@ -267,6 +268,11 @@ def convert_csv(
     CSV with its own stamps (``truth_time_col``, default the gyro's ``time_col``; the same
     unit), as loggers that write the gyro and the quaternion in two files do. Each truth row
     becomes one message at its own stamp: the two files need not share their rows.
+
+    ``truth_estimate_of``: who estimated the truth (``"the x-IMU3"``), when it is a device's
+    own estimate rather than an independent reference. The bag's ``custom_data`` then holds
+    ``imu_dcm.estimate_of:<truth_topic>`` = ``"<who>'s own estimate"``, which the reader gives
+    as the truth's ``estimate_of`` (:data:`imu_dcm.logio.channels.ESTIMATE_OF_KEY`).
     """
     from imu_dcm.outputs import check_output_dir
 
@@ -285,6 +291,11 @@ def convert_csv(
                 "Expected --truth-cols and --truth-order with --truth-csv (the quaternion "
                 f"columns of {Path(truth_csv).name} and their order), got none"
             )
+    if truth_estimate_of is not None and (
+        columns.get("truth_cols") is None or not truth_estimate_of.strip()
+    ):
+        got = "no --truth-cols" if columns.get("truth_cols") is None else "an empty name"
+        raise InputError(f"Expected --truth-estimate-of WHO with --truth-cols, got {got}")
     cols = read_csv_columns(csv_path, **gyro_columns)
     t_q, q = (
         (cols.t_ns, cols.q_w_b)
@@ -302,6 +313,10 @@ def convert_csv(
         "imu_dcm.converted_from": ", ".join(Path(x).name for x in inputs),
         "imu_dcm.columns": ", ".join(f"{k}={v}" for k, v in sorted(columns.items())),
     }
+    if truth_estimate_of is not None:
+        from imu_dcm.logio.channels import ESTIMATE_OF_KEY
+
+        custom[ESTIMATE_OF_KEY + truth_topic] = f"{truth_estimate_of.strip()}'s own estimate"
     write = _write_mcap_file if single else _write_folder
     return write(
         Path(out_dir), cols, t_q, q, custom, imu_topic, truth_topic, frame_id, force, inputs
@@ -406,6 +421,12 @@ def build_parser() -> argparse.ArgumentParser:
         help="read --truth-cols from this second CSV, at its own stamps (same time unit)",
     )
     p.add_argument("--truth-time-col", help="time column of --truth-csv (default: --time-col)")
+    p.add_argument(
+        "--truth-estimate-of",
+        metavar="WHO",
+        help="the truth is WHO's own estimate (e.g. 'the x-IMU3': its AHRS output), not an "
+        'independent reference; replay, batch and info then say "WHO\'s own estimate"',
+    )
     p.add_argument("--delimiter", default=",", help="field separator (default ,)")
     p.add_argument("--imu-topic", default="/imu/data")
     p.add_argument("--truth-topic", default="/ground_truth/orientation")
@@ -428,6 +449,7 @@ def convert_main(argv: list[str]) -> int:
         force=a.force,
         truth_csv=a.truth_csv,
         truth_time_col=a.truth_time_col,
+        truth_estimate_of=a.truth_estimate_of,
         time_col=a.time_col,
         time_unit=a.time_unit,
         gyro_cols=a.gyro_cols,
