@@ -84,6 +84,8 @@ def _own_files(tmp_path) -> dict[str, object]:
     q = np.tile([0.0, 0.0, 0.0, 1.0], (3, 1))
     own["tum"] = export_tum(claim_export(tmp_path / "tum"), t, q, None)[0]
     own["csv"] = write_atomic(claim_output(tmp_path / "e.csv", "csv"), comment_line("x") + "1\n")
+    y = claim_output(tmp_path / "n.yaml", "yaml")
+    own["yaml"] = write_atomic(y, comment_line("noise yaml") + "update_rate: 200\n")
     table = tmp_path / "t.csv"
     write_table(table, [LogRow("a.mcap", samples=3)])
     own["table"] = table
@@ -98,12 +100,14 @@ def _own_files(tmp_path) -> dict[str, object]:
 
 def test_each_kind_recognises_its_own_file_and_refuses_others(tmp_path):
     own = _own_files(tmp_path)
-    assert set(own) == set(KINDS) - {"rrd", "chart"}  # those two: test_output_rule.py
+    # rrd, chart and figure (PNG/SVG from matplotlib): test_output_rule.py
+    assert set(own) == set(KINDS) - {"rrd", "chart", "figure"}
     for kind, path in own.items():
         assert is_own(path, kind), kind
         assert is_own(path, "any"), kind
         assert claim_output(path, kind).stream == "file"
-        same = {kind, *({"tum", "csv"} if kind in ("tum", "csv") else ())}  # both "# imu_dcm"
+        commented = {"tum", "csv", "yaml"}  # all three start "# imu_dcm"
+        same = {kind, *(commented if kind in commented else ())}
         for other in set(own) - same:  # a summary is no table, a table no TUM file, ...
             assert not is_own(path, other), (kind, other)
         foreign = tmp_path / "foreign" / path.name

@@ -98,3 +98,29 @@ def test_noise_plot_and_bad_outputs(still_log, tmp_path, capsys):
     assert "Expected --plot FILE.png or FILE.svg" in capsys.readouterr().err
     assert main(["noise", str(log), "--yaml", str(log / "x.yaml")]) == 2
     assert not (log / "x.yaml").exists()
+
+
+def test_the_prefilter_takes_the_noise_density_from_the_yaml(still_log, tmp_path, capsys):
+    """``--prefilter kalman --noise-params IMU.yaml`` runs the filter with the YAML's
+    ``gyroscope_noise_density``: the same summary as the density given by hand."""
+    import json
+
+    from imu_dcm.replay.__main__ import main
+
+    log, _ = still_log
+    yml = tmp_path / "imu.yaml"
+    assert main(["noise", str(log), "--yaml", str(yml)]) == 0
+    density = yaml.safe_load(yml.read_text())["gyroscope_noise_density"]
+    runs = {
+        "yaml": ["--noise-params", str(yml)],
+        "hand": ["--gyro-noise-density", repr(density)],
+        "rest": [],
+    }
+    got = {}
+    for name, extra in runs.items():
+        out = tmp_path / f"{name}.json"
+        argv = [str(log), "--rerun", "off", "--quiet", "--prefilter", "kalman", *extra]
+        assert main([*argv, "--summary-json", str(out)]) == 0, capsys.readouterr().err
+        got[name] = json.loads(out.read_text())["prefilter_summary"]
+    assert got["yaml"] == got["hand"]
+    assert got["yaml"] != got["rest"]  # the YAML's value was used, not the one from rest

@@ -181,7 +181,8 @@ def add_replay_options(g) -> None:
         "--gyro-noise-density",
         type=float,
         metavar="RAD_S_SQRT_HZ",
-        help="pre-filter: gyro white-noise density, rad/s/√Hz (default: from rest)",
+        help="pre-filter: gyro white-noise density, rad/s/√Hz (default: --noise-params' "
+        "gyroscope_noise_density when given, else from rest)",
     )
     g.add_argument(
         "--angular-accel",
@@ -214,11 +215,17 @@ def replay_keywords(args) -> dict:
     if offset != "auto":
         offset = parse_numbers(offset, 1, "--truth-offset (auto or seconds)")[0]
     config = None
+    density = args.gyro_noise_density
+    params = getattr(args, "noise_params", None)  # replay's --noise-params IMU.yaml
+    if args.prefilter != "none" and density is None and isinstance(params, str):
+        from imu_dcm.replay.budget import read_noise_params
+
+        density = read_noise_params(params).N  # its gyroscope_noise_density, rad/s/√Hz
     if args.prefilter != "none":
         from imu_dcm.prefilter import PrefilterConfig
 
         config = PrefilterConfig(
-            noise_density_rad_s_sqrt_hz=args.gyro_noise_density,
+            noise_density_rad_s_sqrt_hz=density,
             angular_accel_rad_s2=args.angular_accel,
         )
     elif args.gyro_noise_density is not None or args.angular_accel is not None:
