@@ -127,12 +127,18 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--rounds", type=int, default=5, help="timed rounds (default 5)")
     p.add_argument("--small", type=int, default=64, help="small logs of measurement 4 (64)")
     p.add_argument("--only-small", action="store_true", help="measurement 4 only")
+    p.add_argument(
+        "--baseline",
+        type=Path,
+        help="another checkout of the project (an earlier commit): measurement 4 also times "
+        "its batch command, in the same rounds",
+    )
     args = p.parse_args(argv)
 
     limit_threads_env()
     if args.only_small:
         print(f"load average before: {' '.join(f'{x:.2f}' for x in os.getloadavg())}")
-        ok = _small_logs(args.small, args.rounds)
+        ok = _small_logs(args.small, args.rounds, args.baseline)
         print(f"load average after: {' '.join(f'{x:.2f}' for x in os.getloadavg())}")
         return 0 if ok else 1
     from imu_dcm.replay.batch import find_logs
@@ -155,7 +161,7 @@ def main(argv: list[str] | None = None) -> int:
     if _dask(b, args.rounds):
         modes.append("dask")
     same = all(_same(b.rows[k], b.rows["jobs 1"]) for k in modes)
-    same = _small_logs(args.small, args.rounds) and same
+    same = _small_logs(args.small, args.rounds, args.baseline) and same
     print(f"same rows in every mode (bit for bit, wall time aside): {'yes' if same else 'NO'}")
     print(f"load average after: {' '.join(f'{x:.2f}' for x in os.getloadavg())}")
     return 0 if same else 1
@@ -261,59 +267,68 @@ def _write_small_logs(folder: Path, n: int) -> None:
             raise RuntimeError(f"data_synth failed on {argv}")
 
 
-def _small_logs(n: int, rounds: int) -> bool:
+def _small_logs(n: int, rounds: int, baseline: Path | None = None) -> bool:
     """Measurement 4: ``--jobs 2`` / ``--jobs 1`` of the batch command on ``n`` small logs,
-    each call a fresh process; True when both tables hold the same rows (wall time aside)."""
+    each call a fresh process (and the same with the ``baseline`` checkout's code); wall time
+    and the CPU time of the command with its workers. True when the tables hold the same rows
+    (wall time aside)."""
     import contextlib
     import io
+    import resource
     import subprocess
 
     from benchmarks.timing import interleaved_medians, single_thread
     from imu_dcm.replay.table import read_table
 
+    trees = {"": REPO} | ({"baseline ": baseline.resolve()} if baseline else {})
+    cpu: dict[str, list[float]] = {}
     with tempfile.TemporaryDirectory(prefix="batch_small_") as tmp:
         folder = Path(tmp) / "logs"
         folder.mkdir()
         with contextlib.redirect_stdout(io.StringIO()):
             _write_small_logs(folder, n)
-        env = {
-            **os.environ,
-            "PYTHONPATH": os.pathsep.join(filter(None, [str(REPO), os.environ.get("PYTHONPATH")])),
-        }
 
-        def command(jobs: int):
-            table = str(Path(tmp) / f"jobs{jobs}.csv")
+        def command(tree: str, jobs: int):
+            name = f"{tree}jobs {jobs}"
+            table = str(Path(tmp) / f"{name.replace(' ', '_')}.csv")
             argv = [sys.executable, "-m", "imu_dcm.replay", "batch", str(folder), "--table"]
             argv += [table, "--force", "--no-chart", "--quiet", "--jobs", str(jobs)]
-            return lambda: subprocess.run(argv, env=env, check=True, capture_output=True)
+            env = {**os.environ, "PYTHONPATH": str(trees[tree])}
 
+            def run():
+                before = resource.getrusage(resource.RUSAGE_CHILDREN)
+                subprocess.run(argv, env=env, check=True, capture_output=True)
+                after = resource.getrusage(resource.RUSAGE_CHILDREN)
+                used = (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
+                cpu.setdefault(name, []).append(used)
+
+            return name, (run, n)
+
+        cases = dict(command(tree, j) for tree in trees for j in (1, 2))
+        cases["spin 1 process"] = (lambda: _spin_units(1), 2)
+        cases["spin 2 processes"] = (lambda: _spin_units(2), 2)
         with single_thread():
-            t = interleaved_medians(
-                {
-                    "jobs 1": (command(1), n),
-                    "jobs 2": (command(2), n),
-                    "spin 1 process": (lambda: _spin_units(1), 2),
-                    "spin 2 processes": (lambda: _spin_units(2), 2),
-                },
-                rounds=rounds,
-            )
-        rows = {j: read_table(Path(tmp) / f"jobs{j}.csv") for j in (1, 2)}
-    print(f"{n} small logs (400 Hz, 20-40 s), the batch command in a fresh process, wall time:")
-    for name in ("jobs 1", "jobs 2"):
+            t = interleaved_medians(cases, rounds=rounds)
+        rows = {k: read_table(Path(tmp) / f"{k.replace(' ', '_')}.csv") for k in cpu}
+    print(f"{n} small logs (400 Hz, 20-40 s), the batch command in a fresh process:")
+    for name in cpu:
         x = t[name]
         print(
-            f"  {name:<16} median {x.median_s:6.3f} s  ({1e3 * x.median_s / n:6.1f} ms/log; "
-            f"rounds {', '.join(f'{v:.2f}' for v in x.times_s)})"
+            f"  {name:<16} wall median {x.median_s:6.3f} s ({1e3 * x.median_s / n:5.1f} ms/log; "
+            f"rounds {', '.join(f'{v:.2f}' for v in x.times_s)}); CPU with workers "
+            f"{statistics.median(cpu[name]):.2f} s"
         )
-    ratio = t["jobs 2"].median_s / t["jobs 1"].median_s
     spin = t["spin 2 processes"].median_s / t["spin 1 process"].median_s
-    print(
-        f"small logs: jobs 2 / jobs 1 wall ratio {ratio:.2f} (speed-up {1 / ratio:.2f}x, "
-        f"target >= 1.7x); pure CPU work over 2 processes in the same rounds: {spin:.2f} "
-        f"({1 / spin:.2f}x)"
-    )
-    same = _same(rows[1], rows[2])
-    print(f"small logs: same rows with --jobs 1 and 2 (wall time aside): {'yes' if same else 'NO'}")
+    for tree in trees:
+        ratio = t[f"{tree}jobs 2"].median_s / t[f"{tree}jobs 1"].median_s
+        c = statistics.median(cpu[f"{tree}jobs 2"]) / statistics.median(cpu[f"{tree}jobs 1"])
+        print(
+            f"small logs, {tree or 'this tree '}: jobs 2 / jobs 1 wall ratio {ratio:.2f} "
+            f"(speed-up {1 / ratio:.2f}x, target >= 1.7x); CPU ratio {c:.2f}"
+        )
+    print(f"pure CPU work over 2 processes in the same rounds: {spin:.2f} ({1 / spin:.2f}x)")
+    same = all(_same(rows[k], rows["jobs 1"]) for k in rows)
+    print(f"small logs: same rows in every run (wall time aside): {'yes' if same else 'NO'}")
     return same
 
 
