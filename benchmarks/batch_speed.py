@@ -1,7 +1,7 @@
 """Batch replay speed: a process pool and a Dask cluster against one process, and the per-log
 cost of the batch machinery against a bare replay.
 
-``python -m benchmarks.batch_speed [--rounds N] [--broad DIR]``
+``python -m benchmarks.batch_speed [--rounds N] [--broad DIR] [--small N] [--only-small]``
 
 Logs: the six BROAD bags (``../shared/data/broad`` beside the repository, or ``--broad``) and the
 shipped BROAD trial under ``replay/``. Medians of interleaved rounds after a warm-up, one BLAS
@@ -18,6 +18,13 @@ thread per process (see :mod:`benchmarks.timing`). Three measurements:
    the machine gave during the run (0.5 on two idle cores, 1.0 when others take a whole core).
 3. Dask: a ``LocalCluster`` of two single-thread worker processes on 127.0.0.1 (started before
    the rounds, warmed up by one batch), against ``jobs 1`` timed in the same rounds.
+
+4. Many small logs (``--small N``, default 64): N synthetic coning logs written by data_synth
+   (400 Hz, 20-40 s, 8 000-16 000 samples each) into a temporary folder, replayed by the
+   command a user types, ``python -m imu_dcm.replay batch DIR --table T.csv --force
+   --no-chart --jobs J``, each call a fresh process (so the workers start as they do for a
+   user: the parent has imported nothing of the replay), ``--jobs 2`` against ``--jobs 1`` in
+   interleaved rounds, beside the pure-CPU reference. Target: 1.7x or more (ratio <= 0.59).
 
 Every mode must give the same rows, bit for bit except the wall time; the script checks it.
 """
@@ -118,9 +125,22 @@ def main(argv: list[str] | None = None) -> int:
     )
     p.add_argument("--broad", type=Path, default=DEFAULT_BROAD, help="folder of BROAD bags")
     p.add_argument("--rounds", type=int, default=5, help="timed rounds (default 5)")
+    p.add_argument("--small", type=int, default=64, help="small logs of measurement 4 (64)")
+    p.add_argument("--only-small", action="store_true", help="measurement 4 only")
+    p.add_argument(
+        "--baseline",
+        type=Path,
+        help="another checkout of the project (an earlier commit): measurement 4 also times "
+        "its batch command, in the same rounds",
+    )
     args = p.parse_args(argv)
 
     limit_threads_env()
+    if args.only_small:
+        print(f"load average before: {' '.join(f'{x:.2f}' for x in os.getloadavg())}")
+        ok = _small_logs(args.small, args.rounds, args.baseline)
+        print(f"load average after: {' '.join(f'{x:.2f}' for x in os.getloadavg())}")
+        return 0 if ok else 1
     from imu_dcm.replay.batch import find_logs
 
     logs = find_logs([args.broad, SHIPPED])
@@ -141,6 +161,7 @@ def main(argv: list[str] | None = None) -> int:
     if _dask(b, args.rounds):
         modes.append("dask")
     same = all(_same(b.rows[k], b.rows["jobs 1"]) for k in modes)
+    same = _small_logs(args.small, args.rounds, args.baseline) and same
     print(f"same rows in every mode (bit for bit, wall time aside): {'yes' if same else 'NO'}")
     print(f"load average after: {' '.join(f'{x:.2f}' for x in os.getloadavg())}")
     return 0 if same else 1
@@ -235,6 +256,80 @@ def _dask(b: _Batches, rounds: int) -> bool:
     dratio = on_dask["dask 2 workers"].median_s / on_dask["jobs 1"].median_s
     print(f"dask (LocalCluster, 2 worker processes) / jobs 1 wall ratio: {dratio:.2f}")
     return True
+
+
+def _write_small_logs(folder: Path, n: int) -> None:
+    from data_synth.cli import main as synth
+
+    for k in range(n):
+        argv = ["coning", "--rate", "400", "--duration", str(20 + k % 21)]
+        if synth([*argv, "--out", str(folder / f"coning_{k:03d}")]) != 0:
+            raise RuntimeError(f"data_synth failed on {argv}")
+
+
+def _small_logs(n: int, rounds: int, baseline: Path | None = None) -> bool:
+    """Measurement 4: ``--jobs 2`` / ``--jobs 1`` of the batch command on ``n`` small logs,
+    each call a fresh process (and the same with the ``baseline`` checkout's code); wall time
+    and the CPU time of the command with its workers. True when the tables hold the same rows
+    (wall time aside)."""
+    import contextlib
+    import io
+    import resource
+    import subprocess
+
+    from benchmarks.timing import interleaved_medians, single_thread
+    from imu_dcm.replay.table import read_table
+
+    trees = {"": REPO} | ({"baseline ": baseline.resolve()} if baseline else {})
+    cpu: dict[str, list[float]] = {}
+    with tempfile.TemporaryDirectory(prefix="batch_small_") as tmp:
+        folder = Path(tmp) / "logs"
+        folder.mkdir()
+        with contextlib.redirect_stdout(io.StringIO()):
+            _write_small_logs(folder, n)
+
+        def command(tree: str, jobs: int):
+            name = f"{tree}jobs {jobs}"
+            table = str(Path(tmp) / f"{name.replace(' ', '_')}.csv")
+            argv = [sys.executable, "-m", "imu_dcm.replay", "batch", str(folder), "--table"]
+            argv += [table, "--force", "--no-chart", "--quiet", "--jobs", str(jobs)]
+            env = {**os.environ, "PYTHONPATH": str(trees[tree])}
+
+            def run():
+                before = resource.getrusage(resource.RUSAGE_CHILDREN)
+                subprocess.run(argv, env=env, check=True, capture_output=True)
+                after = resource.getrusage(resource.RUSAGE_CHILDREN)
+                used = (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
+                cpu.setdefault(name, []).append(used)
+
+            return name, (run, n)
+
+        cases = dict(command(tree, j) for tree in trees for j in (1, 2))
+        cases["spin 1 process"] = (lambda: _spin_units(1), 2)
+        cases["spin 2 processes"] = (lambda: _spin_units(2), 2)
+        with single_thread():
+            t = interleaved_medians(cases, rounds=rounds)
+        rows = {k: read_table(Path(tmp) / f"{k.replace(' ', '_')}.csv") for k in cpu}
+    print(f"{n} small logs (400 Hz, 20-40 s), the batch command in a fresh process:")
+    for name in cpu:
+        x = t[name]
+        print(
+            f"  {name:<16} wall median {x.median_s:6.3f} s ({1e3 * x.median_s / n:5.1f} ms/log; "
+            f"rounds {', '.join(f'{v:.2f}' for v in x.times_s)}); CPU with workers "
+            f"{statistics.median(cpu[name]):.2f} s"
+        )
+    spin = t["spin 2 processes"].median_s / t["spin 1 process"].median_s
+    for tree in trees:
+        ratio = t[f"{tree}jobs 2"].median_s / t[f"{tree}jobs 1"].median_s
+        c = statistics.median(cpu[f"{tree}jobs 2"]) / statistics.median(cpu[f"{tree}jobs 1"])
+        print(
+            f"small logs, {tree or 'this tree '}: jobs 2 / jobs 1 wall ratio {ratio:.2f} "
+            f"(speed-up {1 / ratio:.2f}x, target >= 1.7x); CPU ratio {c:.2f}"
+        )
+    print(f"pure CPU work over 2 processes in the same rounds: {spin:.2f} ({1 / spin:.2f}x)")
+    same = all(_same(rows[k], rows["jobs 1"]) for k in rows)
+    print(f"small logs: same rows in every run (wall time aside): {'yes' if same else 'NO'}")
+    return same
 
 
 if __name__ == "__main__":

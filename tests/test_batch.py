@@ -333,3 +333,19 @@ def test_resume_replays_a_log_whose_worker_died(logs, tmp_path):
     assert res.resumed == 1 and res.rows[0] == failed  # the log's own failure stands
     assert res.rows[1].error is None and res.rows[1].samples > 0  # the lost one ran again
     assert read_table(out) == list(res.rows)
+
+
+def test_preload_imports_what_each_worker_would_import_on_its_first_log():
+    # A fresh interpreter, as the command is: the batch module alone imports no replay; the
+    # preload (run before the pool forks) imports the replay and loads the compiled kernel.
+    code = (
+        "import sys\n"
+        "from imu_dcm.replay import batch\n"
+        "assert 'imu_dcm.replay.core' not in sys.modules\n"
+        "batch.preload()\n"
+        "from imu_dcm import kernel\n"
+        "assert 'imu_dcm.replay.core' in sys.modules and kernel._AOT, sorted(sys.modules)\n"
+    )
+    env = {**os.environ, "PYTHONPATH": str(REPO_ROOT)}
+    done = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True)
+    assert done.returncode == 0, done.stderr

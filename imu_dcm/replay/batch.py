@@ -13,11 +13,12 @@ decimated error curve, so a worker's memory is what that log's replay needs.
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import os
 import threading
 import time
 import warnings
-from collections.abc import Callable, Iterable, Mapping
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -38,7 +39,10 @@ from imu_dcm.replay.table import (
     one_line,
     read_curves,
     read_table,
+    row_key,
+    row_label,
     summary_line,
+    table_methods,
     write_curves,
     write_markdown,
     write_table,
@@ -48,6 +52,7 @@ __all__ = [
     "BatchResult",
     "claim_batch_outputs",
     "find_logs",
+    "replay_compare",
     "replay_many",
     "replay_one",
     "row_from_result",
@@ -138,6 +143,26 @@ def _size(path: str) -> int:
 
 
 # --------------------------------------------------------------------------- one log
+#: Modules the readers import on first use, when installed (preloaded with the replay).
+_READER_MODULES = ("yaml", "zstandard")
+
+
+def preload() -> None:
+    """Import what every replay needs (the replay, the readers' lazy imports) and load the
+    compiled kernel, once in this process, so that workers forked from it start with them
+    instead of each paying the imports on its first log (about 0.3 s a worker, which on many
+    small logs costs more than the logs)."""
+    import importlib
+
+    from imu_dcm.kernel import backend
+    from imu_dcm.replay import core  # noqa: F401
+
+    backend()
+    for name in _READER_MODULES:
+        with contextlib.suppress(ImportError):
+            importlib.import_module(name)
+
+
 def row_from_result(path: str, result, warnings_seen: Iterable[str], elapsed_s: float) -> LogRow:
     """The table row of one replay result (the one place that reads a replay's summary).
 
@@ -178,6 +203,28 @@ def replay_one(path: str, options: Mapping[str, Any]) -> tuple[LogRow, Curve | N
 
     Returns the row and the log's total error over time, decimated (None without truth).
     """
+    rows, curves = _replay_rows(path, options, None)
+    return rows[0], (curves[0] if curves else None)
+
+
+def replay_compare(
+    path: str, options: Mapping[str, Any]
+) -> tuple[tuple[LogRow, ...], tuple[Curve, ...]]:
+    """:func:`replay_one` with ``options["compare"]``, a tuple of method names: the log is
+    replayed once, then every method integrates the same rates from the same start
+    (:func:`imu_dcm.replay.compare.compare_methods`, as the single-log ``--compare``).
+
+    Returns one row per method, in the order given (``method`` and ``ns_per_sample`` set; the
+    replay's own method's row is the replay's row), and their curves keyed by
+    :func:`~imu_dcm.replay.table.row_label`. A failure gives every method a row with the error.
+    """
+    options = dict(options)
+    names = tuple(options.pop("compare"))
+    return _replay_rows(path, options, names)
+
+
+def _replay_rows(path: str, options: Mapping[str, Any], names: tuple[str, ...] | None):
+    """The rows and curves of one log: one row (names None) or one per method of ``names``."""
     t0 = time.perf_counter()
     with _ONE_AT_A_TIME, warnings.catch_warnings(record=True) as caught:
         warnings.resetwarnings()
@@ -188,19 +235,66 @@ def replay_one(path: str, options: Mapping[str, Any]) -> tuple[LogRow, Curve | N
             from imu_dcm.replay.core import replay
 
             result = replay(path, **options)
+            compared = None
+            if names is not None:
+                from imu_dcm.replay.compare import compare_methods
+
+                compared = compare_methods(result, names)
             row = row_from_result(
                 path, result, (str(w.message) for w in caught), time.perf_counter() - t0
             )
         except Exception as exc:
             said = tuple(dict.fromkeys(one_line(str(w.message)) for w in caught))
             error = f"{type(exc).__name__}: {one_line(str(exc))}"
-            return LogRow(
-                path, warnings=said, elapsed_s=time.perf_counter() - t0, error=error
-            ), None
-    curve = None
-    if row.rms_error_deg is not None:
-        curve = decimate_curve(path, result.t_s, result.error.total_deg)
-    return row, curve
+            failed = LogRow(path, warnings=said, elapsed_s=time.perf_counter() - t0, error=error)
+            return per_method(failed, names), ()
+    if compared is None:
+        curves = ()
+        if row.rms_error_deg is not None:
+            curves = (decimate_curve(path, result.t_s, result.error.total_deg),)
+        return (row,), curves
+    return _compared_rows(row, result, compared)
+
+
+def per_method(row: LogRow, names: tuple[str, ...] | None) -> tuple[LogRow, ...]:
+    """``row`` once (names None) or once per method of ``names``, each with its method set."""
+    if names is None:
+        return (row,)
+    return tuple(dataclasses.replace(row, method=n) for n in names)
+
+
+def _compared_rows(row: LogRow, result, compared) -> tuple[tuple[LogRow, ...], tuple[Curve, ...]]:
+    """One row and curve per method: the replay's own method keeps the replay's figures, every
+    other method gets its statistics from the comparison (the same the single-log
+    ``--compare`` prints); heading-only truth scores the heading, as the replay does."""
+    planar = result.summary.scored_on == "heading"
+    rows, curves = [], []
+    for c in compared:
+        r = dataclasses.replace(row, method=c.name, ns_per_sample=float(c.ns_per_sample))
+        if c.name != result.summary.method:
+            ev = c.evaluation
+            tot = None if ev is None else ev["heading_deg" if planar else "total_deg"]
+            inc = None if ev is None or planar else ev["inclination_deg"]
+            head = None if ev is None else ev["heading_deg"]
+            r = dataclasses.replace(
+                r,
+                rms_error_deg=_stat(tot, "rms"),
+                max_error_deg=_stat(tot, "max"),
+                rms_inclination_deg=_stat(inc, "rms"),
+                max_inclination_deg=_stat(inc, "max"),
+                rms_heading_deg=_stat(head, "rms"),
+                max_heading_deg=_stat(head, "max"),
+            )
+        rows.append(r)
+        if r.rms_error_deg is not None:
+            own = c.name == result.summary.method
+            error = result.error.total_deg if own else c.error.total_deg
+            curves.append(decimate_curve(row_label(r), result.t_s, error))
+    return tuple(rows), tuple(curves)
+
+
+def _stat(stats: dict | None, name: str) -> float | None:
+    return None if stats is None else float(stats[name])
 
 
 # ---------------------------------------------------------------------------- driver
@@ -214,6 +308,7 @@ def replay_many(
     overwrite: bool = False,
     chart: str | Path | None = "auto",
     progress: Callable[[int, int, LogRow], None] | None = None,
+    compare: Sequence[str] | None = None,
     **replay_options,
 ) -> BatchResult:
     """Replay every log found under ``paths`` and tabulate one row per log.
@@ -240,7 +335,11 @@ def replay_many(
         PNG of the RMS per log and the error curves; ``"auto"`` puts ``OUT.png`` beside the
         table when matplotlib is installed; None draws none.
     progress : callable(done, total, row), optional
-        Called after each log.
+        Called after each log (with its first row).
+    compare : sequence of str, optional
+        Method and peer names (those of the single-log ``--compare``): one row per log and
+        method, keyed by (path, method), with the columns ``method`` and ``ns_per_sample``
+        after the others. A table written with them resumes only with the same names.
     **replay_options
         Keywords of :func:`imu_dcm.replay.replay` (``method``, ``bias``, ...), the same for every
         log (``progress`` excluded).
@@ -253,21 +352,24 @@ def replay_many(
     ------
     InputError
         No logs found, a bad ``jobs``, an existing table without ``resume`` or ``overwrite``,
-        an unreadable table, ``chart`` asked without matplotlib, ``dask`` without Dask.
+        an unreadable table, a table resumed with other ``compare`` names than it was written
+        with, ``chart`` asked without matplotlib, ``dask`` without Dask.
     """
     paths = list(paths)
     logs, jobs = _check_batch(paths, jobs, replay_options)
+    names = _compare_names(compare, replay_options)
     chart_path = _chart_path(chart, table)
     table = None if table is None else Path(table)
     claim_batch_outputs(table, chart_path, [*paths, *logs])
-    old = _open_table(table, resume, overwrite)
+    old = _open_table(table, resume, overwrite, names)
     # A row whose worker died is not the log's verdict: replay that log again.
     done = {k: r for k, r in old.items() if not (r.error and f": {LOST}: " in r.error)}
-    todo = [p for p in logs if p not in done]
+    keys = [(p, m) for p in logs for m in (names or (None,))]
+    todo = list(dict.fromkeys(p for p, m in keys if (p, m) not in done))
     resumed = len(logs) - len(todo)
     counts = (resumed, len(logs), progress)
     fresh, new_curves = _run_logs(todo, dict(replay_options), jobs, dask, table, counts)
-    rows = [fresh.get(p) or done[p] for p in logs]
+    rows = [fresh.get(k) or done[k] for k in keys]
     listed = set(logs)
     others = [r for r in old.values() if r.path not in listed]  # earlier runs, other logs
     md, chart_path = _write_outputs(table, rows + others, new_curves, chart_path)
@@ -296,6 +398,17 @@ def _check_batch(
     if "progress" in replay_options:
         raise InputError("Expected no per-log progress callback in a batch, got progress=")
     return logs, jobs
+
+
+def _compare_names(compare: Sequence[str] | None, options: dict) -> tuple[str, ...] | None:
+    """The ``compare`` names checked as the single-log ``--compare`` checks them, put into the
+    workers' ``options`` (None without them)."""
+    if compare is None:
+        return None
+    from imu_dcm.replay.compare import parse_compare
+
+    options["compare"] = parse_compare(",".join(compare))
+    return options["compare"]
 
 
 def _chart_path(chart: str | Path | None, table: str | Path | None) -> Path | None:
@@ -346,9 +459,12 @@ def claim_batch_outputs(
             )
 
 
-def _open_table(table: Path | None, resume: bool, overwrite: bool) -> dict[str, LogRow]:
-    """Make the table ready to append to; its rows by path when resuming (the last row wins).
-    An existing table needs ``resume`` or ``overwrite`` (which removes it and its curves)."""
+def _open_table(
+    table: Path | None, resume: bool, overwrite: bool, names: tuple[str, ...] | None
+) -> dict[tuple[str, str | None], LogRow]:
+    """Make the table ready to append to; its rows by (path, method) when resuming (the last
+    row wins). An existing table needs ``resume`` or ``overwrite`` (which removes it and its
+    curves); it resumes only with the ``compare`` names it was written with (or none)."""
     if table is None:
         return {}
     if table.exists() and table.stat().st_size and not (resume or overwrite):
@@ -360,7 +476,28 @@ def _open_table(table: Path | None, resume: bool, overwrite: bool) -> dict[str, 
         for p in (table, curves_path(table)):
             p.unlink(missing_ok=True)
     table.parent.mkdir(parents=True, exist_ok=True)
-    return {r.path: r for r in read_table(table)} if resume else {}
+    if not resume:
+        return {}
+    rows = read_table(table)
+    _check_resume_methods(table, rows, names)
+    return {row_key(r): r for r in rows}
+
+
+def _check_resume_methods(table: Path, rows: list[LogRow], names: tuple[str, ...] | None) -> None:
+    """A compared table resumes with the same ``--compare`` names, a plain one without."""
+    if not rows:
+        return
+    had = table_methods(table)
+    if had == names:
+        return
+    said = "no --compare" if names is None else f"--compare {','.join(names)}"
+    if had is None:
+        raise InputError(
+            f"Expected no --compare to resume {table} (written without it), got {said}"
+        )
+    raise InputError(
+        f"Expected --compare {','.join(had)} to resume {table} (written with it), got {said}"
+    )
 
 
 def _run_logs(
@@ -374,7 +511,7 @@ def _run_logs(
     """Replay the logs ``todo`` (largest first when in parallel) and keep each result as it
     arrives: appended to the table (curve first, so a row always has its curve), or kept in
     memory without a table. ``counts``: logs already done, logs in all, the progress callback.
-    Returns the new rows and, without a table, the new curves, by path."""
+    Returns the new rows by (path, method) and, without a table, the new curves by label."""
     resumed, total, progress = counts
     fresh: dict[str, LogRow] = {}
     new_curves: dict[str, Curve] = {}
@@ -382,21 +519,29 @@ def _run_logs(
         return fresh, new_curves
     if dask is not None or jobs > 1:  # largest first: no big log left alone at the end
         todo = sorted(todo, key=_size, reverse=True)
+    names = options.get("compare")
+    fn = replay_one if names is None else replay_compare
     if dask is not None:
-        runs = run_dask(replay_one, todo, options, dask)
+        runs = run_dask(fn, todo, options, dask)
     else:
-        runs = run_local(replay_one, todo, options, jobs)
+        if jobs > 1 and len(todo) > 1:
+            preload()  # before the pool forks: its workers start with these
+        runs = run_local(fn, todo, options, jobs)
+    done = 0
     with contextlib.closing(runs):  # stops the workers if this loop is interrupted
-        for row, curve in runs:
+        for got, curves in runs:
+            rows = per_method(got, names) if isinstance(got, LogRow) else got  # a lost worker
+            curves = () if curves is None else (curves,) if isinstance(curves, Curve) else curves
             if table is not None:
-                if curve is not None:
+                for curve in curves:
                     append_curve(table, curve)
-                append_rows(table, [row])
-            elif curve is not None:
-                new_curves[row.path] = curve
-            fresh[row.path] = row
+                append_rows(table, rows)  # a log's rows in one write: all of them or none
+            else:
+                new_curves.update((c.path, c) for c in curves)
+            fresh.update((row_key(r), r) for r in rows)
+            done += 1
             if progress is not None:
-                progress(resumed + len(fresh), total, row)
+                progress(resumed + done, total, rows[0])
     return fresh, new_curves
 
 
@@ -412,8 +557,10 @@ def _write_outputs(
     if table is not None:
         write_table(table, rows)
         curves = read_curves(table)
-        write_curves(table, [curves[r.path] for r in rows if r.path in curves])
+        labels = [row_label(r) for r in rows]
+        write_curves(table, [curves[k] for k in labels if k in curves])
         md = write_markdown(table, rows)
-    if chart is not None:
-        chart = write_chart(chart, rows, curves)
+    if chart is not None:  # a compared table: one bar and curve per log and method
+        labelled = [dataclasses.replace(r, path=row_label(r)) for r in rows]
+        chart = write_chart(chart, labelled, curves)
     return md, chart

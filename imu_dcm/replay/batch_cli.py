@@ -75,6 +75,13 @@ def build_parser() -> argparse.ArgumentParser:
         help="where to draw the chart (default OUT.png; needs matplotlib)",
     )
     chart.add_argument("--no-chart", action="store_true", help="draw no chart")
+    p.add_argument(
+        "--compare",
+        metavar="M1,M2,...",
+        help="one row per log and method: each method or peer (magnus4, trapezoid, end, ..., "
+        "vqf, imufusion, ahrs, reference, scipy) integrates the replay's rates from its start, "
+        "as the single-log --compare; the rows gain the columns method and ns_per_sample",
+    )
     p.add_argument("--quiet", action="store_true", help="print only the summary and errors")
     add_replay_options(p.add_argument_group("replay options (the same for every log)"))
     return p
@@ -116,6 +123,15 @@ def _on_sigterm(signum, frame):
     raise _Terminated
 
 
+def _compare(args) -> tuple[str, ...] | None:
+    """``--compare``'s names, checked before any I/O (None without it)."""
+    if args.compare is None:
+        return None
+    from imu_dcm.replay.compare import parse_compare
+
+    return parse_compare(args.compare)
+
+
 def main(argv: list[str] | None = None) -> int:
     """Run the batch command; returns the exit code (0 all replayed, 1 some failed, 2 bad
     input, 130/143 interrupted; rows appended before the interruption are kept)."""
@@ -132,6 +148,7 @@ def main(argv: list[str] | None = None) -> int:
             from imu_dcm.replay.options import replay_keywords
 
             options = replay_keywords(args)  # the outputs are claimed by replay_many first
+            compare = _compare(args)
             bar = _Bar()
             t0 = time.perf_counter()
             try:
@@ -144,6 +161,7 @@ def main(argv: list[str] | None = None) -> int:
                     overwrite=args.force,
                     chart=None if args.no_chart else (args.chart or "auto"),
                     progress=bar,
+                    compare=compare,
                     **options,
                 )
             finally:
@@ -151,11 +169,14 @@ def main(argv: list[str] | None = None) -> int:
             code = 1 if result.failed else 0  # kept when the output pipe closes early
             if not args.quiet:
                 for r in result.rows:
-                    if r.failed:
+                    if r.failed and r.method in (None, result.rows[0].method):  # once a log
                         print(f"failed     {r.path}: {r.error}")
                 files = [result.table, result.markdown, result.chart]
                 print("wrote      " + ", ".join(str(f) for f in files if f is not None))
-                if result.resumed:
+                if result.resumed and compare:
+                    n = result.resumed
+                    print(f"resumed    {n} logs ({n * len(compare)} rows) already in the table")
+                elif result.resumed:
                     print(f"resumed    {result.resumed} rows already in the table")
                 print(f"elapsed    {time.perf_counter() - t0:.2f} s")
             print(result.summary)

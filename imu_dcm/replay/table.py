@@ -25,7 +25,7 @@ import json
 import os
 import statistics
 from collections.abc import Iterable, Sequence
-from dataclasses import astuple, dataclass, fields
+from dataclasses import dataclass, fields
 from pathlib import Path
 
 import numpy as np
@@ -37,6 +37,7 @@ from imu_dcm.signatures import signature
 
 __all__ = [
     "COLUMNS",
+    "COMPARE_COLUMNS",
     "CURVE_POINTS",
     "Curve",
     "LogRow",
@@ -47,7 +48,10 @@ __all__ = [
     "markdown_path",
     "read_curves",
     "read_table",
+    "row_key",
+    "row_label",
     "summary_line",
+    "table_methods",
     "write_curves",
     "write_markdown",
     "write_table",
@@ -81,6 +85,9 @@ class LogRow:
     warnings : tuple of str — one line per warning the replay gave.
     elapsed_s : float — wall time of this log's replay in its worker, s.
     error : str — one line ``Type: message`` when the log failed, else None.
+    method : str — with ``--compare`` only: the method or peer of this row (the rows of a log
+        share everything but the errors, ``method`` and ``ns_per_sample``); None otherwise.
+    ns_per_sample : float — with ``--compare`` only: that method's integration cost, ns.
     """
 
     path: str
@@ -104,15 +111,33 @@ class LogRow:
     warnings: tuple[str, ...] = ()
     elapsed_s: float | None = None
     error: str | None = None
+    method: str | None = None
+    ns_per_sample: float | None = None
 
     @property
     def failed(self) -> bool:
         return self.error is not None
 
 
-COLUMNS = tuple(f.name for f in fields(LogRow))
+#: The columns of a compared table (``--compare``) after :data:`COLUMNS`: its rows are keyed by
+#: (path, method).
+COMPARE_EXTRA = ("method", "ns_per_sample")
+#: The table's columns (one row per log); a compared table adds :data:`COMPARE_EXTRA`.
+COLUMNS = tuple(f.name for f in fields(LogRow) if f.name not in COMPARE_EXTRA)
+COMPARE_COLUMNS = (*COLUMNS, *COMPARE_EXTRA)
 _INT = {"samples", "dropped", "gaps"}
 _FLOAT = {f.name for f in fields(LogRow) if f.name.endswith(("_s", "_hz", "_deg"))}
+_FLOAT.add("ns_per_sample")
+
+
+def row_key(row: LogRow) -> tuple[str, str | None]:
+    """What identifies a row in its table: (path, method), the method None without compare."""
+    return row.path, row.method
+
+
+def row_label(row: LogRow) -> str:
+    """The row's path, with `` [method]`` in a compared table (its curve's key, its name)."""
+    return row.path if row.method is None else f"{row.path} [{row.method}]"
 
 
 @dataclass(frozen=True)
@@ -173,14 +198,16 @@ def _parse(name: str, text: str):
     return text
 
 
-def format_lines(rows: Iterable[LogRow], header: bool = False) -> str:
-    """CSV text of ``rows`` (each ending in a newline), with the header line first if asked."""
+def format_lines(rows: Sequence[LogRow], header: bool = False) -> str:
+    """CSV text of ``rows`` (each ending in a newline), with the header line first if asked:
+    :data:`COMPARE_COLUMNS` when the rows carry a method, else :data:`COLUMNS`."""
+    columns = COMPARE_COLUMNS if any(r.method is not None for r in rows) else COLUMNS
     buf = io.StringIO()
     w = csv.writer(buf, lineterminator="\n")
     if header:
-        w.writerow(COLUMNS)
+        w.writerow(columns)
     for r in rows:
-        w.writerow([_cell(n, v) for n, v in zip(COLUMNS, astuple(r), strict=False)])
+        w.writerow([_cell(n, getattr(r, n)) for n in columns])
     return buf.getvalue()
 
 
@@ -228,12 +255,13 @@ def read_table(table: str | Path) -> list[LogRow]:
     """The rows of a CSV table written by :func:`append_rows` (empty when it does not exist).
 
     A last line without its newline (the machine went down mid-write) is dropped and the file
-    is rewritten without it.
+    is rewritten without it. The rows of a compared table carry their ``method``.
 
     Raises
     ------
     InputError
-        A header other than :data:`COLUMNS`, or a complete line with the wrong number of cells.
+        A header other than :data:`COLUMNS` or :data:`COMPARE_COLUMNS`, or a complete line with
+        the wrong number of cells.
     """
     p = Path(table)
     if not p.exists():
@@ -245,17 +273,31 @@ def read_table(table: str | Path) -> list[LogRow]:
     lines = list(csv.reader(io.StringIO(text)))
     if not lines:
         return []
-    if tuple(lines[0]) != COLUMNS:
+    columns = tuple(lines[0])
+    if columns not in (COLUMNS, COMPARE_COLUMNS):
         raise InputError(
             f"Expected a batch table with columns {','.join(COLUMNS[:3])},..., got "
             f"{','.join(lines[0][:3])},... in {p}"
         )
     rows = []
     for k, cells in enumerate(lines[1:], start=2):
-        if len(cells) != len(COLUMNS):
-            raise InputError(f"Expected {len(COLUMNS)} cells on line {k} of {p}, got {len(cells)}")
-        rows.append(LogRow(*(_parse(n, c) for n, c in zip(COLUMNS, cells, strict=False))))
+        if len(cells) != len(columns):
+            raise InputError(f"Expected {len(columns)} cells on line {k} of {p}, got {len(cells)}")
+        rows.append(LogRow(**{n: _parse(n, c) for n, c in zip(columns, cells, strict=True)}))
     return rows
+
+
+def table_methods(table: str | Path) -> tuple[str, ...] | None:
+    """The ``--compare`` methods a table was written with, in their order (None for a table
+    without them, or one that does not exist or is empty)."""
+    p = Path(table)
+    if not p.exists():
+        return None
+    with p.open(newline="") as f:
+        header = next(csv.reader(f), None)
+    if header is None or tuple(header) != COMPARE_COLUMNS:
+        return None
+    return tuple(dict.fromkeys(r.method for r in read_table(p) if r.method is not None))
 
 
 def append_curve(table: str | Path, curve: Curve) -> None:
@@ -293,7 +335,16 @@ def _stats(rms: list[float]) -> str:
 def summary_line(rows: Sequence[LogRow]) -> str:
     """``N logs, F failed; RMS error over M logs with truth (KIND): mean X°, median Y°``, one
     mean per kind of truth (:mod:`imu_dcm.replay.kinds`) when the logs have several: an error
-    against a vehicle's own estimate is never averaged with one against a reference."""
+    against a vehicle's own estimate is never averaged with one against a reference. A
+    compared table gives one such line per method, joined by `` | ``."""
+    methods = list(dict.fromkeys(r.method for r in rows if r.method is not None))
+    if methods:  # a compared table: one summary per method, never averaged across methods
+        return " | ".join(f"{m}: {_summary([r for r in rows if r.method == m])}" for m in methods)
+    return _summary(rows)
+
+
+def _summary(rows: Sequence[LogRow]) -> str:
+    """:func:`summary_line` of rows of one method (or of a table without methods)."""
     from imu_dcm.replay.kinds import KINDS
 
     failed = sum(r.failed for r in rows)
@@ -336,7 +387,7 @@ def markdown(rows: Sequence[LogRow]) -> str:
         "RMS heading ° | dropped | gaps | warnings | elapsed s | error |"
     )
     lines = [head, "|" + "---|" * head.count(" | ") + "---|"]
-    for name, r in zip(short_names([r.path for r in rows]), rows, strict=False):
+    for name, r in zip(short_names([row_label(r) for r in rows]), rows, strict=False):
         cells = [
             name,
             r.truth_kind or "",
