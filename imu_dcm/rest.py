@@ -21,11 +21,18 @@ body does not rotate:
   differences of its rotation sample to sample (:func:`truth_noise_rad`), as a rate over the
   window (``z`` spreads). Where the truth rotates as the gyro does, the gyro's mean is motion,
   not bias.
+* **landed state** (where the log has the autopilot's landed and armed state, per sample,
+  :attr:`imu_dcm.logio.LogData.vehicle_state`): a window with any sample where the vehicle is
+  airborne (not landed, and not disarmed) is not rest, whatever the gyro and the accelerometer
+  say (a hover holds both still); a window landed and disarmed throughout supports rest. The
+  autopilot's own land detector judges this from its thrust, climb rate and rotation, which
+  this gyro alone cannot see.
 * **mean rate**: where the truth shows no rotation there is no bound on the mean (it is the
-  bias); where only the accelerometer confirms, it may be up to ``max_bias_rad_s`` (10 °/s, the
-  largest biases of uncalibrated MEMS: an accelerometer cannot tell a constant turn from a
-  bias); with the gyro alone, nothing tells a smooth constant turn from a bias, so the mean must
-  stay under ``max_rate_rad_s`` (2 °/s) and the rest is *unconfirmed*.
+  bias); where only the accelerometer or the landed and disarmed state confirms, it may be up
+  to ``max_bias_rad_s`` (10 °/s, the largest biases of uncalibrated MEMS: an accelerometer
+  cannot tell a constant turn from a bias); with the gyro alone, nothing tells a smooth
+  constant turn from a bias, so the mean must stay under ``max_rate_rad_s`` (2 °/s) and the
+  rest is *unconfirmed*.
 
 A run of consecutive still windows (starts ``[p, q)``) is one rest segment, samples
 ``[p, q - 1 + m)``. Its bias is the mean rate over it, leaving out one window next to motion
@@ -266,6 +273,21 @@ class _Signals:
     truth_q_w_b: NDArray | None = None
     truth_noise_rad: float = 0.0
     r_t_g: NDArray | None = None
+    vehicle: tuple[NDArray, NDArray] | None = None  # (landed, armed) int8 (N,), -1 unknown
+
+
+def _vehicle_windows(vehicle, m: int) -> tuple[NDArray, NDArray]:
+    """Each window's share of airborne samples and whether it is landed and disarmed throughout.
+
+    Airborne: not landed, and not known to be disarmed. Landed and disarmed: landed, and not
+    known to be armed.
+    """
+    landed, armed = (np.asarray(x) for x in vehicle)
+    count = []
+    for flag in ((landed == 0) & (armed != 0), (landed == 1) & (armed != 1)):
+        c = np.concatenate([[0], np.cumsum(flag)])
+        count.append((c[m:] - c[:-m]) / m)
+    return count[0], count[1] >= 1.0
 
 
 def _std_limit(floor_var, m: int, cfg: RestConfig):
@@ -302,6 +324,10 @@ def _conditions(w, t, m: int, cfg: RestConfig, sig: _Signals):
             ("accelerometer", "| |a| - g |", g_err, cfg.max_gravity_error_m_s2, "m/s²"),
         ]
         mean_limit[:] = cfg.max_bias_rad_s
+    if sig.vehicle is not None:
+        airborne, grounded = _vehicle_windows(sig.vehicle, m)
+        conds.append(("landed state", "airborne share", airborne, 0.5 / m, ""))
+        mean_limit[grounded] = np.maximum(mean_limit[grounded], cfg.max_bias_rad_s)
     truth = None
     if sig.truth_q_w_b is not None:
         # the truth's rate is nearer to none than to the gyro's mean, or within its own noise:
@@ -418,12 +444,18 @@ def _still(conds) -> NDArray:
     return still
 
 
-def _evidence(conds, truth, p: int, q: int) -> tuple[str, ...]:
-    """The signals that judged windows ``[p, q)``: all of them, or "(part)" of them."""
-    out = list(dict.fromkeys(c[0] for c in conds))
-    if truth is not None:
-        decided = np.isfinite(truth[p:q])
-        out += ["truth"] if decided.all() else ["truth (part)"] if decided.any() else []
+def _evidence(conds, truth, grounded, p: int, q: int) -> tuple[str, ...]:
+    """The signals that judged windows ``[p, q)``: all of them, or "(part)" of them.
+
+    The landed state counts where it said landed and disarmed (``grounded``, per window).
+    """
+    out = list(dict.fromkeys(c[0] for c in conds if c[0] != "landed state"))
+    for name, decided in (
+        ("landed state", None if grounded is None else grounded[p:q]),
+        ("truth", None if truth is None else np.isfinite(truth[p:q])),
+    ):
+        if decided is not None:
+            out += [name] if decided.all() else [f"{name} (part)"] if decided.any() else []
     return tuple(out)
 
 
@@ -435,6 +467,7 @@ def rest_segments(
     truth_q_w_b: ArrayLike | None = None,
     truth_noise: float = 0.0,
     r_t_g: ArrayLike | None = None,
+    vehicle: tuple[ArrayLike, ArrayLike] | None = None,
 ) -> tuple[list[RestSegment], str]:
     """The rest segments of a log, and one line on conflicting evidence ("" when none).
 
@@ -453,14 +486,19 @@ def rest_segments(
         The truth's angle noise per sample, rad (:func:`truth_noise_rad`).
     r_t_g : array_like, shape (3, 3), optional
         Rotation from the gyro's axes to the truth's body axes (default identity).
+    vehicle : (landed, armed), optional
+        The autopilot's state on the same rows, int (N,) each: 1 true, 0 false, -1 unknown
+        (:meth:`imu_dcm.logio.types.VehicleState.at`).
     """
     cfg = config or RestConfig()
     w, t, acc, q = _checked(omega_b, t_s, accel_b, truth_q_w_b)
     n, m = len(w), window_samples(t, cfg.min_duration_s)
     if n < m:
         return [], ""
-    sig = _Signals(acc, q, truth_noise, None if r_t_g is None else np.asarray(r_t_g, float))
+    rg = None if r_t_g is None else np.asarray(r_t_g, float)
+    sig = _Signals(acc, q, truth_noise, rg, _checked_vehicle(vehicle, n))
     conds, std_limit, truth = _conditions(w, t, m, cfg, sig)
+    grounded = None if sig.vehicle is None else _vehicle_windows(sig.vehicle, m)[1]
     segs, doubts = [], []
     for p, q_ in _touching(runs(_still(conds)), m):
         a, b = p, q_ - 1 + m
@@ -473,8 +511,10 @@ def rest_segments(
             a0, p0 = segs[-1][0], segs[-1][2]
             lo0, hi0 = bias_span(a0, b, n, m)
             swing = float(row_norm(_gyro_path(w, t, lo0, hi0)).max())
-            if swing <= _gyro_path_noise(t, lo0, hi0, std_limit, cfg) and not _segment_doubt(
-                w, t, lo0, hi0, m, std_limit, cfg, sig
+            if (
+                swing <= _gyro_path_noise(t, lo0, hi0, std_limit, cfg)
+                and not _airborne_between(sig, a0, b)
+                and not _segment_doubt(w, t, lo0, hi0, m, std_limit, cfg, sig)
             ):
                 segs[-1] = (a0, b, p0, q_)
                 continue
@@ -483,9 +523,26 @@ def rest_segments(
     for a, b, p, q_ in segs:
         lo, hi = bias_span(a, b, n, m)
         bias = tuple(w[lo:hi].mean(axis=0).tolist())
-        evidence = _evidence(conds, truth, p, q_)
+        evidence = _evidence(conds, truth, grounded, p, q_)
         out.append(RestSegment(a, b, float(t[a]), float(t[b - 1]), bias, lo, hi, evidence))
     return out, _conflict(conds, doubts)
+
+
+def _airborne_between(sig: _Signals, a: int, b: int) -> bool:
+    """Whether the landed state says airborne on any sample of ``[a, b)``."""
+    if sig.vehicle is None:
+        return False
+    landed, armed = sig.vehicle
+    return bool(np.any((landed[a:b] == 0) & (armed[a:b] != 0)))
+
+
+def _checked_vehicle(vehicle, n: int):
+    if vehicle is None:
+        return None
+    out = tuple(np.asarray(x) for x in vehicle)
+    if len(out) != 2 or any(x.shape != (n,) for x in out):
+        raise InputError(f"Expected vehicle (landed, armed) of shape ({n},) each, got {out!r:.60}")
+    return out
 
 
 def _touching(found: list[tuple[int, int]], m: int) -> list[tuple[int, int]]:
@@ -552,6 +609,7 @@ def explain_no_rest(
     accel_b: ArrayLike | None = None,
     truth_q_w_b: ArrayLike | None = None,
     truth_noise: float = 0.0,
+    vehicle: tuple[ArrayLike, ArrayLike] | None = None,
 ) -> str:
     """Why no window passed: the conditions that failed in the window closest to passing.
 
@@ -563,7 +621,8 @@ def explain_no_rest(
     win = window_samples(t, cfg.min_duration_s)
     if len(w) < win:
         return f"the log ({t[-1] - t[0]:.2f} s) is shorter than a {cfg.min_duration_s:.2f} s window"
-    conds = _conditions(w, t, win, cfg, _Signals(acc, q, truth_noise))[0]
+    sig = _Signals(acc, q, truth_noise, None, _checked_vehicle(vehicle, len(w)))
+    conds = _conditions(w, t, win, cfg, sig)[0]
     with np.errstate(invalid="ignore", divide="ignore"):
         ratios = [np.nan_to_num(v / np.broadcast_to(lim, v.shape)) for _s, _n, v, lim, _u in conds]
     worst = np.max(ratios, axis=0)

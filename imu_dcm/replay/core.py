@@ -168,9 +168,10 @@ def _warn(notes: list[str], msg: str) -> None:
 
 
 class _Gyro:
-    """The cleaned gyro of a replay: time base, stamps, rates (rad/s), accelerometer."""
+    """The cleaned gyro of a replay: time base, stamps, rates (rad/s), accelerometer, and the
+    autopilot's (landed, armed) state on its rows (or None)."""
 
-    __slots__ = ("base", "clean", "t_ns", "t_s", "omega", "accel")
+    __slots__ = ("base", "clean", "t_ns", "t_s", "omega", "accel", "vehicle")
 
     def __init__(
         self,
@@ -183,6 +184,7 @@ class _Gyro:
     ) -> None:
         self.base, self.clean, self.t_ns, self.t_s = base, clean, t_ns, t_s
         self.omega, self.accel = omega, accel
+        self.vehicle: tuple[NDArray, NDArray] | None = None
 
 
 class _Judged:
@@ -258,7 +260,10 @@ def _gyro(log: LogData, s: ReplaySettings, notes: list[str]) -> _Gyro:
         )
         _warn(notes, f"{imu.topic}: stamps no IMU produces: {clause}{hint if fix else ''}")
     t_s = (clean.t_ns - clean.t_ns[0]).astype(np.float64) * 1e-9
-    return _Gyro(base, clean, clean.t_ns, t_s, clean.omega_b, _accel(imu, clean, notes))
+    g = _Gyro(base, clean, clean.t_ns, t_s, clean.omega_b, _accel(imu, clean, notes))
+    if log.vehicle_state is not None:
+        g.vehicle = log.vehicle_state.at(clean.t_ns)
+    return g
 
 
 def _accel(imu, clean: CleanedImu, notes: list[str]) -> NDArray | None:
@@ -442,7 +447,7 @@ def _remove_bias(
         noise = truth_noise_rad(judged.aligned.truth.q_w_b, step_ok)
     bias_est = estimate_bias(
         g.omega, g.t_s, s.bias, s.rest_config, g.accel, truth_q_w_b=q, truth_noise=noise,
-        r_t_g=r_t_g,
+        r_t_g=r_t_g, vehicle=g.vehicle,
     )  # fmt: skip
     return bias_est, g.omega - bias_est.bias_b
 
