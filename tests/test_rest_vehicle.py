@@ -176,3 +176,111 @@ def test_real_px4_rests_stay_out_of_the_flight(name):
             # PX4 stamps the state at publication; its sample time lies up to one gyro step
             # before (the rows the state is held on): a millisecond covers it
             assert b <= f0 + 1000 or a >= f1 - 1000, (name, s, (f0, f1))
+
+
+# ------------------------------------------------------------------------------ ArduPilot
+def _hover_dataflash(path):
+    """The hover as a DataFlash log: IMU and the EV events of arming, take-off and landing."""
+    pytest.importorskip("pymavlink")
+    from tests.drone_logs import DFMessage, write_dataflash
+
+    t_us, _t_s, w, a = _hover_arrays()
+    frd = np.array([1.0, -1.0, -1.0])
+    imu = [
+        (int(t), 0, *map(float, wi), *map(float, ai))
+        for t, wi, ai in zip(t_us, w * frd, a * frd, strict=True)
+    ]
+    # ArduPilot's LogEvent ids: ARMED 10, DISARMED 11, LAND_COMPLETE 18, NOT_LANDED 28; one
+    # list per phase of PHASES
+    events = [(18, 11), (10,), (28,), (18,), (11,)]
+    ev = [
+        (int(t_us[0] + round(p[0] * 1e6)), e)
+        for p, ids in zip(PHASES, events, strict=True)
+        for e in ids
+    ]
+    cols = ["TimeUS", "I", "GyrX", "GyrY", "GyrZ", "AccX", "AccY", "AccZ"]
+    return write_dataflash(
+        path,
+        [DFMessage("IMU", "QBffffff", cols, imu), DFMessage("EV", "QB", ["TimeUS", "Id"], ev)],
+    )
+
+
+def test_dataflash_events_give_the_state(tmp_path):
+    log = read_log(_hover_dataflash(tmp_path / "hover.bin"))
+    assert log.vehicle_state is not None and log.vehicle_state.source == "EV"
+    landed, armed = log.vehicle_state.at(log.imu.t_ns)
+    t_s = (log.imu.t_ns - log.imu.t_ns[0]) * 1e-9
+    ends = [p[0] for p in PHASES[1:]] + [END_S + 1.0]
+    for (t0, want_landed, want_armed), t1 in zip(PHASES, ends, strict=True):
+        inside = (t_s >= t0) & (t_s < t1)
+        assert np.all(landed[inside] == want_landed) and np.all(armed[inside] == want_armed)
+
+
+def test_dataflash_hover_is_not_rest(tmp_path):
+    from imu_dcm.replay import replay
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", ImuDcmWarning)
+        summary = replay(_hover_dataflash(tmp_path / "hover.bin")).summary.to_dict()
+    segs = summary["bias_segments"]
+    assert segs
+    for s in segs:
+        assert s["end_s"] < AIRBORNE[0] or s["start_s"] >= AIRBORNE[1]
+        assert any(e.startswith("landed state") for e in s["evidence"])
+        np.testing.assert_allclose(s["bias_rad_s"], BIAS_FLU, atol=_tolerance(RATE_HZ * 3))
+
+
+def _sitl(name: str):
+    pytest.importorskip("pymavlink")
+    path = STRANGERS / name
+    if not path.exists():
+        pytest.skip(f"{name} is not beside the repository (ArduPilot SITL logs)")
+    return path
+
+
+def _stat(path) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``STAT`` (TimeUS, isFlying, Armed) read with pymavlink, record by record."""
+    from pymavlink import DFReader
+
+    r = DFReader.DFReader_binary(str(path))
+    rows = []
+    while (m := r.recv_match(type="STAT")) is not None:
+        rows.append((m.TimeUS, m.isFlying, m.Armed))
+    r.filehandle.close()
+    return tuple(np.array(c) for c in zip(*rows, strict=True))
+
+
+def test_sitl_ground_log_never_arms_and_rests_throughout():
+    from imu_dcm.replay import replay
+
+    path = _sitl("ardupilot_sitl_plane_ground.BIN")
+    _t, flying, armed = _stat(path)
+    assert not flying.any() and not armed.any()
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", ImuDcmWarning)
+        summary = replay(path).summary.to_dict()
+    (seg,) = summary["bias_segments"]
+    log = read_log(path)
+    length_s = (log.imu.t_ns[-1] - log.imu.t_ns[0]) * 1e-9
+    assert seg["start_s"] == 0.0 and seg["end_s"] == pytest.approx(length_s)
+    # the first STAT comes 0.16 s after the first IMU sample: the state covers the rest in part
+    assert "landed state (part)" in seg["evidence"]
+
+
+def test_sitl_flight_rests_end_before_it_flies():
+    from imu_dcm.replay import replay
+
+    path = _sitl("ardupilot_sitl_plane_flight.BIN")
+    t_us, flying, armed = _stat(path)
+    take_off_us = t_us[np.flatnonzero(flying)[0]]
+    assert armed[: np.flatnonzero(flying)[0]].any(), "armed on the ground before take-off"
+    log = read_log(path)
+    t0_us = log.imu.t_ns[0] // 1000
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", ImuDcmWarning)
+        summary = replay(path).summary.to_dict()
+    assert summary["bias_segments"]
+    for s in summary["bias_segments"]:
+        assert t0_us + s["end_s"] * 1e6 <= take_off_us
+        # armed on the ground (motors may run) supports no rest
+        assert not any(e.startswith("landed state") for e in s["evidence"])
