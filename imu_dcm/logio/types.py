@@ -93,6 +93,10 @@ class TruthSeries:
     estimate_of : "" for an independent reference (motion capture, simulation); otherwise who
         estimated it, said to the user ("PX4's own estimate", "ArduPilot's own estimate",
         "wheel odometry", "the IMU's own orientation").
+    p_w : float64 (M, 3) or None — the body's position in the parent frame, m, where the
+        message carries one (a pose, a transform, odometry).
+    omega_b : float64 (M, 3) or None — the body's angular rate in its own frame, rad/s, where
+        the message carries one (odometry's ``twist.twist.angular``).
     """
 
     t_ns: NDArray[np.int64]
@@ -104,6 +108,8 @@ class TruthSeries:
     child_frame_id: str = ""
     auto: bool = False
     estimate_of: str = ""
+    p_w: NDArray[np.float64] | None = None
+    omega_b: NDArray[np.float64] | None = None
 
 
 @dataclass(frozen=True)
