@@ -597,9 +597,11 @@ def explain_no_rest(
     if worst[i] <= 1.0:
         return "every stretch the windows call still was found not to be rest"
     failed = [
-        f"{name} {value[i]:.4g} {unit} > {np.broadcast_to(limit, value.shape)[i]:.4g} "
+        f"the vehicle airborne on {value[i]:.0%} of it (landed state)"
+        if sig_name == "landed state"
+        else f"{name} {value[i]:.4g} {unit} > {np.broadcast_to(limit, value.shape)[i]:.4g} "
         f"({ratio[i]:.1f}x)"
-        for (_s, name, value, limit, unit), ratio in zip(conds, ratios, strict=True)
+        for (sig_name, name, value, limit, unit), ratio in zip(conds, ratios, strict=True)
         if ratio[i] > 1.0
     ]
     return f"the stillest {cfg.min_duration_s:.2f} s, at {t[i] - t[0]:.2f} s, has " + ", ".join(

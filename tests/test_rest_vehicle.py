@@ -123,6 +123,17 @@ def test_hover_is_not_rest_and_the_bias_is_the_written_one():
     assert over and abs(over[0].bias_rad_s[2] - BIAS_FLU[2]) > 0.25 * YAW_DRIFT
 
 
+def test_a_log_airborne_throughout_says_so():
+    from imu_dcm.rest import explain_no_rest
+
+    _t_us, t_s, w, a = _hover_arrays()
+    n = len(t_s)
+    flying = (np.zeros(n, np.int8), np.ones(n, np.int8))
+    assert rest_segments(w, t_s, accel_b=a, vehicle=flying)[0] == []
+    why = explain_no_rest(w, t_s, accel_b=a, vehicle=flying)
+    assert why.endswith("has the vehicle airborne on 100% of it (landed state)"), why
+
+
 def test_hover_ulog_replay_says_landed_state(tmp_path):
     from imu_dcm.replay import replay
 
