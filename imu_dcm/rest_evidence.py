@@ -80,7 +80,7 @@ def motion_windows(mo: Motion, m: int, z: float, rate_hz: float) -> list:
         mean, _var = windowed_mean_var(np.nan_to_num(mo.omega_b), m)
         have = windowed_mean_var(np.isfinite(mo.omega_b[:, :1]).astype(float), m)[0][:, 0]
         k = max(1.0, mo.samples_per_s * m / rate_hz)
-        value = np.where(have >= 1.0, row_norm(mean), np.nan)
+        value = np.where(have > 1.0 - 1e-9, row_norm(mean), np.nan)  # a whole window of twist
         conds.append(
             (
                 "odometry twist",
@@ -124,5 +124,6 @@ def checked_vehicle(vehicle, n: int):
         return None
     out = tuple(np.asarray(x) for x in vehicle)
     if len(out) != 2 or any(x.shape != (n,) for x in out):
-        raise InputError(f"Expected vehicle (landed, armed) of shape ({n},) each, got {out!r:.60}")
+        shapes = ", ".join(str(np.shape(x)) for x in out)
+        raise InputError(f"Expected vehicle (landed, armed) of shape ({n},) each, got {shapes}")
     return out
