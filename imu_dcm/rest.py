@@ -21,11 +21,30 @@ body does not rotate:
   differences of its rotation sample to sample (:func:`truth_noise_rad`), as a rate over the
   window (``z`` spreads). Where the truth rotates as the gyro does, the gyro's mean is motion,
   not bias.
+* **landed state** (where the log has the autopilot's landed and armed state, per sample,
+  :attr:`imu_dcm.logio.LogData.vehicle_state`): a window with any sample where the vehicle is
+  airborne (not landed, and not disarmed) is not rest, whatever the gyro and the accelerometer
+  say (a hover holds both still); a window landed and disarmed throughout supports rest. The
+  autopilot's own land detector judges this from its thrust, climb rate and rotation, which
+  this gyro alone cannot see.
+* **odometry twist** (where the truth is odometry with ``twist.twist.angular``, on the gyro
+  rows, :class:`Motion`): the body rotates where the twist's mean ``|omega|`` over the window
+  is above its noise, ``z sigma_w / sqrt(k)`` (``sigma_w`` from the twist's first differences,
+  at least its quantisation; ``k`` twist samples per window): that window is not rest, and its
+  gyro mean is motion, not bias (a slow turn while driving). A twist within its noise
+  supports rest.
+* **position** (where the truth carries one, :class:`Motion`): a window whose position moves
+  by more than ``z sqrt(2) sigma_p`` from its first sample to its last (``sigma_p`` from the
+  position's second differences, as for the truth's angle) is not rest. A body that moves
+  is not still: translating straight does not rotate it, but the mean of a gyro on a moving
+  vehicle holds its vibration and its small steering turns, which no window's spread shows;
+  the zero-rate assumption behind the bias is the vehicle's standstill.
 * **mean rate**: where the truth shows no rotation there is no bound on the mean (it is the
-  bias); where only the accelerometer confirms, it may be up to ``max_bias_rad_s`` (10 °/s, the
-  largest biases of uncalibrated MEMS: an accelerometer cannot tell a constant turn from a
-  bias); with the gyro alone, nothing tells a smooth constant turn from a bias, so the mean must
-  stay under ``max_rate_rad_s`` (2 °/s) and the rest is *unconfirmed*.
+  bias); where only the accelerometer or the landed and disarmed state confirms, it may be up
+  to ``max_bias_rad_s`` (10 °/s, the largest biases of uncalibrated MEMS: an accelerometer
+  cannot tell a constant turn from a bias); with the gyro alone, nothing tells a smooth
+  constant turn from a bias, so the mean must stay under ``max_rate_rad_s`` (2 °/s) and the
+  rest is *unconfirmed*.
 
 A run of consecutive still windows (starts ``[p, q)``) is one rest segment, samples
 ``[p, q - 1 + m)``. Its bias is the mean rate over it, leaving out one window next to motion
@@ -48,7 +67,17 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from imu_dcm.errors import InputError
+from imu_dcm.rest_evidence import (
+    Motion,
+    airborne_between,
+    checked_vehicle,
+    motion_windows,
+    position_noise_m,
+    twist_noise_rad_s,
+    vehicle_windows,
+)
 from imu_dcm.so3 import log_quat, median, quat_conjugate, quat_multiply, row_max, row_norm
+from imu_dcm.windows import min_steps, step_var, windowed_mean_var
 
 #: Standard gravity, m/s² (a still accelerometer reads about this much).
 GRAVITY_M_S2 = 9.80665
@@ -56,6 +85,7 @@ GRAVITY_M_S2 = 9.80665
 __all__ = [
     "GRAVITY_M_S2",
     "CausalRestBias",
+    "Motion",
     "RestConfig",
     "RestSegment",
     "bias_span",
@@ -63,10 +93,12 @@ __all__ = [
     "explain_no_rest",
     "floor_factor",
     "longest_run",
+    "position_noise_m",
     "quietest_std",
     "rest_segments",
     "runs",
     "truth_noise_rad",
+    "twist_noise_rad_s",
     "window_samples",
     "windowed_mean_var",
 ]
@@ -135,33 +167,6 @@ def window_samples(t_s: NDArray, duration_s: float) -> int:
     return max(2, int(np.ceil(duration_s / dt)))
 
 
-def windowed_mean_var(x: NDArray, m: int) -> tuple[NDArray, NDArray]:
-    """Mean and (population) variance of every window of ``m`` consecutive rows.
-
-    Parameters
-    ----------
-    x : ndarray, shape (N, k)
-        Samples (any unit).
-    m : int
-        Window length in samples, ``1 <= m <= N``.
-
-    Returns
-    -------
-    mean, var : ndarray, shape (N - m + 1, k)
-        Row ``i`` describes the window of samples ``[i, i + m)`` (variance in the unit squared,
-        clipped at 0 against cancellation in the running sums).
-    """
-    sums = np.empty((2, len(x) + 1) + x.shape[1:])  # running sums of x and x², in place
-    sums[:, 0] = 0.0
-    np.cumsum(x, axis=0, out=sums[0, 1:])
-    np.cumsum(np.square(x), axis=0, out=sums[1, 1:])
-    mean, var = sums[:, m:] - sums[:, :-m]
-    mean /= m
-    var /= m
-    var -= mean * mean
-    return mean, np.maximum(var, 0.0, out=var)
-
-
 def runs(mask: NDArray[np.bool_]) -> list[tuple[int, int]]:
     """``[start, stop)`` of every run of True in a boolean mask, in order."""
     edges = np.diff(np.concatenate([[0], np.asarray(mask).astype(np.int8), [0]]))
@@ -200,18 +205,6 @@ def floor_factor(m: int, spreads: float = 4.0) -> float:
     ``m`` samples a window (at least 2), ``z`` = ``spreads`` (see the module docstring).
     """
     return math.exp(2.0 * spreads / math.sqrt(2.0 * max(m - 1, 1)))
-
-
-def _min_steps(x: NDArray) -> NDArray:
-    """The smallest positive step of each column (inf where none)."""
-    d = np.abs(np.diff(x, axis=0))
-    return np.where(d > 0, d, np.inf).min(axis=0) if len(d) else np.full(x.shape[1], np.inf)
-
-
-def _step_var(steps: NDArray) -> float:
-    """The output's quantisation noise, step²/12 (largest axis with a step; 0 without)."""
-    finite = steps[np.isfinite(steps)]
-    return float(finite.max()) ** 2 / 12.0 if len(finite) else 0.0
 
 
 def truth_noise_rad(q_w_b: ArrayLike, step_ok: ArrayLike | None = None) -> float:
@@ -266,6 +259,8 @@ class _Signals:
     truth_q_w_b: NDArray | None = None
     truth_noise_rad: float = 0.0
     r_t_g: NDArray | None = None
+    vehicle: tuple[NDArray, NDArray] | None = None  # (landed, armed) int8 (N,), -1 unknown
+    motion: Motion | None = None
 
 
 def _std_limit(floor_var, m: int, cfg: RestConfig):
@@ -287,14 +282,14 @@ def _conditions(w, t, m: int, cfg: RestConfig, sig: _Signals):
     mean, var = windowed_mean_var(w, m)
     spread = np.sqrt(row_max(var))
     rate = row_norm(mean)
-    floor_var = max(float(spread.min()) ** 2, _step_var(_min_steps(w)))
+    floor_var = max(float(spread.min()) ** 2, step_var(min_steps(w)))
     std_limit = _std_limit(floor_var, m, cfg)
     conds = [("gyro floor", "rate std", spread, std_limit, "rad/s")]
     mean_limit = np.full(len(rate), cfg.max_rate_rad_s)
     if sig.accel_b is not None:
         a_mean, a_var = windowed_mean_var(sig.accel_b, m)
         a_spread = np.sqrt(row_max(a_var))
-        a_floor = math.sqrt(max(float(a_spread.min()) ** 2, _step_var(_min_steps(sig.accel_b))))
+        a_floor = math.sqrt(max(float(a_spread.min()) ** 2, step_var(min_steps(sig.accel_b))))
         a_limit = cfg.max_accel_std_m_s2 if cfg.max_accel_std_m_s2 is not None else a_floor * z
         g_err = np.abs(row_norm(a_mean) - GRAVITY_M_S2)
         conds += [
@@ -302,6 +297,13 @@ def _conditions(w, t, m: int, cfg: RestConfig, sig: _Signals):
             ("accelerometer", "| |a| - g |", g_err, cfg.max_gravity_error_m_s2, "m/s²"),
         ]
         mean_limit[:] = cfg.max_bias_rad_s
+    if sig.motion is not None:
+        rate_hz = (len(t) - 1) / (t[-1] - t[0]) if t[-1] > t[0] else 1.0
+        conds += motion_windows(sig.motion, m, cfg.floor_spreads, rate_hz)
+    if sig.vehicle is not None:
+        airborne, grounded = vehicle_windows(sig.vehicle, m)
+        conds.append(("landed state", "airborne share", airborne, 0.5 / m, ""))
+        mean_limit[grounded] = np.maximum(mean_limit[grounded], cfg.max_bias_rad_s)
     truth = None
     if sig.truth_q_w_b is not None:
         # the truth's rate is nearer to none than to the gyro's mean, or within its own noise:
@@ -418,12 +420,22 @@ def _still(conds) -> NDArray:
     return still
 
 
-def _evidence(conds, truth, p: int, q: int) -> tuple[str, ...]:
-    """The signals that judged windows ``[p, q)``: all of them, or "(part)" of them."""
-    out = list(dict.fromkeys(c[0] for c in conds))
-    if truth is not None:
-        decided = np.isfinite(truth[p:q])
-        out += ["truth"] if decided.all() else ["truth (part)"] if decided.any() else []
+def _evidence(conds, truth, grounded, p: int, q: int) -> tuple[str, ...]:
+    """The signals that judged windows ``[p, q)``: all of them, or "(part)" of them.
+
+    The landed state counts where it said landed and disarmed (``grounded``, per window).
+    """
+    out = list(dict.fromkeys(c[0] for c in conds if c[0] in ("gyro floor", "accelerometer")))
+    for name, _n, value, _lim, _u in conds:  # the motion signals count where they decided
+        if name in ("odometry twist", "position") and name not in out:
+            decided = np.isfinite(value[p:q])
+            out += [name] if decided.all() else [f"{name} (part)"] if decided.any() else []
+    for name, decided in (
+        ("landed state", None if grounded is None else grounded[p:q]),
+        ("truth", None if truth is None else np.isfinite(truth[p:q])),
+    ):
+        if decided is not None:
+            out += [name] if decided.all() else [f"{name} (part)"] if decided.any() else []
     return tuple(out)
 
 
@@ -435,6 +447,8 @@ def rest_segments(
     truth_q_w_b: ArrayLike | None = None,
     truth_noise: float = 0.0,
     r_t_g: ArrayLike | None = None,
+    vehicle: tuple[ArrayLike, ArrayLike] | None = None,
+    motion: Motion | None = None,
 ) -> tuple[list[RestSegment], str]:
     """The rest segments of a log, and one line on conflicting evidence ("" when none).
 
@@ -453,14 +467,21 @@ def rest_segments(
         The truth's angle noise per sample, rad (:func:`truth_noise_rad`).
     r_t_g : array_like, shape (3, 3), optional
         Rotation from the gyro's axes to the truth's body axes (default identity).
+    vehicle : (landed, armed), optional
+        The autopilot's state on the same rows, int (N,) each: 1 true, 0 false, -1 unknown
+        (:meth:`imu_dcm.logio.types.VehicleState.at`).
+    motion : Motion, optional
+        The truth's position and odometry twist on the same rows.
     """
     cfg = config or RestConfig()
     w, t, acc, q = _checked(omega_b, t_s, accel_b, truth_q_w_b)
     n, m = len(w), window_samples(t, cfg.min_duration_s)
     if n < m:
         return [], ""
-    sig = _Signals(acc, q, truth_noise, None if r_t_g is None else np.asarray(r_t_g, float))
+    rg = None if r_t_g is None else np.asarray(r_t_g, float)
+    sig = _Signals(acc, q, truth_noise, rg, checked_vehicle(vehicle, n), motion)
     conds, std_limit, truth = _conditions(w, t, m, cfg, sig)
+    grounded = None if sig.vehicle is None else vehicle_windows(sig.vehicle, m)[1]
     segs, doubts = [], []
     for p, q_ in _touching(runs(_still(conds)), m):
         a, b = p, q_ - 1 + m
@@ -473,8 +494,10 @@ def rest_segments(
             a0, p0 = segs[-1][0], segs[-1][2]
             lo0, hi0 = bias_span(a0, b, n, m)
             swing = float(row_norm(_gyro_path(w, t, lo0, hi0)).max())
-            if swing <= _gyro_path_noise(t, lo0, hi0, std_limit, cfg) and not _segment_doubt(
-                w, t, lo0, hi0, m, std_limit, cfg, sig
+            if (
+                swing <= _gyro_path_noise(t, lo0, hi0, std_limit, cfg)
+                and not airborne_between(sig.vehicle, a0, b)
+                and not _segment_doubt(w, t, lo0, hi0, m, std_limit, cfg, sig)
             ):
                 segs[-1] = (a0, b, p0, q_)
                 continue
@@ -483,7 +506,7 @@ def rest_segments(
     for a, b, p, q_ in segs:
         lo, hi = bias_span(a, b, n, m)
         bias = tuple(w[lo:hi].mean(axis=0).tolist())
-        evidence = _evidence(conds, truth, p, q_)
+        evidence = _evidence(conds, truth, grounded, p, q_)
         out.append(RestSegment(a, b, float(t[a]), float(t[b - 1]), bias, lo, hi, evidence))
     return out, _conflict(conds, doubts)
 
@@ -552,6 +575,8 @@ def explain_no_rest(
     accel_b: ArrayLike | None = None,
     truth_q_w_b: ArrayLike | None = None,
     truth_noise: float = 0.0,
+    vehicle: tuple[ArrayLike, ArrayLike] | None = None,
+    motion: Motion | None = None,
 ) -> str:
     """Why no window passed: the conditions that failed in the window closest to passing.
 
@@ -563,7 +588,8 @@ def explain_no_rest(
     win = window_samples(t, cfg.min_duration_s)
     if len(w) < win:
         return f"the log ({t[-1] - t[0]:.2f} s) is shorter than a {cfg.min_duration_s:.2f} s window"
-    conds = _conditions(w, t, win, cfg, _Signals(acc, q, truth_noise))[0]
+    sig = _Signals(acc, q, truth_noise, None, checked_vehicle(vehicle, len(w)), motion)
+    conds = _conditions(w, t, win, cfg, sig)[0]
     with np.errstate(invalid="ignore", divide="ignore"):
         ratios = [np.nan_to_num(v / np.broadcast_to(lim, v.shape)) for _s, _n, v, lim, _u in conds]
     worst = np.max(ratios, axis=0)
@@ -571,9 +597,11 @@ def explain_no_rest(
     if worst[i] <= 1.0:
         return "every stretch the windows call still was found not to be rest"
     failed = [
-        f"{name} {value[i]:.4g} {unit} > {np.broadcast_to(limit, value.shape)[i]:.4g} "
+        f"the vehicle airborne on {value[i]:.0%} of it (landed state)"
+        if sig_name == "landed state"
+        else f"{name} {value[i]:.4g} {unit} > {np.broadcast_to(limit, value.shape)[i]:.4g} "
         f"({ratio[i]:.1f}x)"
-        for (_s, name, value, limit, unit), ratio in zip(conds, ratios, strict=True)
+        for (sig_name, name, value, limit, unit), ratio in zip(conds, ratios, strict=True)
         if ratio[i] > 1.0
     ]
     return f"the stillest {cfg.min_duration_s:.2f} s, at {t[i] - t[0]:.2f} s, has " + ", ".join(
@@ -677,9 +705,9 @@ class CausalRestBias:
         m, cfg = self.win, self.config
         mean, var = windowed_mean_var(X, m)
         mean, var = mean[rows], var[rows]
-        self._min_steps = np.minimum(self._min_steps, _min_steps(X))
+        self._min_steps = np.minimum(self._min_steps, min_steps(X))
         floor = np.minimum.accumulate(np.minimum(row_max(var), self._floor_var))
-        floor = np.maximum(floor, _step_var(self._min_steps))
+        floor = np.maximum(floor, step_var(self._min_steps))
         if len(floor):
             self._floor_var = float(floor[-1])
         limit = _std_limit(floor, m, cfg)

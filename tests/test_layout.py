@@ -46,6 +46,8 @@ CORE = (
     "streaming",
     "resample",
     "rest",
+    "rest_evidence",
+    "windows",
     "stamps",
     "metrics",
     "allan",

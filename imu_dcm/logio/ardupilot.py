@@ -10,6 +10,10 @@ What is read
   pitch and yaw in degrees, ArduPilot's own estimate, named as such
   (:attr:`TruthSeries.estimate_of`); ``AHR2`` (its backup estimator) is kept as a candidate.
   ``truth_topic`` names one; ``"none"`` reads none.
+* Vehicle state (:attr:`LogData.vehicle_state`, evidence for the rest rule): the ``EV``
+  events ARMED (10), DISARMED (11), LAND_COMPLETE (18) and NOT_LANDED (28) (ArduPilot's
+  ``LogEvent`` ids in ``AP_Logger.h``), ``ARM.ArmState``, and ``STAT.Armed`` and
+  ``STAT.isFlying`` (landed is not flying) where the log has them.
 * Stamps: ``TimeUS`` (µs since boot; logs since 2015) or ``TimeMS`` (ms; logs of 2013-2015)
   as int64 ns, for both ``t_ns`` and ``log_t_ns``. A message with neither is refused (IMU) or
   skipped with a note (truth), as is a column whose FMT types it a string.
@@ -40,12 +44,21 @@ from imu_dcm.logio.ned import FLU_FROM_FRD, q_enu_flu, q_wxyz_from_euler_deg
 from imu_dcm.logio.paths import DATAFLASH_MAGIC as MAGIC  # noqa: F401 (tests write it)
 from imu_dcm.logio.paths import is_dataflash as probe  # noqa: F401 (the reader's probe, here too)
 from imu_dcm.logio.source import Progress, ReadRequest
-from imu_dcm.logio.types import ChannelInfo, Damage, ImuSeries, LogData, TruthSeries
+from imu_dcm.logio.types import (
+    ChannelInfo,
+    Damage,
+    ImuSeries,
+    LogData,
+    TruthSeries,
+    VehicleState,
+)
 
 KIND = "ardupilot dataflash"
 #: Every binary DataFlash log opens with the FMT record describing FMT itself.
 ARDUPILOT_ESTIMATE = "ArduPilot's own estimate"
 TRUTHS = ("SIM", "ATT", "AHR2")
+#: ArduPilot's LogEvent ids (AP_Logger.h) that set the armed or landed state: id -> (which, value)
+EVENTS = {10: ("armed", 1), 11: ("armed", 0), 18: ("landed", 1), 28: ("landed", 0)}
 INSTALL = "pip install 'imu_dcm[mavlink]'"
 _NP = {  # struct codes of pymavlink's FORMAT_TO_STRUCT -> numpy
     "b": "i1",
@@ -257,6 +270,38 @@ def _truths(index: Index, struct_codes, truth_topic: str | None) -> tuple[list[T
     return found, [f"truth: {first.topic}, {first.estimate_of}{why}", *notes]
 
 
+def _vehicle_state(index: Index, struct_codes) -> VehicleState | None:
+    """The armed and landed state from ``EV``, ``ARM`` and ``STAT`` records (module doc)."""
+    steps: dict[str, list[tuple[NDArray, NDArray]]] = {"landed": [], "armed": []}
+    used = []
+    for name, columns in (("EV", ("Id",)), ("ARM", ("ArmState",)), ("STAT", ("Armed", "isFlying"))):
+        cols, _ = decode(index, name, struct_codes)
+        if not cols or not all(c in cols for c in columns) or not len(cols[columns[0]]):
+            continue
+        try:
+            t = stamps_ns(cols, name)
+            values = [numbers(cols, c, name).astype(np.int64) for c in columns]
+        except LogError:
+            continue  # a state that cannot be read judges nothing
+        if name == "EV":
+            for ev, (which, value) in EVENTS.items():
+                sel = values[0] == ev
+                if sel.any():
+                    steps[which].append((t[sel], np.full(int(sel.sum()), value)))
+        else:
+            steps["armed"].append((t, values[0] != 0))
+            if name == "STAT":
+                steps["landed"].append((t, values[1] == 0))
+        used.append(name)
+    merged = {}
+    for which, parts in steps.items():
+        if parts:
+            t = np.concatenate([p[0] for p in parts])
+            order = np.argsort(t, kind="stable")
+            merged[which] = (t[order], np.concatenate([p[1] for p in parts]).astype(bool)[order])
+    return VehicleState.of(", ".join(used), merged.get("landed"), merged.get("armed"))
+
+
 # --------------------------------------------------------------------------- source
 class DataFlashSource:
     """One ArduPilot DataFlash ``.bin`` log (see the module doc)."""
@@ -314,6 +359,7 @@ class DataFlashSource:
             stopped_at=stopped_at,
             truth_candidates=tuple(truths[1:]),
             notes=tuple(n for n in (imu_note, *truth_notes) if n),
+            vehicle_state=_vehicle_state(index, codes),
         )
 
 

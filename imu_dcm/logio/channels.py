@@ -38,6 +38,14 @@ TRUTH_TYPES = {
     "geometry_msgs/msg/TransformStamped": "transform.rotation",
     "nav_msgs/msg/Odometry": "pose.pose.orientation",
 }
+#: Where a truth type carries the body's position (m, parent frame) and, for odometry, its
+#: angular rate (rad/s, the child's body frame, REP 105): rest evidence (``imu_dcm.rest``).
+TRUTH_MOTION = {
+    "geometry_msgs/msg/PoseStamped": ("pose.position", ""),
+    "geometry_msgs/msg/PoseWithCovarianceStamped": ("pose.pose.position", ""),
+    "geometry_msgs/msg/TransformStamped": ("transform.translation", ""),
+    "nav_msgs/msg/Odometry": ("pose.pose.position", "twist.twist.angular"),
+}
 KNOWN_ENCODINGS = ("cdr", "ros1", "json")
 _NOT_GYRO = ("/estimate", "/ground_truth")  # Vector3Stamped topics that are not a gyro
 #: A Vector3Stamped topic is taken as the gyro unasked only when its name says so.
@@ -105,6 +113,8 @@ class _Decoder:
         if self.role == "truth":
             q = TRUTH_TYPES[root]
             want = {f"{q}.{a}": ("f8", 1) for a in "xyzw"}
+            for path in TRUTH_MOTION.get(root, ()):
+                want.update({f"{path}.{a}": ("f8", 1) for a in "xyz" if path})
             want.update({"header.stamp.sec": ("i8", 1), "header.stamp.nanosec": ("i8", 1)})
         elif self.path == "vec3":
             want = {"header.stamp.sec": ("i8", 1), "header.stamp.nanosec": ("i8", 1)}
@@ -141,6 +151,9 @@ class _Decoder:
                 "t_ns": rows(_stamp(out, "header.")),
                 "q": rows(np.stack([out[f"{q}.{a}"] for a in "xyzw"], axis=1)),
             }
+            for key, path in zip(("p", "w"), TRUTH_MOTION.get(root, ("", "")), strict=True):
+                if path:
+                    fields[key] = rows(np.stack([out[f"{path}.{a}"] for a in "xyz"], axis=1))
         elif self.path == "vec3":
             fields = {
                 "t_ns": rows(_stamp(out, "header.")),
@@ -519,13 +532,15 @@ def _read_truth_topic(got: Collected, topic: str, conns: list[Conn], auto: bool)
                     data.fields.get("t_ns", np.zeros(n, np.int64)),
                     data.log_time,
                     data.fields.get("q", np.zeros((n, 4))),
+                    data.fields.get("p"),
+                    data.fields.get("w"),
                 ],
             )
         )
         typ = typ or data.frames.get("type") or norm_type(c.msgtype)
         frame = frame or data.frames.get("frame_id", "")
         child = child or data.frames.get("child_frame_id", "")
-    t_ns, log_t, q = _merge(rows)
+    t_ns, log_t, q, p_w, omega_b = _merge(rows)
     return TruthSeries(
         t_ns.astype(np.int64, copy=False),
         log_t.astype(np.int64, copy=False),
@@ -535,6 +550,8 @@ def _read_truth_topic(got: Collected, topic: str, conns: list[Conn], auto: bool)
         frame,
         child,
         auto,
+        p_w=p_w,
+        omega_b=omega_b,
     )
 
 

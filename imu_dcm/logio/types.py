@@ -93,6 +93,10 @@ class TruthSeries:
     estimate_of : "" for an independent reference (motion capture, simulation); otherwise who
         estimated it, said to the user ("PX4's own estimate", "ArduPilot's own estimate",
         "wheel odometry", "the IMU's own orientation").
+    p_w : float64 (M, 3) or None — the body's position in the parent frame, m, where the
+        message carries one (a pose, a transform, odometry).
+    omega_b : float64 (M, 3) or None — the body's angular rate in its own frame, rad/s, where
+        the message carries one (odometry's ``twist.twist.angular``).
     """
 
     t_ns: NDArray[np.int64]
@@ -104,6 +108,8 @@ class TruthSeries:
     child_frame_id: str = ""
     auto: bool = False
     estimate_of: str = ""
+    p_w: NDArray[np.float64] | None = None
+    omega_b: NDArray[np.float64] | None = None
 
 
 @dataclass(frozen=True)
@@ -121,6 +127,58 @@ class StaticTransform:
     parent: str
     child: str
     q_xyzw: tuple[float, float, float, float]
+
+
+@dataclass(frozen=True)
+class VehicleState:
+    """The vehicle's landed and armed state as the autopilot logged it (a step series).
+
+    Each value holds from its stamp until the next one (the autopilot publishes on change and
+    at a low rate); before the first stamp the state is unknown. ``landed`` and ``armed`` are
+    int8 (M,): 1 true, 0 false, -1 not logged at that stamp (the other one changed).
+    ``t_ns`` (M,) int64 ns, increasing, on the IMU's clock (``ImuSeries.t_ns``). ``source``
+    names where it came from ("vehicle_land_detected, actuator_armed"; "EV (arm, land)").
+    """
+
+    t_ns: NDArray[np.int64]
+    landed: NDArray[np.int8]
+    armed: NDArray[np.int8]
+    source: str
+
+    @classmethod
+    def of(cls, source: str, landed=None, armed=None) -> VehicleState | None:
+        """Merge ``(t_ns, values)`` step series of each (either may be None); None if both are.
+
+        Values are truthy or not (PX4's uint8 flags); at equal stamps the landed row comes first.
+        """
+        given = ((k, tv) for k, tv in enumerate((landed, armed)) if tv is not None)
+        parts = [(np.asarray(tv[0], np.int64), np.asarray(tv[1]) != 0, k) for k, tv in given]
+        parts = [p for p in parts if len(p[0])]
+        if not parts:
+            return None
+        t = np.concatenate([p[0] for p in parts])
+        cols = np.full((2, len(t)), -1, np.int8)
+        at = 0
+        for stamps, values, k in parts:
+            cols[k, at : at + len(stamps)] = values
+            at += len(stamps)
+        order = np.argsort(t, kind="stable")
+        return cls(t[order], cols[0, order], cols[1, order], source)
+
+    def at(self, t_ns: NDArray[np.int64]) -> tuple[NDArray[np.int8], NDArray[np.int8]]:
+        """``(landed, armed)`` held at each stamp of ``t_ns`` (-1 where not known)."""
+        k = np.searchsorted(self.t_ns, np.asarray(t_ns, dtype=np.int64), side="right") - 1
+        held = [np.where(k >= 0, _hold(x)[np.maximum(k, 0)], -1).astype(np.int8)
+                for x in (self.landed, self.armed)]  # fmt: skip
+        return held[0], held[1]
+
+
+def _hold(x: NDArray[np.int8]) -> NDArray[np.int8]:
+    """Each -1 (not logged) replaced by the last logged value before it (-1 before any)."""
+    x = np.asarray(x, dtype=np.int8)
+    idx = np.where(x >= 0, np.arange(len(x)), -1)
+    last = np.maximum.accumulate(idx) if len(x) else idx
+    return np.where(last >= 0, x[np.maximum(last, 0)], -1).astype(np.int8)
 
 
 @dataclass(frozen=True)
@@ -148,6 +206,7 @@ class LogData:
     truth_candidates: tuple[TruthSeries, ...] = ()
     notes: tuple[str, ...] = ()
     static_transforms: tuple[StaticTransform, ...] = ()
+    vehicle_state: VehicleState | None = None
 
 
 # ---------------------------------------------------------------- between containers and decoders

@@ -11,6 +11,8 @@ What is read
 * Truth: ``vehicle_attitude_groundtruth`` where present (simulation), else
   ``vehicle_attitude``, which is PX4's own estimate and named as such
   (:attr:`TruthSeries.estimate_of`). ``truth_topic`` names either; ``"none"`` reads none.
+* Vehicle state: ``vehicle_land_detected.landed`` and ``actuator_armed.armed`` where the log
+  has them, as :attr:`LogData.vehicle_state` (evidence for the rest rule).
 * Stamps: ULog stamps are µs since boot; ``t_ns`` is the sample time (``timestamp_sample``
   where the topic has it, else ``timestamp``), ``log_t_ns`` the publication time
   (``timestamp``), both int64 ns.
@@ -54,12 +56,20 @@ from imu_dcm.logio.ned import FLU_FROM_FRD, q_enu_flu
 from imu_dcm.logio.paths import ULOG_MAGIC as MAGIC
 from imu_dcm.logio.paths import is_ulog as probe  # noqa: F401 (the reader's probe, here too)
 from imu_dcm.logio.source import Progress, ReadRequest
-from imu_dcm.logio.types import ChannelInfo, Damage, ImuSeries, LogData, TruthSeries
+from imu_dcm.logio.types import (
+    ChannelInfo,
+    Damage,
+    ImuSeries,
+    LogData,
+    TruthSeries,
+    VehicleState,
+)
 from imu_dcm.logio.ulog_resync import KNOWN_TYPES, MAX_MESSAGE, Resync
 
 KIND = "px4 ulog"
 GYRO_TOPICS = ("sensor_combined", "sensor_gyro")
 TRUTH_TOPICS = ("vehicle_attitude_groundtruth", "vehicle_attitude")
+STATE_TOPICS = ("vehicle_land_detected", "actuator_armed")
 PX4_ESTIMATE = "PX4's own estimate"
 BLOCK_BYTES = 8 << 20
 #: PX4's RELATIVE_TIMESTAMP_INVALID in ``sensor_combined.accelerometer_timestamp_relative``.
@@ -520,6 +530,20 @@ def _accel(gyro: Topic, topics: list[Topic], t_ns: NDArray[np.int64]) -> NDArray
     return out
 
 
+def _vehicle_state(topics: list[Topic]) -> VehicleState | None:
+    """``vehicle_land_detected.landed`` and ``actuator_armed.armed`` (instance 0), or None."""
+
+    def steps(name: str, field_name: str):
+        t = next((t for t in topics if t.name == name and t.multi_id == 0 and len(t)), None)
+        if t is None or field_name not in t.fields:
+            return None
+        return t.fields["timestamp"].astype(np.int64) * 1000, t.fields[field_name]
+
+    landed, armed = steps(*STATE_TOPICS[:1], "landed"), steps(STATE_TOPICS[1], "armed")
+    used = [n for n, x in zip(STATE_TOPICS, (landed, armed), strict=True) if x is not None]
+    return VehicleState.of(", ".join(used), landed, armed)
+
+
 def imu_series(gyro: Topic, topics: list[Topic], label) -> ImuSeries:
     """The gyro (rad/s) and accelerometer in body FLU, stamps in ns."""
     t_ns = _sample_us(gyro) * 1000
@@ -641,7 +665,7 @@ class UlogSource:
         self.progress = progress
 
     def read(self, request: ReadRequest) -> LogData:
-        wanted = set(GYRO_TOPICS + TRUTH_TOPICS)
+        wanted = set(GYRO_TOPICS + TRUTH_TOPICS + STATE_TOPICS)
         for named in (request.imu_topic, request.truth_topic):
             if named and named != "none":
                 wanted.add(_split_name(named)[0])
@@ -673,6 +697,7 @@ class UlogSource:
             stopped_at=stopped_at,
             truth_candidates=tuple(series[1:]),
             notes=tuple(n for n in notes if n),
+            vehicle_state=_vehicle_state(topics),
         )
 
 

@@ -72,6 +72,8 @@ def estimate_bias(
     truth_q_w_b: ArrayLike | None = None,
     truth_noise: float = 0.0,
     r_t_g: ArrayLike | None = None,
+    vehicle: tuple[ArrayLike, ArrayLike] | None = None,
+    motion=None,
 ) -> BiasEstimate:
     """The gyro bias to subtract at each sample.
 
@@ -96,6 +98,11 @@ def estimate_bias(
         Its angle noise per sample, rad (:func:`imu_dcm.rest.truth_noise_rad`).
     r_t_g : array_like, shape (3, 3), optional
         Rotation from the gyro's axes to the truth's body axes (the mounting; identity).
+    vehicle : (landed, armed), optional
+        The autopilot's landed and armed state on the same rows (auto only;
+        :func:`imu_dcm.rest.rest_segments`).
+    motion : imu_dcm.rest.Motion, optional
+        The truth's position and odometry twist on the same rows (auto only).
 
     Returns
     -------
@@ -117,9 +124,11 @@ def estimate_bias(
     if rule not in BIAS_RULES:
         raise InputError(f"Expected a bias rule in {BIAS_RULES}, got {rule!r}")
     cfg = config or RestConfig()
-    segs, conflict = rest_segments(w, t, cfg, accel_b, truth_q_w_b, truth_noise, r_t_g)
+    segs, conflict = rest_segments(
+        w, t, cfg, accel_b, truth_q_w_b, truth_noise, r_t_g, vehicle, motion
+    )
     if not segs:
-        why = explain_no_rest(w, t, cfg, accel_b, truth_q_w_b, truth_noise)
+        why = explain_no_rest(w, t, cfg, accel_b, truth_q_w_b, truth_noise, vehicle, motion)
         if conflict:  # windows passed, and their stretches were found not to be rest
             why = conflict.split(": ", 1)[1]
         return BiasEstimate(np.zeros((n, 3)), (), "auto", False, why, conflict)

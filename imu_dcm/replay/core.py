@@ -56,7 +56,7 @@ from imu_dcm.replay.truth import (
 )
 from imu_dcm.replay.window import check_score_window, window_mask
 from imu_dcm.resample import slerp_truth
-from imu_dcm.rest import truth_noise_rad
+from imu_dcm.rest import Motion, position_noise_m, truth_noise_rad, twist_noise_rad_s
 from imu_dcm.so3 import median, quat_angle_rad, quat_as_matrix, row_finite, row_norm
 from imu_dcm.stamps import NS_PER_UNIT, timing_doubt
 
@@ -168,9 +168,10 @@ def _warn(notes: list[str], msg: str) -> None:
 
 
 class _Gyro:
-    """The cleaned gyro of a replay: time base, stamps, rates (rad/s), accelerometer."""
+    """The cleaned gyro of a replay: time base, stamps, rates (rad/s), accelerometer, and the
+    autopilot's (landed, armed) state on its rows (or None)."""
 
-    __slots__ = ("base", "clean", "t_ns", "t_s", "omega", "accel")
+    __slots__ = ("base", "clean", "t_ns", "t_s", "omega", "accel", "vehicle")
 
     def __init__(
         self,
@@ -183,6 +184,7 @@ class _Gyro:
     ) -> None:
         self.base, self.clean, self.t_ns, self.t_s = base, clean, t_ns, t_s
         self.omega, self.accel = omega, accel
+        self.vehicle: tuple[NDArray, NDArray] | None = None
 
 
 class _Judged:
@@ -258,7 +260,10 @@ def _gyro(log: LogData, s: ReplaySettings, notes: list[str]) -> _Gyro:
         )
         _warn(notes, f"{imu.topic}: stamps no IMU produces: {clause}{hint if fix else ''}")
     t_s = (clean.t_ns - clean.t_ns[0]).astype(np.float64) * 1e-9
-    return _Gyro(base, clean, clean.t_ns, t_s, clean.omega_b, _accel(imu, clean, notes))
+    g = _Gyro(base, clean, clean.t_ns, t_s, clean.omega_b, _accel(imu, clean, notes))
+    if log.vehicle_state is not None:
+        g.vehicle = log.vehicle_state.at(clean.t_ns)
+    return g
 
 
 def _accel(imu, clean: CleanedImu, notes: list[str]) -> NDArray | None:
@@ -430,7 +435,7 @@ def _remove_bias(
 ) -> tuple[BiasEstimate, NDArray]:
     """The bias from rest (judged by the truth's motion too, when ``judged`` has a truth; its
     jumps, the truth's own, judge nothing)."""
-    q, noise, r_t_g = None, 0.0, None
+    q, noise, r_t_g, motion = None, 0.0, None, None
     if judged is not None and judged.mounting.applied is not None:
         r_t_g = quat_as_matrix(judged.mounting.applied.q_t_g)
     if judged is not None and judged.aligned.truth is not None:
@@ -440,11 +445,37 @@ def _remove_bias(
         for j in judged.jumps:
             step_ok &= (tt[1:] < j.t0_s) | (tt[:-1] > j.t1_s)
         noise = truth_noise_rad(judged.aligned.truth.q_w_b, step_ok)
+        motion = _motion(judged.aligned.truth, tt, g.t_s, q)
     bias_est = estimate_bias(
         g.omega, g.t_s, s.bias, s.rest_config, g.accel, truth_q_w_b=q, truth_noise=noise,
-        r_t_g=r_t_g,
+        r_t_g=r_t_g, vehicle=g.vehicle, motion=motion,
     )  # fmt: skip
     return bias_est, g.omega - bias_est.bias_b
+
+
+def _motion(truth, tt: NDArray, t_s: NDArray, q: NDArray) -> Motion | None:
+    """The truth's position and twist (where it has them) on the gyro rows, NaN where the
+    scored truth has none (outside it, across its jumps)."""
+    p_w, w_b = getattr(truth, "p_w", None), getattr(truth, "omega_b", None)
+    if (p_w is None and w_b is None) or len(tt) < 3:
+        return None
+    none = ~row_finite(q)
+
+    def on_rows(x):
+        if x is None:
+            return None
+        out = np.stack([np.interp(t_s, tt, x[:, k]) for k in range(3)], axis=1)
+        out[none] = np.nan
+        return out
+
+    rate = (len(tt) - 1) / (tt[-1] - tt[0]) if tt[-1] > tt[0] else 0.0
+    return Motion(
+        on_rows(p_w),
+        position_noise_m(p_w) if p_w is not None else 0.0,
+        on_rows(w_b),
+        twist_noise_rad_s(w_b) if w_b is not None else 0.0,
+        rate,
+    )
 
 
 def _prefilter(s: ReplaySettings, omega: NDArray, t_s: NDArray):

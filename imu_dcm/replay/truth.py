@@ -414,6 +414,8 @@ def align_truth(
             sub = dataclasses.replace(
                 truth, t_ns=truth.t_ns[kept], log_t_ns=truth.log_t_ns[kept],
                 q_w_b=truth.q_w_b[kept],
+                p_w=None if getattr(truth, "p_w", None) is None else truth.p_w[kept],
+                omega_b=None if getattr(truth, "omega_b", None) is None else truth.omega_b[kept],
             )  # fmt: skip
             return AlignedTruth(q_truth, sub, check, applied, None)
     if not check.follows and truth.auto:
