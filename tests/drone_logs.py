@@ -252,3 +252,26 @@ def trial_dataflash(path: Path, real: str = "d") -> Path:
             DFMessage("ATT", "Q" + real * 3, ["TimeUS", "Roll", "Pitch", "Yaw"], att_rows),
         ],
     )
+
+
+XIMU3_INERTIAL = STRANGERS / "ximu3_left_foot_inertial.csv"
+XIMU3_QUATERNION = STRANGERS / "ximu3_left_foot_quaternion.csv"
+
+
+def ximu3_convert_argv(out: Path) -> list[str]:
+    """``convert-csv`` arguments joining the foot-worn x-IMU3's two CSVs (gyro deg/s, accel g,
+    the device's W,X,Y,Z quaternion, sensor to earth) into ``out``; skips the calling test when
+    the CSVs are absent."""
+    import pytest
+
+    if not (XIMU3_INERTIAL.is_file() and XIMU3_QUATERNION.is_file()):
+        pytest.skip(
+            "the x-IMU3 CSVs are absent (real logs of other projects: IMU_DCM_STRANGERS_DIR)"
+        )
+    axes = "XYZ"
+    argv = ["convert-csv", str(XIMU3_INERTIAL), str(out), "--time-col", "Timestamp (us)"]
+    argv += ["--time-units", "us", "--gyro-units", "deg/s", "--accel-units", "g"]
+    argv += ["--gyro-cols", ",".join(f"Gyroscope {a} (deg/s)" for a in axes)]
+    argv += ["--accel-cols", ",".join(f"Accelerometer {a} (g)" for a in axes)]
+    argv += ["--truth-csv", str(XIMU3_QUATERNION), "--truth-cols", "W,X,Y,Z"]
+    return [*argv, "--truth-order", "wxyz"]

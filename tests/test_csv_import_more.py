@@ -8,7 +8,7 @@ import json
 
 import numpy as np
 import pytest
-from drone_logs import STRANGERS
+from drone_logs import ximu3_convert_argv
 from scipy.spatial.transform import Rotation
 
 from imu_dcm.logio import read_log
@@ -106,19 +106,8 @@ def test_an_existing_mcap_needs_force_and_must_be_ours(csvs, tmp_path, capsys):
 
 
 def test_ximu3_two_files_convert_and_the_quaternion_is_sensor_to_earth(tmp_path):
-    inertial = STRANGERS / "ximu3_left_foot_inertial.csv"
-    quaternion = STRANGERS / "ximu3_left_foot_quaternion.csv"
-    if not (inertial.is_file() and quaternion.is_file()):
-        pytest.skip(
-            "the x-IMU3 CSVs are absent (real logs of other projects: IMU_DCM_STRANGERS_DIR)"
-        )
     out = tmp_path / "xio.mcap"
-    axes = "XYZ"
-    argv = ["convert-csv", str(inertial), str(out), "--time-col", "Timestamp (us)"]
-    argv += ["--time-units", "us", "--gyro-units", "deg/s", "--accel-units", "g"]
-    argv += ["--gyro-cols", ",".join(f"Gyroscope {a} (deg/s)" for a in axes)]
-    argv += ["--accel-cols", ",".join(f"Accelerometer {a} (g)" for a in axes)]
-    argv += ["--truth-csv", str(quaternion), "--truth-cols", "W,X,Y,Z", "--truth-order", "wxyz"]
+    argv = ximu3_convert_argv(out)
     assert main(argv) == 0
     log = read_log(out)
     assert len(log.imu.t_ns) == 921 and len(log.truth.t_ns) == 921  # the README: 18.6 s at 50 Hz

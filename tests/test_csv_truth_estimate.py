@@ -10,7 +10,7 @@ import json
 
 import numpy as np
 import pytest
-from drone_logs import STRANGERS
+from drone_logs import ximu3_convert_argv
 from scipy.spatial.transform import Rotation
 
 from imu_dcm.errors import ImuDcmWarning
@@ -110,19 +110,8 @@ def test_the_option_needs_a_truth_and_a_name(spin, tmp_path, capsys, extra, said
 
 
 def test_ximu3_quaternion_is_marked_as_the_devices_own_estimate(tmp_path, capsys):
-    inertial = STRANGERS / "ximu3_left_foot_inertial.csv"
-    quaternion = STRANGERS / "ximu3_left_foot_quaternion.csv"
-    if not (inertial.is_file() and quaternion.is_file()):
-        pytest.skip(
-            "the x-IMU3 CSVs are absent (real logs of other projects: IMU_DCM_STRANGERS_DIR)"
-        )
     out = tmp_path / "xio.mcap"
-    axes = "XYZ"
-    argv = ["convert-csv", str(inertial), str(out), "--time-col", "Timestamp (us)"]
-    argv += ["--time-units", "us", "--gyro-units", "deg/s", "--accel-units", "g"]
-    argv += ["--gyro-cols", ",".join(f"Gyroscope {a} (deg/s)" for a in axes)]
-    argv += ["--accel-cols", ",".join(f"Accelerometer {a} (g)" for a in axes)]
-    argv += ["--truth-csv", str(quaternion), "--truth-cols", "W,X,Y,Z", "--truth-order", "wxyz"]
+    argv = ximu3_convert_argv(out)
     assert main([*argv, "--truth-estimate-of", "the x-IMU3"]) == 0
     who, replay, info, kind = _said(out, tmp_path, capsys)
     assert who == "the x-IMU3's own estimate"

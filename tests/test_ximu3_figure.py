@@ -10,7 +10,7 @@ import json
 
 import numpy as np
 import pytest
-from drone_logs import STRANGERS
+from drone_logs import STRANGERS, ximu3_convert_argv
 from scipy.spatial.transform import Rotation
 
 from imu_dcm.replay.__main__ import main
@@ -21,17 +21,8 @@ QUATERNION = STRANGERS / "ximu3_left_foot_quaternion.csv"
 
 @pytest.fixture(scope="module")
 def converted(tmp_path_factory):
-    if not (INERTIAL.is_file() and QUATERNION.is_file()):
-        pytest.skip(
-            "the x-IMU3 CSVs are absent (real logs of other projects: IMU_DCM_STRANGERS_DIR)"
-        )
     out = tmp_path_factory.mktemp("xio") / "xio.mcap"
-    axes = "XYZ"
-    argv = ["convert-csv", str(INERTIAL), str(out), "--time-col", "Timestamp (us)"]
-    argv += ["--time-units", "us", "--gyro-units", "deg/s", "--accel-units", "g"]
-    argv += ["--gyro-cols", ",".join(f"Gyroscope {a} (deg/s)" for a in axes)]
-    argv += ["--accel-cols", ",".join(f"Accelerometer {a} (g)" for a in axes)]
-    argv += ["--truth-csv", str(QUATERNION), "--truth-cols", "W,X,Y,Z", "--truth-order", "wxyz"]
+    argv = ximu3_convert_argv(out)
     assert main(argv) == 0
     return out
 
