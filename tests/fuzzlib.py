@@ -538,7 +538,7 @@ class _Hang(BaseException):
 
 
 @contextlib.contextmanager
-def _stdin_from(path: str | None):
+def stdin_from(path: str | None):
     """fd 0 reads ``path`` for the block (the worker's requests wait in ``sys.stdin``'s buffer
     and on the saved fd, restored after)."""
     if path is None:
@@ -569,7 +569,7 @@ def _run_case(op: dict) -> dict:
     out, err = io.StringIO(), io.StringIO()
     try:
         with (
-            _stdin_from(op.get("stdin")),
+            stdin_from(op.get("stdin")),
             contextlib.redirect_stdout(out),
             contextlib.redirect_stderr(err),
             warnings.catch_warnings(record=True) as caught,

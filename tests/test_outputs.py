@@ -7,13 +7,13 @@ missing folders and failed writes. The commands' side is in test_output_rule.py.
 
 from __future__ import annotations
 
-import contextlib
 import os
 import socket
 import threading
 
 import numpy as np
 import pytest
+from fuzzlib import stdin_from  # fd 0 reads a file for a block, as `cmd < file`
 
 from imu_dcm.logio.writer import StampedSeries, write_bag
 from imu_dcm.outputs import (
@@ -37,20 +37,6 @@ FOREIGN = b"my own notes, not imu_dcm's\n"
 def _bag(path):
     t = np.arange(3, dtype=np.int64) * 10**7
     return write_bag(path, imu=StampedSeries(t, np.zeros((3, 3)), "imu"))
-
-
-@contextlib.contextmanager
-def _stdin_from(path):
-    """fd 0 reads ``path`` for the block (as ``cmd < path`` would), then is restored."""
-    saved = os.dup(0)
-    fd = os.open(path, os.O_RDONLY)
-    try:
-        os.dup2(fd, 0)
-        yield
-    finally:
-        os.dup2(saved, 0)
-        os.close(saved)
-        os.close(fd)
 
 
 def test_rules_for_files(tmp_path):
@@ -170,10 +156,10 @@ def test_a_hard_link_to_an_input_or_standard_input_is_refused(tmp_path):
     os.link(feed, twin)  # another name, same inode
     with pytest.raises(OutputError, match="other than the input"):
         claim_output(twin, "any", [feed])
-    with _stdin_from(feed), pytest.raises(OutputError, match="file on standard input"):
+    with stdin_from(feed), pytest.raises(OutputError, match="file on standard input"):
         claim_output(feed, "any")  # live - --summary-json feed.txt < feed.txt
     assert feed.read_text() == "0,0,0,1\n"
-    with _stdin_from(os.devnull):  # a device on stdin is no input file
+    with stdin_from(os.devnull):  # a device on stdin is no input file
         assert claim_output(tmp_path / "new.json", "json").stream == "file"
 
 
