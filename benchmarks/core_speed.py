@@ -55,8 +55,8 @@ from scipy.spatial.transform import Rotation
 from benchmarks.peers import reference_loop
 from benchmarks.timing import interleaved_medians, single_thread
 from data_synth.analytic import coning_attitude, coning_rates
-from imu_dcm.integrate import integrate, integrate_delta
-from imu_dcm.streaming import DcmIntegrator
+from imu_dcm.integrator.batch import integrate, integrate_delta
+from imu_dcm.integrator.streaming import DcmIntegrator
 
 RATE_HZ = 1000.0
 

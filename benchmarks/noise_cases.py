@@ -15,7 +15,7 @@ from dataclasses import dataclass
 
 from numpy.typing import NDArray
 
-from imu_dcm.integrate import integrate
+from imu_dcm.integrator.batch import integrate
 from imu_dcm.metrics import attitude_error_deg
 
 MODES = ("none", "kalman", "rts")

@@ -22,8 +22,8 @@ from benchmarks.noise_cases import (
     Condition,
     att_err_deg,
 )
+from imu_dcm.gyro.prefilter import PrefilterConfig, prefilter
 from imu_dcm.outputs import save_figure
-from imu_dcm.prefilter import PrefilterConfig, prefilter
 
 __all__ = ["example_series", "markdown", "plot"]
 

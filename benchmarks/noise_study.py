@@ -5,7 +5,7 @@
 chart and the tables are drawn by :mod:`benchmarks.noise_report`.
 
 What is measured, for the pre-filter modes ``none`` / ``kalman`` / ``rts`` of
-:func:`imu_dcm.prefilter.prefilter` (noise density given = the simulated one, process noise by
+:func:`imu_dcm.gyro.prefilter.prefilter` (noise density given = the simulated one, process noise by
 maximum likelihood), with the attitude integrated by ``imu_dcm.integrate`` (magnus4) from the
 true initial attitude:
 
@@ -51,9 +51,9 @@ from benchmarks.noise_cases import (
     ModeStats,
     att_err_deg,
 )
-from imu_dcm.integrate import integrate
+from imu_dcm.gyro.prefilter import PrefilterConfig, euler_prefilter, prefilter
+from imu_dcm.integrator.batch import integrate
 from imu_dcm.metrics import attitude_error_deg
-from imu_dcm.prefilter import PrefilterConfig, euler_prefilter, prefilter
 
 DENSITIES = (1e-4, 1e-3, 1e-2)
 RATES_HZ = (200.0, 1000.0)

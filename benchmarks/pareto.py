@@ -157,11 +157,12 @@ def _batch(method: str) -> Callable:
 
 
 def _integrator_class():
-    """``imu_dcm.DcmIntegrator`` (or from ``imu_dcm.streaming`` if not re-exported), else None."""
+    """``imu_dcm.DcmIntegrator`` (or from ``imu_dcm.integrator.streaming`` if not re-exported),
+    else None."""
     cls = getattr(imu_dcm, "DcmIntegrator", None)
     if cls is None:
         try:
-            from imu_dcm.streaming import DcmIntegrator as cls
+            from imu_dcm.integrator.streaming import DcmIntegrator as cls
         except ImportError:
             return None
     return cls

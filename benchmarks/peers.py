@@ -1,4 +1,4 @@
-"""The peer integrators, for the benchmarks: they live in :mod:`imu_dcm.peers`."""
+"""The peer integrators, for the benchmarks: they live in :mod:`imu_dcm.integrator.peers`."""
 
-from imu_dcm.peers import *  # noqa: F403
-from imu_dcm.peers import __all__  # noqa: F401
+from imu_dcm.integrator.peers import *  # noqa: F403
+from imu_dcm.integrator.peers import __all__  # noqa: F401

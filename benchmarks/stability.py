@@ -3,7 +3,7 @@
 
 The scenes themselves (pure functions returning frozen results, also asserted by
 ``tests/test_stability.py``) live in :mod:`data_synth.stability`; the deliberately wrong or
-first-order integrators they compare against in :mod:`imu_dcm.reference`.
+first-order integrators they compare against in :mod:`imu_dcm.integrator.reference`.
 """
 
 from __future__ import annotations

@@ -9,43 +9,28 @@ in seconds.
 command lines that only print their help start fast.
 """
 
-import sys as _sys
-import types as _types
+import importlib
 
 from imu_dcm.errors import GapWarning, ImuDcmError, ImuDcmWarning, InputError, LogError
 
 _LAZY = {  # loaded on first use, so a command's --help does not import the numerical stack
-    "DELTA_METHODS": "imu_dcm.integrate",
-    "METHODS": "imu_dcm.integrate",
-    "integrate": "imu_dcm.integrate",
-    "integrate_delta": "imu_dcm.integrate",
-    "DcmIntegrator": "imu_dcm.streaming",
-    "Method": "imu_dcm.methods",
-    "DeltaMethod": "imu_dcm.methods",
+    "DELTA_METHODS": "imu_dcm.integrator.batch",
+    "METHODS": "imu_dcm.integrator.batch",
+    "integrate": "imu_dcm.integrator.batch",
+    "integrate_delta": "imu_dcm.integrator.batch",
+    "DcmIntegrator": "imu_dcm.integrator.streaming",
+    "Method": "imu_dcm.integrator.methods",
+    "DeltaMethod": "imu_dcm.integrator.methods",
 }
 
 
 def __getattr__(name: str):
     if name in _LAZY:
-        import importlib
-
         value = getattr(importlib.import_module(_LAZY[name]), name)
         globals()[name] = value
         return value
     raise AttributeError(f"module 'imu_dcm' has no attribute {name!r}")
 
-
-class _Package(_types.ModuleType):
-    """``imu_dcm.integrate`` names the function, also after the submodule of the same name is
-    imported (the import system then sets the package attribute to the module)."""
-
-    def __setattr__(self, name: str, value) -> None:
-        if name == "integrate" and isinstance(value, _types.ModuleType):
-            value = value.integrate
-        super().__setattr__(name, value)
-
-
-_sys.modules[__name__].__class__ = _Package
 
 __all__ = [
     "DELTA_METHODS",

@@ -14,7 +14,8 @@ Loading. Installing the package builds the kernel ahead of time into one extensi
 (``imu_dcm._kernel_aot``, by :mod:`imu_dcm.kernel_build`), which loads in about a millisecond
 and needs no numba at run time. The module carries a digest of the files it was built from
 (:data:`SOURCES`) and of the constants they take from :mod:`imu_dcm.so3` and
-:mod:`imu_dcm.methods`; a module built from other versions of them is not used. Without an
+:mod:`imu_dcm.integrator.methods`; a module built from other versions of them is not used. Without
+an
 up-to-date module (no C compiler at install, an edited kernel, or ``IMU_DCM_KERNEL=jit`` in
 the environment) each entry point is compiled by numba on its first use instead, and cached
 (see :mod:`imu_dcm.kernel_jit`). :func:`backend` says which one a process runs.
@@ -34,6 +35,7 @@ from pathlib import Path
 
 import numpy as np
 
+from imu_dcm.integrator.methods import Method
 from imu_dcm.kernel_state import (
     CLOSED,
     IS_CLOSED,
@@ -57,7 +59,6 @@ from imu_dcm.kernel_state import (
     push_entry,
     state_fields,
 )
-from imu_dcm.methods import Method
 
 __all__ = [
     "CLOSED",
@@ -104,7 +105,7 @@ ENV = "IMU_DCM_KERNEL"
 def _constants() -> str:
     """The values the compiled code folds in from other modules: the series of the
     exponential, the gap factor, the method codes."""
-    from imu_dcm.methods import GAP_FACTOR, DeltaMethod
+    from imu_dcm.integrator.methods import GAP_FACTOR, DeltaMethod
     from imu_dcm.so3 import COS_HALF_SERIES, SERIES_THETA2, SINC_HALF_SERIES
 
     codes = [(m.name, int(m)) for m in (*Method, *DeltaMethod)]

@@ -38,6 +38,7 @@ import numpy as np
 from numba.core import event as numba_event
 
 from imu_dcm.errors import ImuDcmWarning
+from imu_dcm.integrator.methods import GAP_FACTOR, DeltaMethod, Method
 from imu_dcm.kernel_state import (
     CLOSED,
     IS_CLOSED,
@@ -56,7 +57,6 @@ from imu_dcm.kernel_state import (
     feed_entry,
     push_entry,
 )
-from imu_dcm.methods import GAP_FACTOR, DeltaMethod, Method
 from imu_dcm.so3 import COS_HALF_SERIES, SERIES_THETA2, SINC_HALF_SERIES
 
 # numba's cache is keyed on this file alone: after changing a constant it compiles in (the

@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from imu_dcm.methods import Method
+from imu_dcm.integrator.methods import Method
 
 
 class _Layout:

@@ -372,9 +372,9 @@ def test_a_folder_of_logs_points_to_batch(tmp_path):
 def test_help_names_every_container_batch_and_the_method_choices(tmp_path):
     import re
 
+    from imu_dcm.integrator.methods import METHODS
     from imu_dcm.logio.foreign import REFUSALS
     from imu_dcm.logio.registry import SOURCES
-    from imu_dcm.methods import METHODS
 
     text = " ".join(run(["imu_dcm.replay", "--help"], tmp_path).stdout.split())
     for word in ("metadata.yaml", ".mcap", ".db3", "ROS 1 .bag", "imu-dcm-replay batch"):

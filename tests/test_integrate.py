@@ -9,7 +9,7 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from imu_dcm import GapWarning, ImuDcmError, ImuDcmWarning, InputError
-from imu_dcm.integrate import METHODS, increments, integrate, integrate_delta
+from imu_dcm.integrator.batch import METHODS, increments, integrate, integrate_delta
 
 STEP_METHODS = tuple(m for m in METHODS if m != "rotvec_sum")
 EPS = np.finfo(float).eps

@@ -21,7 +21,7 @@ import pytest
 
 from imu_dcm import DcmIntegrator, GapWarning, ImuDcmWarning, kernel, kernel_jit
 from imu_dcm.errors import InputError
-from imu_dcm.integrate import (
+from imu_dcm.integrator.batch import (
     DELTA_METHODS,
     METHODS,
     find_gaps,
@@ -29,7 +29,7 @@ from imu_dcm.integrate import (
     integrate,
     integrate_delta,
 )
-from imu_dcm.methods import DeltaMethod, Method
+from imu_dcm.integrator.methods import DeltaMethod, Method
 from imu_dcm.so3 import quat_angle_rad
 
 EPS = np.finfo(float).eps

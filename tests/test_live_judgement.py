@@ -1,5 +1,6 @@
 """Live judges every sample as replay does: non-finite and implausible rates are dropped and
-counted before the rest rule or the integrator sees them (:func:`imu_dcm.rates.implausible_rates`,
+counted before the rest rule or the integrator sees them
+(:func:`imu_dcm.gyro.rates.implausible_rates`,
 the rule of replay's cleaning), so no NaN or Inf reaches the attitude, the console or the JSON,
 and a NaN line is counted once, as NaN/Inf, not as malformed."""
 
@@ -15,9 +16,9 @@ import pytest
 from scipy.spatial.transform import Rotation
 from test_live_ws import live_thread
 
+from imu_dcm.gyro.rates import MAX_RATE_RAD_S, implausible_rates
 from imu_dcm.live import run
 from imu_dcm.live.__main__ import format_summary
-from imu_dcm.rates import MAX_RATE_RAD_S, implausible_rates
 from imu_dcm.so3 import angle_between_deg
 
 RATE_HZ, SPIN_DEG_S, N = 1000, 90.0, 2001  # 2 s at 90 deg/s about z: a half turn

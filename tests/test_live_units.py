@@ -14,11 +14,11 @@ import numpy as np
 import pytest
 
 from imu_dcm.errors import InputError
+from imu_dcm.gyro.rest import CausalRestBias
 from imu_dcm.live.lines import parse_lines
 from imu_dcm.live.reorder import ReorderBuffer
 from imu_dcm.live.sources import parse_source
 from imu_dcm.replay.bias import estimate_bias
-from imu_dcm.rest import CausalRestBias
 
 REPO = Path(__file__).resolve().parents[1]
 W = (0.0, 0.0, 1.0)
@@ -371,7 +371,7 @@ def test_pipeline_in_batches_equals_batch_integrate(method, sizes):
     """The estimate rows of a live pipeline fed in batches (any size, the first holding fewer
     or more than magnus4's four warm-up samples) are the batch integrator's attitudes at every
     stamp: the same compiled kernel on the same samples."""
-    from imu_dcm.integrate import integrate
+    from imu_dcm.integrator.batch import integrate
     from imu_dcm.live.pipeline import Pipeline
     from imu_dcm.live.sources import Received
 

@@ -155,7 +155,7 @@ def test_events_log_replays_against_vehicle_attitude():
     attitude by 1.45 deg (delta_q_reset, yaw) at 0.888 s, after the replay's start: from just
     after it, the gyro integrated with the toolkit follows the estimate within the hand figure
     plus 10 % (0.6 deg); the whole replay is bounded by the reset plus that (2.05 deg)."""
-    from imu_dcm.integrate import integrate
+    from imu_dcm.integrator.batch import integrate
     from imu_dcm.metrics import attitude_error_deg, rms
     from imu_dcm.replay import replay
     from imu_dcm.replay.truth import slerp_truth

@@ -29,7 +29,7 @@ from imu_dcm.outputs import (
     write_text_atomic,
     writes_to_stdout,
 )
-from imu_dcm.signatures import KINDS, comment_line, is_own
+from imu_dcm.outputs.signatures import KINDS, comment_line, is_own
 
 FOREIGN = b"my own notes, not imu_dcm's\n"
 
@@ -230,7 +230,7 @@ def test_write_atomic_is_whole_or_absent(tmp_path, monkeypatch):
     target = tmp_path / "s.json"
     write_json(target, {"n": 1})
     before = target.read_bytes()
-    from imu_dcm import outputs
+    from imu_dcm.outputs import write as outputs
 
     def fail(src, dst):
         raise OSError(28, "No space left on device")
@@ -281,7 +281,7 @@ def test_write_text_atomic_is_whole_or_absent(tmp_path, monkeypatch):
     target = tmp_path / "metadata.yaml"  # the low-level write, inside a checked folder
     write_text_atomic(target, "one\n")
     assert target.read_text() == "one\n"
-    from imu_dcm import outputs
+    from imu_dcm.outputs import write as outputs
 
     def fail(src, dst):
         raise OSError(28, "No space left on device")

@@ -1,4 +1,4 @@
-"""The peer integrators of ``imu_dcm.peers`` follow this project's conventions.
+"""The peer integrators of ``imu_dcm.integrator.peers`` follow this project's conventions.
 
 A constant-axis rotation has an exact answer, ``q_w_b(t) = q0 ⊗ exp(ω t)``, so it checks each
 peer's quaternion order, sign and side of multiplication (with a non-identity ``q0``, a peer that
@@ -15,7 +15,7 @@ pytest.importorskip("ahrs")
 pytest.importorskip("imufusion")
 pytest.importorskip("vqf")
 
-from imu_dcm.peers import PEERS
+from imu_dcm.integrator.peers import PEERS
 
 # Exact-exponential peers in float64 over ~1000 steps: rounding only, ~1000 * 1e-16 rad.
 EXACT_TOL_RAD = 1e-12

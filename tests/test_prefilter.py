@@ -1,4 +1,4 @@
-"""Tests of imu_dcm.prefilter: filterpy as the oracle, covariance consistency, no lag, noise
+"""Tests of imu_dcm.gyro.prefilter: filterpy as the oracle, covariance consistency, no lag, noise
 estimates, and what smoothing does (and does not do) to the attitude.
 
 Conventions: ``omega_b`` (N, 3) body rate in body axes, rad/s; ``t_s`` seconds; quaternions
@@ -14,7 +14,7 @@ import pytest
 from filterpy.common import Q_continuous_white_noise
 
 from imu_dcm.errors import GapWarning, InputError
-from imu_dcm.prefilter import (
+from imu_dcm.gyro.prefilter import (
     PrefilterConfig,
     StreamingRateFilter,
     estimate_noise_from_rest,
@@ -40,7 +40,7 @@ def _model_path(rng, n, dt, accel_rad_s2, sub=16):
 
 @pytest.mark.parametrize("dim", [2, 3])
 def test_process_noise_matches_filterpy(dim):
-    from imu_dcm.prefilter.linear import _process_noise
+    from imu_dcm.gyro.prefilter.linear import _process_noise
 
     dt = np.array([1e-3, 3.5e-3, 0.02, 0.7])
     q = 2.5
@@ -309,7 +309,7 @@ def test_rts_cuts_rate_noise_without_worsening_attitude(scene, params):
     # difference between integrating raw and smoothed rates is a bounded, zero-mean term next to
     # the angle random walk, so single seeds scatter by a few % either way).
     data_synth = pytest.importorskip("data_synth")
-    from imu_dcm.integrate import integrate
+    from imu_dcm.integrator.batch import integrate
     from imu_dcm.metrics import attitude_error_deg
 
     traj = data_synth.simulate(scene, duration_s=8.0, **params)
@@ -385,7 +385,7 @@ def test_rts_with_the_estimated_density_cuts_rate_noise_without_worsening_attitu
     # spectrum, process noise by maximum likelihood. The same bounds as with the density given
     # (test above): rate error cut >= 2x, attitude no worse than 5 % (pooled over 4 seeds).
     data_synth = pytest.importorskip("data_synth")
-    from imu_dcm.integrate import integrate
+    from imu_dcm.integrator.batch import integrate
     from imu_dcm.metrics import attitude_error_deg
 
     traj = data_synth.simulate("free-body", duration_s=8.0, case="intermediate")
@@ -436,7 +436,7 @@ def test_causal_filter_lag_worsens_the_attitude_in_fast_motion():
     # integrates into the attitude; the noise study measures ~7x. Bound: at least 2x worse than
     # integrating the raw gyro, while the smoother stays within 25 % of it.
     data_synth = pytest.importorskip("data_synth")
-    from imu_dcm.integrate import integrate
+    from imu_dcm.integrator.batch import integrate
     from imu_dcm.metrics import attitude_error_deg
 
     traj = data_synth.simulate("heavy-top", duration_s=2.0, motion="cusp")
@@ -465,7 +465,7 @@ def test_model_based_smoother_beats_the_generic_one_and_the_random_walk():
     # an attitude error at most 0.7 of the raw integration's (the generic smoother stays at ~1,
     # see the test above; measured here ~4.5x and ~0.4).
     data_synth = pytest.importorskip("data_synth")
-    from imu_dcm.integrate import integrate
+    from imu_dcm.integrator.batch import integrate
     from imu_dcm.metrics import attitude_error_deg
 
     traj = data_synth.simulate("free-body", duration_s=10.0, case="intermediate")

@@ -13,7 +13,7 @@ from hypothesis.extra.numpy import arrays
 from scipy.spatial.transform import Rotation
 
 from imu_dcm import kernel_jit
-from imu_dcm.integrate import integrate, integrate_delta
+from imu_dcm.integrator.batch import integrate, integrate_delta
 from imu_dcm.so3 import exp_quat, log_quat, quat_angle_rad, quat_multiply
 
 EPS = np.finfo(float).eps

@@ -8,8 +8,8 @@ import io
 
 import numpy as np
 
+import imu_dcm.gyro.resample as resample
 import imu_dcm.replay.core as core
-import imu_dcm.resample as resample
 from data_synth.scenes import simulate
 from imu_dcm.logio import chunks, writer
 from imu_dcm.logio.writer import StampedSeries

@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from imu_dcm.errors import ImuDcmWarning, InputError
-from imu_dcm.peers import PEERS
+from imu_dcm.integrator.peers import PEERS
 from imu_dcm.replay import replay
 from imu_dcm.replay.__main__ import main
 from imu_dcm.replay.compare import compare_methods, parse_compare

@@ -26,7 +26,7 @@ NOT_ON_THE_PATH = (
     "rerun",
     "filterpy",
     "imu_dcm.viz",
-    "imu_dcm.prefilter",
+    "imu_dcm.gyro.prefilter",
     "imu_dcm.logio.writer",
     "imu_dcm.outputs",
     "imu_dcm.replay.batch",

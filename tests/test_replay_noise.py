@@ -1,4 +1,4 @@
-"""Tests of ``imu-dcm-replay noise`` (imu_dcm.allan.fit_noise, imu_dcm.replay.noise_cli): the
+"""Tests of ``imu-dcm-replay noise`` (imu_dcm.gyro.allan.fit_noise, imu_dcm.replay.noise_cli): the
 angle random walk N and the rate random walk K of a synthetic gyro (data_synth's white noise
 and bias random walk, known densities) are recovered within the statistical bound of the record
 length; the Kalibr YAML says the same numbers in continuous time; outputs are checked before
@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 import yaml
 
-from imu_dcm.allan import B_FACTOR, allan_deviation, fit_noise, octave_clusters
+from imu_dcm.gyro.allan import B_FACTOR, allan_deviation, fit_noise, octave_clusters
 
 N_TRUE, K_TRUE, RATE_HZ, SECONDS = 5e-4, 1e-4, 200.0, 1200.0
 

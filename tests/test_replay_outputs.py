@@ -118,7 +118,7 @@ def test_output_errors_are_one_line(bag, tmp_path, capsys, monkeypatch):
         [str(bag), "--rerun", "off", "--summary-json", str(a_file / "no" / "s.json")],
         "Not a directory",
     )
-    from imu_dcm import outputs
+    from imu_dcm.outputs import write as outputs
 
     # a read-only folder (root ignores permission bits, so the check is simulated)
     monkeypatch.setattr(outputs.os, "access", lambda *a, **k: False)

@@ -1,4 +1,4 @@
-"""Tests of the attitude resampler (imu_dcm.resample.slerp_truth), which replay and live share.
+"""Tests of the attitude resampler (imu_dcm.gyro.resample.slerp_truth), which replay and live share.
 
 Oracle: scipy's Slerp on the same samples; and gaps counted in truth steps by hand.
 """
@@ -8,7 +8,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.spatial.transform import Rotation, Slerp
 
-from imu_dcm.resample import slerp_truth
+from imu_dcm.gyro.resample import slerp_truth
 
 T0_NS = 1_700_000_000_000_000_000
 
@@ -56,7 +56,7 @@ def test_slerp_truth_halfway_to_90_deg_about_z_is_45_deg_about_z():
 def test_slerp_truth_in_blocks_equals_one_block(monkeypatch):
     """Queries resampled block by block (7 at a time, across a gap and both ends) give the
     one-block result bit for bit: each query depends on its own stamp only."""
-    import imu_dcm.resample as resample
+    import imu_dcm.gyro.resample as resample
 
     rng = np.random.default_rng(5)
     tt = np.cumsum(rng.integers(9_000_000, 11_000_000, 300)).astype(np.int64)

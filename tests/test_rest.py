@@ -1,4 +1,4 @@
-"""imu_dcm.rest: the windowed statistics and run finding that rest detection, the bias and the
+"""imu_dcm.gyro.rest: the windowed statistics and run finding that rest detection, the bias and the
 pre-filter's noise estimate share. Truth: direct numpy computations and hand-made masks."""
 
 from __future__ import annotations
@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from imu_dcm.errors import InputError
-from imu_dcm.rest import (
+from imu_dcm.gyro.rest import (
     RestConfig,
     detect_rest,
     longest_run,

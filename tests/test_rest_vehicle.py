@@ -14,9 +14,9 @@ import numpy as np
 import pytest
 
 from imu_dcm.errors import ImuDcmWarning
+from imu_dcm.gyro.rest import GRAVITY_M_S2, rest_segments
 from imu_dcm.logio import read_log
 from imu_dcm.logio.types import VehicleState
-from imu_dcm.rest import GRAVITY_M_S2, rest_segments
 from tests.drone_logs import STRANGERS, ULogSpec, UTopic, write_ulog
 
 RATE_HZ = 250.0
@@ -124,7 +124,7 @@ def test_hover_is_not_rest_and_the_bias_is_the_written_one():
 
 
 def test_a_log_airborne_throughout_says_so():
-    from imu_dcm.rest import explain_no_rest
+    from imu_dcm.gyro.rest import explain_no_rest
 
     _t_us, t_s, w, a = _hover_arrays()
     n = len(t_s)

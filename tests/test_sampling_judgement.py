@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from data_synth.analytic import coning_attitude, coning_rates
-from imu_dcm.integrate import integrate_quat
+from imu_dcm.integrator.batch import integrate_quat
 from imu_dcm.logio.types import ImuSeries, LogData, TruthSeries
 from imu_dcm.replay import replay
 from imu_dcm.replay.sampling import sampling_error_deg

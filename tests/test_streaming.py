@@ -9,8 +9,8 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from imu_dcm import GapWarning, ImuDcmWarning, InputError
-from imu_dcm.integrate import METHODS, integrate
-from imu_dcm.streaming import DcmIntegrator
+from imu_dcm.integrator.batch import METHODS, integrate
+from imu_dcm.integrator.streaming import DcmIntegrator
 
 Q0 = Rotation.from_euler("zyx", [1.0, -0.4, 0.3]).as_quat()
 # Streaming and batch run the same compiled kernel, so they agree to rounding at most (the

@@ -9,8 +9,8 @@ import pytest
 
 import data_synth
 from data_synth.gyro import DEFAULT_EPOCH_NS, GyroModel, synthetic_gyro
-from imu_dcm.allan import noise_density_from_allan
 from imu_dcm.errors import InputError
+from imu_dcm.gyro.allan import noise_density_from_allan
 
 EPS = np.finfo(float).eps  # 2.2e-16: unit round-off bounds below are multiples of it
 
@@ -41,7 +41,7 @@ def test_white_noise_density_by_allan_deviation(still, output):
     rec = synthetic_gyro(
         still, rate_hz, model=GyroModel(noise_density_rad_s_sqrt_hz=density), output=output, seed=11
     )
-    # Allan deviation of white rate noise: σ(τ) = N / √τ (imu_dcm.allan); 1e5 samples pin N to
+    # Allan deviation of white rate noise: σ(τ) = N / √τ (imu_dcm.gyro.allan); 1e5 samples pin N to
     # ~1%, so the 10% bound is met with a wide margin on every axis.
     est = noise_density_from_allan(rec.rate_rad_s(), rate_hz)
     assert np.all(np.abs(est / density - 1.0) < 0.10)

@@ -10,10 +10,10 @@ import numpy as np
 import pytest
 
 from imu_dcm.errors import ImuDcmWarning, LogError
+from imu_dcm.gyro.stamps import timing_doubt
 from imu_dcm.logio import read_log
 from imu_dcm.replay import replay
 from imu_dcm.replay.csv_import import convert_csv
-from imu_dcm.stamps import timing_doubt
 
 N = 4000
 

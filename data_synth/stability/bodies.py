@@ -22,7 +22,7 @@ from data_synth.stability.common import (
     _uniform_t,
     zxz_truth,
 )
-from imu_dcm.reference import euler_zxz_integrate, truncated_first_order
+from imu_dcm.integrator.reference import euler_zxz_integrate, truncated_first_order
 
 # 5. Free box, intermediate axis
 # ----------------------------------------------------------------------------------------------

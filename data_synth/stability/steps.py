@@ -21,7 +21,7 @@ from data_synth.stability.common import (
     coning_truth,
     zxz_truth,
 )
-from imu_dcm.reference import euler_zxz_integrate, truncated_first_order
+from imu_dcm.integrator.reference import euler_zxz_integrate, truncated_first_order
 from imu_dcm.so3 import exp_matrix, quat_multiply
 
 # ----------------------------------------------------------------------------------------------

@@ -28,7 +28,7 @@ from imu_dcm.cli import (
     parse_init_quat,
 )
 from imu_dcm.errors import ImuDcmError
-from imu_dcm.methods import METHODS
+from imu_dcm.integrator.methods import METHODS
 
 PROG = "imu-dcm-live"
 

@@ -25,7 +25,7 @@ One bad message costs itself: a frame pymavlink cannot take, a frame cut off at 
 its datagram (over UDP a datagram holds whole frames: the next one starts afresh, never as the
 cut frame's rest), or a stamp outside 0 to 2^63 ns,
 is counted as malformed and the stream goes on. Rates go on to the pipeline, which drops and
-counts non-finite and implausible ones (:func:`imu_dcm.rates.implausible_rates`).
+counts non-finite and implausible ones (:func:`imu_dcm.gyro.rates.implausible_rates`).
 """
 
 from __future__ import annotations

@@ -6,9 +6,10 @@ feeds it) as arrays, in stamp order:
 1. puts the batch in order within the reorder window (:mod:`imu_dcm.live.reorder`); later
    samples, duplicate stamps and non-finite rates are dropped and counted; when the source has
    been quiet for longer than the window (wall time), the held samples are released;
-2. reports gaps with replay's rule (:func:`imu_dcm.integrate.find_gaps`) over the recent steps
+2. reports gaps with replay's rule (:func:`imu_dcm.integrator.batch.find_gaps`) over the recent
+steps
    and the new ones;
-3. subtracts the bias (``auto``: :class:`imu_dcm.rest.CausalRestBias` over the batch; ``none``;
+3. subtracts the bias (``auto``: :class:`imu_dcm.gyro.rest.CausalRestBias` over the batch; ``none``;
    a vector);
 4. integrates the batch with :meth:`imu_dcm.DcmIntegrator.update_many` (the compiled kernel's
    feed), starting — as replay does — at the first sample inside the truth's coverage, from the
@@ -35,15 +36,15 @@ import numpy as np
 from numpy.typing import NDArray
 
 from imu_dcm.errors import GapWarning
-from imu_dcm.integrate import find_gaps, gap_message, integrate_quat
+from imu_dcm.gyro.rates import deg_evidence
+from imu_dcm.gyro.rest import CausalRestBias
+from imu_dcm.integrator.batch import find_gaps, gap_message, integrate_quat
+from imu_dcm.integrator.streaming import DcmIntegrator
 from imu_dcm.live.latency import LATENCY_KEEP, Latency
 from imu_dcm.live.lines import time_unit_hint
 from imu_dcm.live.reorder import ReorderBuffer
 from imu_dcm.live.sources import Received
 from imu_dcm.metrics import attitude_error_deg
-from imu_dcm.rates import deg_evidence
-from imu_dcm.rest import CausalRestBias
-from imu_dcm.streaming import DcmIntegrator
 
 __all__ = ["LATENCY_KEEP", "Latency", "LiveResult", "Pipeline"]
 
@@ -82,7 +83,7 @@ class LiveResult:
 
 
 def _slerp(truth_t: NDArray, truth_q: NDArray, t_ns: NDArray) -> NDArray:
-    from imu_dcm.resample import slerp_truth
+    from imu_dcm.gyro.resample import slerp_truth
 
     return slerp_truth(truth_t, truth_q, t_ns)
 
@@ -307,7 +308,7 @@ class Pipeline:
     def _probe_units(self, t_ns: NDArray, t_s: NDArray, w: NDArray, final: bool = False) -> None:
         """Rates declared rad/s that look like deg/s, judged once on the first
         :data:`UNITS_PROBE_S` s (at most :data:`UNITS_PROBE_MAX` samples) by replay's rule
-        (:func:`imu_dcm.rates.deg_evidence`: against the truth's rotation rate where the truth
+        (:func:`imu_dcm.gyro.rates.deg_evidence`: against the truth's rotation rate where the truth
         covers them, else the gyro full-scale bound); said in one line, and in the summary."""
         probe = self.units_probe
         probe.add(t_ns, t_s, w)

@@ -5,7 +5,8 @@ in stamp order. A sample stamped at or before the last released one is too late:
 stamp (equal, or equal to one still held) is dropped as ``duplicate``, an earlier one as
 ``backward`` (out of order by more than the window, or a clock that jumped back). Non-finite
 rates are dropped as ``nonfinite``, and rates no gyro produces
-(:func:`imu_dcm.rates.implausible_rates`, the rule replay's cleaning applies) as ``implausible``,
+(:func:`imu_dcm.gyro.rates.implausible_rates`, the rule replay's cleaning applies) as
+``implausible``,
 before anything else (the rest rule, the integrator) sees them. :meth:`ReorderBuffer.flush`
 releases everything held (at stop). Stamps are the source's, never arrival times.
 
@@ -21,7 +22,7 @@ import bisect
 import numpy as np
 from numpy.typing import NDArray
 
-from imu_dcm.rates import implausible_rates
+from imu_dcm.gyro.rates import implausible_rates
 
 __all__ = ["ReorderBuffer"]
 

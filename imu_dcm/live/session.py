@@ -26,7 +26,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from imu_dcm.errors import GapWarning, InputError
-from imu_dcm.integrate import METHODS
+from imu_dcm.integrator.batch import METHODS
 from imu_dcm.live.lines import TIME_UNITS
 from imu_dcm.live.pipeline import DEG, LiveResult, Pipeline
 from imu_dcm.live.sources import Received, Source, open_source, parse_source
@@ -38,9 +38,9 @@ __all__ = ["LiveOptions", "run"]
 def _warm_up(method: str) -> None:
     """Load numba and the compiled kernel before the source opens, so the first samples do not
     wait for them (about 0.7 s with a warm cache, measured as the first second's latency)."""
-    from imu_dcm.integrate import integrate_quat
-    from imu_dcm.resample import slerp_truth  # noqa: F401 - the truth slerp's modules
-    from imu_dcm.streaming import DcmIntegrator
+    from imu_dcm.gyro.resample import slerp_truth  # noqa: F401 - the truth slerp's modules
+    from imu_dcm.integrator.batch import integrate_quat
+    from imu_dcm.integrator.streaming import DcmIntegrator
 
     q0, w, t = [0.0, 0.0, 0.0, 1.0], np.zeros((5, 3)), 0.001 * np.arange(5)
     with warnings.catch_warnings():
@@ -148,7 +148,8 @@ class LiveOptions:
     ----------
     imu_topic, truth_topic : str, optional — WebSocket channel choices (default: by schema, as
         replay); ``truth_topic="none"`` ignores any truth.
-    method : str — integrator method (:data:`imu_dcm.integrate.METHODS`), default ``magnus4``.
+    method : str — integrator method (:data:`imu_dcm.integrator.batch.METHODS`), default
+    ``magnus4``.
     bias : "auto", "none" or array_like (3,) — ``auto``: from rest as it happens
         (replay's rest rule, causal); a vector: rad/s.
     gyro_units : "rad/s" or "deg/s" — unit of the rates (line sources and WebSocket alike).
@@ -249,7 +250,8 @@ def run(
     LiveResult
         Summary keys: ``source, imu_topic, imu_type, truth_topic, truth_type, samples,
         duration_s, rate_hz, dropped_nonfinite, dropped_implausible (a rate over
-        :data:`imu_dcm.rates.MAX_RATE_RAD_S`, replay's rule), dropped_duplicate, dropped_backward,
+        :data:`imu_dcm.gyro.rates.MAX_RATE_RAD_S`, replay's rule), dropped_duplicate,
+        dropped_backward,
         reordered, malformed, gaps (the first 1000), gap_count, reconnects, lost_by_system (UDP
         datagrams the system dropped, its buffer full, counted to the stop), gyro_units,
         units_evidence (why the rates look like deg/s, or None), bias_mode, bias_rad_s,

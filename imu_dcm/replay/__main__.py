@@ -123,7 +123,7 @@ def _write_out(out: Path, result, force: bool, inputs: tuple) -> Path:
         "imu_dcm.source_log": str(result.summary.path),
         "imu_dcm.method": result.summary.method,
         "imu_dcm.bias_mode": result.summary.bias_mode,
-        "imu_dcm.prefilter": result.summary.prefilter or "none",
+        "imu_dcm.gyro.prefilter": result.summary.prefilter or "none",
     }
     return write_bag(
         out, quaternions=quats, vectors=vectors, custom_data=custom, force=force, inputs=inputs

@@ -36,7 +36,7 @@ def write_chart(path: str | Path, rows: Sequence[LogRow], curves: dict[str, Curv
     sample.
     """
     from imu_dcm.outputs import claim_output, claimed_path
-    from imu_dcm.signatures import signature
+    from imu_dcm.outputs.signatures import signature
 
     fig = chart_figure(rows, curves)
     claim = claim_output(path, "chart", what="the chart")  # new or this tool's own PNG

@@ -20,7 +20,7 @@ Rules, in order (all on the rates in rad/s, in file order until the sort):
    place in time.
 5. **Exact duplicates** (same stamp, same rate) are dropped; a repeated stamp with a different
    rate keeps the first sample (counted as a stamp conflict).
-6. **Gaps** over :data:`imu_dcm.integrate.GAP_FACTOR` median steps are listed (not dropped).
+6. **Gaps** over :data:`imu_dcm.integrator.batch.GAP_FACTOR` median steps are listed (not dropped).
 """
 
 from __future__ import annotations
@@ -31,9 +31,9 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from imu_dcm.errors import GapWarning, ImuDcmWarning
-from imu_dcm.integrate import find_gaps, gap_message
-from imu_dcm.rates import FULL_SCALE_RAD_S, MAX_RATE_RAD_S, implausible_rates, truth_rate_ratio
-from imu_dcm.rates import deg_evidence as _deg_evidence  # noqa: F401 - replay.core's
+from imu_dcm.gyro.rates import FULL_SCALE_RAD_S, MAX_RATE_RAD_S, implausible_rates, truth_rate_ratio
+from imu_dcm.gyro.rates import deg_evidence as _deg_evidence  # noqa: F401 - replay.core's
+from imu_dcm.integrator.batch import find_gaps, gap_message
 from imu_dcm.so3 import median, percentile, row_finite
 
 __all__ = [

@@ -5,7 +5,8 @@ then integrates the **same rates** (bias removed, mounting applied, pre-filtered
 ``omega_b``) from the **same start** (the truth at each anchor, the first scored sample and each
 re-anchoring after a truth jump), and is scored with the same statistics
 (:func:`imu_dcm.replay.stats.evaluate`). Names are this project's methods
-(:data:`imu_dcm.methods.METHODS`) and the peers of :mod:`imu_dcm.peers`, gyro-only:
+(:data:`imu_dcm.integrator.methods.METHODS`) and the peers of :mod:`imu_dcm.integrator.peers`,
+gyro-only:
 
 =============== ======================================= =========================
 name            peer                                    installed by
@@ -32,10 +33,10 @@ import numpy as np
 from numpy.typing import NDArray
 
 from imu_dcm.errors import InputError
-from imu_dcm.integrate import integrate_quat
-from imu_dcm.methods import METHODS
+from imu_dcm.integrator.batch import integrate_quat
+from imu_dcm.integrator.methods import METHODS
+from imu_dcm.integrator.peers import PEERS
 from imu_dcm.metrics import AttitudeError, attitude_error_deg
-from imu_dcm.peers import PEERS
 from imu_dcm.replay.stats import evaluate
 from imu_dcm.so3 import row_finite
 

@@ -29,7 +29,10 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from imu_dcm.errors import GapWarning, ImuDcmWarning, LogError
-from imu_dcm.integrate import integrate_quat
+from imu_dcm.gyro.resample import slerp_truth
+from imu_dcm.gyro.rest import Motion, position_noise_m, truth_noise_rad, twist_noise_rad_s
+from imu_dcm.gyro.stamps import NS_PER_UNIT, timing_doubt
+from imu_dcm.integrator.batch import integrate_quat
 from imu_dcm.logio import LogData, read_log
 from imu_dcm.logio.ned import in_log_axes
 from imu_dcm.metrics import AttitudeError, attitude_error_deg, rms
@@ -55,10 +58,7 @@ from imu_dcm.replay.truth import (
     find_jumps,
 )
 from imu_dcm.replay.window import check_score_window, window_mask
-from imu_dcm.resample import slerp_truth
-from imu_dcm.rest import Motion, position_noise_m, truth_noise_rad, twist_noise_rad_s
 from imu_dcm.so3 import median, quat_angle_rad, quat_as_matrix, row_finite, row_norm
-from imu_dcm.stamps import NS_PER_UNIT, timing_doubt
 
 __all__ = ["CleanedImu", "ReplayResult", "ReplaySummary", "clean_imu", "replay", "slerp_truth"]
 
@@ -481,7 +481,7 @@ def _motion(truth, tt: NDArray, t_s: NDArray, q: NDArray) -> Motion | None:
 def _prefilter(s: ReplaySettings, omega: NDArray, t_s: NDArray):
     if s.prefilter is None:
         return omega, None
-    from imu_dcm.prefilter import prefilter as run_prefilter
+    from imu_dcm.gyro.prefilter import prefilter as run_prefilter
 
     with warnings.catch_warnings():  # gaps were reported once, by clean_imu
         warnings.simplefilter("ignore", GapWarning)

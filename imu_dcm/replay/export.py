@@ -1,7 +1,8 @@
 """Export a replay for other tools: TUM trajectory files for evo.
 
 ``estimate.tum`` and ``truth.tum`` begin with one comment line ``# imu_dcm <version> ...`` (the
-signature by which a later run recognises its own file, :mod:`imu_dcm.signatures`; evo and the
+signature by which a later run recognises its own file, :mod:`imu_dcm.outputs.signatures`; evo and
+the
 TUM tools skip ``#`` lines), then hold one line per sample, ``t x y z qx qy qz qw``: the stamp
 in seconds (the log's clock, nanosecond digits), a zero position (attitude only) and ``q_w_b``
 ``[x, y, z, w]``. ``evo_ape tum truth.tum estimate.tum`` then compares the attitudes (use
@@ -19,7 +20,7 @@ from numpy.typing import NDArray
 
 from imu_dcm.errors import InputError
 from imu_dcm.outputs import Claim, OutputError, check_not_input, claim_output, write_atomic
-from imu_dcm.signatures import comment_line
+from imu_dcm.outputs.signatures import comment_line
 
 __all__ = ["TUM_NAMES", "claim_export", "export_tum", "tum_text"]
 

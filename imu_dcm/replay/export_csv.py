@@ -88,8 +88,8 @@ def export_csv(path, result, inputs: Iterable[str | os.PathLike] = ()) -> Path:
     import pyarrow as pa
     import pyarrow.csv as pacsv
 
-    from imu_dcm.output_rule import Claim
-    from imu_dcm.signatures import comment_line
+    from imu_dcm.outputs.rule import Claim
+    from imu_dcm.outputs.signatures import comment_line
 
     claim = path if isinstance(path, Claim) else claim_csv(path, inputs)
     arrays = [

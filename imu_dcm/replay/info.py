@@ -21,7 +21,7 @@ from pathlib import Path
 
 import numpy as np
 
-from imu_dcm.integrate import find_gaps, gap_message
+from imu_dcm.integrator.batch import find_gaps, gap_message
 from imu_dcm.logio.intervals import declared_intervals
 from imu_dcm.replay.kinds import ESTIMATE, POSITIONS, truth_kind
 

@@ -3,8 +3,8 @@
 The stretch is the whole log when it is all rest (the longest rest covers 95 % of it or more),
 else its longest rest (:func:`imu_dcm.replay.bias.estimate_bias`). Over it, per axis, the
 overlapping Allan deviation at octave cluster times 1, 2, 4, ... samples
-(:func:`imu_dcm.allan.allan_deviation`) and the three standard terms
-(:func:`imu_dcm.allan.fit_noise`):
+(:func:`imu_dcm.gyro.allan.allan_deviation`) and the three standard terms
+(:func:`imu_dcm.gyro.allan.fit_noise`):
 angle random walk N, bias instability B and rate random walk K, each with the τ it was read at
 and its relative uncertainty from the number of clusters there.
 
@@ -68,7 +68,7 @@ def measure_noise(path: str, imu_topic: str | None = None, gyro_units: str = "ra
     LogError
         No rest in the log, or a rest too short for an Allan deviation.
     """
-    from imu_dcm.allan import allan_deviation, fit_noise, octave_clusters
+    from imu_dcm.gyro.allan import allan_deviation, fit_noise, octave_clusters
     from imu_dcm.logio import read_log
     from imu_dcm.replay.bias import estimate_bias
     from imu_dcm.replay.clean import clean_imu
@@ -147,7 +147,7 @@ def kalibr_yaml(r: NoiseReport) -> str:
     """Kalibr's ``imu.yaml`` gyroscope keys (continuous time; the largest axis)."""
     n, k, b = r.largest("N"), r.largest("K"), r.largest("B")
     bound = "" if k.reached else " (an upper bound: the +1/2 slope is not reached)"
-    from imu_dcm.signatures import comment_line
+    from imu_dcm.outputs.signatures import comment_line
 
     return (
         comment_line("noise yaml")

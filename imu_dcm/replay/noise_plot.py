@@ -8,7 +8,7 @@ from pathlib import Path
 
 import numpy as np
 
-from imu_dcm.allan import B_FACTOR
+from imu_dcm.gyro.allan import B_FACTOR
 from imu_dcm.replay.plot import _figure
 
 __all__ = ["plot_allan"]

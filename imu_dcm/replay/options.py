@@ -3,7 +3,8 @@ and ``replay batch`` (:func:`add_replay_options`, parsed once by :func:`replay_k
 library's check of typed values (:func:`check_options`).
 
 Text such as ``"x,y,z"`` is parsed by the command line only (:mod:`imu_dcm.cli`); the library
-takes numbers. Only argparse and the numpy-free :mod:`imu_dcm.methods` are imported at module
+takes numbers. Only argparse and the numpy-free :mod:`imu_dcm.integrator.methods` are imported at
+module
 level, so ``--help`` stays fast.
 """
 
@@ -13,7 +14,7 @@ import math
 
 from imu_dcm.cli import parse_bias, parse_init_quat, parse_mounting, parse_numbers
 from imu_dcm.errors import InputError
-from imu_dcm.methods import METHODS
+from imu_dcm.integrator.methods import METHODS
 
 __all__ = [
     "GYRO_UNITS",
@@ -222,7 +223,7 @@ def replay_keywords(args) -> dict:
 
         density = read_noise_params(params).N  # its gyroscope_noise_density, rad/s/√Hz
     if args.prefilter != "none":
-        from imu_dcm.prefilter import PrefilterConfig
+        from imu_dcm.gyro.prefilter import PrefilterConfig
 
         config = PrefilterConfig(
             noise_density_rad_s_sqrt_hz=density,

@@ -22,7 +22,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from imu_dcm.errors import ImuDcmWarning
-from imu_dcm.integrate import integrate_quat
+from imu_dcm.integrator.batch import integrate_quat
 from imu_dcm.metrics import rms
 from imu_dcm.so3 import quat_angle_rad
 

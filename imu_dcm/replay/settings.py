@@ -12,7 +12,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from imu_dcm.errors import InputError
-from imu_dcm.rest import RestConfig
+from imu_dcm.gyro.rest import RestConfig
 from imu_dcm.so3 import as_quat_xyzw
 
 __all__ = ["MOUNTING_MODES", "ReplaySettings", "check_mounting"]
@@ -37,7 +37,7 @@ class ReplaySettings:
         Stamp source; ``"auto"`` prefers the header stamps
         (:func:`imu_dcm.replay.truth.choose_time`).
     method : str
-        Integrator method, one of :data:`imu_dcm.integrate.METHODS` (default ``"magnus4"``).
+        Integrator method, one of :data:`imu_dcm.integrator.batch.METHODS` (default ``"magnus4"``).
     bias : "auto", "none" or float64 (3,)
         Gyro bias, rad/s (:func:`imu_dcm.replay.bias.estimate_bias`).
     gyro_units : {"rad/s", "deg/s"}
@@ -45,13 +45,13 @@ class ReplaySettings:
     q_init : float64 (4,) or None
         Initial ``q_w_b`` ``[x, y, z, w]`` when the log has no truth (default identity).
     prefilter : {None, "kalman", "rts"}
-        Gyro pre-filter (:mod:`imu_dcm.prefilter`), applied after bias removal.
+        Gyro pre-filter (:mod:`imu_dcm.gyro.prefilter`), applied after bias removal.
     prefilter_config : PrefilterConfig or None
     truth_offset_s : float or "auto"
         Added to the truth stamps, s; ``"auto"``: the shift that best aligns the truth's rate
         with the gyro's. The best shift is reported either way.
     rest_config : RestConfig or None
-        Rest thresholds (:mod:`imu_dcm.rest`).
+        Rest thresholds (:mod:`imu_dcm.gyro.rest`).
     mounting : "auto", "none" or float64 (4,)
         The rotation ``q_t_g`` ``[x, y, z, w]`` from the gyro's frame into the truth's body
         frame (:mod:`imu_dcm.replay.mounting`). ``"auto"``: estimated, and applied when the

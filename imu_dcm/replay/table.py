@@ -14,7 +14,8 @@ Files written next to each other for a table ``OUT.csv``:
   rendered): the signature by which a later batch recognises its own file.
 
 Each file is replaced or appended to only when it is new or this tool's (its header row, its
-JSON lines, its comment line: :mod:`imu_dcm.signatures`); appends never follow a symbolic link.
+JSON lines, its comment line: :mod:`imu_dcm.outputs.signatures`); appends never follow a symbolic
+link.
 """
 
 from __future__ import annotations
@@ -33,7 +34,7 @@ from numpy.typing import ArrayLike
 
 from imu_dcm.errors import InputError
 from imu_dcm.outputs import claim_output, write_atomic
-from imu_dcm.signatures import signature
+from imu_dcm.outputs.signatures import signature
 
 __all__ = [
     "COLUMNS",

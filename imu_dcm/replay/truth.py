@@ -5,7 +5,7 @@ whether the truth is the IMU's attitude at all.
   file order at more than 10 % of the steps, or miss the truth while the log times overlap it;
   then the log (receive) times, with the reason in one line.
 * :func:`slerp_truth` — truth ``q_w_b`` at the gyro stamps, never bridged across long gaps
-  (from :mod:`imu_dcm.resample`, the core, where live uses it too).
+  (from :mod:`imu_dcm.gyro.resample`, the core, where live uses it too).
 * :func:`align_truth` — all of it for a replay: offset, check, slerp, and the decision to drop
   an automatically picked truth that does not follow the gyro.
 * :func:`check_truth` — the body rate implied by the truth against the gyro: the rate norms
@@ -27,7 +27,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from imu_dcm.errors import LogError
-from imu_dcm.resample import TRUTH_BRIDGE_STEPS, slerp_truth
+from imu_dcm.gyro.resample import TRUTH_BRIDGE_STEPS, slerp_truth
 from imu_dcm.so3 import (
     log_quat,
     median,

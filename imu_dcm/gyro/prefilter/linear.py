@@ -16,7 +16,7 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy import linalg
 
-from imu_dcm.prefilter.config import (
+from imu_dcm.gyro.prefilter.config import (
     _DT_REL_TOL,
     _PRIOR_SCALE,
     _STATIONARY_REL_TOL,

@@ -8,8 +8,8 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from imu_dcm.errors import InputError
-from imu_dcm.prefilter.config import _PRIOR_SCALE, PrefilterConfig, _check_config
-from imu_dcm.prefilter.linear import _n_motion, _process_noise, _q_scale, _transition
+from imu_dcm.gyro.prefilter.config import _PRIOR_SCALE, PrefilterConfig, _check_config
+from imu_dcm.gyro.prefilter.linear import _n_motion, _process_noise, _q_scale, _transition
 
 
 class StreamingRateFilter:

@@ -10,7 +10,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from imu_dcm.errors import InputError
-from imu_dcm.prefilter.config import (
+from imu_dcm.gyro.prefilter.config import (
     _MIN_REST_SAMPLES,
     PrefilterConfig,
     PrefilterResult,
@@ -18,7 +18,7 @@ from imu_dcm.prefilter.config import (
     _check_mode,
     _check_rates,
 )
-from imu_dcm.prefilter.linear import (
+from imu_dcm.gyro.prefilter.linear import (
     _build_model,
     _n_motion,
     _q_scale,
@@ -26,12 +26,12 @@ from imu_dcm.prefilter.linear import (
     _run_filterpy,
     _stationary_prior,
 )
-from imu_dcm.prefilter.tuning import (
+from imu_dcm.gyro.prefilter.tuning import (
     _fit_accel,
     estimate_noise_from_rest,
     estimate_noise_from_spectrum,
 )
-from imu_dcm.rest import RestConfig, detect_rest, longest_run, quietest_std
+from imu_dcm.gyro.rest import RestConfig, detect_rest, longest_run, quietest_std
 
 
 def prefilter(

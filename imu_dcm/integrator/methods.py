@@ -48,6 +48,6 @@ class DeltaMethod(enum.IntEnum):
 METHODS = tuple(m.label for m in Method)
 #: Delta-angle method names, in code order.
 DELTA_METHODS = tuple(m.label for m in DeltaMethod)
-#: A step longer than this many median steps is a gap (:func:`imu_dcm.integrate.find_gaps`,
+#: A step longer than this many median steps is a gap (:func:`imu_dcm.integrator.batch.find_gaps`,
 #: GapWarning; the streaming kernel flags candidates with it).
 GAP_FACTOR = 5.0

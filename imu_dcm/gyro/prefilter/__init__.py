@@ -28,7 +28,7 @@ path is tested against.
 unscented filter).
 
 Parameters not given are estimated: the noise density from the Allan deviation of a rest segment
-(``imu_dcm.allan``; its angle random walk and bias instability are reported), or, when the log
+(``imu_dcm.gyro.allan``; its angle random walk and bias instability are reported), or, when the log
 never rests, from the upper band of its spectrum; and ``σ_α`` by maximum likelihood of the
 stationary filter's innovations. ``summary["noise_source"]`` says which noise estimate was used.
 
@@ -44,8 +44,8 @@ unfiltered rates for attitude.
 
 from __future__ import annotations
 
-from imu_dcm.prefilter.batch import prefilter
-from imu_dcm.prefilter.config import (
+from imu_dcm.gyro.prefilter.batch import prefilter
+from imu_dcm.gyro.prefilter.config import (
     MODELS,
     MODES,
     NoiseEstimate,
@@ -53,9 +53,9 @@ from imu_dcm.prefilter.config import (
     PrefilterResult,
     SpectralNoiseEstimate,
 )
-from imu_dcm.prefilter.euler import euler_prefilter
-from imu_dcm.prefilter.streaming import StreamingRateFilter
-from imu_dcm.prefilter.tuning import estimate_noise_from_rest, estimate_noise_from_spectrum
+from imu_dcm.gyro.prefilter.euler import euler_prefilter
+from imu_dcm.gyro.prefilter.streaming import StreamingRateFilter
+from imu_dcm.gyro.prefilter.tuning import estimate_noise_from_rest, estimate_noise_from_spectrum
 
 __all__ = [
     "MODELS",

@@ -16,9 +16,9 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from imu_dcm.allan import allan_deviation, noise_density_from_allan
 from imu_dcm.errors import InputError
-from imu_dcm.prefilter.config import (
+from imu_dcm.gyro.allan import allan_deviation, noise_density_from_allan
+from imu_dcm.gyro.prefilter.config import (
     _ACCEL_SEARCH_RAD_S2,
     _FLICKER_FACTOR,
     _MIN_REST_SAMPLES,
@@ -26,7 +26,7 @@ from imu_dcm.prefilter.config import (
     SpectralNoiseEstimate,
     _check_rates,
 )
-from imu_dcm.prefilter.linear import _n_motion, _q_scale, _stationary_prior, _transition
+from imu_dcm.gyro.prefilter.linear import _n_motion, _q_scale, _stationary_prior, _transition
 
 
 def estimate_noise_from_rest(

@@ -41,7 +41,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from imu_dcm.errors import GapWarning, ImuDcmWarning, InputError
-from imu_dcm.methods import DELTA_METHODS, GAP_FACTOR, METHODS, DeltaMethod, Method
+from imu_dcm.integrator.methods import DELTA_METHODS, GAP_FACTOR, METHODS, DeltaMethod, Method
 from imu_dcm.so3 import as_quat_xyzw, median
 
 if TYPE_CHECKING:

@@ -67,7 +67,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from imu_dcm.errors import InputError
-from imu_dcm.rest_evidence import (
+from imu_dcm.gyro.rest_evidence import (
     Motion,
     airborne_between,
     checked_vehicle,
@@ -76,8 +76,8 @@ from imu_dcm.rest_evidence import (
     twist_noise_rad_s,
     vehicle_windows,
 )
+from imu_dcm.gyro.windows import min_steps, step_var, windowed_mean_var
 from imu_dcm.so3 import log_quat, median, quat_conjugate, quat_multiply, row_max, row_norm
-from imu_dcm.windows import min_steps, step_var, windowed_mean_var
 
 #: Standard gravity, m/s² (a still accelerometer reads about this much).
 GRAVITY_M_S2 = 9.80665

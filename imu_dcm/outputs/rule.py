@@ -175,7 +175,7 @@ class Claim:
         Where it goes: absolute, its folder's links resolved, its last component as named
         (``Path("-")`` for standard output).
     kind : str
-        Its kind (:data:`imu_dcm.signatures.KINDS`, or ``"any"``).
+        Its kind (:data:`imu_dcm.outputs.signatures.KINDS`, or ``"any"``).
     what : str
         How messages name it (``"--summary-json"``).
     inputs : tuple of str
@@ -235,8 +235,9 @@ def _hold_fifo(path: Path, what: str, st: os.stat_result) -> None:
 
 
 def _check_owner(out: Path, kind: str, what: str) -> None:
-    """Refuse an existing regular file this tool did not write (:mod:`imu_dcm.signatures`)."""
-    from imu_dcm.signatures import KINDS, is_own
+    """Refuse an existing regular file this tool did not write
+    (:mod:`imu_dcm.outputs.signatures`)."""
+    from imu_dcm.outputs.signatures import KINDS, is_own
 
     if is_own(out, kind):
         return
@@ -257,7 +258,8 @@ def claim_output(
     path : path-like
         The output as the user named it; ``"-"`` is standard output.
     kind : str
-        A kind of :data:`imu_dcm.signatures.KINDS` (``"json"``, ``"rrd"``, ``"tum"``, ``"csv"``,
+        A kind of :data:`imu_dcm.outputs.signatures.KINDS` (``"json"``, ``"rrd"``, ``"tum"``,
+        ``"csv"``,
         ``"table"``, ``"markdown"``, ``"chart"``, ``"curves"``, ``"mcap"``) or ``"any"``: an
         existing regular file must carry that kind's signature (or be empty).
     inputs : iterable of path-like
@@ -277,7 +279,7 @@ def claim_output(
         One line "Expected ..., got ...": an input, a foreign file, a symbolic link to a file,
         a folder, a block device or socket, a path under a file or in a read-only folder.
     """
-    from imu_dcm.signatures import KINDS
+    from imu_dcm.outputs.signatures import KINDS
 
     if kind != "any" and kind not in KINDS:
         raise ValueError(f"Expected an output kind of {sorted(KINDS)} or 'any', got {kind!r}")
@@ -360,7 +362,7 @@ def is_own_bag(path: str | os.PathLike) -> bool:
     The folder holds exactly ``metadata.yaml`` and ``<folder name>.mcap``, and the MCAP header
     record names the library ``imu_dcm.bag_writer`` (or ``imu_dcm.live``).
     """
-    from imu_dcm.signatures import KINDS
+    from imu_dcm.outputs.signatures import KINDS
 
     p = Path(path)
     if p.is_symlink() or not p.is_dir():

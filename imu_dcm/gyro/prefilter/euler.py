@@ -8,7 +8,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from imu_dcm.errors import InputError
-from imu_dcm.prefilter.config import (
+from imu_dcm.gyro.prefilter.config import (
     _PRIOR_SCALE,
     PrefilterConfig,
     PrefilterResult,

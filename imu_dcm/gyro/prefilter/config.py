@@ -14,7 +14,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from imu_dcm.errors import InputError
-from imu_dcm.integrate import check_samples
+from imu_dcm.integrator.batch import check_samples
 
 MODES = ("kalman", "rts")
 MODELS = ("rate-accel", "rate-accel-jerk")
@@ -61,7 +61,7 @@ class PrefilterConfig:
         Standard deviation of the zero-rate pseudo-measurement at rest, rad/s.
     rest_interval_s : tuple of float or None
         ``(start, end)`` in the units of ``t_s``: the rest segment for the noise estimate. None:
-        the longest rest found by :func:`imu_dcm.rest.detect_rest`; when the log has none (or
+        the longest rest found by :func:`imu_dcm.gyro.rest.detect_rest`; when the log has none (or
         none long enough), the density comes from the spectrum of the log itself.
     min_rest_s : float
         Shortest rest segment accepted for the noise estimate, s.

@@ -37,7 +37,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from imu_dcm import kernel
 from imu_dcm.errors import GapWarning, InputError
-from imu_dcm.integrate import (
+from imu_dcm.integrator.batch import (
     _as_float_array,
     _check_method,
     _to_rotation,
@@ -45,7 +45,7 @@ from imu_dcm.integrate import (
     find_gaps,
     gap_message,
 )
-from imu_dcm.methods import GAP_FACTOR, METHODS, Method
+from imu_dcm.integrator.methods import GAP_FACTOR, METHODS, Method
 from imu_dcm.so3 import as_quat_xyzw
 
 if TYPE_CHECKING:
@@ -178,7 +178,8 @@ class DcmIntegrator:
         Warns
         -----
         GapWarning
-            The step is a gap (:func:`imu_dcm.integrate.find_gaps`) among the last four steps.
+            The step is a gap (:func:`imu_dcm.integrator.batch.find_gaps`) among the last four
+            steps.
         """
         # The compiled push takes a float64 (3,) C-contiguous array and a float, unchecked:
         # anything else is converted here first. It checks the sample (finite, increasing, not
@@ -283,7 +284,8 @@ class DcmIntegrator:
         Warns
         -----
         GapWarning
-            A gap (:func:`imu_dcm.integrate.find_gaps`) in the chunk with the buffered stamps.
+            A gap (:func:`imu_dcm.integrator.batch.find_gaps`) in the chunk with the buffered
+            stamps.
         """
         return _to_rotation(self._many(omega_b, t_s))
 

@@ -3,7 +3,7 @@ convert-csv, data_synth): ONE OUTPUT RULE, checked before any work is done and a
 before a file is replaced.
 
 * **Ours or new.** An existing file is replaced only when this tool wrote it, recognised by its
-  content (:mod:`imu_dcm.signatures`: a JSON key, a comment line, PNG metadata, the ``.rrd``
+  content (:mod:`imu_dcm.outputs.signatures`: a JSON key, a comment line, PNG metadata, the ``.rrd``
   application id, the batch table's header). Anything else is refused in one line, ``--force``
   or not (``--force`` only lets this tool's own batch table or bag folder be replaced). An empty
   file holds nothing to lose and may be replaced.
@@ -32,11 +32,11 @@ For a file named by a user, call :func:`claim_output` before the work and :func:
 
     claim = claim_output(args.export_csv, "csv", inputs, what="--export-csv")  # before the work
     ...                                                                         # the work
-    write_atomic(claim, comment_line("estimate") + text)   # imu_dcm.signatures.comment_line
+    write_atomic(claim, comment_line("estimate") + text)   # imu_dcm.outputs.signatures.comment_line
     with claimed_path(claim_output(path, "chart", inputs)) as tmp:  # a writer needing a path
         fig.savefig(tmp, format="png", metadata={"Software": signature("chart")})
 
-A new kind of output gets its signature and recogniser in :data:`imu_dcm.signatures.KINDS`.
+A new kind of output gets its signature and recogniser in :data:`imu_dcm.outputs.signatures.KINDS`.
 :func:`atomic_path` and :func:`write_text_atomic` are the low-level writes for files inside an
 output folder already claimed (a bag's ``metadata.yaml``).
 
@@ -54,7 +54,7 @@ import threading
 from collections.abc import Iterable, Iterator
 from pathlib import Path
 
-from imu_dcm.output_rule import (
+from imu_dcm.outputs.rule import (
     Claim,
     OutputError,
     _make_parents,
@@ -126,7 +126,7 @@ def _replace_with(tmp: Path, out: Path) -> None:
 
 def _write_stream(claim: Claim, data: bytes) -> None:
     """Write ``data`` to a stream claim: the process's stdout / stderr, or a FIFO, pipe or
-    character device (:func:`~imu_dcm.output_rule.open_stream`: a FIFO's end held since its
+    character device (:func:`~imu_dcm.outputs.rule.open_stream`: a FIFO's end held since its
     claim; one without a reader is refused, never waited on)."""
     if claim.stream in ("stdout", "stderr"):
         stream = sys.stdout if claim.stream == "stdout" else sys.stderr
@@ -318,7 +318,7 @@ def write_json(
     (a :class:`Claim`, or a path claimed here as kind ``json``)."""
     import json
 
-    from imu_dcm.signatures import signature
+    from imu_dcm.outputs.signatures import signature
 
     claim = path if isinstance(path, Claim) else claim_output(path, "json", inputs, what=what)
     rest = {k: v for k, v in data.items() if k != "written_by"}
@@ -336,7 +336,7 @@ def save_figure(fig, path: str | os.PathLike | Claim, **savefig_kwargs) -> Path:
     :func:`atomic_path`, unsigned.
     """
     if isinstance(path, Claim):
-        from imu_dcm.signatures import signature
+        from imu_dcm.outputs.signatures import signature
 
         fmt = savefig_kwargs.pop("format", None) or path.path.suffix.lstrip(".") or "png"
         key = "Creator" if fmt == "svg" else "Software"

@@ -1,5 +1,5 @@
 """Rest evidence beyond the gyro and the accelerometer: the autopilot's landed and armed state,
-the truth's position and odometry's twist, each on the gyro rows (:mod:`imu_dcm.rest` says
+the truth's position and odometry's twist, each on the gyro rows (:mod:`imu_dcm.gyro.rest` says
 how each judges a window and where its bound comes from).
 
 Conventions: ``(landed, armed)`` int (N,) each, 1 true, 0 false, -1 unknown; positions in m;
@@ -15,8 +15,8 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from imu_dcm.errors import InputError
+from imu_dcm.gyro.windows import min_steps, step_var, windowed_mean_var
 from imu_dcm.so3 import row_norm
-from imu_dcm.windows import min_steps, step_var, windowed_mean_var
 
 __all__ = [
     "Motion",

@@ -24,7 +24,7 @@ interval). All peers are first order; none corrects coning.
 relative) and before every sample otherwise. vqf takes one fixed ``gyrTs``: ``vqf_batch`` and
 ``vqf_update_gyr`` use the **median** ``dt`` (uneven stamps are not honoured).
 
-``reference_loop`` and ``scipy_loop`` live in :mod:`imu_dcm.reference`; the library peers
+``reference_loop`` and ``scipy_loop`` live in :mod:`imu_dcm.integrator.reference`; the library peers
 import their library when called (``pip install imu_dcm[bench]``). ``PEERS`` maps each name to
 a :class:`Peer` (function, short description, order).
 """
@@ -37,7 +37,7 @@ from typing import NamedTuple
 import numpy as np
 from numpy.typing import NDArray
 
-from imu_dcm.reference import reference_ck, reference_loop, scipy_loop
+from imu_dcm.integrator.reference import reference_ck, reference_loop, scipy_loop
 from imu_dcm.so3 import quat_multiply
 
 __all__ = [
