@@ -23,14 +23,13 @@ from typing import TYPE_CHECKING
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from imu_dcm.arrays import row_norm
 from imu_dcm.errors import InputError
 
 if TYPE_CHECKING:
     from scipy.spatial.transform import Rotation
 
 __all__ = [
-    "percentile",
-    "median",
     "angle_between_deg",
     "as_quat_xyzw",
     "exp_matrix",
@@ -46,9 +45,6 @@ __all__ = [
     "quat_multiply",
     "quat_normalize",
     "quat_rotate",
-    "row_finite",
-    "row_max",
-    "row_norm",
 ]
 
 # Below this angle (rad) the Taylor branches of exp_matrix and log_quat are used: their truncation
@@ -78,68 +74,6 @@ _PRODUCT = (
     ((3, 2, 1), (0, 1, 1), (1, 0, -1), (2, 3, 1)),
     ((3, 3, 1), (0, 0, -1), (1, 1, -1), (2, 2, -1)),
 )
-
-
-def row_norm(a: ArrayLike) -> NDArray[np.float64]:
-    """Euclidean norm over the last axis, shape ``(...)``: ``np.linalg.norm(a, axis=-1)``
-    without numpy's slow reduction over a short axis (a few times faster for ``(N, 4)``)."""
-    a = np.asarray(a, dtype=float)
-    return np.sqrt(np.einsum("...i,...i->...", a, a))
-
-
-def row_finite(a: ArrayLike) -> NDArray[np.bool_]:
-    """Whether every element along the last axis is finite, shape ``(...)``:
-    ``np.all(np.isfinite(a), axis=-1)``, column by column (many times faster for ``(N, 4)``)."""
-    f = np.isfinite(a)
-    if f.ndim == 0 or f.shape[-1] == 0:
-        return np.all(f, axis=-1)
-    out = f[..., 0].copy()
-    for k in range(1, f.shape[-1]):
-        out &= f[..., k]
-    return out
-
-
-def row_max(a: ArrayLike) -> NDArray[np.float64]:
-    """Largest element over the last axis of a non-empty one, shape ``(...)``:
-    ``np.max(a, axis=-1)`` column by column (NaN propagates the same way)."""
-    a = np.asarray(a)
-    out = a[..., 0].copy()
-    for k in range(1, a.shape[-1]):
-        np.maximum(out, a[..., k], out=out)
-    return out
-
-
-def median(values: ArrayLike) -> float:
-    """The median of all the values, as ``np.median`` gives it (the middle one, or the mean of
-    the two middle ones; NaN when any value is NaN or there is none), without the masked-array
-    module ``np.median`` imports on its first call (~13 ms of a replay's start-up)."""
-    a = np.asarray(values, dtype=np.float64).ravel()
-    n = a.size
-    if n == 0 or np.isnan(a).any():
-        return math.nan
-    k = n // 2
-    if n % 2:
-        return float(np.partition(a, k)[k])
-    part = np.partition(a, (k - 1, k))
-    return float((part[k - 1] + part[k]) / 2.0)
-
-
-def percentile(values: ArrayLike, q: float) -> float:
-    """The ``q``-th percentile (0-100) of all the values, as ``np.percentile`` gives it by its
-    default linear rule (NaN when any value is NaN or there is none), without the masked-array
-    module that ``np.percentile`` imports on its first call."""
-    a = np.asarray(values, dtype=np.float64).ravel()
-    n = a.size
-    if n == 0 or np.isnan(a).any():
-        return math.nan
-    v = (q / 100.0) * (n - 1)
-    lo = math.floor(v)
-    hi = min(lo + 1, n - 1)
-    t = v - lo
-    part = np.partition(a, (lo, hi))
-    x, y = float(part[lo]), float(part[hi])
-    d = y - x
-    return y - d * (1.0 - t) if t >= 0.5 else x + d * t  # numpy's two-sided interpolation
 
 
 def _horner(t2: NDArray, coefs: tuple) -> NDArray:

@@ -36,6 +36,7 @@ PACKAGE = REPO / "imu_dcm"
 
 CORE = (
     "so3",
+    "arrays",
     "integrator",
     "gyro",
     "kernel",

@@ -112,7 +112,7 @@ def test_log_quat_of_half_turns_matches_scipy_without_warnings():
 
 
 def test_row_helpers_equal_numpy_reductions_over_the_last_axis():
-    from imu_dcm.so3 import row_finite, row_max, row_norm
+    from imu_dcm.arrays import row_finite, row_max, row_norm
 
     rng = np.random.default_rng(11)
     for shape in [(4,), (50, 4), (7, 3), (3, 5, 2), (0, 4)]:
@@ -152,7 +152,7 @@ def test_product_planes_of_conjugates_and_the_angle_between_attitudes():
 def test_median_and_percentile_equal_numpy_bit_for_bit(n):
     # The replay's median and percentiles skip numpy's masked-array import; they must give
     # numpy's own values exactly (even counts, ties, ints, every percentile rule branch).
-    from imu_dcm.so3 import median, percentile
+    from imu_dcm.arrays import median, percentile
 
     rng = np.random.default_rng(n)
     for a in (rng.normal(size=n) * 1e3, np.round(rng.normal(size=n) * 3), rng.integers(0, 5, n)):

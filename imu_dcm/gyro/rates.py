@@ -19,7 +19,8 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from imu_dcm.so3 import median, percentile, quat_angle_rad, row_finite, row_max, row_norm
+from imu_dcm.arrays import median, percentile, row_finite, row_max, row_norm
+from imu_dcm.so3 import quat_angle_rad
 
 __all__ = [
     "FULL_SCALE_RAD_S",

@@ -12,7 +12,8 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from imu_dcm.so3 import exp_quat, log_quat, median, quat_conjugate, quat_multiply, row_norm
+from imu_dcm.arrays import median, row_norm
+from imu_dcm.so3 import exp_quat, log_quat, quat_conjugate, quat_multiply
 
 __all__ = ["TRUTH_BRIDGE_STEPS", "slerp_truth"]
 

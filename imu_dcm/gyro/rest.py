@@ -66,6 +66,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from imu_dcm.arrays import median, row_max, row_norm
 from imu_dcm.errors import InputError
 from imu_dcm.gyro.rest_evidence import (
     Motion,
@@ -77,7 +78,7 @@ from imu_dcm.gyro.rest_evidence import (
     vehicle_windows,
 )
 from imu_dcm.gyro.windows import min_steps, step_var, windowed_mean_var
-from imu_dcm.so3 import log_quat, median, quat_conjugate, quat_multiply, row_max, row_norm
+from imu_dcm.so3 import log_quat, quat_conjugate, quat_multiply
 
 #: Standard gravity, m/s² (a still accelerometer reads about this much).
 GRAVITY_M_S2 = 9.80665

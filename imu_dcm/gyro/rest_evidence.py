@@ -14,9 +14,9 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from imu_dcm.arrays import row_norm
 from imu_dcm.errors import InputError
 from imu_dcm.gyro.windows import min_steps, step_var, windowed_mean_var
-from imu_dcm.so3 import row_norm
 
 __all__ = [
     "Motion",

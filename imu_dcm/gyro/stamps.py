@@ -18,7 +18,7 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import ArrayLike
 
-from imu_dcm.so3 import median
+from imu_dcm.arrays import median
 
 __all__ = ["NS_PER_UNIT", "timing_doubt"]
 

@@ -40,9 +40,10 @@ from typing import TYPE_CHECKING
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from imu_dcm.arrays import median
 from imu_dcm.errors import GapWarning, ImuDcmWarning, InputError
 from imu_dcm.integrator.methods import DELTA_METHODS, GAP_FACTOR, METHODS, DeltaMethod, Method
-from imu_dcm.so3 import as_quat_xyzw, median
+from imu_dcm.so3 import as_quat_xyzw
 
 if TYPE_CHECKING:
     from scipy.spatial.transform import Rotation

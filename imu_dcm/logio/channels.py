@@ -19,6 +19,7 @@ from dataclasses import replace
 import numpy as np
 from numpy.typing import NDArray
 
+from imu_dcm.arrays import median, percentile, row_finite, row_norm
 from imu_dcm.errors import LogError
 from imu_dcm.gyro.rest import GRAVITY_M_S2
 from imu_dcm.logio.cdr import decode
@@ -26,7 +27,6 @@ from imu_dcm.logio.json_imu import is_json_imu, json_imu_columns, json_msg
 from imu_dcm.logio.schema import Defs, definitions, norm_type
 from imu_dcm.logio.tf import TF_TYPE, child_frame, is_static_tf, moving_children, tf_truth
 from imu_dcm.logio.types import Collected, Columns, Conn, ImuSeries, Payloads, TruthSeries
-from imu_dcm.so3 import median, percentile, row_finite, row_norm
 
 IMU_TYPE = "sensor_msgs/msg/Imu"
 VEC3_TYPE = "geometry_msgs/msg/Vector3Stamped"

@@ -30,11 +30,11 @@ import warnings
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from imu_dcm.arrays import median, percentile, row_finite
 from imu_dcm.errors import GapWarning, ImuDcmWarning
 from imu_dcm.gyro.rates import FULL_SCALE_RAD_S, MAX_RATE_RAD_S, implausible_rates, truth_rate_ratio
 from imu_dcm.gyro.rates import deg_evidence as _deg_evidence  # noqa: F401 - replay.core's
 from imu_dcm.integrator.batch import find_gaps, gap_message
-from imu_dcm.so3 import median, percentile, row_finite
 
 __all__ = [
     "FULL_SCALE_RAD_S",

@@ -32,13 +32,13 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
+from imu_dcm.arrays import row_finite
 from imu_dcm.errors import InputError
 from imu_dcm.integrator.batch import integrate_quat
 from imu_dcm.integrator.methods import METHODS
 from imu_dcm.integrator.peers import PEERS
 from imu_dcm.metrics import AttitudeError, attitude_error_deg
 from imu_dcm.replay.stats import evaluate
-from imu_dcm.so3 import row_finite
 
 __all__ = ["PEER_NAMES", "CompareRow", "compare_methods", "compare_lines", "parse_compare"]
 

@@ -28,6 +28,7 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from imu_dcm.arrays import median, row_finite, row_norm
 from imu_dcm.errors import GapWarning, ImuDcmWarning, LogError
 from imu_dcm.gyro.resample import slerp_truth
 from imu_dcm.gyro.rest import Motion, position_noise_m, truth_noise_rad, twist_noise_rad_s
@@ -58,7 +59,7 @@ from imu_dcm.replay.truth import (
     find_jumps,
 )
 from imu_dcm.replay.window import check_score_window, window_mask
-from imu_dcm.so3 import median, quat_angle_rad, quat_as_matrix, row_finite, row_norm
+from imu_dcm.so3 import quat_angle_rad, quat_as_matrix
 
 __all__ = ["CleanedImu", "ReplayResult", "ReplaySummary", "clean_imu", "replay", "slerp_truth"]
 

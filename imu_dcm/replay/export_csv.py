@@ -27,9 +27,9 @@ from pathlib import Path
 
 import numpy as np
 
+from imu_dcm.arrays import row_finite
 from imu_dcm.metrics import error_planes_rad
 from imu_dcm.outputs import claim_output, claimed_path
-from imu_dcm.so3 import row_finite
 
 __all__ = ["CSV_COLUMNS", "export_csv"]
 

@@ -27,15 +27,9 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from imu_dcm.arrays import row_finite
 from imu_dcm.replay.truth import rate_grid
-from imu_dcm.so3 import (
-    exp_matrix,
-    quat_angle_rad,
-    quat_as_matrix,
-    quat_from_matrix,
-    quat_normalize,
-    row_finite,
-)
+from imu_dcm.so3 import exp_matrix, quat_angle_rad, quat_as_matrix, quat_from_matrix, quat_normalize
 
 __all__ = ["APPLY_DEG", "Mounting", "axis_permutation", "estimate_mounting"]
 

@@ -17,9 +17,10 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import NDArray
 
+from imu_dcm.arrays import median, row_finite
 from imu_dcm.gyro.resample import slerp_truth
 from imu_dcm.metrics import rms
-from imu_dcm.so3 import angle_between_deg, median, quat_conjugate, quat_multiply, row_finite
+from imu_dcm.so3 import angle_between_deg, quat_conjugate, quat_multiply
 
 
 def shift_ms(shift_s: float) -> str:

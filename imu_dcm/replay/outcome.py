@@ -13,7 +13,8 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import NDArray
 
-from imu_dcm.so3 import angle_between_deg, row_finite, row_norm
+from imu_dcm.arrays import row_finite, row_norm
+from imu_dcm.so3 import angle_between_deg
 
 
 def outcome(

@@ -26,17 +26,10 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
+from imu_dcm.arrays import median, row_finite, row_norm
 from imu_dcm.errors import LogError
 from imu_dcm.gyro.resample import TRUTH_BRIDGE_STEPS, slerp_truth
-from imu_dcm.so3 import (
-    log_quat,
-    median,
-    quat_angle_rad,
-    quat_conjugate,
-    quat_multiply,
-    row_finite,
-    row_norm,
-)
+from imu_dcm.so3 import log_quat, quat_angle_rad, quat_conjugate, quat_multiply
 
 __all__ = [
     "MIN_CORRELATION",
