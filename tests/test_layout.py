@@ -1,18 +1,22 @@
-"""The layout: imports point one way, no import circles, short functions, every module imports,
-and the wheel ships two packages.
+"""The layout: layers as packages, imports pointing inwards only, no import circles, short
+functions and modules, private names kept private, every module imports, and the wheel ships two
+packages.
 
-Layers (docs/design.md, "Where each concept lives"): the core maths (``so3``, the integrator and
-its kernels, streaming, resampling, rest detection, metrics, Allan deviation, the pre-filter, the
-reference integrators, errors, and the small helpers every layer shares: safe output, command-line
-parsing) imports neither log I/O nor replay, viz, live or benchmarks; log I/O (reading and
-writing every container: ``logio``, with the bag writer) imports no replay, viz or live; live
-imports no replay (what both need lives below them); nothing in the shipped packages imports
-``benchmarks`` (a folder of the repository, not part of the wheel) or ``tests``.
+Layers (docs/design.md, "Layers"): :data:`LAYERS` lists the packages of ``imu_dcm`` from the
+innermost to the outermost. A module may import its own layer and the layers before it, never a
+later one; a module belongs to the layer of the longest prefix that names it, and every module
+must belong to one (a new package is placed here, or the test fails). ``replay`` and ``live`` are
+siblings in the outermost layer and import nothing of each other. Nothing shipped imports
+``benchmarks`` (a folder of the repository) or ``tests``.
 
 Circles: no module reaches itself through the imports of ``imu_dcm``, ``data_synth`` or
 ``benchmarks``, counting imports inside functions too (a lazy import defers the circle, it does
 not remove it). Length: no function of the shipped packages runs over
-:data:`MAX_FUNCTION_LINES` lines (``def`` to its last line), so each one holds one idea.
+:data:`MAX_FUNCTION_LINES` lines (``def`` to its last line), so each one holds one idea, and no
+module over :data:`MAX_MODULE_LINES` lines but those :data:`LONG_MODULES` names with a reason.
+Privacy: a name with a leading underscore is not imported from another module, and a private
+module (``_name.py``) only from its own package (``imu_dcm._kernels`` is the package's private
+layer of compiled kernels, imported by the layers above it by design).
 """
 
 from __future__ import annotations
@@ -34,24 +38,47 @@ import imu_dcm
 REPO = Path(__file__).resolve().parents[1]
 PACKAGE = REPO / "imu_dcm"
 
-CORE = (
-    "so3",
-    "arrays",
-    "integrator",
-    "gyro",
-    "kernel",
-    "kernel_state",
-    "kernel_jit",
-    "kernel_build",
-    "metrics",
-    "errors",
-    "outputs",
-    "cli",
-    "__main__",  # python -m imu_dcm: the list of commands (imports nothing of the project)
+#: The layers of ``imu_dcm``, inner to outer: (name, the module prefixes that make it up).
+LAYERS = (
+    # the base every layer shares: errors, arrays, rotations, metrics, the one output rule, and
+    # the package's own __init__ / __main__ (its lazy names load from the integrator on first use)
+    (
+        "base",
+        (
+            "imu_dcm",
+            "imu_dcm.__main__",
+            "imu_dcm.errors",
+            "imu_dcm.arrays",
+            "imu_dcm.so3",
+            "imu_dcm.metrics",
+            "imu_dcm.outputs",
+        ),
+    ),
+    # the integrator and its compiled kernels (the integrator's, and the byte scans of the ULog
+    # reader and of live's CSV lines, compiled the same way): one layer, two packages
+    (
+        "integrator",
+        (
+            "imu_dcm.kernel",
+            "imu_dcm.kernel_state",
+            "imu_dcm.kernel_jit",
+            "imu_dcm.kernel_build",
+            "imu_dcm._kernels",
+            "imu_dcm.integrator",
+        ),
+    ),
+    ("gyro", ("imu_dcm.gyro",)),
+    ("logio", ("imu_dcm.logio",)),
+    ("app", ("imu_dcm.cli", "imu_dcm.app")),
+    ("viz", ("imu_dcm.viz",)),
+    ("commands", ("imu_dcm.replay", "imu_dcm.live")),
 )
-# the bag writer belongs to log I/O wherever it sits: imu_dcm/bag_writer.py or inside logio
-LOG_IO = ("logio", "bag_writer")
-UPPER = ("imu_dcm.replay", "imu_dcm.viz", "imu_dcm.live", "benchmarks")
+#: Siblings of one layer that import nothing of each other.
+SIBLINGS = (("imu_dcm.replay", "imu_dcm.live"),)
+#: The longest module the shipped packages may hold, in lines.
+MAX_MODULE_LINES = 500
+#: Modules allowed over :data:`MAX_MODULE_LINES`, each with its reason.
+LONG_MODULES: dict[str, str] = {}
 #: The longest function the shipped packages may hold, in lines from ``def`` to its last line.
 MAX_FUNCTION_LINES = 80
 
@@ -217,47 +244,151 @@ def _offending(files: list[Path], forbidden: tuple[str, ...], root: Path = REPO)
     return bad
 
 
+def _layer_of(module: str) -> int | None:
+    """The index in :data:`LAYERS` of the longest prefix naming ``module``, or None."""
+    best, found = -1, None
+    for k, (_, prefixes) in enumerate(LAYERS):
+        for prefix in prefixes:
+            if (module == prefix or module.startswith(prefix + ".")) and len(prefix) > best:
+                best, found = len(prefix), k
+    return found
+
+
+def _outward_imports(root: Path = REPO, package: Path = PACKAGE) -> list[str]:
+    """``file:line imports module (layer a -> layer b)`` for every import of a later layer, and
+    for every import between :data:`SIBLINGS`."""
+    bad = []
+    for path in sorted(package.rglob("*.py")):
+        here = _module_name(path, root)
+        mine = _layer_of(here)
+        for line, mod, names in _import_statements(path, root):
+            for target in [mod, *(f"{mod}.{n}" for n in names)]:
+                theirs = _layer_of(target) if target.startswith("imu_dcm") else None
+                sibling = any(
+                    here.startswith(a) and target.startswith(b)
+                    for pair in SIBLINGS
+                    for a, b in (pair, pair[::-1])
+                )
+                if (theirs is not None and mine is not None and theirs > mine) or sibling:
+                    where = f"{path.relative_to(root)}:{line}"
+                    layers = "siblings" if sibling else f"{LAYERS[mine][0]} -> {LAYERS[theirs][0]}"
+                    bad.append(f"{where} imports {target} ({layers})")
+                    break
+    return bad
+
+
 def test_the_import_walk_sees_every_kind_of_import(tmp_path):
     # The walk must see imports inside functions and resolve relative ones, or the checks below
-    # could pass on a module that imports upwards lazily.
+    # could pass on a module that imports outwards lazily.
     assert "imu_dcm.errors" in _imports(PACKAGE / "gyro" / "prefilter" / "config.py")
-    fake = tmp_path / "imu_dcm" / "prefilter" / "probe.py"
+    fake = tmp_path / "imu_dcm" / "gyro" / "probe.py"
     fake.parent.mkdir(parents=True)
+    (tmp_path / "imu_dcm" / "live").mkdir()
     fake.write_text(
         "def f():\n    from ..replay import core\n    import benchmarks.stability\n",
         encoding="utf-8",
     )
+    (tmp_path / "imu_dcm" / "live" / "probe.py").write_text(
+        "from imu_dcm.replay.core import x\n", encoding="utf-8"
+    )
     found = _imports(fake, tmp_path)
     assert {"imu_dcm.replay", "imu_dcm.replay.core", "benchmarks.stability"} <= found
-    assert len(_offending([fake], UPPER, tmp_path)) == 3
+    assert _outward_imports(tmp_path, tmp_path / "imu_dcm") == [
+        "imu_dcm/gyro/probe.py:2 imports imu_dcm.replay (gyro -> commands)",
+        "imu_dcm/live/probe.py:1 imports imu_dcm.replay.core (siblings)",
+    ]
 
 
-def test_core_imports_no_log_io_replay_viz_live_or_benchmarks():
-    files = [f for name in CORE for f in _files(name)]
-    # the core is there (a renamed module must be renamed here too)
-    for name in ("so3", "integrator", "gyro", "metrics", "outputs"):
-        assert _files(name), name
-    forbidden = UPPER + tuple(f"imu_dcm.{m}" for m in LOG_IO) + ("data_synth",)
-    assert _offending(files, forbidden) == []
-
-
-def test_log_io_imports_no_replay_viz_or_live():
-    files = [f for name in LOG_IO for f in _files(name)]
-    assert _offending(files, UPPER) == []
-
-
-def test_live_imports_no_replay():
-    # live and replay are siblings: what both need (the truth slerp, the integrator, the
-    # readers) lives below them, so either can change without the other
-    assert _offending(_files("live"), ("imu_dcm.replay",)) == []
+def test_imports_point_inwards_only():
+    bad = _outward_imports()
+    assert bad == [], "\n".join(["imports of an outer layer:", *bad])
 
 
 def test_every_module_of_imu_dcm_has_a_layer():
-    # a new top-level module must be placed in a layer here, or the checks above skip it
-    layered = set(CORE) | set(LOG_IO) | {m.split(".")[-1] for m in UPPER}
-    top = {p.stem for p in PACKAGE.glob("*.py") if p.stem != "__init__"}
-    top |= {p.name for p in PACKAGE.iterdir() if (p / "__init__.py").is_file()}
-    assert sorted(top - layered) == []
+    # a new package must be placed in LAYERS, or the check above skips it
+    modules = {_module_name(p) for p in PACKAGE.rglob("*.py")}
+    assert sorted(m for m in modules if _layer_of(m) is None) == []
+    # and every prefix of LAYERS names something that exists (a renamed package is renamed here)
+    stale = [
+        p
+        for _, ps in LAYERS
+        for p in ps
+        if not any(m == p or m.startswith(p + ".") for m in modules)
+    ]
+    assert stale == []
+
+
+def test_no_shipped_module_runs_over_500_lines():
+    files = sorted(PACKAGE.rglob("*.py")) + sorted((REPO / "data_synth").rglob("*.py"))
+    long = {}
+    for path in files:
+        n = len(path.read_text(encoding="utf-8").splitlines())
+        if n > MAX_MODULE_LINES and _module_name(path) not in LONG_MODULES:
+            long[str(path.relative_to(REPO))] = n
+    assert long == {}, f"modules over {MAX_MODULE_LINES} lines (split them by idea): {long}"
+    assert all(LONG_MODULES.values())  # each exception says why
+
+
+def _package_of(module: str, path: Path) -> str:
+    return module if path.name == "__init__.py" else module.rpartition(".")[0]
+
+
+def _is_module(root: Path, dotted: str) -> bool:
+    path = root / dotted.replace(".", "/")
+    return path.with_suffix(".py").is_file() or (path / "__init__.py").is_file()
+
+
+def _private_imports(root: Path = REPO, package: Path = PACKAGE) -> list[str]:
+    """``file:line module.name`` for every ``_name`` (a function, class or constant) imported
+    from another module, and every private module imported from outside its own package (but
+    ``imu_dcm._kernels``)."""
+    bad = []
+    for path in sorted(package.rglob("*.py")):
+        mine = _package_of(_module_name(path, root), path)
+        for line, mod, names in _import_statements(path, root):
+            where = f"{path.relative_to(root)}:{line}"
+            dotted = [f"{mod}.{n}" for n in names if not _is_module(root, f"{mod}.{n}")]
+            modules = [mod] + [f"{mod}.{n}" for n in names if _is_module(root, f"{mod}.{n}")]
+            for name in dotted:
+                last = name.rpartition(".")[2]
+                if last.startswith("_") and not last.startswith("__"):
+                    bad.append(f"{where} {name}")
+            for target in modules:
+                parts = target.split(".")
+                for k, part in enumerate(parts):
+                    owner = ".".join(parts[:k])
+                    private = part.startswith("_") and not part.startswith("__")
+                    inside = mine == owner or mine.startswith(f"{owner}.{part}")
+                    if private and not inside and not target.startswith("imu_dcm._kernels"):
+                        bad.append(f"{where} {target}")
+                        break
+    return bad
+
+
+def test_the_privacy_walk_sees_names_and_modules(tmp_path):
+    pkg = tmp_path / "imu_dcm"
+    for folder in ("gyro", "live", "live/_inner", "_kernels"):
+        (pkg / folder).mkdir(parents=True, exist_ok=True)
+        (pkg / folder / "__init__.py").write_text("", encoding="utf-8")
+    (pkg / "__init__.py").write_text("", encoding="utf-8")
+    (pkg / "live" / "a.py").write_text(
+        "from imu_dcm.gyro.rest import _limit, fine\n"  # another package's private name
+        "from imu_dcm.live.b import _own\n"  # another module's, even of its own package
+        "from imu_dcm.live._inner import c\n"  # its own private sub-package: allowed
+        "from imu_dcm._kernels import scan\n",  # the kernels' private layer: allowed
+        encoding="utf-8",
+    )
+    (pkg / "gyro" / "d.py").write_text("import imu_dcm.live._inner.c\n", encoding="utf-8")
+    assert _private_imports(tmp_path, pkg) == [
+        "imu_dcm/gyro/d.py:1 imu_dcm.live._inner.c",
+        "imu_dcm/live/a.py:1 imu_dcm.gyro.rest._limit",
+        "imu_dcm/live/a.py:2 imu_dcm.live.b._own",
+    ]
+
+
+def test_no_private_name_is_imported_from_another_module():
+    bad = _private_imports()
+    assert bad == [], "\n".join(["private names imported from another module:", *bad])
 
 
 def test_the_circle_finder_reports_every_circle_as_a_path(tmp_path):

@@ -40,11 +40,11 @@ def _model_path(rng, n, dt, accel_rad_s2, sub=16):
 
 @pytest.mark.parametrize("dim", [2, 3])
 def test_process_noise_matches_filterpy(dim):
-    from imu_dcm.gyro.prefilter.linear import _process_noise
+    from imu_dcm.gyro.prefilter._linear import process_noise
 
     dt = np.array([1e-3, 3.5e-3, 0.02, 0.7])
     q = 2.5
-    mine = _process_noise(dt, dim, q, False, 0.0)
+    mine = process_noise(dt, dim, q, False, 0.0)
     for k, h in enumerate(dt):
         # filterpy orders the state [x, x', x''] as we do ([rate, accel, jerk]).
         np.testing.assert_allclose(mine[k], Q_continuous_white_noise(dim, h, q), rtol=1e-14)

@@ -67,7 +67,7 @@ __all__ = [
 # ----------------------------------------------------------------------------------------------
 
 
-def _as_float_array(a: ArrayLike, name: str) -> NDArray[np.float64]:
+def as_float_array(a: ArrayLike, name: str) -> NDArray[np.float64]:
     arr = np.asarray(a)
     if arr.dtype.kind not in "iuf":
         raise InputError(f"Expected `{name}` real numbers (int or float), got dtype {arr.dtype}")
@@ -117,8 +117,8 @@ def check_samples(
     GapWarning
         A step longer than ``GAP_FACTOR`` times the median step (the first gap's time named).
     """
-    v = _as_float_array(values, name)
-    t = _as_float_array(t_s, "t_s")
+    v = as_float_array(values, name)
+    t = as_float_array(t_s, "t_s")
     if v.ndim != 2 or v.shape[1] != 3:
         raise InputError(f"Expected `{name}` of shape (N, 3), got {v.shape}")
     if t.ndim != 1:
@@ -191,12 +191,12 @@ def _warn_gaps(t: NDArray, stacklevel: int = 3) -> None:
         warnings.warn(gap_message(gaps), GapWarning, stacklevel=stacklevel + 1)
 
 
-def _check_method(method: str, allowed: tuple[str, ...]) -> None:
+def check_method(method: str, allowed: tuple[str, ...]) -> None:
     if method not in allowed:
         raise InputError(f"Expected method in {allowed}, got {method!r}")
 
 
-def _warn_rotvec_sum(stacklevel: int = 3) -> None:
+def warn_rotvec_sum(stacklevel: int = 3) -> None:
     warnings.warn(
         "method 'rotvec_sum' adds rotation vectors (q_0 ⊗ exp(Σ dt ω)); it is wrong "
         "whenever the rotation axis moves in the body",
@@ -205,7 +205,7 @@ def _warn_rotvec_sum(stacklevel: int = 3) -> None:
     )
 
 
-def _to_rotation(q: NDArray) -> Rotation:
+def to_rotation(q: NDArray) -> Rotation:
     """``Rotation`` of quaternions the kernel keeps unit to rounding (no second normalisation,
     no copy: scipy's would cost ~13 ns/sample at N = 10^6)."""
     from scipy.spatial.transform import Rotation
@@ -275,7 +275,7 @@ def integrate(
     >>> integrate(w, t, [0, 0, 0, 1]).as_quat()[-1].round(6)
     array([0.      , 0.      , 0.707107, 0.707107])
     """
-    return _to_rotation(_integrate_rows(omega_b, t_s, q0, method))
+    return to_rotation(_integrate_rows(omega_b, t_s, q0, method))
 
 
 def integrate_quat(
@@ -291,11 +291,11 @@ def integrate_quat(
 def _integrate_rows(omega_b, t_s, q0, method: str) -> NDArray[np.float64]:
     """Check, then run the kernel: the body of :func:`integrate` and :func:`integrate_quat`
     (their warnings name their caller: three frames up from here)."""
-    _check_method(method, METHODS)
+    check_method(method, METHODS)
     omega, t, _dt = check_samples(omega_b, t_s, stacklevel=4)
     q_first = as_quat_xyzw(q0)
     if method == "rotvec_sum":
-        _warn_rotvec_sum(stacklevel=4)
+        warn_rotvec_sum(stacklevel=4)
     return _rate_run(omega, t, q_first, method)
 
 
@@ -305,7 +305,7 @@ def increments(omega_b: ArrayLike, t_s: ArrayLike, method: str = "magnus4") -> N
     The same rules as :func:`integrate` (ghost samples at the ends for ``magnus4``); for
     inspection and tests. ``rotvec_sum`` is not a per-step rule and is refused.
     """
-    _check_method(method, METHODS[:-1])
+    check_method(method, METHODS[:-1])
     omega, t, _dt = check_samples(omega_b, t_s)
     return np.ascontiguousarray(
         _rate_run(omega, t, np.array([0.0, 0.0, 0.0, 1.0]), method, emit_phi=True)
@@ -345,7 +345,7 @@ def integrate_delta(
     InputError
         As :func:`integrate`; also ``N`` not a multiple of the set size m.
     """
-    _check_method(method, DELTA_METHODS)
+    check_method(method, DELTA_METHODS)
     dtheta, _t, dt = check_samples(dtheta_b, t_s, name="dtheta_b", n_extra_stamps=1)
     m = {"two_sample": 2, "three_sample": 3}.get(method, 1)
     if len(dtheta) % m:
@@ -368,4 +368,4 @@ def integrate_delta(
     out = np.empty((len(dtheta) // m + 1, 4))
     q_first = np.ascontiguousarray(as_quat_xyzw(q0), dtype=np.float64)
     kernel.feed_delta(q_first, dtheta, dt, int(DeltaMethod[method.upper()]), out)
-    return _to_rotation(out)
+    return to_rotation(out)

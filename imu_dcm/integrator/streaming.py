@@ -38,12 +38,12 @@ from numpy.typing import ArrayLike, NDArray
 from imu_dcm import kernel
 from imu_dcm.errors import GapWarning, InputError
 from imu_dcm.integrator.batch import (
-    _as_float_array,
-    _check_method,
-    _to_rotation,
-    _warn_rotvec_sum,
+    as_float_array,
+    check_method,
     find_gaps,
     gap_message,
+    to_rotation,
+    warn_rotvec_sum,
 )
 from imu_dcm.integrator.methods import GAP_FACTOR, METHODS, Method
 from imu_dcm.so3 import as_quat_xyzw
@@ -93,7 +93,7 @@ class DcmIntegrator:
     def __init__(
         self, q0: ArrayLike | Rotation, method: str = "magnus4", t0_s: float | None = None
     ) -> None:
-        _check_method(method, METHODS)
+        check_method(method, METHODS)
         try:
             t0 = None if t0_s is None else float(t0_s)
         except (TypeError, ValueError):
@@ -108,7 +108,7 @@ class DcmIntegrator:
         self._finished = False
         self._t0_pending = t0 is not None
         if method == "rotvec_sum":
-            _warn_rotvec_sum()
+            warn_rotvec_sum()
 
     # -- read-only state ------------------------------------------------------------------------
 
@@ -287,7 +287,7 @@ class DcmIntegrator:
             A gap (:func:`imu_dcm.integrator.batch.find_gaps`) in the chunk with the buffered
             stamps.
         """
-        return _to_rotation(self._many(omega_b, t_s))
+        return to_rotation(self._many(omega_b, t_s))
 
     def update_many_quat(self, omega_b: ArrayLike, t_s: ArrayLike) -> NDArray[np.float64]:
         """:meth:`update_many` as an ``(n, 4)`` array of ``[x, y, z, w]`` attitudes, without
@@ -307,8 +307,8 @@ class DcmIntegrator:
             raise InputError("Expected at least one sample, got 0")
         if self._finished:
             raise InputError("Expected no samples after finish(), got some")
-        w = _as_float_array(w, "omega_b")
-        t = _as_float_array(t, "t_s")
+        w = as_float_array(w, "omega_b")
+        t = as_float_array(t, "t_s")
         n_user = len(t)
         if self._t0_pending:
             w = np.vstack([w[:1], w])

@@ -131,9 +131,9 @@ def _parent_writable(out: Path, what: str) -> None:
         raise OutputError(f"Expected a writable folder for {what}, got read-only {str(parent)!r}")
 
 
-def _make_parents(path: str | os.PathLike, what: str) -> list[Path]:
+def make_parents(path: str | os.PathLike, what: str) -> list[Path]:
     """Create the missing parent folders of ``path`` (umask modes); the folders made, deepest
-    last (for :func:`_remove_made`)."""
+    last (for :func:`remove_made`)."""
     parent = Path(path).parent
     missing = []
     while not parent.exists() and parent != parent.parent:
@@ -143,7 +143,7 @@ def _make_parents(path: str | os.PathLike, what: str) -> list[Path]:
         for folder in reversed(missing):
             folder.mkdir(exist_ok=True)
     except OSError as exc:
-        _remove_made(missing[::-1])
+        remove_made(missing[::-1])
         raise OutputError(
             f"Expected to create the folder {str(Path(path).parent)!r} for {what}, got "
             f"{type(exc).__name__}: {exc.strerror or exc}"
@@ -151,8 +151,8 @@ def _make_parents(path: str | os.PathLike, what: str) -> list[Path]:
     return missing[::-1]
 
 
-def _remove_made(folders: list[Path]) -> None:
-    """Remove the folders :func:`_make_parents` made, deepest first, if they are still empty."""
+def remove_made(folders: list[Path]) -> None:
+    """Remove the folders :func:`make_parents` made, deepest first, if they are still empty."""
     for folder in reversed(folders):
         with contextlib.suppress(OSError):
             folder.rmdir()
@@ -160,7 +160,7 @@ def _remove_made(folders: list[Path]) -> None:
 
 def ensure_parent(path: str | os.PathLike, what: str = "output") -> Path:
     """Create the missing parent folders of ``path`` (umask modes); returns the parent."""
-    _make_parents(path, what)
+    make_parents(path, what)
     return Path(path).parent
 
 
@@ -342,7 +342,7 @@ def check_output_file(
     return claim_output(path, kind, inputs, what=what).path
 
 
-def _plain_file(path: str | os.PathLike, inputs: Iterable[str | os.PathLike], what: str) -> Path:
+def plain_file(path: str | os.PathLike, inputs: Iterable[str | os.PathLike], what: str) -> Path:
     """The low-level check of :func:`write_text_atomic`: not an input, regular or new."""
     out = _resolved(path)
     check_not_input(out, inputs, what)

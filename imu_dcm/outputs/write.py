@@ -57,9 +57,6 @@ from pathlib import Path
 from imu_dcm.outputs.rule import (
     Claim,
     OutputError,
-    _make_parents,
-    _plain_file,
-    _remove_made,
     check_not_input,
     check_output_dir,
     check_output_file,
@@ -68,7 +65,10 @@ from imu_dcm.outputs.rule import (
     ensure_parent,
     file_kind,
     is_own_bag,
+    make_parents,
     open_stream,
+    plain_file,
+    remove_made,
     writes_to_stdout,
 )
 
@@ -169,13 +169,13 @@ class PendingOutput:
         self._made: list[Path] = []
         folder, prefix = None, ".imu_dcm."
         if claim.stream == "file":
-            self._made = _make_parents(claim.path, claim.what)
+            self._made = make_parents(claim.path, claim.what)
             folder, prefix = claim.path.parent, f".{claim.path.name}."
         try:
             fd, name = tempfile.mkstemp(prefix=prefix, suffix=".tmp", dir=folder)
             os.close(fd)
         except OSError as exc:
-            _remove_made(self._made)
+            remove_made(self._made)
             raise _write_failed(claim, exc) from None
         self.path = Path(name)
 
@@ -209,7 +209,7 @@ class PendingOutput:
     def abort(self) -> None:
         """Remove the temporary file and the folders made for it; the target is untouched."""
         self.path.unlink(missing_ok=True)
-        _remove_made(self._made)
+        remove_made(self._made)
 
 
 @contextlib.contextmanager
@@ -256,7 +256,7 @@ def atomic_path(path: str | os.PathLike, what: str = "output") -> Iterator[Path]
     :class:`OutputError` line.
     """
     out = Path(path)
-    made = _make_parents(out, what)
+    made = make_parents(out, what)
     tmp = None
     try:
         fd, name = tempfile.mkstemp(prefix=f".{out.name}.", suffix=".tmp", dir=out.parent)
@@ -267,14 +267,14 @@ def atomic_path(path: str | os.PathLike, what: str = "output") -> Iterator[Path]
     except OSError as exc:
         if tmp is not None:
             tmp.unlink(missing_ok=True)
-        _remove_made(made)
+        remove_made(made)
         raise OutputError(
             f"Expected to write {str(out)!r}, got {type(exc).__name__}: {exc.strerror or exc}"
         ) from None
     except BaseException:
         if tmp is not None:
             tmp.unlink(missing_ok=True)
-        _remove_made(made)
+        remove_made(made)
         raise
 
 
@@ -291,7 +291,7 @@ def write_text_atomic(
     :class:`OutputError` for an unsafe target or a write that fails (permission, disk full),
     leaving no temporary file; the mode of a replaced file is kept.
     """
-    out = _plain_file(path, inputs, what)
+    out = plain_file(path, inputs, what)
     with atomic_path(out, what) as tmp:
         tmp.write_text(text, encoding="utf-8")
     return out
@@ -344,7 +344,7 @@ def save_figure(fig, path: str | os.PathLike | Claim, **savefig_kwargs) -> Path:
         with claimed_path(path) as tmp:
             fig.savefig(tmp, format=fmt, metadata=meta, **savefig_kwargs)
         return path.path
-    out = _plain_file(path, (), "figure")
+    out = plain_file(path, (), "figure")
     fmt = savefig_kwargs.pop("format", None) or out.suffix.lstrip(".") or "png"
     with atomic_path(out, "figure") as tmp:
         fig.savefig(tmp, format=fmt, **savefig_kwargs)

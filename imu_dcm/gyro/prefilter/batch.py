@@ -10,26 +10,26 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from imu_dcm.errors import InputError
+from imu_dcm.gyro.prefilter._linear import (
+    build_model,
+    motion_order,
+    q_scale,
+    run_fast,
+    run_filterpy,
+    stationary_prior,
+)
 from imu_dcm.gyro.prefilter.config import (
-    _MIN_REST_SAMPLES,
+    MIN_REST_SAMPLES,
     PrefilterConfig,
     PrefilterResult,
-    _check_config,
-    _check_mode,
-    _check_rates,
-)
-from imu_dcm.gyro.prefilter.linear import (
-    _build_model,
-    _n_motion,
-    _q_scale,
-    _run_fast,
-    _run_filterpy,
-    _stationary_prior,
+    check_config,
+    check_prefilter_mode,
+    check_rates,
 )
 from imu_dcm.gyro.prefilter.tuning import (
-    _fit_accel,
     estimate_noise_from_rest,
     estimate_noise_from_spectrum,
+    fit_accel,
 )
 from imu_dcm.gyro.rest import RestConfig, detect_rest, longest_run, quietest_std
 
@@ -70,12 +70,12 @@ def prefilter(
         (negative or NaN noise), an explicit rest interval too short for the Allan deviation, or,
         with no rest, a log whose spectrum holds no white noise to estimate a missing density.
     """
-    omega_b, t_s = _check_rates(omega_b, t_s)
-    _check_mode(mode)
+    omega_b, t_s = check_rates(omega_b, t_s)
+    check_prefilter_mode(mode)
     if engine not in ("numpy", "filterpy"):
         raise InputError(f"Expected `engine` in ('numpy', 'filterpy'), got {engine!r}")
     cfg = PrefilterConfig() if config is None else config
-    _check_config(cfg)
+    check_config(cfg)
     summary: dict[str, Any] = {
         "mode": mode,
         "model": cfg.model,
@@ -87,8 +87,8 @@ def prefilter(
     rest = _find_rest(omega_b, t_s, cfg, dt_med, summary)
     cfg, bias0 = _resolve_noise(omega_b, t_s, cfg, rest, summary)
     cfg = _resolve_accel(omega_b, t_s, cfg, bias0, summary)
-    m = _build_model(omega_b, t_s, cfg, rest, bias0 if cfg.estimate_bias else None)
-    run = _run_fast if engine == "numpy" else _run_filterpy
+    m = build_model(omega_b, t_s, cfg, rest, bias0 if cfg.estimate_bias else None)
+    run = run_fast if engine == "numpy" else run_filterpy
     X, P = run(omega_b, m, mode == "rts")
     bias_b = X[:, -1, :] if cfg.estimate_bias else None
     if bias_b is not None:
@@ -147,7 +147,7 @@ def _rest_segment(
             )
         return i0, i1, "rest_interval_s"
     i0, i1 = longest_run(rest)
-    if i1 - i0 < _MIN_REST_SAMPLES or t_s[max(i1 - 1, i0)] - t_s[i0] < cfg.min_rest_s:
+    if i1 - i0 < MIN_REST_SAMPLES or t_s[max(i1 - 1, i0)] - t_s[i0] < cfg.min_rest_s:
         i0 = i1 = 0  # no rest long enough for the Allan deviation: use the spectrum
     return i0, i1, "detected rest"
 
@@ -188,7 +188,7 @@ def _resolve_accel(
     fitted by maximum likelihood to the rates less the rest bias."""
     if cfg.angular_accel_rad_s2 is None:
         z_fit = omega_b if bias0 is None else omega_b - bias0
-        fit = _fit_accel(z_fit, t_s, cfg.model, cfg.noise_density_rad_s_sqrt_hz)
+        fit = fit_accel(z_fit, t_s, cfg.model, cfg.noise_density_rad_s_sqrt_hz)
         cfg = replace(cfg, angular_accel_rad_s2=fit["angular_accel_rad_s2"])
         summary["accel_source"] = "maximum likelihood"
         summary["accel_fit"] = fit
@@ -202,8 +202,8 @@ def _stationary_summary(cfg: PrefilterConfig, dt_med: float, summary: dict[str, 
     """The stationary posterior rate std of the causal filter at the median step, and the raw
     per-sample noise, rad/s, into ``summary``."""
     r_med = cfg.noise_density_rad_s_sqrt_hz**2 / dt_med
-    nm = _n_motion(cfg.model)
-    p_med = _stationary_prior(dt_med, nm, _q_scale(cfg.model, cfg.angular_accel_rad_s2), r_med)
+    nm = motion_order(cfg.model)
+    p_med = stationary_prior(dt_med, nm, q_scale(cfg.model, cfg.angular_accel_rad_s2), r_med)
     summary["stationary_rate_std_rad_s"] = math.sqrt(p_med[0, 0] * r_med / (p_med[0, 0] + r_med))
     summary["raw_rate_std_rad_s"] = math.sqrt(r_med)
 

@@ -21,18 +21,18 @@ MODELS = ("rate-accel", "rate-accel-jerk")
 
 # Fewest rest samples accepted for an Allan-deviation noise estimate: with n samples the
 # estimate at one-sample clusters has a relative spread of about 1/sqrt(n) (7 % at 200).
-_MIN_REST_SAMPLES = 200
+MIN_REST_SAMPLES = 200
 # Steps whose dt differs by less than this (relative) share one discretisation.
-_DT_REL_TOL = 1e-9
+DT_REL_TOL = 1e-9
 # A covariance that moves by less than this (relative) in one step is stationary (the backward
 # smoother recursion settles at a round-off floor of about 1e-13).
-_STATIONARY_REL_TOL = 1e-11
+STATIONARY_REL_TOL = 1e-11
 # Width of the initial prior, in units of what the first samples' finite differences tell.
-_PRIOR_SCALE = 100.0
+PRIOR_SCALE = 100.0
 # Search range of the angular-acceleration scale for the likelihood fit, rad/s².
-_ACCEL_SEARCH_RAD_S2 = (1e-4, 1e6)
+ACCEL_SEARCH_RAD_S2 = (1e-4, 1e6)
 # Bias allan-deviation minimum to bias instability (IEEE Std 952: flicker floor 0.664 B).
-_FLICKER_FACTOR = 0.664
+FLICKER_FACTOR = 0.664
 
 
 @dataclass(frozen=True)
@@ -180,7 +180,7 @@ class PrefilterResult:
 # input checks
 
 
-def _check_rates(omega_b: ArrayLike, t_s: ArrayLike) -> tuple[NDArray, NDArray]:
+def check_rates(omega_b: ArrayLike, t_s: ArrayLike) -> tuple[NDArray, NDArray]:
     """The integrator's sample checks (shape, finite, strictly increasing stamps, gaps warned),
     plus the three samples a rate-and-acceleration model needs."""
     omega_b, t_s, _dt = check_samples(omega_b, t_s)
@@ -189,12 +189,12 @@ def _check_rates(omega_b: ArrayLike, t_s: ArrayLike) -> tuple[NDArray, NDArray]:
     return omega_b, t_s
 
 
-def _check_mode(mode: str) -> None:
+def check_prefilter_mode(mode: str) -> None:
     if mode not in MODES:
         raise InputError(f"Expected `mode` in {MODES}, got {mode!r}")
 
 
-def _check_positive(name: str, value: float | None, allow_none: bool = True) -> None:
+def check_positive(name: str, value: float | None, allow_none: bool = True) -> None:
     if value is None and allow_none:
         return
     if (
@@ -205,13 +205,13 @@ def _check_positive(name: str, value: float | None, allow_none: bool = True) -> 
         raise InputError(f"Expected `{name}` finite and > 0, got {value!r}")
 
 
-def _check_config(config: PrefilterConfig) -> None:
+def check_config(config: PrefilterConfig) -> None:
     if not isinstance(config, PrefilterConfig):
         raise InputError(
             f"Expected `config` a PrefilterConfig or None, got {type(config).__name__}"
         )
-    _check_positive("noise_density_rad_s_sqrt_hz", config.noise_density_rad_s_sqrt_hz)
-    _check_positive("angular_accel_rad_s2", config.angular_accel_rad_s2)
+    check_positive("noise_density_rad_s_sqrt_hz", config.noise_density_rad_s_sqrt_hz)
+    check_positive("angular_accel_rad_s2", config.angular_accel_rad_s2)
     if config.model not in MODELS:
         raise InputError(f"Expected `model` in {MODELS}, got {config.model!r}")
     if not isinstance(config.estimate_bias, (bool, np.bool_)):
@@ -224,8 +224,8 @@ def _check_config(config: PrefilterConfig) -> None:
         "rest_window_s",
         "rest_max_rate_rad_s",
     ):
-        _check_positive(name, getattr(config, name), allow_none=False)
-    _check_positive("rest_max_std_rad_s", config.rest_max_std_rad_s)
+        check_positive(name, getattr(config, name), allow_none=False)
+    check_positive("rest_max_std_rad_s", config.rest_max_std_rad_s)
     if config.rest_interval_s is not None:
         iv = config.rest_interval_s
         if len(iv) != 2 or not all(math.isfinite(v) for v in iv) or not iv[0] < iv[1]:

@@ -9,12 +9,12 @@ from numpy.typing import ArrayLike, NDArray
 
 from imu_dcm.errors import InputError
 from imu_dcm.gyro.prefilter.config import (
-    _PRIOR_SCALE,
+    PRIOR_SCALE,
     PrefilterConfig,
     PrefilterResult,
-    _check_mode,
-    _check_positive,
-    _check_rates,
+    check_positive,
+    check_prefilter_mode,
+    check_rates,
 )
 
 
@@ -90,11 +90,11 @@ def euler_prefilter(
         ``angular_accel_b`` from Euler's equations at the estimate; ``config`` holds the noise
         density; ``summary["model"] == "euler"`` with the inertia and torque noise.
     """
-    omega_b, t_s = _check_rates(omega_b, t_s)
-    _check_mode(mode)
+    omega_b, t_s = check_rates(omega_b, t_s)
+    check_prefilter_mode(mode)
     inertia = _vector3("inertia_kg_m2", inertia_kg_m2, positive=True)
-    _check_positive("noise_density_rad_s_sqrt_hz", noise_density_rad_s_sqrt_hz, allow_none=False)
-    _check_positive("torque_noise_n_m_sqrt_hz", torque_noise_n_m_sqrt_hz, allow_none=False)
+    check_positive("noise_density_rad_s_sqrt_hz", noise_density_rad_s_sqrt_hz, allow_none=False)
+    check_positive("torque_noise_n_m_sqrt_hz", torque_noise_n_m_sqrt_hz, allow_none=False)
     tau = None if torque_b is None else _vector3("torque_b", torque_b, positive=False)
     body = _Body(inertia, tau, (torque_noise_n_m_sqrt_hz / inertia) ** 2)
     X, P, Xm, Pm, C = _ukf_forward(omega_b, t_s, body, noise_density_rad_s_sqrt_hz)
@@ -169,7 +169,7 @@ def _ukf_forward(
     ukf = _make_ukf(body, float(np.median(dt)))
     r0 = noise_density**2 / float(dt[0])
     ukf.x = omega_b[0].copy()
-    ukf.P = np.eye(3) * r0 * _PRIOR_SCALE**2
+    ukf.P = np.eye(3) * r0 * PRIOR_SCALE**2
     X = np.empty((n, 3))
     P = np.empty((n, 3, 3))
     Xm = np.empty((n, 3))

@@ -8,8 +8,8 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from imu_dcm.errors import InputError
-from imu_dcm.gyro.prefilter.config import _PRIOR_SCALE, PrefilterConfig, _check_config
-from imu_dcm.gyro.prefilter.linear import _n_motion, _process_noise, _q_scale, _transition
+from imu_dcm.gyro.prefilter._linear import motion_order, process_noise, q_scale, transition_matrices
+from imu_dcm.gyro.prefilter.config import PRIOR_SCALE, PrefilterConfig, check_config
 
 
 class StreamingRateFilter:
@@ -33,7 +33,7 @@ class StreamingRateFilter:
     """
 
     def __init__(self, config: PrefilterConfig) -> None:
-        _check_config(config)
+        check_config(config)
         if config.noise_density_rad_s_sqrt_hz is None or config.angular_accel_rad_s2 is None:
             raise InputError(
                 "Expected `noise_density_rad_s_sqrt_hz` and `angular_accel_rad_s2` given for "
@@ -43,8 +43,8 @@ class StreamingRateFilter:
         if config.estimate_bias:
             raise InputError("Expected `estimate_bias=False` for streaming, got True")
         self.config = config
-        self._nm = _n_motion(config.model)
-        self._q = _q_scale(config.model, config.angular_accel_rad_s2)
+        self._nm = motion_order(config.model)
+        self._q = q_scale(config.model, config.angular_accel_rad_s2)
         self._h = np.zeros(self._nm)
         self._h[0] = 1.0
         self._x: NDArray | None = None  # (d, 3)
@@ -78,14 +78,14 @@ class StreamingRateFilter:
             # the batch filter's prior at its sample 0 uses the first step's dt (dt_full[0])
             sig, h = math.sqrt(dens2 / dt), dt
             spread = [sig, math.sqrt(2.0) * sig / h, math.sqrt(6.0) * sig / h**2][: self._nm]
-            P = np.diag((_PRIOR_SCALE * np.array(spread)) ** 2)
+            P = np.diag((PRIOR_SCALE * np.array(spread)) ** 2)
             z0 = self._x[0].copy()
             Ph = P @ self._h
             K = Ph / (float(self._h @ Ph) + dens2 / dt)
             self._x = self._x + np.outer(K, z0 - self._x[0])
             self._P = P - np.outer(K, Ph)
-        F = _transition(np.array([dt]), self._nm, False)[0]
-        Q = _process_noise(np.array([dt]), self._nm, self._q, False, 0.0)[0]
+        F = transition_matrices(np.array([dt]), self._nm, False)[0]
+        Q = process_noise(np.array([dt]), self._nm, self._q, False, 0.0)[0]
         x = F @ self._x
         P = F @ self._P @ F.T + Q
         Ph = P @ self._h

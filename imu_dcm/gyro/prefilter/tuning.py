@@ -18,15 +18,20 @@ from numpy.typing import ArrayLike, NDArray
 
 from imu_dcm.errors import InputError
 from imu_dcm.gyro.allan import allan_deviation, noise_density_from_allan
+from imu_dcm.gyro.prefilter._linear import (
+    motion_order,
+    q_scale,
+    stationary_prior,
+    transition_matrices,
+)
 from imu_dcm.gyro.prefilter.config import (
-    _ACCEL_SEARCH_RAD_S2,
-    _FLICKER_FACTOR,
-    _MIN_REST_SAMPLES,
+    ACCEL_SEARCH_RAD_S2,
+    FLICKER_FACTOR,
+    MIN_REST_SAMPLES,
     NoiseEstimate,
     SpectralNoiseEstimate,
-    _check_rates,
+    check_rates,
 )
-from imu_dcm.gyro.prefilter.linear import _n_motion, _q_scale, _stationary_prior, _transition
 
 
 def estimate_noise_from_rest(
@@ -52,12 +57,12 @@ def estimate_noise_from_rest(
     InputError
         When the segment is too short for the Allan deviation.
     """
-    omega_b, t_s = _check_rates(omega_b, t_s)
+    omega_b, t_s = check_rates(omega_b, t_s)
     n = len(t_s)
     span = float(t_s[-1] - t_s[0])
-    if n < _MIN_REST_SAMPLES or span < min_rest_s:
+    if n < MIN_REST_SAMPLES or span < min_rest_s:
         raise InputError(
-            f"Expected a rest segment of at least {min_rest_s:g} s and {_MIN_REST_SAMPLES} samples "
+            f"Expected a rest segment of at least {min_rest_s:g} s and {MIN_REST_SAMPLES} samples "
             f"for the Allan deviation, got {span:.3g} s and {n} samples"
         )
     rate_hz = 1.0 / float(np.median(np.diff(t_s)))
@@ -66,7 +71,7 @@ def estimate_noise_from_rest(
     i_min = np.argmin(adev, axis=0)
     return NoiseEstimate(
         noise_density_rad_s_sqrt_hz=arw,
-        bias_instability_rad_s=adev[i_min, np.arange(3)] / _FLICKER_FACTOR,
+        bias_instability_rad_s=adev[i_min, np.arange(3)] / FLICKER_FACTOR,
         bias_instability_tau_s=tau[i_min],
         mean_rate_rad_s=omega_b.mean(axis=0),
         interval_s=(float(t_s[0]), float(t_s[-1])),
@@ -119,7 +124,7 @@ def estimate_noise_from_spectrum(omega_b: ArrayLike, t_s: ArrayLike) -> Spectral
         the rates, or when the level is not flat across the band (not white: a gyro's own
         low-pass filter, or motion reaching the Nyquist frequency).
     """
-    omega_b, t_s = _check_rates(omega_b, t_s)
+    omega_b, t_s = check_rates(omega_b, t_s)
     dt = float(np.median(np.diff(t_s)))
     k = _DIFFERENCE_ORDER
     d = np.diff(omega_b, n=k, axis=0)
@@ -173,8 +178,8 @@ def estimate_noise_from_spectrum(omega_b: ArrayLike, t_s: ArrayLike) -> Spectral
 
 def _innovation_nll(z: NDArray, dt: float, nm: int, q: float, r: float, burn: int) -> float:
     """Negative log-likelihood of the stationary filter's innovations (all axes)."""
-    P = _stationary_prior(dt, nm, q, r)
-    F = _transition(np.array([dt]), nm, False)[0]
+    P = stationary_prior(dt, nm, q, r)
+    F = transition_matrices(np.array([dt]), nm, False)[0]
     H = np.zeros((1, nm))
     H[0, 0] = 1.0
     S = float(P[0, 0] + r)
@@ -195,19 +200,19 @@ def _innovation_nll(z: NDArray, dt: float, nm: int, q: float, r: float, burn: in
     return 0.5 * float(np.sum(e * e) / S + e.size * math.log(S))
 
 
-def _fit_accel(z: NDArray, t_s: NDArray, model: str, density: float) -> dict[str, Any]:
+def fit_accel(z: NDArray, t_s: NDArray, model: str, density: float) -> dict[str, Any]:
     """Maximum-likelihood ``σ_α`` (rad/s²) of the stationary filter at the median step."""
     from scipy import optimize
 
     dt = float(np.median(np.diff(t_s)))
-    nm = _n_motion(model)
+    nm = motion_order(model)
     r = density**2 / dt
     burn = min(len(z) // 10, 1000)
 
     def nll(log_a: float) -> float:
-        return _innovation_nll(z, dt, nm, _q_scale(model, 10.0**log_a), r, burn)
+        return _innovation_nll(z, dt, nm, q_scale(model, 10.0**log_a), r, burn)
 
-    lo, hi = (math.log10(v) for v in _ACCEL_SEARCH_RAD_S2)
+    lo, hi = (math.log10(v) for v in ACCEL_SEARCH_RAD_S2)
     grid = np.arange(lo, hi + 1e-9, 0.5)
     vals = np.array([nll(g) for g in grid])
     j = int(np.argmin(vals))

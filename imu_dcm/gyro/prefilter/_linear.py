@@ -5,6 +5,8 @@ State ``[ω, α]`` (or ``[ω, α, j]``), optionally a bias; each step discretise
 three axes (they do not depend on the data) and fills stationary runs in blocks by one
 first-order IIR filter per eigenmode; the filterpy engine runs ``filterpy.kalman.predict`` /
 ``update`` / ``rts_smoother`` per axis and is the reference the fast one is tested against.
+
+A private module of the pre-filter: :mod:`imu_dcm.gyro.prefilter` is its public face.
 """
 
 from __future__ import annotations
@@ -17,23 +19,23 @@ from numpy.typing import NDArray
 from scipy import linalg
 
 from imu_dcm.gyro.prefilter.config import (
-    _DT_REL_TOL,
-    _PRIOR_SCALE,
-    _STATIONARY_REL_TOL,
+    DT_REL_TOL,
+    PRIOR_SCALE,
+    STATIONARY_REL_TOL,
     PrefilterConfig,
 )
 
 
-def _n_motion(model: str) -> int:
+def motion_order(model: str) -> int:
     return 2 if model == "rate-accel" else 3
 
 
-def _q_scale(model: str, accel_rad_s2: float) -> float:
+def q_scale(model: str, accel_rad_s2: float) -> float:
     """White-noise density driving the highest derivative (see the module docstring)."""
     return accel_rad_s2**2 if model == "rate-accel" else 3.0 * accel_rad_s2**2
 
 
-def _transition(dt: NDArray, n_motion: int, bias: bool) -> NDArray:
+def transition_matrices(dt: NDArray, n_motion: int, bias: bool) -> NDArray:
     """State transition matrices ``F_k``, shape (len(dt), d, d)."""
     d = n_motion + int(bias)
     F = np.zeros((len(dt), d, d))
@@ -45,7 +47,7 @@ def _transition(dt: NDArray, n_motion: int, bias: bool) -> NDArray:
     return F
 
 
-def _process_noise(dt: NDArray, n_motion: int, q: float, bias: bool, q_bias: float) -> NDArray:
+def process_noise(dt: NDArray, n_motion: int, q: float, bias: bool, q_bias: float) -> NDArray:
     """Discretised continuous white-noise process covariance ``Q_k``, shape (len(dt), d, d).
 
     Equal, per step, to ``filterpy.common.Q_continuous_white_noise(n_motion, dt, q)`` (plus
@@ -65,10 +67,10 @@ def _process_noise(dt: NDArray, n_motion: int, q: float, bias: bool, q_bias: flo
     return Q
 
 
-def _stationary_prior(dt: float, n_motion: int, q: float, r: float) -> NDArray:
+def stationary_prior(dt: float, n_motion: int, q: float, r: float) -> NDArray:
     """Stationary prior covariance of the motion states (discrete algebraic Riccati equation)."""
-    F = _transition(np.array([dt]), n_motion, False)[0]
-    Q = _process_noise(np.array([dt]), n_motion, q, False, 0.0)[0]
+    F = transition_matrices(np.array([dt]), n_motion, False)[0]
+    Q = process_noise(np.array([dt]), n_motion, q, False, 0.0)[0]
     H = np.zeros((1, n_motion))
     H[0, 0] = 1.0
     P = linalg.solve_discrete_are(F.T, H.T, Q, np.array([[r]]))
@@ -76,7 +78,7 @@ def _stationary_prior(dt: float, n_motion: int, q: float, r: float) -> NDArray:
 
 
 @dataclass(frozen=True)
-class _Model:
+class FilterModel:
     F: NDArray  # (N, d, d); F[0] = I (the prior at sample 0 is given)
     Q: NDArray  # (N, d, d); Q[0] = 0
     r: NDArray  # (N,) measurement variance, rad²/s²
@@ -88,18 +90,18 @@ class _Model:
     run_start: NDArray  # (N,) first sample of the run of equal (dt, rest) containing each sample
 
 
-def _build_model(
+def build_model(
     z: NDArray, t_s: NDArray, cfg: PrefilterConfig, rest: NDArray | None, bias0: NDArray | None
-) -> _Model:
+) -> FilterModel:
     n = len(t_s)
-    nm = _n_motion(cfg.model)
+    nm = motion_order(cfg.model)
     bias = cfg.estimate_bias
     d = nm + int(bias)
     dt = np.diff(t_s)
     dt_full = np.concatenate([[dt[0]], dt])
-    q = _q_scale(cfg.model, cfg.angular_accel_rad_s2)
-    F = _transition(dt_full, nm, bias)
-    Q = _process_noise(dt_full, nm, q, bias, cfg.bias_random_walk_rad_s_sqrt_s**2)
+    q = q_scale(cfg.model, cfg.angular_accel_rad_s2)
+    F = transition_matrices(dt_full, nm, bias)
+    Q = process_noise(dt_full, nm, q, bias, cfg.bias_random_walk_rad_s_sqrt_s**2)
     F[0] = np.eye(d)
     Q[0] = 0.0
     r = cfg.noise_density_rad_s_sqrt_hz**2 / dt_full
@@ -113,7 +115,7 @@ def _build_model(
     # sigma, two-point slope sqrt(2) sigma / dt, three-point curvature sqrt(6) sigma / dt^2)
     sig, h = math.sqrt(float(r[0])), float(dt_full[0])
     spread = [sig, math.sqrt(2.0) * sig / h, math.sqrt(6.0) * sig / h**2][:nm]
-    P0[np.arange(nm), np.arange(nm)] = (_PRIOR_SCALE * np.array(spread)) ** 2
+    P0[np.arange(nm), np.arange(nm)] = (PRIOR_SCALE * np.array(spread)) ** 2
     x0 = np.zeros((d, 3))
     x0[0] = z[0]
     if bias:
@@ -122,11 +124,11 @@ def _build_model(
             x0[-1] = bias0
             x0[0] = z[0] - bias0
     change = np.ones(n, bool)
-    change[1:] = (np.abs(np.diff(dt_full)) > _DT_REL_TOL * dt_full[:-1]) | (rest[1:] != rest[:-1])
+    change[1:] = (np.abs(np.diff(dt_full)) > DT_REL_TOL * dt_full[:-1]) | (rest[1:] != rest[:-1])
     change[1] = True  # sample 0 has no prediction step, so sample 1 starts a run
     starts = np.flatnonzero(change)
     run_start = starts[np.searchsorted(starts, np.arange(n), side="right") - 1]
-    return _Model(F, Q, r, rest, H, cfg.zero_rate_std_rad_s**2, x0, P0, run_start)
+    return FilterModel(F, Q, r, rest, H, cfg.zero_rate_std_rad_s**2, x0, P0, run_start)
 
 
 # ------------------------------------------------------------------------------------------------
@@ -134,12 +136,12 @@ def _build_model(
 
 
 def _close(a: NDArray, b: NDArray) -> bool:
-    """Covariances equal to ``_STATIONARY_REL_TOL``, entry by entry on the scale sqrt(P_ii P_jj)."""
+    """Covariances equal to ``STATIONARY_REL_TOL``, entry by entry on the scale sqrt(P_ii P_jj)."""
     d = np.sqrt(np.abs(np.diag(a)))
-    return bool(np.all(np.abs(a - b) <= _STATIONARY_REL_TOL * np.outer(d, d)))
+    return bool(np.all(np.abs(a - b) <= STATIONARY_REL_TOL * np.outer(d, d)))
 
 
-def _forward_covariances(m: _Model) -> tuple[NDArray, NDArray, NDArray, NDArray]:
+def _forward_covariances(m: FilterModel) -> tuple[NDArray, NDArray, NDArray, NDArray]:
     """Prior/posterior covariances, gains ``K`` (N, d, 2) and a 'same as previous' flag."""
     n, d = m.F.shape[0], m.F.shape[1]
     Pm = np.empty((n, d, d))
@@ -180,7 +182,7 @@ def _forward_covariances(m: _Model) -> tuple[NDArray, NDArray, NDArray, NDArray]
 
 
 def _smoother_covariances(
-    m: _Model, Pm: NDArray, Pp: NDArray, same: NDArray
+    m: FilterModel, Pm: NDArray, Pp: NDArray, same: NDArray
 ) -> tuple[NDArray, NDArray]:
     """RTS gains ``G_k`` (N-1, d, d) and smoothed covariances (N, d, d)."""
     n = Pm.shape[0]
@@ -255,7 +257,7 @@ def _affine_scan(A: NDArray, b: NDArray, x0: NDArray, same: NDArray | None = Non
     return out
 
 
-def _run_fast(z: NDArray, m: _Model, smooth: bool) -> tuple[NDArray, NDArray]:
+def run_fast(z: NDArray, m: FilterModel, smooth: bool) -> tuple[NDArray, NDArray]:
     """Filtered (or smoothed) states (N, d, 3) and their covariances (N, d, d)."""
     d = m.F.shape[1]
     Pm, Pp, K, same = _forward_covariances(m)
@@ -277,7 +279,7 @@ def _run_fast(z: NDArray, m: _Model, smooth: bool) -> tuple[NDArray, NDArray]:
     return Xs, Ps
 
 
-def _run_filterpy(z: NDArray, m: _Model, smooth: bool) -> tuple[NDArray, NDArray]:
+def run_filterpy(z: NDArray, m: FilterModel, smooth: bool) -> tuple[NDArray, NDArray]:
     """Reference: filterpy's functional predict/update and rts_smoother, one axis at a time."""
     from filterpy.kalman import predict, rts_smoother, update
 
