@@ -16,6 +16,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from imu_dcm.errors import LogError
+from imu_dcm.outputs.signatures import KINDS, is_own
 
 __all__ = [
     "Claim",
@@ -237,7 +238,6 @@ def _hold_fifo(path: Path, what: str, st: os.stat_result) -> None:
 def _check_owner(out: Path, kind: str, what: str) -> None:
     """Refuse an existing regular file this tool did not write
     (:mod:`imu_dcm.outputs.signatures`)."""
-    from imu_dcm.outputs.signatures import KINDS, is_own
 
     if is_own(out, kind):
         return
@@ -279,7 +279,6 @@ def claim_output(
         One line "Expected ..., got ...": an input, a foreign file, a symbolic link to a file,
         a folder, a block device or socket, a path under a file or in a read-only folder.
     """
-    from imu_dcm.outputs.signatures import KINDS
 
     if kind != "any" and kind not in KINDS:
         raise ValueError(f"Expected an output kind of {sorted(KINDS)} or 'any', got {kind!r}")
@@ -362,7 +361,6 @@ def is_own_bag(path: str | os.PathLike) -> bool:
     The folder holds exactly ``metadata.yaml`` and ``<folder name>.mcap``, and the MCAP header
     record names the library ``imu_dcm.bag_writer`` (or ``imu_dcm.live``).
     """
-    from imu_dcm.outputs.signatures import KINDS
 
     p = Path(path)
     if p.is_symlink() or not p.is_dir():

@@ -29,11 +29,14 @@ replaceable. Only the first :data:`HEAD_BYTES` bytes of a file are read.
 from __future__ import annotations
 
 import json
+import os
 import re
 import struct
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
+
+from imu_dcm import __version__
 
 __all__ = ["HEAD_BYTES", "KINDS", "TOOL", "Kind", "comment_line", "is_own", "signature"]
 
@@ -53,7 +56,6 @@ _JSON_SIGNED = re.compile(rb'\A\s*\{\s*"written_by"\s*:\s*"imu_dcm[ "]')
 
 def signature(what: str) -> str:
     """``imu_dcm <version> <what>``: the text every signed output carries."""
-    from imu_dcm import __version__
 
     return f"{TOOL} {__version__} {what}"
 
@@ -156,7 +158,6 @@ KINDS: dict[str, Kind] = {
 def is_own(path: str | Path, kind: str) -> bool:
     """True when the regular file ``path`` is empty or carries the signature of ``kind`` (or,
     for ``"any"``, of any kind). Unreadable files are not ours."""
-    import os
 
     flags = os.O_RDONLY | os.O_NONBLOCK | getattr(os, "O_NOFOLLOW", 0)  # a swapped-in FIFO: no wait
     try:

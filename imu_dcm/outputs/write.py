@@ -46,6 +46,7 @@ Errors are :class:`imu_dcm.errors.OutputError` with one line "Expected ..., got 
 from __future__ import annotations
 
 import contextlib
+import json
 import os
 import stat
 import sys
@@ -71,6 +72,7 @@ from imu_dcm.outputs.rule import (
     remove_made,
     writes_to_stdout,
 )
+from imu_dcm.outputs.signatures import signature
 
 __all__ = [
     "Claim",
@@ -316,9 +318,6 @@ def write_json(
     """Write the mapping ``data`` as indented JSON (numpy values as numbers; NaN refused), signed
     with a first key ``"written_by": "imu_dcm <version> <writer>"``, as the output ``path``
     (a :class:`Claim`, or a path claimed here as kind ``json``)."""
-    import json
-
-    from imu_dcm.outputs.signatures import signature
 
     claim = path if isinstance(path, Claim) else claim_output(path, "json", inputs, what=what)
     rest = {k: v for k, v in data.items() if k != "written_by"}
