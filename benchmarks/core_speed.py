@@ -353,6 +353,33 @@ def startup(runs: int) -> dict[str, tuple[float, float]]:
     }
 
 
+def startup_against(tree: Path, runs: int) -> dict[str, tuple[float, float]]:
+    """Median CPU seconds of each fresh-process case run from this checkout and from ``tree``
+    (another checkout of imu_dcm, say the commit before a change), over ``runs`` rounds
+    interleaved case by case, after one warm-up round: ``{case: (this, other)}``."""
+    cases = startup_cases()
+    here: dict[str, list[float]] = {name: [] for name in cases}
+    there: dict[str, list[float]] = {name: [] for name in cases}
+    with tempfile.TemporaryDirectory() as cwd:
+        for r in range(runs + 1):
+            for name, args in cases.items():
+                cpu_here = _run_s(args, cwd=cwd)[1]
+                cpu_there = _run_s(args, cwd=cwd, PYTHONPATH=str(tree))[1]
+                if r:
+                    here[name].append(cpu_here)
+                    there[name].append(cpu_there)
+    return {n: (statistics.median(here[n]), statistics.median(there[n])) for n in cases}
+
+
+def report_against(res: dict[str, tuple[float, float]], tree: Path) -> None:
+    print(
+        f"\n{'start-up CPU s, fresh process (median)':52s} {'this':>7s} {'other':>7s} {'ratio':>6s}"
+    )
+    for name, (this, other) in res.items():
+        print(f"{name:52s} {this:7.3f} {other:7.3f} {this / other:6.2f}")
+    print(f"(other: {tree}; ratio = this / other, under 1 is faster)")
+
+
 def first_run(runs: int) -> dict[str, float]:
     """The replay of the shipped trial with an empty ``NUMBA_CACHE_DIR``, then again with that
     cache: as installed (the kernel built ahead of time: nothing to compile) and with
@@ -445,7 +472,19 @@ def main(argv: list[str] | None = None) -> None:
         choices=("speed", "streaming", "startup"),
         help="one section: the throughput table, the streaming ratio alone, or start-up",
     )
+    ap.add_argument(
+        "--against",
+        type=Path,
+        metavar="TREE",
+        help="with --only startup: also run each start-up case from TREE (another checkout, "
+        "with its kernel built), interleaved, and give the ratio",
+    )
     args = ap.parse_args(argv)
+    if args.against is not None:
+        if args.only != "startup" or not (args.against / "imu_dcm" / "__init__.py").is_file():
+            ap.error("--against TREE needs --only startup and a checkout of imu_dcm at TREE")
+        report_against(startup_against(args.against, 3 if args.quick else 7), args.against)
+        return
     n_batch, n_loop, n_many = (
         (100_000, 2_000, 20_000) if args.quick else (1_000_000, 50_000, 200_000)
     )
