@@ -1,8 +1,11 @@
-"""Shared test fixtures: where the real BROAD recordings are, and the repository root."""
+"""Shared test fixtures: where the real BROAD recordings are, the repository root, and what
+on stderr is our program's (:func:`assert_quiet`, :func:`own_stderr`)."""
 
 from __future__ import annotations
 
+import linecache
 import os
+import re
 from pathlib import Path
 
 import pytest
@@ -33,3 +36,46 @@ def broad_dir() -> Path:
 @pytest.fixture(scope="session")
 def repo_root() -> Path:
     return REPO_ROOT
+
+
+#: Our packages: a warning naming a file in them is ours, unless it is a deprecation notice,
+#: which a library raises naming the line that imports or calls it.
+OUR_PACKAGES = ("imu_dcm", "data_synth")
+#: The program's own warning classes (imu_dcm.errors); never a third party's.
+OUR_WARNINGS = ("ImuDcmWarning", "GapWarning")
+_WARNING = re.compile(r"^(?P<file>.+?):(?P<line>\d+): (?P<category>\w*Warning): ")
+
+
+def _third_party_warning(line: str) -> re.Match | None:
+    """``line`` as the first line Python prints for another module's warning
+    (``FILE:LINE: CATEGORY: message``), else None."""
+    m = _WARNING.match(line)
+    if m is None or m["category"] in OUR_WARNINGS:
+        return None
+    ours = any(part in OUR_PACKAGES for part in Path(m["file"]).parts)
+    return m if not ours or "Deprecation" in m["category"] else None
+
+
+def own_stderr(stderr: str) -> str:
+    """``stderr`` without the warnings of third-party modules: each one's first line, and,
+    when its source line can be read, the lines of its message down to that source line
+    (Python prints ``  <source>`` under the message). What is left is our program's."""
+    lines, kept, k = stderr.splitlines(keepends=True), [], 0
+    while k < len(lines):
+        m = _third_party_warning(lines[k])
+        if m is None:
+            kept.append(lines[k])
+            k += 1
+            continue
+        source = linecache.getline(m["file"], int(m["line"])).strip()
+        end = next(
+            (j for j in range(k + 1, len(lines)) if source and lines[j].strip() == source), k
+        )
+        k = end + 1
+    return "".join(kept)
+
+
+def assert_quiet(stderr: str) -> None:
+    """No traceback and no line of our own program on ``stderr``; a third-party module's
+    warning (a pending deprecation in numba, say) is not ours to forbid."""
+    assert own_stderr(stderr) == "", stderr

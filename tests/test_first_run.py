@@ -17,7 +17,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import REPO_ROOT
+from conftest import REPO_ROOT, own_stderr
 
 from imu_dcm.logio.writer import StampedSeries, write_bag
 from imu_dcm.outputs import OutputError, atomic_path, write_json, write_text_atomic
@@ -173,7 +173,7 @@ FLIP = REPO_ROOT / "replay" / "free_body_flip_100hz_delta"
 
 
 def _one_error_line(r, prog: str) -> str:
-    lines = [x for x in r.stderr.splitlines() if x.strip() and ": warning:" not in x]
+    lines = [x for x in own_stderr(r.stderr).splitlines() if x.strip() and ": warning:" not in x]
     assert "Traceback" not in r.stderr
     assert len(lines) == 1 and lines[0].startswith(f"{prog}: error: "), r.stderr
     return lines[0]

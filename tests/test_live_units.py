@@ -12,6 +12,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import own_stderr
 
 from imu_dcm.errors import InputError
 from imu_dcm.live.lines import parse_lines
@@ -319,7 +320,7 @@ def test_time_unit_hint_names_the_unit_that_makes_an_imu_rate():
 def test_cli_bad_input_one_line_exit_2(args, needle):
     r = run_cli([*args, "--no-status"], b"")
     assert r.returncode == 2
-    err = r.stderr.decode().strip().splitlines()
+    err = own_stderr(r.stderr.decode()).strip().splitlines()
     assert len(err) == 1 and needle in err[0] and err[0].startswith("imu-dcm-live: error:")
 
 
