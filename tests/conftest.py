@@ -1,5 +1,6 @@
-"""Shared test fixtures: where the real BROAD recordings are, the repository root, and what
-on stderr is our program's (:func:`assert_quiet`, :func:`own_stderr`)."""
+"""Shared test fixtures: the repository root, where the project's data is (:func:`need_data`:
+the BROAD recordings, the real logs of other projects), and what on stderr is our program's
+(:func:`assert_quiet`, :func:`own_stderr`)."""
 
 from __future__ import annotations
 
@@ -11,10 +12,12 @@ from pathlib import Path
 import pytest
 
 REPO_ROOT = Path(__file__).resolve().parents[1]
-# The BROAD bags live beside the repository (../shared/data/broad); IMU_DCM_BROAD_DIR overrides.
-BROAD_DIR = Path(
-    os.environ.get("IMU_DCM_BROAD_DIR", REPO_ROOT.parent / "shared" / "data" / "broad")
-)
+#: The project's data, beside the repository (../shared/data); each folder has its override.
+DATA_DIR = REPO_ROOT.parent / "shared" / "data"
+#: The six BROAD bags (IMU_DCM_BROAD_DIR overrides).
+BROAD_DIR = Path(os.environ.get("IMU_DCM_BROAD_DIR", DATA_DIR / "broad"))
+#: Real logs of other projects: PX4, ArduPilot, x-IMU3 (IMU_DCM_STRANGERS_DIR overrides).
+STRANGERS = Path(os.environ.get("IMU_DCM_STRANGERS_DIR", DATA_DIR / "strangers"))
 BROAD_TRIALS = (
     "02_undisturbed_slow_rotation_B",
     "05_undisturbed_slow_rotation_with_breaks_B",
@@ -25,11 +28,22 @@ BROAD_TRIALS = (
 )
 
 
+def need_data(*paths: Path) -> Path:
+    """The first of ``paths``, files or folders of the project's data; skips the calling test,
+    naming the first one absent, when any is."""
+    missing = next((p for p in paths if not p.exists()), None)
+    if missing is not None:
+        pytest.skip(
+            f"{missing} is absent (the project's data, ../shared/data beside the repository; "
+            "IMU_DCM_BROAD_DIR and IMU_DCM_STRANGERS_DIR point elsewhere)"
+        )
+    return paths[0]
+
+
 @pytest.fixture(scope="session")
 def broad_dir() -> Path:
-    """Folder holding the six BROAD bags; skips the test when it is not beside the repository."""
-    if not all((BROAD_DIR / t / "metadata.yaml").is_file() for t in BROAD_TRIALS):
-        pytest.skip("BROAD bags not found under ../shared/data/broad (set IMU_DCM_BROAD_DIR)")
+    """Folder holding the six BROAD bags; skips the test when any is absent."""
+    need_data(*(BROAD_DIR / t / "metadata.yaml" for t in BROAD_TRIALS))
     return BROAD_DIR
 
 

@@ -9,8 +9,7 @@ import subprocess
 import sys
 
 import pytest
-from conftest import REPO_ROOT
-from drone_logs import STRANGERS
+from conftest import REPO_ROOT, STRANGERS, need_data
 
 from imu_dcm.replay.__main__ import main
 
@@ -29,9 +28,7 @@ def _run(*args: str) -> subprocess.CompletedProcess:
 
 @pytest.mark.parametrize("name", HEALTHY)
 def test_a_healthy_drone_log_prints_notes_and_no_warning(name):
-    path = STRANGERS / name
-    if not path.is_file():
-        pytest.skip(f"{name} is absent (real logs of other projects: set IMU_DCM_STRANGERS_DIR)")
+    path = need_data(STRANGERS / name)
     run = _run("imu_dcm.replay", str(path), "--rerun", "off")
     assert run.returncode == 0, run.stderr
     assert "warning:" not in run.stderr + run.stdout
