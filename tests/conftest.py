@@ -1,9 +1,11 @@
 """Shared test fixtures: the repository root, where the project's data is (:func:`need_data`:
 the BROAD recordings, the real logs of other projects), and what on stderr is our program's
-(:func:`assert_quiet`, :func:`own_stderr`)."""
+(:func:`assert_quiet`, :func:`own_stderr`), and what a message must name
+(:func:`assert_names`, :func:`raises_naming`)."""
 
 from __future__ import annotations
 
+import contextlib
 import linecache
 import os
 import re
@@ -93,3 +95,26 @@ def assert_quiet(stderr: str) -> None:
     """No traceback and no line of our own program on ``stderr``; a third-party module's
     warning (a pending deprecation in numba, say) is not ours to forbid."""
     assert own_stderr(stderr) == "", stderr
+
+
+def _names(message: str, fact: object) -> bool:
+    if isinstance(fact, str):
+        return fact in message
+    # a number: as a number of its own, not as digits of another (2 is not in 0.25 or t_s[21])
+    return re.search(rf"(?<![\w.]){re.escape(str(fact))}(?![\w]|\.\d)", message) is not None
+
+
+def assert_names(message: str, *facts: object) -> None:
+    """``message`` names each of ``facts`` (a path, a value, a limit, an option; a number as a
+    number of its own): the facts it must give, not its wording, so that rewording passes and
+    dropping a fact fails."""
+    missing = [f for f in facts if not _names(message, f)]
+    assert not missing, f"{message!r} does not name {missing}"
+
+
+@contextlib.contextmanager
+def raises_naming(exc_type: type[BaseException], *facts: object):
+    """``pytest.raises(exc_type)``, whose message names each of ``facts`` (:func:`assert_names`)."""
+    with pytest.raises(exc_type) as info:
+        yield info
+    assert_names(str(info.value), *facts)

@@ -397,7 +397,7 @@ def test_no_writable_cache_folder_warns_once_and_still_imports(tmp_path):
     code = "import warnings; warnings.simplefilter('always'); import imu_dcm.kernel_jit"
     res = _run(code, env)
     assert res.returncode == 0, res.stderr
-    assert res.stderr.count("Expected a writable folder to cache") == 1
+    assert res.stderr.count("NUMBA_CACHE_DIR") == 1 and "ImuDcmWarning" in res.stderr  # once
 
 
 def test_find_gaps_is_the_one_rule():

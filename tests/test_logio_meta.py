@@ -9,6 +9,7 @@ import math
 import numpy as np
 import pytest
 import yaml
+from conftest import raises_naming
 from rosbags.rosbag2 import Reader as Rosbag2Reader
 from ruamel.yaml import YAML  # a dependency of rosbags: a YAML parser independent of PyYAML
 
@@ -176,7 +177,7 @@ def test_an_integer_past_pythons_digit_limit_is_one_line(tmp_path):
         + "9" * 5000
         + "\n"
     )
-    with pytest.raises(LogError, match="Expected a rosbag2 metadata.yaml of plain values") as info:
+    with raises_naming(LogError, str(bag / "metadata.yaml"), 5000) as info:
         meta.load_metadata(bag)
     assert "\n" not in str(info.value)
 

@@ -11,6 +11,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import raises_naming
 
 from imu_dcm.errors import LogError
 from imu_dcm.logio import (
@@ -57,7 +58,7 @@ class _Fake:
 def test_a_new_container_is_a_class_and_a_row(tmp_path, monkeypatch):
     p = tmp_path / "x.fake"
     p.write_bytes(b"FAKE1 and some bytes")
-    with pytest.raises(LogError, match="Expected a log of a known container"):
+    with raises_naming(LogError, str(p), "b'FAKE1 an'", ".mcap", ".ulg", ".bin"):
         read_log(p)
     row = SourceEntry("fake log", lambda path, head: head.startswith(b"FAKE1"), _Fake)
     monkeypatch.setattr(registry, "SOURCES", (row, *SOURCES))

@@ -89,7 +89,7 @@ def test_info_as_a_module_and_on_bad_input(bag, tmp_path):
         text=True,
     )
     assert missing.returncode == 2
-    assert "Expected" in missing.stderr and "Traceback" not in missing.stderr
+    assert str(tmp_path / "nope") in missing.stderr and "Traceback" not in missing.stderr
 
 
 def test_info_on_broad_declares_its_movement_phases(broad_dir, capsys):
