@@ -70,7 +70,7 @@ def test_a_new_container_is_a_class_and_a_row(tmp_path, monkeypatch):
 def test_foreign_formats_are_refused_naming_the_fix(tmp_path):
     gz = tmp_path / "log.mcap.gz"
     gz.write_bytes(gzip.compress(b"\x89MCAP0\r\n"))
-    with pytest.raises(LogError, match="got a gzip file.*`gunzip` it first"):
+    with raises_naming(LogError, "gzip", "`gunzip`", str(gz)):  # what it is, the fix
         read_log(gz)
     zipped = tmp_path / "log.zip"
     zipped.write_bytes(b"PK\x03\x04" + b"\0" * 40)
