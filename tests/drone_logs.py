@@ -11,19 +11,14 @@
 
 from __future__ import annotations
 
-import os
 import struct
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
+from conftest import REPO_ROOT, STRANGERS, need_data
 
-REPO_ROOT = Path(__file__).resolve().parents[1]
 TRIAL = REPO_ROOT / "replay" / "broad_07_undisturbed_fast_rotation_B"
-# Real logs of other projects beside the repository; IMU_DCM_STRANGERS_DIR overrides.
-STRANGERS = Path(
-    os.environ.get("IMU_DCM_STRANGERS_DIR", REPO_ROOT.parent / "shared" / "data" / "strangers")
-)
 
 _NP = {
     "uint64_t": "<u8",
@@ -262,12 +257,7 @@ def ximu3_convert_argv(out: Path) -> list[str]:
     """``convert-csv`` arguments joining the foot-worn x-IMU3's two CSVs (gyro deg/s, accel g,
     the device's W,X,Y,Z quaternion, sensor to earth) into ``out``; skips the calling test when
     the CSVs are absent."""
-    import pytest
-
-    if not (XIMU3_INERTIAL.is_file() and XIMU3_QUATERNION.is_file()):
-        pytest.skip(
-            "the x-IMU3 CSVs are absent (real logs of other projects: IMU_DCM_STRANGERS_DIR)"
-        )
+    need_data(XIMU3_INERTIAL, XIMU3_QUATERNION)
     axes = "XYZ"
     argv = ["convert-csv", str(XIMU3_INERTIAL), str(out), "--time-col", "Timestamp (us)"]
     argv += ["--time-units", "us", "--gyro-units", "deg/s", "--accel-units", "g"]

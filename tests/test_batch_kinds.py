@@ -10,8 +10,7 @@ import csv
 import statistics
 
 import numpy as np
-import pytest
-from drone_logs import STRANGERS
+from conftest import STRANGERS, need_data
 
 from imu_dcm.logio.writer import StampedSeries, write_bag
 from imu_dcm.replay.__main__ import main
@@ -25,8 +24,7 @@ LOGS = (
 
 def test_the_table_and_the_summary_separate_kinds_of_truth(tmp_path, capsys):
     paths = [STRANGERS / n for n in LOGS]
-    if not all(p.is_file() for p in paths):
-        pytest.skip("the drone logs of other projects are absent (set IMU_DCM_STRANGERS_DIR)")
+    need_data(*paths)
     t_ns = 10**9 + np.arange(500, dtype=np.int64) * 10_000_000
     plain = write_bag(tmp_path / "plain", imu=StampedSeries(t_ns, np.zeros((500, 3)), "imu"))
     table = tmp_path / "t.csv"

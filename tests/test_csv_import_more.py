@@ -8,6 +8,7 @@ import json
 
 import numpy as np
 import pytest
+from conftest import assert_names
 from drone_logs import ximu3_convert_argv
 from scipy.spatial.transform import Rotation
 
@@ -75,19 +76,19 @@ def test_a_folder_output_is_a_bag(csvs, tmp_path):
 
 
 @pytest.mark.parametrize(
-    ("extra", "said"),
+    ("extra", "facts"),
     [
-        (["--accel-cols", "ax,ay,az"], "Expected --accel-cols and --accel-units together"),
-        (["--truth-csv", "TRUTH"], "Expected --truth-cols and --truth-order with --truth-csv"),
-        (["--truth-time-col", "stamp"], "Expected --truth-csv with --truth-time-col"),
+        (["--accel-cols", "ax,ay,az"], ("--accel-cols", "--accel-units", "'ax,ay,az'")),
+        (["--truth-csv", "TRUTH"], ("--truth-cols", "--truth-order", "--truth-csv", "truth.csv")),
+        (["--truth-time-col", "stamp"], ("--truth-csv", "--truth-time-col")),
     ],
 )
-def test_incomplete_options_are_one_line_and_write_nothing(csvs, tmp_path, capsys, extra, said):
+def test_incomplete_options_are_one_line_and_write_nothing(csvs, tmp_path, capsys, extra, facts):
     gyro, truth = csvs
     extra = [str(truth) if x == "TRUTH" else x for x in extra]
     out = tmp_path / "x.mcap"
     assert main(["convert-csv", str(gyro), str(out), *ARGS, *extra]) == 2
-    assert said in capsys.readouterr().err
+    assert_names(capsys.readouterr().err, *facts)
     assert not out.exists() and sorted(p.name for p in tmp_path.iterdir()) == [
         "gyro.csv",
         "truth.csv",

@@ -10,6 +10,7 @@ import json
 
 import numpy as np
 import pytest
+from conftest import assert_names
 from drone_logs import ximu3_convert_argv
 from scipy.spatial.transform import Rotation
 
@@ -97,15 +98,15 @@ def test_a_damaged_metadata_record_costs_only_the_metadata(spin, tmp_path):
 @pytest.mark.parametrize(
     ("extra", "said"),
     [
-        (["--truth-estimate-of", "the rig"], "got no --truth-cols"),
-        ([*ARGS[8:], "--truth-estimate-of", " "], "got an empty name"),
+        (["--truth-estimate-of", "the rig"], "no --truth-cols"),
+        ([*ARGS[8:], "--truth-estimate-of", " "], "empty name"),
     ],
 )
 def test_the_option_needs_a_truth_and_a_name(spin, tmp_path, capsys, extra, said):
     out = tmp_path / "x.mcap"
     assert main(["convert-csv", str(spin), str(out), *ARGS[:8], *extra]) == 2
     err = capsys.readouterr().err
-    assert "Expected --truth-estimate-of WHO with --truth-cols" in err and said in err
+    assert_names(err, "--truth-estimate-of", "--truth-cols", said)
     assert not out.exists()
 
 

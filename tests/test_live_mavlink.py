@@ -9,6 +9,7 @@ import sys
 
 import numpy as np
 import pytest
+from conftest import raises_naming
 from scipy.spatial.transform import Rotation
 from test_live_ws import live_thread
 
@@ -131,7 +132,7 @@ def test_source_strings():
         "mavlink:udpin::1",
         "mavlink:udpin:127.0.0.1:1?scale=2",
     ):
-        with pytest.raises(InputError, match="Expected SOURCE mavlink:udpin:HOST:PORT"):
+        with raises_naming(InputError, repr(bad), "mavlink:udpin:HOST:PORT"):
             parse_url(bad)
 
 

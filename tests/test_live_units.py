@@ -12,6 +12,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import assert_names, own_stderr, raises_naming
 
 from imu_dcm.errors import InputError
 from imu_dcm.gyro.rest import CausalRestBias
@@ -133,7 +134,7 @@ def test_parse_source():
     assert (s.kind, s.host, s.port) == ("ws", "127.0.0.1", 8765)
     assert parse_source("udp://localhost:9870").port == 9870
     for bad in ("tcp://x:1", "ws://host", "udp://:5", "file.mcap"):
-        with pytest.raises(InputError, match="Expected SOURCE"):
+        with raises_naming(InputError, "SOURCE", repr(bad), "ws://HOST:PORT"):
             parse_source(bad)
 
 
@@ -307,20 +308,21 @@ def test_time_unit_hint_names_the_unit_that_makes_an_imu_rate():
 
 
 @pytest.mark.parametrize(
-    "args, needle",
+    "args, facts",
     [
-        (["tcp://x:1"], "Expected SOURCE"),
-        (["-", "--rerun", "window"], "Expected --rerun"),
-        (["-", "--bias", "1,2"], "Expected --bias"),
-        (["-", "--init-quat", "0,0,0"], "init"),
-        (["-", "--method", "rk4"], "invalid choice"),
+        (["tcp://x:1"], ("SOURCE", "'tcp://x:1'")),
+        (["-", "--rerun", "window"], ("--rerun", "'window'")),
+        (["-", "--bias", "1,2"], ("--bias", 3, "'1,2'")),
+        (["-", "--init-quat", "0,0,0"], ("--init-quat", 4, "'0,0,0'")),
+        (["-", "--method", "rk4"], ("--method", "'rk4'")),
     ],
 )
-def test_cli_bad_input_one_line_exit_2(args, needle):
+def test_cli_bad_input_one_line_exit_2(args, facts):
     r = run_cli([*args, "--no-status"], b"")
     assert r.returncode == 2
-    err = r.stderr.decode().strip().splitlines()
-    assert len(err) == 1 and needle in err[0] and err[0].startswith("imu-dcm-live: error:")
+    err = own_stderr(r.stderr.decode()).strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("imu-dcm-live: error:"), err
+    assert_names(err[0], *facts)
 
 
 def test_stdin_bias_auto_reports_replays_rest_segments(tmp_path):

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from conftest import raises_naming
 
 from imu_dcm.errors import InputError
 from imu_dcm.logio.writer import StampedSeries, write_bag
@@ -69,7 +70,7 @@ def test_noise_params_yaml(tmp_path):
     for text in ("rostopic: /imu\n", "gyroscope_noise_density: -1\n", "[1, 2]\n"):
         bad = tmp_path / "bad.yaml"
         bad.write_text(text)
-        with pytest.raises(InputError, match="Expected"):
+        with raises_naming(InputError, str(bad)):
             read_noise_params(bad)
     with pytest.raises(InputError, match="readable YAML"):
         read_noise_params(tmp_path / "missing.yaml")

@@ -15,10 +15,10 @@ import subprocess
 import sys
 
 import pytest
-from conftest import REPO_ROOT
+from conftest import REPO_ROOT, STRANGERS, need_data
 
 TRIAL = REPO_ROOT / "replay" / "broad_07_undisturbed_fast_rotation_B"
-ULOG = REPO_ROOT.parent / "shared" / "data" / "strangers" / "sample_log_small.ulg"
+ULOG = STRANGERS / "sample_log_small.ulg"
 #: Imported only by paths a plain replay does not take (--rerun, --prefilter, --out, batch, a
 #: summary file, --plot).
 NOT_ON_THE_PATH = (
@@ -70,8 +70,7 @@ def test_the_replay_command_imports_no_scipy_rotation_viewer_or_writer(tmp_path)
 
 @pytest.mark.parametrize("log", [TRIAL, ULOG], ids=["shipped trial", "PX4 ULog"])
 def test_replay_api_imports_no_scipy_rotation(log, tmp_path):
-    if not log.exists():
-        pytest.skip(f"{log.name} not found beside the repository")
+    need_data(log)
     code = (
         "import sys, warnings\n"
         "warnings.simplefilter('ignore')\n"

@@ -11,6 +11,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 import yaml
+from conftest import assert_names
 
 from imu_dcm.gyro.allan import B_FACTOR, allan_deviation, fit_noise, octave_clusters
 
@@ -95,7 +96,7 @@ def test_noise_plot_and_bad_outputs(still_log, tmp_path, capsys):
     assert fig.stat().st_size > 10_000
     capsys.readouterr()
     assert main(["noise", str(log), "--plot", str(tmp_path / "a.gif")]) == 2
-    assert "Expected --plot FILE.png or FILE.svg" in capsys.readouterr().err
+    assert_names(capsys.readouterr().err, "--plot", ".png", ".svg", str(tmp_path / "a.gif"))
     assert main(["noise", str(log), "--yaml", str(log / "x.yaml")]) == 2
     assert not (log / "x.yaml").exists()
 

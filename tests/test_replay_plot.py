@@ -9,6 +9,7 @@ import xml.etree.ElementTree as ET
 
 import numpy as np
 import pytest
+from conftest import assert_names
 
 pytest.importorskip("matplotlib")
 
@@ -54,7 +55,8 @@ def test_plot_svg_names_the_log_and_the_truth(top_log, tmp_path):
 def test_plot_other_suffixes_are_refused_before_reading(top_log, tmp_path, capsys, name):
     code = main([str(top_log), "--rerun", "off", "--plot", str(tmp_path / name)])
     err = capsys.readouterr().err
-    assert code == 2 and "Expected --plot FILE.png or FILE.svg" in err
+    assert code == 2
+    assert_names(err, "--plot", ".png", ".svg", str(tmp_path / name))
     assert list(tmp_path.iterdir()) == []
 
 

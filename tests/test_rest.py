@@ -6,7 +6,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
-import pytest
+from conftest import raises_naming
 
 from imu_dcm.errors import InputError
 from imu_dcm.gyro.rest import (
@@ -72,5 +72,5 @@ def test_detect_rest_marks_the_still_segment_only():
     w[1000:, 2] += 1.0  # turning at 1 rad/s after 5 s
     rest = detect_rest(w, t, RestConfig())
     assert rest[:990].all() and not rest[1000:].any()
-    with pytest.raises(InputError, match=r"^Expected omega_b \(N, 3\)"):
+    with raises_naming(InputError, "omega_b", "(N, 3)", "(2000, 2)"):
         detect_rest(w[:, :2], t)

@@ -10,7 +10,7 @@ import warnings
 
 import numpy as np
 import pytest
-from drone_logs import STRANGERS
+from conftest import STRANGERS, need_data
 
 from imu_dcm.logio import read_custom_data
 from imu_dcm.logio.types import ImuSeries, LogData, TruthSeries
@@ -20,11 +20,7 @@ pytestmark = pytest.mark.slow
 
 
 def _log(name: str):
-    path = STRANGERS / name
-    if not path.is_file():
-        pytest.skip(f"{name} is absent (real logs: ../shared/data/strangers, or set "
-                    f"IMU_DCM_STRANGERS_DIR)")  # fmt: skip
-    return path
+    return need_data(STRANGERS / name)
 
 
 def _rows(path) -> list[list[str]]:

@@ -12,6 +12,7 @@ import warnings
 
 import numpy as np
 import pytest
+from conftest import need_data
 
 from imu_dcm.errors import ImuDcmWarning
 from imu_dcm.gyro.rest import GRAVITY_M_S2, rest_segments
@@ -171,9 +172,7 @@ def _airborne_us(path) -> list[tuple[int, int]]:
 def test_real_px4_rests_stay_out_of_the_flight(name):
     from imu_dcm.replay import replay
 
-    path = STRANGERS / name
-    if not path.exists():
-        pytest.skip(f"{name} is not beside the repository (real PX4 logs)")
+    path = need_data(STRANGERS / name)
     flights = _airborne_us(path)
     assert flights, f"{name} flies"
     log = read_log(path)
@@ -243,10 +242,7 @@ def test_dataflash_hover_is_not_rest(tmp_path):
 
 def _sitl(name: str):
     pytest.importorskip("pymavlink")
-    path = STRANGERS / name
-    if not path.exists():
-        pytest.skip(f"{name} is not beside the repository (ArduPilot SITL logs)")
-    return path
+    return need_data(STRANGERS / name)
 
 
 def _stat(path) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

@@ -13,6 +13,7 @@ import warnings
 
 import numpy as np
 import pytest
+from conftest import own_stderr
 from mcap.reader import make_reader
 from mcap_ros2.decoder import DecoderFactory
 from rosbags.highlevel import AnyReader
@@ -310,7 +311,7 @@ def test_python_dash_m_entry_point(tmp_path):
         timeout=120,
     )
     assert bad.returncode == 2
-    assert bad.stderr.count("\n") == 1 and "--rate" in bad.stderr
+    assert own_stderr(bad.stderr).count("\n") == 1 and "--rate" in bad.stderr
 
 
 # Jobs that cannot finish, bad integers, file-system errors: refused up front, one line, exit 2.

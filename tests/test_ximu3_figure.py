@@ -10,13 +10,10 @@ import json
 
 import numpy as np
 import pytest
-from drone_logs import STRANGERS, ximu3_convert_argv
+from drone_logs import XIMU3_INERTIAL, XIMU3_QUATERNION, ximu3_convert_argv
 from scipy.spatial.transform import Rotation
 
 from imu_dcm.replay.__main__ import main
-
-INERTIAL = STRANGERS / "ximu3_left_foot_inertial.csv"
-QUATERNION = STRANGERS / "ximu3_left_foot_quaternion.csv"
 
 
 @pytest.fixture(scope="module")
@@ -29,8 +26,8 @@ def converted(tmp_path_factory):
 
 def _independent(rule: str) -> float:
     """RMS error (degrees) of the gyro-only estimate, from the two CSVs with numpy and scipy."""
-    gyro = np.loadtxt(INERTIAL, delimiter=",", skiprows=1)
-    quat = np.loadtxt(QUATERNION, delimiter=",", skiprows=1)
+    gyro = np.loadtxt(XIMU3_INERTIAL, delimiter=",", skiprows=1)
+    quat = np.loadtxt(XIMU3_QUATERNION, delimiter=",", skiprows=1)
     assert np.array_equal(gyro[:, 0], quat[:, 0])  # shared stamps: joined row by row
     dt_s = np.diff(gyro[:, 0]) * 1e-6
     omega = np.radians(gyro[:, 1:4])
