@@ -13,7 +13,7 @@ from scipy.spatial.transform import Rotation
 
 from imu_dcm.logio import read_log
 from imu_dcm.replay.__main__ import main
-from imu_dcm.rest import GRAVITY_M_S2
+from imu_dcm.rest_rule import GRAVITY_M_S2
 
 N = 401  # 4 s at 100 Hz
 RATE_DEG_S = 30.0

@@ -46,6 +46,8 @@ CORE = (
     "streaming",
     "resample",
     "rest",
+    "rest_rule",
+    "rest_causal",
     "rest_evidence",
     "windows",
     "stamps",

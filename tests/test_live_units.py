@@ -18,7 +18,7 @@ from imu_dcm.live.lines import parse_lines
 from imu_dcm.live.reorder import ReorderBuffer
 from imu_dcm.live.sources import parse_source
 from imu_dcm.replay.bias import estimate_bias
-from imu_dcm.rest import CausalRestBias
+from imu_dcm.rest_causal import CausalRestBias
 
 REPO = Path(__file__).resolve().parents[1]
 W = (0.0, 0.0, 1.0)

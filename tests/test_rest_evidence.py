@@ -14,7 +14,8 @@ from imu_dcm.logio.types import ImuSeries, LogData, TruthSeries
 from imu_dcm.replay import replay
 from imu_dcm.replay.bias import estimate_bias
 from imu_dcm.replay.summary import format_summary
-from imu_dcm.rest import GRAVITY_M_S2, truth_noise_rad
+from imu_dcm.rest_evidence import truth_noise_rad
+from imu_dcm.rest_rule import GRAVITY_M_S2
 
 RATE_HZ = 200.0
 DEG = np.pi / 180.0

@@ -7,7 +7,8 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from imu_dcm.replay.bias import estimate_bias
-from imu_dcm.rest import GRAVITY_M_S2, RestConfig, detect_rest, explain_no_rest
+from imu_dcm.rest import detect_rest, explain_no_rest
+from imu_dcm.rest_rule import GRAVITY_M_S2, RestConfig
 
 RATE_HZ = 200.0
 DEG = np.pi / 180.0

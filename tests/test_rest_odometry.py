@@ -16,13 +16,9 @@ from scipy.spatial.transform import Rotation
 from imu_dcm.errors import ImuDcmWarning
 from imu_dcm.logio import read_log
 from imu_dcm.logio.types import ImuSeries, LogData, TruthSeries
-from imu_dcm.rest import (
-    GRAVITY_M_S2,
-    Motion,
-    position_noise_m,
-    rest_segments,
-    twist_noise_rad_s,
-)
+from imu_dcm.rest import rest_segments
+from imu_dcm.rest_evidence import Motion, position_noise_m, twist_noise_rad_s
+from imu_dcm.rest_rule import GRAVITY_M_S2
 from tests.drone_logs import TRIAL
 from tests.test_logio import ODOM_DEF, ZERO_COV, _h, _write_truth, write_imu_bag
 

@@ -16,7 +16,8 @@ import pytest
 from imu_dcm.errors import ImuDcmWarning
 from imu_dcm.logio import read_log
 from imu_dcm.logio.types import VehicleState
-from imu_dcm.rest import GRAVITY_M_S2, rest_segments
+from imu_dcm.rest import rest_segments
+from imu_dcm.rest_rule import GRAVITY_M_S2
 from tests.drone_logs import STRANGERS, ULogSpec, UTopic, write_ulog
 
 RATE_HZ = 250.0

@@ -8,8 +8,8 @@ feeds it) as arrays, in stamp order:
    been quiet for longer than the window (wall time), the held samples are released;
 2. reports gaps with replay's rule (:func:`imu_dcm.integrate.find_gaps`) over the recent steps
    and the new ones;
-3. subtracts the bias (``auto``: :class:`imu_dcm.rest.CausalRestBias` over the batch; ``none``;
-   a vector);
+3. subtracts the bias (``auto``: :class:`imu_dcm.rest_causal.CausalRestBias` over the batch;
+   ``none``; a vector);
 4. integrates the batch with :meth:`imu_dcm.DcmIntegrator.update_many` (the compiled kernel's
    feed), starting — as replay does — at the first sample inside the truth's coverage, from the
    truth slerped there (or from ``init_quat`` / identity when there is no truth). When the truth
@@ -42,7 +42,7 @@ from imu_dcm.live.reorder import ReorderBuffer
 from imu_dcm.live.sources import Received
 from imu_dcm.metrics import attitude_error_deg
 from imu_dcm.rates import deg_evidence
-from imu_dcm.rest import CausalRestBias
+from imu_dcm.rest_causal import CausalRestBias
 from imu_dcm.streaming import DcmIntegrator
 
 __all__ = ["LATENCY_KEEP", "Latency", "LiveResult", "Pipeline"]

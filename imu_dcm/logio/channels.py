@@ -25,7 +25,7 @@ from imu_dcm.logio.json_imu import is_json_imu, json_imu_columns, json_msg
 from imu_dcm.logio.schema import Defs, definitions, norm_type
 from imu_dcm.logio.tf import TF_TYPE, child_frame, is_static_tf, moving_children, tf_truth
 from imu_dcm.logio.types import Collected, Columns, Conn, ImuSeries, Payloads, TruthSeries
-from imu_dcm.rest import GRAVITY_M_S2
+from imu_dcm.rest_rule import GRAVITY_M_S2
 from imu_dcm.so3 import median, percentile, row_finite, row_norm
 
 IMU_TYPE = "sensor_msgs/msg/Imu"
@@ -39,7 +39,7 @@ TRUTH_TYPES = {
     "nav_msgs/msg/Odometry": "pose.pose.orientation",
 }
 #: Where a truth type carries the body's position (m, parent frame) and, for odometry, its
-#: angular rate (rad/s, the child's body frame, REP 105): rest evidence (``imu_dcm.rest``).
+#: angular rate (rad/s, the child's body frame, REP 105): rest evidence (``imu_dcm.rest_evidence``).
 TRUTH_MOTION = {
     "geometry_msgs/msg/PoseStamped": ("pose.position", ""),
     "geometry_msgs/msg/PoseWithCovarianceStamped": ("pose.pose.position", ""),

@@ -31,7 +31,8 @@ from imu_dcm.prefilter.tuning import (
     estimate_noise_from_rest,
     estimate_noise_from_spectrum,
 )
-from imu_dcm.rest import RestConfig, detect_rest, longest_run, quietest_std
+from imu_dcm.rest import detect_rest, quietest_std
+from imu_dcm.rest_rule import RestConfig, longest_run
 
 
 def prefilter(

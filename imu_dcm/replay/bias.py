@@ -1,8 +1,9 @@
 """Gyro bias from rest: the bias of each rest segment of a log, applied sample by sample.
 
-Rest segments and their evidence come from :func:`imu_dcm.rest.rest_segments` (the rule live
-runs causally; :class:`~imu_dcm.rest.RestConfig`, :class:`~imu_dcm.rest.RestSegment` and
-:func:`~imu_dcm.rest.detect_rest` are re-exported here). The bias applied to a sample follows
+Rest segments and their evidence come from :func:`imu_dcm.rest.rest_segments` (the rule of
+:mod:`imu_dcm.rest_rule`, which live runs causally; :class:`~imu_dcm.rest_rule.RestConfig`,
+:class:`~imu_dcm.rest_rule.RestSegment` and :func:`~imu_dcm.rest.detect_rest` are re-exported
+here). The bias applied to a sample follows
 :data:`BIAS_RULE`:
 
 * ``"latest"``: that of the latest rest segment that began at or before it (the estimate is
@@ -24,7 +25,8 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from imu_dcm.errors import InputError
-from imu_dcm.rest import RestConfig, RestSegment, detect_rest, explain_no_rest, rest_segments
+from imu_dcm.rest import detect_rest, explain_no_rest, rest_segments
+from imu_dcm.rest_rule import RestConfig, RestSegment
 
 __all__ = [
     "BIAS_RULES",
@@ -95,13 +97,13 @@ def estimate_bias(
     truth_q_w_b : array_like, shape (N, 4), optional
         Reference attitude ``[x, y, z, w]`` on the same rows, NaN where none (auto only).
     truth_noise : float
-        Its angle noise per sample, rad (:func:`imu_dcm.rest.truth_noise_rad`).
+        Its angle noise per sample, rad (:func:`imu_dcm.rest_evidence.truth_noise_rad`).
     r_t_g : array_like, shape (3, 3), optional
         Rotation from the gyro's axes to the truth's body axes (the mounting; identity).
     vehicle : (landed, armed), optional
         The autopilot's landed and armed state on the same rows (auto only;
         :func:`imu_dcm.rest.rest_segments`).
-    motion : imu_dcm.rest.Motion, optional
+    motion : imu_dcm.rest_evidence.Motion, optional
         The truth's position and odometry twist on the same rows (auto only).
 
     Returns

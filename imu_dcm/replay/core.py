@@ -56,7 +56,7 @@ from imu_dcm.replay.truth import (
 )
 from imu_dcm.replay.window import check_score_window, window_mask
 from imu_dcm.resample import slerp_truth
-from imu_dcm.rest import Motion, position_noise_m, truth_noise_rad, twist_noise_rad_s
+from imu_dcm.rest_evidence import Motion, position_noise_m, truth_noise_rad, twist_noise_rad_s
 from imu_dcm.so3 import median, quat_angle_rad, quat_as_matrix, row_finite, row_norm
 from imu_dcm.stamps import NS_PER_UNIT, timing_doubt
 
