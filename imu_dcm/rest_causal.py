@@ -20,6 +20,7 @@ from imu_dcm.rest_rule import (
     runs,
     still_windows,
     window_conditions,
+    window_samples,
 )
 from imu_dcm.windows import min_steps, windowed_mean_var
 
@@ -112,9 +113,7 @@ class CausalRestBias:
         pw, pt = np.concatenate(self._probe_w), np.concatenate(self._probe_t)
         self._probe_w, self._probe_t = [], []
         p = self.probe
-        steps = np.diff(pt[:p])
-        dt = float(np.sort(steps)[len(steps) // 2]) if len(steps) else 1.0
-        self.win = max(2, math.ceil(self.config.min_duration_s / dt))
+        self.win = window_samples(pt[:p], self.config.min_duration_s)
         before = np.tile(self.bias_rad_s, (p - 1 - (seen - len(w)), 1))  # this call's, held
         out = self._steps(pw, pt)
         return np.concatenate([before, out[p - 1 :]])[-len(w) :]

@@ -152,9 +152,13 @@ class RestSegment:
 
 
 def window_samples(t_s: NDArray, duration_s: float) -> int:
-    """Samples in a window of ``duration_s`` seconds at the median step (at least 2)."""
+    """Samples in a window of ``duration_s`` seconds at the median step (at least 2).
+
+    A window of a whole number of steps is that many samples, whatever the rounding of the
+    stamps' differences (a relative 1e-9 of slack: 0.5 s at 5 ms is 100 samples, not 101).
+    """
     dt = median(np.diff(t_s)) if len(t_s) > 1 else 1.0
-    return max(2, int(np.ceil(duration_s / dt)))
+    return max(2, math.ceil(duration_s / dt * (1.0 - 1e-9)))
 
 
 def runs(mask: NDArray[np.bool_]) -> list[tuple[int, int]]:
