@@ -48,6 +48,7 @@ CORE = (
     "rest",
     "rest_rule",
     "rest_causal",
+    "rest_agreement",
     "rest_evidence",
     "windows",
     "stamps",

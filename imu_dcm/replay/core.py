@@ -721,6 +721,7 @@ def _summary(log, s, g: _Gyro, bias_est, judged: _Judged, pf_summary, anchors, e
         rest_confirmed=bias_est.confirmed,
         no_rest=bias_est.no_rest,
         rest_conflict=bias_est.conflict,
+        rest_agreement=bias_est.agreement,
         mounting=dataclasses.asdict(mount.reported) if mount.reported is not None else None,
         mounting_applied=mount.applied is not None,
         mounting_used=mount.used,
