@@ -417,7 +417,9 @@ def _convention(log: LogData, s: ReplaySettings, g: _Gyro, omega, notes):
     if truth is None:
         return log, ConventionChoice()
     tt = truth.t_ns if g.base == "header" else truth.log_t_ns
-    choice = choose_convention(g.t_ns, omega, tt, truth.q_w_b, s.truth_convention, truth.topic)
+    choice = choose_convention(
+        g.t_ns, omega, tt, truth.q_w_b, s.truth_convention, truth.topic, g.accel
+    )
     if choice.line:
         _warn(notes, choice.line)
     if choice.used == "as-is":
@@ -427,7 +429,7 @@ def _convention(log: LogData, s: ReplaySettings, g: _Gyro, omega, notes):
 
 
 def _plain_convention(c: ConventionChoice) -> dict:
-    return {"used": c.used, "how": c.how, "fits": [list(f) for f in c.fits], "line": c.line}
+    return c.as_dict()
 
 
 def _remove_bias(
