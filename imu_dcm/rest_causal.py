@@ -19,6 +19,7 @@ from imu_dcm.rest_rule import (
     noise_floor_var,
     runs,
     still_windows,
+    touches,
     window_conditions,
     window_samples,
 )
@@ -146,7 +147,7 @@ class CausalRestBias:
         out = np.full((n, 3), np.nan)
         before = self.bias_rad_s
         for p, q in runs(still):
-            if self._seg_start >= 0 and k0 + p - m + 1 > self._seg_end + 1:
+            if self._seg_start >= 0 and not touches(self._seg_end + 1, k0 + p - m + 1):
                 self._close_segment(out, k0)  # motion of a window or more since its end
             self._run(X, T, base, k0, p, q, out)
         self.at_rest = bool(n and still[-1])

@@ -88,6 +88,7 @@ __all__ = [
     "runs",
     "std_limit",
     "still_windows",
+    "touches",
     "touching",
     "window_conditions",
     "window_samples",
@@ -277,11 +278,17 @@ def still_windows(conds) -> NDArray:
     return still
 
 
+def touches(stop: int, start: int) -> bool:
+    """Whether a still window starting at sample ``start`` joins the rest ``[a, stop)`` before
+    it: the samples they cover touch (offline and live join runs by this)."""
+    return start <= stop
+
+
 def touching(found: list[tuple[int, int]], m: int) -> list[tuple[int, int]]:
-    """Runs of still windows merged where the samples they cover touch (a gap under ``m``)."""
+    """Runs of still windows merged where the samples they cover touch (:func:`touches`)."""
     out: list[tuple[int, int]] = []
     for p, q in found:
-        if out and p <= out[-1][1] - 1 + m:
+        if out and touches(out[-1][1] - 1 + m, p):
             out[-1] = (out[-1][0], q)
         else:
             out.append((p, q))
