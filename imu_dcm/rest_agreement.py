@@ -2,9 +2,9 @@
 
 Each rest's bias is the mean of ``n = hi - lo`` samples with per-axis sample standard deviation
 ``s``: its noise is the standard error ``s / √n`` per axis (white noise; its own samples, no
-constant of a sensor). Two rests *disagree* where, on some axis, their biases differ by more
-than ``z √(s_i²/n_i + s_j²/n_j)`` (``z`` = ``floor_spreads``, the spreads the rest rule allows
-its windows: 4).
+constant of a sensor; ``s²`` at least the output's quantisation, step²/12). Two rests *disagree*
+where, on some axis, their biases differ by more than ``z √(s_i²/n_i + s_j²/n_j)`` (``z`` =
+``floor_spreads``, the spreads the rest rule allows its windows: 4).
 
 A rest is an *outlier* when it disagrees with both of its neighbours in time (at the first or
 the last rest: the two nearest on its one side) while those two agree with each other: a hover,
@@ -20,13 +20,13 @@ Conventions: ``omega_b`` (N, 3) body rate in body axes, rad/s; segments as
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
 
 from imu_dcm.rest_rule import RestSegment
+from imu_dcm.windows import min_steps, step_var
 
 __all__ = ["Agreement", "rests_agree"]
 
@@ -70,12 +70,13 @@ def _times(s: RestSegment) -> list[float]:
     return [s.start_s, s.end_s]
 
 
-def _noise(w: NDArray, s: RestSegment) -> NDArray:
-    """Per-axis standard error of a rest's bias, rad/s: sample std / √n over ``[lo, hi)``."""
+def _noise(w: NDArray, s: RestSegment, quantum_var: float) -> NDArray:
+    """Per-axis standard error of a rest's bias, rad/s: sample std / √n over ``[lo, hi)``, the
+    variance at least the output's quantisation ``quantum_var`` (step²/12, as for the floor)."""
     x = w[s.lo : s.hi]
     if len(x) < 2:
         return np.full(3, np.inf)
-    return x.std(axis=0, ddof=1) / math.sqrt(len(x))
+    return np.sqrt(np.maximum(x.var(axis=0, ddof=1), quantum_var) / len(x))
 
 
 def rests_agree(omega_b: NDArray, segs: list[RestSegment], spreads: float = 4.0) -> Agreement:
@@ -95,7 +96,8 @@ def rests_agree(omega_b: NDArray, segs: list[RestSegment], spreads: float = 4.0)
         return Agreement(tuple(segs))
     w = np.asarray(omega_b, dtype=float)
     b = np.array([s.bias_rad_s for s in segs])
-    se = np.array([_noise(w, s) for s in segs])
+    quantum = step_var(min_steps(w))
+    se = np.array([_noise(w, s, quantum) for s in segs])
 
     def ratio(i: int, j: int) -> float:
         with np.errstate(invalid="ignore", divide="ignore"):
@@ -128,7 +130,7 @@ def _line(segs, outliers, disagree, spreads: float) -> str:
     if outliers:
         each = "; ".join(
             f"{_span(segs[i])} (bias {_deg(segs[i].bias_rad_s)} °/s, {r:.1f}x its noise from "
-            "the rests either side, which agree)"
+            "its two neighbours, which agree)"
             for i, r in outliers
         )
         n = len(outliers)

@@ -28,7 +28,7 @@ def rests_log(rests, seed: int):
     rng = np.random.default_rng(seed)
     n_move = int(RATE_HZ)
     parts, spans, k = [], [], 0
-    for i, rest in enumerate((None, *rests)):
+    for rest in (None, *rests):
         if rest is not None:
             dur, bias = rest
             n = int(round(dur * RATE_HZ))
@@ -43,7 +43,6 @@ def rests_log(rests, seed: int):
         move[:, 2] += TURN
         parts.append(move)
         k += n_move
-        del i
     w = np.concatenate(parts)
     return w, np.arange(len(w)) / RATE_HZ, spans
 
