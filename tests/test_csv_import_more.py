@@ -12,7 +12,7 @@ from conftest import assert_names
 from drone_logs import ximu3_convert_argv
 from scipy.spatial.transform import Rotation
 
-from imu_dcm.gyro.rest import GRAVITY_M_S2
+from imu_dcm.gyro.rest_rule import GRAVITY_M_S2
 from imu_dcm.logio import read_log
 from imu_dcm.replay.__main__ import main
 

@@ -15,7 +15,7 @@ import pytest
 from conftest import assert_names, own_stderr, raises_naming
 
 from imu_dcm.errors import InputError
-from imu_dcm.gyro.rest import CausalRestBias
+from imu_dcm.gyro.rest_causal import CausalRestBias
 from imu_dcm.live.lines import parse_lines
 from imu_dcm.live.reorder import ReorderBuffer
 from imu_dcm.live.sources import parse_source

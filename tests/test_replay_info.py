@@ -178,3 +178,66 @@ def test_info_on_a_euroc_dataset_names_leica_as_positions_only(tmp_path, capsys)
     assert kinds["state_groundtruth_estimate0"][0] == INDEPENDENT
     assert kinds["leica0"] == ("positions only", 5)
     assert got["gyro"] == "imu0" and got["gyro_count"] == len(trial[0].imu.t_ns)
+
+
+def _state_spans(phases, end_s: float, column: int) -> list[list[float]]:
+    """Where a phase table's flag (column 1 landed, 2 armed) is true, to the log's end."""
+    out = []
+    for k, p in enumerate(phases):
+        stop = phases[k + 1][0] if k + 1 < len(phases) else end_s
+        if p[column]:
+            if out and out[-1][1] == p[0]:
+                out[-1][1] = stop
+            else:
+                out.append([p[0], stop])
+    return out
+
+
+@pytest.mark.parametrize("container", ["ulog", "dataflash"])
+def test_info_lists_the_landed_and_armed_state_as_rest_evidence(tmp_path, container, capsys):
+    # The hover logs of the rest tests: on the ground disarmed, armed, airborne, landed,
+    # disarmed (PHASES, seconds from the first gyro sample); the log ends at its last sample.
+    from test_rest_vehicle import END_S, PHASES, RATE_HZ, _hover_dataflash, _hover_ulog
+
+    path = (
+        _hover_ulog(tmp_path / "hover.ulg")
+        if container == "ulog"
+        else _hover_dataflash(tmp_path / "hover.bin")
+    )
+    end_s = (round(END_S * RATE_HZ) - 1) / RATE_HZ
+    assert main(["info", str(path), "--json"]) == 0
+    got = json.loads(capsys.readouterr().out)["vehicle"]
+    assert got["source"] == (
+        "vehicle_land_detected, actuator_armed" if container == "ulog" else "EV"
+    )
+    for key, column in (("landed_s", 1), ("armed_s", 2)):
+        want = _state_spans(PHASES, end_s, column)
+        assert np.allclose(got[key], want, atol=1e-6), (key, got[key], want)
+    assert main(["info", str(path)]) == 0
+    line = next(x for x in capsys.readouterr().out.splitlines() if x.startswith("vehicle    "))
+    assert f"landed 0.00-6.00 s, 16.00-{end_s:.2f} s; armed 5.00-17.00 s" in line
+    assert "rest evidence" in line
+
+
+def test_info_without_a_vehicle_state_says_so(bag, capsys):
+    assert main(["info", str(bag), "--json"]) == 0
+    assert json.loads(capsys.readouterr().out)["vehicle"] is None
+    assert main(["info", str(bag)]) == 0
+    assert "vehicle    none (no landed or armed state" in capsys.readouterr().out
+
+
+def test_info_on_a_real_px4_log_gives_pyulogs_flight(capsys):
+    # Between the landed spans the vehicle flies: the stretches pyulog reads as not landed
+    from test_rest_vehicle import _airborne_us
+
+    path = STRANGERS / "sample_px4_events.ulg"
+    if not path.is_file():
+        pytest.skip("sample_px4_events.ulg is absent (real logs of other projects)")
+    pyulog = pytest.importorskip("pyulog")
+    u = pyulog.ULog(str(path), ["sensor_combined"])
+    t0_us = int(u.get_dataset("sensor_combined").data["timestamp"][0])
+    assert main(["info", str(path), "--json"]) == 0
+    landed = json.loads(capsys.readouterr().out)["vehicle"]["landed_s"]
+    gaps = [(a[1], b[0]) for a, b in zip(landed[:-1], landed[1:], strict=True)]
+    flights = [((f0 - t0_us) * 1e-6, (f1 - t0_us) * 1e-6) for f0, f1 in _airborne_us(path)]
+    assert np.allclose(gaps, flights, atol=1e-3), (gaps, flights)

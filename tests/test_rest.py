@@ -1,5 +1,6 @@
-"""imu_dcm.gyro.rest: the windowed statistics and run finding that rest detection, the bias and the
-pre-filter's noise estimate share. Truth: direct numpy computations and hand-made masks."""
+"""imu_dcm.gyro.rest, rest_rule and windows: the windowed statistics and run finding that rest
+detection, the bias and the pre-filter's noise estimate share. Truth: direct numpy computations
+and hand-made masks."""
 
 from __future__ import annotations
 
@@ -10,14 +11,11 @@ from conftest import raises_naming
 
 from imu_dcm.errors import InputError
 from imu_dcm.gyro.rest import (
-    RestConfig,
     detect_rest,
-    longest_run,
     quietest_std,
-    runs,
-    window_samples,
-    windowed_mean_var,
 )
+from imu_dcm.gyro.rest_rule import RestConfig, longest_run, runs, window_samples
+from imu_dcm.gyro.windows import windowed_mean_var
 
 
 def test_windowed_mean_var_equals_direct_windows():

@@ -10,7 +10,8 @@ import warnings
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from imu_dcm.gyro.rest import GRAVITY_M_S2, truth_noise_rad
+from imu_dcm.gyro.rest_evidence import truth_noise_rad
+from imu_dcm.gyro.rest_rule import GRAVITY_M_S2
 from imu_dcm.logio.types import ImuSeries, LogData, TruthSeries
 from imu_dcm.replay import replay
 from imu_dcm.replay.bias import estimate_bias

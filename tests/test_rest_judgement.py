@@ -6,7 +6,8 @@ from __future__ import annotations
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from imu_dcm.gyro.rest import GRAVITY_M_S2, RestConfig, detect_rest, explain_no_rest
+from imu_dcm.gyro.rest import detect_rest, explain_no_rest
+from imu_dcm.gyro.rest_rule import GRAVITY_M_S2, RestConfig
 from imu_dcm.replay.bias import estimate_bias
 
 RATE_HZ = 200.0

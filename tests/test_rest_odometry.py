@@ -15,12 +15,10 @@ from scipy.spatial.transform import Rotation
 
 from imu_dcm.errors import ImuDcmWarning
 from imu_dcm.gyro.rest import (
-    GRAVITY_M_S2,
-    Motion,
-    position_noise_m,
     rest_segments,
-    twist_noise_rad_s,
 )
+from imu_dcm.gyro.rest_evidence import Motion, position_noise_m, twist_noise_rad_s
+from imu_dcm.gyro.rest_rule import GRAVITY_M_S2
 from imu_dcm.logio import read_log
 from imu_dcm.logio.types import ImuSeries, LogData, TruthSeries
 from tests.drone_logs import TRIAL

@@ -15,7 +15,8 @@ import pytest
 from conftest import need_data
 
 from imu_dcm.errors import ImuDcmWarning
-from imu_dcm.gyro.rest import GRAVITY_M_S2, rest_segments
+from imu_dcm.gyro.rest import rest_segments
+from imu_dcm.gyro.rest_rule import GRAVITY_M_S2
 from imu_dcm.logio import read_log
 from imu_dcm.logio.types import VehicleState
 from tests.drone_logs import STRANGERS, ULogSpec, UTopic, write_ulog

@@ -200,3 +200,59 @@ def test_a_heading_only_truth_is_scored_on_heading_only():
         bias="none",
     ).summary
     assert full.scored_on == "attitude" and abs(full.rms_error_deg - 5.0 / np.sqrt(2)) < 0.05
+
+
+#: NED from ENU (x and y swap, z flips), written out here from the two frames' definitions
+R_NED_ENU = Rotation.from_matrix([[0.0, 1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, -1.0]])
+G = 9.80665
+
+
+def _coning_log(world: str, seed: int = 3):
+    """A gyro and accelerometer on a coning body (data_synth, 200 Hz, 20 s) pivoting in place
+    (its specific force is gravity's reaction alone, up in the world), and its truth at 100 Hz
+    body to ENU or to NED."""
+    import data_synth
+    from imu_dcm.logio.types import ImuSeries, LogData, TruthSeries
+
+    traj = data_synth.simulate("coning", 20.0, half_angle_deg=20.0, freq_hz=0.5)
+    model = data_synth.GyroModel(noise_density_rad_s_sqrt_hz=1e-3)
+    rec = data_synth.synthetic_gyro(traj, 200.0, model=model, seed=seed)
+    q_imu, _w = traj.at(rec.t_s)
+    rng = np.random.default_rng(seed)
+    accel = Rotation.from_quat(q_imu).inv().apply([0.0, 0.0, G]) + rng.normal(
+        0, 0.05, (len(q_imu), 3)
+    )
+    imu = ImuSeries(
+        rec.t_ns, rec.t_ns, rec.values, None, "/imu", "sensor_msgs/msg/Imu", "imu", accel
+    )
+    t_truth = np.arange(0.0, 20.0, 0.01)
+    q_enu, _ = traj.at(t_truth)
+    q = q_enu if world == "enu" else (R_NED_ENU * Rotation.from_quat(q_enu)).as_quat()
+    t_ns = rec.epoch_ns + np.round(t_truth * 1e9).astype(np.int64)
+    truth = TruthSeries(t_ns, t_ns, q, "/truth", "geometry_msgs/msg/PoseStamped", world)
+    return LogData("coning.mcap", imu, truth, ())
+
+
+def test_a_truth_in_a_ned_world_is_found_by_gravity_and_applied():
+    # The body rates of a NED truth fit the gyro as well as ENU's (a constant rotation on the
+    # world side): only gravity tells. In the NED truth's world the accelerometer's mean points
+    # down, (0, 0, -g) within the accelerometer's noise; it is named and applied, and the score
+    # is the ENU truth's (the error of a constant world rotation is the same).
+    enu = _quiet(_coning_log("enu"), bias="none")
+    ned = _quiet(_coning_log("ned"), bias="none")
+    assert enu.summary.truth_convention == {"used": "as-is", "how": "", "fits": [], "line": ""}
+    conv = ned.summary.truth_convention
+    assert conv["used"] == "ned" and conv["how"] == "fit", conv
+    # a body pivoting in place reads gravity's reaction alone: in the NED world each row is
+    # (0, 0, -g) plus noise, averaging 0.05 / √4000 m/s² per axis (0.02 is 25 of those, left
+    # for the estimated mounting's error)
+    np.testing.assert_allclose(conv["gravity_w_m_s2"], [0.0, 0.0, -G], atol=0.02)
+    line = next(w for w in ned.summary.warnings if "NED" in w)
+    assert "its world is NED, not ENU" in line and "applied" in line
+    assert abs(ned.summary.rms_error_deg - enu.summary.rms_error_deg) < 1e-6
+    # stated, it is applied to an ENU truth too; as-is keeps the NED one as read
+    stated = _quiet(_coning_log("enu"), bias="none", truth_convention="ned")
+    assert stated.summary.truth_convention["used"] == "ned"
+    assert stated.summary.truth_convention["how"] == "given"
+    kept = _quiet(_coning_log("ned"), bias="none", truth_convention="as-is")
+    assert kept.summary.truth_convention["used"] == "as-is"

@@ -9,8 +9,8 @@ feeds it) as arrays, in stamp order:
 2. reports gaps with replay's rule (:func:`imu_dcm.integrator.batch.find_gaps`) over the recent
 steps
    and the new ones;
-3. subtracts the bias (``auto``: :class:`imu_dcm.gyro.rest.CausalRestBias` over the batch; ``none``;
-   a vector);
+3. subtracts the bias (``auto``: :class:`imu_dcm.gyro.rest_causal.CausalRestBias` over the batch;
+   ``none``; a vector);
 4. integrates the batch with :meth:`imu_dcm.DcmIntegrator.update_many` (the compiled kernel's
    feed), starting — as replay does — at the first sample inside the truth's coverage, from the
    truth slerped there (or from ``init_quat`` / identity when there is no truth). When the truth
@@ -37,7 +37,7 @@ from numpy.typing import NDArray
 
 from imu_dcm.errors import GapWarning
 from imu_dcm.gyro.rates import deg_evidence
-from imu_dcm.gyro.rest import CausalRestBias
+from imu_dcm.gyro.rest_causal import CausalRestBias
 from imu_dcm.integrator.batch import find_gaps, gap_message, integrate_quat
 from imu_dcm.integrator.streaming import DcmIntegrator
 from imu_dcm.live.latency import LATENCY_KEEP, Latency

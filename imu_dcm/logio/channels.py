@@ -21,7 +21,7 @@ from numpy.typing import NDArray
 
 from imu_dcm.arrays import median, percentile, row_finite, row_norm
 from imu_dcm.errors import LogError
-from imu_dcm.gyro.rest import GRAVITY_M_S2
+from imu_dcm.gyro.rest_rule import GRAVITY_M_S2
 from imu_dcm.logio.cdr import decode
 from imu_dcm.logio.json_imu import is_json_imu, json_imu_columns, json_msg
 from imu_dcm.logio.schema import Defs, definitions, norm_type
@@ -39,7 +39,8 @@ TRUTH_TYPES = {
     "nav_msgs/msg/Odometry": "pose.pose.orientation",
 }
 #: Where a truth type carries the body's position (m, parent frame) and, for odometry, its
-#: angular rate (rad/s, the child's body frame, REP 105): rest evidence (``imu_dcm.gyro.rest``).
+#: angular rate (rad/s, the child's body frame, REP 105): rest evidence
+# (``imu_dcm.gyro.rest_evidence``).
 TRUTH_MOTION = {
     "geometry_msgs/msg/PoseStamped": ("pose.position", ""),
     "geometry_msgs/msg/PoseWithCovarianceStamped": ("pose.pose.position", ""),

@@ -1,8 +1,12 @@
 """Gyro bias from rest: the bias of each rest segment of a log, applied sample by sample.
 
-Rest segments and their evidence come from :func:`imu_dcm.gyro.rest.rest_segments` (the rule live
-runs causally; :class:`~imu_dcm.gyro.rest.RestConfig`, :class:`~imu_dcm.gyro.rest.RestSegment` and
-:func:`~imu_dcm.gyro.rest.detect_rest` are re-exported here). The bias applied to a sample follows
+Rest segments and their evidence come from :func:`imu_dcm.gyro.rest.rest_segments` (the rule of
+:mod:`imu_dcm.gyro.rest_rule`, which live runs causally;
+:class:`~imu_dcm.gyro.rest_rule.RestConfig`,
+:class:`~imu_dcm.gyro.rest_rule.RestSegment` and :func:`~imu_dcm.gyro.rest.detect_rest` are
+re-exported
+here). Rests whose bias disagrees with the rests around it beyond their noise are not used
+(:func:`imu_dcm.gyro.rest_agreement.rests_agree`). The bias applied to a sample follows
 :data:`BIAS_RULE`:
 
 * ``"latest"``: that of the latest rest segment that began at or before it (the estimate is
@@ -24,7 +28,9 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from imu_dcm.errors import InputError
-from imu_dcm.gyro.rest import RestConfig, RestSegment, detect_rest, explain_no_rest, rest_segments
+from imu_dcm.gyro.rest import detect_rest, explain_no_rest, rest_segments
+from imu_dcm.gyro.rest_agreement import rests_agree
+from imu_dcm.gyro.rest_rule import RestConfig, RestSegment
 
 __all__ = [
     "BIAS_RULES",
@@ -52,6 +58,8 @@ class BiasEstimate:
     confirmed : True when a signal besides the gyro (accelerometer, truth) judged every rest.
     no_rest : why no rest was found ("" when found, or not "auto").
     conflict : one line where the evidence conflicts ("" when it does not).
+    agreement : how the rests' biases agree (:func:`imu_dcm.gyro.rest_agreement.rests_agree`, its
+        ``as_dict``; None with fewer than two rests): the outliers are not in ``segments``.
     """
 
     bias_b: NDArray[np.float64]
@@ -60,6 +68,7 @@ class BiasEstimate:
     confirmed: bool = False
     no_rest: str = ""
     conflict: str = ""
+    agreement: dict | None = None
 
 
 def estimate_bias(
@@ -95,13 +104,13 @@ def estimate_bias(
     truth_q_w_b : array_like, shape (N, 4), optional
         Reference attitude ``[x, y, z, w]`` on the same rows, NaN where none (auto only).
     truth_noise : float
-        Its angle noise per sample, rad (:func:`imu_dcm.gyro.rest.truth_noise_rad`).
+        Its angle noise per sample, rad (:func:`imu_dcm.gyro.rest_evidence.truth_noise_rad`).
     r_t_g : array_like, shape (3, 3), optional
         Rotation from the gyro's axes to the truth's body axes (the mounting; identity).
     vehicle : (landed, armed), optional
         The autopilot's landed and armed state on the same rows (auto only;
         :func:`imu_dcm.gyro.rest.rest_segments`).
-    motion : imu_dcm.gyro.rest.Motion, optional
+    motion : imu_dcm.gyro.rest_evidence.Motion, optional
         The truth's position and odometry twist on the same rows (auto only).
 
     Returns
@@ -132,8 +141,12 @@ def estimate_bias(
         if conflict:  # windows passed, and their stretches were found not to be rest
             why = conflict.split(": ", 1)[1]
         return BiasEstimate(np.zeros((n, 3)), (), "auto", False, why, conflict)
+    agree = rests_agree(w, segs, cfg.floor_spreads)  # the outliers are not used
+    judged = agree.as_dict(segs) if len(segs) > 1 else None
+    segs = list(agree.kept)
     confirmed = all(any(e != "gyro floor" for e in s.evidence) for s in segs)
-    return BiasEstimate(_bias_at(segs, t, rule), tuple(segs), "auto", confirmed, "", conflict)
+    bias_b = _bias_at(segs, t, rule)
+    return BiasEstimate(bias_b, tuple(segs), "auto", confirmed, "", conflict, judged)
 
 
 def _bias_at(segs: list[RestSegment], t: NDArray, rule: str) -> NDArray[np.float64]:

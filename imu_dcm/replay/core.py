@@ -31,7 +31,7 @@ from numpy.typing import ArrayLike, NDArray
 from imu_dcm.arrays import median, row_finite, row_norm
 from imu_dcm.errors import GapWarning, ImuDcmWarning, LogError
 from imu_dcm.gyro.resample import slerp_truth
-from imu_dcm.gyro.rest import Motion, position_noise_m, truth_noise_rad, twist_noise_rad_s
+from imu_dcm.gyro.rest_evidence import Motion, position_noise_m, truth_noise_rad, twist_noise_rad_s
 from imu_dcm.gyro.stamps import NS_PER_UNIT, timing_doubt
 from imu_dcm.integrator.batch import integrate_quat
 from imu_dcm.logio import LogData, read_log
@@ -418,7 +418,9 @@ def _convention(log: LogData, s: ReplaySettings, g: _Gyro, omega, notes):
     if truth is None:
         return log, ConventionChoice()
     tt = truth.t_ns if g.base == "header" else truth.log_t_ns
-    choice = choose_convention(g.t_ns, omega, tt, truth.q_w_b, s.truth_convention, truth.topic)
+    choice = choose_convention(
+        g.t_ns, omega, tt, truth.q_w_b, s.truth_convention, truth.topic, g.accel
+    )
     if choice.line:
         _warn(notes, choice.line)
     if choice.used == "as-is":
@@ -428,7 +430,7 @@ def _convention(log: LogData, s: ReplaySettings, g: _Gyro, omega, notes):
 
 
 def _plain_convention(c: ConventionChoice) -> dict:
-    return {"used": c.used, "how": c.how, "fits": [list(f) for f in c.fits], "line": c.line}
+    return c.as_dict()
 
 
 def _remove_bias(
@@ -722,6 +724,7 @@ def _summary(log, s, g: _Gyro, bias_est, judged: _Judged, pf_summary, anchors, e
         rest_confirmed=bias_est.confirmed,
         no_rest=bias_est.no_rest,
         rest_conflict=bias_est.conflict,
+        rest_agreement=bias_est.agreement,
         mounting=dataclasses.asdict(mount.reported) if mount.reported is not None else None,
         mounting_applied=mount.applied is not None,
         mounting_used=mount.used,

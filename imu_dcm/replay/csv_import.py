@@ -22,7 +22,7 @@ from numpy.typing import NDArray
 
 from imu_dcm.cli import OneLineArgumentParser
 from imu_dcm.errors import ImuDcmWarning, InputError, LogError
-from imu_dcm.gyro.rest import GRAVITY_M_S2
+from imu_dcm.gyro.rest_rule import GRAVITY_M_S2
 from imu_dcm.gyro.stamps import NS_PER_UNIT, timing_doubt
 
 __all__ = ["TIME_UNITS_NS", "CsvColumns", "convert_csv", "convert_main", "read_csv_columns"]

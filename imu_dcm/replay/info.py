@@ -9,6 +9,11 @@ message tables), and its rate is the mean over the log's span (marked ``~``).
 
 Times are seconds from the log's start: the first gyro header stamp (the origin of
 ``--score-window`` and of the replay's gap lines).
+
+The autopilot's landed and armed state (:attr:`imu_dcm.logio.LogData.vehicle_state`: PX4's
+``vehicle_land_detected`` and ``actuator_armed``, ArduPilot's arm and land events) is listed as
+the spans where each held true: evidence the replay's rest rule uses (a window with the vehicle
+airborne is no rest; landed and disarmed throughout supports one).
 """
 
 from __future__ import annotations
@@ -70,6 +75,18 @@ class Interval:
 
 
 @dataclass(frozen=True, slots=True)
+class Vehicle:
+    """The autopilot's landed and armed state, evidence for rest: ``landed_s`` and ``armed_s``
+    the spans (s from the log's start, the last to the log's end) where each held true;
+    ``rows`` the state rows logged; ``source`` where they came from."""
+
+    source: str
+    rows: int
+    landed_s: tuple[tuple[float, float], ...]
+    armed_s: tuple[tuple[float, float], ...]
+
+
+@dataclass(frozen=True, slots=True)
 class LogInfo:
     """What :func:`log_info` found. ``gaps`` are (start s, length s) of the gyro's stamps."""
 
@@ -88,6 +105,7 @@ class LogInfo:
     intervals: tuple[Interval, ...]
     notes: tuple[str, ...]
     damage: str | None
+    vehicle: Vehicle | None = None
 
 
 def _stats(t_ns: np.ndarray) -> tuple[float | None, float | None]:
@@ -156,6 +174,32 @@ def _accel(imu) -> str:
     return f"{imu.topic}: {n} samples on the gyro's rows"
 
 
+def _true_spans(t_s, held, end_s: float) -> tuple[tuple[float, float], ...]:
+    """Where a held flag (1 true, 0 false, -1 unknown) is true: from the row it becomes 1 to the
+    row it becomes 0, or to ``end_s``; within ``[0, end_s]``."""
+    spans, start = [], None
+    for ti, v in zip(t_s.tolist(), held.tolist(), strict=True):
+        if v == 1 and start is None:
+            start = ti
+        elif v == 0 and start is not None:
+            spans.append((start, ti))
+            start = None
+    if start is not None:
+        spans.append((start, end_s))
+    # the state may begin before the gyro: spans are kept to the log, [0, end_s]
+    return tuple((max(a, 0.0), min(b, end_s)) for a, b in spans if b > 0.0 and a < end_s)
+
+
+def _vehicle(state, t0_ns: int, end_ns: int) -> Vehicle | None:
+    if state is None:
+        return None
+    landed, armed = state.at(state.t_ns)  # the state after each row
+    t_s = (state.t_ns - t0_ns) * 1e-9
+    end_s = (end_ns - t0_ns) * 1e-9
+    spans = (_true_spans(t_s, x, end_s) for x in (landed, armed))
+    return Vehicle(state.source, len(state.t_ns), *spans)
+
+
 def _intervals(data, t0_ns: int) -> tuple[Interval, ...]:
     out = []
     for d in declared_intervals(data.custom_data):
@@ -199,6 +243,7 @@ def log_info(path: str | Path) -> LogInfo:
         _intervals(data, t0),
         data.notes,
         data.stopped_at,
+        _vehicle(data.vehicle_state, t0, int(imu.t_ns.max()) if len(imu.t_ns) else 0),
     )
 
 
@@ -213,6 +258,19 @@ def _truth_line(t: Truth) -> str:
     about = f" ({t.about})" if t.about and t.kind == ESTIMATE else ""
     picked = ", the replay's truth" if t.picked else ""
     return f"{t.topic} [{t.type}]: {t.kind}{about}, {t.count} messages{picked}"
+
+
+def _spans(spans) -> str:
+    return ", ".join(f"{a:.2f}-{b:.2f} s" for a, b in spans) if spans else "never"
+
+
+def _vehicle_line(v: Vehicle | None) -> str:
+    if v is None:
+        return "none (no landed or armed state: rests are judged without it)"
+    return (
+        f"{v.source}: landed {_spans(v.landed_s)}; armed {_spans(v.armed_s)} ({v.rows} rows; "
+        "rest evidence: a window with the vehicle airborne is not rest)"
+    )
 
 
 def format_info(info: LogInfo) -> list[str]:
@@ -235,6 +293,7 @@ def format_info(info: LogInfo) -> list[str]:
     )
     lines.append(f"gaps       {gap_message(info.gaps) if info.gaps else 'none'}")
     lines.append(f"accel      {info.accel}")
+    lines.append(f"vehicle    {_vehicle_line(info.vehicle)}")
     if not info.truths:
         lines.append("truth      none")
     for k, t in enumerate(info.truths):
@@ -256,8 +315,9 @@ def info_main(argv: list[str], prog: str) -> int:
     p = OneLineArgumentParser(
         prog=f"{prog} info",
         description="Say what a log holds: every channel (type, count, rate, duration), the "
-        "gyro the replay would take, its gaps, the accelerometer, each truth candidate and "
-        "what it is, and the intervals the metadata declares. Reads only the gyro and truth "
+        "gyro the replay would take, its gaps, the accelerometer, the autopilot's landed and "
+        "armed state, each truth candidate and what it is, and the intervals the metadata "
+        "declares. Reads only the gyro and truth "
         "channels; the rest is counted from the container's index.",
     )
     p.add_argument("log", help="a log of any container the replay reads")

@@ -196,11 +196,12 @@ def add_replay_options(g) -> None:
 def _add_truth_convention(g) -> None:
     g.add_argument(
         "--truth-convention",
-        choices=("auto", "as-is", "conjugate", "w-first", "w-last"),
+        choices=("auto", "as-is", "conjugate", "w-first", "w-last", "ned"),
         default="auto",
         help="how the truth's quaternions are to be read: auto (as read, unless its body rates "
-        "fit the gyro clearly only in another convention; default), as-is, conjugate (world "
-        "to body), w-first ([w,x,y,z] read as [x,y,z,w]), w-last (the reverse)",
+        "fit the gyro clearly only in another convention, or the accelerometer's gravity says "
+        "its world is NED; default), as-is, conjugate (world to body), w-first ([w,x,y,z] read "
+        "as [x,y,z,w]), w-last (the reverse), ned (body to a NED world, not ENU)",
     )
 
 

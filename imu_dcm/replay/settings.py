@@ -12,7 +12,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from imu_dcm.errors import InputError
-from imu_dcm.gyro.rest import RestConfig
+from imu_dcm.gyro.rest_rule import RestConfig
 from imu_dcm.so3 import as_quat_xyzw
 
 __all__ = ["MOUNTING_MODES", "ReplaySettings", "check_mounting"]
@@ -51,7 +51,7 @@ class ReplaySettings:
         Added to the truth stamps, s; ``"auto"``: the shift that best aligns the truth's rate
         with the gyro's. The best shift is reported either way.
     rest_config : RestConfig or None
-        Rest thresholds (:mod:`imu_dcm.gyro.rest`).
+        Rest thresholds (:mod:`imu_dcm.gyro.rest_rule`).
     mounting : "auto", "none" or float64 (4,)
         The rotation ``q_t_g`` ``[x, y, z, w]`` from the gyro's frame into the truth's body
         frame (:mod:`imu_dcm.replay.mounting`). ``"auto"``: estimated, and applied when the

@@ -89,6 +89,7 @@ class ReplaySummary:
     rest_confirmed: bool = False
     no_rest: str = ""
     rest_conflict: str = ""
+    rest_agreement: dict | None = None
     rms_error_no_bias_deg: float | None = None
     truth_convention: dict | None = None
     gap_reanchors: tuple[dict, ...] = ()
@@ -396,6 +397,8 @@ def format_summary(s: ReplaySummary) -> str:
         )
     else:
         lines.append(f"bias       {s.bias_mode}: {bias}{_bias_axes(s)}")
+    if s.rest_agreement and s.rest_agreement["line"]:
+        lines.append("rests      " + s.rest_agreement["line"])
     pf = f", pre-filter {s.prefilter}" if s.prefilter else ""
     lines.append(f"method     {s.method}{pf}; estimate from t = {s.start_time_s:.3f} s")
     if s.score_window != "all":

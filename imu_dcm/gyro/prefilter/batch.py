@@ -31,7 +31,8 @@ from imu_dcm.gyro.prefilter.tuning import (
     estimate_noise_from_spectrum,
     fit_accel,
 )
-from imu_dcm.gyro.rest import RestConfig, detect_rest, longest_run, quietest_std
+from imu_dcm.gyro.rest import detect_rest, quietest_std
+from imu_dcm.gyro.rest_rule import RestConfig, longest_run
 
 
 def prefilter(

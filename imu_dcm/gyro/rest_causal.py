@@ -1,0 +1,226 @@
+"""Rest live: the rest rule of :mod:`imu_dcm.gyro.rest_rule` run causally, sample by sample or in
+batches, with the bias each sample gets as it arrives.
+
+Conventions: ``omega_b`` (N, 3) body rate in body axes, rad/s; ``t_s`` (N,) seconds, increasing.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numpy.typing import NDArray
+
+from imu_dcm.gyro.rest_evidence import Signals
+from imu_dcm.gyro.rest_rule import (
+    RestConfig,
+    RestSegment,
+    bias_span,
+    noise_floor_var,
+    runs,
+    still_windows,
+    touches,
+    window_conditions,
+    window_samples,
+)
+from imu_dcm.gyro.windows import min_steps, windowed_mean_var
+
+__all__ = ["CausalRestBias"]
+
+
+class CausalRestBias:
+    """The rest rule of :func:`imu_dcm.gyro.rest.rest_segments`, run causally as samples arrive
+    (live).
+
+    The same window test (:func:`~imu_dcm.gyro.rest_rule.window_conditions`) and trimming
+    (:func:`~imu_dcm.gyro.rest_rule.bias_span`), looking back only. A live gyro stream carries no
+    accelerometer or truth, so the gyro judges alone: the noise floor is the stillest window
+    seen so far (offline: of the whole log), and the mean rate stays under ``max_rate_rad_s``.
+    The window ending at the newest sample ``k`` is judged when ``k`` arrives. While a segment
+    ``[a, ...)`` lasts, the bias is the mean over ``[lo, k + 1 - m)`` (``lo`` from
+    :func:`~imu_dcm.gyro.rest_rule.bias_span`): one window behind the newest sample. When motion
+    starts, the last still window ends at ``b - 1``, and the segment's bias becomes
+    :func:`~imu_dcm.gyro.rest_rule.bias_span`'s for ``[a, b)`` (its first ``3 m`` samples are kept
+    for the middle half of a short rest), the value :func:`~imu_dcm.gyro.rest.rest_segments` gives
+    it
+    under the same floor. The bias applied to a sample is the estimate available when it
+    arrives. :meth:`update_many` applies the rule to a batch as arrays and returns, for each
+    sample, what :meth:`update` would have returned (to rounding). The window length comes from
+    the median of the first ``probe`` steps (offline: of the whole log).
+
+    Parameters
+    ----------
+    config : RestConfig, optional
+        The rest rule (default ``RestConfig()``).
+    probe : int
+        Steps used to fix the window length (median step).
+
+    Attributes
+    ----------
+    bias_rad_s : tuple of 3 floats — current estimate, body axes, rad/s (zeros before any rest).
+    segments : list of RestSegment — each finished segment (``lo``/``hi`` as in replay).
+    updates : int — how many times the estimate changed.
+    """
+
+    def __init__(self, config: RestConfig | None = None, probe: int = 64) -> None:
+        self.config = config or RestConfig()
+        self.probe = probe
+        self.bias_rad_s = (0.0, 0.0, 0.0)
+        self.segments: list[RestSegment] = []
+        self.updates = 0
+        self.at_rest = False
+        self.win = 0
+        self._floor_var = math.inf  # the stillest window so far (variance, largest axis)
+        self._min_steps = np.full(3, np.inf)  # the smallest step of each axis so far
+        self._probe_w: list[NDArray] = []  # samples before the window length is known
+        self._probe_t: list[NDArray] = []
+        self._tail_w = np.zeros((0, 3))  # the last win samples
+        self._tail_t = np.zeros(0)
+        self._k = -1  # index of the newest sample
+        self._seg_start = -1  # a, or -1 when not in a segment
+        self._seg_t0 = 0.0
+        self._seg_end = 0  # b - 1 of the open segment so far
+        self._seg_end_t = 0.0
+        self._head = np.zeros((0, 3))  # the open segment's first 3 win samples
+        self._lo = 0  # the segment's bias averages the samples [lo, acc_hi)
+        self._acc_hi = 0
+        self._acc = np.zeros(3)
+
+    def update(self, w: tuple[float, float, float], t_s: float) -> tuple[float, float, float]:
+        """Add one sample (rad/s, body axes; stamp s); return the bias to subtract from it."""
+        self.update_many(np.array([w], dtype=float), np.array([t_s], dtype=float))
+        return self.bias_rad_s
+
+    def update_many(self, omega_b: NDArray, t_s: NDArray) -> NDArray:
+        """Add samples in order; return the bias to subtract from each, as :meth:`update` would.
+
+        Parameters
+        ----------
+        omega_b : float64 (n, 3) — body rates, rad/s.
+        t_s : float64 (n,) — their stamps, s, increasing.
+
+        Returns
+        -------
+        float64 (n, 3) — row ``j``: the estimate available once sample ``j`` has arrived.
+        """
+        w = np.asarray(omega_b, dtype=float).reshape(-1, 3)
+        t = np.asarray(t_s, dtype=float).reshape(-1)
+        if self.win:
+            return self._steps(w, t)
+        # the window length needs the median of the first `probe` steps
+        self._probe_w.append(w)
+        self._probe_t.append(t)
+        seen = sum(len(x) for x in self._probe_t)
+        if seen < self.probe:
+            return np.tile(self.bias_rad_s, (len(w), 1))
+        pw, pt = np.concatenate(self._probe_w), np.concatenate(self._probe_t)
+        self._probe_w, self._probe_t = [], []
+        p = self.probe
+        self.win = window_samples(pt[:p], self.config.min_duration_s)
+        before = np.tile(self.bias_rad_s, (p - 1 - (seen - len(w)), 1))  # this call's, held
+        out = self._steps(pw, pt)
+        return np.concatenate([before, out[p - 1 :]])[-len(w) :]
+
+    def _still(self, X: NDArray, T: NDArray, rows: NDArray) -> NDArray:
+        """The rule for the windows starting at ``rows`` of ``X``, each judged against the floor
+        of the windows up to it (:func:`~imu_dcm.gyro.rest_rule.noise_floor_var`, causal)."""
+        m = self.win
+        mean, var = windowed_mean_var(X, m)
+        mean, var = mean[rows], var[rows]
+        self._min_steps = np.minimum(self._min_steps, min_steps(X))
+        floor = noise_floor_var(var, self._min_steps, self._floor_var, causal=True)
+        if len(floor):
+            self._floor_var = float(floor[-1])
+        conds = window_conditions(mean, var, floor, T, m, self.config, Signals())[0]
+        return still_windows(conds)
+
+    def _steps(self, w: NDArray, t: NDArray) -> NDArray:
+        """The rule over a batch: windows ending at each sample, then the segments' runs."""
+        n, m = len(w), self.win
+        X = np.concatenate([self._tail_w, w])
+        T = np.concatenate([self._tail_t, t])
+        base = self._k + 1 - len(self._tail_w)  # index of X[0]
+        k0 = self._k + 1  # index of w[0]
+        still = np.zeros(n, dtype=bool)
+        first_full = max(0, m - 1 - k0)  # the first sample whose window is full
+        if first_full < n:
+            rows = np.arange(first_full, n) + (k0 - base) - m + 1  # window ending at sample j
+            still[first_full:] = self._still(X, T, rows)
+        out = np.full((n, 3), np.nan)
+        before = self.bias_rad_s
+        for p, q in runs(still):
+            if self._seg_start >= 0 and not touches(self._seg_end + 1, k0 + p - m + 1):
+                self._close_segment(out, k0)  # motion of a window or more since its end
+            self._run(X, T, base, k0, p, q, out)
+        self.at_rest = bool(n and still[-1])
+        if self._seg_start >= 0 and k0 + n - 1 >= self._seg_end + m:
+            self._close_segment(out, k0)  # no window that can still come touches it
+        # each sample keeps the newest estimate at its arrival (forward fill)
+        have = ~np.isnan(out[:, 0])
+        if have.any():
+            last = np.maximum.accumulate(np.where(have, np.arange(n), -1))
+            filled = np.where((last >= 0)[:, None], out[np.maximum(last, 0)], before)
+        else:
+            filled = np.tile(before, (n, 1))
+        self._k += n
+        self._tail_w, self._tail_t = X[-m:], T[-m:]
+        return filled
+
+    def _run(self, X, T, base: int, k0: int, p: int, q: int, out: NDArray) -> None:
+        """Still samples ``p..q-1`` of the batch: open (or go on with) the segment and write the
+        bias after each sample into ``out`` (NaN while the segment has no sample yet)."""
+        m = self.win
+        if self._seg_start < 0:
+            a = k0 + p - m + 1  # a segment starts with the first sample of its first still window
+            self._seg_start, self._seg_t0 = a, float(T[a - base])
+            self._lo = a if a == 0 else a + m
+            self._acc_hi, self._acc = self._lo, np.zeros(3)
+            self._head = X[a - base : a - base + 3 * m].copy()
+        elif len(self._head) < 3 * m:
+            have = self._seg_start + len(self._head) - base
+            self._head = np.concatenate([self._head, X[have : have + 3 * m - len(self._head)]])
+        hi = k0 + np.arange(p, q) + 1 - m  # sample k's estimate: the mean over [lo, k + 1 - m)
+        grow = hi > self._acc_hi  # a suffix of the run: hi grows by one per sample
+        if self._acc_hi > self._lo:  # samples whose window adds nothing keep the estimate
+            keep = np.flatnonzero(~grow) + p
+            out[keep] = self._acc / (self._acc_hi - self._lo)
+            self.updates += len(keep)
+        if grow.any():
+            start = self._acc_hi - base
+            partial = np.cumsum(X[start : hi[-1] - base], axis=0)
+            sums = self._acc + partial[hi[grow] - base - start - 1]
+            out[np.flatnonzero(grow) + p] = sums / (hi[grow] - self._lo)[:, None]
+            self._acc, self._acc_hi = sums[-1], int(hi[-1])
+            self.updates += len(sums)
+        if not np.isnan(out[q - 1, 0]):
+            self.bias_rad_s = tuple(out[q - 1].tolist())
+        self._seg_end = k0 + q - 1
+        self._seg_end_t = float(T[k0 + q - 1 - base])
+
+    def _close_segment(self, out: NDArray | None = None, k0: int = 0, at_end: bool = False) -> None:
+        """End the open segment ``[a, b)``; its final bias holds from sample ``b - 1 + m`` (row
+        of ``out`` for a batch starting at sample ``k0``). ``at_end``: the stream ended in it."""
+        a, b, m = self._seg_start, self._seg_end + 1, self.win
+        lo, hi = bias_span(a, b, b + (0 if at_end else 1), m)
+        if at_end and hi > self._acc_hi:  # the last window's samples: the tail
+            self._acc = self._acc + self._tail_w[len(self._tail_w) - (hi - self._acc_hi) :].sum(0)
+            self._acc_hi = hi
+        if lo != self._lo or hi != self._acc_hi:  # a short rest: its middle half
+            self.bias_rad_s = tuple(self._head[lo - a : hi - a].mean(axis=0).tolist())
+        elif hi > lo:
+            self.bias_rad_s = tuple((self._acc / (hi - lo)).tolist())
+        self.segments.append(
+            RestSegment(
+                a, b, self._seg_t0, self._seg_end_t, self.bias_rad_s, lo, hi, ("gyro floor",)
+            )
+        )
+        self._seg_start = -1
+        j = b - 1 + m - k0
+        if out is not None and 0 <= j < len(out):
+            out[j] = self.bias_rad_s
+
+    def finish(self) -> None:
+        """Close an open segment (at stop): the stream ended in it."""
+        if self._seg_start >= 0:
+            self._close_segment(at_end=True)
+            self.at_rest = False
