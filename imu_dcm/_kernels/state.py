@@ -2,10 +2,10 @@
 
 What carries across samples (the attitude, the last four rates and their stamps, the sample
 count, the method) lives in one small array that the compiled kernel updates in place
-(:mod:`imu_dcm.kernel`). Its fields are defined once, by the ``_STATE.field`` calls below; each
-offset is a plain int, which the compiler folds in as a constant, so named fields cost nothing
-per sample. No numba here: the loader, the streaming integrator and the compiled code all read
-the same layout.
+(:mod:`imu_dcm._kernels.calls`). Its fields are defined once, by the ``_STATE.field`` calls
+below; each offset is a plain int, which the compiler folds in as a constant, so named fields
+cost nothing per sample. No numba here: the checked calls, the streaming integrator and the
+compiled code all read the same layout.
 """
 
 from __future__ import annotations
@@ -13,6 +13,30 @@ from __future__ import annotations
 import numpy as np
 
 from imu_dcm.methods import Method
+
+__all__ = [
+    "CLOSED",
+    "IS_CLOSED",
+    "MAGNUS4",
+    "MAYBE_GAP",
+    "METHOD",
+    "N",
+    "NOT_FINITE",
+    "NOT_INCREASING",
+    "OK",
+    "PHI_SUM",
+    "Q",
+    "Q0",
+    "ROWS",
+    "STATE_FIELDS",
+    "STATE_SIZE",
+    "T",
+    "W",
+    "feed_entry",
+    "new_state",
+    "push_entry",
+    "state_fields",
+]
 
 
 class _Layout:
