@@ -14,30 +14,6 @@ import numpy as np
 
 from imu_dcm.methods import Method
 
-__all__ = [
-    "CLOSED",
-    "IS_CLOSED",
-    "MAGNUS4",
-    "MAYBE_GAP",
-    "METHOD",
-    "N",
-    "NOT_FINITE",
-    "NOT_INCREASING",
-    "OK",
-    "PHI_SUM",
-    "Q",
-    "Q0",
-    "ROWS",
-    "STATE_FIELDS",
-    "STATE_SIZE",
-    "T",
-    "W",
-    "feed_entry",
-    "new_state",
-    "push_entry",
-    "state_fields",
-]
-
 
 class _Layout:
     """Named fields of the flat float64 state array, laid out in the order they are defined:
