@@ -1,10 +1,10 @@
-"""Install step: build the integrator kernel ahead of time (``imu_dcm/kernel_build.py``).
+"""Install step: build the compiled kernels ahead of time (``imu_dcm/_kernels/build.py``).
 
-Everything else about the package is in ``pyproject.toml``. The kernel is one extension module
-compiled from ``imu_dcm/kernel_jit.py`` by numba's ahead-of-time compiler; an install (or
+Everything else about the package is in ``pyproject.toml``. The kernels are one extension module
+compiled from ``imu_dcm/_kernels/`` by numba's ahead-of-time compiler; an install (or
 ``pip install -e .``, which builds it into the package folder) then runs without compiling.
 When the build fails (no C compiler, say) the install goes on and says why: the kernel is then
-compiled by numba on first use, as ``imu_dcm.kernel`` explains.
+compiled by numba on first use, as ``imu_dcm._kernels.loader`` explains.
 """
 
 import sys
@@ -17,14 +17,14 @@ ROOT = Path(__file__).resolve().parent
 
 
 class BuildKernel(build_ext):
-    """Builds ``imu_dcm._kernel_aot`` with :func:`imu_dcm.kernel_build.build` (no C sources)."""
+    """Builds ``imu_dcm._kernels._aot`` with :func:`imu_dcm._kernels.build.build` (no C sources)."""
 
     def run(self) -> None:
         for ext in self.extensions:
             out_dir = Path(self.get_ext_fullpath(ext.name)).parent  # in place for -e
             sys.path.insert(0, str(ROOT))
             try:
-                from imu_dcm.kernel_build import build
+                from imu_dcm._kernels.build import build
 
                 print(f"imu_dcm: building the integrator kernel ahead of time into {out_dir}")
                 build(out_dir)
@@ -46,6 +46,6 @@ class BuildKernel(build_ext):
 
 
 setup(
-    ext_modules=[Extension("imu_dcm._kernel_aot", sources=[])],
+    ext_modules=[Extension("imu_dcm._kernels._aot", sources=[])],
     cmdclass={"build_ext": BuildKernel},
 )

@@ -261,7 +261,8 @@ def lookahead() -> None:
 
 REPO = Path(__file__).resolve().parents[1]
 SHIPPED_TRIAL = REPO / "replay" / "broad_07_undisturbed_fast_rotation_B"
-#: What the kernel's compile notice says (imu_dcm.kernel), to count it in a first run's stderr.
+#: What the kernel's compile notice says (imu_dcm._kernels.jit), to count it in a first run's
+#: stderr.
 COMPILE_NOTICE = "compiling the integrator kernel once"
 DECODE_LOOP = "mcap + mcap_ros2 decode loop over the shipped trial"
 
@@ -386,7 +387,7 @@ def first_run(runs: int) -> dict[str, float]:
     ``IMU_DCM_KERNEL=jit`` (numba compiles it in the first run, loads it in the second). Median
     CPU seconds over ``runs`` fresh caches, and how many times the compile notice was printed in
     each run (-1: not the same in every run). Plus the build itself (``python -m
-    imu_dcm.kernel_build`` into a temporary folder, its C compiler included): what an install
+    imu_dcm._kernels.build`` into a temporary folder, its C compiler included): what an install
     spends once."""
     replay = startup_cases()["replay shipped trial, warm cache"]
     out: dict[str, float] = {}
@@ -407,7 +408,7 @@ def first_run(runs: int) -> dict[str, float]:
                 said[0] if min(said) == max(said) else -1
             )
     with tempfile.TemporaryDirectory() as build_dir:
-        build = [sys.executable, "-m", "imu_dcm.kernel_build", "--out", build_dir]
+        build = [sys.executable, "-m", "imu_dcm._kernels.build", "--out", build_dir]
         out["kernel build at install (CPU s)"] = _run_s(build)[1]
     return out
 

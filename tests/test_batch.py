@@ -345,8 +345,8 @@ def test_preload_imports_what_each_worker_would_import_on_its_first_log():
         "from imu_dcm.replay import batch\n"
         "assert 'imu_dcm.replay.core' not in sys.modules\n"
         "batch.preload()\n"
-        "from imu_dcm import kernel\n"
-        "assert 'imu_dcm.replay.core' in sys.modules and kernel._AOT, sorted(sys.modules)\n"
+        "from imu_dcm._kernels import loader\n"
+        "assert 'imu_dcm.replay.core' in sys.modules and loader._AOT, sorted(sys.modules)\n"
     )
     env = {**os.environ, "PYTHONPATH": str(REPO_ROOT)}
     done = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True)

@@ -20,7 +20,9 @@ import numpy as np
 import pytest
 from conftest import assert_quiet, own_stderr
 
-from imu_dcm import DcmIntegrator, GapWarning, ImuDcmWarning, kernel, kernel_jit
+from imu_dcm import DcmIntegrator, GapWarning, ImuDcmWarning
+from imu_dcm import _kernels as kernel
+from imu_dcm._kernels import entries, loader
 from imu_dcm.errors import InputError
 from imu_dcm.integrator.batch import (
     DELTA_METHODS,
@@ -257,8 +259,8 @@ def _aot_or_skip():
     """The module built ahead of time, or a skip (a failure when the environment requires
     it: CI does, after its install built it)."""
     if kernel.backend() == "ahead-of-time":
-        return kernel._aot()
-    reason = f"no up-to-date kernel built ahead of time{kernel._AOT[1]}"
+        return loader._aot()
+    reason = f"no up-to-date kernel built ahead of time{loader._AOT[1]}"
     if os.environ.get("IMU_DCM_REQUIRE_AOT") == "1":
         pytest.fail(reason)
     pytest.skip(reason)
@@ -274,7 +276,7 @@ def test_built_kernel_equals_numba_compile_bit_for_bit(method, emit_phi):
     outs, states = [], []
     for fn in (
         getattr(aot, kernel.feed_entry(method, emit_phi)),
-        kernel_jit.compiled(kernel.feed_entry(method, emit_phi)),
+        entries.compiled(kernel.feed_entry(method, emit_phi)),
     ):
         state = kernel.new_state(np.array([0.0, 0.6, 0.0, 0.8]), method)
         out = np.zeros((len(t) + 1, 4))
@@ -293,7 +295,7 @@ def test_built_push_close_check_and_delta_equal_numba_compile():
         runs = []
         for push, close in (
             (getattr(aot, kernel.push_entry(method)), aot.close_magnus4),
-            (kernel_jit.compiled(kernel.push_entry(method)), kernel_jit.compiled("close_magnus4")),
+            (entries.compiled(kernel.push_entry(method)), entries.compiled("close_magnus4")),
         ):
             state = kernel.new_state(np.array([0.0, 0.0, 0.0, 1.0]), method)
             codes = [push(state, w[k], float(t[k])) for k in range(len(t))]
@@ -306,12 +308,12 @@ def test_built_push_close_check_and_delta_equal_numba_compile():
         assert np.array_equal(runs[0][1], runs[1][1])
     bad = w.copy()
     bad[7, 1] = np.nan
-    assert aot.check_record(bad, t, -math.inf) == kernel_jit.compiled("check_record")(
+    assert aot.check_record(bad, t, -math.inf) == entries.compiled("check_record")(
         bad, t, -math.inf
     )
     for method in DeltaMethod:
         outs = []
-        for fn in (aot.feed_delta, kernel_jit.compiled("feed_delta")):
+        for fn in (aot.feed_delta, entries.compiled("feed_delta")):
             out = np.zeros((49, 4))
             fn(np.array([0.0, 0.0, 0.0, 1.0]), 1e-3 * w[:48], np.diff(t)[:48], int(method), out)
             outs.append(out)
@@ -320,20 +322,28 @@ def test_built_push_close_check_and_delta_equal_numba_compile():
 
 def test_numba_compiles_each_entry_point_for_one_signature():
     for name in ("check_record", kernel.feed_entry(kernel.MAGNUS4, False)):
-        assert len(kernel_jit.compiled(name).signatures) == 1
+        assert len(entries.compiled(name).signatures) == 1
 
 
 def test_an_out_of_date_built_kernel_is_not_used(monkeypatch):
     # A module built from other sources than these (an edited kernel) is left alone: numba
     # compiles instead, and the compile line says why.
-    monkeypatch.setattr(kernel, "_AOT", [])
-    monkeypatch.setattr(kernel, "digest_entry", lambda: "source_no_such_build")
+    monkeypatch.setattr(loader, "_AOT", [])
+    monkeypatch.setattr(loader, "digest_entry", lambda: "source_no_such_build")
     assert kernel.backend() == "jit"
-    if "out of date" not in kernel._AOT[1]:
-        assert "no kernel built ahead of time" in kernel._AOT[1]
-    monkeypatch.setattr(kernel, "_AOT", [])
-    monkeypatch.setenv(kernel.ENV, "jit")
-    assert kernel.backend() == "jit" and "IMU_DCM_KERNEL=jit" in kernel._AOT[1]
+    if "out of date" not in loader._AOT[1]:
+        assert "no kernel built ahead of time" in loader._AOT[1]
+    monkeypatch.setattr(loader, "_AOT", [])
+    monkeypatch.setenv(loader.ENV, "jit")
+    assert kernel.backend() == "jit" and "IMU_DCM_KERNEL=jit" in loader._AOT[1]
+
+
+def test_the_digest_covers_every_file_the_entry_points_are_compiled_from():
+    # A kernel file the digest left out could be edited without the built module going stale.
+    modules = {fn.__module__ for fn, _ in entries.ENTRIES.values()}
+    files = {Path(sys.modules[m].__file__).name for m in modules}
+    assert files == {"integrator.py", "ulog_scan.py", "csv_scan.py"}
+    assert files | {"state.py", "entries.py", "jit.py"} == set(loader.KERNEL_SOURCES)
 
 
 def _kernel_env(cache: Path, **extra: str) -> dict[str, str]:
@@ -341,7 +351,7 @@ def _kernel_env(cache: Path, **extra: str) -> dict[str, str]:
         **os.environ,
         "NUMBA_CACHE_DIR": str(cache),
         "PYTHONPATH": os.pathsep.join(
-            [str(Path(kernel.__file__).parents[1]), os.environ.get("PYTHONPATH", "")]
+            [str(Path(loader.__file__).parents[2]), os.environ.get("PYTHONPATH", "")]
         ),
         **extra,
     }
@@ -370,8 +380,12 @@ def test_compile_notice_once_on_a_cache_miss_and_never_from_the_cache(tmp_path):
     # Compiling with numba (forced here): an empty cache compiles, and says so once on stderr
     # before it does. The same cache again: it loads, silently.
     env = _kernel_env(tmp_path / "cache", IMU_DCM_KERNEL="jit")
-    runs = [_run(_RUN_BOTH, env) for _ in range(2)]
+    code = _RUN_BOTH + "; print('numba.pycc' in sys.modules)"
+    runs = [_run(code, env) for _ in range(2)]
     assert [r.returncode for r in runs] == [0, 0], runs[0].stderr + runs[1].stderr
+    # numba runs the kernel, and its ahead-of-time builder (pending deprecation, it warns on
+    # import) is never loaded: only a build imports it
+    assert [r.stdout.split() for r in runs] == [["True", "False"]] * 2
     notice = "compiling the integrator kernel once, about"
     assert runs[0].stderr.count(notice) == 1, runs[0].stderr
     assert "later runs load it from the cache (IMU_DCM_KERNEL=jit)" in runs[0].stderr
@@ -394,7 +408,7 @@ def test_no_writable_cache_folder_warns_once_and_still_imports(tmp_path):
     blocker = tmp_path / "file"
     blocker.write_text("")
     env = _kernel_env(blocker / "cache", NUMBA_CACHE_LOCATOR_CLASSES="UserProvidedCacheLocator")
-    code = "import warnings; warnings.simplefilter('always'); import imu_dcm.kernel_jit"
+    code = "import warnings; warnings.simplefilter('always'); import imu_dcm._kernels.entries"
     res = _run(code, env)
     assert res.returncode == 0, res.stderr
     assert res.stderr.count("NUMBA_CACHE_DIR") == 1 and "ImuDcmWarning" in res.stderr  # once
@@ -426,7 +440,7 @@ def test_record_chain_walks_ulog_framing_and_stops_at_an_incomplete_record():
     b = np.frombuffer(bytes(buf), np.uint8)  # read-only, as the reader passes it
     at, typ, stop = kernel.record_chain(b, 0)
     assert at.tolist() == [0, 5, 8] and typ.tolist() == [65, 66, 68] and stop == end
-    jit = kernel_jit.compiled("record_chain")(np.array(b), 0)
+    jit = entries.compiled("record_chain")(np.array(b), 0)
     assert [a.tolist() for a in jit[:2]] == [at.tolist(), typ.tolist()] and jit[2] == stop
     with pytest.raises(TypeError, match="uint8"):
         kernel.record_chain(b.astype(np.int16), 0)
@@ -438,9 +452,11 @@ def test_a_failed_build_is_one_line_and_leaves_no_module(tmp_path):
     blocker = tmp_path / "file"
     blocker.write_text("")
     out = str(blocker / "x")
-    code = f"import sys; from imu_dcm.kernel_build import main; sys.exit(main(['--out', {out!r}]))"
+    code = (
+        f"import sys; from imu_dcm._kernels.build import main; sys.exit(main(['--out', {out!r}]))"
+    )
     res = _run(code, _kernel_env(tmp_path / "cache"))
     assert res.returncode == 1, res.stderr
     lines = own_stderr(res.stderr).strip().splitlines()
     assert len(lines) == 1 and lines[0].startswith("imu_dcm: the kernel was not built:"), lines
-    assert "Traceback" not in res.stderr and not list(tmp_path.rglob("*_kernel_aot*"))
+    assert "Traceback" not in res.stderr and not list(tmp_path.rglob("*_aot*"))

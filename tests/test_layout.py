@@ -59,10 +59,6 @@ LAYERS = (
     (
         "integrator",
         (
-            "imu_dcm.kernel",
-            "imu_dcm.kernel_state",
-            "imu_dcm.kernel_jit",
-            "imu_dcm.kernel_build",
             "imu_dcm._kernels",
             "imu_dcm.integrator",
         ),

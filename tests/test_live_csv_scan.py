@@ -1,4 +1,4 @@
-"""The compiled CSV line scan (:func:`imu_dcm.kernel.csv_scan`) and the bulk parse on it
+"""The compiled CSV line scan (:func:`imu_dcm._kernels.scan_csv`) and the bulk parse on it
 (:func:`imu_dcm.live.lines.parse_csv_blob`) against independent oracles: Python's ``Decimal``
 for the exact stamps, Python's ``float`` for the rates; any line not of the plain form sends
 the batch to the line-by-line parser."""
@@ -10,7 +10,7 @@ from decimal import Decimal
 import numpy as np
 import pytest
 
-from imu_dcm.kernel import csv_scan
+from imu_dcm._kernels import scan_csv
 from imu_dcm.live.lines import TIME_UNITS, parse_csv_blob, parse_lines
 
 
@@ -41,7 +41,7 @@ def test_stamps_exact_and_rates_as_float(unit):
 
 
 def test_blank_lines_spaces_and_crlf():
-    t, text, rows = csv_scan(b"1.5,1,2,3\r\n\n  \n 2.25 ,4,5,6\n", TIME_UNITS["s"], 9)
+    t, text, rows = scan_csv(b"1.5,1,2,3\r\n\n  \n 2.25 ,4,5,6\n", TIME_UNITS["s"], 9)
     assert rows == 2 and t.tolist() == [1_500_000_000, 2_250_000_000]
     t_ns, w, bad = parse_csv_blob(b"1.5,1,2,3\r\n\n 2.25 ,4,5,6\n")
     assert t_ns.tolist() == [1_500_000_000, 2_250_000_000] and bad == 0
@@ -63,12 +63,12 @@ def test_blank_lines_spaces_and_crlf():
 )
 def test_a_line_not_plain_sends_the_batch_line_by_line(line):
     blob = b"1,0,0,0\n" + line + b"\n2,0,0,0"
-    assert csv_scan(blob, TIME_UNITS["s"], 9)[2] < 0
+    assert scan_csv(blob, TIME_UNITS["s"], 9)[2] < 0
     assert parse_csv_blob(blob) is None
 
 
 def test_the_largest_stamp_and_a_rate_that_is_no_number():
-    assert csv_scan(b"9223372036.854775807,0,0,0", TIME_UNITS["s"], 9)[0].tolist() == [2**63 - 1]
+    assert scan_csv(b"9223372036.854775807,0,0,0", TIME_UNITS["s"], 9)[0].tolist() == [2**63 - 1]
     assert parse_csv_blob(b"1,0,0,0\n2,0,x,0") is None  # the line-by-line parser counts it
     t, _, _, _, bad = parse_lines([b"1,0,0,0", b"2,0,x,0"])
     assert t.tolist() == [1_000_000_000] and bad == 1
@@ -84,10 +84,10 @@ def test_non_finite_rates_are_rows_the_pipeline_judges():
 
 
 def test_built_scan_equals_numba_compile():
-    from imu_dcm import kernel_jit
+    from imu_dcm._kernels import entries
 
     blob = b"1700000026.5055,0.25,-1e-3,7\n\n12,1,2,3\n"
-    t, text, rows = csv_scan(blob, TIME_UNITS["s"], 9)
-    jit = kernel_jit.compiled("csv_scan")(np.frombuffer(blob, np.uint8).copy(), 10**9, 9)
+    t, text, rows = scan_csv(blob, TIME_UNITS["s"], 9)
+    jit = entries.compiled("csv_scan")(np.frombuffer(blob, np.uint8).copy(), 10**9, 9)
     assert jit[0].tolist() == t.tolist() == [1700000026505500000, 12_000_000_000]
     assert jit[1].tobytes() == text == b"0.25,-1e-3,7,1,2,3," and jit[2] == rows == 2

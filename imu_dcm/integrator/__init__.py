@@ -7,6 +7,6 @@
 - :mod:`~imu_dcm.integrator.reference`: the plain textbook loops the benchmarks compare against;
 - :mod:`~imu_dcm.integrator.peers`: other libraries' integrators behind one signature.
 
-The compiled loop they share is in :mod:`imu_dcm.kernel`. ``imu_dcm.integrate`` and the other
+The compiled loop they share is in :mod:`imu_dcm._kernels`. ``imu_dcm.integrate`` and the other
 names of the top-level package load from here on first use.
 """

@@ -27,7 +27,7 @@ one-sided cubic; with 2 or 3 samples the polynomial degree drops to 1 or 2.
 
 The exponential is exact: ``exp(φ) = [φ sin(θ/2)/θ, cos(θ/2)]``, ``θ = |φ|``, by four terms of
 its Taylor series below 0.05 rad and by ``sin``/``cos`` above. The recursion itself runs in the
-compiled kernel :mod:`imu_dcm.kernel`, shared with the streaming integrator; numba and scipy are
+compiled kernel :mod:`imu_dcm._kernels`, shared with the streaming integrator; numba and scipy are
 imported on the first call, so importing this module is cheap.
 """
 
@@ -109,7 +109,7 @@ def check_samples(
 
     Notes
     -----
-    The checks run in one compiled pass (:func:`imu_dcm.kernel.check_record`): importing numba
+    The checks run in one compiled pass (:func:`imu_dcm._kernels.check_record`): importing numba
     on the first call.
 
     Warns
@@ -131,7 +131,7 @@ def check_samples(
         )
     if len(t) < 2 or len(v) < 1:
         raise InputError(f"Expected at least 2 stamps, got {len(t)}")
-    from imu_dcm import kernel
+    from imu_dcm import _kernels as kernel
 
     v = np.ascontiguousarray(v)
     t = np.ascontiguousarray(t)
@@ -218,7 +218,7 @@ def _rate_run(
 ) -> NDArray:
     """Feed a checked record through the kernel and close it: ``N`` rows (``q0`` first), or
     the ``N - 1`` increments when ``emit_phi``."""
-    from imu_dcm import kernel
+    from imu_dcm import _kernels as kernel
 
     state = kernel.new_state(q_first, int(Method[method.upper()]))
     out = np.empty((len(t), 4))
@@ -363,7 +363,7 @@ def integrate_delta(
                 ImuDcmWarning,
                 stacklevel=2,
             )
-    from imu_dcm import kernel
+    from imu_dcm import _kernels as kernel
 
     out = np.empty((len(dtheta) // m + 1, 4))
     q_first = np.ascontiguousarray(as_quat_xyzw(q0), dtype=np.float64)

@@ -3,7 +3,7 @@
 
 A method's name is its member's name in lower case (``Method.MAGNUS4`` is ``"magnus4"``) and its
 code is the member's value, which the compiled kernel branches on. Adding a method is one member
-here and one branch in :func:`imu_dcm.kernel.increment`.
+here and one branch in :func:`imu_dcm._kernels.integrator.increment`.
 """
 
 from __future__ import annotations

@@ -2,7 +2,7 @@
 
 :class:`DcmIntegrator` holds only what carries across samples — the attitude, the last four rate
 samples and their stamps, the sample count — in one small array that the compiled kernel
-(:mod:`imu_dcm.kernel`) updates in place. The batch :func:`imu_dcm.integrate` runs the very same
+(:mod:`imu_dcm._kernels`) updates in place. The batch :func:`imu_dcm.integrate` runs the very same
 kernel over the whole record, so the two do the same arithmetic. Conventions are the batch
 ones: ``q_w_b`` Hamilton ``[x, y, z, w]`` body to world, ``omega_b`` rad/s in body axes,
 increments on the right, ``t_s`` seconds.
@@ -35,7 +35,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from imu_dcm import kernel
+from imu_dcm import _kernels as kernel
 from imu_dcm.errors import GapWarning, InputError
 from imu_dcm.integrator.batch import (
     as_float_array,
@@ -130,7 +130,7 @@ class DcmIntegrator:
         return Rotation.from_quat(self._q)
 
     def state(self) -> dict[str, NDArray[np.float64]]:
-        """A copy of the kernel state, field by field (:data:`imu_dcm.kernel.STATE_FIELDS`:
+        """A copy of the kernel state, field by field (:data:`imu_dcm._kernels.STATE_FIELDS`:
         the attitude, the last four rates and stamps, the sample count, ...)."""
         return kernel.state_fields(self._state.copy())
 

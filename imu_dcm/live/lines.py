@@ -24,7 +24,7 @@ from decimal import Decimal, DecimalException
 import numpy as np
 from numpy.typing import NDArray
 
-from imu_dcm.kernel import csv_scan
+from imu_dcm._kernels import scan_csv
 
 __all__ = ["TIME_UNITS", "parse_csv_blob", "parse_lines", "time_unit_hint"]
 
@@ -177,7 +177,7 @@ def parse_csv_blob(
     when a line is not of that form (then :func:`parse_lines` judges the lines one by one).
 
     The stamps are read exactly and the line structure checked by one compiled scan
-    (:func:`imu_dcm.kernel.csv_scan`); the rates by one float parse of them all, correctly
+    (:func:`imu_dcm._kernels.scan_csv`); the rates by one float parse of them all, correctly
     rounded as Python's ``float``."""
     return _parse_csv_bulk(blob, DEG if gyro_units == "deg/s" else 1.0, TIME_UNITS[time_units])
 
@@ -186,7 +186,7 @@ def _parse_csv_bulk(blob: bytes, gyro_scale: float, t_scale: int):
     """:func:`parse_csv_blob` scaling the rates by ``gyro_scale``: ``(t_ns, omega, malformed)``
     or None."""
     digits = len(str(t_scale)) - 1  # decimals a stamp may carry: 9 for s, 0 for ns
-    t_ns, text, rows = csv_scan(blob, t_scale, digits)
+    t_ns, text, rows = scan_csv(blob, t_scale, digits)
     if rows < 0:
         return None
     try:

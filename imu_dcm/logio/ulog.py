@@ -49,7 +49,7 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import NDArray
 
-from imu_dcm import kernel
+from imu_dcm import _kernels as kernel
 from imu_dcm.errors import LogError
 from imu_dcm.logio.damage import warn_damage
 from imu_dcm.logio.ned import FLU_FROM_FRD, q_enu_flu

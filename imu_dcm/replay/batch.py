@@ -154,7 +154,7 @@ def preload() -> None:
     small logs costs more than the logs)."""
     import importlib
 
-    from imu_dcm.kernel import backend
+    from imu_dcm._kernels import backend
     from imu_dcm.replay import core  # noqa: F401
 
     backend()

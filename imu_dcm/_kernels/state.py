@@ -2,10 +2,10 @@
 
 What carries across samples (the attitude, the last four rates and their stamps, the sample
 count, the method) lives in one small array that the compiled kernel updates in place
-(:mod:`imu_dcm.kernel`). Its fields are defined once, by the ``_STATE.field`` calls below; each
-offset is a plain int, which the compiler folds in as a constant, so named fields cost nothing
-per sample. No numba here: the loader, the streaming integrator and the compiled code all read
-the same layout.
+(:mod:`imu_dcm._kernels.calls`). Its fields are defined once, by the ``_STATE.field`` calls
+below; each offset is a plain int, which the compiler folds in as a constant, so named fields
+cost nothing per sample. No numba here: the checked calls, the streaming integrator and the
+compiled code all read the same layout.
 """
 
 from __future__ import annotations

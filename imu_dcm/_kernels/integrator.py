@@ -1,45 +1,34 @@
-"""The integrator kernel's compiled code, written for numba: the DCM recursion
-``q_{i+1} = q_i ⊗ exp(φ_i)`` as one loop, and the entry points (:data:`ENTRIES`) that
-:mod:`imu_dcm.kernel` loads.
+"""The integrator kernel, written for numba: the DCM recursion ``q_{i+1} = q_i ⊗ exp(φ_i)`` as
+one loop, the per-sample push, the end step, the input check and the delta-angle rules, and
+their entry points (:data:`ENTRIES`).
 
-This module is imported only to compile: by :mod:`imu_dcm.kernel_build` (ahead of time, at
-install) and by :mod:`imu_dcm.kernel` when no up-to-date module built ahead of time is present
-(then each entry point is compiled by numba on first use, or loaded from numba's cache). Both
-compile these same functions, so the two give the same bits.
+This module is imported only to compile: by :mod:`imu_dcm._kernels.build` (ahead of time, at
+install) and by :mod:`imu_dcm._kernels.loader` when no up-to-date module built ahead of time is
+present (then each entry point is compiled by numba on first use, or loaded from numba's cache:
+:mod:`imu_dcm._kernels.jit`). Both compile these same functions, so the two give the same bits.
 
 Conventions: quaternions Hamilton ``[x, y, z, w]``, ``q_w_b`` body to world; rates ``ω`` rad/s
 in body axes; stamps ``t`` s; increments multiply on the right. The formulas (increments, the
 exponential, the product) are written out here, inline, on purpose: :mod:`imu_dcm.so3` holds the
 vectorised versions of the same maths. The state array's fields are
-:mod:`imu_dcm.kernel_state`'s.
+:mod:`imu_dcm._kernels.state`'s.
 
 Every sample goes through :func:`_push` (or the loop of :func:`_feed_for`, the same over an
 array), which keeps what carries across samples in the state array and commits each step as soon
 as its stencil is complete. Batch is "feed every sample, then close"; streaming feeds them as
 they come, so the two are the same arithmetic.
 
-Compiling (numba): each entry point has one signature (float64 C-contiguous arrays, int64
-codes: :mod:`imu_dcm.kernel` and its callers convert at the Python boundary). The small helpers
-are inlined into them or compiled once each. Compiled code is cached next to this file
-(``__pycache__``) or, when that folder is read-only, in numba's user cache folder
-(``NUMBA_CACHE_DIR`` overrides both); a cache miss says so once per process on stderr before it
-compiles. When no folder is writable the kernel is compiled in every process and
-:class:`imu_dcm.errors.ImuDcmWarning` says so once.
+Each entry point has one signature (float64 C-contiguous arrays, int64 codes:
+:mod:`imu_dcm._kernels.calls` converts and checks at the Python boundary). The small helpers are
+inlined into them or compiled once each.
 """
 
 from __future__ import annotations
 
 import math
-import sys
-import warnings
 
-import numba
-import numpy as np
-from numba.core import event as numba_event
-
-from imu_dcm.errors import ImuDcmWarning
-from imu_dcm.integrator.methods import GAP_FACTOR, DeltaMethod, Method
-from imu_dcm.kernel_state import (
+from imu_dcm._kernels.jit import inline, njit
+from imu_dcm._kernels.state import (
     CLOSED,
     IS_CLOSED,
     MAGNUS4,
@@ -57,88 +46,19 @@ from imu_dcm.kernel_state import (
     feed_entry,
     push_entry,
 )
+from imu_dcm.integrator.methods import GAP_FACTOR, DeltaMethod, Method
 from imu_dcm.so3 import COS_HALF_SERIES, SERIES_THETA2, SINC_HALF_SERIES
 
-# numba's cache is keyed on this file alone: after changing a constant it compiles in (the
-# series, the Method codes, the state layout), touch this file. (The tests compare the compiled
-# exponential with so3's and the streaming gap warning with find_gaps, so a stale cache does not
-# go unnoticed; the module built ahead of time is keyed on all of these files.)
+__all__ = ["ENTRIES", "exp_quat", "quat_mul", "step"]
 
 S0, S1, S2, S3, S4, S5, S6 = SINC_HALF_SERIES
 C0, C1, C2, C3, C4, C5, C6 = COS_HALF_SERIES
 
 
-def _jit(fn=None, signature: str | None = None, **options):
-    """``numba.njit([signature], cache=True, error_model="numpy", **options)``: inputs are
-    checked before they get here, so no Python-style division checks. Without any writable cache
-    folder (see the module doc), compile uncached and warn once."""
-    sig = () if signature is None else (signature,)
-
-    def decorate(f):
-        try:
-            return numba.njit(*sig, cache=True, error_model="numpy", **options)(f)
-        except RuntimeError as e:  # numba: "cannot cache function ...: no locator available"
-            if "no locator" not in str(e):
-                raise
-            _warn_uncached()
-            return numba.njit(*sig, error_model="numpy", **options)(f)
-
-    return decorate if fn is None else decorate(fn)
-
-
-def _inline(fn):
-    """A helper compiled into each caller (numba IR inlining): no function of its own to
-    compile, cache and load, and the caller's constants (the method) fold into it."""
-    return _jit(fn, inline="always")
-
-
-_warned_uncached = []
-
-
-def _warn_uncached() -> None:
-    if not _warned_uncached:
-        _warned_uncached.append(True)
-        warnings.warn(
-            "Expected a writable folder to cache imu_dcm's compiled kernel, got none "
-            "(package folder and user cache read-only): it is compiled in every "
-            "process; set NUMBA_CACHE_DIR to a writable folder",
-            ImuDcmWarning,
-            stacklevel=4,
-        )
-
-
-#: CPU seconds to compile every entry point a replay uses (measured: see docs/integrator.md).
-COMPILE_S = 3
-
-
-class _CompileNotice(numba_event.Listener):
-    """Says once per process, on stderr, that the kernel is being compiled: numba sends the
-    "numba:compile" event only after it found no cached code for the signature."""
-
-    said = False
-    why = ""  # why the kernel built ahead of time is not used (set by compiled())
-
-    def on_start(self, event) -> None:
-        if not self.said and event.data["dispatcher"].py_func.__module__ == __name__:
-            type(self).said = True
-            print(
-                f"imu_dcm: compiling the integrator kernel once, about {COMPILE_S} s; "
-                f"later runs load it from the cache{self.why}",
-                file=sys.stderr,
-                flush=True,
-            )
-
-    def on_end(self, event) -> None:
-        pass
-
-
-_NOTICE = _CompileNotice()
-
-
 # -- the maths of one step ---------------------------------------------------------------------
 
 
-@_jit
+@njit
 def exp_quat(px: float, py: float, pz: float) -> tuple:
     """``exp(φ) = [φ sin(θ/2)/θ, cos(θ/2)]``, ``θ = |φ|``: exact, with the series policy of
     :func:`imu_dcm.so3.exp_quat` (seven series terms up to 0.5 rad,
@@ -154,7 +74,7 @@ def exp_quat(px: float, py: float, pz: float) -> tuple:
     return px * s, py * s, pz * s, c
 
 
-@_jit
+@njit
 def quat_mul(p: tuple, q: tuple) -> tuple:
     """Hamilton product ``p ⊗ q`` of ``[x, y, z, w]`` tuples."""
     px, py, pz, pw = p
@@ -167,7 +87,7 @@ def quat_mul(p: tuple, q: tuple) -> tuple:
     )
 
 
-@_jit
+@njit
 def step(q: tuple, px: float, py: float, pz: float) -> tuple:
     """``q ⊗ exp(φ)``, pulled back to unit norm to first order.
 
@@ -179,7 +99,7 @@ def step(q: tuple, px: float, py: float, pz: float) -> tuple:
     return x * k, y * k, z * k, w * k
 
 
-@_jit
+@njit
 def increment(
     method: int, wm: tuple, w0: tuple, w1: tuple, w2: tuple, h_m: float, h_0: float, h_p: float
 ) -> tuple:
@@ -235,7 +155,7 @@ def increment(
     return h_0 * x1, h_0 * y1, h_0 * z1  # Method.END
 
 
-@_jit
+@njit
 def newest_step(
     method: int, a: tuple, b: tuple, c: tuple, d: tuple, ta: float, tb: float, tc: float, td: float
 ) -> tuple:
@@ -250,14 +170,14 @@ def newest_step(
 # -- the state -----------------------------------------------------------------------------------
 
 
-@_inline
+@inline
 def _rate(state, r: int) -> tuple:
     """Buffered rate ``r`` (0 = oldest of the last four)."""
     i = W + 3 * r
     return state[i], state[i + 1], state[i + 2]
 
 
-@_jit
+@njit
 def _ghost(state, m: int, t: float) -> tuple:
     """Rate at stamp ``t`` on the polynomial through the newest ``m`` buffered samples
     (Lagrange form; ``m`` = 2, 3 or 4: a line, a parabola, a cubic)."""
@@ -273,7 +193,7 @@ def _ghost(state, m: int, t: float) -> tuple:
     return x, y, z
 
 
-@_inline
+@inline
 def _commit(state, phi: tuple, out, k: int, emit_phi: bool) -> int:
     """Apply one step to the state's attitude and write row ``k`` of ``out`` (the new attitude,
     or ``φ`` when ``emit_phi``); return ``k + 1``."""
@@ -287,7 +207,7 @@ def _commit(state, phi: tuple, out, k: int, emit_phi: bool) -> int:
     return k + 1
 
 
-@_inline
+@inline
 def _push(
     state, x: float, y: float, z: float, t: float, out, k: int, method: int, emit_phi: bool
 ) -> int:
@@ -347,7 +267,7 @@ def _feed_for(method: int, emit_phi: bool):
     return feed_method
 
 
-@_inline
+@inline
 def _recursion(state, omega, t, out, j: int, k: int, method: int, emit_phi: bool) -> int:
     """Samples ``j..`` once the window is full: the DCM recursion ``q <- q ⊗ exp(φ)``, one step
     per sample, with the window of four samples in local variables."""
@@ -483,7 +403,7 @@ def check_record(values, t, t_before: float) -> tuple:
 # -- delta angles --------------------------------------------------------------------------------
 
 
-@_inline
+@inline
 def delta_rotvec(method: int, d1: tuple, d2: tuple, d3: tuple, a: float, b: float) -> tuple:
     """Rotation vector of one attitude update from delta angles (rad, body).
 
@@ -542,132 +462,13 @@ def feed_delta(q0, dtheta, dt, method: int, out) -> None:
         out[u + 1, 0], out[u + 1, 1], out[u + 1, 2], out[u + 1, 3] = q
 
 
-# -- a byte walker for the ULog reader ------------------------------------------------------------
-
-
-RECORD_CHAIN_SIGNATURE = "Tuple((int64[::1], uint8[::1], int64))(uint8[::1], int64)"
-
-
-def record_chain(b, pos: int):
-    """Follow the ``[uint16 size][uint8 type]`` chain of little-endian record headers of ``b``
-    from ``pos`` (PX4 ULog's message framing): the position and type of every whole record,
-    and where the first incomplete one starts. Compiled with the kernel so that a ULog replay
-    needs no numba either (:func:`imu_dcm.kernel.record_chain`)."""
-    n = len(b)
-    at = np.empty(n // 3 + 1, np.int64)
-    typ = np.empty(n // 3 + 1, np.uint8)
-    k = 0
-    while pos + 3 <= n:
-        end = pos + 3 + (np.int64(b[pos]) | (np.int64(b[pos + 1]) << 8))
-        if end > n:
-            break
-        at[k] = pos
-        typ[k] = b[pos + 2]
-        k += 1
-        pos = end
-    return at[:k], typ[:k], pos
-
-
-# -- a line scanner for the live line sources ----------------------------------------------------
-
-
-CSV_SCAN_SIGNATURE = "Tuple((int64[::1], uint8[::1], int64))(uint8[::1], int64, int64)"
-_INT64_MAX = 9223372036854775807
-
-
-@_inline
-def _is_space(c) -> bool:
-    return c == 32 or c == 9 or c == 13
-
-
-@_jit
-def _stamp_ns(b, lo: int, hi: int, scale: int, digits: int) -> int:
-    """The stamp ``digits[.digits]`` of ``b[lo:hi]`` (spaces around it allowed, at most
-    ``digits`` decimals) as exact integer ns, or -1 for any other form or for 2**63 ns or
-    more."""
-    while lo < hi and _is_space(b[lo]):
-        lo += 1
-    while hi > lo and _is_space(b[hi - 1]):
-        hi -= 1
-    whole = np.int64(0)
-    k = lo
-    while k < hi and 48 <= b[k] <= 57:
-        d = np.int64(b[k] - 48)
-        if whole > (_INT64_MAX - d) // 10:
-            return -1
-        whole = whole * 10 + d
-        k += 1
-    if k == lo:
-        return -1
-    frac = np.int64(0)
-    n_frac = 0
-    if k < hi and b[k] == 46:  # "."
-        k += 1
-        while k < hi and 48 <= b[k] <= 57 and n_frac < digits:
-            frac = frac * 10 + np.int64(b[k] - 48)
-            n_frac += 1
-            k += 1
-    if k != hi:
-        return -1  # another character, or more decimals than the unit holds
-    for _ in range(n_frac, digits):
-        frac *= 10
-    if whole > (_INT64_MAX - frac) // scale:
-        return -1
-    return whole * scale + frac
-
-
-def csv_scan(b, scale: int, digits: int):
-    """Plain CSV lines ``t,gx,gy,gz`` of the bytes ``b`` (a uint8 array; lines end in
-    ``\\n``, blank lines skipped) in one pass: the stamps as exact integer ns (``t`` in units
-    of ``scale`` ns with at most ``digits`` decimals), the rate fields copied as text, each
-    followed by a comma (for one float parse of them all), and the number of lines; or, at
-    the first line not of that form, ``-1 - its index`` among the lines (the caller then judges
-    the lines one by one)."""
-    n = len(b)
-    t = np.empty(n // 4 + 1, np.int64)  # a line holds 4 bytes at least ("1,,,")
-    text = np.empty(n + 1, np.uint8)
-    rows = 0
-    out = 0
-    lo = 0
-    line = 0
-    while lo < n:
-        hi = lo
-        while hi < n and b[hi] != 10:
-            hi += 1
-        a = lo
-        while a < hi and _is_space(b[a]):
-            a += 1
-        if a < hi:  # not a blank line
-            c1 = a
-            while c1 < hi and b[c1] != 44:
-                c1 += 1
-            if c1 == hi or b[a] == 123:  # one field, or "{": JSON
-                return t[:0], text[:0], -1 - line
-            stamp = _stamp_ns(b, a, c1, scale, digits)
-            commas = 0
-            for k in range(c1 + 1, hi):
-                commas += b[k] == 44
-            if stamp < 0 or commas != 2:
-                return t[:0], text[:0], -1 - line
-            t[rows] = stamp
-            rows += 1
-            for k in range(c1 + 1, hi):
-                text[out] = b[k]
-                out += 1
-            text[out] = 44
-            out += 1
-            line += 1
-        lo = hi + 1
-    return t[:rows], text[:out], rows
-
-
 # -- the entry points ----------------------------------------------------------------------------
 
 
 def _entries() -> dict[str, tuple[object, str]]:
-    """Every entry point: its name (:func:`imu_dcm.kernel_state.feed_entry` and
-    :func:`~imu_dcm.kernel_state.push_entry` name the per-method ones), the function, and its
-    one signature. The per-method loops have the method (and ``emit_phi``) as a constant, so
+    """Every entry point of the integrator: its name (:func:`imu_dcm._kernels.state.feed_entry`
+    and :func:`~imu_dcm._kernels.state.push_entry` name the per-method ones), the function, and
+    its one signature. The per-method loops have the method (and ``emit_phi``) as a constant, so
     the compiler keeps only its branch."""
     entries: dict[str, tuple[object, str]] = {}
     for method in Method:
@@ -678,19 +479,8 @@ def _entries() -> dict[str, tuple[object, str]]:
     entries["close_magnus4"] = (_close_magnus4, CLOSE_SIGNATURE)
     entries["check_record"] = (check_record, CHECK_SIGNATURE)
     entries["feed_delta"] = (feed_delta, FEED_DELTA_SIGNATURE)
-    entries["record_chain"] = (record_chain, RECORD_CHAIN_SIGNATURE)
-    entries["csv_scan"] = (csv_scan, CSV_SCAN_SIGNATURE)
     return entries
 
 
-#: ``name -> (function, signature)`` of every entry point, as built ahead of time.
+#: ``name -> (function, signature)`` of every entry point of the integrator.
 ENTRIES = _entries()
-
-
-def compiled(name: str, why: str = ""):
-    """Entry point ``name`` compiled by numba for its signature, or loaded from numba's cache
-    (saying so, with ``why``, when it compiles)."""
-    fn, signature = ENTRIES[name]
-    _NOTICE.why = why
-    with numba_event.install_listener("numba:compile", _NOTICE):
-        return _jit(fn, signature)

@@ -1,0 +1,130 @@
+"""The kernels' entry points as the package calls them: arrays checked, then the compiled code.
+
+One kernel serves the batch :func:`imu_dcm.integrate`, :func:`imu_dcm.integrate_delta` and the
+streaming :class:`imu_dcm.DcmIntegrator`: every sample goes through :func:`push` (or
+:func:`feed`, the same over an array), which keeps what carries across samples in a small
+``state`` array (:mod:`imu_dcm._kernels.state`) and commits each step as soon as its stencil is
+complete. Batch is "feed every sample, then :func:`close`"; streaming feeds them as they come,
+so the two are the same arithmetic. The code itself is :mod:`imu_dcm._kernels.integrator`;
+:func:`record_chain` and :func:`scan_csv` run the ULog and CSV scans
+(:mod:`~imu_dcm._kernels.ulog_scan`, :mod:`~imu_dcm._kernels.csv_scan`).
+
+Conventions: quaternions Hamilton ``[x, y, z, w]``, ``q_w_b`` body to world; rates ``ω`` rad/s
+in body axes; stamps ``t`` s; increments multiply on the right.
+
+The compiled entry points (:func:`imu_dcm._kernels.loader.entry`) take float64 C-contiguous
+arrays and do not check their types: the functions below check the arrays of a batch call (a
+``TypeError`` otherwise), and :func:`push_for` gives the unchecked per-sample function, whose
+caller converts (as :class:`imu_dcm.DcmIntegrator` does).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from imu_dcm._kernels.loader import backend, entry
+from imu_dcm._kernels.state import CLOSED, METHOD, N, feed_entry, push_entry
+from imu_dcm.integrator.methods import Method
+
+__all__ = [
+    "check_record",
+    "close",
+    "feed",
+    "feed_delta",
+    "push",
+    "push_for",
+    "record_chain",
+    "scan_csv",
+]
+
+
+def _arrays(**arrays: tuple[np.ndarray, int]) -> None:
+    """Refuse any array the compiled code would misread: float64, C-contiguous, ``ndim``."""
+    for name, (a, ndim) in arrays.items():
+        if not (
+            isinstance(a, np.ndarray)
+            and a.dtype == np.float64
+            and a.ndim == ndim
+            and a.flags.c_contiguous
+        ):
+            raise TypeError(
+                f"Expected `{name}` a float64 C-contiguous array of {ndim} dimension(s), "
+                f"got {type(a).__name__} {getattr(a, 'dtype', '')} {getattr(a, 'shape', '')}"
+            )
+
+
+def feed(state, omega, t, out, emit_phi: bool = False) -> int:
+    """Push samples ``omega[j], t[j]`` (checked: finite, increasing after the state's last
+    stamp); ``out`` gets one row per committed step (the attitude after it, or its ``φ`` when
+    ``emit_phi``). Returns the rows written (at most ``len(t) + 1``). Runs the loop compiled
+    for the state's method."""
+    _arrays(state=(state, 1), omega=(omega, 2), t=(t, 1), out=(out, 2))
+    return entry(feed_entry(int(state[METHOD]), emit_phi))(state, omega, t, out)
+
+
+def push(state, omega, t: float) -> int:
+    """One sample (``omega`` a float64 (3,) array, ``t`` a number) into the state; a code
+    (:data:`OK`, :data:`NOT_FINITE`, ...). See :func:`push_for`."""
+    _arrays(state=(state, 1), omega=(omega, 1))
+    return push_for(int(state[METHOD]))(state, omega, float(t))
+
+
+def push_for(method: int):
+    """The compiled per-sample push for ``method``, unchecked: ``fn(state, omega, t)`` with
+    ``state`` and ``omega`` float64 C-contiguous 1-D arrays and ``t`` a float. It checks the
+    sample (finite, after the last stamp, not closed) and returns :data:`IS_CLOSED`,
+    :data:`NOT_FINITE` or :data:`NOT_INCREASING` (state unchanged); :data:`MAYBE_GAP` when the
+    step exceeds ``GAP_FACTOR`` times the shortest of the last three; else :data:`OK`."""
+    return entry(push_entry(int(method)))
+
+
+def close(state, emit_phi: bool = False) -> int:
+    """End of record: ``magnus4`` commits the steps still open, with a ghost sample after the
+    last one (and before the first, for records of 2 or 3 samples) on the polynomial through
+    the last (up to four) samples. Other methods: nothing. Returns the rows written to
+    ``state[ROWS:ROWS + 8]`` (two rows of four)."""
+    _arrays(state=(state, 1))
+    state[CLOSED] = 1.0
+    if int(state[METHOD]) != Method.MAGNUS4 or state[N] < 2.0:
+        return 0
+    return entry("close_magnus4")(state, bool(emit_phi))
+
+
+def check_record(values, t, t_before: float) -> tuple[int, int, int, float, float]:
+    """One pass over samples ``values`` (n, 3) and stamps ``t``: ``(row, stamp, order, dt_min,
+    dt_max)``, the first row with a non-finite number, the first non-finite stamp, the first
+    index not after the stamp before it (``t_before`` for index 0; ``-inf``: none), each ``-1``
+    when there is none, and the shortest and longest step (s)."""
+    _arrays(values=(values, 2), t=(t, 1))
+    return entry("check_record")(values, t, float(t_before))
+
+
+def feed_delta(q0, dtheta, dt, method: int, out) -> None:
+    """Attitudes from checked delta angles: ``out[0] = q0``, then one row per update (per
+    interval, or per set of 2 or 3 intervals)."""
+    _arrays(q0=(q0, 1), dtheta=(dtheta, 2), dt=(dt, 1), out=(out, 2))
+    entry("feed_delta")(q0, dtheta, dt, int(method), out)
+
+
+def record_chain(b, pos: int) -> tuple[np.ndarray, np.ndarray, int]:
+    """The ``[uint16 size][uint8 type]`` record chain of the bytes ``b`` (a uint8 array) from
+    ``pos``: ``(positions, types, end)``, every whole record and where the first incomplete one
+    starts (:func:`imu_dcm._kernels.ulog_scan.record_chain`)."""
+    if not (isinstance(b, np.ndarray) and b.dtype == np.uint8 and b.ndim == 1):
+        raise TypeError(f"Expected `b` a 1-D uint8 array, got {type(b).__name__}")
+    b = np.ascontiguousarray(b)
+    if backend() == "jit" and not b.flags.writeable:
+        b = b.copy()  # numba's signature is of a writable array (the built one reads any)
+    return entry("record_chain")(b, int(pos))
+
+
+def scan_csv(blob: bytes, scale: int, digits: int) -> tuple[np.ndarray, bytes, int]:
+    """Plain CSV lines ``t,gx,gy,gz`` of ``blob`` in one compiled pass
+    (:func:`imu_dcm._kernels.csv_scan.csv_scan`): ``(t_ns, rates_text, rows)``, the exact
+    stamps, the rate fields as ``b"gx,gy,gz,..."``, and the lines read; ``rows < 0`` when a line
+    is not of that form."""
+    b = np.frombuffer(blob, np.uint8)
+    if backend() == "jit":
+        b = b.copy()  # numba's signature is of a writable array (the built one reads any)
+    t, text, rows = entry("csv_scan")(b, int(scale), int(digits))
+    return t, text.tobytes(), int(rows)
