@@ -17,7 +17,7 @@ def __getattr__(name: str):
 
         return run
     if name == "LiveResult":
-        from imu_dcm.live.pipeline import LiveResult
+        from imu_dcm.live.summary import LiveResult
 
         return LiveResult
     raise AttributeError(f"module 'imu_dcm.live' has no attribute {name!r}")
