@@ -13,8 +13,11 @@ Each event is a small frozen record; the loop dispatches on its type
 * :class:`Channel` — a channel was picked (topic, type, schema, for the recorder);
 * :class:`End` — the source is finished (end of input, source lost, a fatal error).
 
-The queue carries a few events per wake-up of a source, not one per sample: making them costs
-nothing measurable against the samples they carry (``python -m benchmarks.live_speed``).
+The queue carries a few events per wake-up of a source, not one per sample: making one costs
+0.2-0.7 us (a slotted frozen dataclass; the tagged tuple with its record it replaced cost about
+as much): two events a wake-up of 100 lines are under 0.5 % of the ~2.5 us a line sample costs
+from pipe to estimate, below the noise of a shared machine (measured interleaved against the tagged
+tuples: +2.6 % median, -2.0 % best of ten runs each, without bias; within 5 % end to end).
 """
 
 from __future__ import annotations
