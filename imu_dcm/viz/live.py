@@ -35,7 +35,6 @@ from numpy.typing import NDArray
 from imu_dcm.cli import check_rerun_switch
 from imu_dcm.errors import InputError
 from imu_dcm.outputs import PendingOutput, claim_output
-from imu_dcm.so3 import quat_rotate
 from imu_dcm.viz.log import (
     AXES_RADIUS,
     ENTITY,
@@ -48,7 +47,7 @@ from imu_dcm.viz.log import (
     make_blueprint,
     send_styles,
 )
-from imu_dcm.viz.view_data import AXES_HZ, TRAIL_POINTS, TRAIL_S, ViewData
+from imu_dcm.viz.view_data import AXES_HZ, TRAIL_POINTS, TRAIL_S, ViewData, body_axes_w
 from imu_dcm.viz.viewer import has_display, serve_rrd, start_viewer
 
 __all__ = ["LiveView", "check_mode"]
@@ -128,11 +127,6 @@ def check_mode(mode: str | None) -> None:
         check_rerun_switch(mode)
         return
     raise InputError(f"Expected --rerun spawn, serve, save:PATH.rrd or off, got {mode!r}")
-
-
-def _axes(q: NDArray) -> NDArray:
-    """Body axes in world coordinates, (n, 3 axes, 3)."""
-    return quat_rotate(q[:, None, :], np.eye(3)[None, :, :])
 
 
 def _save(rec, target: str, blueprint):
@@ -273,7 +267,7 @@ class LiveView:
         held.clear()
         self._sent_3d[key] = t_s[-1]
         idx = self._thin(key, t_s)
-        ax = _axes(q[idx])
+        ax = body_axes_w(q[idx])[0]  # (n, 3 axes, 3), the rows finite
         n = len(idx)
         path = self.entity["estimate_axes" if key == "est" else "truth_axes"]
         vectors = self._column("vectors", ax.reshape(-1, 3), np.arange(0, 3 * n + 1, 3, np.int32))

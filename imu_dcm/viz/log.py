@@ -22,10 +22,10 @@ from imu_dcm.viz.view_data import (
     TRACE_MAX_S,
     ViewData,
     _axes_rows,
-    _body_axes_w,
     _trace_segments,
     _trail_frames,
     _trail_strips,
+    body_axes_w,
     gyro_needs_split,
 )
 
@@ -217,8 +217,8 @@ def _entities(view: ViewData) -> list[_Entity]:
     import rerun as rr
 
     t_rel = view.t_s - view.t_s[0]
-    est_axes, has_est = _body_axes_w(view.q_est)  # (N, 3 axes, 3)
-    true_axes, has_truth = _body_axes_w(view.q_truth)
+    est_axes, has_est = body_axes_w(view.q_est)  # (N, 3 axes, 3)
+    true_axes, has_truth = body_axes_w(view.q_truth)
     rows = _axes_rows(view.t_s)  # thinned to AXES_HZ: memory bounded on long logs
     out = [
         _axes_entity(
@@ -312,8 +312,8 @@ def send_styles(view: ViewData, rec, *, gyro_one_entity: bool = False) -> None:
     if view.t_s[-1] - view.t_s[0] > TRACE_MAX_S:
         return
     tips = {
-        "estimate_trace": _body_axes_w(view.q_est)[0][:, 2],
-        "truth_trace": _body_axes_w(view.q_truth)[0][:, 2],
+        "estimate_trace": body_axes_w(view.q_est)[0][:, 2],
+        "truth_trace": body_axes_w(view.q_truth)[0][:, 2],
     }
     for key, tip in tips.items():
         segments = _trace_segments(tip)
