@@ -43,8 +43,9 @@ __all__ = ["LiveOptions", "run"]
 
 
 def _warm_up(method: str) -> None:
-    """Load numba and the compiled kernel before the source opens, so the first samples do not
-    wait for them (about 0.7 s with a warm cache, measured as the first second's latency)."""
+    """Run the integrators once before the source opens (numba and the compiled kernel load and
+    dispatch on their first call), so the first samples do not wait for them (about 0.7 s with a
+    warm cache, measured as the first second's latency)."""
     q0, w, t = [0.0, 0.0, 0.0, 1.0], np.zeros((5, 3)), 0.001 * np.arange(5)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # rotvec_sum's warning belongs to the real run
