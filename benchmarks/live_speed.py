@@ -26,9 +26,9 @@ What is measured (the live command runs as a child process, as a user runs it):
 * With ``--ws-clients``: the WebSocket client alone, each in a child process receiving
   ``--rate`` messages/s for ``--duration`` s from the same server: ``websockets.sync.client``
   (a reader thread hands each frame over; one ``recv`` per message, batches of 5 ms as the live
-  source used it) against :class:`imu_dcm.live.sources.WsConnection` (under the source thread's
-  own socket loop: websockets' Sans-I/O protocol for the handshake and control frames, the data
-  frames split by the client; one ``recv`` per wake-up).
+  source used it) against :class:`imu_dcm.live.sources.websocket.WsConnection` (under the
+  source thread's own socket loop: websockets' Sans-I/O protocol for the handshake and control
+  frames, the data frames split by the client; one ``recv`` per wake-up).
 * **This machine's wake-up**: the CPU of one parse of 50 sample lines run again at once, and
   run after 50 ms asleep as live's loop runs it. Where a sleeping process's caches and
   page tables go cold (a shared or nested virtual machine), the second is many times the first;
@@ -363,7 +363,7 @@ if which == "sync":
                 break
         return out
 else:
-    from imu_dcm.live.sources import WsConnection
+    from imu_dcm.live.sources.websocket import WsConnection
     ws = WsConnection(url, SUB)
     close = ws.close
     def batch():

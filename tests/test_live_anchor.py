@@ -15,8 +15,8 @@ import warnings
 import numpy as np
 import pytest
 
+from imu_dcm.live.events import Received
 from imu_dcm.live.pipeline import Pipeline
-from imu_dcm.live.sources import Received
 from imu_dcm.replay import replay
 
 IMU, TRUTH = "/imu/data", "/ground_truth/orientation"

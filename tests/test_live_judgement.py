@@ -159,19 +159,19 @@ def test_deg_per_s_given_as_rad_per_s_is_flagged_by_the_full_scale_without_truth
 
 
 def test_the_summary_holds_no_value_json_cannot_hold():
-    from imu_dcm.live.session import _json_safe
+    from imu_dcm.live.summary import json_safe
 
-    got = _json_safe({"a": float("nan"), "b": [1.0, float("inf")], "c": {"d": -float("inf")}})
+    got = json_safe({"a": float("nan"), "b": [1.0, float("inf")], "c": {"d": -float("inf")}})
     assert got == {"a": None, "b": [1.0, None], "c": {"d": None}}
     json.dumps(got, allow_nan=False)
 
 
 def test_live_help_names_every_source():
     from imu_dcm.live.__main__ import build_parser
-    from imu_dcm.live.sources import SOURCES
+    from imu_dcm.live.sources import SCHEMES
 
     text = build_parser().format_help()
-    for scheme in SOURCES:
+    for scheme in SCHEMES:
         assert (scheme if scheme == "-" else f"{scheme}:") in text
     assert "mavlink:udpin:HOST:PORT" in text
 
@@ -179,7 +179,7 @@ def test_live_help_names_every_source():
 def test_a_line_without_end_costs_itself_not_memory(tmp_path):
     # 1 MB with no line end between two good stretches: dropped as one malformed line (said
     # once), never held whole; the samples around it are integrated
-    from imu_dcm.live.sources import MAX_LINE_BYTES
+    from imu_dcm.live.sources.stdin import MAX_LINE_BYTES
 
     lines = _spin_lines({})
     junk = b"9" * (16 * MAX_LINE_BYTES)

@@ -14,8 +14,8 @@ from scipy.spatial.transform import Rotation
 from test_live_ws import live_thread
 
 from imu_dcm.errors import InputError
-from imu_dcm.live.mavlink import parse_url
 from imu_dcm.live.sources import parse_source
+from imu_dcm.live.sources.mavlink import parse_url
 from imu_dcm.logio import ned
 from imu_dcm.so3 import angle_between_deg
 
@@ -161,7 +161,8 @@ def test_a_frame_cut_at_the_end_of_its_datagram_costs_only_itself():
     # over UDP a datagram holds whole frames: the next datagram is not the cut frame's rest
     from pymavlink.dialects.v20 import common
 
-    from imu_dcm.live.mavlink import MavlinkSource
+    from imu_dcm.live.events import Malformed, Received
+    from imu_dcm.live.sources.mavlink import MavlinkSource
 
     mav = common.MAVLink(None, srcSystem=1, srcComponent=1)
 
@@ -176,6 +177,6 @@ def test_a_frame_cut_at_the_end_of_its_datagram_costs_only_itself():
     events = []
     while not src.events.empty():
         events.append(src.events.get())
-    assert ("malformed", 1) in events
-    (data,) = [e[1] for e in events if e[0] == "data"]
+    assert Malformed(1) in events
+    (data,) = [e for e in events if isinstance(e, Received)]
     assert data.t_ns.tolist() == [1_000_000, 3_000_000, 4_000_000]

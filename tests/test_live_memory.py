@@ -11,8 +11,9 @@ import tracemalloc
 
 import numpy as np
 
-from imu_dcm.live.pipeline import LATENCY_KEEP, Latency, Pipeline
-from imu_dcm.live.sources import Received
+from imu_dcm.live.events import Received
+from imu_dcm.live.latency import LATENCY_KEEP, Latency
+from imu_dcm.live.pipeline import Pipeline
 
 BATCH, RATE_HZ = 500, 10_000
 

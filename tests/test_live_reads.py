@@ -14,8 +14,9 @@ import time
 
 import pytest
 
-from imu_dcm.live import sources
-from imu_dcm.live.sources import Source, UdpSource
+from imu_dcm.live.events import Channel, Info, Raw, Received
+from imu_dcm.live.sources import Source, udp
+from imu_dcm.live.sources.udp import UdpSource
 
 
 def _recording_waits(src: Source) -> list[float]:
@@ -40,9 +41,9 @@ def test_inline_arrival_is_the_previous_read():
         tx.sendto(b"1,0,0,0", src.address)
     time.sleep(0.05)
     src.poll()
-    items = [ev for ev in list(src.events.queue) if ev[0] == "raw"]
+    items = [ev for ev in list(src.events.queue) if isinstance(ev, Raw)]
     src.stop()
-    assert [item[1:] for item in items[0][2]] == [read_at]
+    assert [item[1:] for item in items[0].items] == [read_at]
     assert src._read_at[0] > read_at[0]
 
 
@@ -64,16 +65,16 @@ def test_inline_udp_source_reads_in_the_callers_thread_every_line_in_order():
         src.poll()
         while not src.events.empty():
             ev = src.events.get_nowait()
-            if ev[0] == "raw":
-                for e in src.decode(ev[1], ev[2]):
-                    got.extend(e[1].values[:, 2].tolist())
+            if isinstance(ev, Raw):
+                for e in src.decode(ev.key, ev.items):
+                    got.extend(e.values[:, 2].tolist())
             else:
-                infos.append(ev[0])
+                infos.append(type(ev))
         time.sleep(0.005)
     assert src._thread.ident is None  # never started
     src.stop()
     assert got == [float(k) for k in range(n)]
-    assert infos == ["channel", "info"]
+    assert infos == [Channel, Info]
 
 
 def _count_polls(monkeypatch) -> list[float]:
@@ -185,10 +186,10 @@ def _drain_events(src) -> tuple[int, list[str]]:
     got, said = 0, []
     while not src.events.empty():
         ev = src.events.get_nowait()
-        if ev[0] == "raw":
-            got += sum(len(e[1].t_ns) for e in src.decode(ev[1], ev[2]) if e[0] == "data")
-        elif ev[0] == "info":
-            said.append(ev[1])
+        if isinstance(ev, Raw):
+            got += sum(len(e.t_ns) for e in src.decode(ev.key, ev.items) if type(e) is Received)
+        elif isinstance(ev, Info):
+            said.append(ev.text)
     return got, said
 
 
@@ -235,9 +236,7 @@ def test_every_datagram_the_system_drops_is_counted_at_stop(monkeypatch):
         pytest.skip("the drop count is Linux's")
     from test_live_ws import live_thread
 
-    from imu_dcm.live import sources
-
-    monkeypatch.setattr(sources, "UDP_RCVBUF", 4096)
+    monkeypatch.setattr(udp, "UDP_RCVBUF", 4096)
     live = live_thread("udp://127.0.0.1:0", bias="none", idle_stop_s=1.0)
     assert live.ready.wait(20)
     n = 3000
@@ -262,7 +261,7 @@ def test_a_fast_udp_stream_is_read_at_its_cadence_from_the_first_datagram():
     live = live_thread("udp://127.0.0.1:0", bias="none", idle_stop_s=0.75)
     assert live.ready.wait(20)
     with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as probe:
-        probe.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, sources.UDP_RCVBUF)
+        probe.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, udp.UDP_RCVBUF)
         rcvbuf = probe.getsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF)
     rate = rcvbuf / 832 / 0.2  # a one-line datagram takes 832 bytes of it (Linux, loopback)
     n = int(rate)  # one second

@@ -374,8 +374,8 @@ def test_pipeline_in_batches_equals_batch_integrate(method, sizes):
     or more than magnus4's four warm-up samples) are the batch integrator's attitudes at every
     stamp: the same compiled kernel on the same samples."""
     from imu_dcm.integrator.batch import integrate
+    from imu_dcm.live.events import Received
     from imu_dcm.live.pipeline import Pipeline
-    from imu_dcm.live.sources import Received
 
     rows = []
 
@@ -417,7 +417,8 @@ def test_pipeline_in_batches_equals_batch_integrate(method, sizes):
 def test_line_decode_of_several_wake_ups_keeps_each_line_and_its_arrival():
     """The session's loop decodes the items of several source wake-ups at once: one numpy parse
     for plain CSV, item by item otherwise; each sample keeps the arrival of its own wake-up."""
-    from imu_dcm.live.sources import StdinSource
+    from imu_dcm.live.events import Malformed, Received
+    from imu_dcm.live.sources.stdin import StdinSource
 
     items = [
         (b"1.0,0,0,1\n\n1.001,0,0,2", 100, 1000),  # a blank line: ignored
@@ -430,8 +431,8 @@ def test_line_decode_of_several_wake_ups_keeps_each_line_and_its_arrival():
             items if csv_only else [*items, (b'{"t_s": 1.004, "omega_b": [0, 0, 5]}', 300, 3000)]
         )
         events = src.decode("lines", batch)
-        assert not [ev for ev in events if ev[0] == "malformed"]
-        recs = [ev[1] for ev in events if ev[0] == "data"]
+        assert not [ev for ev in events if isinstance(ev, Malformed)]
+        recs = [ev for ev in events if isinstance(ev, Received)]
         t = np.concatenate([r.t_ns for r in recs])
         w = np.concatenate([r.values for r in recs])
         arrival = np.concatenate([r.arrival_ns for r in recs])

@@ -16,8 +16,8 @@ import pytest
 from scipy.spatial.transform import Rotation
 from test_viz import _read, _time_ns
 
-from imu_dcm.live.view import LiveView
 from imu_dcm.viz import ENTITY
+from imu_dcm.viz.live import LiveView
 from imu_dcm.viz.log import EST_RGB, TRUTH_RGB
 
 Q_90Z = np.array([0.0, 0.0, math.sqrt(0.5), math.sqrt(0.5)])  # body x along world y

@@ -195,7 +195,7 @@ READS = {"inline": None, "thread": 0.01}
 
 def spy_reads(monkeypatch) -> dict:
     """Count the WebSocket source's reads of each kind: ``poll`` (inline) and ``session``."""
-    from imu_dcm.live.sources import WsSource
+    from imu_dcm.live.sources.foxglove import WsSource
 
     calls = {"poll": 0, "session": 0}
     poll, session = WsSource.poll, WsSource._session

@@ -11,7 +11,7 @@ import time
 
 import pytest
 
-from imu_dcm.live.sources import WsConnection
+from imu_dcm.live.sources.websocket import WsConnection
 
 server_mod = pytest.importorskip("websockets.sync.server")
 

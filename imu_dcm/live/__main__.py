@@ -245,8 +245,8 @@ def _main(argv: list[str]) -> int:
     args = build_parser().parse_args(argv)
     from imu_dcm.live.session import run
     from imu_dcm.live.sources import parse_source
-    from imu_dcm.live.view import check_mode
     from imu_dcm.outputs import writes_to_stdout
+    from imu_dcm.viz.live import check_mode
 
     parse_source(args.source)
     check_mode(args.rerun)

@@ -30,23 +30,24 @@ from __future__ import annotations
 import math
 import time
 import warnings
-from dataclasses import dataclass, field
 
 import numpy as np
 from numpy.typing import NDArray
 
 from imu_dcm.errors import GapWarning
 from imu_dcm.gyro.rates import deg_evidence
+from imu_dcm.gyro.resample import slerp_truth
 from imu_dcm.gyro.rest_causal import CausalRestBias
 from imu_dcm.integrator.batch import find_gaps, gap_message, integrate_quat
 from imu_dcm.integrator.streaming import DcmIntegrator
-from imu_dcm.live.latency import LATENCY_KEEP, Latency
+from imu_dcm.live.events import Received
+from imu_dcm.live.latency import Latency
 from imu_dcm.live.lines import time_unit_hint
 from imu_dcm.live.reorder import ReorderBuffer
-from imu_dcm.live.sources import Received
+from imu_dcm.live.rows import Rows, Stats
 from imu_dcm.metrics import attitude_error_deg
 
-__all__ = ["LATENCY_KEEP", "Latency", "LiveResult", "Pipeline"]
+__all__ = ["DEG", "GAPS_KEEP", "UNITS_PROBE_MAX", "UNITS_PROBE_S", "Pipeline"]
 
 DEG = math.pi / 180.0
 _TRUTH_KEEP_NS = 5_000_000_000  # truth kept for slerp, ns behind the newest
@@ -60,76 +61,6 @@ UNITS_PROBE_S = 5.0
 UNITS_PROBE_MAX = 50_000
 #: Gaps kept with their times (the count goes on past them).
 GAPS_KEEP = 1000
-
-
-@dataclass(frozen=True)
-class LiveResult:
-    """What a live run produced.
-
-    Attributes
-    ----------
-    summary : dict — JSON-ready summary (keys as replay's where they apply; see :func:`run`).
-    q_w_b : float64 (4,) or None — final attitude ``[x, y, z, w]`` at ``t_ns`` (None if the
-        estimate never started).
-    t_ns : int or None — source stamp of the final attitude, ns.
-    latency_ms : float64 (n,) — receive -> view log call of the newest samples logged (at most
-        :data:`LATENCY_KEEP` and one batch: memory stays bounded), ms.
-    """
-
-    summary: dict
-    q_w_b: NDArray[np.float64] | None
-    t_ns: int | None
-    latency_ms: NDArray[np.float64] = field(repr=False)
-
-
-def _slerp(truth_t: NDArray, truth_q: NDArray, t_ns: NDArray) -> NDArray:
-    from imu_dcm.gyro.resample import slerp_truth
-
-    return slerp_truth(truth_t, truth_q, t_ns)
-
-
-class _Rows:
-    """Columns collected as a list of array chunks; :meth:`take` concatenates and empties."""
-
-    def __init__(self, *shapes: tuple) -> None:
-        self.shapes = shapes
-        self.chunks: list[tuple] = []
-
-    def add(self, *cols: NDArray) -> None:
-        if len(cols[0]):
-            self.chunks.append(cols)
-
-    def take(self) -> tuple[NDArray, ...]:
-        chunks, self.chunks = self.chunks, []
-        if not chunks:
-            return tuple(np.zeros((0, *s[1:]), s[0]) for s in self.shapes)
-        return tuple(np.concatenate([c[k] for c in chunks]) for k in range(len(self.shapes)))
-
-    def __len__(self) -> int:
-        return sum(len(c[0]) for c in self.chunks)
-
-    def trim(self, keep: int) -> None:
-        """Drop whole leading chunks older than ``keep`` (in the first column's unit) behind
-        the newest row."""
-        if len(self.chunks) > 1:
-            newest = self.chunks[-1][0][-1]
-            while len(self.chunks) > 1 and self.chunks[1][0][0] <= newest - keep:
-                del self.chunks[0]
-
-
-class _Stats:
-    """Running error statistics (RMS and max of total, inclination, heading)."""
-
-    def __init__(self) -> None:
-        self.n = 0
-        self.sq = np.zeros(3)
-        self.max = np.zeros(3)
-
-    def add(self, err: NDArray) -> None:
-        if len(err):
-            self.n += len(err)
-            self.sq += (err * err).sum(axis=0)
-            self.max = np.maximum(self.max, err.max(axis=0))
 
 
 _SAMPLES = ((np.int64,), (float,), (float, 3))  # t_ns, t_s, omega_b (bias removed)
@@ -156,7 +87,7 @@ class Pipeline:
     ) -> None:
         self.method = method
         #: rates declared rad/s: their first seconds are judged once for deg/s (_units_probe)
-        self.units_probe = _Rows(*_SAMPLES) if check_units else None
+        self.units_probe = Rows(*_SAMPLES) if check_units else None
         self.units_evidence: str | None = None
         self.bias_mode = (
             "auto"
@@ -187,8 +118,8 @@ class Pipeline:
         self.start_t_s: float | None = None
         self.unscored_before_s: float | None = None  # re-anchored: the start before is unscored
         self.anchor_pending = False
-        self.waiting = _Rows(*_SAMPLES)  # before the start
-        self.history = _Rows(*_SAMPLES)  # since an identity start, to re-anchor on a late truth
+        self.waiting = Rows(*_SAMPLES)  # before the start
+        self.history = Rows(*_SAMPLES)  # since an identity start, to re-anchor on a late truth
         self.truth_channel = False
         self.channels: dict = {}
         self.truth_t: list[NDArray] = []  # truth stamps / quats, oldest first
@@ -196,20 +127,20 @@ class Pipeline:
         self.truth_max_ns: int | None = None
         self.truth_min_ns: int | None = None  # the first truth stamp (where re-anchoring may be)
         self.truth_count = 0
-        self.fed = _Rows(*_SAMPLES)  # the last samples fed (stamps of the lagged rows)
+        self.fed = Rows(*_SAMPLES)  # the last samples fed (stamps of the lagged rows)
         self.emitted = -1  # index (since the start) of the newest estimate row
-        self.first4 = _Rows(*_SAMPLES)  # magnus4: the first four samples (its warm-up)
+        self.first4 = Rows(*_SAMPLES)  # magnus4: the first four samples (its warm-up)
         self.q_last: NDArray | None = None
         self.t_last_ns: int | None = None
         self.bias_sum = np.zeros(3)
         self.bias_n = 0
-        self.stats = _Stats()
+        self.stats = Stats()
         self.truth_used = 0
         # rows since the last flush
-        self.gyro = _Rows((float,), (float, 3), (np.int64,))  # t_s, omega_b, arrival ns
-        self.est = _Rows(*_ESTIMATES)
-        self.err_pending = _Rows(*_ESTIMATES)
-        self.truth_rows = _Rows((np.int64,), (float, 4))
+        self.gyro = Rows((float,), (float, 3), (np.int64,))  # t_s, omega_b, arrival ns
+        self.est = Rows(*_ESTIMATES)
+        self.err_pending = Rows(*_ESTIMATES)
+        self.truth_rows = Rows((np.int64,), (float, 4))
         self.latency = Latency()
         self.samples_before_start = 0
         self.cpu_s: float | None = None
@@ -321,7 +252,7 @@ class Pipeline:
             return
         q = np.full((len(pt_ns), 4), np.nan)
         if self.truth_t:
-            q = _slerp(*self._truth_arrays(), pt_ns)
+            q = slerp_truth(*self._truth_arrays(), pt_ns)
         evidence = deg_evidence(pw, pt_s, q)
         if evidence:
             self.units_evidence = evidence
@@ -342,8 +273,8 @@ class Pipeline:
         self.start_t_s = float(t_s[i])
         self.integ = DcmIntegrator(self.q0, self.method)
         self.emitted = -1
-        self.first4 = _Rows(*_SAMPLES)
-        self.fed = _Rows(*_SAMPLES)
+        self.first4 = Rows(*_SAMPLES)
+        self.fed = Rows(*_SAMPLES)
         if why:
             self.say(why)
         self._feed(t_ns[i:], t_s[i:], wc[i:])
@@ -381,7 +312,7 @@ class Pipeline:
                     f"before the gyro: starting from the identity attitude",
                 )
             return
-        q = _slerp(*self._truth_arrays(), t_ns[covered])
+        q = slerp_truth(*self._truth_arrays(), t_ns[covered])
         ok = np.flatnonzero(np.all(np.isfinite(q), axis=1))
         if len(ok):
             self._start(int(ok[0]), q[ok[0]], None)
@@ -403,13 +334,13 @@ class Pipeline:
         covered = np.flatnonzero((t_ns >= self.truth_min_ns) & (t_ns <= self.truth_max_ns))
         if not len(covered):
             return  # no sample inside the truth yet (cheap: no slerp)
-        q = _slerp(*self._truth_arrays(), t_ns[covered])
+        q = slerp_truth(*self._truth_arrays(), t_ns[covered])
         ok = np.flatnonzero(np.all(np.isfinite(q), axis=1))
         if not len(ok):
             return
         i = int(covered[ok[0]])
         self.anchor_pending = False
-        self.history = _Rows(*_SAMPLES)
+        self.history = Rows(*_SAMPLES)
         est = self.est.take()
         before = est[0] < t_ns[i]
         self.est.add(*(c[before] for c in est))  # rows from the anchor on are estimated again
@@ -480,7 +411,7 @@ class Pipeline:
             t_ns, t_s, wc = self.waiting.take()
             self.waiting.add(t_ns, t_s, wc)
             if self.truth_max_ns is not None:
-                q = _slerp(*self._truth_arrays(), t_ns)
+                q = slerp_truth(*self._truth_arrays(), t_ns)
                 ok = np.flatnonzero(np.all(np.isfinite(q), axis=1))
                 if len(ok):
                     self._start(int(ok[0]), q[ok[0]], None)
@@ -513,7 +444,7 @@ class Pipeline:
         self.err_pending.add(t_ns[wait], t_s[wait], q[wait])
         if not ready.any():
             return np.zeros(0), np.zeros((0, 3))
-        qt = _slerp(*self._truth_arrays(), t_ns[ready])
+        qt = slerp_truth(*self._truth_arrays(), t_ns[ready])
         ok = np.all(np.isfinite(qt), axis=1)
         if not ok.any():
             return np.zeros(0), np.zeros((0, 3))

@@ -23,9 +23,10 @@ import shutil
 import time
 
 import numpy as np
+from mcap.writer import CompressionType, Writer
 from numpy.typing import NDArray
 
-from imu_dcm.live.sources import Channel, Received
+from imu_dcm.live.events import Channel, Received
 from imu_dcm.logio import meta
 from imu_dcm.logio.writer import MSG_DEFINITIONS, cdr_messages, imu_doubles
 from imu_dcm.outputs import check_output_dir, ensure_parent
@@ -54,8 +55,6 @@ class LiveRecorder:
     """
 
     def __init__(self, path, force: bool = False, custom_data: dict | None = None) -> None:
-        from mcap.writer import CompressionType, Writer
-
         out = check_output_dir(path, force=force, what="--record bag")
         ensure_parent(out, "--record bag")
         if out.exists():  # with force, a bag this project wrote (check_output_dir)

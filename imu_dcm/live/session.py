@@ -7,14 +7,14 @@ before), its events go to the :class:`imu_dcm.live.pipeline.Pipeline`, the pipel
 batch, a status line goes to stderr. SIGINT / SIGTERM (in the main thread), ``stop``, the end
 of input, a lost source or ``idle_stop_s`` end the loop; what the source already delivered is still
 processed, the integrator closes its last step, the recording is finished and the summary made.
+
+The loop is :mod:`imu_dcm.live.loop`, the summary :mod:`imu_dcm.live.summary`, the view
+:mod:`imu_dcm.viz.live`.
 """
 
 from __future__ import annotations
 
-import dataclasses
 import gc
-import queue
-import signal
 import sys
 import threading
 import time
@@ -25,23 +25,27 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import ArrayLike
 
-from imu_dcm.errors import GapWarning, InputError
-from imu_dcm.integrator.batch import METHODS
+from imu_dcm.errors import InputError
+from imu_dcm.integrator.batch import METHODS, integrate_quat
+from imu_dcm.integrator.streaming import DcmIntegrator
 from imu_dcm.live.lines import TIME_UNITS
-from imu_dcm.live.pipeline import DEG, LiveResult, Pipeline
-from imu_dcm.live.sources import Received, Source, open_source, parse_source
+from imu_dcm.live.loop import VIEW_INTERVAL_S, Loop
+from imu_dcm.live.pipeline import Pipeline
+from imu_dcm.live.recorder import LiveRecorder
+from imu_dcm.live.sources import Source, open_source, parse_source
+from imu_dcm.live.summary import LiveResult, summary
+from imu_dcm.outputs import OutputError, check_output_dir, check_output_file, write_json
 from imu_dcm.so3 import as_quat_xyzw
+from imu_dcm.viz import HEADLESS_HINT, has_display
+from imu_dcm.viz.live import LiveView, check_mode
 
 __all__ = ["LiveOptions", "run"]
 
 
 def _warm_up(method: str) -> None:
-    """Load numba and the compiled kernel before the source opens, so the first samples do not
-    wait for them (about 0.7 s with a warm cache, measured as the first second's latency)."""
-    from imu_dcm.gyro.resample import slerp_truth  # noqa: F401 - the truth slerp's modules
-    from imu_dcm.integrator.batch import integrate_quat
-    from imu_dcm.integrator.streaming import DcmIntegrator
-
+    """Run the integrators once before the source opens (numba and the compiled kernel load and
+    dispatch on their first call), so the first samples do not wait for them (about 0.7 s with a
+    warm cache, measured as the first second's latency)."""
     q0, w, t = [0.0, 0.0, 0.0, 1.0], np.zeros((5, 3)), 0.001 * np.arange(5)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # rotvec_sum's warning belongs to the real run
@@ -49,28 +53,6 @@ def _warm_up(method: str) -> None:
         integ = DcmIntegrator(q0, method)
         integ.update_many_quat(w, t)  # the pipeline feeds arrays (the kernel's feed)
         integ.finish()
-
-
-def _scaled(rec: Received, gyro_scale: float) -> Received:
-    """The IMU sample with its rates converted to rad/s (``gyro_scale`` rad/s per unit)."""
-    if gyro_scale == 1.0:
-        return rec
-    return dataclasses.replace(rec, values=rec.values * gyro_scale)
-
-
-def _joined(recs: list[Received]) -> Received:
-    """Batches of one kind, in arrival order, as one."""
-    if len(recs) == 1:
-        return recs[0]
-    raw = None if any(r.raw is None for r in recs) else [p for r in recs for p in r.raw]
-    return Received(
-        recs[0].kind,
-        np.concatenate([r.t_ns for r in recs]),
-        np.concatenate([r.values for r in recs]),
-        np.concatenate([r.arrival_ns for r in recs]),
-        np.concatenate([r.wall_ns for r in recs]),
-        raw,
-    )
 
 
 def _check_bias(bias) -> str | tuple:
@@ -92,37 +74,11 @@ def _check_bias(bias) -> str | tuple:
 #: A source wakes at most every quarter view interval, and at least every 20 ms: a sample
 #: waits for its batch and then for the view's, so the batch adds <= 1/4 to the latency.
 _BATCH_MAX_S = 0.02
-#: From this view interval on, the loop reads a pollable source itself at each wake-up (one
-#: thread wakes per interval, not two). Shorter intervals ask for latency: the source's thread
-#: reads each sample a batch_s after its first bytes, not held for the next wake-up's read (worth
-#: a 10 ms interval's p99).
-_INLINE_MIN_S = 0.025
-#: The shortest cadence the loop takes when a source's rate needs it, s.
-_CADENCE_MIN_S = 0.01
-#: The loop reads a source whose buffer fills this much between two reads at most (a quarter:
-#: a rate that doubles, or a read that comes late, still finds room).
-_FILL_TARGET = 0.25
-#: After the first bytes of a source, the next read comes this soon, to measure the rate, s.
-_PROBE_S = 0.01
-#: The loop's wake-up interval by default: the view's display rate, or, without a view, four
-#: times a second (the status line, the recording and the reorder window's release need no
-#: more; each wake-up costs CPU of its own, most of it in caches gone cold while asleep).
-_VIEW_INTERVAL_S = 0.05
-_NO_VIEW_INTERVAL_S = 0.25
-
-
-def _has_display() -> bool:
-    from imu_dcm.viz import has_display
-
-    return has_display()
 
 
 def _check_outputs(record, force: bool, summary_json, rerun) -> None:
     """The view's mode and the output paths, before the source is opened (imu_dcm.outputs'
     rule)."""
-    from imu_dcm.live.view import check_mode
-    from imu_dcm.outputs import OutputError, check_output_dir, check_output_file
-
     check_mode(rerun)
     files = []
     if summary_json is not None:
@@ -140,7 +96,7 @@ def _check_outputs(record, force: bool, summary_json, rerun) -> None:
                 )
 
 
-@dataclass(frozen=True)
+@dataclass(slots=True, frozen=True)
 class LiveOptions:
     """Options of a live run (the keyword arguments of :func:`run`).
 
@@ -235,7 +191,7 @@ def run(
     ----------
     source : str
         ``ws://HOST:PORT`` (Foxglove WebSocket), ``udp://HOST:PORT`` (lines), ``-`` (stdin), or
-        another scheme of :data:`imu_dcm.live.sources.SOURCES`.
+        another scheme of :data:`imu_dcm.live.sources.SCHEMES`.
     stop : threading.Event, optional
         Set it to stop (in addition to SIGINT/SIGTERM in the main thread).
     say : callable(str), optional
@@ -286,22 +242,49 @@ def run(
             check_units=o.gyro_units == "rad/s",
         )
         gc.freeze()  # the start-up's objects: not traversed by every collection while live
-        reason = _Loop(src, pipe, o, stop or threading.Event(), say, on_ready).run()
+        reason = _loop(src, pipe, o, stop or threading.Event(), say, on_ready).run()
     finally:
         gc.unfreeze()
         _close(src, view, recorder, say, o.keep_viewer)
-    summary = _json_safe(_summary(pipe, src, source, o, bias_v, reason, recorder, started))
-    if o.summary_json is not None:
-        from imu_dcm.outputs import write_json
+    return _result(pipe, src, source, o, reason, recorder, started)
 
-        write_json(o.summary_json, summary, what="--summary-json file")
+
+def _result(pipe, src, source, o: LiveOptions, reason, recorder, started) -> LiveResult:
+    """The run's result; its summary written to ``o.summary_json`` when one is asked for."""
+    made = summary(
+        pipe,
+        src,
+        source,
+        gyro_units=o.gyro_units,
+        method=o.method,
+        reason=reason,
+        recorder=recorder,
+        started=started,
+    )
+    if o.summary_json is not None:
+        write_json(o.summary_json, made, what="--summary-json file")
     q = None if pipe.q_last is None else np.asarray(pipe.q_last, dtype=float)
-    return LiveResult(summary, q, pipe.t_last_ns, pipe.latency.recent())
+    return LiveResult(made, q, pipe.t_last_ns, pipe.latency.recent())
+
+
+def _loop(src: Source, pipe: Pipeline, o: LiveOptions, stop, say, on_ready) -> Loop:
+    """The session's loop over ``src``, with the options it reads."""
+    return Loop(
+        src,
+        pipe,
+        stop,
+        say,
+        on_ready,
+        view_interval_s=o.view_interval_s,
+        idle_stop_s=o.idle_stop_s,
+        gyro_units=o.gyro_units,
+        status=o.status,
+    )
 
 
 def _batch_s(o: LiveOptions) -> float:
     """How long a source's wake-up waits for the rest of a batch after its first bytes, s."""
-    return min(_BATCH_MAX_S, (o.view_interval_s or _VIEW_INTERVAL_S) / 4)
+    return min(_BATCH_MAX_S, (o.view_interval_s or VIEW_INTERVAL_S) / 4)
 
 
 def _open_source(spec, o: LiveOptions) -> Source:
@@ -321,11 +304,7 @@ def _open_source(spec, o: LiveOptions) -> Source:
 def _open_view(rerun: str | None, source: str, say):
     """The live view, or None: ``off``, or no mode given and no display (one line says how to
     ask for one)."""
-    from imu_dcm.live.view import LiveView
-
-    if rerun is None and not _has_display():
-        from imu_dcm.viz import HEADLESS_HINT
-
+    if rerun is None and not has_display():
         say(HEADLESS_HINT)
         return None
     return None if rerun == "off" else LiveView(rerun, title=f"live {source}", say=say)
@@ -334,8 +313,6 @@ def _open_view(rerun: str | None, source: str, say):
 def _open_recorder(source: str, o: LiveOptions, bias_v):
     if o.record is None:
         return None
-    from imu_dcm.live.recorder import LiveRecorder
-
     return LiveRecorder(
         o.record,
         force=o.force,
@@ -361,301 +338,3 @@ def _close(src: Source, view, recorder, say, keep_viewer: bool = True) -> None:
             say(f"rerun view failed: {type(exc).__name__}: {exc}")
     if recorder is not None:
         recorder.close()
-
-
-class _Loop:
-    """Receive until stopped: events from the source to the pipeline, the view at display
-    rate, the status line; :meth:`run` returns why it stopped."""
-
-    def __init__(self, src: Source, pipe: Pipeline, o: LiveOptions, stop, say, on_ready) -> None:
-        self.src, self.pipe, self.stop, self.say, self.on_ready = src, pipe, stop, say, on_ready
-        self.recorder = pipe.recorder
-        self.interval_s = o.view_interval_s or (
-            _VIEW_INTERVAL_S if pipe.view is not None else _NO_VIEW_INTERVAL_S
-        )
-        self.idle_stop_s = o.idle_stop_s
-        scale = o.gyro_units == "deg/s" and not src.converts_gyro_units
-        self.gyro_scale = DEG if scale else 1.0
-        self.tty = sys.stderr.isatty()
-        self.status = True if o.status is None else o.status
-        self.status_every = 0.5 if self.tty else 5.0
-        self.reason, self.ended = "stopped", False  # ended: the source said it ended
-        self.idle_since = time.monotonic()
-        self.next_flush = self.idle_since + self.interval_s  # the next wake-up of _receive
-        self.inline = src.pollable and self.interval_s >= _INLINE_MIN_S  # read in the loop
-        self.default_interval_s = self.interval_s
-        self._last_read: float | None = None  # when the previous inline read began
-        self._probed = False  # the read after the first bytes is set (_cadence)
-        self._pending_next: float | None = None
-
-    def _on_signal(self, signum, frame) -> None:
-        self.reason = f"stopped by {signal.Signals(signum).name}"
-        self.stop.set()
-
-    def run(self) -> str:
-        handlers = {}
-        if threading.current_thread() is threading.main_thread():
-            for sig in (signal.SIGINT, signal.SIGTERM):
-                handlers[sig] = signal.signal(sig, self._on_signal)
-        try:
-            with warnings.catch_warnings():
-                warnings.simplefilter("ignore", GapWarning)  # gaps are reported once, here
-                cpu_start = time.process_time()
-                self.src.begin() if self.inline else self.src.start()
-                if self.on_ready is not None:
-                    self.on_ready({"address": getattr(self.src, "address", None)})
-                self._receive()
-                self._drain()
-                if self.interval_s < self.default_interval_s:
-                    self.say(
-                        f"read every {self.interval_s * 1e3:.0f} ms (not "
-                        f"{self.default_interval_s * 1e3:.0f}): the source's rate filled its "
-                        f"buffer sooner"
-                    )
-                self.pipe.read_interval_s = self.interval_s
-                self.pipe.finish()
-                self.pipe.flush(final=True)
-                self.pipe.cpu_s = time.process_time() - cpu_start
-                if self.tty and self.status:
-                    sys.stderr.write("\r" + " " * 100 + "\r")
-        finally:
-            for sig, h in handlers.items():
-                signal.signal(sig, h)
-        return self.reason
-
-    def _receive(self) -> None:
-        """Wake once per view interval (not per event): take every event the source has
-        queued, hand the samples on as one batch per kind, send the view batch."""
-        pipe = self.pipe
-        now = time.monotonic()
-        self.next_flush, next_status = now + self.interval_s, now + self.status_every
-        window_s = pipe.reorder.window_ns * 1e-9
-        while not self._wait(max(0.0, self.next_flush - time.monotonic())):
-            if self.inline:
-                before = time.monotonic()
-                self.src.poll()
-                self._cadence(before)
-            if self._take():
-                return
-            now = time.monotonic()
-            if len(pipe.reorder) and now - self.idle_since > window_s:
-                pipe.release_held()  # the source went quiet: a sample waits <= the window
-            pipe.flush()
-            if self.recorder is not None:
-                self.recorder.maybe_flush()
-            if self._pending_next is not None:  # the probe read after the first bytes
-                self.next_flush, self._pending_next = self._pending_next, None
-            else:
-                self.next_flush = max(self.next_flush + self.interval_s, now)  # steady cadence
-            if self.status and now >= next_status:
-                _status(pipe, self.tty)
-                next_status = now + self.status_every
-            if self.idle_stop_s is not None and now - self.idle_since > self.idle_stop_s:
-                self.reason = f"no sample for {self.idle_stop_s:g} s"
-                return
-
-    def _wait(self, timeout_s: float) -> bool:
-        """Sleep until the next read; True when stopped. A line source that has sent nothing yet
-        is watched meanwhile, and read at its first bytes: the cadence its rate needs is set
-        from the first reads, before its buffer can fill (:meth:`_cadence`). ``stop`` is seen
-        at the end of the interval, as when sleeping (no more wake-ups than the cadence's)."""
-        if not (self.inline and self.src.watchable and not self.src.flowing):
-            return self.stop.wait(timeout_s)
-        end = time.monotonic() + timeout_s
-        while not self.stop.is_set():
-            left = end - time.monotonic()
-            if left <= 0:
-                return False
-            if self.src.ready(left):
-                self.next_flush = time.monotonic()
-                return self.stop.is_set()
-        return True
-
-    def _cadence(self, read_at: float) -> None:
-        """The interval the source's rate needs, from the read that just ran: the buffer filled
-        ``fill`` in the time since the previous read, so a read every ``dt * target / fill``
-        finds it at most a quarter full (down to :data:`_CADENCE_MIN_S`; never longer than the
-        interval set). The first read with data is followed by one after :data:`_PROBE_S`,
-        which measures the rate."""
-        src, prev = self.src, self._last_read
-        self._last_read = read_at
-        if not src.flowing:
-            return
-        if not self._probed:
-            self._probed = True
-            self._pending_next = read_at + _PROBE_S
-            return
-        fill = src.fill
-        if fill is None or prev is None or fill <= 0:
-            return
-        need = max(_CADENCE_MIN_S, (read_at - prev) * _FILL_TARGET / fill)
-        if need < 0.9 * self.interval_s:
-            self.interval_s = need  # from the next wake-up on
-
-    def _take(self, data_only: bool = False) -> bool:
-        """Every event queued by now, in order; raw items decoded once per key (the source's
-        :meth:`~imu_dcm.live.sources.Source.decode`); the samples of each kind go to the
-        pipeline as one batch (the truth first: it may start the estimate). True when the
-        source ended."""
-        events = self.src.events
-        raw: dict[int, tuple] = {}  # id(key) -> (key, items), in first-seen order
-        data: list[tuple] = []
-        ended = False
-        while not ended:
-            try:
-                ev = events.get_nowait()
-            except queue.Empty:
-                break
-            if ev[0] == "raw":
-                raw.setdefault(id(ev[1]), (ev[1], []))[1].extend(ev[2])
-            elif ev[0] == "data" or ev[0] == "malformed":
-                data.append(ev)
-            elif not data_only:
-                ended = self._handle(ev)
-        for key, items in raw.values():
-            data.extend(self.src.decode(key, items))
-        got: dict[str, list[Received]] = {"truth": [], "imu": []}
-        for ev in data:
-            if ev[0] == "malformed":
-                self.pipe.malformed += ev[1]
-                continue
-            got[ev[1].kind].append(ev[1])
-            if self.recorder is not None:
-                self.recorder.add_received(ev[1])
-        if got["truth"]:
-            self.pipe.on_truth(_joined(got["truth"]))
-        if got["imu"]:
-            self.pipe.on_imu(_scaled(_joined(got["imu"]), self.gyro_scale))
-            self.idle_since = time.monotonic()
-        return ended
-
-    def _handle(self, ev: tuple) -> bool:
-        """One event from the source other than samples; True when it ends the run."""
-        kind, pipe = ev[0], self.pipe
-        if kind == "channel":
-            ch = ev[1]
-            pipe.channels[ch.kind] = ch
-            pipe.truth_channel |= ch.kind == "truth"
-            if self.recorder is not None:
-                self.recorder.add_channel(ch)
-        elif kind == "info":
-            self.say(ev[1])
-        elif kind == "end":
-            self.reason, self.ended = ev[1], True
-            return True
-        return False
-
-    def _drain(self) -> None:
-        """What the source already delivered, once it has stopped."""
-        if self.inline and not self.ended:
-            self.src.poll()  # what came since the last wake-up
-        self.src.stop()
-        self._take(data_only=True)
-
-
-def _status(pipe: Pipeline, tty: bool) -> None:
-    r = pipe.reorder
-    dropped = (
-        r.dropped_duplicate
-        + r.dropped_backward
-        + r.dropped_nonfinite
-        + r.dropped_implausible
-        + pipe.malformed
-    )
-    step = pipe.median_step_s
-    rate = 1.0 / step if step else 0.0
-    lat = pipe.latency.last
-    p50 = f"{np.median(lat):.1f}" if len(lat) else "-"
-    b = pipe.rest.bias_rad_s if pipe.rest is not None else pipe.fixed_bias
-    rest = " (at rest)" if pipe.rest is not None and pipe.rest.at_rest else ""
-    line = (
-        f"{rate:7.1f} Hz  {pipe.n} samples  {dropped} dropped  latency {p50} ms  "
-        f"bias ({b[0]:+.4f}, {b[1]:+.4f}, {b[2]:+.4f}) rad/s{rest}"
-    )
-    sys.stderr.write(("\r" + line) if tty else (line + "\n"))
-    sys.stderr.flush()
-
-
-def _json_safe(value):
-    """``value`` with every non-finite float replaced by None (JSON has no NaN or Inf; a value
-    that cannot be measured is none, never a number that is not one)."""
-    if isinstance(value, dict):
-        return {k: _json_safe(v) for k, v in value.items()}
-    if isinstance(value, list | tuple):
-        return [_json_safe(v) for v in value]
-    if isinstance(value, float) and not np.isfinite(value):
-        return None
-    return value
-
-
-def _summary(
-    pipe: Pipeline,
-    src: Source,
-    source: str,
-    o: LiveOptions,
-    bias_v,
-    reason: str,
-    recorder,
-    started: float,
-) -> dict:
-    r = pipe.reorder
-    imu_ch, truth_ch = pipe.channels.get("imu"), pipe.channels.get("truth")
-    dur = float(pipe.recent_t_s[-1]) if len(pipe.recent_t_s) else 0.0
-    step = pipe.median_step_s
-    st = pipe.stats
-    have = st.n > 0
-    rms_v = np.sqrt(st.sq / st.n) if have else [None] * 3
-    segs = [x.as_dict() for x in pipe.rest.segments] if pipe.rest is not None else []
-    bias_mean = (pipe.bias_sum / pipe.bias_n).tolist() if pipe.bias_n else [0.0, 0.0, 0.0]
-    return {
-        "source": source,
-        "imu_topic": imu_ch.topic if imu_ch else None,
-        "imu_type": (imu_ch.name or imu_ch.message_encoding) if imu_ch else None,
-        "truth_topic": truth_ch.topic
-        if truth_ch
-        else ("lines (q_w_b)" if pipe.truth_count else None),
-        "truth_type": truth_ch.name if truth_ch else None,
-        "samples": int(pipe.n),
-        "samples_estimated": int(pipe.n - pipe.samples_before_start) if pipe.integ else 0,
-        "duration_s": float(dur),
-        "rate_hz": 1.0 / step if step else None,
-        "dropped_nonfinite": r.dropped_nonfinite,
-        "dropped_implausible": r.dropped_implausible,
-        "dropped_duplicate": r.dropped_duplicate,
-        "dropped_backward": r.dropped_backward,
-        "reordered": r.reordered,
-        "malformed": int(pipe.malformed),
-        "gaps": [{"t_s": a, "length_s": d} for a, d in pipe.gaps],
-        "gap_count": pipe.gap_count,
-        "reconnects": int(getattr(src, "reconnects", 0)),
-        "lost_by_system": int(src.lost),
-        "gyro_units": o.gyro_units,
-        "units_evidence": pipe.units_evidence,
-        "bias_mode": pipe.bias_mode,
-        "bias_rad_s": bias_mean,
-        "bias_final_rad_s": list(pipe.rest.bias_rad_s) if pipe.rest else list(pipe.fixed_bias),
-        "bias_segments": segs,
-        "method": o.method,
-        "reorder_window_s": r.window_ns * 1e-9,
-        "start_time_s": pipe.start_t_s,
-        "unscored_before_s": pipe.unscored_before_s,
-        "initial_quat_xyzw": None if pipe.q0 is None else [float(v) for v in pipe.q0],
-        "final_quat_xyzw": None if pipe.q_last is None else [float(v) for v in pipe.q_last],
-        "final_t_s": None
-        if pipe.t_last_ns is None or pipe.t0_ns is None
-        else (pipe.t_last_ns - pipe.t0_ns) * 1e-9,
-        "truth_samples_used": int(pipe.truth_used),
-        "rms_error_deg": float(rms_v[0]) if have else None,
-        "max_error_deg": float(st.max[0]) if have else None,
-        "rms_inclination_deg": float(rms_v[1]) if have else None,
-        "max_inclination_deg": float(st.max[1]) if have else None,
-        "rms_heading_deg": float(rms_v[2]) if have else None,
-        "max_heading_deg": float(st.max[2]) if have else None,
-        "latency_p50_ms": pipe.latency.percentile(50),
-        "latency_p99_ms": pipe.latency.percentile(99),
-        "stopped": reason,
-        "record": str(recorder.path) if recorder is not None else None,
-        "cpu_s": pipe.cpu_s,
-        "read_interval_s": pipe.read_interval_s,
-        "elapsed_s": time.perf_counter() - started,
-    }

@@ -49,8 +49,10 @@ exists, else shows nothing and writes nothing (one line, :data:`HEADLESS_HINT`, 
 other modes).
 
 Modules: ``view_data`` (:class:`ViewData` and the geometry drawn from it), ``log`` (what is
-logged: entities, colours, blueprint, :func:`send_view`) and ``viewer`` (how it is shown:
-:func:`save_rrd`, :func:`serve_rrd`, the native viewer, :func:`show_replay`).
+logged: entities, colours, blueprint, :func:`send_view`), ``viewer`` (how it is shown:
+:func:`save_rrd`, :func:`serve_rrd`, the native viewer, :func:`show_replay`) and ``live``
+(live's view, :class:`imu_dcm.viz.live.LiveView`: the same entities fed in batches as a live run
+goes; imported by live, not here, so that importing viz loads no rerun).
 """
 
 from __future__ import annotations

@@ -22,10 +22,10 @@ from imu_dcm.viz.view_data import (
     TRACE_MAX_S,
     ViewData,
     _axes_rows,
-    _body_axes_w,
     _trace_segments,
     _trail_frames,
     _trail_strips,
+    body_axes_w,
     gyro_needs_split,
 )
 
@@ -56,8 +56,11 @@ ENTITY = {
 TRUTH_RGB = np.array([[220, 40, 40], [30, 170, 50], [40, 90, 235]], dtype=np.uint8)
 EST_RGB = np.array([[255, 165, 150], [150, 235, 140], [150, 195, 255]], dtype=np.uint8)
 # Colours readable on the viewer's light and dark themes.
-_TRUTH_TRAIL_RGB = (150, 70, 220)
-_EST_TRAIL_RGB = (240, 150, 0)
+TRUTH_TRAIL_RGB = (150, 70, 220)
+EST_TRAIL_RGB = (240, 150, 0)
+#: Radii of the body axes' arrows and of the z-tip trails, by entity ("estimate", "truth").
+AXES_RADIUS = {"estimate": 0.018, "truth": 0.035}
+TRAIL_RADIUS = {"estimate": 0.004, "truth": 0.007}
 _ERROR_RGB = [(190, 50, 190), (255, 140, 40), (40, 160, 230)]
 _GYRO_RGB = [(230, 70, 70), (70, 200, 90), (80, 130, 255)]
 _GYRO_RAW_RGB = [(140, 110, 110), (110, 140, 115), (110, 120, 150)]
@@ -214,12 +217,17 @@ def _entities(view: ViewData) -> list[_Entity]:
     import rerun as rr
 
     t_rel = view.t_s - view.t_s[0]
-    est_axes, has_est = _body_axes_w(view.q_est)  # (N, 3 axes, 3)
-    true_axes, has_truth = _body_axes_w(view.q_truth)
+    est_axes, has_est = body_axes_w(view.q_est)  # (N, 3 axes, 3)
+    true_axes, has_truth = body_axes_w(view.q_truth)
     rows = _axes_rows(view.t_s)  # thinned to AXES_HZ: memory bounded on long logs
     out = [
         _axes_entity(
-            ENTITY["estimate_axes"], t_rel[rows], est_axes[rows], has_est[rows], EST_RGB, 0.018
+            ENTITY["estimate_axes"],
+            t_rel[rows],
+            est_axes[rows],
+            has_est[rows],
+            EST_RGB,
+            AXES_RADIUS["estimate"],
         ),
         _axes_entity(
             ENTITY["truth_axes"],
@@ -227,7 +235,7 @@ def _entities(view: ViewData) -> list[_Entity]:
             true_axes[rows],
             has_truth[rows],
             TRUTH_RGB,
-            0.035,
+            AXES_RADIUS["truth"],
             True,
         ),
     ]
@@ -237,8 +245,8 @@ def _entities(view: ViewData) -> list[_Entity]:
         "estimate_trail": est_axes[:, 2],
     }
     for key, tip in tips.items():
-        color = _EST_TRAIL_RGB if key == "estimate_trail" else _TRUTH_TRAIL_RGB
-        radius = 0.004 if key == "estimate_trail" else 0.007
+        color = EST_TRAIL_RGB if key == "estimate_trail" else TRUTH_TRAIL_RGB
+        radius = TRAIL_RADIUS["estimate" if key == "estimate_trail" else "truth"]
         out.append(
             _Entity(
                 ENTITY[key],
@@ -304,13 +312,13 @@ def send_styles(view: ViewData, rec, *, gyro_one_entity: bool = False) -> None:
     if view.t_s[-1] - view.t_s[0] > TRACE_MAX_S:
         return
     tips = {
-        "estimate_trace": _body_axes_w(view.q_est)[0][:, 2],
-        "truth_trace": _body_axes_w(view.q_truth)[0][:, 2],
+        "estimate_trace": body_axes_w(view.q_est)[0][:, 2],
+        "truth_trace": body_axes_w(view.q_truth)[0][:, 2],
     }
     for key, tip in tips.items():
         segments = _trace_segments(tip)
         if segments:
-            color = (*_EST_TRAIL_RGB, 110) if key == "estimate_trace" else (*_TRUTH_TRAIL_RGB, 90)
+            color = (*EST_TRAIL_RGB, 110) if key == "estimate_trace" else (*TRUTH_TRAIL_RGB, 90)
             rec.log(
                 ENTITY[key],
                 rr.LineStrips3D(segments, colors=[color], radii=[0.003]),

@@ -127,7 +127,7 @@ class ViewData:
 # geometry of the 3D view
 
 
-def _body_axes_w(q_w_b: NDArray) -> tuple[NDArray, NDArray[np.bool_]]:
+def body_axes_w(q_w_b: NDArray) -> tuple[NDArray, NDArray[np.bool_]]:
     """Body x, y, z axes in world coordinates (the columns of ``R_w_b``) and the valid rows.
 
     Returns

@@ -93,7 +93,8 @@ def _rerun_env() -> dict[str, str]:
     return env
 
 
-def _free_port() -> int:
+def free_port() -> int:
+    """A TCP port of 127.0.0.1 free now (the system's choice)."""
     with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
         s.bind(("127.0.0.1", 0))
         return int(s.getsockname()[1])
@@ -241,8 +242,8 @@ def serve_rrd(
     """
     if path is not None and not Path(path).is_file():
         raise InputError(f"Expected an existing .rrd file, got {str(path)!r}")
-    grpc_port = grpc_port or _free_port()
-    web_port = web_port or _free_port()
+    grpc_port = grpc_port or free_port()
+    web_port = web_port or free_port()
     cmd = [
         str(rerun_binary()),
         "--serve-web",
@@ -289,13 +290,22 @@ def has_display() -> bool:
     return True  # macOS and Windows always have a desktop session for a local user
 
 
-def _spawn_viewer(view: ViewData, realtime: bool) -> str:
-    """Start the native viewer on 127.0.0.1 (detached) and stream the view to it."""
-    port = _free_port()
+def start_viewer(timeout_s: float = 20.0) -> tuple[object, int]:
+    """Start the native viewer (the ``rerun`` binary) listening on a free port of 127.0.0.1, in
+    its own session so that it outlives the caller until the user closes it, its output in a
+    log file of the temporary folder; returns ``(process, port)`` once the port accepts
+    connections (the recording connects to ``rerun+http://127.0.0.1:PORT/proxy``)."""
+    port = free_port()
     log_path = Path(tempfile.gettempdir()) / f"imu_dcm_rerun_viewer_{port}.log"
     cmd = [str(rerun_binary()), "--bind", "127.0.0.1", "--port", str(port), "--expect-data-soon"]
     proc = _start(cmd, log_path)
-    _wait_for_port(port, proc, 20.0, log_path)
+    _wait_for_port(port, proc, timeout_s, log_path)
+    return proc, port
+
+
+def _spawn_viewer(view: ViewData, realtime: bool) -> str:
+    """Start the native viewer on 127.0.0.1 (detached) and stream the view to it."""
+    proc, port = start_viewer()
     rec = _new_recording(view)
     rec.connect_grpc(f"rerun+http://127.0.0.1:{port}/proxy", default_blueprint=make_blueprint(view))
     rec.send_recording_name(view.title)

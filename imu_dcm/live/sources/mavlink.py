@@ -37,8 +37,14 @@ from urllib.parse import parse_qs
 
 import numpy as np
 
+try:  # an optional extra: this module is imported only when a mavlink: SOURCE opens
+    from pymavlink.dialects.v20 import common
+except ImportError:
+    common = None
+
 from imu_dcm.errors import InputError
-from imu_dcm.live.sources import Channel, Received, Source
+from imu_dcm.live.events import Channel, End, Info, Malformed, Received
+from imu_dcm.live.sources.base import Source
 from imu_dcm.logio.ned import FLU_FROM_FRD, q_enu_flu
 
 INSTALL = "pip install 'imu_dcm[mavlink]'"
@@ -85,12 +91,8 @@ def parse_url(url: str) -> tuple[str, str, int, float | None]:
 
 
 def _dialect():
-    try:
-        from pymavlink.dialects.v20 import common
-    except ImportError:
-        raise InputError(
-            f"Expected pymavlink for a mavlink: SOURCE, got none installed; {INSTALL}"
-        ) from None
+    if common is None:
+        raise InputError(f"Expected pymavlink for a mavlink: SOURCE, got none installed; {INSTALL}")
     return common
 
 
@@ -152,9 +154,9 @@ class MavlinkSource(Source):
     # ---------------------------------------------------------------------- receiving
     def _run(self) -> None:
         where = f"mavlink:{self.mode}:{self.address[0]}:{self.address[1]}"
-        self.events.put(("info", f"listening on {where}" if self.mode == "udpin" else where))
+        self.events.put(Info(f"listening on {where}" if self.mode == "udpin" else where))
         if self.truth:
-            self.events.put(("channel", Channel("truth", TRUTH, "", "", "", "mavlink")))
+            self.events.put(Channel("truth", TRUTH, "", "", "", "mavlink"))
         try:
             while not self._stop.is_set():
                 data = self._receive()
@@ -173,7 +175,7 @@ class MavlinkSource(Source):
         except TimeoutError:
             return []
         if not first and self.mode == "tcp":
-            self.events.put(("end", "the MAVLink TCP server closed the connection"))
+            self.events.put(End("the MAVLink TCP server closed the connection"))
             return None
         chunks = [first]
         self.sock.setblocking(False)
@@ -202,7 +204,7 @@ class MavlinkSource(Source):
                 bad += 1  # a datagram holds whole frames: its cut-off end is not the next's start
                 self._new_parser()
         if bad:
-            self.events.put(("malformed", bad))
+            self.events.put(Malformed(bad))
         if truth:
             a = np.array(truth, dtype=np.float64)
             t = np.array([r[0] for r in truth], dtype=np.int64)
@@ -235,14 +237,8 @@ class MavlinkSource(Source):
 
     def _put(self, kind: str, t_ns, values, arrival: int, wall: int) -> None:
         n = len(t_ns)
-        self.events.put(
-            (
-                "data",
-                Received(
-                    kind, t_ns, values, np.full(n, arrival, np.int64), np.full(n, wall, np.int64)
-                ),
-            )
-        )
+        arrival_ns, wall_ns = np.full(n, arrival, np.int64), np.full(n, wall, np.int64)
+        self.events.put(Received(kind, t_ns, values, arrival_ns, wall_ns))
 
     def _use(self, name: str) -> bool:
         """Whether ``name`` is the gyro: the one named, else the first scaled message to
@@ -269,8 +265,8 @@ class MavlinkSource(Source):
     def _lock(self, name: str) -> None:
         self.gyro_type = name
         unit = "raw counts x raw_gyro_scale" if GYRO[name][0] is None else "body FRD -> FLU"
-        self.events.put(("channel", Channel("imu", name, "", "", "", "mavlink")))
-        self.events.put(("info", f"gyro: {name} ({unit})"))
+        self.events.put(Channel("imu", name, "", "", "", "mavlink"))
+        self.events.put(Info(f"gyro: {name} ({unit})"))
 
     def _refuse_raw(self) -> None:
         if not self._stop.is_set():
@@ -279,5 +275,5 @@ class MavlinkSource(Source):
                 "of an unknown unit): give its scale, "
                 "mavlink:udpin:HOST:PORT?raw_gyro_scale=RAD_S_PER_COUNT"
             )
-            self.events.put(("end", why))
+            self.events.put(End(why))
             self._stop.set()

@@ -1,44 +1,57 @@
-"""The live rerun view: replay's entities and blueprint, fed in batches at display rate.
+"""Live's rerun view: replay's entities and blueprint, fed in batches at display rate.
 
 The same entity paths (``imu_dcm.viz.ENTITY``), timeline and blueprint as replay's view
 (:func:`imu_dcm.viz.make_blueprint`), so a live view reads like a replayed one: estimated and
-true body axes in 3D with the z-tip trail of the last 2 s, the attitude error and the gyro rates
-over time. Each :meth:`LiveView.log` call sends what arrived since the previous one with one
-``send_columns`` per entity (never one log call per sample); the 3D axes are thinned to the
-first row of each 1/``AXES_HZ`` s of source time (the scalars keep every sample). Each call
-costs rerun about 0.2-0.4 ms of CPU whatever its rows, so the live view keeps the calls few: the
-three gyro rates go out as three series of one entity (``ENTITY["gyro"]``, replay's colours and
-names; replay's view has one entity per axis), the arrow columns are made directly, and the
-axes' and trails' colours, radii and labels are sent once, statically.
+true body axes in 3D with the z-tip trail of the last ``TRAIL_S`` s, the attitude error and the
+gyro rates over time (replay's colours and radii, :mod:`imu_dcm.viz.log`). Each
+:meth:`LiveView.log` call sends what arrived since the previous one with one ``send_columns``
+per entity (never one log call per sample); the 3D axes are thinned to the first row of each
+1/``AXES_HZ`` s of source time (the scalars keep every sample). Each call costs rerun about
+0.2-0.4 ms of CPU whatever its rows, so the live view keeps the calls few: the three gyro rates
+go out as three series of one entity (``ENTITY["gyro"]``, replay's colours and names; replay's
+view has one entity per axis), the arrow columns are made directly, and the axes' and trails'
+colours, radii and labels are sent once, statically.
 
-Modes: ``spawn`` starts the native viewer (the ``rerun`` binary, listening on 127.0.0.1 only) —
-it needs a display; ``serve`` runs ``rerun --serve-web --bind 127.0.0.1`` (via
-:func:`imu_dcm.viz.serve_rrd`) and streams to it, the server staying up after the run so the
-recording can still be looked at; ``save:PATH.rrd`` streams into a file; ``None`` spawns with a
-display and serves without one.
+Modes: ``spawn`` starts the native viewer (:func:`imu_dcm.viz.viewer.start_viewer`: the
+``rerun`` binary, listening on 127.0.0.1 only) — it needs a display; ``serve`` runs ``rerun
+--serve-web --bind 127.0.0.1`` (via :func:`imu_dcm.viz.serve_rrd`) and streams to it, the
+server staying up after the run so the recording can still be looked at; ``save:PATH.rrd``
+streams into a file; ``None`` spawns with a display and serves without one.
+
+rerun and pyarrow are imported when a view opens (:class:`LiveView`), not with this module: a
+run without a view, which still checks its mode here, does not pay the ~0.5 s of CPU they take
+to import (measured: rerun 458 ms, pyarrow 30 ms).
 """
 
 from __future__ import annotations
 
 import math
-import os
-import socket
-import subprocess
-import time
 import uuid
+from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
 
+from imu_dcm.cli import check_rerun_switch
 from imu_dcm.errors import InputError
-from imu_dcm.so3 import quat_rotate
-from imu_dcm.viz.log import EST_RGB, TRUTH_RGB
-from imu_dcm.viz.view_data import AXES_HZ  # rows of 3D body axes per second, as replay's view
+from imu_dcm.outputs import PendingOutput, claim_output
+from imu_dcm.viz.log import (
+    AXES_RADIUS,
+    ENTITY,
+    EST_RGB,
+    EST_TRAIL_RGB,
+    TIMELINE,
+    TRAIL_RADIUS,
+    TRUTH_RGB,
+    TRUTH_TRAIL_RGB,
+    make_blueprint,
+    send_styles,
+)
+from imu_dcm.viz.view_data import AXES_HZ, TRAIL_POINTS, TRAIL_S, ViewData, body_axes_w
+from imu_dcm.viz.viewer import has_display, serve_rrd, start_viewer
 
-__all__ = ["AXES_HZ", "LiveView", "check_mode"]
+__all__ = ["LiveView", "check_mode"]
 
-_TRAIL_S = 2.0
-_TRAIL_POINTS = 120
 _FLUSH_TIMEOUT_S = 10.0
 #: Source time between two sends of the 3D axes and trails, s (10 a second, each holding every
 #: row of 1/AXES_HZ s: each send costs two rerun calls, ~0.5 ms of CPU, so sending them with
@@ -46,36 +59,33 @@ _FLUSH_TIMEOUT_S = 10.0
 _3D_EVERY_S = 0.1
 
 
-_AXES_STYLE = {  # arrows of the body axes: colours, radius, labels (as replay's view)
-    "estimate": (EST_RGB, 0.018, None),
-    "truth": (TRUTH_RGB, 0.035, ["x", "y", "z"]),
+_AXES_STYLE = {  # arrows of the body axes: colours, radius, labels (replay's view's)
+    "estimate": (EST_RGB, AXES_RADIUS["estimate"], None),
+    "truth": (TRUTH_RGB, AXES_RADIUS["truth"], ["x", "y", "z"]),
 }
-_TRAIL_STYLE = {"estimate": ((240, 150, 0), 0.004), "truth": ((150, 70, 220), 0.007)}
+TRAIL_STYLE = {  # the z-tip trails: colour, radius (replay's view's)
+    "estimate": (EST_TRAIL_RGB, TRAIL_RADIUS["estimate"]),
+    "truth": (TRUTH_TRAIL_RGB, TRAIL_RADIUS["truth"]),
+}
 _ONE_ROW = np.array([0, 1], dtype=np.int32)
 
 
+@dataclass(slots=True, frozen=True)
 class _Batch:
     """A ready arrow array as a rerun component batch (``ComponentBatchLike``)."""
 
-    __slots__ = ("array",)
-
-    def __init__(self, array) -> None:
-        self.array = array
+    array: object
 
     def as_arrow_array(self):
         return self.array
 
 
+@dataclass(slots=True, frozen=True)
 class _Times:
-    """The ``time`` timeline of rows, a duration rounded to the ns (``TimeColumnLike``)."""
+    """The ``time`` timeline of rows, an arrow duration array in ns (``TimeColumnLike``)."""
 
-    __slots__ = ("array", "timeline")
-
-    def __init__(self, timeline: str, t_s: NDArray) -> None:
-        import pyarrow as pa
-
-        self.timeline = timeline
-        self.array = pa.array(np.rint(t_s * 1e9).astype(np.int64), pa.duration("ns"))
+    timeline: str
+    array: object
 
     def timeline_name(self) -> str:
         return self.timeline
@@ -84,19 +94,18 @@ class _Times:
         return self.array
 
 
-def pa_array(values, dtype):
-    """``values`` as an arrow array of ``dtype``: float64 scalars, fixed-size lists of 3
-    (vectors, from an (n, 3) array) or lists of them (strips, from a list of (k, 3) arrays)."""
-    import pyarrow as pa
-
+def _arrow(pa, values, dtype):
+    """``values`` as an arrow array of ``dtype`` (``pa`` is pyarrow): float64 scalars,
+    fixed-size lists of 3 (vectors, from an (n, 3) array) or lists of them (strips, from a list
+    of (k, 3) arrays)."""
     if pa.types.is_fixed_size_list(dtype):
         flat = np.ascontiguousarray(values, dtype=np.float32).reshape(-1)
         return pa.FixedSizeListArray.from_arrays(pa.array(flat, dtype.value_type), type=dtype)
     if pa.types.is_list(dtype):
         sizes = np.array([len(v) for v in values], dtype=np.int32)
         offsets = pa.array(np.concatenate([[0], np.cumsum(sizes)]).astype(np.int32))
-        inner = pa_array(
-            np.concatenate(values) if len(values) else np.zeros((0, 3)), dtype.value_type
+        inner = _arrow(
+            pa, np.concatenate(values) if len(values) else np.zeros((0, 3)), dtype.value_type
         )
         return pa.ListArray.from_arrays(offsets, inner, type=dtype)
     return pa.array(np.ascontiguousarray(values, dtype=np.float64), dtype)
@@ -106,8 +115,6 @@ def check_mode(mode: str | None) -> None:
     """Raise InputError for a mode other than None, spawn, serve, off or save:PATH.rrd, and
     for a view asked for while ``RERUN=off`` turns rerun off
     (:func:`imu_dcm.cli.check_rerun_switch`)."""
-    from imu_dcm.cli import check_rerun_switch
-
     if mode is None or mode in ("spawn", "serve", "off"):
         check_rerun_switch(mode)
         return
@@ -122,38 +129,11 @@ def check_mode(mode: str | None) -> None:
     raise InputError(f"Expected --rerun spawn, serve, save:PATH.rrd or off, got {mode!r}")
 
 
-def _free_port() -> int:
-    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
-
-
-def _spawn_detached(cmd: list[str]) -> int:
-    """Start the viewer in its own session, output discarded; it outlives the run (the user
-    closes it). Returns its pid."""
-    env = {**os.environ, "TELEMETRY_ENABLED": "false"}
-    if hasattr(os, "posix_spawn"):
-        actions = [(os.POSIX_SPAWN_OPEN, fd, os.devnull, os.O_RDWR, 0) for fd in (0, 1, 2)]
-        return os.posix_spawn(cmd[0], cmd, env, file_actions=actions, setsid=True)
-    proc = subprocess.Popen(
-        cmd, stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, env=env
-    )  # pragma: no cover - Windows
-    proc.returncode = 0  # left running on purpose: no "still running" warning when dropped
-    return proc.pid
-
-
-def _axes(q: NDArray) -> NDArray:
-    """Body axes in world coordinates, (n, 3 axes, 3)."""
-    return quat_rotate(q[:, None, :], np.eye(3)[None, :, :])
-
-
 def _save(rec, target: str, blueprint):
     """Stream the recording into a temporary sibling of ``target`` (.rrd; new or a recording
     this tool wrote, :func:`imu_dcm.outputs.claim_output`); the returned
     :class:`~imu_dcm.outputs.PendingOutput` makes it ``target`` whole at :meth:`LiveView.close`
     (the target is never emptied, and never half written)."""
-    from imu_dcm.outputs import PendingOutput, claim_output
-
     pending = PendingOutput(claim_output(target, "rrd", what="--rerun save:"))
     try:
         rec.save(pending.path, default_blueprint=blueprint)
@@ -167,23 +147,22 @@ class LiveView:
     """A rerun recording fed as the live run goes (see the module doc)."""
 
     def __init__(self, mode: str | None, title: str, say=print) -> None:
+        import pyarrow as pa  # here, not with the module (see the module doc)
         import rerun as rr
-
-        from imu_dcm import viz
 
         check_mode(mode)
         if mode is None:
-            mode = "spawn" if viz.has_display() else "serve"
+            mode = "spawn" if has_display() else "serve"
         self.mode = mode
         self.say = say
         self.served = None
         self.viewer_pid = None
         self._pending = None
-        self.rr = rr
-        self.entity = viz.ENTITY
-        self.timeline = viz.TIMELINE
+        self.rr, self.pa = rr, pa
+        self.entity = ENTITY
+        self.timeline = TIMELINE
         nan4 = np.full((1, 4), np.nan)
-        self._blank = viz.ViewData(
+        self._blank = ViewData(
             t_s=np.zeros(1),
             q_est=nan4,
             q_truth=nan4,
@@ -193,42 +172,20 @@ class LiveView:
             error_heading_deg=np.full(1, np.nan),
             title=title,
         )
-        blueprint = viz.make_blueprint(self._blank)
+        blueprint = make_blueprint(self._blank)
         rec = rr.RecordingStream("imu_dcm", recording_id=uuid.uuid4())
         if mode == "spawn":
-            if not viz.has_display():
+            if not has_display():
                 raise InputError(
                     "Expected a display (DISPLAY or WAYLAND_DISPLAY) for rerun mode "
                     "'spawn', got none; use 'serve' or 'save:PATH.rrd'"
                 )
-            port = _free_port()
-            pid = _spawn_detached(
-                [
-                    str(viz.rerun_binary()),
-                    "--bind",
-                    "127.0.0.1",
-                    "--port",
-                    str(port),
-                    "--expect-data-soon",
-                ]
-            )
-            self.viewer_pid = pid
-            deadline = time.monotonic() + 20.0
-            while True:
-                try:
-                    with socket.create_connection(("127.0.0.1", port), timeout=0.2):
-                        break
-                except OSError:
-                    if time.monotonic() > deadline:
-                        raise InputError(
-                            f"Expected the rerun viewer on 127.0.0.1:{port}, got "
-                            f"none within 20 s (pid {pid})"
-                        ) from None
-                    time.sleep(0.05)
+            proc, port = start_viewer()
+            self.viewer_pid = proc.pid
             rec.connect_grpc(f"rerun+http://127.0.0.1:{port}/proxy", default_blueprint=blueprint)
-            say(f"rerun: viewer started (pid {pid}, listening on 127.0.0.1:{port})")
+            say(f"rerun: viewer started (pid {proc.pid}, listening on 127.0.0.1:{port})")
         elif mode == "serve":
-            self.served = viz.serve_rrd(None)
+            self.served = serve_rrd(None)
             try:
                 rec.connect_grpc(self.served.grpc_url, default_blueprint=blueprint)
             except BaseException:
@@ -247,17 +204,15 @@ class LiveView:
         self.log_calls = 0
 
     def _static(self) -> None:
-        from imu_dcm import viz
-
         rr = self.rr
         # replay's styles (colours, names, widths); the rates as one entity of three series
-        viz.send_styles(self._blank, self.rec, gyro_one_entity=True)
+        send_styles(self._blank, self.rec, gyro_one_entity=True)
         # the axes' and trails' colours, radii and labels: static, once (replay's values), so
         # each send carries the vectors and the strip alone
         for key, (rgb, radius, labels) in _AXES_STYLE.items():
             style = rr.Arrows3D.from_fields(colors=rgb, radii=[radius], labels=labels)
             self.rec.log(self.entity[f"{key}_axes"], style, static=True)
-        for key, (color, radius) in _TRAIL_STYLE.items():
+        for key, (color, radius) in TRAIL_STYLE.items():
             style = rr.LineStrips3D.from_fields(colors=[color], radii=[radius])
             self.rec.log(self.entity[f"{key}_trail"], style, static=True)
         # arrow types and descriptors of the columns, from rerun's own builders
@@ -271,14 +226,18 @@ class LiveView:
         }
 
     def _time(self, t_s: NDArray) -> _Times:
-        return _Times(self.timeline, t_s)
+        """The rows' times as the timeline's column (a duration, rounded to the ns)."""
+        pa = self.pa
+        ns = pa.array(np.rint(t_s * 1e9).astype(np.int64), pa.duration("ns"))
+        return _Times(self.timeline, ns)
 
     def _column(self, kind: str, values, offsets: NDArray):
         """One component column (``vectors``, ``strips`` or ``scalars``) of rows
         ``values[offsets[i]:offsets[i + 1]]``, made directly as the arrow array rerun's builder
         makes (its type taken from that builder at start)."""
         desc, dtype = self._kinds[kind]
-        return self.rr.ComponentColumn(desc, _Batch(pa_array(values, dtype)), offsets=offsets)
+        batch = _Batch(_arrow(self.pa, values, dtype))
+        return self.rr.ComponentColumn(desc, batch, offsets=offsets)
 
     def _send(self, path: str, times, column) -> None:
         self.rec.send_columns(path, indexes=[times], columns=[column])
@@ -308,19 +267,19 @@ class LiveView:
         held.clear()
         self._sent_3d[key] = t_s[-1]
         idx = self._thin(key, t_s)
-        ax = _axes(q[idx])
+        ax = body_axes_w(q[idx])[0]  # (n, 3 axes, 3), the rows finite
         n = len(idx)
         path = self.entity["estimate_axes" if key == "est" else "truth_axes"]
         vectors = self._column("vectors", ax.reshape(-1, 3), np.arange(0, 3 * n + 1, 3, np.int32))
         self._send(path, self._time(t_s[idx]), vectors)
-        # z-tip trail of the drawn rows: the last _TRAIL_S seconds, one strip per call
+        # z-tip trail of the drawn rows: the last TRAIL_S seconds, one strip per call
         tip_t, tip_z = self._tips[key]
         tip_t, tip_z = np.concatenate([tip_t, t_s[idx]]), np.concatenate([tip_z, ax[:, 2]])
-        keep = tip_t >= t_s[-1] - _TRAIL_S
+        keep = tip_t >= t_s[-1] - TRAIL_S
         self._tips[key] = tip_t, tip_z = tip_t[keep], tip_z[keep]
         pts = tip_z
-        if len(pts) > _TRAIL_POINTS:
-            pts = pts[np.linspace(0, len(pts) - 1, _TRAIL_POINTS).round().astype(int)]
+        if len(pts) > TRAIL_POINTS:
+            pts = pts[np.linspace(0, len(pts) - 1, TRAIL_POINTS).round().astype(int)]
         strip = self._column("strips", [pts], _ONE_ROW)
         self._send(
             self.entity["estimate_trail" if key == "est" else "truth_trail"],

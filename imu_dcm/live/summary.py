@@ -1,0 +1,130 @@
+"""What a live run reports: :class:`LiveResult` and its summary, JSON-ready.
+
+The summary's keys are replay's where they apply (:func:`imu_dcm.live.run` lists them); a value
+that cannot be measured is None, never NaN or Inf (:func:`json_safe`).
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+from numpy.typing import NDArray
+
+from imu_dcm.live.pipeline import Pipeline
+from imu_dcm.live.sources import Source
+
+__all__ = ["LiveResult", "json_safe", "summary"]
+
+
+@dataclass(slots=True, frozen=True)
+class LiveResult:
+    """What a live run produced.
+
+    Attributes
+    ----------
+    summary : dict — JSON-ready summary (keys as replay's where they apply; see
+        :func:`imu_dcm.live.run`).
+    q_w_b : float64 (4,) or None — final attitude ``[x, y, z, w]`` at ``t_ns`` (None if the
+        estimate never started).
+    t_ns : int or None — source stamp of the final attitude, ns.
+    latency_ms : float64 (n,) — receive -> view log call of the newest samples logged (at most
+        :data:`imu_dcm.live.latency.LATENCY_KEEP` and one batch: memory stays bounded), ms.
+    """
+
+    summary: dict
+    q_w_b: NDArray[np.float64] | None
+    t_ns: int | None
+    latency_ms: NDArray[np.float64] = field(repr=False)
+
+
+def json_safe(value):
+    """``value`` with every non-finite float replaced by None (JSON has no NaN or Inf; a value
+    that cannot be measured is none, never a number that is not one)."""
+    if isinstance(value, dict):
+        return {k: json_safe(v) for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return [json_safe(v) for v in value]
+    if isinstance(value, float) and not np.isfinite(value):
+        return None
+    return value
+
+
+def summary(
+    pipe: Pipeline,
+    src: Source,
+    source: str,
+    *,
+    gyro_units: str,
+    method: str,
+    reason: str,
+    recorder,
+    started: float,
+) -> dict:
+    """The summary of a run (its keys: :func:`imu_dcm.live.run`), every value finite or None."""
+    return json_safe(_fields(pipe, src, source, gyro_units, method, reason, recorder, started))
+
+
+def _fields(pipe, src, source, gyro_units, method, reason, recorder, started) -> dict:
+    r = pipe.reorder
+    imu_ch, truth_ch = pipe.channels.get("imu"), pipe.channels.get("truth")
+    dur = float(pipe.recent_t_s[-1]) if len(pipe.recent_t_s) else 0.0
+    step = pipe.median_step_s
+    st = pipe.stats
+    have = st.n > 0
+    rms_v = np.sqrt(st.sq / st.n) if have else [None] * 3
+    segs = [x.as_dict() for x in pipe.rest.segments] if pipe.rest is not None else []
+    bias_mean = (pipe.bias_sum / pipe.bias_n).tolist() if pipe.bias_n else [0.0, 0.0, 0.0]
+    return {
+        "source": source,
+        "imu_topic": imu_ch.topic if imu_ch else None,
+        "imu_type": (imu_ch.name or imu_ch.message_encoding) if imu_ch else None,
+        "truth_topic": truth_ch.topic
+        if truth_ch
+        else ("lines (q_w_b)" if pipe.truth_count else None),
+        "truth_type": truth_ch.name if truth_ch else None,
+        "samples": int(pipe.n),
+        "samples_estimated": int(pipe.n - pipe.samples_before_start) if pipe.integ else 0,
+        "duration_s": float(dur),
+        "rate_hz": 1.0 / step if step else None,
+        "dropped_nonfinite": r.dropped_nonfinite,
+        "dropped_implausible": r.dropped_implausible,
+        "dropped_duplicate": r.dropped_duplicate,
+        "dropped_backward": r.dropped_backward,
+        "reordered": r.reordered,
+        "malformed": int(pipe.malformed),
+        "gaps": [{"t_s": a, "length_s": d} for a, d in pipe.gaps],
+        "gap_count": pipe.gap_count,
+        "reconnects": int(getattr(src, "reconnects", 0)),
+        "lost_by_system": int(src.lost),
+        "gyro_units": gyro_units,
+        "units_evidence": pipe.units_evidence,
+        "bias_mode": pipe.bias_mode,
+        "bias_rad_s": bias_mean,
+        "bias_final_rad_s": list(pipe.rest.bias_rad_s) if pipe.rest else list(pipe.fixed_bias),
+        "bias_segments": segs,
+        "method": method,
+        "reorder_window_s": r.window_ns * 1e-9,
+        "start_time_s": pipe.start_t_s,
+        "unscored_before_s": pipe.unscored_before_s,
+        "initial_quat_xyzw": None if pipe.q0 is None else [float(v) for v in pipe.q0],
+        "final_quat_xyzw": None if pipe.q_last is None else [float(v) for v in pipe.q_last],
+        "final_t_s": None
+        if pipe.t_last_ns is None or pipe.t0_ns is None
+        else (pipe.t_last_ns - pipe.t0_ns) * 1e-9,
+        "truth_samples_used": int(pipe.truth_used),
+        "rms_error_deg": float(rms_v[0]) if have else None,
+        "max_error_deg": float(st.max[0]) if have else None,
+        "rms_inclination_deg": float(rms_v[1]) if have else None,
+        "max_inclination_deg": float(st.max[1]) if have else None,
+        "rms_heading_deg": float(rms_v[2]) if have else None,
+        "max_heading_deg": float(st.max[2]) if have else None,
+        "latency_p50_ms": pipe.latency.percentile(50),
+        "latency_p99_ms": pipe.latency.percentile(99),
+        "stopped": reason,
+        "record": str(recorder.path) if recorder is not None else None,
+        "cpu_s": pipe.cpu_s,
+        "read_interval_s": pipe.read_interval_s,
+        "elapsed_s": time.perf_counter() - started,
+    }
