@@ -58,7 +58,7 @@ CORE = (
     "outputs",
     "output_rule",
     "signatures",
-    "cli",
+    "app",
     "__main__",  # python -m imu_dcm: the list of commands (imports nothing of the project)
 )
 # the bag writer belongs to log I/O wherever it sits: imu_dcm/bag_writer.py or inside logio

@@ -227,7 +227,7 @@ def test_bad_options():
     with pytest.raises(InputError, match="Expected truth offset 'auto' or seconds"):
         replay("whatever", truth_offset_s="soon")
     # text is parsed by the command line only, with the same one-line messages
-    from imu_dcm.cli import parse_numbers
+    from imu_dcm.app.options import parse_numbers
 
     with pytest.raises(InputError, match="Expected init quaternion x,y,z,w as 4"):
         parse_numbers("1,0,0", 4, "init quaternion x,y,z,w")

@@ -25,12 +25,14 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import ArrayLike
 
+from imu_dcm.app.checks import check_bias, check_init_q_w_b
+from imu_dcm.app.rerun_mode import check_rerun_mode, rerun_save_path
+from imu_dcm.app.summary import RunFigures, json_ready
 from imu_dcm.errors import GapWarning, InputError
 from imu_dcm.integrate import METHODS
 from imu_dcm.live.lines import TIME_UNITS
 from imu_dcm.live.pipeline import DEG, LiveResult, Pipeline
 from imu_dcm.live.sources import Received, Source, open_source, parse_source
-from imu_dcm.so3 import as_quat_xyzw
 
 __all__ = ["LiveOptions", "run"]
 
@@ -73,22 +75,6 @@ def _joined(recs: list[Received]) -> Received:
     )
 
 
-def _check_bias(bias) -> str | tuple:
-    """``"auto"``, ``"none"`` or 3 finite numbers (rad/s); text is parsed by the command line
-    (:func:`imu_dcm.cli.parse_bias`)."""
-    if isinstance(bias, str):
-        if bias in ("auto", "none"):
-            return bias
-        raise InputError(f"Expected bias 'auto', 'none' or 3 numbers (rad/s), got {bias!r}")
-    try:
-        b = np.asarray(bias, dtype=float)
-    except (TypeError, ValueError):
-        raise InputError(f"Expected bias as 3 finite numbers (rad/s), got {bias!r}") from None
-    if b.shape != (3,) or not np.all(np.isfinite(b)):
-        raise InputError(f"Expected bias auto, none or 3 finite numbers (rad/s), got {bias!r}")
-    return tuple(b.tolist())
-
-
 #: A source wakes at most every quarter view interval, and at least every 20 ms: a sample
 #: waits for its batch and then for the view's, so the batch adds <= 1/4 to the latency.
 _BATCH_MAX_S = 0.02
@@ -120,16 +106,15 @@ def _has_display() -> bool:
 def _check_outputs(record, force: bool, summary_json, rerun) -> None:
     """The view's mode and the output paths, before the source is opened (imu_dcm.outputs'
     rule)."""
-    from imu_dcm.live.view import check_mode
     from imu_dcm.outputs import OutputError, check_output_dir, check_output_file
 
-    check_mode(rerun)
+    check_rerun_mode(rerun, "rerun")
     files = []
     if summary_json is not None:
         path = check_output_file(summary_json, (), "--summary-json", kind="json")
         files.append((path, "--summary-json"))
-    if isinstance(rerun, str) and rerun.startswith("save:"):
-        path = check_output_file(rerun[len("save:") :], (), "--rerun save:", kind="rrd")
+    if rerun_save_path(rerun) is not None:
+        path = check_output_file(rerun_save_path(rerun), (), "--rerun save:", kind="rrd")
         files.append((path, "--rerun save:"))
     if record is not None:  # the other outputs must not land in (or be) the bag folder
         bag = check_output_dir(record, force=force, what="--record bag")
@@ -153,8 +138,8 @@ class LiveOptions:
         (replay's rest rule, causal); a vector: rad/s.
     gyro_units : "rad/s" or "deg/s" — unit of the rates (line sources and WebSocket alike).
     time_units : "s", "ms", "us" or "ns" — unit of CSV stamps.
-    init_quat : array_like (4,), optional — start attitude ``q_w_b``
-        ``[x, y, z, w]`` at the first sample (instead of the truth).
+    init_q_w_b : array_like (4,), optional — start attitude ``q_w_b``
+        ``[x, y, z, w]`` at the first sample (instead of the truth; :mod:`imu_dcm.app.checks`).
     reorder_window_s : float — reorder window in source time, s (default 0.05).
     view_interval_s : float, optional — the loop's wake-up interval: the batches of the view
         and the recording (display rate), s; default 0.05 with a view, 0.25 without.
@@ -180,7 +165,7 @@ class LiveOptions:
     bias: str | ArrayLike = "auto"
     gyro_units: str = "rad/s"
     time_units: str = "s"
-    init_quat: ArrayLike | None = None
+    init_q_w_b: ArrayLike | None = None
     reorder_window_s: float = 0.05
     view_interval_s: float | None = None
     rerun: str | None = None
@@ -196,7 +181,7 @@ class LiveOptions:
 
 
 def _checked(source: str, o: LiveOptions) -> tuple:
-    """The options checked before any I/O: ``(spec, bias, init_q)``; raises InputError."""
+    """The options checked before any I/O: ``(spec, bias, init_q_w_b)``; raises InputError."""
     spec = parse_source(source)
     if o.method not in METHODS:
         raise InputError(f"Expected method in {METHODS}, got {o.method!r}")
@@ -209,11 +194,7 @@ def _checked(source: str, o: LiveOptions) -> tuple:
             f"Expected reorder window >= 0 s and view interval > 0 s, got "
             f"{o.reorder_window_s!r} and {o.view_interval_s!r}"
         )
-    bias_v = _check_bias(o.bias)
-    init_q = None
-    if o.init_quat is not None:
-        init_q = as_quat_xyzw(np.asarray(o.init_quat, dtype=float), "init_quat")
-    return spec, bias_v, init_q
+    return spec, check_bias(o.bias), check_init_q_w_b(o.init_q_w_b)
 
 
 def _say_stderr(text: str) -> None:
@@ -253,15 +234,15 @@ def run(
         reordered, malformed, gaps (the first 1000), gap_count, reconnects, lost_by_system (UDP
         datagrams the system dropped, its buffer full, counted to the stop), gyro_units,
         units_evidence (why the rates look like deg/s, or None), bias_mode, bias_rad_s,
-        bias_segments, method, start_time_s, unscored_before_s, initial_quat_xyzw,
-        final_quat_xyzw, final_t_s, truth_samples_used, rms/max error/inclination/heading (deg,
+        bias_segments, method, start_time_s, unscored_before_s, initial_q_w_b,
+        final_q_w_b, final_t_s, truth_samples_used, rms/max error/inclination/heading (deg,
         None without truth), latency_p50_ms, latency_p99_ms, stopped, record, cpu_s (process
         CPU time while receiving, all threads), read_interval_s (the loop's final cadence),
         elapsed_s``; no value is NaN or Inf (None where it cannot be measured).
     """
     started = time.perf_counter()
     o = LiveOptions(**options)
-    spec, bias_v, init_q = _checked(source, o)
+    spec, bias_v, init_q_w_b = _checked(source, o)
     say = say or _say_stderr
     _check_outputs(o.record, o.force, o.summary_json, o.rerun)
     _warm_up(o.method)
@@ -273,7 +254,7 @@ def run(
         pipe = Pipeline(
             method=o.method,
             bias=bias_v,
-            init_q=init_q,
+            init_q_w_b=init_q_w_b,
             window_ns=round(o.reorder_window_s * 1e9),
             truth_wait_s=o.truth_wait_s,
             lines=not src.announces_truth,
@@ -288,7 +269,7 @@ def run(
     finally:
         gc.unfreeze()
         _close(src, view, recorder, say, o.keep_viewer)
-    summary = _json_safe(_summary(pipe, src, source, o, bias_v, reason, recorder, started))
+    summary = json_ready(_summary(pipe, src, source, o, reason, recorder, started))
     if o.summary_json is not None:
         from imu_dcm.outputs import write_json
 
@@ -574,24 +555,11 @@ def _status(pipe: Pipeline, tty: bool) -> None:
     sys.stderr.flush()
 
 
-def _json_safe(value):
-    """``value`` with every non-finite float replaced by None (JSON has no NaN or Inf; a value
-    that cannot be measured is none, never a number that is not one)."""
-    if isinstance(value, dict):
-        return {k: _json_safe(v) for k, v in value.items()}
-    if isinstance(value, list | tuple):
-        return [_json_safe(v) for v in value]
-    if isinstance(value, float) and not np.isfinite(value):
-        return None
-    return value
-
-
 def _summary(
     pipe: Pipeline,
     src: Source,
     source: str,
     o: LiveOptions,
-    bias_v,
     reason: str,
     recorder,
     started: float,
@@ -605,55 +573,56 @@ def _summary(
     rms_v = np.sqrt(st.sq / st.n) if have else [None] * 3
     segs = [x.as_dict() for x in pipe.rest.segments] if pipe.rest is not None else []
     bias_mean = (pipe.bias_sum / pipe.bias_n).tolist() if pipe.bias_n else [0.0, 0.0, 0.0]
+    figures = RunFigures(
+        samples=int(pipe.n),
+        samples_estimated=int(pipe.n - pipe.samples_before_start) if pipe.integ else 0,
+        duration_s=float(dur),
+        rate_hz=1.0 / step if step else None,
+        imu_topic=imu_ch.topic if imu_ch else None,
+        imu_type=(imu_ch.name or imu_ch.message_encoding) if imu_ch else None,
+        truth_topic=truth_ch.topic if truth_ch else ("lines (q_w_b)" if pipe.truth_count else None),
+        truth_type=truth_ch.name if truth_ch else None,
+        method=o.method,
+        gyro_units=o.gyro_units,
+        bias_mode=pipe.bias_mode,
+        bias_rad_s=tuple(bias_mean),
+        bias_segments=tuple(segs),
+        start_time_s=pipe.start_t_s,
+        initial_q_w_b=None if pipe.q0 is None else tuple(float(v) for v in pipe.q0),
+        final_q_w_b=None if pipe.q_last is None else tuple(float(v) for v in pipe.q_last),
+        truth_samples_used=int(pipe.truth_used),
+        rms_error_deg=float(rms_v[0]) if have else None,
+        max_error_deg=float(st.max[0]) if have else None,
+        rms_inclination_deg=float(rms_v[1]) if have else None,
+        max_inclination_deg=float(st.max[1]) if have else None,
+        rms_heading_deg=float(rms_v[2]) if have else None,
+        max_heading_deg=float(st.max[2]) if have else None,
+        dropped_nonfinite=r.dropped_nonfinite,
+        dropped_implausible=r.dropped_implausible,
+        dropped_duplicate=r.dropped_duplicate,
+        dropped_backward=r.dropped_backward,
+        gaps=tuple(pipe.gaps),
+        elapsed_s=time.perf_counter() - started,
+    )
     return {
         "source": source,
-        "imu_topic": imu_ch.topic if imu_ch else None,
-        "imu_type": (imu_ch.name or imu_ch.message_encoding) if imu_ch else None,
-        "truth_topic": truth_ch.topic
-        if truth_ch
-        else ("lines (q_w_b)" if pipe.truth_count else None),
-        "truth_type": truth_ch.name if truth_ch else None,
-        "samples": int(pipe.n),
-        "samples_estimated": int(pipe.n - pipe.samples_before_start) if pipe.integ else 0,
-        "duration_s": float(dur),
-        "rate_hz": 1.0 / step if step else None,
-        "dropped_nonfinite": r.dropped_nonfinite,
-        "dropped_implausible": r.dropped_implausible,
-        "dropped_duplicate": r.dropped_duplicate,
-        "dropped_backward": r.dropped_backward,
+        **figures.to_dict(),
         "reordered": r.reordered,
         "malformed": int(pipe.malformed),
-        "gaps": [{"t_s": a, "length_s": d} for a, d in pipe.gaps],
         "gap_count": pipe.gap_count,
         "reconnects": int(getattr(src, "reconnects", 0)),
         "lost_by_system": int(src.lost),
-        "gyro_units": o.gyro_units,
         "units_evidence": pipe.units_evidence,
-        "bias_mode": pipe.bias_mode,
-        "bias_rad_s": bias_mean,
         "bias_final_rad_s": list(pipe.rest.bias_rad_s) if pipe.rest else list(pipe.fixed_bias),
-        "bias_segments": segs,
-        "method": o.method,
         "reorder_window_s": r.window_ns * 1e-9,
-        "start_time_s": pipe.start_t_s,
         "unscored_before_s": pipe.unscored_before_s,
-        "initial_quat_xyzw": None if pipe.q0 is None else [float(v) for v in pipe.q0],
-        "final_quat_xyzw": None if pipe.q_last is None else [float(v) for v in pipe.q_last],
         "final_t_s": None
         if pipe.t_last_ns is None or pipe.t0_ns is None
         else (pipe.t_last_ns - pipe.t0_ns) * 1e-9,
-        "truth_samples_used": int(pipe.truth_used),
-        "rms_error_deg": float(rms_v[0]) if have else None,
-        "max_error_deg": float(st.max[0]) if have else None,
-        "rms_inclination_deg": float(rms_v[1]) if have else None,
-        "max_inclination_deg": float(st.max[1]) if have else None,
-        "rms_heading_deg": float(rms_v[2]) if have else None,
-        "max_heading_deg": float(st.max[2]) if have else None,
         "latency_p50_ms": pipe.latency.percentile(50),
         "latency_p99_ms": pipe.latency.percentile(99),
         "stopped": reason,
         "record": str(recorder.path) if recorder is not None else None,
         "cpu_s": pipe.cpu_s,
         "read_interval_s": pipe.read_interval_s,
-        "elapsed_s": time.perf_counter() - started,
     }

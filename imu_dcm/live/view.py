@@ -30,12 +30,13 @@ import uuid
 import numpy as np
 from numpy.typing import NDArray
 
+from imu_dcm.app.rerun_mode import check_rerun_mode, rerun_save_path
 from imu_dcm.errors import InputError
 from imu_dcm.so3 import quat_rotate
 from imu_dcm.viz.log import EST_RGB, TRUTH_RGB
 from imu_dcm.viz.view_data import AXES_HZ  # rows of 3D body axes per second, as replay's view
 
-__all__ = ["AXES_HZ", "LiveView", "check_mode"]
+__all__ = ["AXES_HZ", "LiveView"]
 
 _TRAIL_S = 2.0
 _TRAIL_POINTS = 120
@@ -102,26 +103,6 @@ def pa_array(values, dtype):
     return pa.array(np.ascontiguousarray(values, dtype=np.float64), dtype)
 
 
-def check_mode(mode: str | None) -> None:
-    """Raise InputError for a mode other than None, spawn, serve, off or save:PATH.rrd, and
-    for a view asked for while ``RERUN=off`` turns rerun off
-    (:func:`imu_dcm.cli.check_rerun_switch`)."""
-    from imu_dcm.cli import check_rerun_switch
-
-    if mode is None or mode in ("spawn", "serve", "off"):
-        check_rerun_switch(mode)
-        return
-    if (
-        isinstance(mode, str)
-        and mode.startswith("save:")
-        and mode.endswith(".rrd")
-        and len(mode) > len("save:.rrd")
-    ):
-        check_rerun_switch(mode)
-        return
-    raise InputError(f"Expected --rerun spawn, serve, save:PATH.rrd or off, got {mode!r}")
-
-
 def _free_port() -> int:
     with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
         s.bind(("127.0.0.1", 0))
@@ -171,7 +152,7 @@ class LiveView:
 
         from imu_dcm import viz
 
-        check_mode(mode)
+        check_rerun_mode(mode, "rerun mode")
         if mode is None:
             mode = "spawn" if viz.has_display() else "serve"
         self.mode = mode
@@ -236,7 +217,7 @@ class LiveView:
                 raise
             say(f"rerun: open {self.served.url} (web viewer, 127.0.0.1 only)")
         else:
-            self._pending = _save(rec, mode[len("save:") :], blueprint)
+            self._pending = _save(rec, rerun_save_path(mode), blueprint)
         rec.send_recording_name(title)
         self.rec = rec
         self._static()
