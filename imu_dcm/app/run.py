@@ -33,7 +33,7 @@ __all__ = [
     "Terminated",
     "end_quietly_on_broken_pipe",
     "error_line",
-    "first_line",
+    "one_line",
     "run_main",
 ]
 
@@ -49,7 +49,7 @@ def _raise_terminated(signum, frame):
     raise Terminated
 
 
-def first_line(text: str) -> str:
+def one_line(text: str) -> str:
     """The first line of ``text``, without carriage returns ("" for no text)."""
     return (text.splitlines() or [""])[0].replace("\r", " ").strip()
 
@@ -57,7 +57,7 @@ def first_line(text: str) -> str:
 def error_line(exc: BaseException) -> str:
     """The one line said for an error: its message's first line; for an ``OSError`` the system's
     words and the file, as "Expected a readable input and writable outputs, got ..."."""
-    text = first_line(str(exc))
+    text = one_line(str(exc))
     if isinstance(exc, OSError):
         where = f" {exc.filename!r}" if exc.filename else ""
         return (
@@ -129,7 +129,7 @@ def run_main(
             if trap:
                 signal.signal(signal.SIGTERM, old)
             for w in caught:
-                print(f"{prog}: warning: {first_line(str(w.message))}", file=sys.stderr)
+                print(f"{prog}: warning: {one_line(str(w.message))}", file=sys.stderr)
     if message:
         print(f"{prog}: error: {message}", file=sys.stderr)
     return code
