@@ -108,7 +108,7 @@ def _check_outputs(record, force: bool, summary_json, rerun) -> None:
     rule)."""
     from imu_dcm.outputs import OutputError, check_output_dir, check_output_file
 
-    check_rerun_mode(rerun, "rerun")
+    check_rerun_mode(rerun, "rerun mode")
     files = []
     if summary_json is not None:
         path = check_output_file(summary_json, (), "--summary-json", kind="json")
