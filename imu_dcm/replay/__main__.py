@@ -28,6 +28,7 @@ from imu_dcm.app.options import OneLineArgumentParser
 from imu_dcm.app.progress import Progress
 from imu_dcm.app.rerun_mode import check_rerun_mode, rerun_save_path
 from imu_dcm.app.run import run_main
+from imu_dcm.errors import ImuDcmError, InputError
 from imu_dcm.replay.options import LOG_KINDS, add_replay_options, replay_keywords
 
 PROG = "imu-dcm-replay"
@@ -192,7 +193,6 @@ def _check_rerun(mode: str | None, inputs: tuple):
     checked by :func:`imu_dcm.app.rerun_mode.check_rerun_mode`): a display for ``spawn``; the
     claimed ``save:`` file (or None)."""
     if mode == "spawn":
-        from imu_dcm.errors import InputError
         from imu_dcm.viz import has_display
 
         if not has_display():
@@ -218,8 +218,6 @@ def _inputs(log: str) -> tuple[str, ...]:
 
 def _distinct_outputs(args) -> None:
     """No output is another output, and nothing is written inside the --out bag folder."""
-    from imu_dcm.errors import InputError
-
     named = [("--out", args.out), ("--summary-json", args.summary_json), ("--plot", args.plot)]
     named.append(("--export-csv", args.export_csv))
     if args.export_tum:
@@ -240,8 +238,6 @@ def _distinct_outputs(args) -> None:
 
 def _not_a_folder_of_logs(log: str) -> None:
     """A folder that holds logs (not a log itself) is for ``batch``: say so."""
-    from imu_dcm.errors import InputError
-
     if not os.path.isdir(log) or os.path.isfile(os.path.join(log, "metadata.yaml")):
         return
     from imu_dcm.replay.batch import find_logs
@@ -301,8 +297,6 @@ def _options(args) -> tuple[dict, dict]:
 
 def _check_view_options(args) -> None:
     """``--keep-viewer`` and ``--realtime`` act only on a view: refused where there is none."""
-    from imu_dcm.errors import InputError
-
     mode = args.rerun or "the default (no view without a display)"
     if args.keep_viewer and args.rerun != "serve":
         raise InputError(f"Expected --rerun serve with --keep-viewer, got --rerun {mode}")
@@ -371,8 +365,6 @@ def _replay_main(argv: list[str]) -> int:
 def _view(result, args, claim) -> tuple[str, int]:
     """:func:`_show`, its failures one line: an error when the view was asked for, else a
     warning (the default view is a convenience)."""
-    from imu_dcm.errors import ImuDcmError
-
     try:
         return _show(result, args.rerun, args.realtime, args.keep_viewer, claim)
     except Exception as exc:

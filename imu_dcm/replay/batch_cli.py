@@ -12,9 +12,11 @@ import argparse
 import sys
 import time
 
+from imu_dcm.app.options import OneLineArgumentParser
 from imu_dcm.app.run import EXIT_FAILED, EXIT_OK, end_quietly_on_broken_pipe, run_main
 from imu_dcm.errors import InputError
 from imu_dcm.replay.batch import replay_many
+from imu_dcm.replay.options import add_replay_options, replay_keywords
 from imu_dcm.replay.table import LogRow
 
 PROG = "imu-dcm-replay batch"
@@ -22,9 +24,6 @@ PROG = "imu-dcm-replay batch"
 
 def build_parser() -> argparse.ArgumentParser:
     """The parser of ``python -m imu_dcm.replay batch`` (options are checked before any I/O)."""
-    from imu_dcm.app.options import OneLineArgumentParser
-    from imu_dcm.replay.options import add_replay_options
-
     p = OneLineArgumentParser(
         prog=PROG,
         description="Replay many gyro logs with the same options, on all cores or on a Dask "
@@ -125,8 +124,6 @@ def _batch_main(argv: list[str]) -> int:
     args = build_parser().parse_args(argv)
     if not args.table.endswith(".csv"):
         raise InputError(f"Expected --table ending in .csv, got {args.table!r}")
-    from imu_dcm.replay.options import replay_keywords
-
     options = replay_keywords(args)  # the outputs are claimed by replay_many first
     compare = _compare(args)
     bar = _Bar()
