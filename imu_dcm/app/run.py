@@ -126,8 +126,8 @@ def run_main(
         except Terminated:
             code, message = EXIT_TERMINATED, terminated or "terminated"
         finally:
-            if trap:
-                signal.signal(signal.SIGTERM, old)
+            if trap:  # None: the handler was not set from Python (the default, then)
+                signal.signal(signal.SIGTERM, signal.SIG_DFL if old is None else old)
             for w in caught:
                 print(f"{prog}: warning: {one_line(str(w.message))}", file=sys.stderr)
     if message:
