@@ -15,7 +15,14 @@ import pytest
 from imu_dcm.app.checks import check_bias, check_init_q_w_b
 from imu_dcm.app.options import parse_init_q_w_b
 from imu_dcm.app.rerun_mode import check_rerun_mode, rerun_save_path
-from imu_dcm.app.run import EXIT_BAD_INPUT, EXIT_INTERRUPTED, EXIT_OK, error_line, run_main
+from imu_dcm.app.run import (
+    EXIT_BAD_INPUT,
+    EXIT_INTERRUPTED,
+    EXIT_OK,
+    Terminated,
+    error_line,
+    run_main,
+)
 from imu_dcm.app.summary import RunFigures
 from imu_dcm.errors import InputError
 from imu_dcm.rates import MAX_RATE_RAD_S
@@ -37,6 +44,8 @@ def test_run_main_turns_what_the_body_raised_into_a_code_and_one_line(capsys):
     assert run_main("tool", _raises(KeyboardInterrupt()), [], interrupted="stop") == 130
     assert capsys.readouterr().err == "tool: error: stop\n"
     assert EXIT_INTERRUPTED == 130
+    assert run_main("tool", _raises(Terminated()), []) == 143  # SIGTERM
+    assert capsys.readouterr().err == "tool: error: terminated\n"
     assert run_main("tool", _raises(SystemExit(0)), []) == EXIT_OK  # --help
     assert run_main("tool", _raises(BrokenPipeError()), []) == EXIT_OK
     assert capsys.readouterr().err == ""

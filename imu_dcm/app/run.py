@@ -83,15 +83,17 @@ def run_main(
     argv: list[str] | None = None,
     *,
     interrupted: str = "interrupted",
-    terminated: str | None = None,
+    terminated: str = "terminated",
 ) -> int:
     """Run a command's work, ``body(argv)``, and return its exit code (module doc).
 
     ``body`` returns the code of a run that ended; what it raises becomes a code and one line
     on stderr, ``PROG: error: ...``: an :class:`~imu_dcm.errors.ImuDcmError` or ``OSError``
     2 (:func:`error_line`), ``SystemExit`` (argparse: ``--help``, a bad option, already
-    printed) its own code, Ctrl-C 130 with ``interrupted``, a closed stdout 0. Each warning
-    raised meanwhile is printed once as ``PROG: warning: ...``, its first line.
+    printed) its own code, Ctrl-C 130 with ``interrupted``, SIGTERM 143 with ``terminated``, a
+    closed stdout 0. Each warning raised meanwhile is printed once as ``PROG: warning: ...``,
+    its first line. In the main thread, SIGTERM raises :class:`Terminated` in ``body`` for the
+    run's length (a body may set its own handler meanwhile, and put this one back).
 
     Parameters
     ----------
@@ -100,15 +102,12 @@ def run_main(
     body : callable(list of str) -> int
     argv : list of str, optional
         The arguments (default ``sys.argv[1:]``).
-    interrupted : str
-        The line said on Ctrl-C.
-    terminated : str, optional
-        Given: SIGTERM (in the main thread) raises :class:`Terminated` in ``body`` and ends the
-        command with 143 and this line; None leaves SIGTERM as it is.
+    interrupted, terminated : str
+        The line said on Ctrl-C, on SIGTERM.
     """
     argv = list(sys.argv[1:] if argv is None else argv)
     message, code = "", EXIT_BAD_INPUT
-    trap = terminated is not None and threading.current_thread() is threading.main_thread()
+    trap = threading.current_thread() is threading.main_thread()
     old = signal.signal(signal.SIGTERM, _raise_terminated) if trap else None
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
@@ -124,7 +123,7 @@ def run_main(
         except KeyboardInterrupt:
             code, message = EXIT_INTERRUPTED, interrupted
         except Terminated:
-            code, message = EXIT_TERMINATED, terminated or "terminated"
+            code, message = EXIT_TERMINATED, terminated
         finally:
             if trap:  # None: the handler was not set from Python (the default, then)
                 signal.signal(signal.SIGTERM, signal.SIG_DFL if old is None else old)
