@@ -35,8 +35,9 @@ import numpy as np
 from data_synth import budget
 from data_synth.gyro import DEFAULT_EPOCH_NS, MAX_STAMP_NS, OUTPUTS, GyroModel, synthetic_gyro
 from data_synth.scenes import BRANCHES, FREE_BODY_CASES, MOTIONS, simulate
-from imu_dcm.cli import OneLineArgumentParser, end_quietly_on_broken_pipe, prog_name
-from imu_dcm.errors import ImuDcmError, InputError
+from imu_dcm.app.options import OneLineArgumentParser, prog_name
+from imu_dcm.app.run import run_main
+from imu_dcm.errors import InputError
 from imu_dcm.logio.writer import StampedSeries, write_bag
 from imu_dcm.outputs import check_output_dir
 
@@ -426,23 +427,14 @@ def make_log(args: argparse.Namespace, argv: list[str]) -> Path:
 
 
 def main(argv: list[str] | None = None) -> int:
-    """Entry point; returns the exit status (:mod:`imu_dcm.cli`: 0 ok; 2 bad option or value,
-    a job too large, an existing output or a file-system error; 130 interrupted)."""
+    """Entry point; returns the exit status (:mod:`imu_dcm.app.run`: 0 ok; 2 bad option or value,
+    a job too large, an existing output or a file-system error; 130 interrupted). A bad option
+    ends in ``SystemExit`` (argparse's, status 2), before the work starts."""
     argv = list(sys.argv[1:] if argv is None else argv)
     args = build_parser().parse_args(argv)
-    try:
-        out = make_log(args, argv)
-        print(out)
-    except BrokenPipeError:  # ... | head
-        end_quietly_on_broken_pipe()
-    except ImuDcmError as exc:  # bad value or existing output: one line, status 2
-        msg = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
-        print(f"{PROG}: error: {msg}", file=sys.stderr)
-        return 2
-    except OSError as exc:  # the file system refused: one line, status 2
-        print(f"{PROG}: error: {exc}".splitlines()[0], file=sys.stderr)
-        return 2
-    except KeyboardInterrupt:
-        print(f"{PROG}: error: interrupted", file=sys.stderr)
-        return 130
-    return 0
+
+    def work(_: list[str]) -> int:
+        print(make_log(args, argv))
+        return 0
+
+    return run_main(PROG, work, argv)

@@ -329,7 +329,7 @@ def violations(
         v.append("NaN or Infinity in the JSON")
     if run.summary is not None and run.rc == 0:
         s = run.summary
-        q = np.array(s["final_quat_xyzw"], dtype=float)
+        q = np.array(s["final_q_w_b"], dtype=float)
         if not np.all(np.isfinite(q)):
             v.append("a non-finite attitude")
         else:

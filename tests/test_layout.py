@@ -65,7 +65,7 @@ LAYERS = (
     ),
     ("gyro", ("imu_dcm.gyro",)),
     ("logio", ("imu_dcm.logio",)),
-    ("app", ("imu_dcm.cli", "imu_dcm.app")),
+    ("app", ("imu_dcm.app",)),
     ("viz", ("imu_dcm.viz",)),
     ("commands", ("imu_dcm.replay", "imu_dcm.live")),
 )

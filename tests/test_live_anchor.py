@@ -54,7 +54,7 @@ def test_live_reanchors_to_a_late_truth_and_scores_as_replay(broad_dir):
     pipe = Pipeline(
         method="magnus4",
         bias="none",
-        init_q=None,
+        init_q_w_b=None,
         window_ns=50_000_000,
         truth_wait_s=1.0,
         lines=False,  # the truth comes on an announced channel, as over a WebSocket

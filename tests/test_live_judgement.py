@@ -159,9 +159,9 @@ def test_deg_per_s_given_as_rad_per_s_is_flagged_by_the_full_scale_without_truth
 
 
 def test_the_summary_holds_no_value_json_cannot_hold():
-    from imu_dcm.live.summary import json_safe
+    from imu_dcm.app.summary import json_ready
 
-    got = json_safe({"a": float("nan"), "b": [1.0, float("inf")], "c": {"d": -float("inf")}})
+    got = json_ready({"a": float("nan"), "b": [1.0, float("inf")], "c": {"d": -float("inf")}})
     assert got == {"a": None, "b": [1.0, None], "c": {"d": None}}
     json.dumps(got, allow_nan=False)
 

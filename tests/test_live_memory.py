@@ -22,7 +22,7 @@ def _pipeline() -> Pipeline:
     return Pipeline(
         method="magnus4",
         bias="auto",
-        init_q=None,
+        init_q_w_b=None,
         window_ns=50_000_000,
         truth_wait_s=1.0,
         lines=True,

@@ -95,10 +95,10 @@ def _record_wakeups(monkeypatch) -> list[tuple[float, bool, bool]]:
     """The loop's waits: for each, the time it was set to end (the loop's own schedule, not
     the clock's reading), whether the source was flowing (its first bytes read) when it
     began, and whether it woke to read (not stopped)."""
-    from imu_dcm.live import session
+    from imu_dcm.live.loop import Loop
 
     waits: list[tuple[float, bool, bool]] = []
-    wait = session._Loop._wait
+    wait = Loop._wait
 
     def recorded(self, timeout_s):
         deadline, flowing = self.next_flush, self.src.flowing
@@ -106,7 +106,7 @@ def _record_wakeups(monkeypatch) -> list[tuple[float, bool, bool]]:
         waits.append((deadline, flowing, not stopped))
         return stopped
 
-    monkeypatch.setattr(session._Loop, "_wait", recorded)
+    monkeypatch.setattr(Loop, "_wait", recorded)
     return waits
 
 

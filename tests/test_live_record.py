@@ -56,7 +56,7 @@ def check_bag(bag: Path, imu_t, imu_w, tr_t, tr_q, summary: dict) -> None:
     est = read_log(bag, truth_topic=EST).truth
     assert len(est.t_ns) == summary["samples_estimated"]
     assert np.all(np.diff(est.t_ns) > 0)
-    assert est.q_w_b[-1].tolist() == summary["final_quat_xyzw"]
+    assert est.q_w_b[-1].tolist() == summary["final_q_w_b"]
     # rosbags: every topic, same counts and values
     msgs = rosbags_messages(bag)
     assert [t for t, _ in msgs[IMU]] == imu_t.tolist()
@@ -64,7 +64,7 @@ def check_bag(bag: Path, imu_t, imu_w, tr_t, tr_q, summary: dict) -> None:
     assert [t for t, _ in msgs[TRUTH]] == tr_t.tolist()
     assert len(msgs[EST]) == summary["samples_estimated"]
     q = msgs[EST][-1][1].quaternion
-    assert [q.x, q.y, q.z, q.w] == summary["final_quat_xyzw"]
+    assert [q.x, q.y, q.z, q.w] == summary["final_q_w_b"]
 
 
 def test_record_after_a_normal_stop_websocket(trial, tmp_path):

@@ -263,7 +263,7 @@ def test_stdin_constant_rate_gives_90_deg_about_z(tmp_path):
     assert "stopped    end of input" in text
     assert "final      q_w_b [x, y, z, w] = [+0.000000, +0.000000, +0.707107, +0.707107]" in text
     summary = json.loads(out.read_text())
-    q = np.array(summary["final_quat_xyzw"])
+    q = np.array(summary["final_q_w_b"])
     h = math.sqrt(0.5)
     # constant axis: exact up to rounding of 100 steps
     assert np.allclose(q, [0, 0, h, h], atol=100 * 4 * np.finfo(float).eps)
@@ -390,7 +390,7 @@ def test_pipeline_in_batches_equals_batch_integrate(method, sizes):
     pipe = Pipeline(
         method=method,
         bias="none",
-        init_q=q0,
+        init_q_w_b=q0,
         window_ns=0,
         truth_wait_s=1.0,
         lines=True,

@@ -249,7 +249,7 @@ def test_ws_live_equals_replay_on_the_same_messages(trial, tmp_path, monkeypatch
     assert res.t_ns == int(rep.t_ns[-1])
     # same messages, same stamps, same start (truth at the first sample): same attitude
     assert angle_deg(res.q_w_b, q_replay) <= TOL_DEG
-    assert s["initial_quat_xyzw"] == pytest.approx(rep.q_truth[rep.start_index], abs=1e-15)
+    assert s["initial_q_w_b"] == pytest.approx(rep.q_truth[rep.start_index], abs=1e-15)
     # the live error statistics are those of replay (same estimates, same truth)
     assert s["truth_samples_used"] == rep.summary.to_dict()["truth_samples_used"]
     assert s["rms_error_deg"] == pytest.approx(rep.summary.to_dict()["rms_error_deg"], rel=1e-9)

@@ -171,7 +171,7 @@ def test_rerun_off_in_the_environment_never_empties_a_recording(tmp_path):
 
 def test_rerun_switch_matches_rerun_itself():
     pytest.importorskip("rerun")
-    from imu_dcm.cli import RERUN_OFF_VALUES
+    from imu_dcm.app.rerun_mode import RERUN_OFF_VALUES
 
     probe = (
         "import uuid, rerun as rr; "

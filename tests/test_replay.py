@@ -224,7 +224,7 @@ def test_bad_options():
     with raises_naming(InputError, "truth offset", "'auto'", "'soon'"):
         replay("whatever", truth_offset_s="soon")
     # text is parsed by the command line only, with the same one-line messages
-    from imu_dcm.cli import parse_numbers
+    from imu_dcm.app.options import parse_numbers
 
     with raises_naming(InputError, "init quaternion x,y,z,w", 4, "'1,0,0'"):
         parse_numbers("1,0,0", 4, "init quaternion x,y,z,w")

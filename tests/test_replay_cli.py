@@ -287,7 +287,7 @@ def test_subprocess_replays_shipped_trial(tmp_path):
 def test_progress_bar_only_on_a_terminal():
     import io
 
-    from imu_dcm.cli import Progress
+    from imu_dcm.app.progress import Progress
 
     class Terminal(io.StringIO):
         def isatty(self) -> bool:

@@ -4,7 +4,7 @@ Integrates a live gyro stream as it arrives (Foxglove WebSocket ``ws://HOST:PORT
 ``udp://HOST:PORT`` or stdin lines ``-``), shows it in rerun, optionally records it as a ROS 2
 bag, and prints a summary when it stops (Ctrl-C, SIGTERM, end of input, lost source).
 
-Exit codes (:mod:`imu_dcm.cli`): 0 done; 1 no sample received (never connected, or nothing
+Exit codes (:mod:`imu_dcm.app.run`): 0 done; 1 no sample received (never connected, or nothing
 came); 2 bad input or options (one line on stderr); 130 / 143 stopped by Ctrl-C / SIGTERM (the
 summary and the recording are still written).
 """
@@ -13,21 +13,10 @@ from __future__ import annotations
 
 import argparse
 import sys
-import warnings
 
-from imu_dcm.cli import (
-    EXIT_BAD_INPUT,
-    EXIT_FAILED,
-    EXIT_INTERRUPTED,
-    EXIT_OK,
-    EXIT_TERMINATED,
-    OneLineArgumentParser,
-    check_rerun_switch,
-    end_quietly_on_broken_pipe,
-    parse_bias,
-    parse_init_quat,
-)
-from imu_dcm.errors import ImuDcmError
+from imu_dcm.app.options import OneLineArgumentParser, parse_bias, parse_init_q_w_b
+from imu_dcm.app.rerun_mode import check_rerun_mode
+from imu_dcm.app.run import EXIT_FAILED, EXIT_INTERRUPTED, EXIT_OK, EXIT_TERMINATED, run_main
 from imu_dcm.integrator.methods import METHODS
 
 PROG = "imu-dcm-live"
@@ -89,6 +78,7 @@ def _add_input_options(p) -> None:
     )
     p.add_argument(
         "--init-quat",
+        dest="init_q_w_b",
         metavar="X,Y,Z,W",
         help="start attitude q_world_body (scalar last) instead of the truth",
     )
@@ -209,8 +199,8 @@ def format_summary(s: dict) -> str:
         lines.append(f"method     {s['method']}; no estimate (no sample was integrated)")
     else:
         lines.append(f"method     {s['method']}; estimate from t = {s['start_time_s']:.3f} s")
-    if s["final_quat_xyzw"] is not None:
-        q = ", ".join(f"{v:+.6f}" for v in s["final_quat_xyzw"])
+    if s["final_q_w_b"] is not None:
+        q = ", ".join(f"{v:+.6f}" for v in s["final_q_w_b"])
         lines.append(f"final      q_w_b [x, y, z, w] = [{q}] at t = {s['final_t_s']:.3f} s")
     if s["rms_error_deg"] is not None:
         lines.append(
@@ -246,11 +236,9 @@ def _main(argv: list[str]) -> int:
     from imu_dcm.live.session import run
     from imu_dcm.live.sources import parse_source
     from imu_dcm.outputs import writes_to_stdout
-    from imu_dcm.viz.live import check_mode
 
     parse_source(args.source)
-    check_mode(args.rerun)
-    rerun = check_rerun_switch(args.rerun)  # RERUN=off: no default view; a named one refused
+    rerun = check_rerun_mode(args.rerun)  # RERUN=off: no default view; a named one refused
     bias = parse_bias(args.bias)
     result = run(
         args.source,
@@ -260,7 +248,7 @@ def _main(argv: list[str]) -> int:
         bias=bias,
         gyro_units=args.gyro_units,
         time_units=args.time_units,
-        init_quat=parse_init_quat(args.init_quat),
+        init_q_w_b=parse_init_q_w_b(args.init_q_w_b),
         reorder_window_s=args.reorder_window * 1e-3,
         view_interval_s=None if args.view_interval is None else args.view_interval * 1e-3,
         rerun=rerun,
@@ -283,28 +271,7 @@ def _main(argv: list[str]) -> int:
 
 def main(argv: list[str] | None = None) -> int:
     """Run the command; returns the exit code (module doc)."""
-    argv = list(sys.argv[1:] if argv is None else argv)
-    message = ""
-    with warnings.catch_warnings(record=True) as caught:
-        warnings.simplefilter("always")
-        try:
-            code = _main(argv)
-        except BrokenPipeError:  # ... | head: the reader had what it wanted
-            end_quietly_on_broken_pipe()
-            code = EXIT_OK
-        except (ImuDcmError, OSError) as exc:  # FileExistsError is an OSError
-            code = EXIT_BAD_INPUT
-            message = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
-        except SystemExit as exc:
-            code = exc.code if isinstance(exc.code, int) else EXIT_BAD_INPUT
-        except KeyboardInterrupt:
-            code, message = EXIT_INTERRUPTED, "interrupted"
-        finally:
-            for w in caught:
-                print(f"{PROG}: warning: {str(w.message).splitlines()[0]}", file=sys.stderr)
-    if message:
-        print(f"{PROG}: error: {message}", file=sys.stderr)
-    return code
+    return run_main(PROG, _main, argv)
 
 
 if __name__ == "__main__":

@@ -13,7 +13,7 @@ steps
    ``none``; a vector);
 4. integrates the batch with :meth:`imu_dcm.DcmIntegrator.update_many` (the compiled kernel's
    feed), starting — as replay does — at the first sample inside the truth's coverage, from the
-   truth slerped there (or from ``init_quat`` / identity when there is no truth). When the truth
+   truth slerped there (or from ``init_q_w_b`` / identity when there is no truth). When the truth
    starts late (its channel is announced but its first sample comes more than ``truth_wait_s``
    after the gyro's), the estimate starts from the identity and *re-anchors* to the truth when
    the truth first arrives, at the first sample it covers, as replay would; the start before
@@ -75,7 +75,7 @@ class Pipeline:
         *,
         method: str,
         bias,
-        init_q: NDArray | None,
+        init_q_w_b: NDArray | None,
         window_ns: int,
         truth_wait_s: float,
         lines: bool,
@@ -98,7 +98,7 @@ class Pipeline:
             tuple(float(v) for v in bias) if self.bias_mode == "fixed" else (0.0, 0.0, 0.0)
         )
         self.rest = CausalRestBias() if self.bias_mode == "auto" else None
-        self.init_q = init_q
+        self.init_q_w_b = init_q_w_b
         self.reorder = ReorderBuffer(window_ns)
         self.truth_wait_ns = int(truth_wait_s * 1e9)
         self.lines = lines
@@ -280,8 +280,8 @@ class Pipeline:
         self._feed(t_ns[i:], t_s[i:], wc[i:])
 
     def _try_start(self) -> None:
-        if self.init_q is not None:
-            self._start(0, self.init_q, None)
+        if self.init_q_w_b is not None:
+            self._start(0, self.init_q_w_b, None)
             return
         t_ns, t_s, wc = self.waiting.take()
         self.waiting.add(t_ns, t_s, wc)
@@ -416,7 +416,7 @@ class Pipeline:
                 if len(ok):
                     self._start(int(ok[0]), q[ok[0]], None)
             if self.integ is None:
-                self._start(0, self.init_q if self.init_q is not None else _IDENTITY, None)
+                self._start(0, self.init_q_w_b if self.init_q_w_b is not None else _IDENTITY, None)
         if self.integ is not None:
             q = self.integ.finish()
             last = self.integ.n_samples - 1

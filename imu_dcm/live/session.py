@@ -25,6 +25,8 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import ArrayLike
 
+from imu_dcm.app.checks import check_bias, check_init_q_w_b
+from imu_dcm.app.rerun_mode import check_rerun_mode, rerun_save_path
 from imu_dcm.errors import InputError
 from imu_dcm.integrator.batch import METHODS, integrate_quat
 from imu_dcm.integrator.streaming import DcmIntegrator
@@ -35,9 +37,8 @@ from imu_dcm.live.recorder import LiveRecorder
 from imu_dcm.live.sources import Source, open_source, parse_source
 from imu_dcm.live.summary import LiveResult, summary
 from imu_dcm.outputs import OutputError, check_output_dir, check_output_file, write_json
-from imu_dcm.so3 import as_quat_xyzw
 from imu_dcm.viz import HEADLESS_HINT, has_display
-from imu_dcm.viz.live import LiveView, check_mode
+from imu_dcm.viz.live import LiveView
 
 __all__ = ["LiveOptions", "run"]
 
@@ -55,22 +56,6 @@ def _warm_up(method: str) -> None:
         integ.finish()
 
 
-def _check_bias(bias) -> str | tuple:
-    """``"auto"``, ``"none"`` or 3 finite numbers (rad/s); text is parsed by the command line
-    (:func:`imu_dcm.cli.parse_bias`)."""
-    if isinstance(bias, str):
-        if bias in ("auto", "none"):
-            return bias
-        raise InputError(f"Expected bias 'auto', 'none' or 3 numbers (rad/s), got {bias!r}")
-    try:
-        b = np.asarray(bias, dtype=float)
-    except (TypeError, ValueError):
-        raise InputError(f"Expected bias as 3 finite numbers (rad/s), got {bias!r}") from None
-    if b.shape != (3,) or not np.all(np.isfinite(b)):
-        raise InputError(f"Expected bias auto, none or 3 finite numbers (rad/s), got {bias!r}")
-    return tuple(b.tolist())
-
-
 #: A source wakes at most every quarter view interval, and at least every 20 ms: a sample
 #: waits for its batch and then for the view's, so the batch adds <= 1/4 to the latency.
 _BATCH_MAX_S = 0.02
@@ -79,13 +64,13 @@ _BATCH_MAX_S = 0.02
 def _check_outputs(record, force: bool, summary_json, rerun) -> None:
     """The view's mode and the output paths, before the source is opened (imu_dcm.outputs'
     rule)."""
-    check_mode(rerun)
+    check_rerun_mode(rerun, "rerun mode")
     files = []
     if summary_json is not None:
         path = check_output_file(summary_json, (), "--summary-json", kind="json")
         files.append((path, "--summary-json"))
-    if isinstance(rerun, str) and rerun.startswith("save:"):
-        path = check_output_file(rerun[len("save:") :], (), "--rerun save:", kind="rrd")
+    if rerun_save_path(rerun) is not None:
+        path = check_output_file(rerun_save_path(rerun), (), "--rerun save:", kind="rrd")
         files.append((path, "--rerun save:"))
     if record is not None:  # the other outputs must not land in (or be) the bag folder
         bag = check_output_dir(record, force=force, what="--record bag")
@@ -110,8 +95,8 @@ class LiveOptions:
         (replay's rest rule, causal); a vector: rad/s.
     gyro_units : "rad/s" or "deg/s" — unit of the rates (line sources and WebSocket alike).
     time_units : "s", "ms", "us" or "ns" — unit of CSV stamps.
-    init_quat : array_like (4,), optional — start attitude ``q_w_b``
-        ``[x, y, z, w]`` at the first sample (instead of the truth).
+    init_q_w_b : array_like (4,), optional — start attitude ``q_w_b``
+        ``[x, y, z, w]`` at the first sample (instead of the truth; :mod:`imu_dcm.app.checks`).
     reorder_window_s : float — reorder window in source time, s (default 0.05).
     view_interval_s : float, optional — the loop's wake-up interval: the batches of the view
         and the recording (display rate), s; default 0.05 with a view, 0.25 without.
@@ -137,7 +122,7 @@ class LiveOptions:
     bias: str | ArrayLike = "auto"
     gyro_units: str = "rad/s"
     time_units: str = "s"
-    init_quat: ArrayLike | None = None
+    init_q_w_b: ArrayLike | None = None
     reorder_window_s: float = 0.05
     view_interval_s: float | None = None
     rerun: str | None = None
@@ -153,7 +138,7 @@ class LiveOptions:
 
 
 def _checked(source: str, o: LiveOptions) -> tuple:
-    """The options checked before any I/O: ``(spec, bias, init_q)``; raises InputError."""
+    """The options checked before any I/O: ``(spec, bias, init_q_w_b)``; raises InputError."""
     spec = parse_source(source)
     if o.method not in METHODS:
         raise InputError(f"Expected method in {METHODS}, got {o.method!r}")
@@ -166,11 +151,7 @@ def _checked(source: str, o: LiveOptions) -> tuple:
             f"Expected reorder window >= 0 s and view interval > 0 s, got "
             f"{o.reorder_window_s!r} and {o.view_interval_s!r}"
         )
-    bias_v = _check_bias(o.bias)
-    init_q = None
-    if o.init_quat is not None:
-        init_q = as_quat_xyzw(np.asarray(o.init_quat, dtype=float), "init_quat")
-    return spec, bias_v, init_q
+    return spec, check_bias(o.bias), check_init_q_w_b(o.init_q_w_b)
 
 
 def _say_stderr(text: str) -> None:
@@ -211,15 +192,15 @@ def run(
         reordered, malformed, gaps (the first 1000), gap_count, reconnects, lost_by_system (UDP
         datagrams the system dropped, its buffer full, counted to the stop), gyro_units,
         units_evidence (why the rates look like deg/s, or None), bias_mode, bias_rad_s,
-        bias_segments, method, start_time_s, unscored_before_s, initial_quat_xyzw,
-        final_quat_xyzw, final_t_s, truth_samples_used, rms/max error/inclination/heading (deg,
+        bias_segments, method, start_time_s, unscored_before_s, initial_q_w_b,
+        final_q_w_b, final_t_s, truth_samples_used, rms/max error/inclination/heading (deg,
         None without truth), latency_p50_ms, latency_p99_ms, stopped, record, cpu_s (process
         CPU time while receiving, all threads), read_interval_s (the loop's final cadence),
         elapsed_s``; no value is NaN or Inf (None where it cannot be measured).
     """
     started = time.perf_counter()
     o = LiveOptions(**options)
-    spec, bias_v, init_q = _checked(source, o)
+    spec, bias_v, init_q_w_b = _checked(source, o)
     say = say or _say_stderr
     _check_outputs(o.record, o.force, o.summary_json, o.rerun)
     _warm_up(o.method)
@@ -231,7 +212,7 @@ def run(
         pipe = Pipeline(
             method=o.method,
             bias=bias_v,
-            init_q=init_q,
+            init_q_w_b=init_q_w_b,
             window_ns=round(o.reorder_window_s * 1e9),
             truth_wait_s=o.truth_wait_s,
             lines=not src.announces_truth,

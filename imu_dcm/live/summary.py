@@ -1,7 +1,7 @@
 """What a live run reports: :class:`LiveResult` and its summary, JSON-ready.
 
 The summary's keys are replay's where they apply (:func:`imu_dcm.live.run` lists them); a value
-that cannot be measured is None, never NaN or Inf (:func:`json_safe`).
+that cannot be measured is None, never NaN or Inf (:func:`imu_dcm.app.summary.json_ready`).
 """
 
 from __future__ import annotations
@@ -12,10 +12,11 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import NDArray
 
+from imu_dcm.app.summary import RunFigures, json_ready
 from imu_dcm.live.pipeline import Pipeline
 from imu_dcm.live.sources import Source
 
-__all__ = ["LiveResult", "json_safe", "summary"]
+__all__ = ["LiveResult", "summary"]
 
 
 @dataclass(slots=True, frozen=True)
@@ -39,18 +40,6 @@ class LiveResult:
     latency_ms: NDArray[np.float64] = field(repr=False)
 
 
-def json_safe(value):
-    """``value`` with every non-finite float replaced by None (JSON has no NaN or Inf; a value
-    that cannot be measured is none, never a number that is not one)."""
-    if isinstance(value, dict):
-        return {k: json_safe(v) for k, v in value.items()}
-    if isinstance(value, list | tuple):
-        return [json_safe(v) for v in value]
-    if isinstance(value, float) and not np.isfinite(value):
-        return None
-    return value
-
-
 def summary(
     pipe: Pipeline,
     src: Source,
@@ -63,7 +52,7 @@ def summary(
     started: float,
 ) -> dict:
     """The summary of a run (its keys: :func:`imu_dcm.live.run`), every value finite or None."""
-    return json_safe(_fields(pipe, src, source, gyro_units, method, reason, recorder, started))
+    return json_ready(_fields(pipe, src, source, gyro_units, method, reason, recorder, started))
 
 
 def _fields(pipe, src, source, gyro_units, method, reason, recorder, started) -> dict:
@@ -76,55 +65,56 @@ def _fields(pipe, src, source, gyro_units, method, reason, recorder, started) ->
     rms_v = np.sqrt(st.sq / st.n) if have else [None] * 3
     segs = [x.as_dict() for x in pipe.rest.segments] if pipe.rest is not None else []
     bias_mean = (pipe.bias_sum / pipe.bias_n).tolist() if pipe.bias_n else [0.0, 0.0, 0.0]
+    figures = RunFigures(
+        samples=int(pipe.n),
+        samples_estimated=int(pipe.n - pipe.samples_before_start) if pipe.integ else 0,
+        duration_s=float(dur),
+        rate_hz=1.0 / step if step else None,
+        imu_topic=imu_ch.topic if imu_ch else None,
+        imu_type=(imu_ch.name or imu_ch.message_encoding) if imu_ch else None,
+        truth_topic=truth_ch.topic if truth_ch else ("lines (q_w_b)" if pipe.truth_count else None),
+        truth_type=truth_ch.name if truth_ch else None,
+        method=method,
+        gyro_units=gyro_units,
+        bias_mode=pipe.bias_mode,
+        bias_rad_s=tuple(bias_mean),
+        bias_segments=tuple(segs),
+        start_time_s=pipe.start_t_s,
+        initial_q_w_b=None if pipe.q0 is None else tuple(float(v) for v in pipe.q0),
+        final_q_w_b=None if pipe.q_last is None else tuple(float(v) for v in pipe.q_last),
+        truth_samples_used=int(pipe.truth_used),
+        rms_error_deg=float(rms_v[0]) if have else None,
+        max_error_deg=float(st.max[0]) if have else None,
+        rms_inclination_deg=float(rms_v[1]) if have else None,
+        max_inclination_deg=float(st.max[1]) if have else None,
+        rms_heading_deg=float(rms_v[2]) if have else None,
+        max_heading_deg=float(st.max[2]) if have else None,
+        dropped_nonfinite=r.dropped_nonfinite,
+        dropped_implausible=r.dropped_implausible,
+        dropped_duplicate=r.dropped_duplicate,
+        dropped_backward=r.dropped_backward,
+        gaps=tuple(pipe.gaps),
+        elapsed_s=time.perf_counter() - started,
+    )
     return {
         "source": source,
-        "imu_topic": imu_ch.topic if imu_ch else None,
-        "imu_type": (imu_ch.name or imu_ch.message_encoding) if imu_ch else None,
-        "truth_topic": truth_ch.topic
-        if truth_ch
-        else ("lines (q_w_b)" if pipe.truth_count else None),
-        "truth_type": truth_ch.name if truth_ch else None,
-        "samples": int(pipe.n),
-        "samples_estimated": int(pipe.n - pipe.samples_before_start) if pipe.integ else 0,
-        "duration_s": float(dur),
-        "rate_hz": 1.0 / step if step else None,
-        "dropped_nonfinite": r.dropped_nonfinite,
-        "dropped_implausible": r.dropped_implausible,
-        "dropped_duplicate": r.dropped_duplicate,
-        "dropped_backward": r.dropped_backward,
+        **figures.to_dict(),
         "reordered": r.reordered,
         "malformed": int(pipe.malformed),
-        "gaps": [{"t_s": a, "length_s": d} for a, d in pipe.gaps],
         "gap_count": pipe.gap_count,
         "reconnects": int(getattr(src, "reconnects", 0)),
         "lost_by_system": int(src.lost),
-        "gyro_units": gyro_units,
         "units_evidence": pipe.units_evidence,
-        "bias_mode": pipe.bias_mode,
-        "bias_rad_s": bias_mean,
         "bias_final_rad_s": list(pipe.rest.bias_rad_s) if pipe.rest else list(pipe.fixed_bias),
-        "bias_segments": segs,
-        "method": method,
         "reorder_window_s": r.window_ns * 1e-9,
-        "start_time_s": pipe.start_t_s,
         "unscored_before_s": pipe.unscored_before_s,
-        "initial_quat_xyzw": None if pipe.q0 is None else [float(v) for v in pipe.q0],
-        "final_quat_xyzw": None if pipe.q_last is None else [float(v) for v in pipe.q_last],
         "final_t_s": None
         if pipe.t_last_ns is None or pipe.t0_ns is None
         else (pipe.t_last_ns - pipe.t0_ns) * 1e-9,
-        "truth_samples_used": int(pipe.truth_used),
-        "rms_error_deg": float(rms_v[0]) if have else None,
-        "max_error_deg": float(st.max[0]) if have else None,
-        "rms_inclination_deg": float(rms_v[1]) if have else None,
-        "max_inclination_deg": float(st.max[1]) if have else None,
-        "rms_heading_deg": float(rms_v[2]) if have else None,
-        "max_heading_deg": float(st.max[2]) if have else None,
         "latency_p50_ms": pipe.latency.percentile(50),
         "latency_p99_ms": pipe.latency.percentile(99),
         "stopped": reason,
         "record": str(recorder.path) if recorder is not None else None,
         "cpu_s": pipe.cpu_s,
         "read_interval_s": pipe.read_interval_s,
-        "elapsed_s": time.perf_counter() - started,
     }

@@ -24,7 +24,11 @@ import sys
 import warnings
 from pathlib import Path
 
-from imu_dcm.cli import OneLineArgumentParser, Progress, end_quietly_on_broken_pipe
+from imu_dcm.app.options import OneLineArgumentParser
+from imu_dcm.app.progress import Progress
+from imu_dcm.app.rerun_mode import check_rerun_mode, rerun_save_path
+from imu_dcm.app.run import run_main
+from imu_dcm.errors import ImuDcmError, InputError
 from imu_dcm.replay.options import LOG_KINDS, add_replay_options, replay_keywords
 
 PROG = "imu-dcm-replay"
@@ -185,12 +189,9 @@ def _serve_until_stopped(served) -> int:
 
 
 def _check_rerun(mode: str | None, inputs: tuple):
-    """Validate --rerun before anything is read or written; the claimed ``save:`` file (or
-    None)."""
-    from imu_dcm.errors import InputError
-
-    if mode is None or mode in ("off", "serve"):
-        return None
+    """What --rerun needs, checked before anything is read or written (the mode itself is
+    checked by :func:`imu_dcm.app.rerun_mode.check_rerun_mode`): a display for ``spawn``; the
+    claimed ``save:`` file (or None)."""
     if mode == "spawn":
         from imu_dcm.viz import has_display
 
@@ -199,15 +200,12 @@ def _check_rerun(mode: str | None, inputs: tuple):
                 "Expected a display (DISPLAY or WAYLAND_DISPLAY) for --rerun spawn, "
                 "got none; use --rerun save:PATH.rrd or serve"
             )
+    target = rerun_save_path(mode)
+    if target is None:
         return None
-    if mode.startswith("save:"):
-        target = mode[len("save:") :]
-        if not target.endswith(".rrd") or len(target) <= len(".rrd"):
-            raise InputError(f"Expected --rerun save:PATH.rrd, got {mode!r}")
-        from imu_dcm.outputs import claim_output
+    from imu_dcm.outputs import claim_output
 
-        return claim_output(target, "rrd", inputs, what="--rerun save:")
-    raise InputError(f"Expected --rerun spawn, serve, save:PATH.rrd or off, got {mode!r}")
+    return claim_output(target, "rrd", inputs, what="--rerun save:")
 
 
 def _inputs(log: str) -> tuple[str, ...]:
@@ -220,8 +218,6 @@ def _inputs(log: str) -> tuple[str, ...]:
 
 def _distinct_outputs(args) -> None:
     """No output is another output, and nothing is written inside the --out bag folder."""
-    from imu_dcm.errors import InputError
-
     named = [("--out", args.out), ("--summary-json", args.summary_json), ("--plot", args.plot)]
     named.append(("--export-csv", args.export_csv))
     if args.export_tum:
@@ -229,8 +225,7 @@ def _distinct_outputs(args) -> None:
             ("--export-tum", os.path.join(args.export_tum, f))
             for f in ("estimate.tum", "truth.tum")
         ]
-    if args.rerun and args.rerun.startswith("save:"):
-        named.append(("--rerun save:", args.rerun[len("save:") :]))
+    named.append(("--rerun save:", rerun_save_path(args.rerun)))
     paths = [(flag, Path(os.path.abspath(os.path.realpath(p)))) for flag, p in named if p]
     for i, (fa, a) in enumerate(paths):
         for fb, b in paths[i + 1 :]:
@@ -243,8 +238,6 @@ def _distinct_outputs(args) -> None:
 
 def _not_a_folder_of_logs(log: str) -> None:
     """A folder that holds logs (not a log itself) is for ``batch``: say so."""
-    from imu_dcm.errors import InputError
-
     if not os.path.isdir(log) or os.path.isfile(os.path.join(log, "metadata.yaml")):
         return
     from imu_dcm.replay.batch import find_logs
@@ -263,10 +256,8 @@ def _not_a_folder_of_logs(log: str) -> None:
 def _options(args) -> tuple[dict, dict]:
     """Every option parsed and checked, and every output claimed (:mod:`imu_dcm.outputs`),
     before any input is read or output written: the replay's keywords and the claims."""
-    from imu_dcm.cli import check_rerun_switch
-
     keywords = replay_keywords(args)
-    args.rerun = check_rerun_switch(args.rerun)
+    args.rerun = check_rerun_mode(args.rerun)  # RERUN=off: no default view; a named one refused
     _not_a_folder_of_logs(args.log)
     inputs = _inputs(args.log)
     _distinct_outputs(args)
@@ -306,12 +297,10 @@ def _options(args) -> tuple[dict, dict]:
 
 def _check_view_options(args) -> None:
     """``--keep-viewer`` and ``--realtime`` act only on a view: refused where there is none."""
-    from imu_dcm.errors import InputError
-
     mode = args.rerun or "the default (no view without a display)"
     if args.keep_viewer and args.rerun != "serve":
         raise InputError(f"Expected --rerun serve with --keep-viewer, got --rerun {mode}")
-    if args.realtime and (args.rerun in ("off",) or (args.rerun or "").startswith("save:")):
+    if args.realtime and (args.rerun == "off" or rerun_save_path(args.rerun) is not None):
         raise InputError(
             f"Expected --rerun spawn or serve with --realtime (it paces a view), got --rerun {mode}"
         )
@@ -347,8 +336,8 @@ def _replay_main(argv: list[str]) -> int:
     summary_claim = claims.get("summary")
     if summary_claim is not None and summary_claim.stream != "stdout":
         written.append(str(args.summary_json))
-    if args.rerun and args.rerun.startswith("save:"):
-        written.append(args.rerun[len("save:") :])
+    if rerun_save_path(args.rerun) is not None:
+        written.append(rerun_save_path(args.rerun))
     lines: list[str] = []  # the evaluations' lines (budget, comparison), after the summary
     extra = _evaluations(result, args, claims, lines)
     written += [str(p) for p in (args.export_csv, args.plot) if p]
@@ -376,8 +365,6 @@ def _replay_main(argv: list[str]) -> int:
 def _view(result, args, claim) -> tuple[str, int]:
     """:func:`_show`, its failures one line: an error when the view was asked for, else a
     warning (the default view is a convenience)."""
-    from imu_dcm.errors import ImuDcmError
-
     try:
         return _show(result, args.rerun, args.realtime, args.keep_viewer, claim)
     except Exception as exc:
@@ -395,21 +382,21 @@ def _view(result, args, claim) -> tuple[str, int]:
 def _evaluations(result, args, claims: dict, lines: list[str]) -> dict:
     """``--compare``, ``--noise-params``, ``--export-csv`` and ``--plot`` (their outputs claimed
     in ``claims``): their lines go to ``lines``; returns what they add to the summary JSON."""
-    from imu_dcm.replay.summary import _plain
+    from imu_dcm.app.summary import json_ready
 
     extra = {}
     rows = _compare(result, args, lines)
     if rows is not None:
         from imu_dcm.replay.compare import compare_json
 
-        extra["compare"] = _plain(compare_json(rows))
+        extra["compare"] = json_ready(compare_json(rows))
     if args.noise_params:
         from imu_dcm.replay.budget import budget, budget_line
 
         b = budget(result, args.noise_params)
         lines.insert(0, budget_line(b))
         if b is not None:
-            extra["budget"] = _plain(b)
+            extra["budget"] = json_ready(b)
     if args.export_csv:
         from imu_dcm.replay.export_csv import export_csv
 
@@ -437,61 +424,32 @@ def _compare(result, args, lines: list[str]):
     return rows
 
 
-def _message(exc: BaseException) -> str:
-    text = str(exc).splitlines()[0] if str(exc) else ""
-    if isinstance(exc, OSError):
-        where = f" {exc.filename!r}" if exc.filename else ""
-        return (
-            f"Expected a readable input and writable outputs, got {type(exc).__name__}: "
-            f"{exc.strerror or text}{where}"
-        )
-    return text or type(exc).__name__
+def _dispatch(argv: list[str]) -> int:
+    """The sub-command named first (noise, convert-csv, info), else a replay of one log."""
+    if argv and argv[0] == "noise":
+        from imu_dcm.replay.noise_cli import noise_main
+
+        return noise_main(argv[1:])
+    if argv and argv[0] == "convert-csv":
+        from imu_dcm.replay.csv_import import convert_main
+
+        return convert_main(argv[1:])
+    if argv and argv[0] == "info":
+        from imu_dcm.replay.info import info_main
+
+        return info_main(argv[1:], PROG)
+    return _replay_main(argv)
 
 
 def main(argv: list[str] | None = None) -> int:
-    """Run the command; returns the exit code (:mod:`imu_dcm.cli`: 0 done, 2 bad input or
+    """Run the command; returns the exit code (:mod:`imu_dcm.app.run`: 0 done, 2 bad input or
     options, 130 interrupted; ``batch`` adds 1 for failed logs)."""
-    from imu_dcm.errors import ImuDcmError
-
     argv = list(sys.argv[1:] if argv is None else argv)
     if argv and argv[0] == "batch":
         from imu_dcm.replay import batch_cli
 
         return batch_cli.main(argv[1:])
-    message = ""
-    with warnings.catch_warnings(record=True) as caught:
-        warnings.simplefilter("always")
-        try:
-            if argv and argv[0] == "noise":
-                from imu_dcm.replay.noise_cli import noise_main
-
-                code = noise_main(argv[1:])
-            elif argv and argv[0] == "convert-csv":
-                from imu_dcm.replay.csv_import import convert_main
-
-                code = convert_main(argv[1:])
-            elif argv and argv[0] == "info":
-                from imu_dcm.replay.info import info_main
-
-                code = info_main(argv[1:], PROG)
-            else:
-                code = _replay_main(argv)
-        except BrokenPipeError:  # ... | head: the reader had what it wanted
-            end_quietly_on_broken_pipe()
-            code = 0
-        except (ImuDcmError, OSError) as exc:
-            code, message = 2, _message(exc)
-        except SystemExit as exc:  # argparse: --help (0) or a bad option (2), already printed
-            code = exc.code if isinstance(exc.code, int) else 2
-        except KeyboardInterrupt:
-            code, message = 130, "interrupted"
-        finally:
-            for w in caught:
-                text = str(w.message).splitlines()[0]
-                print(f"{PROG}: warning: {text}", file=sys.stderr)
-    if message:
-        print(f"{PROG}: error: {message}", file=sys.stderr)
-    return code
+    return run_main(PROG, _dispatch, argv)
 
 
 if __name__ == "__main__":

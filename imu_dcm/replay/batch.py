@@ -23,6 +23,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from imu_dcm.app.run import one_line
 from imu_dcm.errors import ImuDcmWarning, InputError
 from imu_dcm.logio import find_logs as find_logs_in
 from imu_dcm.logio.registry import convert_hint, not_logs
@@ -36,7 +37,6 @@ from imu_dcm.replay.table import (
     curves_path,
     decimate_curve,
     markdown_path,
-    one_line,
     read_curves,
     read_table,
     row_key,

@@ -9,25 +9,21 @@ written so far stay in the table: rerun with ``--resume``). Bad input gives one 
 from __future__ import annotations
 
 import argparse
-import signal
 import sys
-import threading
 import time
-import warnings
 
-from imu_dcm.cli import end_quietly_on_broken_pipe
-from imu_dcm.errors import ImuDcmError, InputError
+from imu_dcm.app.options import OneLineArgumentParser
+from imu_dcm.app.run import EXIT_FAILED, EXIT_OK, end_quietly_on_broken_pipe, run_main
+from imu_dcm.errors import InputError
 from imu_dcm.replay.batch import replay_many
-from imu_dcm.replay.table import LogRow, one_line
+from imu_dcm.replay.options import add_replay_options, replay_keywords
+from imu_dcm.replay.table import LogRow
 
 PROG = "imu-dcm-replay batch"
 
 
 def build_parser() -> argparse.ArgumentParser:
     """The parser of ``python -m imu_dcm.replay batch`` (options are checked before any I/O)."""
-    from imu_dcm.cli import OneLineArgumentParser
-    from imu_dcm.replay.options import add_replay_options
-
     p = OneLineArgumentParser(
         prog=PROG,
         description="Replay many gyro logs with the same options, on all cores or on a Dask "
@@ -115,14 +111,6 @@ class _Bar:
             self.stream.flush()
 
 
-class _Terminated(BaseException):
-    """SIGTERM, raised like KeyboardInterrupt (a per-log ``except Exception`` never eats it)."""
-
-
-def _on_sigterm(signum, frame):
-    raise _Terminated
-
-
 def _compare(args) -> tuple[str, ...] | None:
     """``--compare``'s names, checked before any I/O (None without it)."""
     if args.compare is None:
@@ -132,69 +120,60 @@ def _compare(args) -> tuple[str, ...] | None:
     return parse_compare(args.compare)
 
 
+def _batch_main(argv: list[str]) -> int:
+    args = build_parser().parse_args(argv)
+    if not args.table.endswith(".csv"):
+        raise InputError(f"Expected --table ending in .csv, got {args.table!r}")
+    options = replay_keywords(args)  # the outputs are claimed by replay_many first
+    compare = _compare(args)
+    bar = _Bar()
+    t0 = time.perf_counter()
+    try:
+        result = replay_many(
+            args.paths,
+            args.table,
+            jobs=args.jobs,
+            dask=args.dask,
+            resume=args.resume,
+            overwrite=args.force,
+            chart=None if args.no_chart else (args.chart or "auto"),
+            progress=bar,
+            compare=compare,
+            **options,
+        )
+    finally:
+        bar.close()
+    try:
+        _report(args, result, compare, t0)
+    except BrokenPipeError:  # ... | head: the code stays what the batch gave
+        end_quietly_on_broken_pipe()
+    return EXIT_FAILED if result.failed else EXIT_OK
+
+
+def _report(args, result, compare, t0: float) -> None:
+    """The failed logs, the files written, the resumed rows, the time, and the summary line."""
+    if not args.quiet:
+        for r in result.rows:
+            if r.failed and r.method in (None, result.rows[0].method):  # once a log
+                print(f"failed     {r.path}: {r.error}")
+        files = [result.table, result.markdown, result.chart]
+        print("wrote      " + ", ".join(str(f) for f in files if f is not None))
+        if result.resumed and compare:
+            n = result.resumed
+            print(f"resumed    {n} logs ({n * len(compare)} rows) already in the table")
+        elif result.resumed:
+            print(f"resumed    {result.resumed} rows already in the table")
+        print(f"elapsed    {time.perf_counter() - t0:.2f} s")
+    print(result.summary)
+
+
 def main(argv: list[str] | None = None) -> int:
     """Run the batch command; returns the exit code (0 all replayed, 1 some failed, 2 bad
     input, 130/143 interrupted; rows appended before the interruption are kept)."""
-    argv = list(sys.argv[1:] if argv is None else argv)
-    message, code = "", 2
-    on_main = threading.current_thread() is threading.main_thread()
-    old = signal.signal(signal.SIGTERM, _on_sigterm) if on_main else None
-    with warnings.catch_warnings(record=True) as caught:
-        warnings.simplefilter("always")
-        try:
-            args = build_parser().parse_args(argv)
-            if not args.table.endswith(".csv"):
-                raise InputError(f"Expected --table ending in .csv, got {args.table!r}")
-            from imu_dcm.replay.options import replay_keywords
-
-            options = replay_keywords(args)  # the outputs are claimed by replay_many first
-            compare = _compare(args)
-            bar = _Bar()
-            t0 = time.perf_counter()
-            try:
-                result = replay_many(
-                    args.paths,
-                    args.table,
-                    jobs=args.jobs,
-                    dask=args.dask,
-                    resume=args.resume,
-                    overwrite=args.force,
-                    chart=None if args.no_chart else (args.chart or "auto"),
-                    progress=bar,
-                    compare=compare,
-                    **options,
-                )
-            finally:
-                bar.close()
-            code = 1 if result.failed else 0  # kept when the output pipe closes early
-            if not args.quiet:
-                for r in result.rows:
-                    if r.failed and r.method in (None, result.rows[0].method):  # once a log
-                        print(f"failed     {r.path}: {r.error}")
-                files = [result.table, result.markdown, result.chart]
-                print("wrote      " + ", ".join(str(f) for f in files if f is not None))
-                if result.resumed and compare:
-                    n = result.resumed
-                    print(f"resumed    {n} logs ({n * len(compare)} rows) already in the table")
-                elif result.resumed:
-                    print(f"resumed    {result.resumed} rows already in the table")
-                print(f"elapsed    {time.perf_counter() - t0:.2f} s")
-            print(result.summary)
-        except BrokenPipeError:  # ... | head: the reader had what it wanted
-            end_quietly_on_broken_pipe()
-        except (ImuDcmError, OSError) as exc:
-            message = one_line(str(exc)) or type(exc).__name__
-        except SystemExit as exc:  # argparse: --help (0) or a bad option (2), already printed
-            code = exc.code if isinstance(exc.code, int) else 2
-        except KeyboardInterrupt:
-            code, message = 130, "interrupted; the rows written so far are kept (--resume)"
-        except _Terminated:
-            code, message = 143, "terminated; the rows written so far are kept (--resume)"
-        finally:
-            if on_main:
-                signal.signal(signal.SIGTERM, old)
-            for w in caught:
-                print(f"{PROG}: warning: {one_line(str(w.message))}", file=sys.stderr)
-    if message:
-        print(f"{PROG}: error: {message}", file=sys.stderr)
-    return code
+    return run_main(
+        PROG,
+        _batch_main,
+        argv,
+        interrupted="interrupted; the rows written so far are kept (--resume)",
+        terminated="terminated; the rows written so far are kept (--resume)",
+    )

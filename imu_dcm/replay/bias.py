@@ -27,6 +27,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from imu_dcm.app.checks import check_bias
 from imu_dcm.errors import InputError
 from imu_dcm.gyro.rest import detect_rest, explain_no_rest, rest_segments
 from imu_dcm.gyro.rest_agreement import rests_agree
@@ -122,13 +123,9 @@ def estimate_bias(
     n = len(w)
     if isinstance(mode, str) and mode == "none":
         return BiasEstimate(np.zeros((n, 3)), (), "none")
+    mode = check_bias(mode)
     if not isinstance(mode, str):
-        b = np.asarray(mode, dtype=float)
-        if b.shape != (3,) or not np.all(np.isfinite(b)):
-            raise InputError(f"Expected a bias of 3 finite values in rad/s, got {mode!r}")
-        return BiasEstimate(np.broadcast_to(b, (n, 3)).copy(), (), "fixed")
-    if mode != "auto":
-        raise InputError(f"Expected bias 'auto', 'none' or x,y,z in rad/s, got {mode!r}")
+        return BiasEstimate(np.broadcast_to(mode, (n, 3)).copy(), (), "fixed")
     rule = rule or BIAS_RULE
     if rule not in BIAS_RULES:
         raise InputError(f"Expected a bias rule in {BIAS_RULES}, got {rule!r}")

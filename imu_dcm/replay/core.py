@@ -95,8 +95,8 @@ def replay(
         and frame choices are those it was read with).
     imu_topic, truth_topic, truth_frame, time, method, bias, gyro_units, init_q_w_b, prefilter,
     prefilter_config, truth_offset_s, rest_config, mounting, score_window, truth_convention
-        How to replay: each is a field of :class:`imu_dcm.replay.settings.ReplaySettings`
-        (``init_q_w_b`` is its ``q_init``), documented there.
+        How to replay: each is a field of :class:`imu_dcm.replay.settings.ReplaySettings`,
+        documented there.
     progress : callable(stage, fraction), optional
         Called as work advances (for a progress bar).
 
@@ -115,7 +115,7 @@ def replay(
     """
     t0 = _time.perf_counter()
     shown = path.path if isinstance(path, LogData) else path
-    bias, q_init, offset = check_options(
+    bias, init_q_w_b, offset = check_options(
         shown, time, method, bias, gyro_units, init_q_w_b, prefilter, truth_offset_s
     )
     settings = ReplaySettings(
@@ -126,7 +126,7 @@ def replay(
         method,
         bias,
         gyro_units or "rad/s",
-        q_init,
+        init_q_w_b,
         prefilter,
         prefilter_config,
         offset,
@@ -511,7 +511,7 @@ def _integrate(s: ReplaySettings, omega, t_s, q_truth, anchors, topic: str) -> N
     q_est = np.full((n, 4), np.nan)
     ends = [*anchors[1:], n]
     for a, b in zip(anchors, ends, strict=True):
-        q0 = q_truth[a] if np.all(np.isfinite(q_truth[a])) else s.q_init
+        q0 = q_truth[a] if np.all(np.isfinite(q_truth[a])) else s.init_q_w_b
         if q0 is None:
             q0 = np.array([0.0, 0.0, 0.0, 1.0])
         if b - a >= 2:
@@ -573,7 +573,7 @@ def _replay(path, s: ReplaySettings, report, notes: list[str]) -> ReplayResult:
     q_est = _integrate(s, omega, g.t_s, q_truth, anchors, log.imu.topic)
     report("integrate", 1.0)
     error, both = _score(q_est, q_truth)
-    if s.q_init is not None and np.isfinite(q_truth[anchors[0]]).all():
+    if s.init_q_w_b is not None and np.isfinite(q_truth[anchors[0]]).all():
         _warn(
             notes,
             "--init-quat not used: the estimate starts from the truth's attitude "
@@ -664,7 +664,7 @@ def _summary(log, s, g: _Gyro, bias_est, judged: _Judged, pf_summary, anchors, e
     imu, aligned, truth = log.imu, judged.aligned, judged.aligned.truth
     start, n, t_s = anchors[0], len(g.t_s), g.t_s
     clean = g.clean
-    q0 = np.asarray(judged.aligned.q_truth[start]) if both.any() else s.q_init
+    q0 = np.asarray(judged.aligned.q_truth[start]) if both.any() else s.init_q_w_b
     q0 = np.array([0.0, 0.0, 0.0, 1.0]) if q0 is None or not np.all(np.isfinite(q0)) else q0
 
     def stat_(a: NDArray, f) -> float | None:

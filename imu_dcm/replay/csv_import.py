@@ -20,7 +20,7 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import NDArray
 
-from imu_dcm.cli import OneLineArgumentParser
+from imu_dcm.app.options import OneLineArgumentParser
 from imu_dcm.errors import ImuDcmWarning, InputError, LogError
 from imu_dcm.gyro.rest_rule import GRAVITY_M_S2
 from imu_dcm.gyro.stamps import NS_PER_UNIT, timing_doubt

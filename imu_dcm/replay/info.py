@@ -310,7 +310,7 @@ def format_info(info: LogInfo) -> list[str]:
 
 def info_main(argv: list[str], prog: str) -> int:
     """The ``info`` sub-command: prints :func:`format_info`, or the JSON with ``--json``."""
-    from imu_dcm.cli import OneLineArgumentParser
+    from imu_dcm.app.options import OneLineArgumentParser
 
     p = OneLineArgumentParser(
         prog=f"{prog} info",

@@ -21,7 +21,7 @@ import os
 
 import numpy as np
 
-from imu_dcm.cli import OneLineArgumentParser
+from imu_dcm.app.options import OneLineArgumentParser
 from imu_dcm.errors import InputError, LogError
 
 __all__ = ["NoiseReport", "build_parser", "convert_units", "measure_noise", "noise_main"]

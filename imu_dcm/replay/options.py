@@ -2,17 +2,17 @@
 and ``replay batch`` (:func:`add_replay_options`, parsed once by :func:`replay_keywords`), and the
 library's check of typed values (:func:`check_options`).
 
-Text such as ``"x,y,z"`` is parsed by the command line only (:mod:`imu_dcm.cli`); the library
-takes numbers. Only argparse and the numpy-free :mod:`imu_dcm.integrator.methods` are imported at
-module
-level, so ``--help`` stays fast.
+Text such as ``"x,y,z"`` is parsed by the command line only (:mod:`imu_dcm.app.options`); the
+library takes numbers, and checks the bias and the start attitude as live does
+(:mod:`imu_dcm.app.checks`). Only argparse and the numpy-free :mod:`imu_dcm.integrator.methods` are
+imported at module level, so ``--help`` stays fast.
 """
 
 from __future__ import annotations
 
 import math
 
-from imu_dcm.cli import parse_bias, parse_init_quat, parse_mounting, parse_numbers
+from imu_dcm.app.options import parse_bias, parse_init_q_w_b, parse_mounting, parse_numbers
 from imu_dcm.errors import InputError
 from imu_dcm.integrator.methods import METHODS
 
@@ -52,9 +52,10 @@ def check_options(
 
     Returns
     -------
-    (bias, q_init, truth_offset_s)
-        ``bias`` "auto", "none" or a float64 (3,) array, rad/s; ``q_init`` a unit ``[x, y, z, w]``
-        or None; the offset as given (seconds or "auto").
+    (bias, init_q_w_b, truth_offset_s)
+        ``bias`` "auto", "none" or a float64 (3,) array, rad/s; ``init_q_w_b`` a unit
+        ``[x, y, z, w]`` or None (:mod:`imu_dcm.app.checks`); the offset as given (seconds or
+        "auto").
 
     Raises
     ------
@@ -62,9 +63,7 @@ def check_options(
         A value out of its set or not finite. (A special file as the log is refused by the
         reader, from its ``stat``, before a byte is read.)
     """
-    import numpy as np
-
-    from imu_dcm.so3 import as_quat_xyzw
+    from imu_dcm.app.checks import check_bias, check_init_q_w_b  # numpy: not for --help
 
     if time not in TIME_BASES:
         raise InputError(f"Expected time in {TIME_BASES}, got {time!r}")
@@ -74,17 +73,8 @@ def check_options(
         raise InputError(f"Expected gyro units 'rad/s', 'deg/s' or None, got {gyro_units!r}")
     if prefilter is not None and prefilter not in PREFILTERS:
         raise InputError(f"Expected prefilter None, 'kalman' or 'rts', got {prefilter!r}")
-    if isinstance(bias, str):
-        if bias not in ("auto", "none"):
-            raise InputError(f"Expected bias 'auto', 'none' or 3 numbers (rad/s), got {bias!r}")
-    else:
-        try:
-            bias = np.asarray(bias, dtype=float)
-        except (TypeError, ValueError):
-            raise InputError(f"Expected bias as 3 finite numbers (rad/s), got {bias!r}") from None
-        if bias.shape != (3,) or not np.all(np.isfinite(bias)):
-            raise InputError(f"Expected bias as 3 finite numbers (rad/s), got {bias!r}")
-    q_init = None if init_q_w_b is None else as_quat_xyzw(init_q_w_b, "init_q_w_b")
+    bias = check_bias(bias)
+    init_q_w_b = check_init_q_w_b(init_q_w_b)
     if isinstance(truth_offset_s, str):
         if truth_offset_s != "auto":
             raise InputError(f"Expected truth offset 'auto' or seconds, got {truth_offset_s!r}")
@@ -96,7 +86,7 @@ def check_options(
         raise InputError(
             f"Expected a finite truth offset in s (|x| <= 1e6), got {truth_offset_s!r}"
         )
-    return bias, q_init, truth_offset_s
+    return bias, init_q_w_b, truth_offset_s
 
 
 def _add_scoring_options(g) -> None:
@@ -169,6 +159,7 @@ def add_replay_options(g) -> None:
     )
     g.add_argument(
         "--init-quat",
+        dest="init_q_w_b",
         metavar="X,Y,Z,W",
         help="initial q_world_body (scalar last) when the log has no truth",
     )
@@ -211,7 +202,7 @@ def replay_keywords(args) -> dict:
     from imu_dcm.replay.window import parse_score_window
 
     bias = parse_bias(args.bias)
-    init = parse_init_quat(args.init_quat)
+    init = parse_init_q_w_b(args.init_q_w_b)
     mounting = parse_mounting(args.mounting)
     offset: float | str = args.truth_offset
     if offset != "auto":

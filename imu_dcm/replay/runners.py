@@ -18,8 +18,9 @@ from collections.abc import Callable, Iterator, Mapping
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from typing import Any
 
+from imu_dcm.app.run import one_line
 from imu_dcm.errors import ImuDcmWarning, InputError
-from imu_dcm.replay.table import Curve, LogRow, one_line
+from imu_dcm.replay.table import Curve, LogRow
 
 __all__ = ["DASK_HINT", "LOST", "run_dask", "run_local"]
 

@@ -42,7 +42,7 @@ class ReplaySettings:
         Gyro bias, rad/s (:func:`imu_dcm.replay.bias.estimate_bias`).
     gyro_units : {"rad/s", "deg/s"}
         Unit of the log's rates; deg/s are converted (rad/s is checked for deg/s evidence).
-    q_init : float64 (4,) or None
+    init_q_w_b : float64 (4,) or None
         Initial ``q_w_b`` ``[x, y, z, w]`` when the log has no truth (default identity).
     prefilter : {None, "kalman", "rts"}
         Gyro pre-filter (:mod:`imu_dcm.gyro.prefilter`), applied after bias removal.
@@ -73,7 +73,7 @@ class ReplaySettings:
     method: str = "magnus4"
     bias: str | NDArray[np.float64] = "auto"
     gyro_units: str = "rad/s"
-    q_init: NDArray[np.float64] | None = None
+    init_q_w_b: NDArray[np.float64] | None = None
     prefilter: str | None = None
     prefilter_config: object = None
     truth_offset_s: float | str = 0.0

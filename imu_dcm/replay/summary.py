@@ -5,11 +5,11 @@ from __future__ import annotations
 
 import dataclasses
 from dataclasses import dataclass
-from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
+from imu_dcm.app.summary import RunFigures
 from imu_dcm.metrics import AttitudeError
 from imu_dcm.replay.bias import BiasEstimate
 from imu_dcm.replay.sampling import TOO_SLOW_SHARE
@@ -19,8 +19,10 @@ __all__ = ["ReplayResult", "ReplaySummary", "format_summary"]
 
 
 @dataclass(frozen=True)
-class ReplaySummary:
-    """The figures of one replay (angles in degrees, rates rad/s, times s since the first sample).
+class ReplaySummary(RunFigures):
+    """The figures of one replay (angles in degrees, rates rad/s, times s since the first sample):
+    those every run reports (:class:`imu_dcm.app.summary.RunFigures`, each documented there;
+    :meth:`~imu_dcm.app.summary.RunFigures.to_dict` makes the JSON) and the replay's own.
 
     Error fields are None when nothing was scored (no truth, or truth rejected: then
     ``truth_rejected`` names the topic that did not follow the gyro). ``gaps`` holds
@@ -45,46 +47,18 @@ class ReplaySummary:
 
     path: str
     container: str
-    samples: int
-    samples_estimated: int
-    duration_s: float
-    rate_hz: float
-    imu_topic: str
-    imu_type: str
-    truth_topic: str | None
-    truth_type: str | None
     time: str
-    method: str
-    gyro_units: str
-    bias_mode: str
-    bias_rad_s: tuple[float, float, float]
-    bias_segments: tuple[dict, ...]
     prefilter: str | None
     prefilter_summary: dict | None
-    start_time_s: float
-    initial_q_w_b: tuple[float, float, float, float]
-    truth_samples_used: int
     truth_offset_s: float
     truth_check: dict | None
-    rms_error_deg: float | None
-    max_error_deg: float | None
-    rms_inclination_deg: float | None
-    max_inclination_deg: float | None
-    rms_heading_deg: float | None
-    max_heading_deg: float | None
-    dropped_nonfinite: int
-    dropped_implausible: int
     implausible_t_s: tuple[float, ...]
-    dropped_duplicate: int
-    dropped_backward: int
     sorted_out_of_order: int
-    gaps: tuple[tuple[float, float], ...]
     stopped_at: str | None
     channels: tuple[dict, ...]
     damage: tuple[dict, ...] = ()
     truth_rejected: str | None = None
     warnings: tuple[str, ...] = ()
-    elapsed_s: float = 0.0
     bias_rule: str = ""
     rest_confirmed: bool = False
     no_rest: str = ""
@@ -103,7 +77,6 @@ class ReplaySummary:
     scored_segments: tuple[dict, ...] = ()
     truth_estimate_of: str = ""
     truth_candidates: tuple[dict, ...] = ()
-    final_q_w_b: tuple[float, float, float, float] | None = None
     rotation_deg: float | None = None
     turned_deg: float | None = None
     written: tuple[str, ...] = ()
@@ -113,12 +86,6 @@ class ReplaySummary:
     log_axes: str = ""
     bias_log_rad_s: tuple[float, float, float] | None = None
     evaluation: dict | None = None
-
-    def to_dict(self) -> dict[str, Any]:
-        """JSON-ready dict: tuples become lists, gaps ``{"t_s", "length_s"}`` objects, NaN None."""
-        d = dataclasses.asdict(self)
-        d["gaps"] = [{"t_s": a, "length_s": b} for a, b in self.gaps]
-        return _plain(d)
 
 
 def _rest_evidence(s: ReplaySummary) -> str:
@@ -168,20 +135,6 @@ def _bias_axes(s: ReplaySummary) -> str:
         f" in FLU, the replay's axes; ({b[0]:+.3f}, {b[1]:+.3f}, {b[2]:+.3f}) °/s in "
         f"{s.log_axes}, the log's axes"
     )
-
-
-def _plain(x: Any) -> Any:
-    if isinstance(x, dict):
-        return {str(k): _plain(v) for k, v in x.items()}
-    if isinstance(x, (list, tuple)):
-        return [_plain(v) for v in x]
-    if isinstance(x, np.ndarray):
-        return _plain(x.tolist())
-    if isinstance(x, (np.floating, np.integer, np.bool_)):
-        x = x.item()
-    if isinstance(x, float) and not np.isfinite(x):
-        return None  # JSON has no NaN/Inf
-    return x
 
 
 @dataclass(frozen=True)

@@ -32,6 +32,7 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import ArrayLike
 
+from imu_dcm.app.run import one_line
 from imu_dcm.errors import InputError
 from imu_dcm.outputs import claim_output, write_atomic
 from imu_dcm.outputs.signatures import signature
@@ -149,11 +150,6 @@ class Curve:
     path: str
     t_s: tuple[float, ...]
     error_deg: tuple[float, ...]
-
-
-def one_line(text: str) -> str:
-    """The first line of ``text``, without carriage returns (a CSV cell never spans lines)."""
-    return (text.splitlines() or [""])[0].replace("\r", " ").strip()
 
 
 def decimate_curve(

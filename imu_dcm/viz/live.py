@@ -32,7 +32,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from imu_dcm.cli import check_rerun_switch
+from imu_dcm.app.rerun_mode import check_rerun_mode, rerun_save_path
 from imu_dcm.errors import InputError
 from imu_dcm.outputs import PendingOutput, claim_output
 from imu_dcm.viz.log import (
@@ -50,7 +50,7 @@ from imu_dcm.viz.log import (
 from imu_dcm.viz.view_data import AXES_HZ, TRAIL_POINTS, TRAIL_S, ViewData, body_axes_w
 from imu_dcm.viz.viewer import has_display, serve_rrd, start_viewer
 
-__all__ = ["LiveView", "check_mode"]
+__all__ = ["LiveView"]
 
 _FLUSH_TIMEOUT_S = 10.0
 #: Source time between two sends of the 3D axes and trails, s (10 a second, each holding every
@@ -111,24 +111,6 @@ def _arrow(pa, values, dtype):
     return pa.array(np.ascontiguousarray(values, dtype=np.float64), dtype)
 
 
-def check_mode(mode: str | None) -> None:
-    """Raise InputError for a mode other than None, spawn, serve, off or save:PATH.rrd, and
-    for a view asked for while ``RERUN=off`` turns rerun off
-    (:func:`imu_dcm.cli.check_rerun_switch`)."""
-    if mode is None or mode in ("spawn", "serve", "off"):
-        check_rerun_switch(mode)
-        return
-    if (
-        isinstance(mode, str)
-        and mode.startswith("save:")
-        and mode.endswith(".rrd")
-        and len(mode) > len("save:.rrd")
-    ):
-        check_rerun_switch(mode)
-        return
-    raise InputError(f"Expected --rerun spawn, serve, save:PATH.rrd or off, got {mode!r}")
-
-
 def _save(rec, target: str, blueprint):
     """Stream the recording into a temporary sibling of ``target`` (.rrd; new or a recording
     this tool wrote, :func:`imu_dcm.outputs.claim_output`); the returned
@@ -150,7 +132,7 @@ class LiveView:
         import pyarrow as pa  # here, not with the module (see the module doc)
         import rerun as rr
 
-        check_mode(mode)
+        check_rerun_mode(mode, "rerun mode")
         if mode is None:
             mode = "spawn" if has_display() else "serve"
         self.mode = mode
@@ -193,7 +175,7 @@ class LiveView:
                 raise
             say(f"rerun: open {self.served.url} (web viewer, 127.0.0.1 only)")
         else:
-            self._pending = _save(rec, mode[len("save:") :], blueprint)
+            self._pending = _save(rec, rerun_save_path(mode), blueprint)
         rec.send_recording_name(title)
         self.rec = rec
         self._static()

@@ -16,13 +16,12 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
-from imu_dcm.cli import check_rerun_switch
+from imu_dcm.app.rerun_mode import check_rerun_mode, check_rerun_switch, rerun_save_path
 from imu_dcm.errors import ImuDcmError, InputError
 from imu_dcm.outputs import Claim, claim_output, claimed_path
 from imu_dcm.viz.log import _new_recording, make_blueprint, send_view
 from imu_dcm.viz.view_data import ViewData
 
-_MODES = ("spawn", "serve", "save:PATH.rrd", "off", None)
 _FLUSH_TIMEOUT_S = 60.0  # a viewer that went away must not hang the replay
 
 
@@ -423,23 +422,17 @@ def show_replay(
     InputError
         For an unknown mode, a ``save:`` path not ending in ``.rrd``, ``"spawn"`` without a
         display, or a mode other than ``"off"`` while ``RERUN=off`` turns rerun's SDK off
-        (:func:`imu_dcm.cli.check_rerun_switch`; the default then shows nothing).
+        (:func:`imu_dcm.app.rerun_mode.check_rerun_switch`; the default then shows nothing).
     """
-    if not isinstance(mode, str | None):
-        raise InputError(f"Expected rerun mode one of {_MODES}, got {mode!r}")
-    mode = check_rerun_switch(mode)  # RERUN=off: the default shows nothing, a named mode refused
+    mode = check_rerun_mode(mode, "rerun mode")  # RERUN=off: the default shows nothing
     if mode is None:
         if not has_display():
             return HEADLESS_HINT
         mode = "spawn"
-    if not isinstance(mode, str):
-        raise InputError(f"Expected rerun mode one of {_MODES}, got {mode!r}")
     if mode == "off":
         return ""
-    if mode.startswith("save:"):
-        target = mode[len("save:") :]
-        if not target.endswith(".rrd") or len(target) <= len(".rrd"):
-            raise InputError(f"Expected rerun mode save:PATH.rrd, got {mode!r}")
+    target = rerun_save_path(mode)
+    if target is not None:
         return saved_line(save_rrd(view, target))
     if mode == "serve":
         served = serve_replay(view, realtime, save_dir, keep=True)
@@ -450,11 +443,9 @@ def show_replay(
             f"ports: ssh -L {v.web_port}:127.0.0.1:{v.web_port} "
             f"-L {v.grpc_port}:127.0.0.1:{v.grpc_port} HOST)"
         )
-    if mode == "spawn":
-        if not has_display():
-            raise InputError(
-                "Expected a display (DISPLAY or WAYLAND_DISPLAY) for rerun mode 'spawn', got none; "
-                "use 'serve' or 'save:PATH.rrd'"
-            )
-        return _spawn_viewer(view, realtime)
-    raise InputError(f"Expected rerun mode one of {_MODES}, got {mode!r}")
+    if not has_display():  # the one mode left: spawn
+        raise InputError(
+            "Expected a display (DISPLAY or WAYLAND_DISPLAY) for rerun mode 'spawn', got none; "
+            "use 'serve' or 'save:PATH.rrd'"
+        )
+    return _spawn_viewer(view, realtime)

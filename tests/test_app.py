@@ -1,0 +1,111 @@
+"""What every command shares (imu_dcm.app): the exit-code wrapper, the --rerun mode, the bias
+and start-attitude checks, the summary figures. The commands' own tests drive them end to end;
+these state each rule once, on its own."""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import math
+import warnings
+
+import numpy as np
+import pytest
+
+from imu_dcm.app.checks import check_bias, check_init_q_w_b
+from imu_dcm.app.options import parse_init_q_w_b
+from imu_dcm.app.rerun_mode import check_rerun_mode, rerun_save_path
+from imu_dcm.app.run import (
+    EXIT_BAD_INPUT,
+    EXIT_INTERRUPTED,
+    EXIT_OK,
+    Terminated,
+    error_line,
+    run_main,
+)
+from imu_dcm.app.summary import RunFigures
+from imu_dcm.errors import InputError
+from imu_dcm.gyro.rates import MAX_RATE_RAD_S
+
+Q_Z90 = [0.0, 0.0, math.sqrt(0.5), math.sqrt(0.5)]  # 90° about z, [x, y, z, w]
+
+
+def _raises(exc: BaseException):
+    def body(argv):
+        raise exc
+
+    return body
+
+
+def test_run_main_turns_what_the_body_raised_into_a_code_and_one_line(capsys):
+    assert run_main("tool", lambda argv: 7, ["a"]) == 7
+    assert run_main("tool", _raises(InputError("Expected x, got y\nmore")), []) == EXIT_BAD_INPUT
+    assert capsys.readouterr().err == "tool: error: Expected x, got y\n"
+    assert run_main("tool", _raises(KeyboardInterrupt()), [], interrupted="stop") == 130
+    assert capsys.readouterr().err == "tool: error: stop\n"
+    assert EXIT_INTERRUPTED == 130
+    assert run_main("tool", _raises(Terminated()), []) == 143  # SIGTERM
+    assert capsys.readouterr().err == "tool: error: terminated\n"
+    assert run_main("tool", _raises(SystemExit(0)), []) == EXIT_OK  # --help
+    assert run_main("tool", _raises(BrokenPipeError()), []) == EXIT_OK
+    assert capsys.readouterr().err == ""
+
+
+def test_run_main_says_each_warning_once_in_one_line(capsys):
+    def body(argv):
+        warnings.warn("first line\nsecond line", stacklevel=1)
+        return 0
+
+    assert run_main("tool", body, []) == 0
+    assert capsys.readouterr().err == "tool: warning: first line\n"
+
+
+def test_an_os_error_names_its_file():
+    line = error_line(PermissionError(13, "Permission denied", "/x/out.csv"))
+    assert "PermissionError" in line and "Permission denied" in line and "/x/out.csv" in line
+
+
+def test_rerun_modes(monkeypatch):
+    monkeypatch.delenv("RERUN", raising=False)
+    for mode in (None, "spawn", "serve", "off", "save:a/b.rrd"):
+        assert check_rerun_mode(mode) == mode
+    assert rerun_save_path("save:a/b.rrd") == "a/b.rrd" and rerun_save_path("serve") is None
+    for bad in ("web", "SPAWN", "save:", "save:.rrd", "save:out.txt", 3):
+        with pytest.raises(InputError, match="--rerun"):
+            check_rerun_mode(bad)
+    monkeypatch.setenv("RERUN", "off")  # rerun's own switch: the default shows nothing
+    assert check_rerun_mode(None) == "off"
+    with pytest.raises(InputError, match="RERUN=off"):
+        check_rerun_mode("save:a.rrd")
+
+
+def test_one_bias_check():
+    assert check_bias("auto") == "auto" and check_bias("none") == "none"
+    b = check_bias([0.01, -0.02, 0.0])
+    assert b.dtype == np.float64 and b.tolist() == [0.01, -0.02, 0.0]
+    for bad in ("sometimes", [0.1, 0.2], [0.1, np.nan, 0.0], [[0.1, 0.2, 0.3]], "1,2,3"):
+        with pytest.raises(InputError, match="bias"):
+            check_bias(bad)
+    with pytest.raises(InputError, match=f"{MAX_RATE_RAD_S:g}"):  # no gyro's rate is larger
+        check_bias([0.0, 0.0, 2 * MAX_RATE_RAD_S])
+
+
+def test_one_start_attitude_check():
+    assert check_init_q_w_b(None) is None
+    np.testing.assert_allclose(check_init_q_w_b([0.0, 0.0, 2.0, 2.0]), Q_Z90, atol=1e-15)
+    for bad in ([0.0, 0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, np.inf, 1.0]):
+        with pytest.raises(InputError, match="init_q_w_b"):
+            check_init_q_w_b(bad)
+    assert parse_init_q_w_b("0,0,0.7071067811865476,0.7071067811865476") == pytest.approx(Q_Z90)
+    with pytest.raises(InputError, match="--init-quat x,y,z,w"):
+        parse_init_q_w_b("1,2")
+
+
+def test_run_figures_are_a_frozen_record_and_json_ready():
+    fields = {f.name: None for f in dataclasses.fields(RunFigures)}
+    f = RunFigures(**{**fields, "gaps": ((1.5, 0.25),), "rate_hz": float("nan")})
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        f.samples = 3
+    d = json.loads(json.dumps(f.to_dict(), allow_nan=False))
+    assert d["gaps"] == [{"t_s": 1.5, "length_s": 0.25}] and d["rate_hz"] is None
+    assert set(d) == set(fields)
