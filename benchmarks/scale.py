@@ -92,7 +92,7 @@ def zstd_chunks(path: Path) -> int:
     """Decompress every chunk of an indexed MCAP on one thread; returns the bytes out."""
     import zstandard
 
-    from imu_dcm.logio.mcap import McapSource
+    from imu_dcm.logio.containers.mcap import McapSource
 
     src = McapSource(path)
     total = 0

@@ -37,7 +37,7 @@ from data_synth.gyro import DEFAULT_EPOCH_NS, MAX_STAMP_NS, OUTPUTS, GyroModel, 
 from data_synth.scenes import BRANCHES, FREE_BODY_CASES, MOTIONS, simulate
 from imu_dcm.cli import OneLineArgumentParser, end_quietly_on_broken_pipe, prog_name
 from imu_dcm.errors import ImuDcmError, InputError
-from imu_dcm.logio.writer import StampedSeries, write_bag
+from imu_dcm.logio.writers import StampedSeries, write_bag
 from imu_dcm.outputs import check_output_dir
 
 __all__ = ["build_parser", "main", "make_log"]

@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 from drone_logs import STRANGERS
 
-from imu_dcm.logio.writer import StampedSeries, write_bag
+from imu_dcm.logio.writers import StampedSeries, write_bag
 from imu_dcm.replay.__main__ import main
 
 LOGS = (

@@ -8,7 +8,7 @@ import pytest
 
 from imu_dcm.errors import LogError
 from imu_dcm.logio import read_log
-from imu_dcm.logio.writer import StampedSeries, write_bag
+from imu_dcm.logio.writers import StampedSeries, write_bag
 from imu_dcm.replay.__main__ import main
 
 N = 400

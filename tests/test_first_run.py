@@ -19,7 +19,7 @@ import numpy as np
 import pytest
 from conftest import REPO_ROOT
 
-from imu_dcm.logio.writer import StampedSeries, write_bag
+from imu_dcm.logio.writers import StampedSeries, write_bag
 from imu_dcm.outputs import OutputError, atomic_path, write_json, write_text_atomic
 
 LINES = "".join(f"{k * 0.01:.2f},0.1,0,0\n" for k in range(50))  # 0.5 s at 100 Hz about x
@@ -372,7 +372,7 @@ def test_a_folder_of_logs_points_to_batch(tmp_path):
 def test_help_names_every_container_batch_and_the_method_choices(tmp_path):
     import re
 
-    from imu_dcm.logio.foreign import REFUSALS
+    from imu_dcm.logio.containers.foreign import REFUSALS
     from imu_dcm.logio.registry import SOURCES
     from imu_dcm.methods import METHODS
 

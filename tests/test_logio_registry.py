@@ -108,7 +108,11 @@ def _imports(path: Path) -> set[str]:
 
 def test_logio_has_no_import_circle():
     package = REPO / "imu_dcm" / "logio"
-    mods = {f"imu_dcm.logio.{p.stem}": p for p in package.glob("*.py") if p.stem != "__init__"}
+    mods = {
+        "imu_dcm." + ".".join(p.relative_to(package.parent).with_suffix("").parts): p
+        for p in package.rglob("*.py")
+        if p.stem != "__init__"
+    }
     graph = {m: {d for d in _imports(p) if d in mods and d != m} for m, p in mods.items()}
     state: dict[str, int] = {}
 

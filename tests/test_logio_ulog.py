@@ -10,7 +10,8 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from imu_dcm.errors import ImuDcmWarning, LogError
-from imu_dcm.logio import ned, read_log, ulog
+from imu_dcm.logio import ned, read_log
+from imu_dcm.logio.containers import ulog
 from imu_dcm.logio.registry import SOURCES
 from imu_dcm.logio.source import ReadRequest
 from imu_dcm.so3 import angle_between_deg

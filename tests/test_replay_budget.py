@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from imu_dcm.errors import InputError
-from imu_dcm.logio.writer import StampedSeries, write_bag
+from imu_dcm.logio.writers import StampedSeries, write_bag
 from imu_dcm.replay import replay
 from imu_dcm.replay.budget import NoiseParams, budget, budget_line, read_noise_params
 

@@ -61,7 +61,7 @@ from numpy.typing import NDArray
 
 from imu_dcm.errors import InputError
 from imu_dcm.live.lines import parse_csv_blob, parse_lines
-from imu_dcm.logio.batch import classify_schema, decode_cdr_batch
+from imu_dcm.logio.ros.payload import classify_schema, decode_cdr_batch
 
 __all__ = [
     "SOURCES",

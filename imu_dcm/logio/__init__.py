@@ -6,7 +6,7 @@ profile; ``ros2msg``, ``ros2idl`` or ``ros1msg`` schemas; CDR, ROS 1 or JSON mes
 single ``.db3`` files, ROS 1 ``.bag`` files (v2.0; uncompressed, bz2 or lz4 chunks) and
 EuRoC/ASL dataset folders (CSVs).
 Only the channels that can be the IMU or the truth are read (a camera topic is never
-decompressed); their payloads are decoded in bulk with numpy (:mod:`imu_dcm.logio.cdr`).
+decompressed); their payloads are decoded in bulk with numpy (:mod:`imu_dcm.logio.ros.cdr`).
 
 A damaged part costs only itself: it is skipped, listed in :attr:`LogData.damage` with its
 file offset, and one :class:`~imu_dcm.errors.ImuDcmWarning` summarises the damage.
@@ -17,10 +17,10 @@ from __future__ import annotations
 from collections.abc import Callable
 from pathlib import Path
 
-from imu_dcm.logio.channels import TRUTH_TYPES
 from imu_dcm.logio.heap import release_freed_memory
 from imu_dcm.logio.meta import read_custom_data
 from imu_dcm.logio.registry import SOURCES, find_logs, open_log, resolve_mcap_path
+from imu_dcm.logio.ros.channels import TRUTH_TYPES
 from imu_dcm.logio.source import LogSource, ReadRequest, SourceEntry
 from imu_dcm.logio.types import (
     ChannelInfo,
@@ -65,7 +65,7 @@ def read_log(
     path : str or Path
         A rosbag2 folder (``metadata.yaml`` + ``.mcap`` / ``.db3`` files), a ``.mcap``,
         ``.mcap.zstd`` or ``.db3`` file, a ROS 1 ``.bag``, a EuRoC/ASL dataset folder (or its
-        ``mav0``; :mod:`imu_dcm.logio.euroc`), or any other container of
+        ``mav0``; :mod:`imu_dcm.logio.containers.euroc`), or any other container of
         :data:`imu_dcm.logio.registry.SOURCES`. Regular files and folders only. Never modified.
     imu_topic : str, optional
         The IMU topic. By default the one topic of ``sensor_msgs/Imu``, of a type containing an

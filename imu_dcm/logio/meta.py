@@ -9,7 +9,7 @@ document that is not UTF-8 or not the ``rosbag2_bagfile_information`` mapping ra
 :class:`~imu_dcm.errors.LogError` instead of a traceback.
 
 Writing: :func:`metadata_body` is the rosbag2 format version 9 body that the bag writer
-(:mod:`imu_dcm.logio.writer`) and live's recorder both write; :func:`write_metadata` replaces a
+(:mod:`imu_dcm.logio.writers`) and live's recorder both write; :func:`write_metadata` replaces a
 bag's ``metadata.yaml`` whole (:func:`imu_dcm.outputs.write_text_atomic`).
 """
 

@@ -4,7 +4,7 @@
 whose ``probe`` accepts a path reads it. Adding a container is one module holding a
 :class:`~imu_dcm.logio.source.LogSource`, plus one row here. Rows that only
 recognise a format to refuse it (saying how to convert it) come last
-(:mod:`imu_dcm.logio.foreign`).
+(:mod:`imu_dcm.logio.containers.foreign`).
 
 Accepted paths are regular files and folders; a FIFO, a device such as ``/dev/zero`` or a
 socket is refused before a byte is read.
@@ -20,14 +20,12 @@ from pathlib import Path
 
 from imu_dcm.errors import LogError
 from imu_dcm.logio import meta
-from imu_dcm.logio.foreign import REFUSALS, TEXT_SUFFIXES
-from imu_dcm.logio.mcap import MAGIC as MCAP_MAGIC
-from imu_dcm.logio.mcap import McapSource
-from imu_dcm.logio.paths import check_regular, is_dataflash, is_euroc, is_ulog, read_head
-from imu_dcm.logio.ros import RosSource
-from imu_dcm.logio.ros1 import MAGIC as ROS1_MAGIC
-from imu_dcm.logio.ros1 import open_bag
-from imu_dcm.logio.rosbag2 import (
+from imu_dcm.logio.containers.foreign import REFUSALS, TEXT_SUFFIXES
+from imu_dcm.logio.containers.mcap import MAGIC as MCAP_MAGIC
+from imu_dcm.logio.containers.mcap import McapSource
+from imu_dcm.logio.containers.ros1 import MAGIC as ROS1_MAGIC
+from imu_dcm.logio.containers.ros1 import open_bag
+from imu_dcm.logio.containers.rosbag2 import (
     SQLITE_MAGIC,
     ZSTD_MAGIC,
     SqliteSource,
@@ -35,6 +33,8 @@ from imu_dcm.logio.rosbag2 import (
     is_bag_folder,
     open_folder,
 )
+from imu_dcm.logio.paths import check_regular, is_dataflash, is_euroc, is_ulog, read_head
+from imu_dcm.logio.ros.read import RosSource
 from imu_dcm.logio.source import LogSource, Progress, SourceEntry
 
 #: File names taken as a folder's one log even when their bytes are not recognised (so that
@@ -59,10 +59,11 @@ def _in_bag(open_file):
 
 
 def _later(module: str, opener: str):
-    """The opener ``opener`` of ``imu_dcm.logio.<module>``, that module imported at the call."""
+    """The opener ``opener`` of ``imu_dcm.logio.containers.<module>``, that module imported
+    at the call."""
 
     def opened(path: Path, progress: Progress | None) -> LogSource:
-        return getattr(import_module(f"imu_dcm.logio.{module}"), opener)(path, progress)
+        return getattr(import_module(f"imu_dcm.logio.containers.{module}"), opener)(path, progress)
 
     return opened
 

@@ -21,7 +21,7 @@ What is read
 Frames: body FRD, world NED, Euler angles in the 3-2-1 sequence; the gyro, accelerometer and
 truth are converted to body FLU, world ENU, ``[x, y, z, w]`` (:mod:`imu_dcm.logio.ned`).
 
-How it is read: :mod:`imu_dcm.logio.dataflash` indexes the records of every message type,
+How it is read: :mod:`imu_dcm.logio.containers.dataflash` indexes the records of every message type,
 resynchronising after a damaged record (each damaged part is counted and said once, with its
 byte offset); the wanted types are then decoded in bulk with numpy through the layouts the
 log's FMT records declare (no per-message Python objects). The format characters' sizes and
@@ -38,8 +38,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from imu_dcm.errors import LogError
+from imu_dcm.logio.containers.dataflash import Format, Index, index_log
 from imu_dcm.logio.damage import warn_damage
-from imu_dcm.logio.dataflash import Format, Index, index_log
 from imu_dcm.logio.ned import FLU_FROM_FRD, q_enu_flu, q_wxyz_from_euler_deg
 from imu_dcm.logio.paths import DATAFLASH_MAGIC as MAGIC  # noqa: F401 (tests write it)
 from imu_dcm.logio.paths import is_dataflash as probe  # noqa: F401 (the reader's probe, here too)

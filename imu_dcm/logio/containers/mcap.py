@@ -2,8 +2,8 @@
 
 With a summary (the normal case) the chunk indexes say which channels every chunk holds, so
 chunks of other channels (a camera) are never read; the others are read in batches
-(:mod:`imu_dcm.logio.chunks`: decompressed on worker threads into one buffer) and the messages
-of a whole batch located and checked at once from their message indexes. Without one (a
+(:mod:`imu_dcm.logio.containers.chunks`: decompressed on worker threads into one buffer) and
+the messages of a whole batch located and checked at once from their message indexes. Without one (a
 truncated file) the file is walked forward record by record, one chunk in memory at a time; a
 chunk is skipped unread when the message indexes behind it show no kept channel. Each chunk is
 refused when its declared size is beyond :func:`size_bound`, and never decompresses past its
@@ -22,9 +22,9 @@ from pathlib import Path
 import numpy as np
 
 from imu_dcm.errors import LogError
-from imu_dcm.logio.cdr import gather
-from imu_dcm.logio.chunks import Decompressor, Job, batches
-from imu_dcm.logio.ros import RosSource
+from imu_dcm.logio.containers.chunks import Decompressor, Job, batches
+from imu_dcm.logio.ros.cdr import gather
+from imu_dcm.logio.ros.read import RosSource
 from imu_dcm.logio.types import Collected, Conn, Damage, Payloads, Sink
 
 MAGIC = b"\x89MCAP0\r\n"

@@ -4,7 +4,7 @@
 chunks that hold kept connections are then read here, each decompressed to at most its declared
 ``size`` (a chunk that claims 1000 bytes cannot inflate to gigabytes), and the message records
 located from the index offsets with numpy. ROS 1 payloads are little endian, packed without
-alignment; :mod:`imu_dcm.logio.cdr` decodes them in bulk. A damaged chunk is skipped and
+alignment; :mod:`imu_dcm.logio.ros.cdr` decodes them in bulk. A damaged chunk is skipped and
 reported with its file offset, time range and the kept messages it held.
 """
 
@@ -19,9 +19,9 @@ from pathlib import Path
 import numpy as np
 
 from imu_dcm.errors import LogError
-from imu_dcm.logio.mcap import compact, size_bound
+from imu_dcm.logio.containers.mcap import compact, size_bound
 from imu_dcm.logio.paths import read_head
-from imu_dcm.logio.ros import RosSource
+from imu_dcm.logio.ros.read import RosSource
 from imu_dcm.logio.types import Collected, Conn, Damage, Payloads, Sink
 
 MAGIC = b"#ROSBAG V"
@@ -188,7 +188,7 @@ class Ros1Source(RosSource):
 
     @staticmethod
     def _take(d: np.ndarray, entries: dict, seq: int, sink: Sink) -> None:
-        from imu_dcm.logio.cdr import gather
+        from imu_dcm.logio.ros.cdr import gather
 
         for cid, (offs, times) in entries.items():
             off = np.asarray(offs, np.int64)

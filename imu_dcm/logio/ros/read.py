@@ -4,7 +4,7 @@ A ROS container (MCAP, rosbag2 sqlite3, split or compressed rosbag2 folders, ROS
 collects: ``collect(sink)`` walks its file and hands the payloads of the channels the
 :class:`~imu_dcm.logio.types.Sink` wants to the decoders, batch by batch, and returns a
 :class:`~imu_dcm.logio.types.Collected`. :func:`read_ros` then picks the IMU and the truth
-channels (:mod:`imu_dcm.logio.channels`) and builds the :class:`LogData`; :class:`RosSource`
+channels (:mod:`imu_dcm.logio.ros.channels`) and builds the :class:`LogData`; :class:`RosSource`
 makes that the container's :meth:`~imu_dcm.logio.source.LogSource.read`.
 """
 
@@ -14,7 +14,8 @@ import warnings
 from pathlib import Path
 
 from imu_dcm.errors import ImuDcmWarning, LogError
-from imu_dcm.logio.channels import (
+from imu_dcm.logio.damage import damage_summary, warn_damage
+from imu_dcm.logio.ros.channels import (
     declared_estimates,
     describe,
     pick_imu_judged,
@@ -22,9 +23,8 @@ from imu_dcm.logio.channels import (
     read_imu,
     read_truths,
 )
-from imu_dcm.logio.damage import damage_summary, warn_damage
+from imu_dcm.logio.ros.tf import static_transforms
 from imu_dcm.logio.source import Progress, ReadRequest
-from imu_dcm.logio.tf import static_transforms
 from imu_dcm.logio.types import ChannelInfo, Collected, LogData, Sink
 
 

@@ -32,7 +32,7 @@ the wanted topics with numpy through the layouts the log's own format messages d
 damaged message (a type the format does not define, a data message of an unknown subscription
 or of another size than its format, a size past the end) costs only itself, and the one before
 it when its size may be what was damaged: the walk resumes at the next sound messages
-(:mod:`imu_dcm.logio.ulog_resync`) and each damaged part is listed in
+(:mod:`imu_dcm.logio.containers.ulog_resync`) and each damaged part is listed in
 :attr:`LogData.damage` with its byte offset. Appended data and incompatible flags hand the
 file to ``pyulog`` (PX4's own parser); the notes say so. A log cut short costs its last
 message and is listed too.
@@ -51,6 +51,7 @@ from numpy.typing import NDArray
 
 from imu_dcm import kernel
 from imu_dcm.errors import LogError
+from imu_dcm.logio.containers.ulog_resync import KNOWN_TYPES, MAX_MESSAGE, Resync
 from imu_dcm.logio.damage import warn_damage
 from imu_dcm.logio.ned import FLU_FROM_FRD, q_enu_flu
 from imu_dcm.logio.paths import ULOG_MAGIC as MAGIC
@@ -64,7 +65,6 @@ from imu_dcm.logio.types import (
     TruthSeries,
     VehicleState,
 )
-from imu_dcm.logio.ulog_resync import KNOWN_TYPES, MAX_MESSAGE, Resync
 
 KIND = "px4 ulog"
 GYRO_TOPICS = ("sensor_combined", "sensor_gyro")
@@ -207,7 +207,7 @@ class Scanned:
 
 class _Scanner(Resync):
     """Walks the message chain of a ULog in blocks, keeping the records of ``wanted`` topics
-    (and resuming after a damaged message: :class:`imu_dcm.logio.ulog_resync.Resync`)."""
+    (and resuming after a damaged message: :class:`imu_dcm.logio.containers.ulog_resync.Resync`)."""
 
     def __init__(self, wanted: frozenset[str]):
         self.wanted = wanted

@@ -18,8 +18,8 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from imu_dcm.logio.channels import IMU_TYPE, TRUTH_TYPES, _Decoder, imu_path
-from imu_dcm.logio.schema import norm_type
+from imu_dcm.logio.ros.channels import IMU_TYPE, TRUTH_TYPES, _Decoder, imu_path
+from imu_dcm.logio.ros.schema import norm_type
 from imu_dcm.logio.types import Conn, Payloads
 
 __all__ = ["IMU_TYPE", "TRUTH_TYPES", "Decoded", "classify_schema", "decode_cdr_batch"]

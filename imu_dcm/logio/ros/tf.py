@@ -18,7 +18,7 @@ import struct
 import numpy as np
 
 from imu_dcm.errors import LogError
-from imu_dcm.logio.schema import norm_type
+from imu_dcm.logio.ros.schema import norm_type
 from imu_dcm.logio.types import Collected, Conn, Payloads, StaticTransform, TruthSeries
 
 TF_TYPE = "tf2_msgs/msg/TFMessage"

@@ -21,11 +21,11 @@ import numpy as np
 
 from imu_dcm.errors import LogError
 from imu_dcm.logio import meta
-from imu_dcm.logio.mcap import MAGIC as MCAP_MAGIC
-from imu_dcm.logio.mcap import McapSource, size_bound
+from imu_dcm.logio.containers.mcap import MAGIC as MCAP_MAGIC
+from imu_dcm.logio.containers.mcap import McapSource, size_bound
 from imu_dcm.logio.meta import topic_counts
 from imu_dcm.logio.paths import check_regular
-from imu_dcm.logio.ros import RosSource
+from imu_dcm.logio.ros.read import RosSource
 from imu_dcm.logio.source import Progress
 from imu_dcm.logio.types import Collected, Conn, Damage, Payloads, Sink, join_any
 

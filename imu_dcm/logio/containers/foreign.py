@@ -10,7 +10,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from imu_dcm.errors import LogError
-from imu_dcm.logio.lfs import is_lfs_pointer, refuse_lfs_pointer
+from imu_dcm.logio.containers.lfs import is_lfs_pointer, refuse_lfs_pointer
 from imu_dcm.logio.paths import mav_folder, read_head
 from imu_dcm.logio.source import LogSource, Progress, SourceEntry
 

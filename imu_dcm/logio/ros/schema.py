@@ -6,7 +6,7 @@ recorders store) is read here, field by field, exactly as :mod:`rosbags.typesys`
 know) and every ``ros2idl`` schema go to rosbags' parser, whose import costs more than reading
 a log's schemas. A channel without a schema (sqlite3 bags of Humble and older) takes its
 definition from rosbags' built-in type store. The result is a plain map
-``type name -> [Field]`` that :mod:`imu_dcm.logio.cdr` walks. A corrupt schema, one that is too
+``type name -> [Field]`` that :mod:`imu_dcm.logio.ros.cdr` walks. A corrupt schema, one that is too
 large, or one whose types nest deeper than :data:`MAX_DEPTH` (or contain themselves) raises
 :class:`~imu_dcm.errors.LogError`.
 """
