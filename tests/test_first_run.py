@@ -373,14 +373,14 @@ def test_help_names_every_container_batch_and_the_method_choices(tmp_path):
     import re
 
     from imu_dcm.logio.containers.foreign import REFUSALS
-    from imu_dcm.logio.registry import SOURCES
+    from imu_dcm.logio.registry import READERS
     from imu_dcm.methods import METHODS
 
     text = " ".join(run(["imu_dcm.replay", "--help"], tmp_path).stdout.split())
     for word in ("metadata.yaml", ".mcap", ".db3", "ROS 1 .bag", "imu-dcm-replay batch"):
         assert word in text, word
     # every container of the reader table is named (by the first word in its parentheses)
-    for entry in SOURCES:
+    for entry in READERS:
         m = re.search(r"\(([^ ,)]+)", entry.name)
         if entry in REFUSALS or m is None:
             continue

@@ -14,7 +14,7 @@ import pytest
 
 from imu_dcm.errors import LogError
 from imu_dcm.logio import (
-    SOURCES,
+    READERS,
     ImuSeries,
     LogData,
     LogSource,
@@ -31,8 +31,8 @@ SHIPPED = REPO / "replay" / "broad_07_undisturbed_fast_rotation_B"
 
 
 def test_every_row_is_an_entry_and_every_source_the_interface():
-    assert all(isinstance(e, SourceEntry) for e in SOURCES)
-    assert len({e.name for e in SOURCES}) == len(SOURCES)
+    assert all(isinstance(e, SourceEntry) for e in READERS)
+    assert len({e.name for e in READERS}) == len(READERS)
     folder = open_log(SHIPPED)
     single = open_log(next(SHIPPED.glob("*.mcap")))
     for src in (folder, single):
@@ -60,7 +60,7 @@ def test_a_new_container_is_a_class_and_a_row(tmp_path, monkeypatch):
     with pytest.raises(LogError, match="Expected a log of a known container"):
         read_log(p)
     row = SourceEntry("fake log", lambda path, head: head.startswith(b"FAKE1"), _Fake)
-    monkeypatch.setattr(registry, "SOURCES", (row, *SOURCES))
+    monkeypatch.setattr(registry, "READERS", (row, *READERS))
     log = read_log(p, imu_topic="g")
     assert log.container == "fake" and log.imu.topic == "g" and len(log.imu.t_ns) == 5
     assert find_logs(tmp_path) == [p]

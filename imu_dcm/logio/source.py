@@ -1,7 +1,7 @@
 """The reader interface: what every log container implements, and how one is chosen.
 
 A container is one module of :mod:`imu_dcm.logio` holding a class that satisfies
-:class:`LogSource`, plus one row in :data:`imu_dcm.logio.registry.SOURCES` (a
+:class:`LogSource`, plus one row in :data:`imu_dcm.logio.registry.READERS` (a
 :class:`SourceEntry`) that recognises it by a file's first bytes or a folder's layout.
 :func:`imu_dcm.logio.read_log` opens the first entry whose ``probe`` accepts the path and calls
 its ``read``; replay, batch and live never know which container they got.
@@ -15,7 +15,7 @@ from typing import Protocol, runtime_checkable
 
 from imu_dcm.logio.types import LogData
 
-Progress = Callable[[float], None]
+ProgressCallback = Callable[[float], None]
 
 
 class ReadRequest:
@@ -41,7 +41,7 @@ class ReadRequest:
         imu_topic: str | None = None,
         truth_topic: str | None = None,
         truth_frame: str | None = None,
-        progress: Progress | None = None,
+        progress: ProgressCallback | None = None,
     ) -> None:
         self.imu_topic, self.truth_topic = imu_topic, truth_topic
         self.truth_frame, self.progress = truth_frame, progress
@@ -84,7 +84,7 @@ class SourceEntry:
         self,
         name: str,
         probe: Callable[[Path, bytes], bool],
-        open: Callable[[Path, Progress | None], LogSource],
+        open: Callable[[Path, ProgressCallback | None], LogSource],
         search: bool = True,
     ) -> None:
         self.name, self.probe, self.open, self.search = name, probe, open, search

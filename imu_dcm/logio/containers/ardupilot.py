@@ -43,7 +43,7 @@ from imu_dcm.logio.damage import warn_damage
 from imu_dcm.logio.ned import FLU_FROM_FRD, q_enu_flu, q_wxyz_from_euler_deg
 from imu_dcm.logio.paths import DATAFLASH_MAGIC as MAGIC  # noqa: F401 (tests write it)
 from imu_dcm.logio.paths import is_dataflash as probe  # noqa: F401 (the reader's probe, here too)
-from imu_dcm.logio.source import Progress, ReadRequest
+from imu_dcm.logio.source import ProgressCallback, ReadRequest
 from imu_dcm.logio.types import (
     ChannelInfo,
     Damage,
@@ -308,7 +308,7 @@ class DataFlashSource:
 
     kind = KIND
 
-    def __init__(self, path: Path, progress: Progress | None = None):
+    def __init__(self, path: Path, progress: ProgressCallback | None = None):
         self.path = Path(path)
         self.progress = progress
 
@@ -363,5 +363,5 @@ class DataFlashSource:
         )
 
 
-def open_dataflash(path: Path, progress: Progress | None = None) -> DataFlashSource:
+def open_dataflash(path: Path, progress: ProgressCallback | None = None) -> DataFlashSource:
     return DataFlashSource(path, progress)

@@ -49,7 +49,7 @@ from numpy.typing import NDArray
 from imu_dcm.errors import LogError
 from imu_dcm.logio.meta import load_yaml
 from imu_dcm.logio.paths import check_regular, mav_folder
-from imu_dcm.logio.source import Progress, ReadRequest
+from imu_dcm.logio.source import ProgressCallback, ReadRequest
 from imu_dcm.logio.types import ChannelInfo, ImuSeries, LogData, TruthSeries
 from imu_dcm.so3 import quat_conjugate, quat_from_matrix, quat_multiply
 
@@ -261,7 +261,7 @@ class EurocSource:
 
     kind = KIND
 
-    def __init__(self, path: Path, progress: Progress | None = None):
+    def __init__(self, path: Path, progress: ProgressCallback | None = None):
         mav = mav_folder(path)
         if mav is None:
             raise LogError(f"Expected a EuRoC/ASL dataset (mav0/imu0/data.csv), got {path}")

@@ -16,7 +16,6 @@ from __future__ import annotations
 
 import struct
 import zlib
-from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -25,6 +24,7 @@ from imu_dcm.errors import LogError
 from imu_dcm.logio.containers.chunks import Decompressor, Job, batches
 from imu_dcm.logio.ros.cdr import gather
 from imu_dcm.logio.ros.read import RosSource
+from imu_dcm.logio.source import ProgressCallback
 from imu_dcm.logio.types import Collected, Conn, Damage, Payloads, Sink
 
 MAGIC = b"\x89MCAP0\r\n"
@@ -178,7 +178,7 @@ class McapSource(RosSource):
 
     kind = "mcap"
 
-    def __init__(self, path: Path, progress: Callable[[float], None] | None = None):
+    def __init__(self, path: Path, progress: ProgressCallback | None = None):
         self.path = path
         self.progress = progress
         self.schemas: dict[int, tuple[str, str, bytes]] = {}

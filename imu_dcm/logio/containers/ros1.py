@@ -13,7 +13,6 @@ from __future__ import annotations
 import bz2
 import struct
 from collections import defaultdict
-from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -22,6 +21,7 @@ from imu_dcm.errors import LogError
 from imu_dcm.logio.containers.mcap import compact, size_bound
 from imu_dcm.logio.paths import read_head
 from imu_dcm.logio.ros.read import RosSource
+from imu_dcm.logio.source import ProgressCallback
 from imu_dcm.logio.types import Collected, Conn, Damage, Payloads, Sink
 
 MAGIC = b"#ROSBAG V"
@@ -101,7 +101,7 @@ class Ros1Source(RosSource):
 
     kind = "ros1 bag"
 
-    def __init__(self, path: Path, progress: Callable[[float], None] | None = None):
+    def __init__(self, path: Path, progress: ProgressCallback | None = None):
         self.path = path
         self.progress = progress
 
@@ -212,7 +212,7 @@ class Ros1Source(RosSource):
             sink.add(cid, Payloads(buf, out_start, n, t[k], (seq << 32) + off[k]))
 
 
-def open_bag(path: Path, progress: Callable[[float], None] | None = None) -> Ros1Source:
+def open_bag(path: Path, progress: ProgressCallback | None = None) -> Ros1Source:
     """The source of a ROS 1 bag; LogError naming the fix for a version other than 2.0."""
     head = read_head(path)
     if not head.startswith(b"#ROSBAG V2.0"):

@@ -13,7 +13,6 @@
 from __future__ import annotations
 
 import shutil
-from collections.abc import Callable
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -26,7 +25,7 @@ from imu_dcm.logio.containers.mcap import McapSource, size_bound
 from imu_dcm.logio.meta import topic_counts
 from imu_dcm.logio.paths import check_regular
 from imu_dcm.logio.ros.read import RosSource
-from imu_dcm.logio.source import Progress
+from imu_dcm.logio.source import ProgressCallback
 from imu_dcm.logio.types import Collected, Conn, Damage, Payloads, Sink, join_any
 
 if TYPE_CHECKING:
@@ -48,7 +47,7 @@ class SqliteSource(RosSource):
     def __init__(
         self,
         path: Path,
-        progress: Callable[[float], None] | None = None,
+        progress: ProgressCallback | None = None,
         counts: dict[str, int] | None = None,
     ):
         self.path = path
@@ -213,7 +212,7 @@ class Rosbag2Folder(RosSource):
         folder: Path,
         info: dict,
         files: list[Path],
-        progress: Callable[[float], None] | None = None,
+        progress: ProgressCallback | None = None,
     ):
         self.folder = self.path = folder
         self.info = info
@@ -302,7 +301,7 @@ class Rosbag2Folder(RosSource):
 
 
 # ------------------------------------------------------------------ opening, by storage or bytes
-def storage_source(path: Path, storage: str, progress: Progress | None = None) -> RosSource:
+def storage_source(path: Path, storage: str, progress: ProgressCallback | None = None) -> RosSource:
     """The source reading one storage file of a rosbag2 bag, by its ``storage_identifier``."""
     if storage == "sqlite3":
         return SqliteSource(path, progress)
@@ -315,7 +314,7 @@ class ZstdFile(RosSource):
 
     kind = "zstd-compressed file"
 
-    def __init__(self, path: Path, progress: Progress | None = None):
+    def __init__(self, path: Path, progress: ProgressCallback | None = None):
         self.path = path
         self.progress = progress
 
@@ -345,7 +344,7 @@ def is_bag_folder(path: Path, head: bytes) -> bool:
     return not head and path.is_dir() and (path / "metadata.yaml").is_file()
 
 
-def open_folder(folder: Path, progress: Progress | None = None) -> RosSource:
+def open_folder(folder: Path, progress: ProgressCallback | None = None) -> RosSource:
     """The source of a rosbag2 folder: its one plain storage file, or the whole folder.
 
     Raises

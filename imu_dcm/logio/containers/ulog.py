@@ -56,7 +56,7 @@ from imu_dcm.logio.damage import warn_damage
 from imu_dcm.logio.ned import FLU_FROM_FRD, q_enu_flu
 from imu_dcm.logio.paths import ULOG_MAGIC as MAGIC
 from imu_dcm.logio.paths import is_ulog as probe  # noqa: F401 (the reader's probe, here too)
-from imu_dcm.logio.source import Progress, ReadRequest
+from imu_dcm.logio.source import ProgressCallback, ReadRequest
 from imu_dcm.logio.types import (
     ChannelInfo,
     Damage,
@@ -329,7 +329,7 @@ class _Scanner(Resync):
         return out
 
 
-def _scan_fast(path: Path, wanted: frozenset[str], progress: Progress | None) -> Scanned:
+def _scan_fast(path: Path, wanted: frozenset[str], progress: ProgressCallback | None) -> Scanned:
     sc = _Scanner(wanted)
     total = max(path.stat().st_size, 1)
     damage: list[Damage] = []
@@ -392,7 +392,7 @@ def _pyulog():
     return ULog
 
 
-def scan(path: Path, wanted: frozenset[str], progress: Progress | None = None) -> Scanned:
+def scan(path: Path, wanted: frozenset[str], progress: ProgressCallback | None = None) -> Scanned:
     """Read the ``wanted`` topics of a ULog (fast scan; pyulog where the scan cannot)."""
     try:
         scanned = _scan_fast(path, wanted, progress)
@@ -660,7 +660,7 @@ class UlogSource:
 
     kind = KIND
 
-    def __init__(self, path: Path, progress: Progress | None = None):
+    def __init__(self, path: Path, progress: ProgressCallback | None = None):
         self.path = Path(path)
         self.progress = progress
 
@@ -701,5 +701,5 @@ class UlogSource:
         )
 
 
-def open_ulog(path: Path, progress: Progress | None = None) -> UlogSource:
+def open_ulog(path: Path, progress: ProgressCallback | None = None) -> UlogSource:
     return UlogSource(path, progress)

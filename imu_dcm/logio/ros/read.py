@@ -24,7 +24,7 @@ from imu_dcm.logio.ros.channels import (
     read_truths,
 )
 from imu_dcm.logio.ros.tf import static_transforms
-from imu_dcm.logio.source import Progress, ReadRequest
+from imu_dcm.logio.source import ProgressCallback, ReadRequest
 from imu_dcm.logio.types import ChannelInfo, Collected, LogData, Sink
 
 
@@ -41,7 +41,7 @@ class RosSource:
 
     kind = "ros"
     path: Path
-    progress: Progress | None = None
+    progress: ProgressCallback | None = None
     custom_data: dict[str, str] = {}  # replaced per instance, never mutated
 
     def collect(self, sink: Sink) -> Collected:
