@@ -13,8 +13,8 @@ import pytest
 from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 
 from imu_dcm.errors import LogError
+from imu_dcm.logio.ros.collect import Conn
 from imu_dcm.logio.ros.schema import _convert, _msg_types, _with_time, definitions
-from imu_dcm.logio.types import Conn
 
 
 def _rosbags(text: str, root: str):

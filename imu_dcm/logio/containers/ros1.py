@@ -20,9 +20,10 @@ import numpy as np
 from imu_dcm.errors import LogError
 from imu_dcm.logio.containers.mcap import compact, size_bound
 from imu_dcm.logio.paths import read_head
+from imu_dcm.logio.ros.collect import Collected, Conn, Payloads, Sink
 from imu_dcm.logio.ros.read import RosSource
 from imu_dcm.logio.source import ProgressCallback
-from imu_dcm.logio.types import Collected, Conn, Damage, Payloads, Sink
+from imu_dcm.logio.types import Damage
 
 MAGIC = b"#ROSBAG V"
 

@@ -24,9 +24,10 @@ from imu_dcm.logio.containers.mcap import MAGIC as MCAP_MAGIC
 from imu_dcm.logio.containers.mcap import McapSource, size_bound
 from imu_dcm.logio.meta import topic_counts
 from imu_dcm.logio.paths import check_regular
+from imu_dcm.logio.ros.collect import Collected, Conn, Payloads, Sink, join_any
 from imu_dcm.logio.ros.read import RosSource
 from imu_dcm.logio.source import ProgressCallback
-from imu_dcm.logio.types import Collected, Conn, Damage, Payloads, Sink, join_any
+from imu_dcm.logio.types import Damage
 
 if TYPE_CHECKING:
     import sqlite3

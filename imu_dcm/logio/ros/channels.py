@@ -21,10 +21,11 @@ from numpy.typing import NDArray
 
 from imu_dcm.errors import LogError
 from imu_dcm.logio.ros.cdr import decode
+from imu_dcm.logio.ros.collect import Collected, Columns, Conn, Payloads
 from imu_dcm.logio.ros.json_imu import is_json_imu, json_imu_columns, json_msg
 from imu_dcm.logio.ros.schema import Defs, definitions, norm_type
 from imu_dcm.logio.ros.tf import TF_TYPE, child_frame, is_static_tf, moving_children, tf_truth
-from imu_dcm.logio.types import Collected, Columns, Conn, ImuSeries, Payloads, TruthSeries
+from imu_dcm.logio.types import ImuSeries, TruthSeries
 from imu_dcm.rest import GRAVITY_M_S2
 from imu_dcm.so3 import median, percentile, row_finite, row_norm
 

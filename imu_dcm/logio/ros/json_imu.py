@@ -11,7 +11,7 @@ import math
 
 import numpy as np
 
-from imu_dcm.logio.types import Conn, Payloads
+from imu_dcm.logio.ros.collect import Conn, Payloads
 
 _INT64 = 2**63
 

@@ -19,8 +19,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from imu_dcm.logio.ros.channels import IMU_TYPE, TRUTH_TYPES, _Decoder, imu_path
+from imu_dcm.logio.ros.collect import Conn, Payloads
 from imu_dcm.logio.ros.schema import norm_type
-from imu_dcm.logio.types import Conn, Payloads
 
 __all__ = ["IMU_TYPE", "TRUTH_TYPES", "Decoded", "classify_schema", "decode_cdr_batch"]
 

@@ -2,8 +2,8 @@
 
 A ROS container (MCAP, rosbag2 sqlite3, split or compressed rosbag2 folders, ROS 1 bags) only
 collects: ``collect(sink)`` walks its file and hands the payloads of the channels the
-:class:`~imu_dcm.logio.types.Sink` wants to the decoders, batch by batch, and returns a
-:class:`~imu_dcm.logio.types.Collected`. :func:`read_ros` then picks the IMU and the truth
+:class:`~imu_dcm.logio.ros.collect.Sink` wants to the decoders, batch by batch, and returns a
+:class:`~imu_dcm.logio.ros.collect.Collected`. :func:`read_ros` then picks the IMU and the truth
 channels (:mod:`imu_dcm.logio.ros.channels`) and builds the :class:`LogData`; :class:`RosSource`
 makes that the container's :meth:`~imu_dcm.logio.source.LogSource.read`.
 """
@@ -23,9 +23,10 @@ from imu_dcm.logio.ros.channels import (
     read_imu,
     read_truths,
 )
+from imu_dcm.logio.ros.collect import Collected, Sink
 from imu_dcm.logio.ros.tf import static_transforms
 from imu_dcm.logio.source import ProgressCallback, ReadRequest
-from imu_dcm.logio.types import ChannelInfo, Collected, LogData, Sink
+from imu_dcm.logio.types import ChannelInfo, LogData
 
 
 class RosSource:

@@ -18,7 +18,7 @@ from dataclasses import dataclass
 from functools import lru_cache
 
 from imu_dcm.errors import LogError
-from imu_dcm.logio.types import Conn
+from imu_dcm.logio.ros.collect import Conn
 
 #: Primitive ROS types and their little-endian numpy dtypes.
 PRIM = {

@@ -29,8 +29,9 @@ from imu_dcm.logio.containers.mcap.records import (
     rosbag2_custom_data,
 )
 from imu_dcm.logio.ros.cdr import gather
+from imu_dcm.logio.ros.collect import Conn, Payloads, Sink
 from imu_dcm.logio.source import ProgressCallback
-from imu_dcm.logio.types import Conn, Damage, Payloads, Sink
+from imu_dcm.logio.types import Damage
 
 __all__ = ["McapReader"]
 

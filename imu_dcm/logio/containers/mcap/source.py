@@ -14,9 +14,9 @@ from imu_dcm.logio.containers.mcap.indexed import IndexedReader, read_summary
 from imu_dcm.logio.containers.mcap.reader import McapReader
 from imu_dcm.logio.containers.mcap.records import MAGIC, header_profile
 from imu_dcm.logio.containers.mcap.streaming import StreamingReader
+from imu_dcm.logio.ros.collect import Collected, Sink
 from imu_dcm.logio.ros.read import RosSource
 from imu_dcm.logio.source import ProgressCallback
-from imu_dcm.logio.types import Collected, Sink
 
 __all__ = ["McapSource", "make_reader"]
 

@@ -33,7 +33,8 @@ from imu_dcm.logio.containers.mcap.records import (
     parse_schema,
     read_string,
 )
-from imu_dcm.logio.types import Damage, Payloads
+from imu_dcm.logio.ros.collect import Payloads
+from imu_dcm.logio.types import Damage
 
 __all__ = ["StreamingReader"]
 
