@@ -272,7 +272,7 @@ def convert_csv(
     ``truth_estimate_of``: who estimated the truth (``"the x-IMU3"``), when it is a device's
     own estimate rather than an independent reference. The bag's ``custom_data`` then holds
     ``imu_dcm.estimate_of:<truth_topic>`` = ``"<who>'s own estimate"``, which the reader gives
-    as the truth's ``estimate_of`` (:data:`imu_dcm.logio.ros.channels.ESTIMATE_OF_KEY`).
+    as the truth's ``estimate_of`` (:data:`imu_dcm.logio.ros.truth.ESTIMATE_OF_KEY`).
     """
     from imu_dcm.outputs import check_output_dir
 
@@ -314,7 +314,7 @@ def convert_csv(
         "imu_dcm.columns": ", ".join(f"{k}={v}" for k, v in sorted(columns.items())),
     }
     if truth_estimate_of is not None:
-        from imu_dcm.logio.ros.channels import ESTIMATE_OF_KEY
+        from imu_dcm.logio.ros.truth import ESTIMATE_OF_KEY
 
         custom[ESTIMATE_OF_KEY + truth_topic] = f"{truth_estimate_of.strip()}'s own estimate"
     write = _write_mcap_file if single else _write_folder
