@@ -15,10 +15,13 @@ bag's ``metadata.yaml`` whole (:func:`imu_dcm.outputs.write_text_atomic`).
 
 from __future__ import annotations
 
+import json
 import re
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
+
+import numpy as np
 
 from imu_dcm.errors import LogError
 
@@ -75,7 +78,7 @@ def _check_aliases(events, where: Path, what: str) -> None:
     ``events`` are the parser's events. An anchored node's expanded size is known at its end;
     an alias adds that size. Refused as soon as the count passes the bound.
     """
-    import yaml
+    import yaml  # lazy: ~15 ms at import, a bag folder or EuRoC sensor file only
 
     sizes: dict[str, int] = {}
     stack: list[list] = []  # open collections: [anchor, expanded size so far]
@@ -118,7 +121,7 @@ def load_yaml(text: str, where: Path, what: str = "rosbag2 metadata.yaml") -> An
         A syntax error, nesting too deep for the parser, or aliases expanding past the bound;
         the message names ``what`` and ``where``.
     """
-    import yaml
+    import yaml  # lazy, as in _check_aliases
 
     loader_cls = getattr(yaml, "CSafeLoader", yaml.SafeLoader)
     try:
@@ -139,8 +142,6 @@ def load_yaml(text: str, where: Path, what: str = "rosbag2 metadata.yaml") -> An
 
 def _check_nesting(raw: bytes, where: Path) -> None:
     """Refuse flow collections nested deeper than MAX_NESTING (YAML parsers recurse on them)."""
-    import numpy as np
-
     b = np.frombuffer(raw, np.uint8)
     step = ((b == 0x5B) | (b == 0x7B)).astype(np.int32) - ((b == 0x5D) | (b == 0x7D))
     depth = int(np.cumsum(step).max()) if len(b) else 0
@@ -251,8 +252,6 @@ def yaml_str(s: str) -> str:
     string syntax is valid YAML)."""
     if re.fullmatch(r"[A-Za-z_/][A-Za-z0-9_/~]*", s) and s.lower() not in _YAML_WORDS:
         return s
-    import json  # (writing only: not imported for every read)
-
     return json.dumps(s)
 
 
@@ -269,8 +268,6 @@ def metadata_body(
     :data:`TYPE_HASHES` (an empty string for a type not listed, as rosbag2 writes for types
     without one). ``start_ns`` / ``end_ns`` are the first and last log times.
     """
-    import json  # (writing only: not imported for every read)
-
     total = sum(n for _, _, n in topics)
     lines = ["compression_format: ''", "compression_mode: ''"]
     if custom_data:
@@ -320,6 +317,7 @@ def metadata_document(body: str) -> str:
 
 def write_metadata(folder: Path, body: str) -> Path:
     """Replace ``folder/metadata.yaml`` whole with ``body`` (never half-written)."""
-    from imu_dcm.outputs import write_text_atomic  # (tempfile, shutil: only for writing)
+    # lazy: outputs is kept off the replay's import path (tests/test_replay_imports.py)
+    from imu_dcm.outputs import write_text_atomic
 
     return write_text_atomic(folder / "metadata.yaml", metadata_document(body))

@@ -28,7 +28,8 @@ def check_regular(p: Path) -> bool:
     if stat.S_ISDIR(st.st_mode):
         return True
     if not stat.S_ISREG(st.st_mode):
-        from imu_dcm.outputs import file_kind  # (tempfile, shutil: not for every read)
+        # lazy: outputs is kept off the replay's import path (tests/test_replay_imports.py)
+        from imu_dcm.outputs import file_kind
 
         raise LogError(
             f"Expected a regular file or a folder, got a {file_kind(st.st_mode)} (a special "

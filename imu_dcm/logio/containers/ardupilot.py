@@ -80,7 +80,7 @@ _NP = {  # struct codes of pymavlink's FORMAT_TO_STRUCT -> numpy
 
 def _dfreader():
     try:
-        from pymavlink import DFReader
+        from pymavlink import DFReader  # lazy: the optional mavlink extra (93 MB installed)
     except ImportError:
         raise LogError(
             f"Expected pymavlink to read an ArduPilot DataFlash log, got none installed; {INSTALL}"

@@ -20,6 +20,7 @@ import numpy as np
 from imu_dcm.errors import LogError
 from imu_dcm.logio.containers.mcap import compact, size_bound
 from imu_dcm.logio.paths import read_head
+from imu_dcm.logio.ros.cdr import gather
 from imu_dcm.logio.ros.collect import Collected, Conn, Payloads, Sink
 from imu_dcm.logio.ros.read import RosSource
 from imu_dcm.logio.source import ProgressCallback
@@ -41,7 +42,7 @@ def _decompress(compression: str, data: bytes, size: int) -> bytes:
         elif compression == "bz2":
             out = bz2.BZ2Decompressor().decompress(data, max_length=size + 1)
         elif compression == "lz4":
-            import lz4.frame
+            import lz4.frame  # lazy: only an lz4 chunk needs it
 
             out = lz4.frame.LZ4FrameDecompressor().decompress(data, max_length=size + 1)
         else:
@@ -107,7 +108,7 @@ class Ros1Source(RosSource):
         self.progress = progress
 
     def collect(self, sink: Sink) -> Collected:
-        from rosbags.rosbag1 import Reader, ReaderError
+        from rosbags.rosbag1 import Reader, ReaderError  # lazy: heavy, a .bag read only
 
         reader = Reader(self.path)
         try:
@@ -137,7 +138,7 @@ class Ros1Source(RosSource):
             reader.close()
 
     def _read(self, reader, sink: Sink) -> Collected:
-        from rosbags.rosbag1.reader import Header, RecordType
+        from rosbags.rosbag1.reader import Header, RecordType  # lazy, as in collect
 
         conns = []
         for c in reader.connections:
@@ -189,8 +190,6 @@ class Ros1Source(RosSource):
 
     @staticmethod
     def _take(d: np.ndarray, entries: dict, seq: int, sink: Sink) -> None:
-        from imu_dcm.logio.ros.cdr import gather
-
         for cid, (offs, times) in entries.items():
             off = np.asarray(offs, np.int64)
             t = np.asarray(times, np.int64)

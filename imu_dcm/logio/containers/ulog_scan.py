@@ -340,7 +340,7 @@ def _scan_pyulog(path: Path, wanted: frozenset[str], why: str) -> Scanned:
 
 def _pyulog():
     try:
-        from pyulog import ULog
+        from pyulog import ULog  # lazy: only for the logs the fast scan hands over
     except ImportError:  # pragma: no cover - pyulog is a dependency
         raise LogError(
             "Expected pyulog to read this ULog, got no pyulog; `pip install pyulog`"

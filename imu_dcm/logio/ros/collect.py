@@ -7,6 +7,8 @@ returns everything as a :class:`Collected`.
 
 from __future__ import annotations
 
+from dataclasses import dataclass, field
+
 import numpy as np
 from numpy.typing import NDArray
 
@@ -24,33 +26,29 @@ __all__ = [
 ]
 
 
+@dataclass(slots=True, eq=False)
 class Conn:
     """A channel as a container describes it (internal).
 
     ``encoding`` is the payload serialisation: "cdr" (ROS 2), "ros1" (ROS 1, packed little
     endian), "json" or whatever else the file says. ``schema_encoding`` is "ros2msg", "ros2idl",
     "ros1msg" or "" (the definition then comes from rosbags' type store for ``msgtype``).
+    ``count`` is the channel's message count (a split bag adds its files' counts up).
 
-    The internal records here are plain classes, not dataclasses: nothing compares, copies or
-    freezes them, and each dataclass costs a replay's start-up about half a millisecond.
+    The records here are mutable (a split bag renumbers its channels' file-order keys) and
+    compared by identity (``eq=False``: they hold arrays).
     """
 
-    __slots__ = ("id", "topic", "msgtype", "encoding", "schema_encoding", "schema_text", "count")
-
-    def __init__(
-        self,
-        id: int,
-        topic: str,
-        msgtype: str,
-        encoding: str,
-        schema_encoding: str = "",
-        schema_text: str = "",
-        count: int | None = None,
-    ) -> None:
-        self.id, self.topic, self.msgtype, self.encoding = id, topic, msgtype, encoding
-        self.schema_encoding, self.schema_text, self.count = schema_encoding, schema_text, count
+    id: int
+    topic: str
+    msgtype: str
+    encoding: str
+    schema_encoding: str = ""
+    schema_text: str = ""
+    count: int | None = None
 
 
+@dataclass(slots=True, eq=False)
 class Payloads:
     """Raw payloads of one channel: ``buf[start[i] : start[i] + length[i]]`` (internal).
 
@@ -58,23 +56,11 @@ class Payloads:
     merge several channels of one topic in file order.
     """
 
-    __slots__ = ("buf", "start", "length", "log_time", "order")
-
-    def __init__(
-        self,
-        buf: NDArray[np.uint8],
-        start: NDArray[np.int64],
-        length: NDArray[np.int64],
-        log_time: NDArray[np.int64],
-        order: NDArray[np.int64],
-    ) -> None:
-        self.buf, self.start, self.length, self.log_time, self.order = (
-            buf,
-            start,
-            length,
-            log_time,
-            order,
-        )
+    buf: NDArray[np.uint8]
+    start: NDArray[np.int64]
+    length: NDArray[np.int64]
+    log_time: NDArray[np.int64]
+    order: NDArray[np.int64]
 
     @staticmethod
     def empty() -> Payloads:
@@ -106,6 +92,7 @@ def join_payloads(parts: list[Payloads]) -> Payloads:
     return Payloads(buf, start[idx], length[idx], log_time[idx], order[idx])
 
 
+@dataclass(slots=True, eq=False)
 class Columns:
     """Decoded fields of one channel (internal): one row per message that decoded, file order.
 
@@ -115,20 +102,12 @@ class Columns:
     channel's definition could not be read (then every message is dropped).
     """
 
-    __slots__ = ("order", "log_time", "fields", "frames", "error", "dropped")
-
-    def __init__(
-        self,
-        order: NDArray[np.int64],
-        log_time: NDArray[np.int64],
-        fields: dict[str, NDArray],
-        frames: dict[str, str] | None = None,
-        error: Exception | None = None,
-        dropped: int = 0,
-    ) -> None:
-        self.order, self.log_time, self.fields = order, log_time, fields
-        self.frames = {} if frames is None else frames
-        self.error, self.dropped = error, dropped
+    order: NDArray[np.int64]
+    log_time: NDArray[np.int64]
+    fields: dict[str, NDArray]
+    frames: dict[str, str] = field(default_factory=dict)
+    error: Exception | None = None
+    dropped: int = 0
 
     def __len__(self) -> int:
         return len(self.order)
@@ -235,17 +214,11 @@ class Sink:
         return {cid: join_any(parts) for cid, parts in self._done.items()}
 
 
+@dataclass(slots=True, eq=False)
 class Collected:
     """What a container read (internal): all channels, the kept ones' data, damage."""
 
-    __slots__ = ("kind", "conns", "payloads", "damage")
-
-    def __init__(
-        self,
-        kind: str,
-        conns: list[Conn],
-        payloads: dict[int, Payloads | Columns],
-        damage: list[Damage] | None = None,
-    ) -> None:
-        self.kind, self.conns, self.payloads = kind, conns, payloads
-        self.damage = [] if damage is None else damage
+    kind: str
+    conns: list[Conn]
+    payloads: dict[int, Payloads | Columns]
+    damage: list[Damage] = field(default_factory=list)

@@ -7,6 +7,7 @@ nanoseconds (1e300, 2**70, Infinity) is dropped and counted, never a traceback.
 
 from __future__ import annotations
 
+import json
 import math
 
 import numpy as np
@@ -17,8 +18,6 @@ _INT64 = 2**63
 
 
 def json_msg(raw: bytes) -> dict | None:
-    import json  # (only for JSON channels: not imported for every read)
-
     try:
         m = json.loads(raw)
     except (ValueError, RecursionError):

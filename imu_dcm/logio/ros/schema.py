@@ -132,7 +132,7 @@ def _check_depth(defs: Defs, root: str) -> None:
 
 def _idl_types(text: str) -> dict:
     """Types of an IDL schema, possibly several IDL files separated by ``=== / IDL: name``."""
-    from rosbags.typesys import get_types_from_idl
+    from rosbags.typesys import get_types_from_idl  # lazy: heavy, see _definitions
 
     types: dict = {}
     for piece in re.split(r"^=+[ \t]*$", text, flags=re.MULTILINE):
@@ -265,6 +265,8 @@ def _definitions(msgtype: str, encoding: str, text: str, serialization: str) -> 
         defs = _msg_types(text, root)
         if defs is not None:
             return _with_time(defs)
+    # lazy: rosbags' type system costs ~15 ms at import; the plain .msg texts of most
+    # logs are read above without it
     from rosbags.typesys import get_types_from_msg
 
     if text.strip():
@@ -273,7 +275,7 @@ def _definitions(msgtype: str, encoding: str, text: str, serialization: str) -> 
         else:
             typesdict = get_types_from_msg(text, root)
     else:
-        from rosbags.typesys import Stores, get_typestore
+        from rosbags.typesys import Stores, get_typestore  # lazy, as above
 
         store = get_typestore(Stores.ROS1_NOETIC if serialization == "ros1" else Stores.ROS2_HUMBLE)
         if root not in store.fielddefs:
@@ -330,7 +332,7 @@ def definitions(conn: Conn) -> tuple[Defs, str]:
 
 def typestore_for(conn: Conn):
     """A rosbags type store holding ``conn``'s types (for the per-message fallback)."""
-    from rosbags.typesys import Stores, get_types_from_msg, get_typestore
+    from rosbags.typesys import Stores, get_types_from_msg, get_typestore  # lazy, as above
 
     root = norm_type(conn.msgtype)
     if not conn.schema_text.strip():
