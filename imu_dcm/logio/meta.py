@@ -25,6 +25,26 @@ import numpy as np
 
 from imu_dcm.errors import LogError
 
+__all__ = [
+    "MAX_ALIAS_GROWTH",
+    "MAX_METADATA_BYTES",
+    "MAX_NESTING",
+    "MIN_ALIAS_NODES",
+    "QOS_YAML",
+    "TYPE_HASHES",
+    "custom_data",
+    "file_list",
+    "load_metadata",
+    "load_yaml",
+    "metadata_body",
+    "metadata_document",
+    "read_custom_data",
+    "topic_counts",
+    "write_metadata",
+    "yaml_str",
+]
+
+
 #: Largest metadata.yaml read (bytes); real ones are a few kB, one per topic ~0.5 kB.
 MAX_METADATA_BYTES = 4 * 1024 * 1024
 #: Deepest nesting of [ ] / { } accepted (rosbag2 writes 2-3 levels).

@@ -7,6 +7,19 @@ from pathlib import Path
 
 from imu_dcm.errors import LogError
 
+__all__ = [
+    "DATAFLASH_MAGIC",
+    "HEAD_BYTES",
+    "ULOG_MAGIC",
+    "check_regular",
+    "is_dataflash",
+    "is_euroc",
+    "is_ulog",
+    "mav_folder",
+    "read_head",
+]
+
+
 #: Bytes of a file's start handed to the container table's probes.
 HEAD_BYTES = 64
 

@@ -37,6 +37,17 @@ from imu_dcm.logio.paths import check_regular, is_dataflash, is_euroc, is_ulog, 
 from imu_dcm.logio.ros.read import RosSource
 from imu_dcm.logio.source import LogSource, ProgressCallback, SourceEntry
 
+__all__ = [
+    "READERS",
+    "convert_hint",
+    "find_logs",
+    "not_logs",
+    "open_log",
+    "pick",
+    "resolve_mcap_path",
+]
+
+
 #: File names taken as a folder's one log even when their bytes are not recognised (so that
 #: a damaged one is reported, not passed over).
 _LOG_NAMES = ("*.mcap", "*.db3", "*.bag", "*.mcap.zstd")

@@ -16,6 +16,9 @@ from typing import Protocol, runtime_checkable
 
 from imu_dcm.logio.types import LogData
 
+__all__ = ["LogSource", "ProgressCallback", "ReadRequest", "SourceEntry"]
+
+
 ProgressCallback = Callable[[float], None]
 
 

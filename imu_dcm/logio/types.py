@@ -15,6 +15,16 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import NDArray
 
+__all__ = [
+    "ChannelInfo",
+    "Damage",
+    "ImuSeries",
+    "LogData",
+    "StaticTransform",
+    "TruthSeries",
+    "VehicleState",
+]
+
 
 @dataclass(frozen=True)
 class ChannelInfo:

@@ -41,8 +41,8 @@ from imu_dcm.errors import LogError
 from imu_dcm.logio.containers.dataflash import Format, Index, index_log
 from imu_dcm.logio.damage import warn_damage
 from imu_dcm.logio.ned import FLU_FROM_FRD, q_enu_flu, q_wxyz_from_euler_deg
-from imu_dcm.logio.paths import DATAFLASH_MAGIC as MAGIC  # noqa: F401 (tests write it)
-from imu_dcm.logio.paths import is_dataflash as probe  # noqa: F401 (the reader's probe, here too)
+from imu_dcm.logio.paths import DATAFLASH_MAGIC as MAGIC
+from imu_dcm.logio.paths import is_dataflash as probe
 from imu_dcm.logio.source import ProgressCallback, ReadRequest
 from imu_dcm.logio.types import (
     ChannelInfo,
@@ -52,6 +52,24 @@ from imu_dcm.logio.types import (
     TruthSeries,
     VehicleState,
 )
+
+__all__ = [
+    "ARDUPILOT_ESTIMATE",
+    "EVENTS",
+    "INSTALL",
+    "KIND",
+    "MAGIC",
+    "TRUTHS",
+    "DataFlashSource",
+    "decode",
+    "imu_series",
+    "numbers",
+    "open_dataflash",
+    "probe",
+    "stamps_ns",
+    "truth_series",
+]
+
 
 KIND = "ardupilot dataflash"
 #: Every binary DataFlash log opens with the FMT record describing FMT itself.

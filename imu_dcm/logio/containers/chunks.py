@@ -18,6 +18,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
+__all__ = ["BATCH_BYTES", "WORKERS", "Decompressor", "Job", "batches"]
+
+
 #: Decompressed bytes per batch: ~16 chunks of rosbag2's 768 KiB, few enough numpy calls per
 #: message, a small multiple of a chunk held at once.
 BATCH_BYTES = 16 << 20

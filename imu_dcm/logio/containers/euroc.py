@@ -56,6 +56,22 @@ from imu_dcm.logio.types import ChannelInfo, ImuSeries, LogData, TruthSeries
 from imu_dcm.outputs import file_kind
 from imu_dcm.so3 import quat_conjugate, quat_from_matrix, quat_multiply
 
+__all__ = [
+    "CSV_TYPE",
+    "IMU_COLUMNS",
+    "KIND",
+    "MAX_SENSOR_YAML",
+    "POSITIONS_TYPE",
+    "TRUTHS",
+    "TRUTHS_BY_NAME",
+    "EurocSource",
+    "TruthFolder",
+    "read_csv",
+    "regular_csv",
+    "sensor_rotation",
+]
+
+
 KIND = "euroc/asl folder"
 CSV_TYPE = "asl data.csv"
 #: The type of a truth folder holding positions only (``leica0``).

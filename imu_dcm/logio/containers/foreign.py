@@ -14,6 +14,9 @@ from imu_dcm.logio.containers.lfs import is_lfs_pointer, refuse_lfs_pointer
 from imu_dcm.logio.paths import mav_folder, read_head
 from imu_dcm.logio.source import LogSource, ProgressCallback, SourceEntry
 
+__all__ = ["REFUSALS", "TEXT_SUFFIXES", "euroc_root"]
+
+
 #: Text tables: convert-csv turns them into a bag.
 TEXT_SUFFIXES = (".csv", ".txt", ".tsv")
 

@@ -26,6 +26,9 @@ from imu_dcm.logio.ros.read import RosSource
 from imu_dcm.logio.source import ProgressCallback
 from imu_dcm.logio.types import Damage
 
+__all__ = ["MAGIC", "Ros1Source", "open_bag"]
+
+
 MAGIC = b"#ROSBAG V"
 
 

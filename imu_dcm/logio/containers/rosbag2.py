@@ -33,6 +33,22 @@ from imu_dcm.logio.types import Damage
 if TYPE_CHECKING:
     import sqlite3
 
+__all__ = [
+    "MAX_MESSAGE_BYTES",
+    "SQLITE_MAGIC",
+    "STORAGES",
+    "ZSTD_MAGIC",
+    "Rosbag2Folder",
+    "SqliteSource",
+    "ZstdFile",
+    "decompress_file",
+    "decompress_messages",
+    "is_bag_folder",
+    "open_folder",
+    "storage_source",
+]
+
+
 #: Largest single decompressed message of a message-compressed bag (bytes).
 MAX_MESSAGE_BYTES = 256 << 20
 SQLITE_MAGIC = b"SQLite format 3\x00"

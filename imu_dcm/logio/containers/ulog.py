@@ -50,9 +50,23 @@ from imu_dcm.errors import LogError
 from imu_dcm.logio.containers.ulog_scan import Scanned, Topic, scan
 from imu_dcm.logio.damage import warn_damage
 from imu_dcm.logio.ned import FLU_FROM_FRD, q_enu_flu
-from imu_dcm.logio.paths import is_ulog as probe  # noqa: F401 (the reader's probe, here too)
+from imu_dcm.logio.paths import is_ulog as probe
 from imu_dcm.logio.source import ProgressCallback, ReadRequest
 from imu_dcm.logio.types import ChannelInfo, ImuSeries, LogData, TruthSeries, VehicleState
+
+__all__ = [
+    "GYRO_TOPICS",
+    "KIND",
+    "PX4_ESTIMATE",
+    "STATE_TOPICS",
+    "TRUTH_TOPICS",
+    "UlogSource",
+    "imu_series",
+    "open_ulog",
+    "probe",
+    "truth_series",
+]
+
 
 KIND = "px4 ulog"
 GYRO_TOPICS = ("sensor_combined", "sensor_gyro")

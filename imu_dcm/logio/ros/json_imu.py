@@ -14,6 +14,9 @@ import numpy as np
 
 from imu_dcm.logio.ros.collect import Conn, Payloads
 
+__all__ = ["is_json_imu", "json_imu_columns", "json_msg", "json_stamp"]
+
+
 _INT64 = 2**63
 
 

@@ -24,6 +24,8 @@ from imu_dcm.logio.ros.truth import declared_estimates, read_truths
 from imu_dcm.logio.source import ProgressCallback, ReadRequest
 from imu_dcm.logio.types import ChannelInfo, LogData
 
+__all__ = ["RosSource", "read_ros"]
+
 
 class RosSource:
     """Base of the ROS containers: ``collect(sink)`` is theirs, ``read(request)`` is shared.

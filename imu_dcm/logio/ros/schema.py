@@ -20,6 +20,18 @@ from functools import lru_cache
 from imu_dcm.errors import LogError
 from imu_dcm.logio.ros.collect import Conn
 
+__all__ = [
+    "MAX_DEPTH",
+    "MAX_SCHEMA_BYTES",
+    "PRIM",
+    "Defs",
+    "Field",
+    "definitions",
+    "norm_type",
+    "typestore_for",
+]
+
+
 #: Primitive ROS types and their little-endian numpy dtypes.
 PRIM = {
     "bool": "u1",

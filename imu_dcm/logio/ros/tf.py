@@ -22,6 +22,17 @@ from imu_dcm.logio.ros.collect import Collected, Conn, Payloads
 from imu_dcm.logio.ros.schema import norm_type
 from imu_dcm.logio.types import StaticTransform, TruthSeries
 
+__all__ = [
+    "TF_TYPE",
+    "child_frame",
+    "is_static_tf",
+    "moving_children",
+    "static_transforms",
+    "tf_rows",
+    "tf_truth",
+]
+
+
 TF_TYPE = "tf2_msgs/msg/TFMessage"
 #: tf2 refuses a quaternion whose squared norm is further than this from 1; so does the reader.
 _NORM2_TOL = 0.01
