@@ -3,8 +3,10 @@
 Containers (the table :data:`imu_dcm.logio.registry.READERS`): ROS 2 bags with MCAP or sqlite3
 storage (split, ``file``- or ``message``-compressed), single ``.mcap`` files (``ros2`` or ``ros1``
 profile; ``ros2msg``, ``ros2idl`` or ``ros1msg`` schemas; CDR, ROS 1 or JSON messages),
-single ``.db3`` files, ROS 1 ``.bag`` files (v2.0; uncompressed, bz2 or lz4 chunks) and
-EuRoC/ASL dataset folders (CSVs).
+single ``.db3`` files, ROS 1 ``.bag`` files (v2.0; uncompressed, bz2 or lz4 chunks), PX4 ULog,
+ArduPilot DataFlash and EuRoC/ASL dataset folders (CSVs): one reader a container in
+:mod:`imu_dcm.logio.containers`, the ROS message decoding they share in :mod:`imu_dcm.logio.ros`,
+the bag writer in :mod:`imu_dcm.logio.writers`.
 Only the channels that can be the IMU or the truth are read (a camera topic is never
 decompressed); their payloads are decoded in bulk with numpy (:mod:`imu_dcm.logio.ros.cdr`).
 

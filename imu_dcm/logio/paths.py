@@ -10,6 +10,7 @@ from imu_dcm.errors import LogError
 __all__ = [
     "DATAFLASH_MAGIC",
     "HEAD_BYTES",
+    "MCAP_MAGIC",
     "ULOG_MAGIC",
     "check_regular",
     "is_dataflash",
@@ -23,6 +24,9 @@ __all__ = [
 #: Bytes of a file's start handed to the container table's probes.
 HEAD_BYTES = 64
 
+#: First bytes of an MCAP file (read by :mod:`imu_dcm.logio.containers.mcap`, written by
+#: :mod:`imu_dcm.logio.writers`).
+MCAP_MAGIC = b"\x89MCAP0\r\n"
 #: First bytes of a PX4 ULog and of a binary ArduPilot DataFlash log (its first FMT record).
 ULOG_MAGIC = b"ULog\x01\x12\x35"
 DATAFLASH_MAGIC = b"\xa3\x95\x80\x80"

@@ -21,7 +21,6 @@ from pathlib import Path
 from imu_dcm.errors import LogError
 from imu_dcm.logio import meta
 from imu_dcm.logio.containers.foreign import REFUSALS, TEXT_SUFFIXES
-from imu_dcm.logio.containers.mcap import MAGIC as MCAP_MAGIC
 from imu_dcm.logio.containers.mcap import McapSource
 from imu_dcm.logio.containers.ros1 import MAGIC as ROS1_MAGIC
 from imu_dcm.logio.containers.ros1 import open_bag
@@ -33,7 +32,14 @@ from imu_dcm.logio.containers.rosbag2 import (
     is_bag_folder,
     open_folder,
 )
-from imu_dcm.logio.paths import check_regular, is_dataflash, is_euroc, is_ulog, read_head
+from imu_dcm.logio.paths import (
+    MCAP_MAGIC,
+    check_regular,
+    is_dataflash,
+    is_euroc,
+    is_ulog,
+    read_head,
+)
 from imu_dcm.logio.ros.read import RosSource
 from imu_dcm.logio.source import LogSource, ProgressCallback, SourceEntry
 

@@ -21,10 +21,9 @@ import numpy as np
 
 from imu_dcm.errors import LogError
 from imu_dcm.logio import meta
-from imu_dcm.logio.containers.mcap import MAGIC as MCAP_MAGIC
 from imu_dcm.logio.containers.mcap import McapSource, size_bound
 from imu_dcm.logio.meta import topic_counts
-from imu_dcm.logio.paths import check_regular
+from imu_dcm.logio.paths import MCAP_MAGIC, check_regular
 from imu_dcm.logio.ros.collect import Collected, Conn, Payloads, Sink, join_any
 from imu_dcm.logio.ros.read import RosSource
 from imu_dcm.logio.source import ProgressCallback

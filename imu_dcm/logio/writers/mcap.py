@@ -37,8 +37,8 @@ from mcap.records import (
 )
 from numpy.typing import NDArray
 
-from imu_dcm.logio.containers.mcap.records import MAGIC
 from imu_dcm.logio.meta import QOS_YAML
+from imu_dcm.logio.paths import MCAP_MAGIC as MAGIC
 from imu_dcm.logio.writers.messages import MSG_DEFINITIONS
 
 __all__ = ["OWN_LIBRARY", "Encoded", "write_mcap"]

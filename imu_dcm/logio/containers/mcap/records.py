@@ -14,6 +14,7 @@ import numpy as np
 
 from imu_dcm.errors import LogError
 from imu_dcm.logio.meta import custom_data, load_yaml
+from imu_dcm.logio.paths import MCAP_MAGIC as MAGIC
 from imu_dcm.logio.ros.cdr import gather
 
 __all__ = [
@@ -48,7 +49,6 @@ __all__ = [
     "size_bound",
 ]
 
-MAGIC = b"\x89MCAP0\r\n"
 OP_FOOTER, OP_SCHEMA, OP_CHANNEL, OP_MESSAGE, OP_CHUNK, OP_MSG_INDEX = 2, 3, 4, 5, 6, 7
 OP_CHUNK_INDEX, OP_STATISTICS, OP_METADATA, OP_METADATA_INDEX, OP_DATA_END = 8, 11, 12, 13, 15
 REC = struct.Struct("<BQ")
