@@ -1,6 +1,6 @@
 """The reader interface: what every log container implements, and how one is chosen.
 
-A container is one module of :mod:`imu_dcm.logio` holding a class that satisfies
+A container is one module of :mod:`imu_dcm.logio.containers` holding a class that satisfies
 :class:`LogSource`, plus one row in :data:`imu_dcm.logio.registry.READERS` (a
 :class:`SourceEntry`) that recognises it by a file's first bytes or a folder's layout.
 :func:`imu_dcm.logio.read_log` opens the first entry whose ``probe`` accepts the path and calls
