@@ -25,7 +25,7 @@ from imu_dcm.logio.ros.schema import norm_type
 __all__ = ["IMU_TYPE", "TRUTH_TYPES", "Decoded", "classify_schema", "decode_cdr_batch"]
 
 
-@dataclass(frozen=True)
+@dataclass(slots=True, frozen=True)
 class Decoded:
     """A decoded batch: ``t_ns`` int64 (n,), ``values`` float64 (n, 3) rates or (n, 4)
     quaternions ``[x, y, z, w]``, ``good`` bool (len(payloads),) — which payloads decoded (only
