@@ -211,7 +211,7 @@ def feed_stdin(t_ns, w, rate_hz: float):
 def feed_ws(t_ns, w, rate_hz: float, server_box: dict):
     import foxglove
 
-    from imu_dcm.logio.writer import MSG_DEFINITIONS, cdr_messages, imu_doubles
+    from imu_dcm.logio.writers import MSG_DEFINITIONS, cdr_messages, imu_doubles
 
     imu_type = "sensor_msgs/msg/Imu"
     payloads = [r.tobytes() for r in cdr_messages(t_ns, "imu", imu_doubles(w, None, None))]
@@ -325,7 +325,7 @@ def replay_cpu(rate_hz: float, duration_s: float, tmp: Path, rounds: int) -> flo
     import statistics
     import warnings
 
-    from imu_dcm.logio.writer import StampedSeries, write_bag
+    from imu_dcm.logio.writers import StampedSeries, write_bag
     from imu_dcm.replay import replay
 
     t_ns, w = coning(rate_hz, duration_s)

@@ -92,13 +92,11 @@ def zstd_chunks(path: Path) -> int:
     """Decompress every chunk of an indexed MCAP on one thread; returns the bytes out."""
     import zstandard
 
-    from imu_dcm.logio.mcap import McapSource
+    from imu_dcm.logio.containers.mcap.indexed import read_summary
 
-    src = McapSource(path)
     total = 0
     with open(path, "rb") as f:
-        src.size = f.seek(0, 2)
-        for start, clen, *_rest, _comp, csize, usize in src._summary(f):
+        for start, clen, *_rest, _comp, csize, usize in read_summary(f, f.seek(0, 2)).chunks:
             f.seek(start + clen - csize)
             data = f.read(csize)
             total += len(zstandard.ZstdDecompressor().decompress(data, max_output_size=usize))

@@ -38,7 +38,7 @@ from data_synth.scenes import BRANCHES, FREE_BODY_CASES, MOTIONS, simulate
 from imu_dcm.app.options import OneLineArgumentParser, prog_name
 from imu_dcm.app.run import run_main
 from imu_dcm.errors import InputError
-from imu_dcm.logio.writer import StampedSeries, write_bag
+from imu_dcm.logio.writers import StampedSeries, write_bag
 from imu_dcm.outputs import check_output_dir
 
 __all__ = ["build_parser", "main", "make_log"]

@@ -26,7 +26,7 @@ from pathlib import Path
 import numpy as np
 from fuzzlib import Base, Case
 
-from imu_dcm.logio.writer import StampedSeries, write_bag
+from imu_dcm.logio.writers import StampedSeries, write_bag
 from tests.drone_logs import DFMessage, ULogSpec, UTopic, write_dataflash, write_ulog
 
 N, RATE_HZ, OMEGA_Z = 2000, 400.0, 0.5  # samples, Hz, rad/s about z (FLU)

@@ -18,7 +18,7 @@ from rosbags.typesys import Stores, get_typestore
 from ruamel.yaml import YAML  # a dependency of rosbags: an independent YAML parser
 
 from imu_dcm.errors import InputError, LogError
-from imu_dcm.logio.writer import MSG_DEFINITIONS, TYPE_HASHES, StampedSeries, write_bag
+from imu_dcm.logio.writers import MSG_DEFINITIONS, TYPE_HASHES, StampedSeries, write_bag
 
 EPOCH_NS = 1_700_000_000_000_000_000
 TYPESTORE = get_typestore(Stores.ROS2_HUMBLE)
@@ -266,7 +266,7 @@ def test_refuses_existing_output_and_force_replaces(tmp_path):
 
 
 def test_output_is_whole_or_absent(tmp_path, monkeypatch):
-    import imu_dcm.logio.writer as bw
+    import imu_dcm.logio.writers.bag as bw
 
     def boom(*a, **k):
         raise RuntimeError("disk full")
@@ -362,7 +362,7 @@ def test_chunk_by_chunk_encoding_equals_one_shot(tmp_path):
     (4 KiB chunks, the rows of one chunk at a time) equals every payload built up front."""
     import io
 
-    from imu_dcm.logio import writer
+    from imu_dcm.logio.writers import bag as writer
 
     t_ns, w, q, v = _sample(n=900)
     log_t = t_ns + np.random.default_rng(4).integers(0, 3_000_000, t_ns.size)  # out of order

@@ -12,7 +12,7 @@ import statistics
 import numpy as np
 from conftest import STRANGERS, need_data
 
-from imu_dcm.logio.writer import StampedSeries, write_bag
+from imu_dcm.logio.writers import StampedSeries, write_bag
 from imu_dcm.replay.__main__ import main
 
 LOGS = (

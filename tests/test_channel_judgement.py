@@ -9,7 +9,7 @@ from conftest import raises_naming
 
 from imu_dcm.errors import LogError
 from imu_dcm.logio import read_log
-from imu_dcm.logio.writer import StampedSeries, write_bag
+from imu_dcm.logio.writers import StampedSeries, write_bag
 from imu_dcm.replay.__main__ import main
 
 N = 400

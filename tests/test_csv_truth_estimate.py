@@ -16,7 +16,7 @@ from scipy.spatial.transform import Rotation
 
 from imu_dcm.errors import ImuDcmWarning
 from imu_dcm.logio import read_log
-from imu_dcm.logio.channels import ESTIMATE_OF_KEY
+from imu_dcm.logio.ros.truth import ESTIMATE_OF_KEY
 from imu_dcm.replay.__main__ import main
 from imu_dcm.replay.kinds import ESTIMATE, INDEPENDENT
 

@@ -19,7 +19,7 @@ import numpy as np
 import pytest
 from conftest import REPO_ROOT, assert_names, own_stderr, raises_naming
 
-from imu_dcm.logio.writer import StampedSeries, write_bag
+from imu_dcm.logio.writers import StampedSeries, write_bag
 from imu_dcm.outputs import OutputError, atomic_path, write_json, write_text_atomic
 
 LINES = "".join(f"{k * 0.01:.2f},0.1,0,0\n" for k in range(50))  # 0.5 s at 100 Hz about x
@@ -374,14 +374,14 @@ def test_help_names_every_container_batch_and_the_method_choices(tmp_path):
     import re
 
     from imu_dcm.integrator.methods import METHODS
-    from imu_dcm.logio.foreign import REFUSALS
-    from imu_dcm.logio.registry import SOURCES
+    from imu_dcm.logio.containers.foreign import REFUSALS
+    from imu_dcm.logio.registry import READERS
 
     text = " ".join(run(["imu_dcm.replay", "--help"], tmp_path).stdout.split())
     for word in ("metadata.yaml", ".mcap", ".db3", "ROS 1 .bag", "imu-dcm-replay batch"):
         assert word in text, word
     # every container of the reader table is named (by the first word in its parentheses)
-    for entry in SOURCES:
+    for entry in READERS:
         m = re.search(r"\(([^ ,)]+)", entry.name)
         if entry in REFUSALS or m is None:
             continue

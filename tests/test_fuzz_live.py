@@ -103,7 +103,7 @@ STEP_NS = 10**9 // fuzzlive.RATE_HZ
 
 
 def _cdr(t_ns: list[int], rates: list[list[float]]) -> list[bytes]:
-    from imu_dcm.logio.writer import cdr_messages, imu_doubles
+    from imu_dcm.logio.writers import cdr_messages, imu_doubles
 
     rows = cdr_messages(np.array(t_ns, np.int64), "imu", imu_doubles(np.array(rates), None, None))
     return [bytes(r) for r in rows]
@@ -170,7 +170,7 @@ def _ws_handler(good: list[bytes], bad: dict[int, list], schema: str):
 
 def test_bad_messages_from_a_websocket_server(tmp_path):
     server_mod = pytest.importorskip("websockets.sync.server")
-    from imu_dcm.logio.writer import MSG_DEFINITIONS
+    from imu_dcm.logio.writers import MSG_DEFINITIONS
 
     rng = np.random.default_rng([SEED, 3])
     t_ns = [T0_NS + k * STEP_NS for k in range(N_GOOD)]

@@ -20,7 +20,7 @@ import pytest
 from imu_dcm.errors import GapWarning, ImuDcmWarning
 from imu_dcm.integrator.batch import integrate_quat
 from imu_dcm.live import run
-from imu_dcm.logio.writer import StampedSeries, write_bag
+from imu_dcm.logio.writers import StampedSeries, write_bag
 from imu_dcm.metrics import attitude_error_deg
 from imu_dcm.replay import replay
 

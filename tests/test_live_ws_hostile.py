@@ -15,7 +15,7 @@ import pytest
 from scipy.spatial.transform import Rotation
 from test_live_ws import live_thread
 
-from imu_dcm.logio.writer import MSG_DEFINITIONS, cdr_messages, imu_doubles
+from imu_dcm.logio.writers import MSG_DEFINITIONS, cdr_messages, imu_doubles
 from imu_dcm.so3 import angle_between_deg
 
 server_mod = pytest.importorskip("websockets.sync.server")

@@ -561,7 +561,7 @@ def test_short_message_is_dropped_and_counted(tmp_path):
 def test_live_batch_decode_matches_the_file_reader():
     # A live source hands raw payloads and the schema text: the batch decoder must give the
     # same samples as reading the file, and flag a cut payload.
-    from imu_dcm.logio.batch import classify_schema, decode_cdr_batch
+    from imu_dcm.logio.ros.payload import classify_schema, decode_cdr_batch
 
     src = resolve_mcap_path(SHIPPED)
     by_topic: dict[str, list] = {}

@@ -16,7 +16,8 @@ from conftest import assert_names, assert_quiet, raises_naming
 from scipy.spatial.transform import Rotation
 
 from imu_dcm.errors import ImuDcmWarning, LogError
-from imu_dcm.logio import ardupilot, ned, read_log
+from imu_dcm.logio import ned, read_log
+from imu_dcm.logio.containers import ardupilot
 from imu_dcm.so3 import angle_between_deg
 from tests.drone_logs import (
     TRIAL,

@@ -11,8 +11,10 @@ import numpy as np
 import pytest
 
 from imu_dcm.errors import ImuDcmWarning
-from imu_dcm.logio import chunks, read_log, writer
-from imu_dcm.logio.writer import StampedSeries
+from imu_dcm.logio import read_log
+from imu_dcm.logio.containers import chunks
+from imu_dcm.logio.writers import StampedSeries
+from imu_dcm.logio.writers import bag as writer
 
 EPOCH_NS = 1_700_000_000_000_000_000
 

@@ -15,7 +15,7 @@ from ruamel.yaml import YAML  # a dependency of rosbags: a YAML parser independe
 
 from imu_dcm.errors import LogError
 from imu_dcm.logio import meta, read_log
-from imu_dcm.logio.writer import StampedSeries, write_bag
+from imu_dcm.logio.writers import StampedSeries, write_bag
 
 T0_NS = 1_700_000_000_000_000_000
 

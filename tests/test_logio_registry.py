@@ -15,7 +15,7 @@ from conftest import raises_naming
 
 from imu_dcm.errors import LogError
 from imu_dcm.logio import (
-    SOURCES,
+    READERS,
     ImuSeries,
     LogData,
     LogSource,
@@ -32,8 +32,8 @@ SHIPPED = REPO / "replay" / "broad_07_undisturbed_fast_rotation_B"
 
 
 def test_every_row_is_an_entry_and_every_source_the_interface():
-    assert all(isinstance(e, SourceEntry) for e in SOURCES)
-    assert len({e.name for e in SOURCES}) == len(SOURCES)
+    assert all(isinstance(e, SourceEntry) for e in READERS)
+    assert len({e.name for e in READERS}) == len(READERS)
     folder = open_log(SHIPPED)
     single = open_log(next(SHIPPED.glob("*.mcap")))
     for src in (folder, single):
@@ -61,7 +61,7 @@ def test_a_new_container_is_a_class_and_a_row(tmp_path, monkeypatch):
     with raises_naming(LogError, str(p), "b'FAKE1 an'", ".mcap", ".ulg", ".bin"):
         read_log(p)
     row = SourceEntry("fake log", lambda path, head: head.startswith(b"FAKE1"), _Fake)
-    monkeypatch.setattr(registry, "SOURCES", (row, *SOURCES))
+    monkeypatch.setattr(registry, "READERS", (row, *READERS))
     log = read_log(p, imu_topic="g")
     assert log.container == "fake" and log.imu.topic == "g" and len(log.imu.t_ns) == 5
     assert find_logs(tmp_path) == [p]
@@ -109,7 +109,11 @@ def _imports(path: Path) -> set[str]:
 
 def test_logio_has_no_import_circle():
     package = REPO / "imu_dcm" / "logio"
-    mods = {f"imu_dcm.logio.{p.stem}": p for p in package.glob("*.py") if p.stem != "__init__"}
+    mods = {
+        "imu_dcm." + ".".join(p.relative_to(package.parent).with_suffix("").parts): p
+        for p in package.rglob("*.py")
+        if p.stem != "__init__"
+    }
     graph = {m: {d for d in _imports(p) if d in mods and d != m} for m, p in mods.items()}
     state: dict[str, int] = {}
 

@@ -1,4 +1,4 @@
-"""The ``.msg`` fast path of :mod:`imu_dcm.logio.schema` against rosbags' parser as the oracle.
+"""The ``.msg`` fast path of :mod:`imu_dcm.logio.ros.schema` against rosbags' parser as the oracle.
 
 Plain ``.msg`` texts (the schemas ROS 2 and ROS 1 recorders store) are read without importing
 rosbags; whatever the fast path takes must come out exactly as rosbags reads it, and whatever
@@ -13,8 +13,8 @@ import pytest
 from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 
 from imu_dcm.errors import LogError
-from imu_dcm.logio.schema import _convert, _msg_types, _with_time, definitions
-from imu_dcm.logio.types import Conn
+from imu_dcm.logio.ros.collect import Conn
+from imu_dcm.logio.ros.schema import _convert, _msg_types, _with_time, definitions
 
 
 def _rosbags(text: str, root: str):

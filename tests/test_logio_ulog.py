@@ -11,8 +11,9 @@ from conftest import need_data, raises_naming
 from scipy.spatial.transform import Rotation
 
 from imu_dcm.errors import ImuDcmWarning, LogError
-from imu_dcm.logio import ned, read_log, ulog
-from imu_dcm.logio.registry import SOURCES
+from imu_dcm.logio import ned, read_log
+from imu_dcm.logio.containers import ulog
+from imu_dcm.logio.registry import READERS
 from imu_dcm.logio.source import ReadRequest
 from imu_dcm.so3 import angle_between_deg
 from tests.drone_logs import (
@@ -307,12 +308,12 @@ def test_probe():
     assert ulog.probe(None, b"ULog\x01\x12\x35\x01" + bytes(8))
     assert not ulog.probe(None, b"\x89MCAP0\r\n")
     assert not ulog.probe(None, b"")
-    (entry,) = [e for e in SOURCES if e.name == "PX4 ULog (.ulg)"]
+    (entry,) = [e for e in READERS if e.name == "PX4 ULog (.ulg)"]
     assert entry.probe(None, b"ULog\x01\x12\x35\x01")
 
 
 def test_read_request_through_the_entry(trial_ulg):
-    (entry,) = [e for e in SOURCES if e.name == "PX4 ULog (.ulg)"]
+    (entry,) = [e for e in READERS if e.name == "PX4 ULog (.ulg)"]
     src = entry.open(trial_ulg, None)
     assert src.kind == "px4 ulog"
     got = src.read(ReadRequest(truth_topic="none"))

@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 from fuzzlib import stdin_from  # fd 0 reads a file for a block, as `cmd < file`
 
-from imu_dcm.logio.writer import StampedSeries, write_bag
+from imu_dcm.logio.writers import StampedSeries, write_bag
 from imu_dcm.outputs import (
     OutputError,
     PendingOutput,

@@ -13,7 +13,7 @@ from conftest import raises_naming
 from scipy.spatial.transform import Rotation
 
 from imu_dcm.errors import GapWarning, ImuDcmWarning, InputError, LogError
-from imu_dcm.logio.writer import StampedSeries, write_bag
+from imu_dcm.logio.writers import StampedSeries, write_bag
 from imu_dcm.replay import ReplayResult, replay
 from imu_dcm.replay.bias import RestConfig, detect_rest, estimate_bias
 from imu_dcm.replay.clean import clean_imu

@@ -11,7 +11,7 @@ import pytest
 from conftest import raises_naming
 
 from imu_dcm.errors import InputError
-from imu_dcm.logio.writer import StampedSeries, write_bag
+from imu_dcm.logio.writers import StampedSeries, write_bag
 from imu_dcm.replay import replay
 from imu_dcm.replay.budget import NoiseParams, budget, budget_line, read_noise_params
 

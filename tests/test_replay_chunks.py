@@ -11,8 +11,9 @@ import numpy as np
 import imu_dcm.gyro.resample as resample
 import imu_dcm.replay.core as core
 from data_synth.scenes import simulate
-from imu_dcm.logio import chunks, writer
-from imu_dcm.logio.writer import StampedSeries
+from imu_dcm.logio.containers import chunks
+from imu_dcm.logio.writers import StampedSeries
+from imu_dcm.logio.writers import bag as writer
 from imu_dcm.replay import replay
 
 EPOCH_NS = 1_700_000_000_000_000_000

@@ -20,7 +20,7 @@ from scipy.spatial.transform import Rotation
 from test_logio import write_imu_bag  # tests/ is on sys.path (pytest rootdir conftest)
 
 from imu_dcm.logio import resolve_mcap_path
-from imu_dcm.logio.writer import StampedSeries, write_bag
+from imu_dcm.logio.writers import StampedSeries, write_bag
 from imu_dcm.replay.__main__ import main
 
 REPO = Path(__file__).resolve().parents[1]

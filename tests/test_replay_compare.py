@@ -57,7 +57,7 @@ def test_each_segment_starts_from_the_replays_anchor(tmp_path):
     """After a truth jump, every method re-anchors where the replay did."""
     from scipy.spatial.transform import Rotation
 
-    from imu_dcm.logio.writer import StampedSeries, write_bag
+    from imu_dcm.logio.writers import StampedSeries, write_bag
 
     t = np.arange(0, 6.0, 0.005)
     rate = np.c_[0.4 * np.sin(t), 0.2 + 0 * t, 0.1 * np.cos(2 * t)]

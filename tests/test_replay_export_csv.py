@@ -29,7 +29,7 @@ def jump_log(tmp_path_factory):
     table holds unscored rows (before the truth, across the jump) and re-anchored ones."""
     from scipy.spatial.transform import Rotation
 
-    from imu_dcm.logio.writer import StampedSeries, write_bag
+    from imu_dcm.logio.writers import StampedSeries, write_bag
 
     t = np.arange(0, 12.0, 0.005)
     axis = np.array([1.0, 2.0, 2.0]) / 3.0

@@ -27,7 +27,7 @@ NOT_ON_THE_PATH = (
     "filterpy",
     "imu_dcm.viz",
     "imu_dcm.gyro.prefilter",
-    "imu_dcm.logio.writer",
+    "imu_dcm.logio.writers",
     "imu_dcm.outputs",
     "imu_dcm.replay.batch",
     "mcap_ros2",
@@ -64,7 +64,11 @@ def test_the_replay_command_imports_no_scipy_rotation_viewer_or_writer(tmp_path)
     assert _unexpected(modules) == []
     assert "importlib.metadata" not in modules or "numba" in modules  # --version only
     # The readers of other containers load when their row opens a log, not for a ROS bag.
-    others = {"imu_dcm.logio.ulog", "imu_dcm.logio.ardupilot", "imu_dcm.logio.euroc"}
+    others = {
+        "imu_dcm.logio.containers.ulog",
+        "imu_dcm.logio.containers.ardupilot",
+        "imu_dcm.logio.containers.euroc",
+    }
     assert others & modules == set()
 
 

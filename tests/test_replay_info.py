@@ -16,7 +16,7 @@ import pytest
 from conftest import STRANGERS, need_data
 from test_logio_euroc import SHIPPED, _csv, _dataset
 
-from imu_dcm.logio.writer import StampedSeries, write_bag
+from imu_dcm.logio.writers import StampedSeries, write_bag
 from imu_dcm.replay.__main__ import main
 from imu_dcm.replay.kinds import ESTIMATE, INDEPENDENT
 

@@ -144,7 +144,7 @@ def test_truth_is_picked_among_candidates_by_how_it_follows_the_gyro(log, clean,
     # Two attitude topics: the optical truth and another body's (the truth played backwards).
     # The reader offers both; the replay scores the one that follows the gyro, whatever the
     # reader's order, and lists the other with its fit.
-    from imu_dcm.logio.writer import StampedSeries, write_bag
+    from imu_dcm.logio.writers import StampedSeries, write_bag
 
     t = log.truth
     other = StampedSeries(t.t_ns, t.q_w_b[::-1].copy(), "world")

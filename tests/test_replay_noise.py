@@ -33,7 +33,7 @@ class _Still:
 @pytest.fixture(scope="module")
 def still_log(tmp_path_factory):
     from data_synth.gyro import GyroModel, synthetic_gyro
-    from imu_dcm.logio.writer import StampedSeries, write_bag
+    from imu_dcm.logio.writers import StampedSeries, write_bag
 
     model = GyroModel(noise_density_rad_s_sqrt_hz=N_TRUE, bias_walk_rad_s2_sqrt_hz=K_TRUE)
     rec = synthetic_gyro(_Still(), RATE_HZ, model=model, seed=4)

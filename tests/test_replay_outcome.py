@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from imu_dcm.logio.writer import StampedSeries, write_bag
+from imu_dcm.logio.writers import StampedSeries, write_bag
 from imu_dcm.replay.__main__ import main
 
 RATE_DEG_S, SECONDS, HZ = 10.0, 100.0, 100

@@ -15,7 +15,7 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from data_synth.analytic import coning_attitude, coning_rates
-from imu_dcm.logio.writer import StampedSeries, write_bag
+from imu_dcm.logio.writers import StampedSeries, write_bag
 from imu_dcm.outputs import OutputError, check_output_dir, is_own_bag
 from imu_dcm.replay.__main__ import main
 

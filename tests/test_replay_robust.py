@@ -16,7 +16,7 @@ from scipy.spatial.transform import Rotation
 
 from imu_dcm.errors import ImuDcmWarning, LogError
 from imu_dcm.logio import read_log
-from imu_dcm.logio.writer import StampedSeries, write_bag
+from imu_dcm.logio.writers import StampedSeries, write_bag
 from imu_dcm.replay import replay
 from imu_dcm.replay.clean import clean_imu
 

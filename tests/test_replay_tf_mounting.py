@@ -21,7 +21,7 @@ from mcap.writer import Writer as McapWriter
 from scipy.spatial.transform import Rotation
 
 from imu_dcm.logio import ImuSeries, LogData, StaticTransform, TruthSeries, read_log
-from imu_dcm.logio.writer import StampedSeries, write_bag
+from imu_dcm.logio.writers import StampedSeries, write_bag
 from imu_dcm.replay import replay
 from imu_dcm.replay.mounting_tf import static_rotation
 

@@ -15,7 +15,7 @@ import pytest
 from conftest import assert_names
 from test_replay_broad import movement_rms_deg
 
-from imu_dcm.logio.writer import StampedSeries, write_bag
+from imu_dcm.logio.writers import StampedSeries, write_bag
 from imu_dcm.replay import replay
 from imu_dcm.replay.__main__ import main
 

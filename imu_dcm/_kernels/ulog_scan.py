@@ -1,5 +1,6 @@
 """The ULog byte walker, written for numba: the chain of ``[uint16 size][uint8 type]`` record
-headers of a PX4 ULog file (:mod:`imu_dcm.logio.ulog` reads the records it finds), and its entry
+headers of a PX4 ULog file (:mod:`imu_dcm.logio.containers.ulog` reads the records it finds), and
+its entry
 point (:data:`ENTRIES`).
 
 Imported only to compile, like :mod:`imu_dcm._kernels.integrator`.

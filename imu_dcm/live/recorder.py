@@ -28,7 +28,7 @@ from numpy.typing import NDArray
 
 from imu_dcm.live.events import Channel, Received
 from imu_dcm.logio import meta
-from imu_dcm.logio.writer import MSG_DEFINITIONS, cdr_messages, imu_doubles
+from imu_dcm.logio.writers import MSG_DEFINITIONS, cdr_messages, imu_doubles
 from imu_dcm.outputs import check_output_dir, ensure_parent
 
 __all__ = ["FLUSH_S", "LiveRecorder"]

@@ -1,12 +1,14 @@
 """Read gyro logs of every container a ROS user has, through one interface: :func:`read_log`.
 
-Containers (the table :data:`imu_dcm.logio.registry.SOURCES`): ROS 2 bags with MCAP or sqlite3
+Containers (the table :data:`imu_dcm.logio.registry.READERS`): ROS 2 bags with MCAP or sqlite3
 storage (split, ``file``- or ``message``-compressed), single ``.mcap`` files (``ros2`` or ``ros1``
 profile; ``ros2msg``, ``ros2idl`` or ``ros1msg`` schemas; CDR, ROS 1 or JSON messages),
-single ``.db3`` files, ROS 1 ``.bag`` files (v2.0; uncompressed, bz2 or lz4 chunks) and
-EuRoC/ASL dataset folders (CSVs).
+single ``.db3`` files, ROS 1 ``.bag`` files (v2.0; uncompressed, bz2 or lz4 chunks), PX4 ULog,
+ArduPilot DataFlash and EuRoC/ASL dataset folders (CSVs): one reader a container in
+:mod:`imu_dcm.logio.containers`, the ROS message decoding they share in :mod:`imu_dcm.logio.ros`,
+the bag writer in :mod:`imu_dcm.logio.writers`.
 Only the channels that can be the IMU or the truth are read (a camera topic is never
-decompressed); their payloads are decoded in bulk with numpy (:mod:`imu_dcm.logio.cdr`).
+decompressed); their payloads are decoded in bulk with numpy (:mod:`imu_dcm.logio.ros.cdr`).
 
 A damaged part costs only itself: it is skipped, listed in :attr:`LogData.damage` with its
 file offset, and one :class:`~imu_dcm.errors.ImuDcmWarning` summarises the damage.
@@ -14,14 +16,13 @@ file offset, and one :class:`~imu_dcm.errors.ImuDcmWarning` summarises the damag
 
 from __future__ import annotations
 
-from collections.abc import Callable
 from pathlib import Path
 
-from imu_dcm.logio.channels import TRUTH_TYPES
 from imu_dcm.logio.heap import release_freed_memory
 from imu_dcm.logio.meta import read_custom_data
-from imu_dcm.logio.registry import SOURCES, find_logs, open_log, resolve_mcap_path
-from imu_dcm.logio.source import LogSource, ReadRequest, SourceEntry
+from imu_dcm.logio.registry import READERS, find_logs, open_log, resolve_mcap_path
+from imu_dcm.logio.ros.channels import TRUTH_TYPES
+from imu_dcm.logio.source import LogSource, ProgressCallback, ReadRequest, SourceEntry
 from imu_dcm.logio.types import (
     ChannelInfo,
     Damage,
@@ -32,13 +33,14 @@ from imu_dcm.logio.types import (
 )
 
 __all__ = [
-    "SOURCES",
+    "READERS",
     "TRUTH_TYPES",
     "ChannelInfo",
     "Damage",
     "ImuSeries",
     "LogData",
     "LogSource",
+    "ProgressCallback",
     "ReadRequest",
     "SourceEntry",
     "StaticTransform",
@@ -56,7 +58,7 @@ def read_log(
     imu_topic: str | None = None,
     truth_topic: str | None = None,
     truth_frame: str | None = None,
-    progress: Callable[[float], None] | None = None,
+    progress: ProgressCallback | None = None,
 ) -> LogData:
     """Read the gyro samples and the reference attitude of a log, whatever its container.
 
@@ -65,8 +67,8 @@ def read_log(
     path : str or Path
         A rosbag2 folder (``metadata.yaml`` + ``.mcap`` / ``.db3`` files), a ``.mcap``,
         ``.mcap.zstd`` or ``.db3`` file, a ROS 1 ``.bag``, a EuRoC/ASL dataset folder (or its
-        ``mav0``; :mod:`imu_dcm.logio.euroc`), or any other container of
-        :data:`imu_dcm.logio.registry.SOURCES`. Regular files and folders only. Never modified.
+        ``mav0``; :mod:`imu_dcm.logio.containers.euroc`), or any other container of
+        :data:`imu_dcm.logio.registry.READERS`. Regular files and folders only. Never modified.
     imu_topic : str, optional
         The IMU topic. By default the one topic of ``sensor_msgs/Imu``, of a type containing an
         ``Imu`` field (vendor wrappers), or JSON with ``angular_velocity {x, y, z}``; failing

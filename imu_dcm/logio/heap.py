@@ -13,6 +13,9 @@ from __future__ import annotations
 import ctypes
 import sys
 
+__all__ = ["release_freed_memory"]
+
+
 _TRIM = None
 if sys.platform.startswith("linux"):
     try:

@@ -14,6 +14,9 @@ from dataclasses import dataclass
 
 from imu_dcm.errors import LogError
 
+__all__ = ["SUFFIX", "Declared", "declared_intervals"]
+
+
 SUFFIX = "intervals_stamp_ns"
 
 

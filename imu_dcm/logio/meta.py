@@ -9,18 +9,41 @@ document that is not UTF-8 or not the ``rosbag2_bagfile_information`` mapping ra
 :class:`~imu_dcm.errors.LogError` instead of a traceback.
 
 Writing: :func:`metadata_body` is the rosbag2 format version 9 body that the bag writer
-(:mod:`imu_dcm.logio.writer`) and live's recorder both write; :func:`write_metadata` replaces a
+(:mod:`imu_dcm.logio.writers`) and live's recorder both write; :func:`write_metadata` replaces a
 bag's ``metadata.yaml`` whole (:func:`imu_dcm.outputs.write_text_atomic`).
 """
 
 from __future__ import annotations
 
+import json
 import re
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 from imu_dcm.errors import LogError
+
+__all__ = [
+    "MAX_ALIAS_GROWTH",
+    "MAX_METADATA_BYTES",
+    "MAX_NESTING",
+    "MIN_ALIAS_NODES",
+    "QOS_YAML",
+    "TYPE_HASHES",
+    "custom_data",
+    "file_list",
+    "load_metadata",
+    "load_yaml",
+    "metadata_body",
+    "metadata_document",
+    "read_custom_data",
+    "topic_counts",
+    "write_metadata",
+    "yaml_str",
+]
+
 
 #: Largest metadata.yaml read (bytes); real ones are a few kB, one per topic ~0.5 kB.
 MAX_METADATA_BYTES = 4 * 1024 * 1024
@@ -75,7 +98,7 @@ def _check_aliases(events, where: Path, what: str) -> None:
     ``events`` are the parser's events. An anchored node's expanded size is known at its end;
     an alias adds that size. Refused as soon as the count passes the bound.
     """
-    import yaml
+    import yaml  # lazy: ~15 ms at import, a bag folder or EuRoC sensor file only
 
     sizes: dict[str, int] = {}
     stack: list[list] = []  # open collections: [anchor, expanded size so far]
@@ -118,7 +141,7 @@ def load_yaml(text: str, where: Path, what: str = "rosbag2 metadata.yaml") -> An
         A syntax error, nesting too deep for the parser, or aliases expanding past the bound;
         the message names ``what`` and ``where``.
     """
-    import yaml
+    import yaml  # lazy, as in _check_aliases
 
     loader_cls = getattr(yaml, "CSafeLoader", yaml.SafeLoader)
     try:
@@ -139,8 +162,6 @@ def load_yaml(text: str, where: Path, what: str = "rosbag2 metadata.yaml") -> An
 
 def _check_nesting(raw: bytes, where: Path) -> None:
     """Refuse flow collections nested deeper than MAX_NESTING (YAML parsers recurse on them)."""
-    import numpy as np
-
     b = np.frombuffer(raw, np.uint8)
     step = ((b == 0x5B) | (b == 0x7B)).astype(np.int32) - ((b == 0x5D) | (b == 0x7D))
     depth = int(np.cumsum(step).max()) if len(b) else 0
@@ -251,8 +272,6 @@ def yaml_str(s: str) -> str:
     string syntax is valid YAML)."""
     if re.fullmatch(r"[A-Za-z_/][A-Za-z0-9_/~]*", s) and s.lower() not in _YAML_WORDS:
         return s
-    import json  # (writing only: not imported for every read)
-
     return json.dumps(s)
 
 
@@ -269,8 +288,6 @@ def metadata_body(
     :data:`TYPE_HASHES` (an empty string for a type not listed, as rosbag2 writes for types
     without one). ``start_ns`` / ``end_ns`` are the first and last log times.
     """
-    import json  # (writing only: not imported for every read)
-
     total = sum(n for _, _, n in topics)
     lines = ["compression_format: ''", "compression_mode: ''"]
     if custom_data:
@@ -320,6 +337,7 @@ def metadata_document(body: str) -> str:
 
 def write_metadata(folder: Path, body: str) -> Path:
     """Replace ``folder/metadata.yaml`` whole with ``body`` (never half-written)."""
-    from imu_dcm.outputs import write_text_atomic  # (tempfile, shutil: only for writing)
+    # lazy: outputs is kept off the replay's import path (tests/test_replay_imports.py)
+    from imu_dcm.outputs import write_text_atomic
 
     return write_text_atomic(folder / "metadata.yaml", metadata_document(body))

@@ -20,6 +20,17 @@ from numpy.typing import ArrayLike, NDArray
 
 from imu_dcm.so3 import quat_multiply
 
+__all__ = [
+    "FLU_FROM_FRD",
+    "LOG_AXES",
+    "Q_ENU_NED",
+    "Q_FRD_FLU",
+    "in_log_axes",
+    "q_enu_flu",
+    "q_wxyz_from_euler_deg",
+]
+
+
 _HALF = np.sqrt(0.5)
 Q_ENU_NED = np.array([_HALF, _HALF, 0.0, 0.0])  # [x, y, z, w]
 Q_FRD_FLU = np.array([1.0, 0.0, 0.0, 0.0])

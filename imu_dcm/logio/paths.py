@@ -7,9 +7,26 @@ from pathlib import Path
 
 from imu_dcm.errors import LogError
 
+__all__ = [
+    "DATAFLASH_MAGIC",
+    "HEAD_BYTES",
+    "MCAP_MAGIC",
+    "ULOG_MAGIC",
+    "check_regular",
+    "is_dataflash",
+    "is_euroc",
+    "is_ulog",
+    "mav_folder",
+    "read_head",
+]
+
+
 #: Bytes of a file's start handed to the container table's probes.
 HEAD_BYTES = 64
 
+#: First bytes of an MCAP file (read by :mod:`imu_dcm.logio.containers.mcap`, written by
+#: :mod:`imu_dcm.logio.writers`).
+MCAP_MAGIC = b"\x89MCAP0\r\n"
 #: First bytes of a PX4 ULog and of a binary ArduPilot DataFlash log (its first FMT record).
 ULOG_MAGIC = b"ULog\x01\x12\x35"
 DATAFLASH_MAGIC = b"\xa3\x95\x80\x80"
@@ -28,7 +45,8 @@ def check_regular(p: Path) -> bool:
     if stat.S_ISDIR(st.st_mode):
         return True
     if not stat.S_ISREG(st.st_mode):
-        from imu_dcm.outputs import file_kind  # (tempfile, shutil: not for every read)
+        # lazy: outputs is kept off the replay's import path (tests/test_replay_imports.py)
+        from imu_dcm.outputs import file_kind
 
         raise LogError(
             f"Expected a regular file or a folder, got a {file_kind(st.st_mode)} (a special "

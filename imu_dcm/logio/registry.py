@@ -1,10 +1,10 @@
 """The container table: which reader takes a path, by a file's first bytes or a folder's layout.
 
-:data:`SOURCES` has one :class:`~imu_dcm.logio.source.SourceEntry` per container; the first
+:data:`READERS` has one :class:`~imu_dcm.logio.source.SourceEntry` per container; the first
 whose ``probe`` accepts a path reads it. Adding a container is one module holding a
 :class:`~imu_dcm.logio.source.LogSource`, plus one row here. Rows that only
 recognise a format to refuse it (saying how to convert it) come last
-(:mod:`imu_dcm.logio.foreign`).
+(:mod:`imu_dcm.logio.containers.foreign`).
 
 Accepted paths are regular files and folders; a FIFO, a device such as ``/dev/zero`` or a
 socket is refused before a byte is read.
@@ -20,14 +20,11 @@ from pathlib import Path
 
 from imu_dcm.errors import LogError
 from imu_dcm.logio import meta
-from imu_dcm.logio.foreign import REFUSALS, TEXT_SUFFIXES
-from imu_dcm.logio.mcap import MAGIC as MCAP_MAGIC
-from imu_dcm.logio.mcap import McapSource
-from imu_dcm.logio.paths import check_regular, is_dataflash, is_euroc, is_ulog, read_head
-from imu_dcm.logio.ros import RosSource
-from imu_dcm.logio.ros1 import MAGIC as ROS1_MAGIC
-from imu_dcm.logio.ros1 import open_bag
-from imu_dcm.logio.rosbag2 import (
+from imu_dcm.logio.containers.foreign import REFUSALS, TEXT_SUFFIXES
+from imu_dcm.logio.containers.mcap import McapSource
+from imu_dcm.logio.containers.ros1 import MAGIC as ROS1_MAGIC
+from imu_dcm.logio.containers.ros1 import open_bag
+from imu_dcm.logio.containers.rosbag2 import (
     SQLITE_MAGIC,
     ZSTD_MAGIC,
     SqliteSource,
@@ -35,7 +32,27 @@ from imu_dcm.logio.rosbag2 import (
     is_bag_folder,
     open_folder,
 )
-from imu_dcm.logio.source import LogSource, Progress, SourceEntry
+from imu_dcm.logio.paths import (
+    MCAP_MAGIC,
+    check_regular,
+    is_dataflash,
+    is_euroc,
+    is_ulog,
+    read_head,
+)
+from imu_dcm.logio.ros.read import RosSource
+from imu_dcm.logio.source import LogSource, ProgressCallback, SourceEntry
+
+__all__ = [
+    "READERS",
+    "convert_hint",
+    "find_logs",
+    "not_logs",
+    "open_log",
+    "pick",
+    "resolve_mcap_path",
+]
+
 
 #: File names taken as a folder's one log even when their bytes are not recognised (so that
 #: a damaged one is reported, not passed over).
@@ -49,7 +66,7 @@ def _magic(magic: bytes):
 def _in_bag(open_file):
     """``open_file``, and the ``custom_data`` of the bag folder the file lies in (if any)."""
 
-    def opened(path: Path, progress: Progress | None) -> RosSource:
+    def opened(path: Path, progress: ProgressCallback | None) -> RosSource:
         src = open_file(path, progress)
         if (path.parent / "metadata.yaml").is_file():
             src.custom_data = meta.read_custom_data(path)
@@ -59,10 +76,11 @@ def _in_bag(open_file):
 
 
 def _later(module: str, opener: str):
-    """The opener ``opener`` of ``imu_dcm.logio.<module>``, that module imported at the call."""
+    """The opener ``opener`` of ``imu_dcm.logio.containers.<module>``, that module imported
+    at the call."""
 
-    def opened(path: Path, progress: Progress | None) -> LogSource:
-        return getattr(import_module(f"imu_dcm.logio.{module}"), opener)(path, progress)
+    def opened(path: Path, progress: ProgressCallback | None) -> LogSource:
+        return getattr(import_module(f"imu_dcm.logio.containers.{module}"), opener)(path, progress)
 
     return opened
 
@@ -75,7 +93,7 @@ def _is_metadata(path: Path, head: bytes) -> bool:
     return path.name == "metadata.yaml" and bool(head) and is_bag_folder(path.parent, b"")
 
 
-def _open_metadata(path: Path, progress: Progress | None) -> LogSource:
+def _open_metadata(path: Path, progress: ProgressCallback | None) -> LogSource:
     """A bag's ``metadata.yaml``: the bag folder it describes."""
     return open_folder(path.parent, progress)
 
@@ -110,7 +128,7 @@ def convert_hint(files: list[Path]) -> str:
     )
 
 
-def _open_inside(folder: Path, progress: Progress | None) -> LogSource:
+def _open_inside(folder: Path, progress: ProgressCallback | None) -> LogSource:
     """A folder holding exactly one log file (not a bag folder): that file's source."""
     found = _logs_inside(folder)
     if not found:
@@ -128,7 +146,7 @@ def _open_inside(folder: Path, progress: Progress | None) -> LogSource:
     return open_log(found[0], progress)
 
 
-SOURCES: tuple[SourceEntry, ...] = (
+READERS: tuple[SourceEntry, ...] = (
     SourceEntry("rosbag2 folder (metadata.yaml + storage files)", is_bag_folder, open_folder),
     SourceEntry(
         "a bag's own file (metadata.yaml, read as its folder)", _is_metadata, _open_metadata, False
@@ -154,7 +172,7 @@ SOURCES: tuple[SourceEntry, ...] = (
 
 
 def pick(path: Path) -> SourceEntry:
-    """The first row of :data:`SOURCES` accepting ``path`` (a regular file or a folder).
+    """The first row of :data:`READERS` accepting ``path`` (a regular file or a folder).
 
     Raises
     ------
@@ -162,17 +180,17 @@ def pick(path: Path) -> SourceEntry:
         Missing path, a special file, or a file no row recognises.
     """
     head = b"" if check_regular(path) else read_head(path)
-    for entry in SOURCES:
+    for entry in READERS:
         if entry.probe(path, head):
             return entry
-    readable = "; ".join(e.name for e in SOURCES if e.search)
+    readable = "; ".join(e.name for e in READERS if e.search)
     raise LogError(
         f"Expected a log of a known container ({readable}), got a file starting "
         f"{head[:8]!r}: {path}"
     )
 
 
-def open_log(path: str | Path, progress: Progress | None = None) -> LogSource:
+def open_log(path: str | Path, progress: ProgressCallback | None = None) -> LogSource:
     """The opened source of ``path`` (no samples read yet); see :func:`pick`."""
     p = Path(path)
     return pick(p).open(p, progress)
@@ -184,7 +202,7 @@ def _accepts(path: Path) -> bool:
         head = b"" if path.is_dir() else read_head(path)
     except LogError:
         return False
-    return any(e.search and e.probe(path, head) for e in SOURCES)
+    return any(e.search and e.probe(path, head) for e in READERS)
 
 
 def _is_log_file(path: Path) -> bool:

@@ -1,7 +1,7 @@
 """The reader interface: what every log container implements, and how one is chosen.
 
-A container is one module of :mod:`imu_dcm.logio` holding a class that satisfies
-:class:`LogSource`, plus one row in :data:`imu_dcm.logio.registry.SOURCES` (a
+A container is one module of :mod:`imu_dcm.logio.containers` holding a class that satisfies
+:class:`LogSource`, plus one row in :data:`imu_dcm.logio.registry.READERS` (a
 :class:`SourceEntry`) that recognises it by a file's first bytes or a folder's layout.
 :func:`imu_dcm.logio.read_log` opens the first entry whose ``probe`` accepts the path and calls
 its ``read``; replay, batch and live never know which container they got.
@@ -10,14 +10,19 @@ its ``read``; replay, batch and live never know which container they got.
 from __future__ import annotations
 
 from collections.abc import Callable
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Protocol, runtime_checkable
 
 from imu_dcm.logio.types import LogData
 
-Progress = Callable[[float], None]
+__all__ = ["LogSource", "ProgressCallback", "ReadRequest", "SourceEntry"]
 
 
+ProgressCallback = Callable[[float], None]
+
+
+@dataclass(slots=True, frozen=True)
 class ReadRequest:
     """What the caller wants from a log.
 
@@ -29,22 +34,12 @@ class ReadRequest:
         reads no truth.
     truth_frame : str or None — the child frame of a ``/tf`` transform to use as truth.
     progress : callable(fraction) or None — called as the log is read.
-
-    This and :class:`SourceEntry` are plain classes, not dataclasses: nothing compares them,
-    and a dataclass costs every replay's start-up about half a millisecond.
     """
 
-    __slots__ = ("imu_topic", "truth_topic", "truth_frame", "progress")
-
-    def __init__(
-        self,
-        imu_topic: str | None = None,
-        truth_topic: str | None = None,
-        truth_frame: str | None = None,
-        progress: Progress | None = None,
-    ) -> None:
-        self.imu_topic, self.truth_topic = imu_topic, truth_topic
-        self.truth_frame, self.progress = truth_frame, progress
+    imu_topic: str | None = None
+    truth_topic: str | None = None
+    truth_frame: str | None = None
+    progress: ProgressCallback | None = None
 
 
 @runtime_checkable
@@ -63,6 +58,7 @@ class LogSource(Protocol):
     def read(self, request: ReadRequest) -> LogData: ...
 
 
+@dataclass(slots=True, frozen=True)
 class SourceEntry:
     """One row of the container table.
 
@@ -78,13 +74,7 @@ class SourceEntry:
         refusals and for the catch-all "folder holding one log").
     """
 
-    __slots__ = ("name", "probe", "open", "search")
-
-    def __init__(
-        self,
-        name: str,
-        probe: Callable[[Path, bytes], bool],
-        open: Callable[[Path, Progress | None], LogSource],
-        search: bool = True,
-    ) -> None:
-        self.name, self.probe, self.open, self.search = name, probe, open, search
+    name: str
+    probe: Callable[[Path, bytes], bool]
+    open: Callable[[Path, ProgressCallback | None], LogSource]
+    search: bool = True

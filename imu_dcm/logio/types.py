@@ -1,4 +1,5 @@
-"""What the log readers return, and the raw form every container hands to the decoders.
+"""What the log readers return (the raw form a ROS container hands to the decoders is in
+:mod:`imu_dcm.logio.ros.collect`).
 
 Conventions: stamps are int64 nanoseconds (``t_ns`` from the messages' header stamps,
 ``log_t_ns`` from the container's receive/log time); rates ``omega_b`` are the body angular
@@ -13,6 +14,16 @@ from pathlib import Path
 
 import numpy as np
 from numpy.typing import NDArray
+
+__all__ = [
+    "ChannelInfo",
+    "Damage",
+    "ImuSeries",
+    "LogData",
+    "StaticTransform",
+    "TruthSeries",
+    "VehicleState",
+]
 
 
 @dataclass(frozen=True)
@@ -207,231 +218,3 @@ class LogData:
     notes: tuple[str, ...] = ()
     static_transforms: tuple[StaticTransform, ...] = ()
     vehicle_state: VehicleState | None = None
-
-
-# ---------------------------------------------------------------- between containers and decoders
-class Conn:
-    """A channel as a container describes it (internal).
-
-    ``encoding`` is the payload serialisation: "cdr" (ROS 2), "ros1" (ROS 1, packed little
-    endian), "json" or whatever else the file says. ``schema_encoding`` is "ros2msg", "ros2idl",
-    "ros1msg" or "" (the definition then comes from rosbags' type store for ``msgtype``).
-
-    The internal records here are plain classes, not dataclasses: nothing compares, copies or
-    freezes them, and each dataclass costs a replay's start-up about half a millisecond.
-    """
-
-    __slots__ = ("id", "topic", "msgtype", "encoding", "schema_encoding", "schema_text", "count")
-
-    def __init__(
-        self,
-        id: int,
-        topic: str,
-        msgtype: str,
-        encoding: str,
-        schema_encoding: str = "",
-        schema_text: str = "",
-        count: int | None = None,
-    ) -> None:
-        self.id, self.topic, self.msgtype, self.encoding = id, topic, msgtype, encoding
-        self.schema_encoding, self.schema_text, self.count = schema_encoding, schema_text, count
-
-
-class Payloads:
-    """Raw payloads of one channel: ``buf[start[i] : start[i] + length[i]]`` (internal).
-
-    ``order`` is a file-order key (increasing within a file and across split files), used to
-    merge several channels of one topic in file order.
-    """
-
-    __slots__ = ("buf", "start", "length", "log_time", "order")
-
-    def __init__(
-        self,
-        buf: NDArray[np.uint8],
-        start: NDArray[np.int64],
-        length: NDArray[np.int64],
-        log_time: NDArray[np.int64],
-        order: NDArray[np.int64],
-    ) -> None:
-        self.buf, self.start, self.length, self.log_time, self.order = (
-            buf,
-            start,
-            length,
-            log_time,
-            order,
-        )
-
-    @staticmethod
-    def empty() -> Payloads:
-        z = np.zeros(0, np.int64)
-        return Payloads(np.zeros(0, np.uint8), z, z, z, z)
-
-    def __len__(self) -> int:
-        return len(self.start)
-
-    def payload(self, i: int) -> bytes:
-        s = int(self.start[i])
-        return self.buf[s : s + int(self.length[i])].tobytes()
-
-
-def join_payloads(parts: list[Payloads]) -> Payloads:
-    """One Payloads from several (one buffer), ordered by their file-order keys (stable)."""
-    parts = [p for p in parts if len(p)]
-    if not parts:
-        return Payloads.empty()
-    if len(parts) == 1:
-        return parts[0]
-    shift = np.cumsum([0] + [len(p.buf) for p in parts[:-1]])
-    buf = np.concatenate([p.buf for p in parts])
-    start = np.concatenate([p.start + s for p, s in zip(parts, shift, strict=False)])
-    length = np.concatenate([p.length for p in parts])
-    log_time = np.concatenate([p.log_time for p in parts])
-    order = np.concatenate([p.order for p in parts])
-    idx = np.argsort(order, kind="stable")
-    return Payloads(buf, start[idx], length[idx], log_time[idx], order[idx])
-
-
-class Columns:
-    """Decoded fields of one channel (internal): one row per message that decoded, file order.
-
-    ``fields`` maps a name ("t_ns", "omega", "quat", "q") to an array (N,) or (N, k);
-    ``dropped`` counts messages that did not decode; ``frames`` holds the first message's
-    "frame_id" / "child_frame_id" and the "type"; ``error`` is the schema error when the
-    channel's definition could not be read (then every message is dropped).
-    """
-
-    __slots__ = ("order", "log_time", "fields", "frames", "error", "dropped")
-
-    def __init__(
-        self,
-        order: NDArray[np.int64],
-        log_time: NDArray[np.int64],
-        fields: dict[str, NDArray],
-        frames: dict[str, str] | None = None,
-        error: Exception | None = None,
-        dropped: int = 0,
-    ) -> None:
-        self.order, self.log_time, self.fields = order, log_time, fields
-        self.frames = {} if frames is None else frames
-        self.error, self.dropped = error, dropped
-
-    def __len__(self) -> int:
-        return len(self.order)
-
-
-def join_columns(parts: list[Columns]) -> Columns:
-    """One Columns from several, ordered by their file-order keys (stable).
-
-    Fields are joined one at a time and each part's copy released as it goes, so the join
-    needs one field's worth of extra memory, not a second copy of everything.
-    """
-    if len(parts) == 1:
-        return parts[0]
-    order = np.concatenate([p.order for p in parts])
-    idx = None if np.all(order[1:] >= order[:-1]) else np.argsort(order, kind="stable")
-
-    def joined(arrays: list[NDArray]) -> NDArray:
-        a = np.concatenate(arrays)
-        return a if idx is None else a[idx]
-
-    frames: dict[str, str] = {}
-    for p in parts:
-        for k, v in p.frames.items():
-            if v and k not in frames:
-                frames[k] = v
-    fields = {}
-    for k in sorted({k for p in parts for k in p.fields}):
-        proto = next(p.fields[k] for p in parts if k in p.fields)
-        fields[k] = joined(
-            [
-                p.fields.pop(k) if k in p.fields else np.full((len(p),) + proto.shape[1:], np.nan)
-                for p in parts
-            ]
-        )
-    return Columns(
-        order if idx is None else order[idx],
-        joined([p.log_time for p in parts]),
-        fields,
-        frames,
-        next((p.error for p in parts if p.error is not None), None),
-        sum(p.dropped for p in parts),
-    )
-
-
-def join_any(parts: list) -> Payloads | Columns:
-    if parts and isinstance(parts[0], Columns):
-        return join_columns(parts)
-    return join_payloads(parts)
-
-
-class Sink:
-    """Where a container puts the payloads of kept channels (internal).
-
-    ``plan(conn)`` says what to do with a channel: None (skip it), or a callable turning a
-    batch of :class:`Payloads` into :class:`Columns` (decoded now, so raw bytes never pile
-    up) or returning the Payloads themselves (kept raw: JSON, /tf). ``transform(p)`` runs on
-    each batch first (message decompression). Payloads are decoded every :data:`BATCH_BYTES`.
-    """
-
-    BATCH_BYTES = 2 << 20
-    #: Payloads are decoded in groups of at least this many bytes (see ``_flush``).
-    GROUP_BYTES = 256 << 10
-
-    def __init__(self, plan, transform=None):
-        self.plan = plan
-        self.transform = transform
-        self._plans: dict[int, object] = {}
-        self._pending: dict[int, list[Payloads]] = {}
-        self._bytes: dict[int, int] = {}
-        self._done: dict[int, list] = {}
-
-    def wants(self, conn: Conn) -> bool:
-        if conn.id not in self._plans:
-            self._plans[conn.id] = self.plan(conn)
-        return self._plans[conn.id] is not None
-
-    def add(self, cid: int, p: Payloads) -> None:
-        self._pending.setdefault(cid, []).append(p)
-        self._bytes[cid] = self._bytes.get(cid, 0) + len(p.buf)
-        if self._bytes[cid] >= self.BATCH_BYTES:
-            self._flush(cid)
-
-    def _flush(self, cid: int) -> None:
-        parts = self._pending.pop(cid, [])
-        self._bytes[cid] = 0
-        # Decoded in groups of at least GROUP_BYTES: a part that holds a whole chunk (shared by
-        # the channels that fill it) alone, small parts (a channel's payloads copied out of its
-        # chunks) joined. Joining whole chunks would copy each once per channel.
-        group: list[Payloads] = []
-        size = 0
-        for k, p in enumerate(parts):
-            group.append(p)
-            size += len(p.buf)
-            if size >= self.GROUP_BYTES or k == len(parts) - 1:
-                batch = join_payloads(group)
-                if self.transform is not None:
-                    batch = self.transform(batch)
-                self._done.setdefault(cid, []).append(self._plans[cid](batch))
-                group, size = [], 0
-
-    def finish(self) -> dict[int, Payloads | Columns]:
-        for cid in list(self._pending):
-            self._flush(cid)
-        return {cid: join_any(parts) for cid, parts in self._done.items()}
-
-
-class Collected:
-    """What a container read (internal): all channels, the kept ones' data, damage."""
-
-    __slots__ = ("kind", "conns", "payloads", "damage")
-
-    def __init__(
-        self,
-        kind: str,
-        conns: list[Conn],
-        payloads: dict[int, Payloads | Columns],
-        damage: list[Damage] | None = None,
-    ) -> None:
-        self.kind, self.conns, self.payloads = kind, conns, payloads
-        self.damage = [] if damage is None else damage

@@ -356,7 +356,7 @@ def plain_file(path: str | os.PathLike, inputs: Iterable[str | os.PathLike], wha
 
 
 def is_own_bag(path: str | os.PathLike) -> bool:
-    """True for a bag folder written by :func:`imu_dcm.logio.writer.write_bag` and nothing else.
+    """True for a bag folder written by :func:`imu_dcm.logio.writers.write_bag` and nothing else.
 
     The folder holds exactly ``metadata.yaml`` and ``<folder name>.mcap``, and the MCAP header
     record names the library ``imu_dcm.bag_writer`` (or ``imu_dcm.live``).

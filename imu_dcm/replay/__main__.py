@@ -114,7 +114,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def _write_out(out: Path, result, force: bool, inputs: tuple) -> Path:
-    from imu_dcm.logio.writer import StampedSeries, write_bag
+    from imu_dcm.logio.writers import StampedSeries, write_bag
 
     k = slice(result.start_index, None)
     quats = {"/estimate/orientation": StampedSeries(result.t_ns[k], result.q_est[k], "world")}

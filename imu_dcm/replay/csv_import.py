@@ -272,7 +272,7 @@ def convert_csv(
     ``truth_estimate_of``: who estimated the truth (``"the x-IMU3"``), when it is a device's
     own estimate rather than an independent reference. The bag's ``custom_data`` then holds
     ``imu_dcm.estimate_of:<truth_topic>`` = ``"<who>'s own estimate"``, which the reader gives
-    as the truth's ``estimate_of`` (:data:`imu_dcm.logio.channels.ESTIMATE_OF_KEY`).
+    as the truth's ``estimate_of`` (:data:`imu_dcm.logio.ros.truth.ESTIMATE_OF_KEY`).
     """
     from imu_dcm.outputs import check_output_dir
 
@@ -314,7 +314,7 @@ def convert_csv(
         "imu_dcm.columns": ", ".join(f"{k}={v}" for k, v in sorted(columns.items())),
     }
     if truth_estimate_of is not None:
-        from imu_dcm.logio.channels import ESTIMATE_OF_KEY
+        from imu_dcm.logio.ros.truth import ESTIMATE_OF_KEY
 
         custom[ESTIMATE_OF_KEY + truth_topic] = f"{truth_estimate_of.strip()}'s own estimate"
     write = _write_mcap_file if single else _write_folder
@@ -324,9 +324,9 @@ def convert_csv(
 
 
 def _series(cols: CsvColumns, t_q, q, imu_topic: str, truth_topic: str, frame_id: str) -> dict:
-    """The keywords of :func:`imu_dcm.logio.writer.write_bag` (rows without a finite, non-zero
+    """The keywords of :func:`imu_dcm.logio.writers.write_bag` (rows without a finite, non-zero
     quaternion get no truth message)."""
-    from imu_dcm.logio.writer import StampedSeries
+    from imu_dcm.logio.writers import StampedSeries
 
     quats = {}
     if q is not None:
@@ -342,7 +342,7 @@ def _series(cols: CsvColumns, t_q, q, imu_topic: str, truth_topic: str, frame_id
 
 
 def _write_folder(out, cols, t_q, q, custom, imu_topic, truth_topic, frame_id, force, inputs):
-    from imu_dcm.logio.writer import write_bag
+    from imu_dcm.logio.writers import write_bag
 
     kw = _series(cols, t_q, q, imu_topic, truth_topic, frame_id)
     return write_bag(out, custom_data=custom, force=force, inputs=inputs, **kw)
@@ -350,7 +350,7 @@ def _write_folder(out, cols, t_q, q, custom, imu_topic, truth_topic, frame_id, f
 
 def _check_mcap_output(out: Path, inputs: tuple, force: bool) -> None:
     """A ``.mcap`` output: a new file, or with ``force`` one this project's writer wrote."""
-    from imu_dcm.logio.writer import OWN_LIBRARY
+    from imu_dcm.logio.writers import OWN_LIBRARY
     from imu_dcm.outputs import OutputError, check_output_file
 
     check_output_file(out, inputs, what="output MCAP file")
@@ -367,7 +367,7 @@ def _write_mcap_file(out, cols, t_q, q, custom, imu_topic, truth_topic, frame_id
     import shutil
     import tempfile
 
-    from imu_dcm.logio.writer import write_bag
+    from imu_dcm.logio.writers import write_bag
     from imu_dcm.outputs import ensure_parent
 
     ensure_parent(out, "output MCAP file")

@@ -27,7 +27,7 @@ __all__ = [
 ]
 
 #: What the replay reads, in words for --help (static: --help does not import the readers). One
-#: entry per row of the reader table (imu_dcm.logio.registry.SOURCES): add one with a new reader
+#: entry per row of the reader table (imu_dcm.logio.registry.READERS): add one with a new reader
 #: (tests/test_first_run.py checks that every row is named here).
 LOG_KINDS = [
     "a ROS 2 bag folder (metadata.yaml with .mcap or .db3 storage)",

@@ -27,7 +27,7 @@ from imu_dcm.live.events import Channel, End, Event, Info, Malformed, Raw, Recei
 from imu_dcm.live.sources.base import Source
 from imu_dcm.live.sources.spec import BATCH_S, SourceOptions, SourceSpec
 from imu_dcm.live.sources.websocket import WsConnection
-from imu_dcm.logio.batch import classify_schema, decode_cdr_batch
+from imu_dcm.logio.ros.payload import classify_schema, decode_cdr_batch
 
 __all__ = ["BIN_MESSAGE", "BIN_SERVER_OPS", "MSG_HEAD", "SUBPROTOCOLS", "WsSource"]
 

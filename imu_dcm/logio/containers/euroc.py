@@ -44,14 +44,33 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+import pyarrow as pa  # ~130 ms at import: this module loads only when a EuRoC row opens a log
+import pyarrow.csv as pcsv
 from numpy.typing import NDArray
 
 from imu_dcm.errors import LogError
 from imu_dcm.logio.meta import load_yaml
 from imu_dcm.logio.paths import check_regular, mav_folder
-from imu_dcm.logio.source import Progress, ReadRequest
+from imu_dcm.logio.source import ProgressCallback, ReadRequest
 from imu_dcm.logio.types import ChannelInfo, ImuSeries, LogData, TruthSeries
+from imu_dcm.outputs import file_kind
 from imu_dcm.so3 import quat_conjugate, quat_from_matrix, quat_multiply
+
+__all__ = [
+    "CSV_TYPE",
+    "IMU_COLUMNS",
+    "KIND",
+    "MAX_SENSOR_YAML",
+    "POSITIONS_TYPE",
+    "TRUTHS",
+    "TRUTHS_BY_NAME",
+    "EurocSource",
+    "TruthFolder",
+    "read_csv",
+    "regular_csv",
+    "sensor_rotation",
+]
+
 
 KIND = "euroc/asl folder"
 CSV_TYPE = "asl data.csv"
@@ -122,9 +141,6 @@ def _first_bad_line(path: Path, skip: int, n_columns: int) -> str | None:
 
 
 def _read_arrow(path: Path, skip: int, n_columns: int) -> tuple[NDArray, NDArray]:
-    import pyarrow as pa
-    import pyarrow.csv as pcsv
-
     names = [f"f{i}" for i in range(n_columns)]
     table = pcsv.read_csv(
         path,
@@ -151,8 +167,6 @@ def read_csv(path: Path, n_columns: int) -> tuple[NDArray[np.int64], NDArray[np.
         Missing or special file, no samples, too few columns, a line of another length or
         holding something other than numbers, stamps not strictly increasing.
     """
-    import pyarrow as pa
-
     regular_csv(path)
     skip = _header_lines(path)
     where = f"{path.parent.name}/{path.name} ({path})"
@@ -191,8 +205,6 @@ def regular_csv(path: Path) -> None:
     else:
         if stat.S_ISREG(mode):
             return
-        from imu_dcm.outputs import file_kind  # as paths.check_regular does
-
         what = "a folder" if stat.S_ISDIR(mode) else f"a {file_kind(mode)} (a special file)"
     raise LogError(f"Expected a regular file {path.parent.name}/{path.name}, got {what}: {path}")
 
@@ -261,7 +273,7 @@ class EurocSource:
 
     kind = KIND
 
-    def __init__(self, path: Path, progress: Progress | None = None):
+    def __init__(self, path: Path, progress: ProgressCallback | None = None):
         mav = mav_folder(path)
         if mav is None:
             raise LogError(f"Expected a EuRoC/ASL dataset (mav0/imu0/data.csv), got {path}")

@@ -18,8 +18,20 @@ import struct
 import numpy as np
 
 from imu_dcm.errors import LogError
-from imu_dcm.logio.schema import norm_type
-from imu_dcm.logio.types import Collected, Conn, Payloads, StaticTransform, TruthSeries
+from imu_dcm.logio.ros.collect import Collected, Conn, Payloads
+from imu_dcm.logio.ros.schema import norm_type
+from imu_dcm.logio.types import StaticTransform, TruthSeries
+
+__all__ = [
+    "TF_TYPE",
+    "child_frame",
+    "is_static_tf",
+    "moving_children",
+    "static_transforms",
+    "tf_rows",
+    "tf_truth",
+]
+
 
 TF_TYPE = "tf2_msgs/msg/TFMessage"
 #: tf2 refuses a quaternion whose squared norm is further than this from 1; so does the reader.

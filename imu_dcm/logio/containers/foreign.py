@@ -10,16 +10,19 @@ from __future__ import annotations
 from pathlib import Path
 
 from imu_dcm.errors import LogError
-from imu_dcm.logio.lfs import is_lfs_pointer, refuse_lfs_pointer
+from imu_dcm.logio.containers.lfs import is_lfs_pointer, refuse_lfs_pointer
 from imu_dcm.logio.paths import mav_folder, read_head
-from imu_dcm.logio.source import LogSource, Progress, SourceEntry
+from imu_dcm.logio.source import LogSource, ProgressCallback, SourceEntry
+
+__all__ = ["REFUSALS", "TEXT_SUFFIXES", "euroc_root"]
+
 
 #: Text tables: convert-csv turns them into a bag.
 TEXT_SUFFIXES = (".csv", ".txt", ".tsv")
 
 
 def _refusal(name: str, magic: bytes, fix: str) -> SourceEntry:
-    def refuse(path: Path, _progress: Progress | None) -> LogSource:
+    def refuse(path: Path, _progress: ProgressCallback | None) -> LogSource:
         raise LogError(f"Expected a ROS bag or an MCAP file, got {name}: {path}; {fix}")
 
     return SourceEntry(name, lambda _p, head: head.startswith(magic), refuse, search=False)
@@ -29,17 +32,17 @@ def _is_empty_file(path: Path, head: bytes) -> bool:
     return not head and not path.is_dir()
 
 
-def _refuse_empty(path: Path, _progress: Progress | None) -> LogSource:
+def _refuse_empty(path: Path, _progress: ProgressCallback | None) -> LogSource:
     what = "an MCAP file" if path.suffix == ".mcap" else "a log file"
     raise LogError(f"Expected {what}, got an empty file: {path}")
 
 
-def _refuse_not_mcap(path: Path, _progress: Progress | None) -> LogSource:
+def _refuse_not_mcap(path: Path, _progress: ProgressCallback | None) -> LogSource:
     head = read_head(path)[:8]
     raise LogError(f"Expected an MCAP file (magic \\x89MCAP0), got {head!r} in {path}")
 
 
-def _refuse_text(path: Path, _progress: Progress | None) -> LogSource:
+def _refuse_text(path: Path, _progress: ProgressCallback | None) -> LogSource:
     raise LogError(
         f"Expected a ROS bag or an MCAP file, got a text table: {path}; "
         f"`python -m imu_dcm.replay convert-csv {path.name}` converts it"
@@ -57,7 +60,7 @@ def euroc_root(path: Path) -> Path | None:
     return mav.parent if mav.name == "mav0" else mav
 
 
-def _refuse_euroc_file(path: Path, _progress: Progress | None) -> LogSource:
+def _refuse_euroc_file(path: Path, _progress: ProgressCallback | None) -> LogSource:
     root = euroc_root(path)
     raise LogError(
         f"Expected a log, got a file of the EuRoC/ASL dataset {root}: {path}; give the dataset "

@@ -14,8 +14,12 @@ import sys
 import zlib
 from collections.abc import Callable, Iterator
 from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass
 
 import numpy as np
+
+__all__ = ["BATCH_BYTES", "WORKERS", "Decompressor", "Job", "batches"]
+
 
 #: Decompressed bytes per batch: ~16 chunks of rosbag2's 768 KiB, few enough numpy calls per
 #: message, a small multiple of a chunk held at once.
@@ -24,20 +28,25 @@ BATCH_BYTES = 16 << 20
 WORKERS = min(2, os.cpu_count() or 1)
 
 
+@dataclass(slots=True, eq=False)
 class Job:
     """One chunk to read: ``n`` compressed bytes at file offset ``at``, ``usize`` bytes out.
 
-    ``why`` is set to a one-line reason when the chunk is damaged; ``out`` is its slice of the
-    batch buffer once decompressed, ``start`` where that slice begins.
+    ``key`` is the caller's (what it needs to place the chunk's messages); ``comp`` the
+    compression, ``crc`` the uncompressed CRC-32 (0: none). ``why`` is set to a one-line reason
+    when the chunk is damaged; ``out`` is its slice of the batch buffer once decompressed,
+    ``start`` where that slice begins.
     """
 
-    __slots__ = ("key", "at", "n", "usize", "comp", "crc", "why", "out", "start")
-
-    def __init__(self, key, at: int, n: int, usize: int, comp: str, crc: int):
-        self.key, self.at, self.n, self.usize, self.comp, self.crc = key, at, n, usize, comp, crc
-        self.why: str | None = None
-        self.out: memoryview | None = None
-        self.start = 0
+    key: object
+    at: int
+    n: int
+    usize: int
+    comp: str
+    crc: int
+    why: str | None = None
+    out: memoryview | None = None
+    start: int = 0
 
 
 def batches(jobs: list[Job], limit: int | None = None) -> Iterator[list[Job]]:

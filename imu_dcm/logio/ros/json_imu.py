@@ -7,18 +7,20 @@ nanoseconds (1e300, 2**70, Infinity) is dropped and counted, never a traceback.
 
 from __future__ import annotations
 
+import json
 import math
 
 import numpy as np
 
-from imu_dcm.logio.types import Conn, Payloads
+from imu_dcm.logio.ros.collect import Conn, Payloads
+
+__all__ = ["is_json_imu", "json_imu_columns", "json_msg", "json_stamp"]
+
 
 _INT64 = 2**63
 
 
 def json_msg(raw: bytes) -> dict | None:
-    import json  # (only for JSON channels: not imported for every read)
-
     try:
         m = json.loads(raw)
     except (ValueError, RecursionError):

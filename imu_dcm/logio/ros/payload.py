@@ -18,14 +18,14 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from imu_dcm.logio.channels import IMU_TYPE, TRUTH_TYPES, _Decoder, imu_path
-from imu_dcm.logio.schema import norm_type
-from imu_dcm.logio.types import Conn, Payloads
+from imu_dcm.logio.ros.channels import IMU_TYPE, TRUTH_TYPES, ChannelDecoder, imu_path
+from imu_dcm.logio.ros.collect import Conn, Payloads
+from imu_dcm.logio.ros.schema import norm_type
 
 __all__ = ["IMU_TYPE", "TRUTH_TYPES", "Decoded", "classify_schema", "decode_cdr_batch"]
 
 
-@dataclass(frozen=True)
+@dataclass(slots=True, frozen=True)
 class Decoded:
     """A decoded batch: ``t_ns`` int64 (n,), ``values`` float64 (n, 3) rates or (n, 4)
     quaternions ``[x, y, z, w]``, ``good`` bool (len(payloads),) — which payloads decoded (only
@@ -60,12 +60,14 @@ def classify_schema(name: str, encoding: str, text: str) -> tuple[str, str] | No
 
 
 @functools.lru_cache(maxsize=64)
-def _decoder(kind: tuple[str, str], name: str, encoding: str, text: str, topic: str) -> _Decoder:
+def _decoder(
+    kind: tuple[str, str], name: str, encoding: str, text: str, topic: str
+) -> ChannelDecoder:
     """One decoder per channel (its schema parsed once, not per batch: a live source decodes
     a batch every few ms)."""
     what, path = kind
     conn = Conn(0, topic, name, "cdr", encoding, text)
-    return _Decoder(conn, "imu", path) if what == "imu" else _Decoder(conn, "truth")
+    return ChannelDecoder(conn, "imu", path) if what == "imu" else ChannelDecoder(conn, "truth")
 
 
 def decode_cdr_batch(

@@ -6,7 +6,7 @@ recorders store) is read here, field by field, exactly as :mod:`rosbags.typesys`
 know) and every ``ros2idl`` schema go to rosbags' parser, whose import costs more than reading
 a log's schemas. A channel without a schema (sqlite3 bags of Humble and older) takes its
 definition from rosbags' built-in type store. The result is a plain map
-``type name -> [Field]`` that :mod:`imu_dcm.logio.cdr` walks. A corrupt schema, one that is too
+``type name -> [Field]`` that :mod:`imu_dcm.logio.ros.cdr` walks. A corrupt schema, one that is too
 large, or one whose types nest deeper than :data:`MAX_DEPTH` (or contain themselves) raises
 :class:`~imu_dcm.errors.LogError`.
 """
@@ -18,7 +18,19 @@ from dataclasses import dataclass
 from functools import lru_cache
 
 from imu_dcm.errors import LogError
-from imu_dcm.logio.types import Conn
+from imu_dcm.logio.ros.collect import Conn
+
+__all__ = [
+    "MAX_DEPTH",
+    "MAX_SCHEMA_BYTES",
+    "PRIM",
+    "Defs",
+    "Field",
+    "definitions",
+    "norm_type",
+    "typestore_for",
+]
+
 
 #: Primitive ROS types and their little-endian numpy dtypes.
 PRIM = {
@@ -132,7 +144,7 @@ def _check_depth(defs: Defs, root: str) -> None:
 
 def _idl_types(text: str) -> dict:
     """Types of an IDL schema, possibly several IDL files separated by ``=== / IDL: name``."""
-    from rosbags.typesys import get_types_from_idl
+    from rosbags.typesys import get_types_from_idl  # lazy: heavy, see _definitions
 
     types: dict = {}
     for piece in re.split(r"^=+[ \t]*$", text, flags=re.MULTILINE):
@@ -265,6 +277,8 @@ def _definitions(msgtype: str, encoding: str, text: str, serialization: str) -> 
         defs = _msg_types(text, root)
         if defs is not None:
             return _with_time(defs)
+    # lazy: rosbags' type system costs ~15 ms at import; the plain .msg texts of most
+    # logs are read above without it
     from rosbags.typesys import get_types_from_msg
 
     if text.strip():
@@ -273,7 +287,7 @@ def _definitions(msgtype: str, encoding: str, text: str, serialization: str) -> 
         else:
             typesdict = get_types_from_msg(text, root)
     else:
-        from rosbags.typesys import Stores, get_typestore
+        from rosbags.typesys import Stores, get_typestore  # lazy, as above
 
         store = get_typestore(Stores.ROS1_NOETIC if serialization == "ros1" else Stores.ROS2_HUMBLE)
         if root not in store.fielddefs:
@@ -330,7 +344,7 @@ def definitions(conn: Conn) -> tuple[Defs, str]:
 
 def typestore_for(conn: Conn):
     """A rosbags type store holding ``conn``'s types (for the per-message fallback)."""
-    from rosbags.typesys import Stores, get_types_from_msg, get_typestore
+    from rosbags.typesys import Stores, get_types_from_msg, get_typestore  # lazy, as above
 
     root = norm_type(conn.msgtype)
     if not conn.schema_text.strip():

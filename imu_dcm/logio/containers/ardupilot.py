@@ -21,7 +21,7 @@ What is read
 Frames: body FRD, world NED, Euler angles in the 3-2-1 sequence; the gyro, accelerometer and
 truth are converted to body FLU, world ENU, ``[x, y, z, w]`` (:mod:`imu_dcm.logio.ned`).
 
-How it is read: :mod:`imu_dcm.logio.dataflash` indexes the records of every message type,
+How it is read: :mod:`imu_dcm.logio.containers.dataflash` indexes the records of every message type,
 resynchronising after a damaged record (each damaged part is counted and said once, with its
 byte offset); the wanted types are then decoded in bulk with numpy through the layouts the
 log's FMT records declare (no per-message Python objects). The format characters' sizes and
@@ -38,12 +38,12 @@ import numpy as np
 from numpy.typing import NDArray
 
 from imu_dcm.errors import LogError
+from imu_dcm.logio.containers.dataflash import Format, Index, index_log
 from imu_dcm.logio.damage import warn_damage
-from imu_dcm.logio.dataflash import Format, Index, index_log
 from imu_dcm.logio.ned import FLU_FROM_FRD, q_enu_flu, q_wxyz_from_euler_deg
-from imu_dcm.logio.paths import DATAFLASH_MAGIC as MAGIC  # noqa: F401 (tests write it)
-from imu_dcm.logio.paths import is_dataflash as probe  # noqa: F401 (the reader's probe, here too)
-from imu_dcm.logio.source import Progress, ReadRequest
+from imu_dcm.logio.paths import DATAFLASH_MAGIC as MAGIC
+from imu_dcm.logio.paths import is_dataflash as probe
+from imu_dcm.logio.source import ProgressCallback, ReadRequest
 from imu_dcm.logio.types import (
     ChannelInfo,
     Damage,
@@ -52,6 +52,24 @@ from imu_dcm.logio.types import (
     TruthSeries,
     VehicleState,
 )
+
+__all__ = [
+    "ARDUPILOT_ESTIMATE",
+    "EVENTS",
+    "INSTALL",
+    "KIND",
+    "MAGIC",
+    "TRUTHS",
+    "DataFlashSource",
+    "decode",
+    "imu_series",
+    "numbers",
+    "open_dataflash",
+    "probe",
+    "stamps_ns",
+    "truth_series",
+]
+
 
 KIND = "ardupilot dataflash"
 #: Every binary DataFlash log opens with the FMT record describing FMT itself.
@@ -80,7 +98,7 @@ _NP = {  # struct codes of pymavlink's FORMAT_TO_STRUCT -> numpy
 
 def _dfreader():
     try:
-        from pymavlink import DFReader
+        from pymavlink import DFReader  # lazy: the optional mavlink extra (93 MB installed)
     except ImportError:
         raise LogError(
             f"Expected pymavlink to read an ArduPilot DataFlash log, got none installed; {INSTALL}"
@@ -308,7 +326,7 @@ class DataFlashSource:
 
     kind = KIND
 
-    def __init__(self, path: Path, progress: Progress | None = None):
+    def __init__(self, path: Path, progress: ProgressCallback | None = None):
         self.path = Path(path)
         self.progress = progress
 
@@ -363,5 +381,5 @@ class DataFlashSource:
         )
 
 
-def open_dataflash(path: Path, progress: Progress | None = None) -> DataFlashSource:
+def open_dataflash(path: Path, progress: ProgressCallback | None = None) -> DataFlashSource:
     return DataFlashSource(path, progress)

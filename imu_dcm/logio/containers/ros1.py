@@ -4,7 +4,7 @@
 chunks that hold kept connections are then read here, each decompressed to at most its declared
 ``size`` (a chunk that claims 1000 bytes cannot inflate to gigabytes), and the message records
 located from the index offsets with numpy. ROS 1 payloads are little endian, packed without
-alignment; :mod:`imu_dcm.logio.cdr` decodes them in bulk. A damaged chunk is skipped and
+alignment; :mod:`imu_dcm.logio.ros.cdr` decodes them in bulk. A damaged chunk is skipped and
 reported with its file offset, time range and the kept messages it held.
 """
 
@@ -13,16 +13,21 @@ from __future__ import annotations
 import bz2
 import struct
 from collections import defaultdict
-from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
 
 from imu_dcm.errors import LogError
-from imu_dcm.logio.mcap import compact, size_bound
+from imu_dcm.logio.containers.mcap import compact, size_bound
 from imu_dcm.logio.paths import read_head
-from imu_dcm.logio.ros import RosSource
-from imu_dcm.logio.types import Collected, Conn, Damage, Payloads, Sink
+from imu_dcm.logio.ros.cdr import gather
+from imu_dcm.logio.ros.collect import Collected, Conn, Payloads, Sink
+from imu_dcm.logio.ros.read import RosSource
+from imu_dcm.logio.source import ProgressCallback
+from imu_dcm.logio.types import Damage
+
+__all__ = ["MAGIC", "Ros1Source", "open_bag"]
+
 
 MAGIC = b"#ROSBAG V"
 
@@ -40,7 +45,7 @@ def _decompress(compression: str, data: bytes, size: int) -> bytes:
         elif compression == "bz2":
             out = bz2.BZ2Decompressor().decompress(data, max_length=size + 1)
         elif compression == "lz4":
-            import lz4.frame
+            import lz4.frame  # lazy: only an lz4 chunk needs it
 
             out = lz4.frame.LZ4FrameDecompressor().decompress(data, max_length=size + 1)
         else:
@@ -101,12 +106,12 @@ class Ros1Source(RosSource):
 
     kind = "ros1 bag"
 
-    def __init__(self, path: Path, progress: Callable[[float], None] | None = None):
+    def __init__(self, path: Path, progress: ProgressCallback | None = None):
         self.path = path
         self.progress = progress
 
     def collect(self, sink: Sink) -> Collected:
-        from rosbags.rosbag1 import Reader, ReaderError
+        from rosbags.rosbag1 import Reader, ReaderError  # lazy: heavy, a .bag read only
 
         reader = Reader(self.path)
         try:
@@ -136,7 +141,7 @@ class Ros1Source(RosSource):
             reader.close()
 
     def _read(self, reader, sink: Sink) -> Collected:
-        from rosbags.rosbag1.reader import Header, RecordType
+        from rosbags.rosbag1.reader import Header, RecordType  # lazy, as in collect
 
         conns = []
         for c in reader.connections:
@@ -188,8 +193,6 @@ class Ros1Source(RosSource):
 
     @staticmethod
     def _take(d: np.ndarray, entries: dict, seq: int, sink: Sink) -> None:
-        from imu_dcm.logio.cdr import gather
-
         for cid, (offs, times) in entries.items():
             off = np.asarray(offs, np.int64)
             t = np.asarray(times, np.int64)
@@ -212,7 +215,7 @@ class Ros1Source(RosSource):
             sink.add(cid, Payloads(buf, out_start, n, t[k], (seq << 32) + off[k]))
 
 
-def open_bag(path: Path, progress: Callable[[float], None] | None = None) -> Ros1Source:
+def open_bag(path: Path, progress: ProgressCallback | None = None) -> Ros1Source:
     """The source of a ROS 1 bag; LogError naming the fix for a version other than 2.0."""
     head = read_head(path)
     if not head.startswith(b"#ROSBAG V2.0"):

@@ -15,8 +15,11 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import NDArray
 
-from imu_dcm.logio.schema import PRIM, Defs, typestore_for
-from imu_dcm.logio.types import Conn, Payloads
+from imu_dcm.logio.ros.collect import Conn, Payloads
+from imu_dcm.logio.ros.schema import PRIM, Defs, typestore_for
+
+__all__ = ["BLOCK", "Unsupported", "Want", "decode", "decode_slow", "gather"]
+
 
 Want = dict[str, tuple[str, int]]  # field path -> (output dtype, element count)
 

@@ -2,10 +2,11 @@
 
 A ROS container (MCAP, rosbag2 sqlite3, split or compressed rosbag2 folders, ROS 1 bags) only
 collects: ``collect(sink)`` walks its file and hands the payloads of the channels the
-:class:`~imu_dcm.logio.types.Sink` wants to the decoders, batch by batch, and returns a
-:class:`~imu_dcm.logio.types.Collected`. :func:`read_ros` then picks the IMU and the truth
-channels (:mod:`imu_dcm.logio.channels`) and builds the :class:`LogData`; :class:`RosSource`
-makes that the container's :meth:`~imu_dcm.logio.source.LogSource.read`.
+:class:`~imu_dcm.logio.ros.collect.Sink` wants to the decoders, batch by batch, and returns a
+:class:`~imu_dcm.logio.ros.collect.Collected`. :func:`read_ros` then picks the IMU and the
+truth channels (:mod:`imu_dcm.logio.ros.imu`, :mod:`imu_dcm.logio.ros.truth`) and builds the
+:class:`LogData`; :class:`RosSource` makes that the container's
+:meth:`~imu_dcm.logio.source.LogSource.read`.
 """
 
 from __future__ import annotations
@@ -14,18 +15,16 @@ import warnings
 from pathlib import Path
 
 from imu_dcm.errors import ImuDcmWarning, LogError
-from imu_dcm.logio.channels import (
-    declared_estimates,
-    describe,
-    pick_imu_judged,
-    plan,
-    read_imu,
-    read_truths,
-)
 from imu_dcm.logio.damage import damage_summary, warn_damage
-from imu_dcm.logio.source import Progress, ReadRequest
-from imu_dcm.logio.tf import static_transforms
-from imu_dcm.logio.types import ChannelInfo, Collected, LogData, Sink
+from imu_dcm.logio.ros.channels import describe, plan
+from imu_dcm.logio.ros.collect import Collected, Sink
+from imu_dcm.logio.ros.imu import pick_imu, read_imu
+from imu_dcm.logio.ros.tf import static_transforms
+from imu_dcm.logio.ros.truth import declared_estimates, read_truths
+from imu_dcm.logio.source import ProgressCallback, ReadRequest
+from imu_dcm.logio.types import ChannelInfo, LogData
+
+__all__ = ["RosSource", "read_ros"]
 
 
 class RosSource:
@@ -41,7 +40,7 @@ class RosSource:
 
     kind = "ros"
     path: Path
-    progress: Progress | None = None
+    progress: ProgressCallback | None = None
     custom_data: dict[str, str] = {}  # replaced per instance, never mutated
 
     def collect(self, sink: Sink) -> Collected:
@@ -77,7 +76,7 @@ def read_ros(source: RosSource, request: ReadRequest) -> LogData:
     )
     stopped_at = damage_summary(got.damage) if got.damage else None
     _check_not_empty(got, channels, shown, stopped_at)
-    topic, conns, notes = pick_imu_judged(got, request.imu_topic)
+    topic, conns, notes = pick_imu(got, request.imu_topic)
     imu, undecodable = read_imu(got, topic, conns)
     if len(imu.t_ns) == 0:
         raise LogError(
