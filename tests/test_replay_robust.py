@@ -144,7 +144,7 @@ def test_a_non_finite_estimate_is_an_error_never_a_score(trial, tmp_path, monkey
     from imu_dcm.replay import core
 
     monkeypatch.setattr(
-        core, "integrate_quat", lambda w, t, q0, method: np.full((len(t), 4), np.nan)
+        core, "integrate_quat", lambda w, t, q0, method, **kw: np.full((len(t), 4), np.nan)
     )
     with pytest.raises(LogError, match="Expected a finite attitude estimate, got NaN/Inf"):
         _run(SHIPPED)

@@ -10,10 +10,9 @@ makes that the container's :meth:`~imu_dcm.logio.source.LogSource.read`.
 
 from __future__ import annotations
 
-import warnings
 from pathlib import Path
 
-from imu_dcm.errors import ImuDcmWarning, LogError
+from imu_dcm.errors import ImuDcmWarning, LogError, say
 from imu_dcm.logio.channels import (
     declared_estimates,
     describe,
@@ -86,9 +85,10 @@ def read_ros(source: RosSource, request: ReadRequest) -> LogData:
     truth, candidates = read_truths(got, imu, request.truth_topic, request.truth_frame)
     truth, *more = declared_estimates((truth, *candidates), source.custom_data)
     candidates = tuple(more)
-    warn_damage(shown, got.damage, stacklevel=4)
+    warn_damage(shown, got.damage, stacklevel=4, diagnostics=request.diagnostics)
     if undecodable:
-        warnings.warn(
+        say(
+            request.diagnostics,
             f"{imu.topic}: dropped {undecodable} messages that do not decode",
             ImuDcmWarning,
             stacklevel=4,

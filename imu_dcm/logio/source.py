@@ -13,6 +13,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Protocol, runtime_checkable
 
+from imu_dcm.errors import Diagnostics
 from imu_dcm.logio.types import LogData
 
 Progress = Callable[[float], None]
@@ -29,12 +30,14 @@ class ReadRequest:
         reads no truth.
     truth_frame : str or None — the child frame of a ``/tf`` transform to use as truth.
     progress : callable(fraction) or None — called as the log is read.
+    diagnostics : Diagnostics or None — where the reader's warnings go (damage skipped,
+        messages that do not decode); None warns them.
 
     This and :class:`SourceEntry` are plain classes, not dataclasses: nothing compares them,
     and a dataclass costs every replay's start-up about half a millisecond.
     """
 
-    __slots__ = ("imu_topic", "truth_topic", "truth_frame", "progress")
+    __slots__ = ("imu_topic", "truth_topic", "truth_frame", "progress", "diagnostics")
 
     def __init__(
         self,
@@ -42,9 +45,11 @@ class ReadRequest:
         truth_topic: str | None = None,
         truth_frame: str | None = None,
         progress: Progress | None = None,
+        diagnostics: Diagnostics | None = None,
     ) -> None:
         self.imu_topic, self.truth_topic = imu_topic, truth_topic
         self.truth_frame, self.progress = truth_frame, progress
+        self.diagnostics = diagnostics
 
 
 @runtime_checkable

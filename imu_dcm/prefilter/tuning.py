@@ -17,7 +17,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from imu_dcm.allan import allan_deviation, noise_density_from_allan
-from imu_dcm.errors import InputError
+from imu_dcm.errors import Diagnostics, InputError
 from imu_dcm.prefilter.config import (
     _ACCEL_SEARCH_RAD_S2,
     _FLICKER_FACTOR,
@@ -30,7 +30,11 @@ from imu_dcm.prefilter.linear import _n_motion, _q_scale, _stationary_prior, _tr
 
 
 def estimate_noise_from_rest(
-    omega_b: ArrayLike, t_s: ArrayLike, min_rest_s: float = 1.0
+    omega_b: ArrayLike,
+    t_s: ArrayLike,
+    min_rest_s: float = 1.0,
+    *,
+    diagnostics: Diagnostics | None = None,
 ) -> NoiseEstimate:
     """Angle random walk and bias instability from a rest segment's Allan deviation.
 
@@ -52,7 +56,7 @@ def estimate_noise_from_rest(
     InputError
         When the segment is too short for the Allan deviation.
     """
-    omega_b, t_s = _check_rates(omega_b, t_s)
+    omega_b, t_s = _check_rates(omega_b, t_s, diagnostics)
     n = len(t_s)
     span = float(t_s[-1] - t_s[0])
     if n < _MIN_REST_SAMPLES or span < min_rest_s:
@@ -90,7 +94,9 @@ _MAX_BAND_TILT = 2.0
 _MIN_SPECTRUM_BINS = 30
 
 
-def estimate_noise_from_spectrum(omega_b: ArrayLike, t_s: ArrayLike) -> SpectralNoiseEstimate:
+def estimate_noise_from_spectrum(
+    omega_b: ArrayLike, t_s: ArrayLike, *, diagnostics: Diagnostics | None = None
+) -> SpectralNoiseEstimate:
     """White-noise density of a gyro log with no rest, from the upper band of its spectrum.
 
     The rates are differenced twice (``d_k = z_{k+1} − 2 z_k + z_{k−1}``, whose gain at
@@ -119,7 +125,7 @@ def estimate_noise_from_spectrum(omega_b: ArrayLike, t_s: ArrayLike) -> Spectral
         the rates, or when the level is not flat across the band (not white: a gyro's own
         low-pass filter, or motion reaching the Nyquist frequency).
     """
-    omega_b, t_s = _check_rates(omega_b, t_s)
+    omega_b, t_s = _check_rates(omega_b, t_s, diagnostics)
     dt = float(np.median(np.diff(t_s)))
     k = _DIFFERENCE_ORDER
     d = np.diff(omega_b, n=k, axis=0)

@@ -25,6 +25,7 @@ import warnings
 from pathlib import Path
 
 from imu_dcm.cli import OneLineArgumentParser, Progress, end_quietly_on_broken_pipe
+from imu_dcm.errors import Diagnostics
 from imu_dcm.replay.options import LOG_KINDS, add_replay_options, replay_keywords
 
 PROG = "imu-dcm-replay"
@@ -249,9 +250,7 @@ def _not_a_folder_of_logs(log: str) -> None:
         return
     from imu_dcm.replay.batch import find_logs
 
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        found = find_logs([log])
+    found = find_logs([log], diagnostics=Diagnostics())  # what it skips is batch's to say
     if len(found) > 1:  # a folder holding one log file is that log (the reader opens it)
         n = len(found)
         raise InputError(

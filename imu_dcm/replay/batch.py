@@ -14,8 +14,8 @@ from __future__ import annotations
 
 import contextlib
 import dataclasses
+import importlib
 import os
-import threading
 import time
 import warnings
 from collections.abc import Callable, Iterable, Mapping, Sequence
@@ -23,9 +23,12 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from imu_dcm.errors import ImuDcmWarning, InputError
+from imu_dcm.errors import Diagnostics, ImuDcmWarning, InputError, say
+from imu_dcm.kernel import backend
 from imu_dcm.logio import find_logs as find_logs_in
 from imu_dcm.logio.registry import convert_hint, not_logs
+from imu_dcm.outputs import OutputError, claim_output
+from imu_dcm.replay.batch_chart import INSTALL_HINT, chart_available, write_chart
 from imu_dcm.replay.kinds import truth_kind
 from imu_dcm.replay.runners import LOST, run_dask, run_local
 from imu_dcm.replay.table import (
@@ -60,7 +63,6 @@ __all__ = [
 
 #: Files read as lists of logs (one path a line, relative to the list; ``#`` comments).
 LIST_SUFFIXES = (".txt", ".list", ".lst")
-_ONE_AT_A_TIME = threading.Lock()  # warnings are process-global: one replay per process
 
 
 @dataclass(frozen=True)
@@ -84,14 +86,15 @@ class BatchResult:
 
 
 # ------------------------------------------------------------------------------ inputs
-def find_logs(paths: Iterable[str | Path]) -> list[str]:
+def find_logs(paths: Iterable[str | Path], *, diagnostics: Diagnostics | None = None) -> list[str]:
     """The logs named by ``paths``, as absolute paths, each once, in the order found.
 
     A folder the reader takes as one log (a bag, a EuRoC dataset) is a log; another folder is
     searched (sorted, hidden entries skipped) by :func:`imu_dcm.logio.find_logs`; a ``.txt`` /
     ``.list`` file lists paths, one a line (relative to the list's folder; blank lines and
     ``#`` comments skipped); anything else, including a path that does not exist, is taken as a
-    log (and gets an error row if it is not one).
+    log (and gets an error row if it is not one). A searched folder's files that are not logs
+    are warned (or added to ``diagnostics``), one line a folder.
     """
     out: dict[str, None] = {}
 
@@ -100,7 +103,7 @@ def find_logs(paths: Iterable[str | Path]) -> list[str]:
             found = list(find_logs_in(p))
             said = _skipped(p, found)
             if said:
-                warnings.warn(said, ImuDcmWarning, stacklevel=3)
+                say(diagnostics, said, ImuDcmWarning, stacklevel=3)
             out.update((os.path.abspath(f), None) for f in found)
         elif p.suffix in LIST_SUFFIXES and p.is_file() and not from_list:
             for line in p.read_text().splitlines():
@@ -152,10 +155,7 @@ def preload() -> None:
     compiled kernel, once in this process, so that workers forked from it start with them
     instead of each paying the imports on its first log (about 0.3 s a worker, which on many
     small logs costs more than the logs)."""
-    import importlib
-
-    from imu_dcm.kernel import backend
-    from imu_dcm.replay import core  # noqa: F401
+    from imu_dcm.replay import core  # noqa: F401 (lazy: see _replay_rows)
 
     backend()
     for name in _READER_MODULES:
@@ -167,7 +167,7 @@ def row_from_result(path: str, result, warnings_seen: Iterable[str], elapsed_s: 
     """The table row of one replay result (the one place that reads a replay's summary).
 
     ``dropped`` sums every ``dropped_*`` count of the :class:`ReplaySummary`; warnings are the
-    replay's own plus those it raised, each once.
+    replay's own plus ``warnings_seen`` (its diagnostics: the reader's too), each once.
     """
     s = result.summary
     bx, by, bz = (float(b) for b in s.bias_rad_s)
@@ -226,28 +226,24 @@ def replay_compare(
 def _replay_rows(path: str, options: Mapping[str, Any], names: tuple[str, ...] | None):
     """The rows and curves of one log: one row (names None) or one per method of ``names``."""
     t0 = time.perf_counter()
-    with _ONE_AT_A_TIME, warnings.catch_warnings(record=True) as caught:
-        warnings.resetwarnings()
-        warnings.simplefilter("ignore")  # library deprecations are not the log's business
-        warnings.simplefilter("always", UserWarning)  # ImuDcmWarning and kin
-        warnings.simplefilter("always", RuntimeWarning)
-        try:
-            from imu_dcm.replay.core import replay
+    # Lazy: the replay costs ~50 ms of CPU to import, which a Dask batch's driver never needs;
+    # the comparison ~270 ms (its peers load scipy), which a batch without --compare never needs.
+    from imu_dcm.replay.core import replay
 
-            result = replay(path, **options)
-            compared = None
-            if names is not None:
-                from imu_dcm.replay.compare import compare_methods
+    said = Diagnostics()  # the log's warnings travel with its result: no process-wide state
+    try:
+        result = replay(path, diagnostics=said, **options)
+        compared = None
+        if names is not None:
+            from imu_dcm.replay.compare import compare_methods
 
-                compared = compare_methods(result, names)
-            row = row_from_result(
-                path, result, (str(w.message) for w in caught), time.perf_counter() - t0
-            )
-        except Exception as exc:
-            said = tuple(dict.fromkeys(one_line(str(w.message)) for w in caught))
-            error = f"{type(exc).__name__}: {one_line(str(exc))}"
-            failed = LogRow(path, warnings=said, elapsed_s=time.perf_counter() - t0, error=error)
-            return per_method(failed, names), ()
+            compared = compare_methods(result, names)
+        row = row_from_result(path, result, said.lines(), time.perf_counter() - t0)
+    except Exception as exc:
+        seen = tuple(dict.fromkeys(one_line(m) for m in said.warned()))
+        error = f"{type(exc).__name__}: {one_line(str(exc))}"
+        failed = LogRow(path, warnings=seen, elapsed_s=time.perf_counter() - t0, error=error)
+        return per_method(failed, names), ()
     if compared is None:
         curves = ()
         if row.rms_error_deg is not None:
@@ -405,7 +401,7 @@ def _compare_names(compare: Sequence[str] | None, options: dict) -> tuple[str, .
     workers' ``options`` (None without them)."""
     if compare is None:
         return None
-    from imu_dcm.replay.compare import parse_compare
+    from imu_dcm.replay.compare import parse_compare  # lazy: see _replay_rows
 
     options["compare"] = parse_compare(",".join(compare))
     return options["compare"]
@@ -414,8 +410,6 @@ def _compare_names(compare: Sequence[str] | None, options: dict) -> tuple[str, .
 def _chart_path(chart: str | Path | None, table: str | Path | None) -> Path | None:
     """Where the chart goes: ``"auto"`` beside the table when matplotlib is installed (a warning
     when it is not), a path as given (matplotlib required), or nowhere."""
-    from imu_dcm.replay.batch_chart import INSTALL_HINT, chart_available
-
     if chart == "auto":
         if table is not None and chart_available():
             return Path(table).with_suffix(".png")
@@ -442,8 +436,6 @@ def claim_batch_outputs(
     before any log is read: each new or this tool's own file of its kind (header row, comment
     line, JSON lines, PNG metadata), never an input, inside an input folder or a symbolic link;
     the table, its markdown and its curves regular files (they are appended to and read)."""
-    from imu_dcm.outputs import OutputError, claim_output
-
     beside = []
     if table is not None:
         beside = [(table, "table", "--table"), (markdown_path(table), "markdown", None)]
@@ -550,8 +542,6 @@ def _write_outputs(
 ) -> tuple[Path | None, Path | None]:
     """Rewrite the table and its curves in input order, with the markdown beside them; draw the
     chart. Returns the markdown and the chart written (None when not asked for)."""
-    from imu_dcm.replay.batch_chart import write_chart
-
     md = None
     curves = new_curves
     if table is not None:

@@ -25,12 +25,10 @@ Rules, in order (all on the rates in rad/s, in file order until the sort):
 
 from __future__ import annotations
 
-import warnings
-
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from imu_dcm.errors import GapWarning, ImuDcmWarning
+from imu_dcm.errors import Diagnostics, GapWarning, ImuDcmWarning, say
 from imu_dcm.integrate import find_gaps, gap_message
 from imu_dcm.rates import FULL_SCALE_RAD_S, MAX_RATE_RAD_S, implausible_rates, truth_rate_ratio
 from imu_dcm.rates import deg_evidence as _deg_evidence  # noqa: F401 - replay.core's
@@ -166,7 +164,13 @@ def _times(t: NDArray[np.int64], t0: int, limit: int = 5) -> str:
     return shown + (f" and {len(t) - limit} more" if len(t) > limit else "")
 
 
-def clean_imu(t_ns: ArrayLike, omega_b: ArrayLike, topic: str = "IMU") -> CleanedImu:
+def clean_imu(
+    t_ns: ArrayLike,
+    omega_b: ArrayLike,
+    topic: str = "IMU",
+    *,
+    diagnostics: Diagnostics | None = None,
+) -> CleanedImu:
     """Apply the cleaning rules of this module to gyro samples in file order.
 
     Parameters
@@ -177,6 +181,8 @@ def clean_imu(t_ns: ArrayLike, omega_b: ArrayLike, topic: str = "IMU") -> Cleane
         Body rates, rad/s, body axes.
     topic : str
         Named in the warnings.
+    diagnostics : Diagnostics, optional
+        Where the warnings go instead of being warned.
 
     Returns
     -------
@@ -219,7 +225,8 @@ def clean_imu(t_ns: ArrayLike, omega_b: ArrayLike, topic: str = "IMU") -> Cleane
     bad = np.sort(np.concatenate(bad_t))
     t0 = int(t[0]) if len(t) else (int(bad[0]) if len(bad) else 0)
 
-    messages, gaps = _report(topic, t, t0, n_bad, bad, n_dup, n_conf, n_wild, wild_t, n_sorted)
+    counts = (n_bad, bad, n_dup, n_conf, n_wild, wild_t, n_sorted)
+    messages, gaps = _report(topic, t, t0, counts, diagnostics)
     return CleanedImu(
         t,
         w,
@@ -260,13 +267,14 @@ def _sort_and_dedupe(t, w, index):
     return t[keep], w[keep], index[keep], n_sorted, n_dup, int(same.sum()) - n_dup
 
 
-def _report(topic, t, t0, n_bad, bad, n_dup, n_conf, n_wild, wild_t, n_sorted):
-    """The cleaning's warnings, one line per rule that acted (raised and returned), and gaps."""
+def _report(topic, t, t0, counts, diagnostics: Diagnostics | None):
+    """The cleaning's warnings, one line per rule that acted (said and returned), and gaps."""
+    n_bad, bad, n_dup, n_conf, n_wild, wild_t, n_sorted = counts
     messages: list[str] = []
 
     def warn(msg: str, cat: type[Warning] = ImuDcmWarning) -> None:
         messages.append(f"{topic}: {msg}")
-        warnings.warn(messages[-1], cat, stacklevel=4)
+        say(diagnostics, messages[-1], cat, stacklevel=4)
 
     if n_bad:
         warn(f"dropped {n_bad} samples with NaN/Inf rates")

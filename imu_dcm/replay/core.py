@@ -21,14 +21,13 @@ from __future__ import annotations
 
 import dataclasses
 import time as _time
-import warnings
 from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from imu_dcm.errors import GapWarning, ImuDcmWarning, LogError
+from imu_dcm.errors import Diagnostics, GapWarning, LogError
 from imu_dcm.integrate import integrate_quat
 from imu_dcm.logio import LogData, read_log
 from imu_dcm.logio.ned import in_log_axes
@@ -84,6 +83,7 @@ def replay(
     progress: Callable[[str, float], None] | None = None,
     score_window: str | tuple[float, float] = "all",
     truth_convention: str = "auto",
+    diagnostics: Diagnostics | None = None,
 ) -> ReplayResult:
     """Replay a gyro log: integrate its rates and compare the attitude with its truth.
 
@@ -98,6 +98,9 @@ def replay(
         (``init_q_w_b`` is its ``q_init``), documented there.
     progress : callable(stage, fraction), optional
         Called as work advances (for a progress bar).
+    diagnostics : Diagnostics, optional
+        Where the warnings go, the reader's too (no process-wide state: replays may run in
+        threads); without it they are warned when the replay ends or fails, in order.
 
     Returns
     -------
@@ -118,27 +121,17 @@ def replay(
         shown, time, method, bias, gyro_units, init_q_w_b, prefilter, truth_offset_s
     )
     settings = ReplaySettings(
-        imu_topic,
-        truth_topic,
-        truth_frame,
-        time,
-        method,
-        bias,
-        gyro_units or "rad/s",
-        q_init,
-        prefilter,
-        prefilter_config,
-        offset,
-        rest_config,
-        check_mounting(mounting),
-        check_score_window(score_window),
-        check_convention(truth_convention),
-    )
-    notes: list[str] = []  # this replay's warnings, for the summary (no global state)
-    result = _replay(path, settings, progress or (lambda stage, frac: None), notes)
-    summary = dataclasses.replace(
-        result.summary, warnings=tuple(notes), elapsed_s=_time.perf_counter() - t0
-    )
+        imu_topic, truth_topic, truth_frame, time, method, bias, gyro_units or "rad/s", q_init,
+        prefilter, prefilter_config, offset, rest_config, check_mounting(mounting),
+        check_score_window(score_window), check_convention(truth_convention),
+    )  # fmt: skip
+    notes = Diagnostics() if diagnostics is None else diagnostics
+    try:
+        result = _replay(path, settings, progress or (lambda stage, frac: None), notes)
+    finally:
+        if diagnostics is None:  # the user's call: warned here, once, at the edge
+            notes.warn(stacklevel=2)
+    summary = dataclasses.replace(result.summary, elapsed_s=_time.perf_counter() - t0)
     return dataclasses.replace(result, summary=summary)
 
 
@@ -149,7 +142,7 @@ def _record(obj) -> dict:
     return dict(vars(obj))
 
 
-def _rest_conflict(log: LogData, notes: list[str], msg: str) -> LogData:
+def _rest_conflict(log: LogData, notes: Diagnostics, msg: str) -> LogData:
     """Evidence on rest that conflicts: a warning against an independent truth; against the
     vehicle's own estimate (which integrates this gyro, so it turns with its bias) one of the
     log's notes, since the conflict is then expected and says nothing about the log's health."""
@@ -158,13 +151,8 @@ def _rest_conflict(log: LogData, notes: list[str], msg: str) -> LogData:
         return dataclasses.replace(
             log, notes=(*log.notes, f"{msg} (the truth is {who}'s own estimate)")
         )
-    _warn(notes, msg)
+    notes.add(msg)
     return log
-
-
-def _warn(notes: list[str], msg: str) -> None:
-    notes.append(msg)
-    warnings.warn(msg, ImuDcmWarning, stacklevel=3)
 
 
 class _Gyro:
@@ -212,7 +200,7 @@ class _Judged:
         self.gaps = gaps  # gyro gaps re-anchored (TruthJump records over each gap)
 
 
-def _read(path, s: ReplaySettings, report) -> LogData:
+def _read(path, s: ReplaySettings, report, notes: Diagnostics) -> LogData:
     report("read", 0.0)
     log = read_log(
         path,
@@ -220,12 +208,13 @@ def _read(path, s: ReplaySettings, report) -> LogData:
         truth_topic=s.truth_topic,
         truth_frame=s.truth_frame,
         progress=lambda frac: report("read", frac),
+        diagnostics=notes,
     )
     report("read", 1.0)
     return log
 
 
-def _gyro(log: LogData, s: ReplaySettings, notes: list[str]) -> _Gyro:
+def _gyro(log: LogData, s: ReplaySettings, notes: Diagnostics) -> _Gyro:
     """Time base, cleaning and units of the gyro samples."""
     imu, truth = log.imu, log.truth
     base, why = choose_time(
@@ -236,12 +225,12 @@ def _gyro(log: LogData, s: ReplaySettings, notes: list[str]) -> _Gyro:
         truth.log_t_ns if truth is not None else None,
     )
     if why:
-        _warn(notes, f"time: using log time, not header stamps: {why}")
+        notes.add(f"time: using log time, not header stamps: {why}")
     imu_t = imu.t_ns if base == "header" else imu.log_t_ns
     scale = DEG if s.gyro_units == "deg/s" else 1.0
     omega = np.asarray(imu.omega_b, dtype=float)
-    clean = clean_imu(imu_t, omega * scale if scale != 1.0 else omega, imu.topic)  # no copy
-    notes.extend(clean.messages)
+    w = omega * scale if scale != 1.0 else omega  # no copy
+    clean = clean_imu(imu_t, w, imu.topic, diagnostics=notes)
     n = len(clean.t_ns)
     if n < 2:
         hint = ""
@@ -258,7 +247,7 @@ def _gyro(log: LogData, s: ReplaySettings, notes: list[str]) -> _Gyro:
             f"; was it converted with a time unit {factor}x too large (for a CSV declared in "
             f"s: convert-csv --time-units {fix})?"
         )
-        _warn(notes, f"{imu.topic}: stamps no IMU produces: {clause}{hint if fix else ''}")
+        notes.add(f"{imu.topic}: stamps no IMU produces: {clause}{hint if fix else ''}")
     t_s = (clean.t_ns - clean.t_ns[0]).astype(np.float64) * 1e-9
     g = _Gyro(base, clean, clean.t_ns, t_s, clean.omega_b, _accel(imu, clean, notes))
     if log.vehicle_state is not None:
@@ -266,43 +255,42 @@ def _gyro(log: LogData, s: ReplaySettings, notes: list[str]) -> _Gyro:
     return g
 
 
-def _accel(imu, clean: CleanedImu, notes: list[str]) -> NDArray | None:
+def _accel(imu, clean: CleanedImu, notes: Diagnostics) -> NDArray | None:
     """The accelerometer on the cleaned gyro rows, m/s², or None (absent or incomplete)."""
     if imu.accel_b is None:
         return None
     acc = np.asarray(imu.accel_b, dtype=float)[clean.index]
     if not np.all(np.isfinite(acc)):
         bad = int(np.count_nonzero(~row_finite(acc)))
-        notes.append(
+        notes.add(
             f"{imu.topic}: accelerometer missing on {bad} of {len(acc)} samples; rest judged "
-            f"from the gyro alone"
+            f"from the gyro alone",
+            None,  # in the summary, not warned
         )
         return None
     return acc
 
 
 def _judge_truth(
-    log: LogData, s: ReplaySettings, g: _Gyro, omega: NDArray, notes: list[str]
+    log: LogData, s: ReplaySettings, g: _Gyro, omega: NDArray, notes: Diagnostics
 ) -> _Judged:
     """Offset, rate check, jumps and mounting of the truth against the (bias-free) gyro."""
     imu = log.imu
     aligned = align_truth(
         log.truth, g.base, g.t_ns, g.omega, s.truth_offset_s, imu.log_t_ns,
-        lambda msg: _warn(notes, msg),
+        notes.add,
     )  # fmt: skip
     if s.gyro_units == "rad/s":
         evidence = _deg_evidence(g.omega, g.t_s, aligned.q_truth)
         if evidence:
-            _warn(
-                notes,
+            notes.add(
                 f"{imu.topic}: the rates look like deg/s: {evidence}; pass "
                 f"--gyro-units deg/s to convert",
             )
     else:  # declared deg/s: a rad/s log converted reads 57.3x slower than its truth turns
         ratio = truth_rate_ratio(g.omega, g.t_s, aligned.q_truth)
         if ratio is not None and abs(ratio * (180 / np.pi) - 1) < 0.2:
-            _warn(
-                notes,
+            notes.add(
                 f"{imu.topic}: the rates look like rad/s: converted from deg/s, the gyro rate "
                 f"is 1/{1 / ratio:.1f} of the truth's rotation rate (1/57.3 for rad/s read as "
                 f"deg/s); drop --gyro-units deg/s",
@@ -331,8 +319,7 @@ def _judge_truth(
     if jumps:
         shown = "; ".join(j.describe() for j in jumps[:5])
         more = f" and {len(jumps) - 5} more" if len(jumps) > 5 else ""
-        _warn(
-            notes,
+        notes.add(
             f"truth {truth.topic} jumps where the gyro does not: {shown}{more}; the estimate "
             f"re-anchors to the truth after each jump and the "
             f"{len(_scored_truth(aligned.q_truth, g.t_s, jumps)[1])} segments between jumps are "
@@ -344,12 +331,12 @@ def _judge_truth(
     given = None if isinstance(s.mounting, str) else _given(s.mounting)
     choice = choose_mounting(s.mounting, est, declared, given, frames)
     if choice.line:
-        _warn(notes, choice.line)
+        notes.add(choice.line)
     gaps = _unseen_gaps(g, omega, aligned.q_truth, notes)
     return _Judged(aligned, tt, jumps, choice, gaps)
 
 
-def _unseen_gaps(g: _Gyro, omega: NDArray, q_truth: NDArray, notes: list[str]) -> tuple:
+def _unseen_gaps(g: _Gyro, omega: NDArray, q_truth: NDArray, notes: Diagnostics) -> tuple:
     """The gyro's gaps whose rotation it did not see: where the truth turns across the gap, or
     the integrator's bridge of it (the mean of the rates at its ends times its length) would,
     more than a truth jump's :data:`JUMP_DEG`. The estimate re-anchors after each."""
@@ -370,8 +357,7 @@ def _unseen_gaps(g: _Gyro, omega: NDArray, q_truth: NDArray, notes: list[str]) -
             for j in out[:5]
         )
         more = f" and {len(out) - 5} more" if len(out) > 5 else ""
-        _warn(
-            notes,
+        notes.add(
             f"{len(out)} gap{'s' if len(out) > 1 else ''} the gyro did not see: {shown}{more}; "
             f"the estimate re-anchors to the truth after each and the segments are scored",
         )
@@ -419,7 +405,7 @@ def _convention(log: LogData, s: ReplaySettings, g: _Gyro, omega, notes):
     tt = truth.t_ns if g.base == "header" else truth.log_t_ns
     choice = choose_convention(g.t_ns, omega, tt, truth.q_w_b, s.truth_convention, truth.topic)
     if choice.line:
-        _warn(notes, choice.line)
+        notes.add(choice.line)
     if choice.used == "as-is":
         return log, choice
     q = convert(truth.q_w_b, choice.used)
@@ -483,9 +469,8 @@ def _prefilter(s: ReplaySettings, omega: NDArray, t_s: NDArray):
         return omega, None
     from imu_dcm.prefilter import prefilter as run_prefilter
 
-    with warnings.catch_warnings():  # gaps were reported once, by clean_imu
-        warnings.simplefilter("ignore", GapWarning)
-        pf = run_prefilter(omega, t_s, s.prefilter, s.prefilter_config)
+    said = Diagnostics()  # its only warning, the gaps, was said once, by clean_imu
+    pf = run_prefilter(omega, t_s, s.prefilter, s.prefilter_config, diagnostics=said)
     return np.asarray(pf.omega_b, dtype=float), pf.summary
 
 
@@ -502,8 +487,10 @@ def _scored_truth(q_truth: NDArray, t_s: NDArray, jumps) -> tuple[NDArray, list[
     return q, anchors
 
 
-def _integrate(s: ReplaySettings, omega, t_s, q_truth, anchors, topic: str) -> NDArray:
-    """Integrate each segment from its anchor (the truth there, or the initial attitude)."""
+def _integrate(s: ReplaySettings, omega, t_s, q_truth, anchors, topic, notes=None) -> NDArray:
+    """Integrate each segment from its anchor (the truth there, or the initial attitude); the
+    integrator's warnings go to ``notes`` once each, but gaps (said once, by clean_imu)."""
+    said = Diagnostics()
     n = len(t_s)
     q_est = np.full((n, 4), np.nan)
     ends = [*anchors[1:], n]
@@ -512,11 +499,12 @@ def _integrate(s: ReplaySettings, omega, t_s, q_truth, anchors, topic: str) -> N
         if q0 is None:
             q0 = np.array([0.0, 0.0, 0.0, 1.0])
         if b - a >= 2:
-            with warnings.catch_warnings():  # gaps were reported once, by clean_imu
-                warnings.simplefilter("ignore", GapWarning)
-                q_est[a:b] = integrate_quat(omega[a:b], t_s[a:b], q0, s.method)
+            q_est[a:b] = integrate_quat(omega[a:b], t_s[a:b], q0, s.method, diagnostics=said)
         else:
             q_est[a:b] = q0
+    for line, category in dict.fromkeys(said.said):
+        if notes is not None and category is not GapWarning:
+            notes.add(line, category)
     finite = row_finite(q_est[anchors[0] :])
     if not finite.all():
         k = anchors[0] + int(np.flatnonzero(~finite)[0])
@@ -549,8 +537,9 @@ def _score(q_est: NDArray, q_truth: NDArray) -> tuple[AttitudeError, NDArray]:
     return AttitudeError(*out), both
 
 
-def _replay(path, s: ReplaySettings, report, notes: list[str]) -> ReplayResult:
-    log = path if isinstance(path, LogData) else _read(path, s, report)
+def _replay(path, s: ReplaySettings, report, notes: Diagnostics) -> ReplayResult:
+    log = path if isinstance(path, LogData) else _read(path, s, report, notes)
+    own = len(notes.said)  # the summary's warnings: the replay's own, after the reader's
     g = _gyro(log, s, notes)
     report("bias", 0.0)
     bias_est, omega = _remove_bias(s, g)
@@ -567,12 +556,11 @@ def _replay(path, s: ReplaySettings, report, notes: list[str]) -> ReplayResult:
     breaks = tuple(sorted((*judged.jumps, *judged.gaps), key=lambda j: j.t0_s))
     q_truth, anchors = _scored_truth(judged.aligned.q_truth, g.t_s, breaks)
     report("integrate", 0.0)
-    q_est = _integrate(s, omega, g.t_s, q_truth, anchors, log.imu.topic)
+    q_est = _integrate(s, omega, g.t_s, q_truth, anchors, log.imu.topic, notes)
     report("integrate", 1.0)
     error, both = _score(q_est, q_truth)
     if s.q_init is not None and np.isfinite(q_truth[anchors[0]]).all():
-        _warn(
-            notes,
+        notes.add(
             "--init-quat not used: the estimate starts from the truth's attitude "
             f"({judged.aligned.truth.topic}); --truth-topic none starts it from --init-quat",
         )
@@ -599,6 +587,7 @@ def _replay(path, s: ReplaySettings, report, notes: list[str]) -> ReplayResult:
         truth_candidates=candidates,
         score_window=scored_on,
         notes=tuple(log.notes),  # the reader's findings (a refused channel, a better one used)
+        warnings=notes.lines(own),
         offset_auto_rms_deg=auto_rms,
         **outcome(g.t_s, omega, q_est, start),
     )

@@ -150,8 +150,8 @@ def run_dask(fn: PerLog, paths: list[str], options: Mapping[str, Any], dask) -> 
         threaded = sum(w.get("nthreads", 1) > 1 for w in workers)
         if threaded:
             warnings.warn(
-                f"{threaded} Dask workers run several threads, but a process replays "
-                f"one log at a time: start workers with --nthreads 1 --nworkers N",
+                f"{threaded} Dask workers run several threads, whose replays share one Python "
+                f"interpreter: start workers with --nthreads 1 --nworkers N",
                 ImuDcmWarning,
                 stacklevel=3,
             )
