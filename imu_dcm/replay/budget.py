@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import contextlib
 import os
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -33,13 +34,13 @@ from imu_dcm.errors import InputError
 __all__ = ["NoiseParams", "budget", "budget_line", "read_noise_params"]
 
 
+@dataclass(slots=True, frozen=True)
 class NoiseParams:
     """Gyro noise in continuous time: ``N`` rad/s/√Hz, ``K`` rad/s²/√Hz, ``B`` rad/s (or 0)."""
 
-    __slots__ = ("N", "K", "B")
-
-    def __init__(self, N: float, K: float = 0.0, B: float = 0.0) -> None:
-        self.N, self.K, self.B = float(N), float(K), float(B)
+    N: float
+    K: float = 0.0
+    B: float = 0.0
 
 
 def read_noise_params(path: str | os.PathLike) -> NoiseParams:
