@@ -26,8 +26,9 @@ import pytest
 from data_synth.cli import main as synth_main
 from imu_dcm.errors import ImuDcmWarning
 from imu_dcm.replay import replay, replay_many
-from imu_dcm.replay.batch import find_logs, replay_one
+from imu_dcm.replay.batch import find_logs
 from imu_dcm.replay.batch_cli import main as batch_main
+from imu_dcm.replay.batch_log import replay_one
 from imu_dcm.replay.table import COLUMNS, LogRow, append_rows, read_table
 
 REPO_ROOT = Path(__file__).resolve().parents[1]

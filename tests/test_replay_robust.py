@@ -304,7 +304,7 @@ def test_header_stamps_that_do_not_increase_use_log_time(trial, tmp_path):
 
 
 def test_lagged_correlation_equals_numpy_corrcoef_per_lag():
-    from imu_dcm.replay.truth import lagged_correlation
+    from imu_dcm.replay.rate_check import lagged_correlation
 
     rng = np.random.default_rng(5)
     n, lags = 500, 40

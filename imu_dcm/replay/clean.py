@@ -25,22 +25,21 @@ Rules, in order (all on the rates in rad/s, in file order until the sort):
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from imu_dcm.errors import Diagnostics, GapWarning, ImuDcmWarning, say
 from imu_dcm.integrate import find_gaps, gap_message
-from imu_dcm.rates import FULL_SCALE_RAD_S, MAX_RATE_RAD_S, implausible_rates, truth_rate_ratio
-from imu_dcm.rates import deg_evidence as _deg_evidence  # noqa: F401 - replay.core's
+from imu_dcm.rates import MAX_RATE_RAD_S, implausible_rates
 from imu_dcm.so3 import median, percentile, row_finite
 
 __all__ = [
-    "FULL_SCALE_RAD_S",
     "MAX_RATE_RAD_S",
     "SPIKE_RATIO",
     "CleanedImu",
     "clean_imu",
-    "truth_rate_ratio",
 ]
 
 #: An isolated sample this many times above the log's 99.9th percentile and its neighbours is
@@ -56,54 +55,29 @@ WILD_STAMP_WINDOW = 9
 WILD_STAMP_STEPS = 1000
 
 
+@dataclass(slots=True, frozen=True)
 class CleanedImu:
     """Gyro samples after cleaning, sorted by stamp, with the counts of what was dropped.
 
     ``t_ns`` int64 (N,) strictly increasing; ``omega_b`` float64 (N, 3) finite, rad/s;
     ``index`` int64 (N,) position of each kept sample in the input; gaps as (time s since the
     first kept sample, length s); ``implausible_t_s`` the times of the implausible samples (s
-    since the first kept sample); ``messages`` the warnings it raised, one line each.
-
-    A plain class (not a dataclass: nothing compares or copies it; a dataclass costs the
-    replay's start-up about half a millisecond).
+    since the first kept sample); ``messages`` its warnings, one line each (said as they were
+    found, or added to the caller's diagnostics).
     """
 
-    __slots__ = (
-        "t_ns",
-        "omega_b",
-        "index",
-        "dropped_nonfinite",
-        "dropped_implausible",
-        "dropped_wild_stamp",
-        "dropped_duplicate",
-        "dropped_stamp_conflict",
-        "sorted_out_of_order",
-        "gaps",
-        "implausible_t_s",
-        "messages",
-    )
-
-    def __init__(
-        self,
-        t_ns: NDArray[np.int64],
-        omega_b: NDArray[np.float64],
-        index: NDArray[np.int64],
-        dropped_nonfinite: int,
-        dropped_implausible: int,
-        dropped_wild_stamp: int,
-        dropped_duplicate: int,
-        dropped_stamp_conflict: int,
-        sorted_out_of_order: int,
-        gaps: tuple[tuple[float, float], ...],
-        implausible_t_s: tuple[float, ...],
-        messages: tuple[str, ...] = (),
-    ) -> None:
-        self.t_ns, self.omega_b, self.index = t_ns, omega_b, index
-        self.dropped_nonfinite, self.dropped_implausible = dropped_nonfinite, dropped_implausible
-        self.dropped_wild_stamp, self.dropped_duplicate = dropped_wild_stamp, dropped_duplicate
-        self.dropped_stamp_conflict = dropped_stamp_conflict
-        self.sorted_out_of_order, self.gaps = sorted_out_of_order, gaps
-        self.implausible_t_s, self.messages = implausible_t_s, messages
+    t_ns: NDArray[np.int64]
+    omega_b: NDArray[np.float64]
+    index: NDArray[np.int64]
+    dropped_nonfinite: int
+    dropped_implausible: int
+    dropped_wild_stamp: int
+    dropped_duplicate: int
+    dropped_stamp_conflict: int
+    sorted_out_of_order: int
+    gaps: tuple[tuple[float, float], ...]
+    implausible_t_s: tuple[float, ...]
+    messages: tuple[str, ...] = ()
 
     @property
     def dropped_nonincreasing(self) -> int:

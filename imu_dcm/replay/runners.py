@@ -1,7 +1,7 @@
 """Where the logs of a batch run: in this process, in a process pool, or on a Dask cluster.
 
 Each runner calls ``fn(path, options) -> (row, curve)`` once per log (``fn`` must not raise and
-must be importable by name, e.g. :func:`imu_dcm.replay.batch.replay_one`) and yields the results
+must be importable by name, e.g. :func:`imu_dcm.replay.batch_log.replay_one`) and yields the results
 as they finish, in completion order. Workers get one BLAS/OpenMP thread each.
 """
 

@@ -27,7 +27,7 @@ class ReplaySummary:
     (t_s, length_s) pairs. ``warnings`` holds the one-line warnings of the cleaning and the
     truth checks, kept per replay so that replays in threads do not mix (the reader's own are
     summed up in ``stopped_at`` / ``damage``). ``truth_check`` is the rate comparison of truth
-    and gyro (:class:`imu_dcm.replay.truth.TruthCheck`) as a dict, or None without truth.
+    and gyro (:class:`imu_dcm.replay.rate_check.TruthCheck`) as a dict, or None without truth.
     ``mounting`` is the motion's estimate of the mounting (or the quaternion given);
     ``final_q_w_b``, ``rotation_deg``, ``turned_deg`` are the result with or without truth
     (:mod:`imu_dcm.replay.outcome`); ``written`` lists the files and folders the command wrote
