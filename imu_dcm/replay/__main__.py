@@ -20,13 +20,20 @@ import argparse
 import contextlib
 import dataclasses
 import os
+import signal
 import sys
+import threading
 import warnings
 from pathlib import Path
 
 from imu_dcm.cli import OneLineArgumentParser, Progress, end_quietly_on_broken_pipe
-from imu_dcm.errors import Diagnostics
+from imu_dcm.errors import Diagnostics, ImuDcmError, InputError
 from imu_dcm.replay.options import LOG_KINDS, add_replay_options, replay_keywords
+
+# The modules imported inside functions load numpy and the rest of the numerical stack (each
+# ~80 ms of CPU on top of --help's ~65 ms; the comparison ~330 ms), which --help and a bad
+# option never pay for; or, like imu_dcm.outputs, only the options that write a file need them
+# (a plain replay imports no writer: tests/test_replay_imports.py).
 
 PROG = "imu-dcm-replay"
 
@@ -163,9 +170,6 @@ def _show(result, mode: str | None, realtime: bool, keep: bool, claim=None) -> t
 def _serve_until_stopped(served) -> int:
     """Print the viewer's URL, then wait for Ctrl-C, SIGTERM or the server's own exit; returns
     the signal that ended the wait (0: the server exited), for the exit code 128 + signal."""
-    import signal
-    import threading
-
     stop = threading.Event()
     got = []
     signals = (signal.SIGINT, signal.SIGTERM)
@@ -221,8 +225,6 @@ def _inputs(log: str) -> tuple[str, ...]:
 
 def _distinct_outputs(args) -> None:
     """No output is another output, and nothing is written inside the --out bag folder."""
-    from imu_dcm.errors import InputError
-
     named = [("--out", args.out), ("--summary-json", args.summary_json), ("--plot", args.plot)]
     named.append(("--export-csv", args.export_csv))
     if args.export_tum:
@@ -244,8 +246,6 @@ def _distinct_outputs(args) -> None:
 
 def _not_a_folder_of_logs(log: str) -> None:
     """A folder that holds logs (not a log itself) is for ``batch``: say so."""
-    from imu_dcm.errors import InputError
-
     if not os.path.isdir(log) or os.path.isfile(os.path.join(log, "metadata.yaml")):
         return
     from imu_dcm.replay.batch import find_logs
@@ -305,8 +305,6 @@ def _options(args) -> tuple[dict, dict]:
 
 def _check_view_options(args) -> None:
     """``--keep-viewer`` and ``--realtime`` act only on a view: refused where there is none."""
-    from imu_dcm.errors import InputError
-
     mode = args.rerun or "the default (no view without a display)"
     if args.keep_viewer and args.rerun != "serve":
         raise InputError(f"Expected --rerun serve with --keep-viewer, got --rerun {mode}")
@@ -375,8 +373,6 @@ def _replay_main(argv: list[str]) -> int:
 def _view(result, args, claim) -> tuple[str, int]:
     """:func:`_show`, its failures one line: an error when the view was asked for, else a
     warning (the default view is a convenience)."""
-    from imu_dcm.errors import ImuDcmError
-
     try:
         return _show(result, args.rerun, args.realtime, args.keep_viewer, claim)
     except Exception as exc:
@@ -394,21 +390,21 @@ def _view(result, args, claim) -> tuple[str, int]:
 def _evaluations(result, args, claims: dict, lines: list[str]) -> dict:
     """``--compare``, ``--noise-params``, ``--export-csv`` and ``--plot`` (their outputs claimed
     in ``claims``): their lines go to ``lines``; returns what they add to the summary JSON."""
-    from imu_dcm.replay.summary import _plain
+    from imu_dcm.replay.summary import json_ready
 
     extra = {}
     rows = _compare(result, args, lines)
     if rows is not None:
         from imu_dcm.replay.compare import compare_json
 
-        extra["compare"] = _plain(compare_json(rows))
+        extra["compare"] = json_ready(compare_json(rows))
     if args.noise_params:
         from imu_dcm.replay.budget import budget, budget_line
 
         b = budget(result, args.noise_params)
         lines.insert(0, budget_line(b))
         if b is not None:
-            extra["budget"] = _plain(b)
+            extra["budget"] = json_ready(b)
     if args.export_csv:
         from imu_dcm.replay.export_csv import export_csv
 

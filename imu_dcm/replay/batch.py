@@ -3,8 +3,9 @@
 ``python -m imu_dcm.replay batch PATH... --table OUT.csv [--jobs N | --dask ADDRESS]`` or
 :func:`replay_many`. Every log runs through :func:`imu_dcm.replay.batch_log.replay_one` (the
 same function in a process pool, in a Dask worker, or in this process for ``jobs=1``), which
-never raises: a log that fails gives a row carrying its one-line error. Rows are appended to the table as they arrive (see
-:mod:`imu_dcm.replay.table`), so ``resume=True`` picks up a batch that was killed.
+never raises: a log that fails gives a row carrying its one-line error. Rows are appended to
+the table as they arrive (see :mod:`imu_dcm.replay.table`), so ``resume=True`` picks up a
+batch that was killed.
 
 Workers run one log at a time with one BLAS thread each, and send back only the row and a
 decimated error curve, so a worker's memory is what that log's replay needs.

@@ -15,9 +15,10 @@ import threading
 import time
 import warnings
 
-from imu_dcm.cli import end_quietly_on_broken_pipe
+from imu_dcm.cli import OneLineArgumentParser, end_quietly_on_broken_pipe
 from imu_dcm.errors import ImuDcmError, InputError
 from imu_dcm.replay.batch import replay_many
+from imu_dcm.replay.options import add_replay_options
 from imu_dcm.replay.table import LogRow, one_line
 
 PROG = "imu-dcm-replay batch"
@@ -25,9 +26,6 @@ PROG = "imu-dcm-replay batch"
 
 def build_parser() -> argparse.ArgumentParser:
     """The parser of ``python -m imu_dcm.replay batch`` (options are checked before any I/O)."""
-    from imu_dcm.cli import OneLineArgumentParser
-    from imu_dcm.replay.options import add_replay_options
-
     p = OneLineArgumentParser(
         prog=PROG,
         description="Replay many gyro logs with the same options, on all cores or on a Dask "

@@ -206,7 +206,7 @@ def _motion(truth, tt: NDArray, t_s: NDArray, q: NDArray) -> Motion | None:
 def _prefilter(s: ReplaySettings, omega: NDArray, t_s: NDArray):
     if s.prefilter is None:
         return omega, None
-    from imu_dcm.prefilter import prefilter as run_prefilter
+    from imu_dcm.prefilter import prefilter as run_prefilter  # lazy: ~170 ms of CPU (filterpy)
 
     said = Diagnostics()  # its only warning, the gaps, was said once, by clean_imu
     pf = run_prefilter(omega, t_s, s.prefilter, s.prefilter_config, diagnostics=said)

@@ -13,6 +13,8 @@ from __future__ import annotations
 
 import argparse
 import csv
+import shutil
+import tempfile
 import warnings
 from dataclasses import dataclass
 from pathlib import Path
@@ -22,6 +24,7 @@ from numpy.typing import NDArray
 
 from imu_dcm.cli import OneLineArgumentParser
 from imu_dcm.errors import ImuDcmWarning, InputError, LogError
+from imu_dcm.outputs import OutputError, check_output_dir, check_output_file, ensure_parent
 from imu_dcm.rest import GRAVITY_M_S2
 from imu_dcm.stamps import NS_PER_UNIT, timing_doubt
 
@@ -274,8 +277,6 @@ def convert_csv(
     ``imu_dcm.estimate_of:<truth_topic>`` = ``"<who>'s own estimate"``, which the reader gives
     as the truth's ``estimate_of`` (:data:`imu_dcm.logio.channels.ESTIMATE_OF_KEY`).
     """
-    from imu_dcm.outputs import check_output_dir
-
     inputs = tuple(x for x in (csv_path, truth_csv) if x is not None)
     single = str(out_dir).endswith(".mcap")
     if single:
@@ -326,7 +327,7 @@ def convert_csv(
 def _series(cols: CsvColumns, t_q, q, imu_topic: str, truth_topic: str, frame_id: str) -> dict:
     """The keywords of :func:`imu_dcm.logio.writer.write_bag` (rows without a finite, non-zero
     quaternion get no truth message)."""
-    from imu_dcm.logio.writer import StampedSeries
+    from imu_dcm.logio.writer import StampedSeries  # lazy: ~22 ms, not for --help
 
     quats = {}
     if q is not None:
@@ -351,7 +352,6 @@ def _write_folder(out, cols, t_q, q, custom, imu_topic, truth_topic, frame_id, f
 def _check_mcap_output(out: Path, inputs: tuple, force: bool) -> None:
     """A ``.mcap`` output: a new file, or with ``force`` one this project's writer wrote."""
     from imu_dcm.logio.writer import OWN_LIBRARY
-    from imu_dcm.outputs import OutputError, check_output_file
 
     check_output_file(out, inputs, what="output MCAP file")
     if out.exists():
@@ -364,11 +364,7 @@ def _check_mcap_output(out: Path, inputs: tuple, force: bool) -> None:
 
 def _write_mcap_file(out, cols, t_q, q, custom, imu_topic, truth_topic, frame_id, force, inputs):
     """The bag written into a temporary sibling folder, its ``.mcap`` renamed to ``out``."""
-    import shutil
-    import tempfile
-
     from imu_dcm.logio.writer import write_bag
-    from imu_dcm.outputs import ensure_parent
 
     ensure_parent(out, "output MCAP file")
     tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.", dir=out.parent))

@@ -12,10 +12,13 @@ from numpy.typing import NDArray
 
 from imu_dcm.metrics import AttitudeError
 from imu_dcm.replay.bias import BiasEstimate
+from imu_dcm.replay.mounting import APPLY_DEG, Mounting
+from imu_dcm.replay.offset_hint import shift_ms
+from imu_dcm.replay.outcome import outcome_lines
 from imu_dcm.replay.sampling import TOO_SLOW_SHARE
 from imu_dcm.replay.stats import evaluation_lines
 
-__all__ = ["ReplayResult", "ReplaySummary", "format_summary"]
+__all__ = ["ReplayResult", "ReplaySummary", "format_summary", "json_ready"]
 
 
 @dataclass(frozen=True)
@@ -117,7 +120,7 @@ class ReplaySummary:
         """JSON-ready dict: tuples become lists, gaps ``{"t_s", "length_s"}`` objects, NaN None."""
         d = dataclasses.asdict(self)
         d["gaps"] = [{"t_s": a, "length_s": b} for a, b in self.gaps]
-        return _plain(d)
+        return json_ready(d)
 
 
 def _rest_evidence(s: ReplaySummary) -> str:
@@ -169,13 +172,14 @@ def _bias_axes(s: ReplaySummary) -> str:
     )
 
 
-def _plain(x: Any) -> Any:
+def json_ready(x: Any) -> Any:
+    """``x`` for JSON: dicts (string keys), lists, numbers, strings, None for NaN/Inf."""
     if isinstance(x, dict):
-        return {str(k): _plain(v) for k, v in x.items()}
+        return {str(k): json_ready(v) for k, v in x.items()}
     if isinstance(x, (list, tuple)):
-        return [_plain(v) for v in x]
+        return [json_ready(v) for v in x]
     if isinstance(x, np.ndarray):
-        return _plain(x.tolist())
+        return json_ready(x.tolist())
     if isinstance(x, (np.floating, np.integer, np.bool_)):
         x = x.item()
     if isinstance(x, float) and not np.isfinite(x):
@@ -242,8 +246,6 @@ def _candidates_line(cands: tuple[dict, ...]) -> str:
 
 def _mounting_lines(s: ReplaySummary) -> list[str]:
     """The estimated (or given) mounting and the declared one, one line each."""
-    from imu_dcm.replay.mounting import APPLY_DEG, Mounting
-
     fields = {f.name for f in dataclasses.fields(Mounting)}
     lines = []
     if s.mounting:
@@ -298,8 +300,6 @@ def _judgement_lines(s: ReplaySummary) -> list[str]:
 
 def _shift_line(s: ReplaySummary, check: dict) -> str:
     """The rate check with its best shift, and what ``--truth-offset auto`` would score."""
-    from imu_dcm.replay.offset_hint import shift_ms
-
     verdict = "follows the gyro" if check["follows"] else "does NOT follow the gyro"
     hint = ""
     if s.offset_auto_rms_deg is not None and s.rms_error_deg is not None:
@@ -403,8 +403,6 @@ def format_summary(s: ReplaySummary) -> str:
     lines += _error_lines(s)
     lines.extend(_bias_choice_line(s))
     lines.extend(_sampling_line(s))
-    from imu_dcm.replay.outcome import outcome_lines
-
     lines += outcome_lines(s.final_q_w_b, s.rotation_deg, s.turned_deg, s.written)
     if s.stopped_at:
         lines.append(f"stopped    {s.stopped_at}")

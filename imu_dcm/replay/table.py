@@ -33,6 +33,7 @@ from numpy.typing import ArrayLike
 
 from imu_dcm.errors import InputError
 from imu_dcm.outputs import claim_output, write_atomic
+from imu_dcm.replay.kinds import KINDS
 from imu_dcm.signatures import signature
 
 __all__ = [
@@ -345,8 +346,6 @@ def summary_line(rows: Sequence[LogRow]) -> str:
 
 def _summary(rows: Sequence[LogRow]) -> str:
     """:func:`summary_line` of rows of one method (or of a table without methods)."""
-    from imu_dcm.replay.kinds import KINDS
-
     failed = sum(r.failed for r in rows)
     by_kind: dict[str, list[float]] = {}
     for r in rows:
