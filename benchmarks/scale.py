@@ -138,6 +138,8 @@ def floors(bag: Path, rounds: int, rosbags: bool) -> dict:
 def _phase_child(bag: str) -> None:
     """In a fresh process: replay ``bag`` with every phase timed; print the figures as JSON."""
     import imu_dcm.replay.core as core
+    import imu_dcm.replay.gyro as gyro
+    import imu_dcm.replay.rate_check as rate_check
     import imu_dcm.replay.truth as truth
 
     spent = dict.fromkeys(PHASES, 0.0)
@@ -161,10 +163,11 @@ def _phase_child(bag: str) -> None:
         setattr(mod, name, wrapper)
 
     timed(core, "read_log", "read")
-    timed(core, "clean_imu", "clean")
-    timed(core, "_judge_truth", "truth check")
-    timed(core, "_pick_truth", "truth check")
+    timed(gyro, "clean_imu", "clean")
+    timed(core, "judge_truth", "truth check")
+    timed(core, "pick_truth", "truth check")
     timed(truth, "slerp_truth", "resample")
+    timed(rate_check, "slerp_truth", "resample")
     timed(core, "estimate_bias", "bias")
     timed(core, "integrate_quat", "integrate")
     timed(core, "attitude_error_deg", "score")

@@ -17,6 +17,7 @@ import statistics
 import subprocess
 import sys
 import time
+from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
 import numpy as np
@@ -28,6 +29,7 @@ from imu_dcm.errors import ImuDcmWarning
 from imu_dcm.replay import replay, replay_many
 from imu_dcm.replay.batch import find_logs
 from imu_dcm.replay.batch_cli import main as batch_main
+from imu_dcm.replay.batch_log import replay_one
 from imu_dcm.replay.table import COLUMNS, LogRow, append_rows, read_table
 
 REPO_ROOT = Path(__file__).resolve().parents[1]
@@ -161,6 +163,26 @@ def test_bad_logs_get_error_rows_and_the_others_complete(logs, tmp_path):
     table = read_table(tmp_path / "t.csv")
     assert sorted(r.path for r in table) == sorted(r.path for r in res.rows)
     assert sum(r.failed for r in table) == 3
+
+
+def test_replays_in_threads_keep_each_its_own_warnings(logs, tmp_path):
+    # A replay's warnings travel with its result, not through the process-wide warnings state:
+    # logs replayed in threads of one process (no lock) give the rows, warnings included, that
+    # they give one at a time, and the truncated log's warning stays on its own row.
+    whole = Path(SHIPPED[-1]) / f"{Path(SHIPPED[-1]).name}.mcap"
+    data = whole.read_bytes()
+    (tmp_path / "half.mcap").write_bytes(data[: len(data) // 2])
+    paths = [str(tmp_path / "half.mcap"), *logs[-3:], str(tmp_path / "half.mcap")]
+
+    def row(path):
+        return dataclasses.replace(replay_one(path, {})[0], elapsed_s=0.0)
+
+    alone = [row(p) for p in paths]
+    with ThreadPoolExecutor(len(paths)) as pool:
+        together = list(pool.map(row, paths))
+    assert together == alone
+    said = [any("truncated" in w for w in r.warnings) for r in together]
+    assert said == [True, False, False, False, True]
 
 
 def test_markdown_summary_and_chart(logs, tmp_path):

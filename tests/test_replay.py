@@ -173,10 +173,10 @@ def test_rates_in_deg_per_s_are_detected_and_converted(tmp_path):
 def test_rates_above_full_scale_without_truth_warn():
     t = np.arange(0, 1, 0.01)
     w = np.tile([100.0, 0, 0], (len(t), 1))  # 100 rad/s = 5700 °/s: above a ±2000 °/s gyro
-    from imu_dcm.replay.clean import _deg_evidence
+    from imu_dcm.gyro.rates import deg_evidence
 
-    assert "above the ±2000 °/s" in _deg_evidence(w, t, np.full((len(t), 4), np.nan))
-    assert _deg_evidence(w / 10, t, np.full((len(t), 4), np.nan)) is None
+    assert "above the ±2000 °/s" in deg_evidence(w, t, np.full((len(t), 4), np.nan))
+    assert deg_evidence(w / 10, t, np.full((len(t), 4), np.nan)) is None
 
 
 def test_without_truth_starts_from_init_quat(tmp_path):

@@ -144,7 +144,7 @@ def test_a_non_finite_estimate_is_an_error_never_a_score(trial, tmp_path, monkey
     from imu_dcm.replay import core
 
     monkeypatch.setattr(
-        core, "integrate_quat", lambda w, t, q0, method: np.full((len(t), 4), np.nan)
+        core, "integrate_quat", lambda w, t, q0, method, **kw: np.full((len(t), 4), np.nan)
     )
     with raises_naming(LogError, "NaN", "/imu/data"):
         _run(SHIPPED)
@@ -304,7 +304,7 @@ def test_header_stamps_that_do_not_increase_use_log_time(trial, tmp_path):
 
 
 def test_lagged_correlation_equals_numpy_corrcoef_per_lag():
-    from imu_dcm.replay.truth import lagged_correlation
+    from imu_dcm.replay.rate_check import lagged_correlation
 
     rng = np.random.default_rng(5)
     n, lags = 500, 40

@@ -15,7 +15,7 @@ from scipy.spatial.transform import Rotation
 from imu_dcm.logio import read_log
 from imu_dcm.replay import replay
 from imu_dcm.replay.convention import choose_convention, convert
-from imu_dcm.replay.truth import check_truth
+from imu_dcm.replay.rate_check import check_truth
 
 TRIAL = REPO_ROOT / "replay" / "broad_07_undisturbed_fast_rotation_B"
 

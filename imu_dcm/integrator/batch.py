@@ -41,7 +41,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from imu_dcm.arrays import median
-from imu_dcm.errors import GapWarning, ImuDcmWarning, InputError
+from imu_dcm.errors import Diagnostics, GapWarning, ImuDcmWarning, InputError, say
 from imu_dcm.integrator.methods import DELTA_METHODS, GAP_FACTOR, METHODS, DeltaMethod, Method
 from imu_dcm.so3 import as_quat_xyzw
 
@@ -81,6 +81,7 @@ def check_samples(
     n_extra_stamps: int = 0,
     *,
     stacklevel: int = 3,
+    diagnostics: Diagnostics | None = None,
 ) -> tuple[NDArray, NDArray, NDArray]:
     """Validate ``(N, 3)`` samples and their stamps; return float64 arrays and the steps.
 
@@ -96,6 +97,8 @@ def check_samples(
         0 for rates (one stamp per sample), 1 for delta angles (stamps bound the intervals).
     stacklevel : int
         The GapWarning's stack level, counted from this function (3: its caller's caller).
+    diagnostics : Diagnostics, optional
+        Where the GapWarning goes instead of being warned (the caller's result carries it).
 
     Returns
     -------
@@ -147,7 +150,7 @@ def check_samples(
             f"{float(t[order - 1])!r} s"
         )
     if dt_max > GAP_FACTOR * dt_min:  # else no step can exceed GAP_FACTOR x the median
-        _warn_gaps(t, stacklevel)
+        _warn_gaps(t, stacklevel, diagnostics)
     return v, t, np.diff(t)
 
 
@@ -185,10 +188,10 @@ def gap_message(gaps: tuple[tuple[float, float], ...], factor: float = GAP_FACTO
     return f"{len(gaps)} gap(s) longer than {factor:g}x the median step at {listed}{more}"
 
 
-def _warn_gaps(t: NDArray, stacklevel: int = 3) -> None:
+def _warn_gaps(t: NDArray, stacklevel: int = 3, diagnostics: Diagnostics | None = None) -> None:
     gaps = find_gaps(t)
     if gaps:
-        warnings.warn(gap_message(gaps), GapWarning, stacklevel=stacklevel + 1)
+        say(diagnostics, gap_message(gaps), GapWarning, stacklevel=stacklevel + 1)
 
 
 def check_method(method: str, allowed: tuple[str, ...]) -> None:
@@ -196,8 +199,9 @@ def check_method(method: str, allowed: tuple[str, ...]) -> None:
         raise InputError(f"Expected method in {allowed}, got {method!r}")
 
 
-def warn_rotvec_sum(stacklevel: int = 3) -> None:
-    warnings.warn(
+def warn_rotvec_sum(stacklevel: int = 3, diagnostics: Diagnostics | None = None) -> None:
+    say(
+        diagnostics,
         "method 'rotvec_sum' adds rotation vectors (q_0 ⊗ exp(Σ dt ω)); it is wrong "
         "whenever the rotation axis moves in the body",
         ImuDcmWarning,
@@ -279,23 +283,28 @@ def integrate(
 
 
 def integrate_quat(
-    omega_b: ArrayLike, t_s: ArrayLike, q0: ArrayLike | Rotation, method: str = "magnus4"
+    omega_b: ArrayLike,
+    t_s: ArrayLike,
+    q0: ArrayLike | Rotation,
+    method: str = "magnus4",
+    *,
+    diagnostics: Diagnostics | None = None,
 ) -> NDArray[np.float64]:
     """:func:`integrate` as an ``(N, 4)`` array of ``[x, y, z, w]`` quaternions ``q_w_b``
     (unit to rounding, row 0 is ``q0``), without building a scipy ``Rotation``: the replay and
     live commands take this path and never import scipy's rotations. Same arguments, checks and
-    warnings as :func:`integrate`."""
-    return _integrate_rows(omega_b, t_s, q0, method)
+    warnings as :func:`integrate`; with ``diagnostics`` the warnings go there instead."""
+    return _integrate_rows(omega_b, t_s, q0, method, diagnostics)
 
 
-def _integrate_rows(omega_b, t_s, q0, method: str) -> NDArray[np.float64]:
+def _integrate_rows(omega_b, t_s, q0, method: str, diagnostics=None) -> NDArray[np.float64]:
     """Check, then run the kernel: the body of :func:`integrate` and :func:`integrate_quat`
     (their warnings name their caller: three frames up from here)."""
     check_method(method, METHODS)
-    omega, t, _dt = check_samples(omega_b, t_s, stacklevel=4)
+    omega, t, _dt = check_samples(omega_b, t_s, stacklevel=4, diagnostics=diagnostics)
     q_first = as_quat_xyzw(q0)
     if method == "rotvec_sum":
-        warn_rotvec_sum(stacklevel=4)
+        warn_rotvec_sum(stacklevel=4, diagnostics=diagnostics)
     return _rate_run(omega, t, q_first, method)
 
 

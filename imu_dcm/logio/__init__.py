@@ -18,6 +18,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from imu_dcm.errors import Diagnostics
 from imu_dcm.logio.heap import release_freed_memory
 from imu_dcm.logio.meta import read_custom_data
 from imu_dcm.logio.registry import READERS, find_logs, open_log, resolve_mcap_path
@@ -59,6 +60,7 @@ def read_log(
     truth_topic: str | None = None,
     truth_frame: str | None = None,
     progress: ProgressCallback | None = None,
+    diagnostics: Diagnostics | None = None,
 ) -> LogData:
     """Read the gyro samples and the reference attitude of a log, whatever its container.
 
@@ -86,6 +88,8 @@ def read_log(
         The child frame of the ``/tf`` transform to use as truth (where several move).
     progress : callable(fraction), optional
         Called as the file is read with the fraction done (for a progress bar).
+    diagnostics : Diagnostics, optional
+        Where the warnings below go instead of being warned (the caller's result carries them).
 
     Returns
     -------
@@ -107,6 +111,6 @@ def read_log(
         lost), or messages did not decode.
     """
     source = open_log(path, progress)
-    log = source.read(ReadRequest(imu_topic, truth_topic, truth_frame, progress))
+    log = source.read(ReadRequest(imu_topic, truth_topic, truth_frame, progress, diagnostics))
     release_freed_memory()  # the decoding's freed batches: ~400 MB after a 1 h log
     return log

@@ -2,11 +2,10 @@
 
 from __future__ import annotations
 
-import warnings
 from collections.abc import Sequence
 from pathlib import Path
 
-from imu_dcm.errors import ImuDcmWarning
+from imu_dcm.errors import Diagnostics, ImuDcmWarning, say
 from imu_dcm.logio.types import Damage
 
 __all__ = ["damage_summary", "warn_damage"]
@@ -28,13 +27,18 @@ def damage_summary(damage: Sequence[Damage]) -> str:
     )
 
 
-def warn_damage(path: Path, damage: Sequence[Damage], stacklevel: int = 3) -> str | None:
+def warn_damage(
+    path: Path,
+    damage: Sequence[Damage],
+    stacklevel: int = 3,
+    diagnostics: Diagnostics | None = None,
+) -> str | None:
     """Warn once that ``path`` is truncated or corrupt (once the log is known to be usable, so
-    that an error is the only line otherwise); returns the summary, or None without damage."""
+    that an error is the only line otherwise), or add it to ``diagnostics``; returns the
+    summary, or None without damage."""
     if not damage:
         return None
     summary = damage_summary(damage)
-    warnings.warn(
-        f"{path.name} is truncated or corrupt: {summary}", ImuDcmWarning, stacklevel=stacklevel + 1
-    )
+    said = f"{path.name} is truncated or corrupt: {summary}"
+    say(diagnostics, said, ImuDcmWarning, stacklevel=stacklevel + 1)
     return summary

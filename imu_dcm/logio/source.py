@@ -14,6 +14,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Protocol, runtime_checkable
 
+from imu_dcm.errors import Diagnostics
 from imu_dcm.logio.types import LogData
 
 __all__ = ["LogSource", "ProgressCallback", "ReadRequest", "SourceEntry"]
@@ -34,12 +35,15 @@ class ReadRequest:
         reads no truth.
     truth_frame : str or None — the child frame of a ``/tf`` transform to use as truth.
     progress : callable(fraction) or None — called as the log is read.
+    diagnostics : Diagnostics or None — where the reader's warnings go (damage skipped,
+        messages that do not decode); None warns them.
     """
 
     imu_topic: str | None = None
     truth_topic: str | None = None
     truth_frame: str | None = None
     progress: ProgressCallback | None = None
+    diagnostics: Diagnostics | None = None
 
 
 @runtime_checkable

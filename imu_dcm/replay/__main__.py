@@ -20,7 +20,9 @@ import argparse
 import contextlib
 import dataclasses
 import os
+import signal
 import sys
+import threading
 import warnings
 from pathlib import Path
 
@@ -28,8 +30,13 @@ from imu_dcm.app.options import OneLineArgumentParser
 from imu_dcm.app.progress import Progress
 from imu_dcm.app.rerun_mode import check_rerun_mode, rerun_save_path
 from imu_dcm.app.run import run_main
-from imu_dcm.errors import ImuDcmError, InputError
+from imu_dcm.errors import Diagnostics, ImuDcmError, InputError
 from imu_dcm.replay.options import LOG_KINDS, add_replay_options, replay_keywords
+
+# The modules imported inside functions load numpy and the rest of the numerical stack (each
+# ~80 ms of CPU on top of --help's ~65 ms; the comparison ~330 ms), which --help and a bad
+# option never pay for; or, like imu_dcm.outputs, only the options that write a file need them
+# (a plain replay imports no writer: tests/test_replay_imports.py).
 
 PROG = "imu-dcm-replay"
 
@@ -166,9 +173,6 @@ def _show(result, mode: str | None, realtime: bool, keep: bool, claim=None) -> t
 def _serve_until_stopped(served) -> int:
     """Print the viewer's URL, then wait for Ctrl-C, SIGTERM or the server's own exit; returns
     the signal that ended the wait (0: the server exited), for the exit code 128 + signal."""
-    import signal
-    import threading
-
     stop = threading.Event()
     got = []
     signals = (signal.SIGINT, signal.SIGTERM)
@@ -242,9 +246,7 @@ def _not_a_folder_of_logs(log: str) -> None:
         return
     from imu_dcm.replay.batch import find_logs
 
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        found = find_logs([log])
+    found = find_logs([log], diagnostics=Diagnostics())  # what it skips is batch's to say
     if len(found) > 1:  # a folder holding one log file is that log (the reader opens it)
         n = len(found)
         raise InputError(

@@ -1,10 +1,11 @@
 """Replay many logs at once: on all cores of this machine, or on a Dask cluster.
 
 ``python -m imu_dcm.replay batch PATH... --table OUT.csv [--jobs N | --dask ADDRESS]`` or
-:func:`replay_many`. Every log runs through :func:`replay_one` (the same function in a process
-pool, in a Dask worker, or in this process for ``jobs=1``), which never raises: a log that fails
-gives a row carrying its one-line error. Rows are appended to the table as they arrive (see
-:mod:`imu_dcm.replay.table`), so ``resume=True`` picks up a batch that was killed.
+:func:`replay_many`. Every log runs through :func:`imu_dcm.replay.batch_log.replay_one` (the
+same function in a process pool, in a Dask worker, or in this process for ``jobs=1``), which
+never raises: a log that fails gives a row carrying its one-line error. Rows are appended to
+the table as they arrive (see :mod:`imu_dcm.replay.table`), so ``resume=True`` picks up a
+batch that was killed.
 
 Workers run one log at a time with one BLAS thread each, and send back only the row and a
 decimated error curve, so a worker's memory is what that log's replay needs.
@@ -14,20 +15,21 @@ from __future__ import annotations
 
 import contextlib
 import dataclasses
+import importlib
 import os
-import threading
-import time
 import warnings
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from imu_dcm.app.run import one_line
-from imu_dcm.errors import ImuDcmWarning, InputError
+from imu_dcm._kernels import backend
+from imu_dcm.errors import Diagnostics, ImuDcmWarning, InputError, say
 from imu_dcm.logio import find_logs as find_logs_in
 from imu_dcm.logio.registry import convert_hint, not_logs
-from imu_dcm.replay.kinds import truth_kind
+from imu_dcm.outputs import OutputError, claim_output
+from imu_dcm.replay.batch_chart import INSTALL_HINT, chart_available, write_chart
+from imu_dcm.replay.batch_log import per_method, replay_compare, replay_one
 from imu_dcm.replay.runners import LOST, run_dask, run_local
 from imu_dcm.replay.table import (
     Curve,
@@ -35,7 +37,6 @@ from imu_dcm.replay.table import (
     append_curve,
     append_rows,
     curves_path,
-    decimate_curve,
     markdown_path,
     read_curves,
     read_table,
@@ -48,19 +49,10 @@ from imu_dcm.replay.table import (
     write_table,
 )
 
-__all__ = [
-    "BatchResult",
-    "claim_batch_outputs",
-    "find_logs",
-    "replay_compare",
-    "replay_many",
-    "replay_one",
-    "row_from_result",
-]
+__all__ = ["BatchResult", "claim_batch_outputs", "find_logs", "preload", "replay_many"]
 
 #: Files read as lists of logs (one path a line, relative to the list; ``#`` comments).
 LIST_SUFFIXES = (".txt", ".list", ".lst")
-_ONE_AT_A_TIME = threading.Lock()  # warnings are process-global: one replay per process
 
 
 @dataclass(frozen=True)
@@ -84,14 +76,17 @@ class BatchResult:
 
 
 # ------------------------------------------------------------------------------ inputs
-def find_logs(paths: Iterable[str | Path]) -> list[str]:
+
+
+def find_logs(paths: Iterable[str | Path], *, diagnostics: Diagnostics | None = None) -> list[str]:
     """The logs named by ``paths``, as absolute paths, each once, in the order found.
 
     A folder the reader takes as one log (a bag, a EuRoC dataset) is a log; another folder is
     searched (sorted, hidden entries skipped) by :func:`imu_dcm.logio.find_logs`; a ``.txt`` /
     ``.list`` file lists paths, one a line (relative to the list's folder; blank lines and
     ``#`` comments skipped); anything else, including a path that does not exist, is taken as a
-    log (and gets an error row if it is not one).
+    log (and gets an error row if it is not one). A searched folder's files that are not logs
+    are warned (or added to ``diagnostics``), one line a folder.
     """
     out: dict[str, None] = {}
 
@@ -100,7 +95,7 @@ def find_logs(paths: Iterable[str | Path]) -> list[str]:
             found = list(find_logs_in(p))
             said = _skipped(p, found)
             if said:
-                warnings.warn(said, ImuDcmWarning, stacklevel=3)
+                say(diagnostics, said, ImuDcmWarning, stacklevel=3)
             out.update((os.path.abspath(f), None) for f in found)
         elif p.suffix in LIST_SUFFIXES and p.is_file() and not from_list:
             for line in p.read_text().splitlines():
@@ -143,6 +138,8 @@ def _size(path: str) -> int:
 
 
 # --------------------------------------------------------------------------- one log
+
+
 #: Modules the readers import on first use, when installed (preloaded with the replay).
 _READER_MODULES = ("yaml", "zstandard")
 
@@ -152,10 +149,6 @@ def preload() -> None:
     compiled kernel, once in this process, so that workers forked from it start with them
     instead of each paying the imports on its first log (about 0.3 s a worker, which on many
     small logs costs more than the logs)."""
-    import importlib
-
-    from imu_dcm._kernels import backend
-    from imu_dcm.replay import core  # noqa: F401
 
     backend()
     for name in _READER_MODULES:
@@ -163,141 +156,9 @@ def preload() -> None:
             importlib.import_module(name)
 
 
-def row_from_result(path: str, result, warnings_seen: Iterable[str], elapsed_s: float) -> LogRow:
-    """The table row of one replay result (the one place that reads a replay's summary).
-
-    ``dropped`` sums every ``dropped_*`` count of the :class:`ReplaySummary`; warnings are the
-    replay's own plus those it raised, each once.
-    """
-    s = result.summary
-    bx, by, bz = (float(b) for b in s.bias_rad_s)
-    dropped = sum(v for k, v in vars(s).items() if k.startswith("dropped_"))
-    said = dict.fromkeys(one_line(w) for w in (*s.warnings, *warnings_seen))
-    return LogRow(
-        path=path,
-        samples=int(s.samples),
-        duration_s=float(s.duration_s),
-        rate_hz=float(s.rate_hz),
-        imu_topic=s.imu_topic,
-        truth_topic=s.truth_topic,
-        truth_kind=truth_kind(s.truth_estimate_of if s.truth_topic else None),
-        bias_x_rad_s=bx,
-        bias_y_rad_s=by,
-        bias_z_rad_s=bz,
-        rms_error_deg=s.rms_error_deg,
-        max_error_deg=s.max_error_deg,
-        rms_inclination_deg=s.rms_inclination_deg,
-        max_inclination_deg=s.max_inclination_deg,
-        rms_heading_deg=s.rms_heading_deg,
-        max_heading_deg=s.max_heading_deg,
-        dropped=int(dropped),
-        gaps=len(s.gaps),
-        warnings=tuple(said),
-        elapsed_s=float(elapsed_s),
-    )
-
-
-def replay_one(path: str, options: Mapping[str, Any]) -> tuple[LogRow, Curve | None]:
-    """Replay one log with ``options`` (keywords of :func:`imu_dcm.replay.replay`); never raises
-    an ``Exception``: a failure gives a row with ``error`` set and no curve.
-
-    Returns the row and the log's total error over time, decimated (None without truth).
-    """
-    rows, curves = _replay_rows(path, options, None)
-    return rows[0], (curves[0] if curves else None)
-
-
-def replay_compare(
-    path: str, options: Mapping[str, Any]
-) -> tuple[tuple[LogRow, ...], tuple[Curve, ...]]:
-    """:func:`replay_one` with ``options["compare"]``, a tuple of method names: the log is
-    replayed once, then every method integrates the same rates from the same start
-    (:func:`imu_dcm.replay.compare.compare_methods`, as the single-log ``--compare``).
-
-    Returns one row per method, in the order given (``method`` and ``ns_per_sample`` set; the
-    replay's own method's row is the replay's row), and their curves keyed by
-    :func:`~imu_dcm.replay.table.row_label`. A failure gives every method a row with the error.
-    """
-    options = dict(options)
-    names = tuple(options.pop("compare"))
-    return _replay_rows(path, options, names)
-
-
-def _replay_rows(path: str, options: Mapping[str, Any], names: tuple[str, ...] | None):
-    """The rows and curves of one log: one row (names None) or one per method of ``names``."""
-    t0 = time.perf_counter()
-    with _ONE_AT_A_TIME, warnings.catch_warnings(record=True) as caught:
-        warnings.resetwarnings()
-        warnings.simplefilter("ignore")  # library deprecations are not the log's business
-        warnings.simplefilter("always", UserWarning)  # ImuDcmWarning and kin
-        warnings.simplefilter("always", RuntimeWarning)
-        try:
-            from imu_dcm.replay.core import replay
-
-            result = replay(path, **options)
-            compared = None
-            if names is not None:
-                from imu_dcm.replay.compare import compare_methods
-
-                compared = compare_methods(result, names)
-            row = row_from_result(
-                path, result, (str(w.message) for w in caught), time.perf_counter() - t0
-            )
-        except Exception as exc:
-            said = tuple(dict.fromkeys(one_line(str(w.message)) for w in caught))
-            error = f"{type(exc).__name__}: {one_line(str(exc))}"
-            failed = LogRow(path, warnings=said, elapsed_s=time.perf_counter() - t0, error=error)
-            return per_method(failed, names), ()
-    if compared is None:
-        curves = ()
-        if row.rms_error_deg is not None:
-            curves = (decimate_curve(path, result.t_s, result.error.total_deg),)
-        return (row,), curves
-    return _compared_rows(row, result, compared)
-
-
-def per_method(row: LogRow, names: tuple[str, ...] | None) -> tuple[LogRow, ...]:
-    """``row`` once (names None) or once per method of ``names``, each with its method set."""
-    if names is None:
-        return (row,)
-    return tuple(dataclasses.replace(row, method=n) for n in names)
-
-
-def _compared_rows(row: LogRow, result, compared) -> tuple[tuple[LogRow, ...], tuple[Curve, ...]]:
-    """One row and curve per method: the replay's own method keeps the replay's figures, every
-    other method gets its statistics from the comparison (the same the single-log
-    ``--compare`` prints); heading-only truth scores the heading, as the replay does."""
-    planar = result.summary.scored_on == "heading"
-    rows, curves = [], []
-    for c in compared:
-        r = dataclasses.replace(row, method=c.name, ns_per_sample=float(c.ns_per_sample))
-        if c.name != result.summary.method:
-            ev = c.evaluation
-            tot = None if ev is None else ev["heading_deg" if planar else "total_deg"]
-            inc = None if ev is None or planar else ev["inclination_deg"]
-            head = None if ev is None else ev["heading_deg"]
-            r = dataclasses.replace(
-                r,
-                rms_error_deg=_stat(tot, "rms"),
-                max_error_deg=_stat(tot, "max"),
-                rms_inclination_deg=_stat(inc, "rms"),
-                max_inclination_deg=_stat(inc, "max"),
-                rms_heading_deg=_stat(head, "rms"),
-                max_heading_deg=_stat(head, "max"),
-            )
-        rows.append(r)
-        if r.rms_error_deg is not None:
-            own = c.name == result.summary.method
-            error = result.error.total_deg if own else c.error.total_deg
-            curves.append(decimate_curve(row_label(r), result.t_s, error))
-    return tuple(rows), tuple(curves)
-
-
-def _stat(stats: dict | None, name: str) -> float | None:
-    return None if stats is None else float(stats[name])
-
-
 # ---------------------------------------------------------------------------- driver
+
+
 def replay_many(
     paths: Iterable[str | Path],
     table: str | Path | None = None,
@@ -405,7 +266,7 @@ def _compare_names(compare: Sequence[str] | None, options: dict) -> tuple[str, .
     workers' ``options`` (None without them)."""
     if compare is None:
         return None
-    from imu_dcm.replay.compare import parse_compare
+    from imu_dcm.replay.compare import parse_compare  # lazy: see batch_log._replay_rows
 
     options["compare"] = parse_compare(",".join(compare))
     return options["compare"]
@@ -414,8 +275,6 @@ def _compare_names(compare: Sequence[str] | None, options: dict) -> tuple[str, .
 def _chart_path(chart: str | Path | None, table: str | Path | None) -> Path | None:
     """Where the chart goes: ``"auto"`` beside the table when matplotlib is installed (a warning
     when it is not), a path as given (matplotlib required), or nowhere."""
-    from imu_dcm.replay.batch_chart import INSTALL_HINT, chart_available
-
     if chart == "auto":
         if table is not None and chart_available():
             return Path(table).with_suffix(".png")
@@ -442,8 +301,6 @@ def claim_batch_outputs(
     before any log is read: each new or this tool's own file of its kind (header row, comment
     line, JSON lines, PNG metadata), never an input, inside an input folder or a symbolic link;
     the table, its markdown and its curves regular files (they are appended to and read)."""
-    from imu_dcm.outputs import OutputError, claim_output
-
     beside = []
     if table is not None:
         beside = [(table, "table", "--table"), (markdown_path(table), "markdown", None)]
@@ -550,8 +407,6 @@ def _write_outputs(
 ) -> tuple[Path | None, Path | None]:
     """Rewrite the table and its curves in input order, with the markdown beside them; draw the
     chart. Returns the markdown and the chart written (None when not asked for)."""
-    from imu_dcm.replay.batch_chart import write_chart
-
     md = None
     curves = new_curves
     if table is not None:

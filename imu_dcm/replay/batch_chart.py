@@ -13,6 +13,8 @@ from pathlib import Path
 
 import numpy as np
 
+from imu_dcm.outputs import claim_output, claimed_path
+from imu_dcm.outputs.signatures import signature
 from imu_dcm.replay.table import Curve, LogRow, short_names, summary_line
 
 __all__ = ["INSTALL_HINT", "chart_available", "write_chart"]
@@ -35,8 +37,6 @@ def write_chart(path: str | Path, rows: Sequence[LogRow], curves: dict[str, Curv
     error over time of every log with a curve, deg, log scale, seconds since each log's first
     sample.
     """
-    from imu_dcm.outputs import claim_output, claimed_path
-    from imu_dcm.outputs.signatures import signature
 
     fig = chart_figure(rows, curves)
     claim = claim_output(path, "chart", what="the chart")  # new or this tool's own PNG

@@ -25,21 +25,25 @@ from __future__ import annotations
 
 import contextlib
 import os
+from dataclasses import dataclass
 
 import numpy as np
+import yaml
 
 from imu_dcm.errors import InputError
+from imu_dcm.metrics import attitude_error_deg
+from imu_dcm.replay.compare import compare_methods
 
 __all__ = ["NoiseParams", "budget", "budget_line", "read_noise_params"]
 
 
+@dataclass(slots=True, frozen=True)
 class NoiseParams:
     """Gyro noise in continuous time: ``N`` rad/s/√Hz, ``K`` rad/s²/√Hz, ``B`` rad/s (or 0)."""
 
-    __slots__ = ("N", "K", "B")
-
-    def __init__(self, N: float, K: float = 0.0, B: float = 0.0) -> None:
-        self.N, self.K, self.B = float(N), float(K), float(B)
+    N: float
+    K: float = 0.0
+    B: float = 0.0
 
 
 def read_noise_params(path: str | os.PathLike) -> NoiseParams:
@@ -51,8 +55,6 @@ def read_noise_params(path: str | os.PathLike) -> NoiseParams:
     InputError
         Unreadable file, or a key missing, not a number or negative.
     """
-    import yaml
-
     try:
         with open(path, encoding="utf-8") as f:
             doc = yaml.safe_load(f)
@@ -93,8 +95,6 @@ def noise_rms_deg(params: NoiseParams, lengths_s: list[float]) -> float:
 
 
 def _angle_rms_deg(q_a, q_b) -> float:
-    from imu_dcm.metrics import attitude_error_deg
-
     ok = np.isfinite(q_a).all(axis=1) & np.isfinite(q_b).all(axis=1)
     if not ok.any():
         return float("nan")
@@ -105,8 +105,6 @@ def _angle_rms_deg(q_a, q_b) -> float:
 def method_rms_deg(result) -> tuple[float, bool]:
     """The method's own error on these samples, deg, and whether it is an order of magnitude
     (``magnus4``: scaled from ``coning``'s)."""
-    from imu_dcm.replay.compare import compare_methods
-
     method = result.summary.method
     scored = np.isfinite(result.error.total_deg)
     if method == "magnus4":

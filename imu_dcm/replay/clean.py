@@ -25,24 +25,22 @@ Rules, in order (all on the rates in rad/s, in file order until the sort):
 
 from __future__ import annotations
 
-import warnings
+from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from imu_dcm.arrays import median, percentile, row_finite
-from imu_dcm.errors import GapWarning, ImuDcmWarning
-from imu_dcm.gyro.rates import FULL_SCALE_RAD_S, MAX_RATE_RAD_S, implausible_rates, truth_rate_ratio
+from imu_dcm.errors import Diagnostics, GapWarning, ImuDcmWarning, say
+from imu_dcm.gyro.rates import MAX_RATE_RAD_S, implausible_rates
 from imu_dcm.gyro.rates import deg_evidence as _deg_evidence  # noqa: F401 - replay.core's
 from imu_dcm.integrator.batch import find_gaps, gap_message
 
 __all__ = [
-    "FULL_SCALE_RAD_S",
     "MAX_RATE_RAD_S",
     "SPIKE_RATIO",
     "CleanedImu",
     "clean_imu",
-    "truth_rate_ratio",
 ]
 
 #: An isolated sample this many times above the log's 99.9th percentile and its neighbours is
@@ -58,54 +56,29 @@ WILD_STAMP_WINDOW = 9
 WILD_STAMP_STEPS = 1000
 
 
+@dataclass(slots=True, frozen=True)
 class CleanedImu:
     """Gyro samples after cleaning, sorted by stamp, with the counts of what was dropped.
 
     ``t_ns`` int64 (N,) strictly increasing; ``omega_b`` float64 (N, 3) finite, rad/s;
     ``index`` int64 (N,) position of each kept sample in the input; gaps as (time s since the
     first kept sample, length s); ``implausible_t_s`` the times of the implausible samples (s
-    since the first kept sample); ``messages`` the warnings it raised, one line each.
-
-    A plain class (not a dataclass: nothing compares or copies it; a dataclass costs the
-    replay's start-up about half a millisecond).
+    since the first kept sample); ``messages`` its warnings, one line each (said as they were
+    found, or added to the caller's diagnostics).
     """
 
-    __slots__ = (
-        "t_ns",
-        "omega_b",
-        "index",
-        "dropped_nonfinite",
-        "dropped_implausible",
-        "dropped_wild_stamp",
-        "dropped_duplicate",
-        "dropped_stamp_conflict",
-        "sorted_out_of_order",
-        "gaps",
-        "implausible_t_s",
-        "messages",
-    )
-
-    def __init__(
-        self,
-        t_ns: NDArray[np.int64],
-        omega_b: NDArray[np.float64],
-        index: NDArray[np.int64],
-        dropped_nonfinite: int,
-        dropped_implausible: int,
-        dropped_wild_stamp: int,
-        dropped_duplicate: int,
-        dropped_stamp_conflict: int,
-        sorted_out_of_order: int,
-        gaps: tuple[tuple[float, float], ...],
-        implausible_t_s: tuple[float, ...],
-        messages: tuple[str, ...] = (),
-    ) -> None:
-        self.t_ns, self.omega_b, self.index = t_ns, omega_b, index
-        self.dropped_nonfinite, self.dropped_implausible = dropped_nonfinite, dropped_implausible
-        self.dropped_wild_stamp, self.dropped_duplicate = dropped_wild_stamp, dropped_duplicate
-        self.dropped_stamp_conflict = dropped_stamp_conflict
-        self.sorted_out_of_order, self.gaps = sorted_out_of_order, gaps
-        self.implausible_t_s, self.messages = implausible_t_s, messages
+    t_ns: NDArray[np.int64]
+    omega_b: NDArray[np.float64]
+    index: NDArray[np.int64]
+    dropped_nonfinite: int
+    dropped_implausible: int
+    dropped_wild_stamp: int
+    dropped_duplicate: int
+    dropped_stamp_conflict: int
+    sorted_out_of_order: int
+    gaps: tuple[tuple[float, float], ...]
+    implausible_t_s: tuple[float, ...]
+    messages: tuple[str, ...] = ()
 
     @property
     def dropped_nonincreasing(self) -> int:
@@ -166,7 +139,13 @@ def _times(t: NDArray[np.int64], t0: int, limit: int = 5) -> str:
     return shown + (f" and {len(t) - limit} more" if len(t) > limit else "")
 
 
-def clean_imu(t_ns: ArrayLike, omega_b: ArrayLike, topic: str = "IMU") -> CleanedImu:
+def clean_imu(
+    t_ns: ArrayLike,
+    omega_b: ArrayLike,
+    topic: str = "IMU",
+    *,
+    diagnostics: Diagnostics | None = None,
+) -> CleanedImu:
     """Apply the cleaning rules of this module to gyro samples in file order.
 
     Parameters
@@ -177,6 +156,8 @@ def clean_imu(t_ns: ArrayLike, omega_b: ArrayLike, topic: str = "IMU") -> Cleane
         Body rates, rad/s, body axes.
     topic : str
         Named in the warnings.
+    diagnostics : Diagnostics, optional
+        Where the warnings go instead of being warned.
 
     Returns
     -------
@@ -219,7 +200,8 @@ def clean_imu(t_ns: ArrayLike, omega_b: ArrayLike, topic: str = "IMU") -> Cleane
     bad = np.sort(np.concatenate(bad_t))
     t0 = int(t[0]) if len(t) else (int(bad[0]) if len(bad) else 0)
 
-    messages, gaps = _report(topic, t, t0, n_bad, bad, n_dup, n_conf, n_wild, wild_t, n_sorted)
+    counts = (n_bad, bad, n_dup, n_conf, n_wild, wild_t, n_sorted)
+    messages, gaps = _report(topic, t, t0, counts, diagnostics)
     return CleanedImu(
         t,
         w,
@@ -260,13 +242,14 @@ def _sort_and_dedupe(t, w, index):
     return t[keep], w[keep], index[keep], n_sorted, n_dup, int(same.sum()) - n_dup
 
 
-def _report(topic, t, t0, n_bad, bad, n_dup, n_conf, n_wild, wild_t, n_sorted):
-    """The cleaning's warnings, one line per rule that acted (raised and returned), and gaps."""
+def _report(topic, t, t0, counts, diagnostics: Diagnostics | None):
+    """The cleaning's warnings, one line per rule that acted (said and returned), and gaps."""
+    n_bad, bad, n_dup, n_conf, n_wild, wild_t, n_sorted = counts
     messages: list[str] = []
 
     def warn(msg: str, cat: type[Warning] = ImuDcmWarning) -> None:
         messages.append(f"{topic}: {msg}")
-        warnings.warn(messages[-1], cat, stacklevel=4)
+        say(diagnostics, messages[-1], cat, stacklevel=4)
 
     if n_bad:
         warn(f"dropped {n_bad} samples with NaN/Inf rates")

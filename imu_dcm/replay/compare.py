@@ -33,7 +33,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from imu_dcm.arrays import row_finite
-from imu_dcm.errors import InputError
+from imu_dcm.errors import Diagnostics, InputError
 from imu_dcm.integrator.batch import integrate_quat
 from imu_dcm.integrator.methods import METHODS
 from imu_dcm.integrator.peers import PEERS
@@ -103,8 +103,10 @@ def _anchors(result) -> list[int]:
 
 
 def _integrator(name: str):
+    """The method or peer as ``fn(omega_b, t_s, q0)``; a method's warnings (the gaps, its
+    own) were said once, by the replay."""
     if name in METHODS:
-        return lambda w, t, q0: integrate_quat(w, t, q0, name)
+        return lambda w, t, q0: integrate_quat(w, t, q0, name, diagnostics=Diagnostics())
     return PEERS[PEER_NAMES[name][0]].fn
 
 
@@ -135,22 +137,16 @@ def compare_methods(result, names: tuple[str, ...]) -> list[CompareRow]:
     ``result`` is a :class:`imu_dcm.replay.summary.ReplayResult`; its estimate's start
     attitudes (``q_est`` at each anchor: the truth there, or the initial attitude) are reused.
     """
-    import warnings
-
-    from imu_dcm.errors import GapWarning
-
     t_s, omega = result.t_s, np.ascontiguousarray(result.omega_b)
     anchors = _anchors(result)
     rows = []
     for name in names:
         fn = _integrator(name)
         a = anchors[0]
-        with warnings.catch_warnings():  # gaps were reported once, by the replay
-            warnings.simplefilter("ignore", GapWarning)
-            k = min(len(t_s), a + _WARMUP)
-            if k - a >= 2:
-                fn(omega[a:k], t_s[a:k], result.q_est[a])  # warm-up: imports, first calls
-            q_est, elapsed = _run(fn, omega, t_s, result.q_est, anchors)
+        k = min(len(t_s), a + _WARMUP)
+        if k - a >= 2:
+            fn(omega[a:k], t_s[a:k], result.q_est[a])  # warm-up: imports, first calls
+        q_est, elapsed = _run(fn, omega, t_s, result.q_est, anchors)
         error, both = _score(q_est, result.q_truth)
         ev = evaluate(t_s, q_est, result.q_truth, both, anchors, error, result.summary.bias_rad_s)
         samples = len(t_s) - anchors[0]

@@ -13,6 +13,8 @@ from __future__ import annotations
 
 import argparse
 import csv
+import shutil
+import tempfile
 import warnings
 from dataclasses import dataclass
 from pathlib import Path
@@ -24,6 +26,7 @@ from imu_dcm.app.options import OneLineArgumentParser
 from imu_dcm.errors import ImuDcmWarning, InputError, LogError
 from imu_dcm.gyro.rest_rule import GRAVITY_M_S2
 from imu_dcm.gyro.stamps import NS_PER_UNIT, timing_doubt
+from imu_dcm.outputs import OutputError, check_output_dir, check_output_file, ensure_parent
 
 __all__ = ["TIME_UNITS_NS", "CsvColumns", "convert_csv", "convert_main", "read_csv_columns"]
 
@@ -274,8 +277,6 @@ def convert_csv(
     ``imu_dcm.estimate_of:<truth_topic>`` = ``"<who>'s own estimate"``, which the reader gives
     as the truth's ``estimate_of`` (:data:`imu_dcm.logio.ros.truth.ESTIMATE_OF_KEY`).
     """
-    from imu_dcm.outputs import check_output_dir
-
     inputs = tuple(x for x in (csv_path, truth_csv) if x is not None)
     single = str(out_dir).endswith(".mcap")
     if single:
@@ -351,7 +352,6 @@ def _write_folder(out, cols, t_q, q, custom, imu_topic, truth_topic, frame_id, f
 def _check_mcap_output(out: Path, inputs: tuple, force: bool) -> None:
     """A ``.mcap`` output: a new file, or with ``force`` one this project's writer wrote."""
     from imu_dcm.logio.writers import OWN_LIBRARY
-    from imu_dcm.outputs import OutputError, check_output_file
 
     check_output_file(out, inputs, what="output MCAP file")
     if out.exists():
@@ -364,11 +364,8 @@ def _check_mcap_output(out: Path, inputs: tuple, force: bool) -> None:
 
 def _write_mcap_file(out, cols, t_q, q, custom, imu_topic, truth_topic, frame_id, force, inputs):
     """The bag written into a temporary sibling folder, its ``.mcap`` renamed to ``out``."""
-    import shutil
-    import tempfile
 
     from imu_dcm.logio.writers import write_bag
-    from imu_dcm.outputs import ensure_parent
 
     ensure_parent(out, "output MCAP file")
     tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.", dir=out.parent))

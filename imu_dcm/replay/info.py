@@ -26,7 +26,9 @@ from pathlib import Path
 
 import numpy as np
 
+from imu_dcm.app.options import OneLineArgumentParser
 from imu_dcm.integrator.batch import find_gaps, gap_message
+from imu_dcm.logio import read_log
 from imu_dcm.logio.intervals import declared_intervals
 from imu_dcm.replay.kinds import ESTIMATE, POSITIONS, truth_kind
 
@@ -216,8 +218,6 @@ def log_info(path: str | Path) -> LogInfo:
     LogError
         What the replay would refuse (no gyro, an unreadable container), in one line.
     """
-    from imu_dcm.logio import read_log
-
     data = read_log(path)
     imu = data.imu
     t0 = int(imu.t_ns.min()) if len(imu.t_ns) else 0
@@ -310,7 +310,6 @@ def format_info(info: LogInfo) -> list[str]:
 
 def info_main(argv: list[str], prog: str) -> int:
     """The ``info`` sub-command: prints :func:`format_info`, or the JSON with ``--json``."""
-    from imu_dcm.app.options import OneLineArgumentParser
 
     p = OneLineArgumentParser(
         prog=f"{prog} info",

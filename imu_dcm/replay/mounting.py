@@ -2,7 +2,7 @@
 
 A gyro bolted to a body at a fixed rotation ``R_TG`` measures ``omega_G = R_TGᵀ omega_T``, where
 ``omega_T`` is the body rate in the truth's body frame. Over the steps of a time grid (at the
-best time shift of the truth, :func:`imu_dcm.replay.truth.check_truth`), the gyro's rotation
+best time shift of the truth, :func:`imu_dcm.replay.rate_check.check_truth`), the gyro's rotation
 vector ``a_k`` and the truth's body-frame rotation vector ``b_k`` satisfy ``b_k = R_TG a_k``:
 Wahba's problem, solved by the SVD of ``H = Σ a_k b_kᵀ`` (Kabsch, with the sign fixed so that
 ``det R = +1``).
@@ -28,7 +28,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from imu_dcm.arrays import row_finite
-from imu_dcm.replay.truth import rate_grid
+from imu_dcm.replay.rate_check import rate_grid
 from imu_dcm.so3 import exp_matrix, quat_angle_rad, quat_as_matrix, quat_from_matrix, quat_normalize
 
 __all__ = ["APPLY_DEG", "Mounting", "axis_permutation", "estimate_mounting"]

@@ -29,7 +29,7 @@ given quaternion is applied and compared with both.
 
 from __future__ import annotations
 
-from dataclasses import asdict
+from dataclasses import asdict, dataclass
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -58,6 +58,7 @@ def _bare(frame: str) -> str:
     return frame.strip().lstrip("/")
 
 
+@dataclass(slots=True, frozen=True)
 class TfMounting:
     """The mounting composed from ``/tf_static``.
 
@@ -69,23 +70,13 @@ class TfMounting:
     body_frame_from : "child_frame_id" (the truth names it) or "static root" (the root of the
         static tree above the IMU's frame; the truth names no body frame).
     chain : frames from ``body_frame`` to ``imu_frame`` along the static tree.
-
-    This and :class:`MountingChoice` are plain classes (nothing compares or copies them; a
-    dataclass costs the replay's start-up about half a millisecond).
     """
 
-    __slots__ = ("mounting", "imu_frame", "body_frame", "body_frame_from", "chain")
-
-    def __init__(
-        self,
-        mounting: Mounting,
-        imu_frame: str,
-        body_frame: str,
-        body_frame_from: str,
-        chain: tuple[str, ...],
-    ) -> None:
-        self.mounting, self.imu_frame, self.body_frame = mounting, imu_frame, body_frame
-        self.body_frame_from, self.chain = body_frame_from, chain
+    mounting: Mounting
+    imu_frame: str
+    body_frame: str
+    body_frame_from: str
+    chain: tuple[str, ...]
 
 
 def _parents(static: tuple[StaticTransform, ...]) -> dict[str, tuple[str, NDArray]]:
@@ -186,6 +177,7 @@ def disagreement_deg(declared: Mounting, est: Mounting) -> tuple[float, str]:
     return float(np.degrees(np.arctan2(np.linalg.norm(np.cross(a, b)), a @ b))), "axis"
 
 
+@dataclass(slots=True, frozen=True)
 class MountingChoice:
     """The mounting a replay applies, what its summary reports, and its one line.
 
@@ -199,18 +191,11 @@ class MountingChoice:
     line : str — the one line to say ("" when there is nothing to say).
     """
 
-    __slots__ = ("applied", "reported", "used", "tf", "line")
-
-    def __init__(
-        self,
-        applied: Mounting | None,
-        reported: Mounting | None,
-        used: str,
-        tf: dict | None,
-        line: str,
-    ) -> None:
-        self.applied, self.reported, self.used = applied, reported, used
-        self.tf, self.line = tf, line
+    applied: Mounting | None
+    reported: Mounting | None
+    used: str
+    tf: dict | None
+    line: str
 
 
 def _motion(est: Mounting) -> str:

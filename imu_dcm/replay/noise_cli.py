@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import argparse
 import os
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -46,14 +47,22 @@ def build_parser() -> argparse.ArgumentParser:
     return p
 
 
+@dataclass(slots=True, frozen=True)
 class NoiseReport:
-    """What ``noise`` found: the stretch used, its rate and one :class:`AllanFit` per axis."""
+    """What ``noise`` found: the stretch used, its rate and one :class:`AllanFit` per axis.
 
-    __slots__ = ("topic", "rate_hz", "start_s", "end_s", "samples", "whole", "fits")
+    ``topic`` the IMU channel; ``rate_hz`` its rate over the stretch; ``start_s``, ``end_s``
+    the stretch (s since the first sample); ``samples`` its length; ``whole`` True when the
+    stretch is the whole log (all rest); ``fits`` one ``AllanFit`` per axis (x, y, z).
+    """
 
-    def __init__(self, topic, rate_hz, start_s, end_s, samples, whole, fits) -> None:
-        self.topic, self.rate_hz, self.start_s, self.end_s = topic, rate_hz, start_s, end_s
-        self.samples, self.whole, self.fits = samples, whole, fits
+    topic: str
+    rate_hz: float
+    start_s: float
+    end_s: float
+    samples: int
+    whole: bool
+    fits: tuple
 
     def largest(self, term: str):
         """The axis term with the largest value (Kalibr takes one per sensor)."""
@@ -69,6 +78,9 @@ def measure_noise(path: str, imu_topic: str | None = None, gyro_units: str = "ra
         No rest in the log, or a rest too short for an Allan deviation.
     """
     from imu_dcm.gyro.allan import allan_deviation, fit_noise, octave_clusters
+
+    # lazy: the readers ~20 ms of CPU, the Allan fit, bias and cleaning ~11 ms, which
+    # `noise --help` and a bad option never need
     from imu_dcm.logio import read_log
     from imu_dcm.replay.bias import estimate_bias
     from imu_dcm.replay.clean import clean_imu

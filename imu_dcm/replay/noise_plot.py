@@ -9,7 +9,8 @@ from pathlib import Path
 import numpy as np
 
 from imu_dcm.gyro.allan import B_FACTOR
-from imu_dcm.replay.plot import _figure
+from imu_dcm.outputs import save_figure
+from imu_dcm.replay.plot import new_figure
 
 __all__ = ["plot_allan"]
 
@@ -23,9 +24,7 @@ def plot_allan(report, path: str | os.PathLike, name: str) -> Path:
     ``0.664 B`` and the +½ line ``K √(τ/3)`` (dashed where the record does not reach it), each
     read-off point marked.
     """
-    from imu_dcm.outputs import save_figure
-
-    fig = _figure(9.0, 6.5)
+    fig = new_figure(9.0, 6.5)
     ax = fig.subplots()
     for axis, f, colour in zip("xyz", report.fits, _COLOURS, strict=True):
         tau = f.tau_s

@@ -23,9 +23,9 @@ import numpy as np
 from numpy.typing import NDArray
 
 from imu_dcm.errors import InputError
-from imu_dcm.outputs import claim_output
+from imu_dcm.outputs import claim_output, save_figure
 
-__all__ = ["PLOT_EXTRA", "check_plot", "plot_compare", "plot_replay"]
+__all__ = ["PLOT_EXTRA", "check_plot", "new_figure", "plot_compare", "plot_replay"]
 
 #: What installs matplotlib for ``--plot``.
 PLOT_EXTRA = "pip install 'imu_dcm[plot]'"
@@ -58,7 +58,8 @@ def check_plot(path: str, inputs, flag: str = "--plot"):
     return claim_output(path, "figure", inputs, what=f"{flag} file")
 
 
-def _figure(width_in: float, height_in: float):
+def new_figure(width_in: float, height_in: float):
+    """A headless matplotlib figure, inches (matplotlib, an optional extra, loads here)."""
     import matplotlib
 
     matplotlib.use("Agg", force=False)  # headless; a figure never opens a window
@@ -216,9 +217,7 @@ def plot_replay(result, path: str | os.PathLike) -> Path:
 
     Written whole or not at all (:func:`imu_dcm.outputs.save_figure`); returns the path.
     """
-    from imu_dcm.outputs import save_figure
-
-    fig = _figure(12.0, 7.0)
+    fig = new_figure(12.0, 7.0)
     top, bottom = fig.subplots(2, 1, sharex=True, height_ratios=(3, 2))
     _error_panel(top, result)
     _gyro_panel(bottom, result)
@@ -248,9 +247,7 @@ def plot_compare(result, errors: Mapping[str, NDArray], path: str | os.PathLike)
     Each line is the error's RMS over 400 equal time bins, so that methods whose errors
     oscillate over each other stay apart; a log scale when the methods' RMS differ by over 30x.
     """
-    from imu_dcm.outputs import save_figure
-
-    fig = _figure(12.0, 5.5)
+    fig = new_figure(12.0, 5.5)
     ax = fig.subplots()
     t = result.t_s
     for a, b in _scored_spans(result):

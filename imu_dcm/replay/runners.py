@@ -1,7 +1,7 @@
 """Where the logs of a batch run: in this process, in a process pool, or on a Dask cluster.
 
 Each runner calls ``fn(path, options) -> (row, curve)`` once per log (``fn`` must not raise and
-must be importable by name, e.g. :func:`imu_dcm.replay.batch.replay_one`) and yields the results
+must be importable by name, e.g. :func:`imu_dcm.replay.batch_log.replay_one`) and yields the results
 as they finish, in completion order. Workers get one BLAS/OpenMP thread each.
 """
 
@@ -151,8 +151,8 @@ def run_dask(fn: PerLog, paths: list[str], options: Mapping[str, Any], dask) -> 
         threaded = sum(w.get("nthreads", 1) > 1 for w in workers)
         if threaded:
             warnings.warn(
-                f"{threaded} Dask workers run several threads, but a process replays "
-                f"one log at a time: start workers with --nthreads 1 --nworkers N",
+                f"{threaded} Dask workers run several threads, whose replays share one Python "
+                f"interpreter: start workers with --nthreads 1 --nworkers N",
                 ImuDcmWarning,
                 stacklevel=3,
             )

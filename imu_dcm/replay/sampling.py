@@ -16,12 +16,10 @@ Conventions: ``q_w_b`` ``[x, y, z, w]``; rates rad/s; angles in degrees.
 
 from __future__ import annotations
 
-import warnings
-
 import numpy as np
 from numpy.typing import NDArray
 
-from imu_dcm.errors import ImuDcmWarning
+from imu_dcm.errors import Diagnostics
 from imu_dcm.integrator.batch import integrate_quat
 from imu_dcm.metrics import rms
 from imu_dcm.so3 import quat_angle_rad
@@ -56,8 +54,7 @@ def sampling_error_deg(
     p = ORDER.get(method)
     if p is None or len(t_s) < 8:
         return None
-    with warnings.catch_warnings():  # the record's gaps and rates were reported once
-        warnings.simplefilter("ignore", ImuDcmWarning)
-        half = integrate_quat(omega_b[::2], t_s[::2], q_est[0], method)
+    said = Diagnostics()  # the record's gaps and method were said once, by the replay
+    half = integrate_quat(omega_b[::2], t_s[::2], q_est[0], method, diagnostics=said)
     diff = quat_angle_rad(q_est[::2], half)
     return float(np.degrees(rms(diff)) / (2**p - 1))

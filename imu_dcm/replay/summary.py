@@ -12,6 +12,9 @@ from numpy.typing import NDArray
 from imu_dcm.app.summary import RunFigures
 from imu_dcm.metrics import AttitudeError
 from imu_dcm.replay.bias import BiasEstimate
+from imu_dcm.replay.mounting import APPLY_DEG, Mounting
+from imu_dcm.replay.offset_hint import shift_ms
+from imu_dcm.replay.outcome import outcome_lines
 from imu_dcm.replay.sampling import TOO_SLOW_SHARE
 from imu_dcm.replay.stats import evaluation_lines
 
@@ -29,7 +32,7 @@ class ReplaySummary(RunFigures):
     (t_s, length_s) pairs. ``warnings`` holds the one-line warnings of the cleaning and the
     truth checks, kept per replay so that replays in threads do not mix (the reader's own are
     summed up in ``stopped_at`` / ``damage``). ``truth_check`` is the rate comparison of truth
-    and gyro (:class:`imu_dcm.replay.truth.TruthCheck`) as a dict, or None without truth.
+    and gyro (:class:`imu_dcm.replay.rate_check.TruthCheck`) as a dict, or None without truth.
     ``mounting`` is the motion's estimate of the mounting (or the quaternion given);
     ``final_q_w_b``, ``rotation_deg``, ``turned_deg`` are the result with or without truth
     (:mod:`imu_dcm.replay.outcome`); ``written`` lists the files and folders the command wrote
@@ -196,8 +199,6 @@ def _candidates_line(cands: tuple[dict, ...]) -> str:
 
 def _mounting_lines(s: ReplaySummary) -> list[str]:
     """The estimated (or given) mounting and the declared one, one line each."""
-    from imu_dcm.replay.mounting import APPLY_DEG, Mounting
-
     fields = {f.name for f in dataclasses.fields(Mounting)}
     lines = []
     if s.mounting:
@@ -252,8 +253,6 @@ def _judgement_lines(s: ReplaySummary) -> list[str]:
 
 def _shift_line(s: ReplaySummary, check: dict) -> str:
     """The rate check with its best shift, and what ``--truth-offset auto`` would score."""
-    from imu_dcm.replay.offset_hint import shift_ms
-
     verdict = "follows the gyro" if check["follows"] else "does NOT follow the gyro"
     hint = ""
     if s.offset_auto_rms_deg is not None and s.rms_error_deg is not None:
@@ -359,8 +358,6 @@ def format_summary(s: ReplaySummary) -> str:
     lines += _error_lines(s)
     lines.extend(_bias_choice_line(s))
     lines.extend(_sampling_line(s))
-    from imu_dcm.replay.outcome import outcome_lines
-
     lines += outcome_lines(s.final_q_w_b, s.rotation_deg, s.turned_deg, s.written)
     if s.stopped_at:
         lines.append(f"stopped    {s.stopped_at}")

@@ -36,6 +36,7 @@ from imu_dcm.app.run import one_line
 from imu_dcm.errors import InputError
 from imu_dcm.outputs import claim_output, write_atomic
 from imu_dcm.outputs.signatures import signature
+from imu_dcm.replay.kinds import KINDS
 
 __all__ = [
     "COLUMNS",
@@ -342,8 +343,6 @@ def summary_line(rows: Sequence[LogRow]) -> str:
 
 def _summary(rows: Sequence[LogRow]) -> str:
     """:func:`summary_line` of rows of one method (or of a table without methods)."""
-    from imu_dcm.replay.kinds import KINDS
-
     failed = sum(r.failed for r in rows)
     by_kind: dict[str, list[float]] = {}
     for r in rows:

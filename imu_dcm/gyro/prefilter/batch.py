@@ -9,7 +9,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from imu_dcm.errors import InputError
+from imu_dcm.errors import Diagnostics, InputError
 from imu_dcm.gyro.prefilter._linear import (
     build_model,
     motion_order,
@@ -42,6 +42,7 @@ def prefilter(
     config: PrefilterConfig | None = None,
     *,
     engine: str = "numpy",
+    diagnostics: Diagnostics | None = None,
 ) -> PrefilterResult:
     """Kalman-filter (``kalman``) or RTS-smooth (``rts``) measured body rates.
 
@@ -59,6 +60,8 @@ def prefilter(
         ``numpy``: covariances once for all axes, steady-state runs in blocks (fast).
         ``filterpy``: ``filterpy.kalman.predict`` / ``update`` / ``rts_smoother`` per axis
         (the reference; about 100x slower).
+    diagnostics : Diagnostics, optional
+        Where the warnings (gaps) go instead of being warned.
 
     Returns
     -------
@@ -71,7 +74,7 @@ def prefilter(
         (negative or NaN noise), an explicit rest interval too short for the Allan deviation, or,
         with no rest, a log whose spectrum holds no white noise to estimate a missing density.
     """
-    omega_b, t_s = check_rates(omega_b, t_s)
+    omega_b, t_s = check_rates(omega_b, t_s, diagnostics)
     check_prefilter_mode(mode)
     if engine not in ("numpy", "filterpy"):
         raise InputError(f"Expected `engine` in ('numpy', 'filterpy'), got {engine!r}")
@@ -214,7 +217,8 @@ def _noise_from_rest(
 ) -> tuple[float, NDArray]:
     """Noise density (RMS over the axes) from a rest segment's Allan deviation, and the rest
     mean rate (the bias, rad/s); what was found goes into ``summary``."""
-    est = estimate_noise_from_rest(omega_b, t_s, min_rest_s)
+    said = Diagnostics()  # the gaps were said once, by prefilter's check of the whole record
+    est = estimate_noise_from_rest(omega_b, t_s, min_rest_s, diagnostics=said)
     arw = est.noise_density_rad_s_sqrt_hz
     summary.update(
         noise_source=f"Allan deviation of {source}",
@@ -232,7 +236,8 @@ def _noise_from_rest(
 def _noise_from_spectrum(omega_b: NDArray, t_s: NDArray, summary: dict[str, Any]) -> float:
     """Noise density (RMS over the axes) from the upper band of the log's spectrum (no rest);
     what was found goes into ``summary``."""
-    est = estimate_noise_from_spectrum(omega_b, t_s)
+    said = Diagnostics()  # the gaps were said once, by prefilter's check
+    est = estimate_noise_from_spectrum(omega_b, t_s, diagnostics=said)
     density = est.noise_density_rad_s_sqrt_hz
     summary.update(
         noise_source="spectrum of the log (no rest long enough for the Allan deviation)",

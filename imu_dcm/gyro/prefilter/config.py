@@ -13,7 +13,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from imu_dcm.errors import InputError
+from imu_dcm.errors import Diagnostics, InputError
 from imu_dcm.integrator.batch import check_samples
 
 MODES = ("kalman", "rts")
@@ -180,10 +180,12 @@ class PrefilterResult:
 # input checks
 
 
-def check_rates(omega_b: ArrayLike, t_s: ArrayLike) -> tuple[NDArray, NDArray]:
-    """The integrator's sample checks (shape, finite, strictly increasing stamps, gaps warned),
-    plus the three samples a rate-and-acceleration model needs."""
-    omega_b, t_s, _dt = check_samples(omega_b, t_s)
+def check_rates(
+    omega_b: ArrayLike, t_s: ArrayLike, diagnostics: Diagnostics | None = None
+) -> tuple[NDArray, NDArray]:
+    """The integrator's sample checks (shape, finite, strictly increasing stamps, gaps warned
+    or added to ``diagnostics``), plus the three samples a rate-and-acceleration model needs."""
+    omega_b, t_s, _dt = check_samples(omega_b, t_s, diagnostics=diagnostics)
     if omega_b.shape[0] < 3:
         raise InputError(f"Expected at least 3 samples, got {omega_b.shape[0]}")
     return omega_b, t_s

@@ -16,7 +16,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from imu_dcm.errors import InputError
+from imu_dcm.errors import Diagnostics, InputError
 from imu_dcm.gyro.allan import allan_deviation, noise_density_from_allan
 from imu_dcm.gyro.prefilter._linear import (
     motion_order,
@@ -35,7 +35,11 @@ from imu_dcm.gyro.prefilter.config import (
 
 
 def estimate_noise_from_rest(
-    omega_b: ArrayLike, t_s: ArrayLike, min_rest_s: float = 1.0
+    omega_b: ArrayLike,
+    t_s: ArrayLike,
+    min_rest_s: float = 1.0,
+    *,
+    diagnostics: Diagnostics | None = None,
 ) -> NoiseEstimate:
     """Angle random walk and bias instability from a rest segment's Allan deviation.
 
@@ -57,7 +61,7 @@ def estimate_noise_from_rest(
     InputError
         When the segment is too short for the Allan deviation.
     """
-    omega_b, t_s = check_rates(omega_b, t_s)
+    omega_b, t_s = check_rates(omega_b, t_s, diagnostics)
     n = len(t_s)
     span = float(t_s[-1] - t_s[0])
     if n < MIN_REST_SAMPLES or span < min_rest_s:
@@ -95,7 +99,9 @@ _MAX_BAND_TILT = 2.0
 _MIN_SPECTRUM_BINS = 30
 
 
-def estimate_noise_from_spectrum(omega_b: ArrayLike, t_s: ArrayLike) -> SpectralNoiseEstimate:
+def estimate_noise_from_spectrum(
+    omega_b: ArrayLike, t_s: ArrayLike, *, diagnostics: Diagnostics | None = None
+) -> SpectralNoiseEstimate:
     """White-noise density of a gyro log with no rest, from the upper band of its spectrum.
 
     The rates are differenced twice (``d_k = z_{k+1} − 2 z_k + z_{k−1}``, whose gain at
@@ -124,7 +130,7 @@ def estimate_noise_from_spectrum(omega_b: ArrayLike, t_s: ArrayLike) -> Spectral
         the rates, or when the level is not flat across the band (not white: a gyro's own
         low-pass filter, or motion reaching the Nyquist frequency).
     """
-    omega_b, t_s = check_rates(omega_b, t_s)
+    omega_b, t_s = check_rates(omega_b, t_s, diagnostics)
     dt = float(np.median(np.diff(t_s)))
     k = _DIFFERENCE_ORDER
     d = np.diff(omega_b, n=k, axis=0)

@@ -359,7 +359,7 @@ class DataFlashSource:
                     messages_lost=1,
                 )
             )
-        stopped_at = warn_damage(self.path, damage)
+        stopped_at = warn_damage(self.path, damage, diagnostics=request.diagnostics)
         channels = tuple(
             ChannelInfo(f.name, f.name, "dataflash", len(index.offsets[t]))
             for t, f in sorted(index.formats.items(), key=lambda kv: kv[1].name)

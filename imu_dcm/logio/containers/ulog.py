@@ -330,7 +330,8 @@ class UlogSource:
         channels = tuple(
             ChannelInfo(label(n, i), fmt, "ulog", c) for (n, i, fmt), c in sorted(s.counts.items())
         )
-        stopped_at = warn_damage(self.path, s.damage)  # once the log is known to be usable
+        # once the log is known to be usable
+        stopped_at = warn_damage(self.path, s.damage, diagnostics=request.diagnostics)
         if progress is not None:
             progress(1.0)
         return LogData(

@@ -11,10 +11,9 @@ truth channels (:mod:`imu_dcm.logio.ros.imu`, :mod:`imu_dcm.logio.ros.truth`) an
 
 from __future__ import annotations
 
-import warnings
 from pathlib import Path
 
-from imu_dcm.errors import ImuDcmWarning, LogError
+from imu_dcm.errors import ImuDcmWarning, LogError, say
 from imu_dcm.logio.damage import damage_summary, warn_damage
 from imu_dcm.logio.ros.channels import describe, plan
 from imu_dcm.logio.ros.collect import Collected, Sink
@@ -85,9 +84,10 @@ def read_ros(source: RosSource, request: ReadRequest) -> LogData:
     truth, candidates = read_truths(got, imu, request.truth_topic, request.truth_frame)
     truth, *more = declared_estimates((truth, *candidates), source.custom_data)
     candidates = tuple(more)
-    warn_damage(shown, got.damage, stacklevel=4)
+    warn_damage(shown, got.damage, stacklevel=4, diagnostics=request.diagnostics)
     if undecodable:
-        warnings.warn(
+        say(
+            request.diagnostics,
             f"{imu.topic}: dropped {undecodable} messages that do not decode",
             ImuDcmWarning,
             stacklevel=4,
