@@ -149,6 +149,7 @@ def preload() -> None:
     compiled kernel, once in this process, so that workers forked from it start with them
     instead of each paying the imports on its first log (about 0.3 s a worker, which on many
     small logs costs more than the logs)."""
+    from imu_dcm.replay import core  # noqa: F401 (lazy: see batch_log._replay_rows)
 
     backend()
     for name in _READER_MODULES:

@@ -234,7 +234,7 @@ class LiveView:
         self._last_axes[key] = slot[-1]
         return np.flatnonzero(first)
 
-    def _axes_rows(self, key: str, t_s: NDArray, q: NDArray, final: bool = False) -> None:
+    def axes_rows(self, key: str, t_s: NDArray, q: NDArray, final: bool = False) -> None:
         """The 3D axes and the z-tip trail of new rows: at most every ``_3D_EVERY_S`` of source
         time (the rows in between are held and go with the next send): two ``send_columns``
         calls per send, whatever the view interval."""
@@ -288,10 +288,10 @@ class LiveView:
             gyro = self._column("scalars", omega_b.reshape(-1), rows)
             self._send(self.entity["gyro"], self._time(gyro_t_s), gyro)
         if len(est_t_s):
-            self._axes_rows("est", est_t_s, q_est)
+            self.axes_rows("est", est_t_s, q_est)
         if len(truth_t_s):
             order = np.argsort(truth_t_s, kind="stable")
-            self._axes_rows("truth", truth_t_s[order], q_truth[order])
+            self.axes_rows("truth", truth_t_s[order], q_truth[order])
         if len(err_t_s):
             rows = np.arange(0, 3 * len(err_t_s) + 1, 3, dtype=np.int32)  # total, incl., heading
             self._send(
@@ -304,7 +304,7 @@ class LiveView:
         """Flush and disconnect; return the line to print about the viewer."""
         try:
             for key in ("est", "truth"):  # the rows held for the next 3D send
-                self._axes_rows(key, np.zeros(0), np.zeros((0, 4)), final=True)
+                self.axes_rows(key, np.zeros(0), np.zeros((0, 4)), final=True)
             self.rec.flush(timeout_sec=_FLUSH_TIMEOUT_S)
             self.rec.disconnect()
         except BaseException:

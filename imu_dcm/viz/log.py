@@ -21,12 +21,12 @@ from imu_dcm.errors import InputError
 from imu_dcm.viz.view_data import (
     TRACE_MAX_S,
     ViewData,
-    _axes_rows,
-    _trace_segments,
-    _trail_frames,
-    _trail_strips,
+    axes_rows,
     body_axes_w,
     gyro_needs_split,
+    trace_segments,
+    trail_frames,
+    trail_strips,
 )
 
 _BLOCK_ROWS = 2_000  # rows per send_columns call when the whole view is sent at once
@@ -204,7 +204,7 @@ def _trail_fields(t_s: NDArray, tip: NDArray, frames: NDArray, color, radius: fl
     def fields(a: int, b: int) -> dict:
         n = b - a
         return {
-            "strips": _trail_strips(t_s, tip, frames[a:b]),
+            "strips": trail_strips(t_s, tip, frames[a:b]),
             "colors": np.tile(np.array(color, dtype=np.uint8), (n, 1)),
             "radii": np.full(n, radius, dtype=np.float32),
         }
@@ -219,7 +219,7 @@ def _entities(view: ViewData) -> list[_Entity]:
     t_rel = view.t_s - view.t_s[0]
     est_axes, has_est = body_axes_w(view.q_est)  # (N, 3 axes, 3)
     true_axes, has_truth = body_axes_w(view.q_truth)
-    rows = _axes_rows(view.t_s)  # thinned to AXES_HZ: memory bounded on long logs
+    rows = axes_rows(view.t_s)  # thinned to AXES_HZ: memory bounded on long logs
     out = [
         _axes_entity(
             ENTITY["estimate_axes"],
@@ -239,7 +239,7 @@ def _entities(view: ViewData) -> list[_Entity]:
             True,
         ),
     ]
-    frames = _trail_frames(view.t_s)
+    frames = trail_frames(view.t_s)
     tips = {
         "truth_trail": true_axes[:, 2],
         "estimate_trail": est_axes[:, 2],
@@ -316,7 +316,7 @@ def send_styles(view: ViewData, rec, *, gyro_one_entity: bool = False) -> None:
         "truth_trace": body_axes_w(view.q_truth)[0][:, 2],
     }
     for key, tip in tips.items():
-        segments = _trace_segments(tip)
+        segments = trace_segments(tip)
         if segments:
             color = (*EST_TRAIL_RGB, 110) if key == "estimate_trace" else (*TRUTH_TRAIL_RGB, 90)
             rec.log(
@@ -382,7 +382,7 @@ def send_view(view: ViewData, rec, *, realtime: bool = False, chunk_s: float = 0
             time.sleep(delay)
 
 
-def _new_recording(view: ViewData):
+def new_recording(view: ViewData):
     import rerun as rr
 
     rec = rr.RecordingStream("imu_dcm", recording_id=uuid.uuid4())

@@ -144,7 +144,7 @@ def body_axes_w(q_w_b: NDArray) -> tuple[NDArray, NDArray[np.bool_]]:
     return np.where(valid[:, None, None], axes, np.nan), valid
 
 
-def _trail_frames(t_s: NDArray, fps: float = TRAIL_FPS) -> NDArray[np.intp]:
+def trail_frames(t_s: NDArray, fps: float = TRAIL_FPS) -> NDArray[np.intp]:
     """Sample index of each frame: the last sample at or before k / fps."""
     rel = t_s - t_s[0]
     n_frames = math.floor(rel[-1] * fps) + 1
@@ -152,12 +152,12 @@ def _trail_frames(t_s: NDArray, fps: float = TRAIL_FPS) -> NDArray[np.intp]:
     return np.unique(np.clip(idx, 0, len(t_s) - 1))
 
 
-def _axes_rows(t_s: NDArray) -> NDArray[np.intp]:
+def axes_rows(t_s: NDArray) -> NDArray[np.intp]:
     """Samples whose body axes are drawn: one per 1 / AXES_HZ of log time, and the last."""
-    return np.union1d(_trail_frames(t_s, AXES_HZ), [len(t_s) - 1])
+    return np.union1d(trail_frames(t_s, AXES_HZ), [len(t_s) - 1])
 
 
-def _trail_strips(t_s: NDArray, tip_w: NDArray, frames: NDArray[np.intp]) -> list[NDArray]:
+def trail_strips(t_s: NDArray, tip_w: NDArray, frames: NDArray[np.intp]) -> list[NDArray]:
     """Per frame, the tip positions over the last TRAIL_S seconds (NaN points dropped)."""
     start = np.searchsorted(t_s, t_s[frames] - TRAIL_S, side="left")
     j = np.linspace(0.0, 1.0, TRAIL_POINTS)
@@ -169,7 +169,7 @@ def _trail_strips(t_s: NDArray, tip_w: NDArray, frames: NDArray[np.intp]) -> lis
     return [p[m] for p, m in zip(pts, ok, strict=True)]
 
 
-def _trace_segments(tip_w: NDArray) -> list[NDArray]:
+def trace_segments(tip_w: NDArray) -> list[NDArray]:
     """The whole tip trace, decimated to <= TRACE_MAX_POINTS, split where it is NaN."""
     step = max(1, math.ceil(len(tip_w) / TRACE_MAX_POINTS))
     pts = tip_w[::step]

@@ -19,7 +19,7 @@ from pathlib import Path
 from imu_dcm.app.rerun_mode import check_rerun_mode, check_rerun_switch, rerun_save_path
 from imu_dcm.errors import ImuDcmError, InputError
 from imu_dcm.outputs import Claim, claim_output, claimed_path
-from imu_dcm.viz.log import _new_recording, make_blueprint, send_view
+from imu_dcm.viz.log import make_blueprint, new_recording, send_view
 from imu_dcm.viz.view_data import ViewData
 
 _FLUSH_TIMEOUT_S = 60.0  # a viewer that went away must not hang the replay
@@ -48,7 +48,7 @@ def save_rrd(view: ViewData, path: str | os.PathLike | Claim) -> Path:
     if claim is None:
         claim = claim_output(target, "rrd", what="--rerun save: file")
     check_rerun_switch(f"save:{target}")  # RERUN=off: rerun would save an empty file
-    rec = _new_recording(view)
+    rec = new_recording(view)
     with claimed_path(claim) as tmp:
         rec.save(tmp, default_blueprint=make_blueprint(view))
         rec.send_recording_name(view.title)
@@ -305,7 +305,7 @@ def start_viewer(timeout_s: float = 20.0) -> tuple[object, int]:
 def _spawn_viewer(view: ViewData, realtime: bool) -> str:
     """Start the native viewer on 127.0.0.1 (detached) and stream the view to it."""
     proc, port = start_viewer()
-    rec = _new_recording(view)
+    rec = new_recording(view)
     rec.connect_grpc(f"rerun+http://127.0.0.1:{port}/proxy", default_blueprint=make_blueprint(view))
     rec.send_recording_name(view.title)
     send_view(view, rec, realtime=realtime)
@@ -364,7 +364,7 @@ def serve_replay(
         served = serve_rrd(None)
         try:  # Ctrl-C or an error while streaming must not leave the server running
             print(f"rerun: open {served.url} (streaming at recorded speed)", flush=True)
-            rec = _new_recording(view)
+            rec = new_recording(view)
             rec.connect_grpc(served.grpc_url, default_blueprint=make_blueprint(view))
             rec.send_recording_name(view.title)
             send_view(view, rec, realtime=True)
