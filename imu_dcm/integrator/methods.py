@@ -1,5 +1,5 @@
 """The integrator's method codes and the gap rule's factor: one definition below the kernel and
-:mod:`imu_dcm.integrate`, which both import it (no numpy, no numba).
+:mod:`imu_dcm.integrator.batch`, which both import it (no numpy, no numba).
 
 A method's name is its member's name in lower case (``Method.MAGNUS4`` is ``"magnus4"``) and its
 code is the member's value, which the compiled kernel branches on. Adding a method is one member
@@ -15,7 +15,7 @@ __all__ = ["DELTA_METHODS", "GAP_FACTOR", "METHODS", "DeltaMethod", "Method"]
 
 class Method(enum.IntEnum):
     """Rate-input increment rules, in order of increasing accuracy (``rotvec_sum`` last: a
-    counter-example). See :mod:`imu_dcm.integrate` for the formulas."""
+    counter-example). See :mod:`imu_dcm.integrator.batch` for the formulas."""
 
     START = 0
     END = 1
