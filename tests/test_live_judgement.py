@@ -7,6 +7,7 @@ and a NaN line is counted once, as NaN/Inf, not as malformed."""
 from __future__ import annotations
 
 import json
+import math
 import os
 import socket
 import threading
@@ -15,6 +16,8 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 from test_live_ws import live_thread
+from test_rest_causal import BIAS, REST_S, SIGMA, TURN_OFF, M, agreement_log
+from test_rest_causal import RATE_HZ as RATE_HZ_REST
 
 from imu_dcm.gyro.rates import MAX_RATE_RAD_S, implausible_rates
 from imu_dcm.live import run
@@ -53,7 +56,7 @@ def _run_stdin(lines: list[bytes], tmp_path, gyro_units_given: str = "deg/s", **
             rerun="off",
             status=False,
             gyro_units=gyro_units_given,
-            say=lambda _s: None,
+            say=kw.pop("say", lambda _s: None),
             summary_json=summary,
             **kw,
         )
@@ -187,3 +190,28 @@ def test_a_line_without_end_costs_itself_not_memory(tmp_path):
     s = res.summary
     assert s["malformed"] == 1 and s["samples"] == N
     assert angle_between_deg(res.q_w_b, _truth_end()) < 1e-9
+
+
+def test_a_rest_that_disagrees_is_said_and_in_the_summary_as_replays(tmp_path):
+    # Three rests at one bias, a slow turn the window rule takes for rest, a fourth rest: the
+    # turn is not used, said once as it closes, and the summary carries replay's
+    # rest_agreement and marks the segment.
+    zero = np.zeros(3)
+    w, t, spans = agreement_log([zero, zero, zero, TURN_OFF, zero], seed=7)
+    rows = zip(t.tolist(), w.tolist(), strict=True)
+    lines = [f"{a!r},{x!r},{y!r},{z!r}".encode() for a, (x, y, z) in rows]
+    said: list[str] = []
+    res, saved = _run_stdin(lines, tmp_path, gyro_units_given="rad/s", bias="auto", say=said.append)
+    s = res.summary
+    assert saved["rest_agreement"] == s["rest_agreement"]
+    a, b = spans[3][:2]
+    (out,) = s["rest_agreement"]["outliers"]
+    assert (out["start_s"], out["end_s"]) == pytest.approx((t[a], t[b - 1]), abs=1e-9)
+    assert [seg["used"] for seg in s["bias_segments"]] == [True, True, True, False, True]
+    assert "reason" in s["bias_segments"][3] and "reason" not in s["bias_segments"][2]
+    not_used = [x for x in said if "not used" in x]
+    assert len(not_used) == 1 and f"{t[a]:.3f}-{t[b - 1]:.3f} s" in not_used[0], said
+    assert "rests      " + s["rest_agreement"]["line"] in format_summary(s)
+    assert "(1 not used)" in format_summary(s)
+    se = SIGMA / math.sqrt(REST_S * RATE_HZ_REST - 2 * M)
+    assert np.all(np.abs(np.array(s["bias_final_rad_s"]) - BIAS) < 4 * se)

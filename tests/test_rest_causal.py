@@ -13,6 +13,7 @@ import pytest
 
 from imu_dcm.gyro.rest import rest_segments
 from imu_dcm.gyro.rest_causal import CausalRestBias
+from imu_dcm.replay.bias import estimate_bias
 
 SIGMA = 0.002  # gyro noise, rad/s
 BIAS = np.array([0.004, -0.002, 0.003])  # rad/s
@@ -77,3 +78,102 @@ def test_offline_and_live_find_each_rest_and_its_bias_short_and_long(rate_hz, se
         n - 2 * (n // 4) if n < 3 * m else n - 2 * m for n in length
     ]
     assert length[0] < length[1] < 3 * m < length[2] < length[3]  # both kinds are tried
+
+
+# -- rests that disagree (the agreement rule, causal) ----------------------------------------
+
+RATE_HZ = 200.0
+M = 100  # the rule's window at 200 Hz: 0.5 s
+REST_S = 4.0  # each rest: 800 samples, 600 of them its bias (one window off each side)
+#: a slow turn the window rule takes for rest: z at 5 standard errors of a window's mean over
+#: the bias (0.057 °/s: at the floor, under the 2 °/s a gyro-only rest allows)
+TURN_OFF = np.array([0.0, 0.0, 5 * SIGMA / math.sqrt(M)])
+
+
+def agreement_log(offsets, seed: int):
+    """1 s of motion, then each rest of REST_S at ``BIAS + offset`` followed by 1 s of motion.
+    Over each rest's bias span the noise has mean 0 and sample std SIGMA exactly, so each
+    rest's bias is ``BIAS + offset`` and its noise SIGMA / √n. Returns w, t, each rest's
+    ``[a, b)`` and its bias span ``[lo, hi)``."""
+    rng = np.random.default_rng(seed)
+    n, n_move = int(REST_S * RATE_HZ), int(RATE_HZ)
+    parts, spans, k = [], [], 0
+    for off in (None, *offsets):
+        if off is not None:
+            x = rng.normal(0.0, SIGMA, (n, 3))
+            span = x[M : n - M]
+            x[M : n - M] = (span - span.mean(axis=0)) / span.std(axis=0, ddof=1) * SIGMA
+            parts.append(x + BIAS + off)
+            spans.append((k, k + n, k + M, k + n - M))
+            k += n
+        move = rng.normal(0.0, SIGMA, (n_move, 3)) + BIAS
+        move[:, 2] += TURN
+        parts.append(move)
+        k += n_move
+    w = np.concatenate(parts)
+    return w, np.arange(len(w)) / RATE_HZ, spans
+
+
+def run_live(w, t):
+    live = CausalRestBias()
+    applied = live.update_many(w, t)
+    live.finish()
+    return live, applied
+
+
+def test_a_slow_turn_after_three_agreeing_rests_is_not_used():
+    zero = np.zeros(3)
+    w, t, spans = agreement_log([zero, zero, zero, TURN_OFF, zero], seed=7)
+    live, applied = run_live(w, t)
+    # the turn passed the window rule: five segments, each where the construction put it
+    assert [(s.start, s.stop) for s in live.segments] == [(a, b) for a, b, _lo, _hi in spans]
+    assert live.agreement.used == [True, True, True, False, True]
+    # reported, with its distance from the two before it: 5 SE of a window over √(2) SE of a rest
+    ((i, noises),) = live.agreement.outliers
+    se = SIGMA / math.sqrt(REST_S * RATE_HZ - 2 * M)
+    assert i == 3 and noises == pytest.approx(TURN_OFF[2] / (math.sqrt(2) * se), rel=1e-6)
+    line = live.agreement.result().line
+    a3, b3 = spans[3][:2]
+    assert f"{t[a3]:.2f}-{t[b3 - 1]:.2f} s" in line and "not used" in line, line
+    # the final bias is the rests' at BIAS, within their noise
+    assert np.all(np.abs(np.array(live.bias_rad_s) - BIAS) < 4 * se)
+    # from the turn's close (its last window's end) to the next rest's first estimate, the
+    # bias applied is the rest before it's, not the turn's
+    a4 = spans[4][0]
+    between = applied[b3 - 1 + M : a4 + 2 * M]
+    assert len(between) and np.all(np.abs(between - BIAS) < 4 * se)
+    assert np.all(np.abs(between[:, 2] - BIAS[2] - TURN_OFF[2]) > 4 * se)  # not the turn's
+
+
+def test_rests_that_agree_change_nothing(monkeypatch):
+    # Independent draws at one bias: every rest used, and the bias applied to every sample is
+    # bit for bit the one without the agreement rule (it never finds an outlier).
+    rng = np.random.default_rng(11)
+    w, t, spans = rests_log(RATE_HZ, 11)
+    w = np.concatenate([w, rng.normal(0.0, SIGMA, (800, 3)) + BIAS])  # a fifth rest, at the end
+    t = np.arange(len(w)) / RATE_HZ
+    live, applied = run_live(w, t)
+    assert len(live.segments) == 5 and all(live.agreement.used)
+    assert live.agreement.result().line == ""
+    monkeypatch.setattr("imu_dcm.gyro.rest_agreement.outlier", lambda *_a, **_k: None)
+    before, applied_before = run_live(w, t)
+    assert np.array_equal(applied, applied_before)
+    assert live.segments == before.segments and live.bias_rad_s == before.bias_rad_s
+
+
+@pytest.mark.parametrize("where", [2, 3])
+def test_offline_and_live_find_the_same_outlier(where):
+    # An interior rest off by a slow turn, between rests that agree (two or more before it):
+    # replay's pass over the whole log and live's, rest by rest, leave out the same one.
+    offsets = [np.zeros(3)] * 5
+    offsets[where] = TURN_OFF
+    w, t, spans = agreement_log(offsets[: where + 2], seed=20 + where)
+    offline = estimate_bias(w, t, "auto").agreement
+    live, _applied = run_live(w, t)
+    a, b = spans[where][:2]
+    assert [(o["start_s"], o["end_s"]) for o in offline["outliers"]] == [(t[a], t[b - 1])]
+    live_out = live.agreement.result().as_dict(live.segments)
+    assert [(o["start_s"], o["end_s"]) for o in live_out["outliers"]] == [(t[a], t[b - 1])]
+    assert live_out["outliers"][0]["noises"] == pytest.approx(
+        offline["outliers"][0]["noises"], rel=1e-9
+    )

@@ -11,6 +11,7 @@ import math
 import numpy as np
 from numpy.typing import NDArray
 
+from imu_dcm.gyro.rest_agreement import CausalAgreement
 from imu_dcm.gyro.rest_evidence import Signals
 from imu_dcm.gyro.rest_rule import (
     RestConfig,
@@ -23,7 +24,7 @@ from imu_dcm.gyro.rest_rule import (
     window_conditions,
     window_samples,
 )
-from imu_dcm.gyro.windows import min_steps, windowed_mean_var
+from imu_dcm.gyro.windows import min_steps, step_var, windowed_mean_var
 
 __all__ = ["CausalRestBias"]
 
@@ -44,9 +45,17 @@ class CausalRestBias:
     for the middle half of a short rest), the value :func:`~imu_dcm.gyro.rest.rest_segments` gives
     it
     under the same floor. The bias applied to a sample is the estimate available when it
-    arrives. :meth:`update_many` applies the rule to a batch as arrays and returns, for each
-    sample, what :meth:`update` would have returned (to rounding). The window length comes from
-    the median of the first ``probe`` steps (offline: of the whole log).
+    arrives.
+
+    When a segment closes, its bias is judged against the rests before it by the agreement rule
+    (:class:`~imu_dcm.gyro.rest_agreement.CausalAgreement`, the rule replay's
+    :func:`~imu_dcm.gyro.rest_agreement.rests_agree` applies offline): one that disagrees with
+    the two before it beyond their noise while those two agree is not used, and the estimate
+    goes back to the last rest used (zeros before any). While it lasts, its running mean is
+    applied (nothing can judge it before it closes). :meth:`update_many` applies the rule to a
+    batch as arrays and returns, for each sample, what :meth:`update` would have returned (to
+    rounding). The window length comes from the median of the first ``probe`` steps (offline:
+    of the whole log).
 
     Parameters
     ----------
@@ -58,7 +67,10 @@ class CausalRestBias:
     Attributes
     ----------
     bias_rad_s : tuple of 3 floats — current estimate, body axes, rad/s (zeros before any rest).
-    segments : list of RestSegment — each finished segment (``lo``/``hi`` as in replay).
+    segments : list of RestSegment — each finished segment (``lo``/``hi`` as in replay), used or
+        not.
+    agreement : CausalAgreement — how the segments' biases agree; ``agreement.used[i]``: whether
+        segment ``i``'s bias is used.
     updates : int — how many times the estimate changed.
     """
 
@@ -68,6 +80,8 @@ class CausalRestBias:
         self.bias_rad_s = (0.0, 0.0, 0.0)
         self.segments: list[RestSegment] = []
         self.updates = 0
+        self.agreement = CausalAgreement(self.config.floor_spreads)
+        self._used_bias = (0.0, 0.0, 0.0)  # the last rest used
         self.at_rest = False
         self.win = 0
         self._floor_var = math.inf  # the stillest window so far (variance, largest axis)
@@ -85,6 +99,8 @@ class CausalRestBias:
         self._lo = 0  # the segment's bias averages the samples [lo, acc_hi)
         self._acc_hi = 0
         self._acc = np.zeros(3)
+        self._shift = np.zeros(3)  # the squares of [lo, acc_hi) about this sample (its first)
+        self._sq = np.zeros(3)
 
     def update(self, w: tuple[float, float, float], t_s: float) -> tuple[float, float, float]:
         """Add one sample (rad/s, body axes; stamp s); return the bias to subtract from it."""
@@ -187,6 +203,7 @@ class CausalRestBias:
             self.updates += len(keep)
         if grow.any():
             start = self._acc_hi - base
+            self._add_squares(X[start : hi[-1] - base])
             partial = np.cumsum(X[start : hi[-1] - base], axis=0)
             sums = self._acc + partial[hi[grow] - base - start - 1]
             out[np.flatnonzero(grow) + p] = sums / (hi[grow] - self._lo)[:, None]
@@ -197,23 +214,45 @@ class CausalRestBias:
         self._seg_end = k0 + q - 1
         self._seg_end_t = float(T[k0 + q - 1 - base])
 
+    def _add_squares(self, x: NDArray) -> None:
+        """Samples joining ``[lo, acc_hi)``: their squares about its first sample."""
+        if self._acc_hi == self._lo and len(x):
+            self._shift, self._sq = x[0].copy(), np.zeros(3)
+        self._sq = self._sq + ((x - self._shift) ** 2).sum(axis=0)
+
+    def _span_var(self) -> NDArray:
+        """Per-axis sample variance of ``[lo, acc_hi)`` (from the sums about its first sample)."""
+        n = self._acc_hi - self._lo
+        if n < 2:
+            return np.zeros(3)
+        d = self._acc - n * self._shift
+        return np.maximum(self._sq - d * d / n, 0.0) / (n - 1)
+
     def _close_segment(self, out: NDArray | None = None, k0: int = 0, at_end: bool = False) -> None:
         """End the open segment ``[a, b)``; its final bias holds from sample ``b - 1 + m`` (row
         of ``out`` for a batch starting at sample ``k0``). ``at_end``: the stream ended in it."""
         a, b, m = self._seg_start, self._seg_end + 1, self.win
         lo, hi = bias_span(a, b, b + (0 if at_end else 1), m)
         if at_end and hi > self._acc_hi:  # the last window's samples: the tail
-            self._acc = self._acc + self._tail_w[len(self._tail_w) - (hi - self._acc_hi) :].sum(0)
+            tail = self._tail_w[len(self._tail_w) - (hi - self._acc_hi) :]
+            self._add_squares(tail)
+            self._acc = self._acc + tail.sum(0)
             self._acc_hi = hi
+        var = self._span_var()
         if lo != self._lo or hi != self._acc_hi:  # a short rest: its middle half
-            self.bias_rad_s = tuple(self._head[lo - a : hi - a].mean(axis=0).tolist())
+            x = self._head[lo - a : hi - a]
+            self.bias_rad_s = tuple(x.mean(axis=0).tolist())
+            var = x.var(axis=0, ddof=1) if len(x) >= 2 else np.zeros(3)
         elif hi > lo:
             self.bias_rad_s = tuple((self._acc / (hi - lo)).tolist())
-        self.segments.append(
-            RestSegment(
-                a, b, self._seg_t0, self._seg_end_t, self.bias_rad_s, lo, hi, ("gyro floor",)
-            )
+        seg = RestSegment(
+            a, b, self._seg_t0, self._seg_end_t, self.bias_rad_s, lo, hi, ("gyro floor",)
         )
+        self.segments.append(seg)
+        if self.agreement.add(seg, var, hi - lo, step_var(self._min_steps)) is None:
+            self._used_bias = self.bias_rad_s
+        else:  # not used: the estimate goes back to the last rest used
+            self.bias_rad_s = self._used_bias
         self._seg_start = -1
         j = b - 1 + m - k0
         if out is not None and 0 <= j < len(out):

@@ -188,11 +188,16 @@ def format_summary(s: dict) -> str:
         lines.append("bias       auto: no rest segment found, no bias removed")
     elif s["bias_mode"] == "auto":
         n = len(s["bias_segments"])
+        unused = sum(1 for x in s["bias_segments"] if not x.get("used", True))
         bd = np.degrees(b)
         lines.append(
-            f"bias       auto: {n} rest segment{'s' if n != 1 else ''}, mean applied "
-            f"{bias} = ({bd[0]:+.3f}, {bd[1]:+.3f}, {bd[2]:+.3f}) °/s"
+            f"bias       auto: {n} rest segment{'s' if n != 1 else ''}"
+            + (f" ({unused} not used)" if unused else "")
+            + f", mean applied {bias} = ({bd[0]:+.3f}, {bd[1]:+.3f}, {bd[2]:+.3f}) °/s"
         )
+        agreement = s.get("rest_agreement")
+        if agreement and agreement["line"]:
+            lines.append("rests      " + agreement["line"])
     else:
         lines.append(f"bias       {s['bias_mode']}: {bias}")
     if s["start_time_s"] is None:

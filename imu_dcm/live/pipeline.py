@@ -9,8 +9,8 @@ feeds it) as arrays, in stamp order:
 2. reports gaps with replay's rule (:func:`imu_dcm.integrator.batch.find_gaps`) over the recent
 steps
    and the new ones;
-3. subtracts the bias (``auto``: :class:`imu_dcm.gyro.rest_causal.CausalRestBias` over the batch;
-   ``none``; a vector);
+3. subtracts the bias (``auto``: :class:`imu_dcm.gyro.rest_causal.CausalRestBias` over the batch,
+   each rest said as it closes: its bias, or why it is not used; ``none``; a vector);
 4. integrates the batch with :meth:`imu_dcm.DcmIntegrator.update_many` (the compiled kernel's
    feed), starting — as replay does — at the first sample inside the truth's coverage, from the
    truth slerped there (or from ``init_q_w_b`` / identity when there is no truth). When the truth
@@ -37,6 +37,7 @@ from numpy.typing import NDArray
 from imu_dcm.errors import GapWarning
 from imu_dcm.gyro.rates import deg_evidence
 from imu_dcm.gyro.resample import slerp_truth
+from imu_dcm.gyro.rest_agreement import EVIDENCE
 from imu_dcm.gyro.rest_causal import CausalRestBias
 from imu_dcm.integrator.batch import find_gaps, gap_message, integrate_quat
 from imu_dcm.integrator.streaming import DcmIntegrator
@@ -65,6 +66,21 @@ GAPS_KEEP = 1000
 
 _SAMPLES = ((np.int64,), (float,), (float, 3))  # t_ns, t_s, omega_b (bias removed)
 _ESTIMATES = ((np.int64,), (float,), (float, 4))  # t_ns, t_s, q_w_b
+
+
+def rest_line(rest: CausalRestBias, i: int) -> str:
+    """The line for rest segment ``i`` as it closes: its bias, or why it is not used."""
+    seg = rest.segments[i]
+    v = seg.bias_rad_s
+    bias = f"({v[0]:+.5f}, {v[1]:+.5f}, {v[2]:+.5f}) rad/s"
+    if rest.agreement.used[i]:
+        return f"bias from rest {seg.start_s:.3f}-{seg.end_s:.3f} s: {bias}"
+    r = dict(rest.agreement.outliers)[i]
+    return (
+        f"rest {seg.start_s:.3f}-{seg.end_s:.3f} s not used: its bias {bias} is {r:.1f}x its "
+        f"noise from the two rests before it, which agree ({EVIDENCE}, "
+        f"z = {rest.agreement.spreads:g})"
+    )
 
 
 class Pipeline:
@@ -193,12 +209,8 @@ class Pipeline:
         if self.rest is not None:
             n_seg = len(self.rest.segments)
             b = self.rest.update_many(w, t_s)
-            for seg in self.rest.segments[n_seg:]:
-                v = seg.bias_rad_s
-                self.say(
-                    f"bias from rest {seg.start_s:.3f}-{seg.end_s:.3f} s: "
-                    f"({v[0]:+.5f}, {v[1]:+.5f}, {v[2]:+.5f}) rad/s"
-                )
+            for i in range(n_seg, len(self.rest.segments)):
+                self.say(rest_line(self.rest, i))
             wc = w - b
         else:
             b = np.asarray(self.fixed_bias)

@@ -192,11 +192,13 @@ def run(
         reordered, malformed, gaps (the first 1000), gap_count, reconnects, lost_by_system (UDP
         datagrams the system dropped, its buffer full, counted to the stop), gyro_units,
         units_evidence (why the rates look like deg/s, or None), bias_mode, bias_rad_s,
-        bias_segments, method, start_time_s, unscored_before_s, initial_q_w_b,
-        final_q_w_b, final_t_s, truth_samples_used, rms/max error/inclination/heading (deg,
-        None without truth), latency_p50_ms, latency_p99_ms, stopped, record, cpu_s (process
-        CPU time while receiving, all threads), read_interval_s (the loop's final cadence),
-        elapsed_s``; no value is NaN or Inf (None where it cannot be measured).
+        bias_segments (each with ``used``, and a ``reason`` when not), rest_agreement (replay's:
+        how the rests' biases agree, None with fewer than two), method, start_time_s,
+        unscored_before_s, initial_q_w_b, final_q_w_b, final_t_s, truth_samples_used, rms/max
+        error/inclination/heading (deg, None without truth), latency_p50_ms, latency_p99_ms,
+        stopped, record, cpu_s (process CPU time while receiving, all threads), read_interval_s
+        (the loop's final cadence), elapsed_s``; no value is NaN or Inf (None where it cannot be
+        measured).
     """
     started = time.perf_counter()
     o = LiveOptions(**options)

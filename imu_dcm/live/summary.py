@@ -63,7 +63,7 @@ def _fields(pipe, src, source, gyro_units, method, reason, recorder, started) ->
     st = pipe.stats
     have = st.n > 0
     rms_v = np.sqrt(st.sq / st.n) if have else [None] * 3
-    segs = [x.as_dict() for x in pipe.rest.segments] if pipe.rest is not None else []
+    segs, agreement = _rests(pipe)
     bias_mean = (pipe.bias_sum / pipe.bias_n).tolist() if pipe.bias_n else [0.0, 0.0, 0.0]
     figures = RunFigures(
         samples=int(pipe.n),
@@ -105,6 +105,7 @@ def _fields(pipe, src, source, gyro_units, method, reason, recorder, started) ->
         "reconnects": int(getattr(src, "reconnects", 0)),
         "lost_by_system": int(src.lost),
         "units_evidence": pipe.units_evidence,
+        "rest_agreement": agreement,
         "bias_final_rad_s": list(pipe.rest.bias_rad_s) if pipe.rest else list(pipe.fixed_bias),
         "reorder_window_s": r.window_ns * 1e-9,
         "unscored_before_s": pipe.unscored_before_s,
@@ -118,3 +119,23 @@ def _fields(pipe, src, source, gyro_units, method, reason, recorder, started) ->
         "cpu_s": pipe.cpu_s,
         "read_interval_s": pipe.read_interval_s,
     }
+
+
+def _rests(pipe: Pipeline) -> tuple[list[dict], dict | None]:
+    """The rest segments (each marked used or not, with the reason) and how their biases agree
+    (replay's ``rest_agreement``; None with fewer than two rests or no rest rule)."""
+    if pipe.rest is None:
+        return [], None
+    agreement = pipe.rest.agreement
+    result = agreement.result()
+    why = {id(s): r for s, r in result.outliers}
+    segs = []
+    for seg, used in zip(pipe.rest.segments, agreement.used, strict=True):
+        d = {**seg.as_dict(), "used": used}
+        if not used:
+            d["reason"] = (
+                f"its bias is {why[id(seg)]:.1f}x its noise from the two rests before it, "
+                "which agree"
+            )
+        segs.append(d)
+    return segs, result.as_dict(agreement.rests) if len(agreement.rests) > 1 else None
