@@ -10,6 +10,7 @@ import math
 
 import numpy as np
 import pytest
+from test_rest_agreement import rests_log as rests_log_at_200hz
 
 from imu_dcm.gyro.rest import rest_segments
 from imu_dcm.gyro.rest_causal import CausalRestBias
@@ -91,27 +92,11 @@ TURN_OFF = np.array([0.0, 0.0, 5 * SIGMA / math.sqrt(M)])
 
 
 def agreement_log(offsets, seed: int):
-    """1 s of motion, then each rest of REST_S at ``BIAS + offset`` followed by 1 s of motion.
-    Over each rest's bias span the noise has mean 0 and sample std SIGMA exactly, so each
-    rest's bias is ``BIAS + offset`` and its noise SIGMA / √n. Returns w, t, each rest's
-    ``[a, b)`` and its bias span ``[lo, hi)``."""
-    rng = np.random.default_rng(seed)
-    n, n_move = int(REST_S * RATE_HZ), int(RATE_HZ)
-    parts, spans, k = [], [], 0
-    for off in (None, *offsets):
-        if off is not None:
-            x = rng.normal(0.0, SIGMA, (n, 3))
-            span = x[M : n - M]
-            x[M : n - M] = (span - span.mean(axis=0)) / span.std(axis=0, ddof=1) * SIGMA
-            parts.append(x + BIAS + off)
-            spans.append((k, k + n, k + M, k + n - M))
-            k += n
-        move = rng.normal(0.0, SIGMA, (n_move, 3)) + BIAS
-        move[:, 2] += TURN
-        parts.append(move)
-        k += n_move
-    w = np.concatenate(parts)
-    return w, np.arange(len(w)) / RATE_HZ, spans
+    """1 s of motion, then each rest of REST_S at ``BIAS + offset`` followed by 1 s of motion
+    (:func:`test_rest_agreement.rests_log`: over each rest's bias span the noise has mean 0 and
+    sample std SIGMA exactly, so each rest's bias is ``BIAS + offset`` and its noise
+    SIGMA / √n). Returns w, t, each rest's ``[a, b)`` and its bias span ``[lo, hi)``."""
+    return rests_log_at_200hz([(REST_S, BIAS + off) for off in offsets], seed)
 
 
 def run_live(w, t):

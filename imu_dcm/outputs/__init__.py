@@ -6,44 +6,6 @@ or not at all, and :mod:`~imu_dcm.outputs.signatures` recognises what this tool 
 below are the whole public face; the modules' docstrings give the rule in full.
 """
 
-from imu_dcm.outputs.write import (
-    Claim,
-    OutputError,
-    PendingOutput,
-    atomic_path,
-    check_not_input,
-    check_output_dir,
-    check_output_file,
-    check_output_folder,
-    claim_output,
-    claimed_path,
-    ensure_parent,
-    file_kind,
-    is_own_bag,
-    save_figure,
-    write_atomic,
-    write_json,
-    write_text_atomic,
-    writes_to_stdout,
-)
-
-__all__ = [
-    "Claim",
-    "OutputError",
-    "PendingOutput",
-    "atomic_path",
-    "check_not_input",
-    "check_output_dir",
-    "check_output_file",
-    "check_output_folder",
-    "claim_output",
-    "claimed_path",
-    "ensure_parent",
-    "file_kind",
-    "is_own_bag",
-    "save_figure",
-    "write_atomic",
-    "write_json",
-    "write_text_atomic",
-    "writes_to_stdout",
-]
+# the public face is write's __all__ (it re-exports the rule's names), listed once, there
+from imu_dcm.outputs.write import *  # noqa: F403
+from imu_dcm.outputs.write import __all__  # noqa: F401
