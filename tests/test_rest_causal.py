@@ -261,3 +261,15 @@ def test_the_accelerometer_comes_with_every_batch_or_with_none():
     live.update_many(w[:10], t[:10], still_accel(10, np.random.default_rng(0)))
     with pytest.raises(InputError, match="every batch or with none"):
         live.update_many(w[10:20], t[10:20])
+
+
+def test_a_sample_without_an_accelerometer_reading_breaks_the_rest_it_falls_in():
+    w, t, spans = agreement_log([np.zeros(3)], seed=43)
+    a = still_accel(len(w), np.random.default_rng(44))
+    (a0, b0, _lo, _hi) = spans[0]
+    k = (a0 + b0) // 2
+    a[k] = np.nan  # this sample came without one: no window holding it is rest
+    live = CausalRestBias()
+    live.update_many(w, t, a)
+    live.finish()
+    assert [(s.start, s.stop) for s in live.segments] == [(a0, k), (k + 1, b0)]

@@ -98,6 +98,7 @@ class CausalRestBias:
         self._evidence: tuple[str, ...] = ("gyro floor",)  # the signals that judge the windows
         self._probe_a: list[NDArray] = []
         self._tail_a = np.zeros((0, 3))
+        self._a_missing: NDArray | None = None  # windows holding a sample without a reading
         self._probe_w: list[NDArray] = []  # samples before the window length is known
         self._probe_t: list[NDArray] = []
         self._tail_w = np.zeros((0, 3))  # the last win samples
@@ -132,8 +133,9 @@ class CausalRestBias:
         ----------
         omega_b : float64 (n, 3) — body rates, rad/s.
         t_s : float64 (n,) — their stamps, s, increasing.
-        accel_b : float64 (n, 3) or None — specific force on the same rows, m/s², finite, in
-            the gyro's axes. Given with every batch or with none (the first batch decides).
+        accel_b : float64 (n, 3) or None — specific force on the same rows, m/s², in the
+            gyro's axes; NaN rows where a sample has none (a window holding one is not rest).
+            Given with every batch or with none (the first batch decides).
 
         Returns
         -------
@@ -182,17 +184,28 @@ class CausalRestBias:
         floor = noise_floor_var(var, self._min_steps, self._floor_var, causal=True)
         if len(floor):
             self._floor_var = float(floor[-1])
-        sig = Signals() if XA is None else Signals(XA[rows[0] : rows[-1] + m])
+        sig, self._a_missing = Signals(), None
         if XA is not None:
-            self._a_min_steps = np.minimum(self._a_min_steps, min_steps(XA))
+            A = XA[rows[0] : rows[-1] + m]
+            missing = ~np.isfinite(A).all(axis=1)
+            if missing.any():  # a window holding a sample without a reading is not still
+                A = np.where(missing[:, None], 0.0, A)
+                count = np.concatenate([[0], np.cumsum(missing)])
+                self._a_missing = (count[m:] - count[:-m]) > 0
+            self._a_min_steps = np.minimum(self._a_min_steps, min_steps(A))
+            sig = Signals(A)
         conds = window_conditions(
             mean, var, floor, T, m, self.config, sig, accel_floor=self._accel_floor
         )[0]
         self._evidence = evidence_of(conds, None, None, 0, 0)
-        return still_windows(conds)
+        still = still_windows(conds)
+        return still if self._a_missing is None else still & ~self._a_missing
 
     def _accel_floor(self, a_var: NDArray) -> NDArray:
-        """The accelerometer's floor for each window: the stillest of it and those before it."""
+        """The accelerometer's floor for each window: the stillest of it and those before it
+        (windows holding a sample without a reading do not count)."""
+        if self._a_missing is not None:
+            a_var = np.where(self._a_missing[:, None], np.inf, a_var)
         floor = noise_floor_var(a_var, self._a_min_steps, self._a_floor_var, causal=True)
         if len(floor):
             self._a_floor_var = float(floor[-1])
