@@ -322,3 +322,30 @@ def test_ws_server_killed_and_restarted_reconnects_reports_the_gap(
     with pytest.warns(GapWarning):
         q_across = integrate_quat(rep.omega_b[a:], rep.t_s[a:], rep.q_est[a], "magnus4")[-1]
     assert angle_deg(out["result"].q_w_b, q_across) <= TOL_DEG
+
+
+def test_a_live_imu_payloads_accelerometer_is_decoded_in_bulk_with_its_rate():
+    # sensor_msgs/Imu as a Foxglove server sends it: the linear acceleration decodes with the
+    # angular velocity, bit for bit; a message flagging none (covariance[0] = -1) gives NaN,
+    # a batch of only those none
+    from imu_dcm.logio.ros.payload import classify_schema, decode_cdr_batch
+    from imu_dcm.logio.writers.messages import MSG_DEFINITIONS, cdr_messages, imu_doubles
+
+    name = "sensor_msgs/msg/Imu"
+    text = MSG_DEFINITIONS[name]
+    kind = classify_schema(name, "ros2msg", text)
+    rng = np.random.default_rng(0)
+    w, a = rng.normal(size=(6, 3)), rng.normal(size=(6, 3)) + [0.0, 0.0, 9.8]
+    t = 10**9 + np.arange(6, dtype=np.int64) * 5_000_000
+
+    def decoded(doubles):
+        payloads = [bytes(r) for r in cdr_messages(t, "imu", doubles)]
+        return decode_cdr_batch(kind, name, "ros2msg", text, payloads, IMU)
+
+    dec = decoded(imu_doubles(w, a, None))
+    assert np.array_equal(dec.values, w) and np.array_equal(dec.accel, a)
+    assert decoded(imu_doubles(w, None, None)).accel is None
+    mixed = imu_doubles(w, a, None)
+    mixed[::2] = imu_doubles(w[::2], None, None)
+    dec = decoded(mixed)
+    assert np.isnan(dec.accel[::2]).all() and np.array_equal(dec.accel[1::2], a[1::2])
