@@ -215,3 +215,52 @@ def test_a_rest_that_disagrees_is_said_and_in_the_summary_as_replays(tmp_path):
     assert "(1 not used)" in format_summary(s)
     se = SIGMA / math.sqrt(REST_S * RATE_HZ_REST - 2 * M)
     assert np.all(np.abs(np.array(s["bias_final_rad_s"]) - BIAS) < 4 * se)
+
+
+def _pipeline_rests(w, t, accel, batch: int):
+    """The live pipeline fed ``w`` (and ``accel`` where given, None batches where a row of it
+    is None) in batches, as a source delivers them; its rest rule afterwards."""
+    from imu_dcm.live.events import Received
+    from imu_dcm.live.pipeline import Pipeline
+
+    pipe = Pipeline(
+        method="trapezoid",
+        bias="auto",
+        init_q_w_b=None,
+        window_ns=0,
+        truth_wait_s=0.0,
+        lines=True,
+        view=None,
+        recorder=None,
+        say=lambda _text: None,
+    )
+    t_ns = np.round(t * 1e9).astype(np.int64)
+    for i in range(0, len(w), batch):
+        sl = slice(i, i + batch)
+        n = len(t_ns[sl])
+        acc = None if accel is None or accel[sl] is None else accel[sl]
+        zero = np.zeros(n, np.int64)
+        pipe.on_imu(Received("imu", t_ns[sl], w[sl], zero, zero, accel=acc))
+    pipe.finish()
+    return pipe.rest, (t_ns - t_ns[0]) * 1e-9
+
+
+def test_live_takes_the_accelerometer_a_source_gives_to_its_rest_rule():
+    from test_rest_causal import shaken_log
+
+    from imu_dcm.gyro.rest_causal import CausalRestBias
+
+    w, a, t, spans = shaken_log(seed=32)
+    rest, t_s = _pipeline_rests(w, t, a, batch=50)
+    # the shaken body at the gyro floor is not rest: the two rests, by gyro and accelerometer
+    assert [(s.start, s.stop) for s in rest.segments] == spans
+    assert all(s.evidence == ("gyro floor", "accelerometer") for s in rest.segments)
+    # without the accelerometer: bit for bit the gyro-only rule on the same samples
+    alone, _ = _pipeline_rests(w, t, None, batch=50)
+    ref = CausalRestBias()
+    for i in range(0, len(w), 50):  # the same batches: the same sums
+        ref.update_many(w[i : i + 50], t_s[i : i + 50])
+    ref.finish()
+    assert alone.segments == ref.segments and alone.bias_rad_s == ref.bias_rad_s
+    assert all(s.evidence == ("gyro floor",) for s in alone.segments)
+    assert alone.segments[0].stop == 2 * spans[0][1]  # the gyro alone took the shaking for rest

@@ -180,3 +180,51 @@ def test_a_frame_cut_at_the_end_of_its_datagram_costs_only_itself():
     assert Malformed(1) in events
     (data,) = [e for e in events if isinstance(e, Received)]
     assert data.t_ns.tolist() == [1_000_000, 3_000_000, 4_000_000]
+
+
+def _received_imu(kind: str, raw_gyro_scale: float | None = None):
+    """The IMU batch a MavlinkSource makes of two messages of ``kind`` (no socket traffic)."""
+    from pymavlink.dialects.v20 import common
+
+    from imu_dcm.live.events import Received
+    from imu_dcm.live.sources.mavlink import MavlinkSource
+
+    mav = common.MAVLink(None, srcSystem=1, srcComponent=1)
+    acc_frd = (0.5, -0.25, -9.75)  # m/s², FRD: the specific force of a level body is up (-z)
+    if kind == "HIGHRES_IMU":
+        msgs = [
+            mav.highres_imu_encode(t, *acc_frd, *W_FRD, 0, 0, 0, 0, 0, 0, 0, 0x3F) for t in (1, 2)
+        ]
+    elif kind == "SCALED_IMU":  # mG as int16
+        mg = [round(v / 9.80665e-3) for v in acc_frd]
+        msgs = [mav.scaled_imu_encode(t, *mg, 250, -125, 500, 0, 0, 0) for t in (1, 2)]
+    else:
+        msgs = [mav.raw_imu_encode(t, 1, 2, 3, 500, -250, 1000, 0, 0, 0) for t in (1, 2)]
+    url = "mavlink:udpin:127.0.0.1:0" + (
+        f"?raw_gyro_scale={raw_gyro_scale}" if raw_gyro_scale else ""
+    )
+    src = MavlinkSource(url, imu_topic=kind)
+    try:
+        src._handle([b"".join(m.pack(mav) for m in msgs)], 0, 0)
+    finally:
+        src.sock.close()
+    events = []
+    while not src.events.empty():
+        events.append(src.events.get())
+    (rec,) = [e for e in events if isinstance(e, Received) and e.kind == "imu"]
+    return rec, acc_frd
+
+
+@pytest.mark.parametrize("kind", ["HIGHRES_IMU", "SCALED_IMU"])
+def test_mavlink_accelerations_come_in_m_s2_in_the_gyros_axes(kind):
+    rec, acc_frd = _received_imu(kind)
+    want = np.array(acc_frd) * ned.FLU_FROM_FRD  # FLU, as the rates
+    tol = 0.0 if kind == "HIGHRES_IMU" else 0.5 * 9.80665e-3  # float32 exact; mG rounding
+    assert rec.accel.shape == (2, 3)
+    np.testing.assert_allclose(rec.accel, np.tile(want, (2, 1)), rtol=1e-6, atol=tol)
+    assert rec.accel[0, 2] > 9.0  # up in FLU: +z
+
+
+def test_raw_imu_counts_carry_no_accelerometer():
+    rec, _acc = _received_imu("RAW_IMU", raw_gyro_scale=0.001)
+    assert rec.accel is None

@@ -322,3 +322,69 @@ def test_ws_server_killed_and_restarted_reconnects_reports_the_gap(
     with pytest.warns(GapWarning):
         q_across = integrate_quat(rep.omega_b[a:], rep.t_s[a:], rep.q_est[a], "magnus4")[-1]
     assert angle_deg(out["result"].q_w_b, q_across) <= TOL_DEG
+
+
+def test_a_live_imu_payloads_accelerometer_is_decoded_in_bulk_with_its_rate():
+    # sensor_msgs/Imu as a Foxglove server sends it: the linear acceleration decodes with the
+    # angular velocity, bit for bit; a message flagging none (covariance[0] = -1) gives NaN,
+    # a batch of only those none
+    from imu_dcm.logio.ros.payload import classify_schema, decode_cdr_batch
+    from imu_dcm.logio.writers.messages import MSG_DEFINITIONS, cdr_messages, imu_doubles
+
+    name = "sensor_msgs/msg/Imu"
+    text = MSG_DEFINITIONS[name]
+    kind = classify_schema(name, "ros2msg", text)
+    rng = np.random.default_rng(0)
+    w, a = rng.normal(size=(6, 3)), rng.normal(size=(6, 3)) + [0.0, 0.0, 9.8]
+    t = 10**9 + np.arange(6, dtype=np.int64) * 5_000_000
+
+    def decoded(doubles):
+        payloads = [bytes(r) for r in cdr_messages(t, "imu", doubles)]
+        return decode_cdr_batch(kind, name, "ros2msg", text, payloads, IMU)
+
+    dec = decoded(imu_doubles(w, a, None))
+    assert np.array_equal(dec.values, w) and np.array_equal(dec.accel, a)
+    assert decoded(imu_doubles(w, None, None)).accel is None
+    mixed = imu_doubles(w, a, None)
+    mixed[::2] = imu_doubles(w[::2], None, None)
+    dec = decoded(mixed)
+    assert np.isnan(dec.accel[::2]).all() and np.array_equal(dec.accel[1::2], a[1::2])
+
+
+def test_ws_live_rests_by_the_accelerometer_the_imu_messages_carry():
+    # A real server publishing sensor_msgs/Imu with linear_acceleration: a body shaken at the
+    # gyro's floor between two rests (test_rest_causal.shaken_log). Live's rest rule gets the
+    # accelerometer and finds the two rests, not the shaking, each "still by the gyro floor
+    # and the accelerometer", as replay's rest_segments does on the same arrays.
+    from types import SimpleNamespace
+
+    from test_rest_causal import shaken_log
+
+    from imu_dcm.gyro.rest import rest_segments
+    from imu_dcm.logio.writers.messages import MSG_DEFINITIONS, cdr_messages, imu_doubles
+
+    w, a, t, spans = shaken_log(seed=33)
+    t_ns = 10**9 + np.round(t * 1e9).astype(np.int64)
+    rows = cdr_messages(t_ns, "imu", imu_doubles(w, a, None))
+    msgs = [(IMU, int(s), bytes(r)) for s, r in zip(t_ns, rows, strict=True)]
+    name = "sensor_msgs/msg/Imu"
+    schema = SimpleNamespace(name=name, encoding="ros2msg", data=MSG_DEFINITIONS[name].encode())
+    pub = Publisher({IMU: schema})
+    try:
+        th, said, out, _ = start_live(
+            f"ws://127.0.0.1:{pub.port}", method="trapezoid", bias="auto", idle_stop_s=1.5
+        )
+        pub.wait_subscribed()
+        pub.publish(msgs, speed=10.0)
+        th.join(60)
+    finally:
+        pub.stop()
+    assert not th.is_alive(), said
+    s = out["result"].summary
+    assert s["samples"] == len(w), said
+    t_s = (t_ns - t_ns[0]) * 1e-9
+    segs = s["bias_segments"]
+    assert [(g["start_s"], g["end_s"]) for g in segs] == [(t_s[i], t_s[j - 1]) for i, j in spans]
+    assert all(g["evidence"] == ["gyro floor", "accelerometer"] for g in segs)
+    offline, _conflict = rest_segments(w, t_s, accel_b=a)
+    assert [(o.start, o.stop) for o in offline] == spans

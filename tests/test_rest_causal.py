@@ -12,6 +12,7 @@ import numpy as np
 import pytest
 from test_rest_agreement import rests_log as rests_log_at_200hz
 
+from imu_dcm.errors import InputError
 from imu_dcm.gyro.rest import rest_segments
 from imu_dcm.gyro.rest_causal import CausalRestBias
 from imu_dcm.replay.bias import estimate_bias
@@ -162,3 +163,113 @@ def test_offline_and_live_find_the_same_outlier(where):
     assert live_out["outliers"][0]["noises"] == pytest.approx(
         offline["outliers"][0]["noises"], rel=1e-9
     )
+
+
+# -- the accelerometer (a live source that carries it) ---------------------------------------
+
+G = 9.80665
+SIGMA_A = 0.02  # accelerometer noise, m/s²
+
+
+def still_accel(n: int, rng) -> np.ndarray:
+    """A still accelerometer: gravity along +z (specific force up) and its noise."""
+    return rng.normal(0.0, SIGMA_A, (n, 3)) + [0.0, 0.0, G]
+
+
+def shaken_log(seed: int):
+    """2 s rest, 2 s of a body that accelerates and vibrates without rotating (gyro at its
+    floor: bias and noise only; accelerometer 4 m/s² forward plus a 2 m/s² vibration at 13 Hz,
+    |mean a| - g = 0.8 m/s² and std 1.4 m/s², far beyond its floor of 0.02), 1 s of turn, 2 s
+    rest, 1 s of turn. Returns w, a, t and the rests' ``[a, b)``."""
+    rng = np.random.default_rng(seed)
+    n_r, n_v, n_m = 400, 400, 200
+    gyro = [rng.normal(0.0, SIGMA, (n, 3)) + BIAS for n in (n_r, n_v, n_m, n_r, n_m)]
+    for i in (2, 4):
+        gyro[i][:, 2] += TURN
+    acc = [still_accel(n, rng) for n in (n_r, n_v, n_m, n_r, n_m)]
+    tv = np.arange(n_v) / RATE_HZ
+    acc[1][:, 0] += 4.0 + 2.0 * np.cos(2 * math.pi * 13.0 * tv)
+    w, a = np.concatenate(gyro), np.concatenate(acc)
+    r2 = n_r + n_v + n_m
+    return w, a, np.arange(len(w)) / RATE_HZ, [(0, n_r), (r2, r2 + n_r)]
+
+
+@pytest.mark.parametrize("batch", [1, 37, 10_000])
+def test_a_shaken_body_at_the_gyro_floor_is_not_rest_live_or_offline(batch):
+    w, a, t, spans = shaken_log(seed=31)
+    live = CausalRestBias()
+    for i in range(0, len(w), batch):
+        live.update_many(w[i : i + batch], t[i : i + batch], a[i : i + batch])
+    live.finish()
+    offline, _conflict = rest_segments(w, t, accel_b=a)
+    # the shaking is not rest: the two rests, where the construction put them, live and offline
+    assert [(s.start, s.stop) for s in live.segments] == spans
+    assert [(s.start, s.stop, s.lo, s.hi) for s in live.segments] == [
+        (s.start, s.stop, s.lo, s.hi) for s in offline
+    ]
+    for s in (*live.segments, *offline):
+        assert s.evidence == ("gyro floor", "accelerometer")
+    eps = np.finfo(float).eps
+    for s, o in zip(live.segments, offline, strict=True):
+        np.testing.assert_allclose(s.bias_rad_s, o.bias_rad_s, rtol=0, atol=4 * s.hi * eps * 0.01)
+    # the gyro alone takes the shaking for rest: its first rest runs on through it
+    alone = CausalRestBias()
+    alone.update_many(w, t)
+    alone.finish()
+    assert alone.segments[0].start == 0 and alone.segments[0].stop == 2 * spans[0][1]
+
+
+def test_a_true_rest_with_the_accelerometer_says_so_and_has_the_constructions_bias():
+    offsets = [np.zeros(3), np.array([0.001, 0.0, -0.001]), np.zeros(3)]
+    w, t, spans = agreement_log(offsets, seed=41)
+    a = still_accel(len(w), np.random.default_rng(42))
+    live = CausalRestBias()
+    live.update_many(w, t, a)
+    live.finish()
+    offline, _conflict = rest_segments(w, t, accel_b=a)
+    for found in (live.segments, offline):
+        assert [(s.start, s.stop, s.lo, s.hi) for s in found] == spans
+        for s, off in zip(found, offsets, strict=True):
+            assert s.evidence == ("gyro floor", "accelerometer")
+            # over the bias span the noise has mean 0: the bias is the construction's
+            np.testing.assert_allclose(s.bias_rad_s, BIAS + off, rtol=0, atol=1e-15)
+
+
+def test_without_the_accelerometer_the_gyro_judges_alone_as_before():
+    # no accelerometer: the gyro-only rule (evidence "gyro floor" alone), whether None is
+    # passed or nothing, sample by sample or in one batch, bit for bit
+    w, t, spans = rests_log(RATE_HZ, 5)
+    one = CausalRestBias()
+    applied = one.update_many(w, t)
+    one.finish()
+    each = CausalRestBias()
+    applied_each = np.array([each.update(tuple(x), s, None) for x, s in zip(w, t, strict=True)])
+    each.finish()
+    assert np.array_equal(applied, applied_each)
+    assert one.segments == each.segments
+    assert [(s.start, s.stop) for s in one.segments] == spans
+    assert all(s.evidence == ("gyro floor",) for s in one.segments)
+    offline, _conflict = rest_segments(w, t)
+    assert [(s.start, s.stop, s.lo, s.hi, s.evidence) for s in offline] == [
+        (s.start, s.stop, s.lo, s.hi, s.evidence) for s in one.segments
+    ]
+
+
+def test_the_accelerometer_comes_with_every_batch_or_with_none():
+    w, t, _spans = rests_log(RATE_HZ, 6)
+    live = CausalRestBias()
+    live.update_many(w[:10], t[:10], still_accel(10, np.random.default_rng(0)))
+    with pytest.raises(InputError, match="every batch or with none"):
+        live.update_many(w[10:20], t[10:20])
+
+
+def test_a_sample_without_an_accelerometer_reading_breaks_the_rest_it_falls_in():
+    w, t, spans = agreement_log([np.zeros(3)], seed=43)
+    a = still_accel(len(w), np.random.default_rng(44))
+    (a0, b0, _lo, _hi) = spans[0]
+    k = (a0 + b0) // 2
+    a[k] = np.nan  # this sample came without one: no window holding it is rest
+    live = CausalRestBias()
+    live.update_many(w, t, a)
+    live.finish()
+    assert [(s.start, s.stop) for s in live.segments] == [(a0, k), (k + 1, b0)]

@@ -11,12 +11,14 @@ import math
 import numpy as np
 from numpy.typing import NDArray
 
+from imu_dcm.errors import InputError
 from imu_dcm.gyro.rest_agreement import CausalAgreement
 from imu_dcm.gyro.rest_evidence import Signals
 from imu_dcm.gyro.rest_rule import (
     RestConfig,
     RestSegment,
     bias_span,
+    evidence_of,
     noise_floor_var,
     runs,
     still_windows,
@@ -34,9 +36,13 @@ class CausalRestBias:
     (live).
 
     The same window test (:func:`~imu_dcm.gyro.rest_rule.window_conditions`) and trimming
-    (:func:`~imu_dcm.gyro.rest_rule.bias_span`), looking back only. A live gyro stream carries no
-    accelerometer or truth, so the gyro judges alone: the noise floor is the stillest window
-    seen so far (offline: of the whole log), and the mean rate stays under ``max_rate_rad_s``.
+    (:func:`~imu_dcm.gyro.rest_rule.bias_span`), looking back only. A live stream carries no
+    truth. Where it carries the accelerometer (``accel_b``, m/s², from the first batch on), it
+    judges with the gyro as offline: its spread at its own floor and ``|mean a|`` near g, the
+    mean rate under ``max_bias_rad_s``; the rest's evidence is ("gyro floor",
+    "accelerometer"). Without one the gyro judges alone, and the mean rate stays under
+    ``max_rate_rad_s`` (evidence ("gyro floor",)). Each floor is the stillest window seen so
+    far (offline: of the whole log).
     The window ending at the newest sample ``k`` is judged when ``k`` arrives. While a segment
     ``[a, ...)`` lasts, the bias is the mean over ``[lo, k + 1 - m)`` (``lo`` from
     :func:`~imu_dcm.gyro.rest_rule.bias_span`): one window behind the newest sample. When motion
@@ -86,6 +92,13 @@ class CausalRestBias:
         self.win = 0
         self._floor_var = math.inf  # the stillest window so far (variance, largest axis)
         self._min_steps = np.full(3, np.inf)  # the smallest step of each axis so far
+        self._accel: bool | None = None  # whether the stream carries the accelerometer
+        self._a_floor_var = math.inf  # the accelerometer's stillest window so far
+        self._a_min_steps = np.full(3, np.inf)
+        self._evidence: tuple[str, ...] = ("gyro floor",)  # the signals that judge the windows
+        self._probe_a: list[NDArray] = []
+        self._tail_a = np.zeros((0, 3))
+        self._a_missing: NDArray | None = None  # windows holding a sample without a reading
         self._probe_w: list[NDArray] = []  # samples before the window length is known
         self._probe_t: list[NDArray] = []
         self._tail_w = np.zeros((0, 3))  # the last win samples
@@ -102,18 +115,27 @@ class CausalRestBias:
         self._shift = np.zeros(3)  # the squares of [lo, acc_hi) about this sample (its first)
         self._sq = np.zeros(3)
 
-    def update(self, w: tuple[float, float, float], t_s: float) -> tuple[float, float, float]:
-        """Add one sample (rad/s, body axes; stamp s); return the bias to subtract from it."""
-        self.update_many(np.array([w], dtype=float), np.array([t_s], dtype=float))
+    def update(
+        self, w: tuple[float, float, float], t_s: float, a=None
+    ) -> tuple[float, float, float]:
+        """Add one sample (rad/s, body axes; stamp s; specific force ``a`` m/s² or None);
+        return the bias to subtract from it."""
+        acc = None if a is None else np.array([a], dtype=float)
+        self.update_many(np.array([w], dtype=float), np.array([t_s], dtype=float), acc)
         return self.bias_rad_s
 
-    def update_many(self, omega_b: NDArray, t_s: NDArray) -> NDArray:
+    def update_many(
+        self, omega_b: NDArray, t_s: NDArray, accel_b: NDArray | None = None
+    ) -> NDArray:
         """Add samples in order; return the bias to subtract from each, as :meth:`update` would.
 
         Parameters
         ----------
         omega_b : float64 (n, 3) — body rates, rad/s.
         t_s : float64 (n,) — their stamps, s, increasing.
+        accel_b : float64 (n, 3) or None — specific force on the same rows, m/s², in the
+            gyro's axes; NaN rows where a sample has none (a window holding one is not rest).
+            Given with every batch or with none (the first batch decides).
 
         Returns
         -------
@@ -121,25 +143,40 @@ class CausalRestBias:
         """
         w = np.asarray(omega_b, dtype=float).reshape(-1, 3)
         t = np.asarray(t_s, dtype=float).reshape(-1)
+        a = None if accel_b is None else np.asarray(accel_b, dtype=float).reshape(-1, 3)
+        if self._accel is None:
+            self._accel = a is not None
+        elif self._accel != (a is not None):
+            had = "with" if self._accel else "without"
+            raise InputError(
+                f"Expected accel_b with every batch or with none, got "
+                f"{'none' if a is None else 'one'} after batches {had}"
+            )
+        if a is not None and a.shape != w.shape:
+            raise InputError(f"Expected accel_b of shape {w.shape}, got {a.shape}")
         if self.win:
-            return self._steps(w, t)
+            return self._steps(w, t, a)
         # the window length needs the median of the first `probe` steps
         self._probe_w.append(w)
         self._probe_t.append(t)
+        if a is not None:
+            self._probe_a.append(a)
         seen = sum(len(x) for x in self._probe_t)
         if seen < self.probe:
             return np.tile(self.bias_rad_s, (len(w), 1))
         pw, pt = np.concatenate(self._probe_w), np.concatenate(self._probe_t)
-        self._probe_w, self._probe_t = [], []
+        pa = np.concatenate(self._probe_a) if self._accel else None
+        self._probe_w, self._probe_t, self._probe_a = [], [], []
         p = self.probe
         self.win = window_samples(pt[:p], self.config.min_duration_s)
         before = np.tile(self.bias_rad_s, (p - 1 - (seen - len(w)), 1))  # this call's, held
-        out = self._steps(pw, pt)
+        out = self._steps(pw, pt, pa)
         return np.concatenate([before, out[p - 1 :]])[-len(w) :]
 
-    def _still(self, X: NDArray, T: NDArray, rows: NDArray) -> NDArray:
-        """The rule for the windows starting at ``rows`` of ``X``, each judged against the floor
-        of the windows up to it (:func:`~imu_dcm.gyro.rest_rule.noise_floor_var`, causal)."""
+    def _still(self, X: NDArray, T: NDArray, rows: NDArray, XA: NDArray | None) -> NDArray:
+        """The rule for the windows starting at ``rows`` (consecutive) of ``X`` (and of the
+        accelerometer's ``XA``), each judged against the floor of the windows up to it
+        (:func:`~imu_dcm.gyro.rest_rule.noise_floor_var`, causal), the accelerometer's too."""
         m = self.win
         mean, var = windowed_mean_var(X, m)
         mean, var = mean[rows], var[rows]
@@ -147,21 +184,46 @@ class CausalRestBias:
         floor = noise_floor_var(var, self._min_steps, self._floor_var, causal=True)
         if len(floor):
             self._floor_var = float(floor[-1])
-        conds = window_conditions(mean, var, floor, T, m, self.config, Signals())[0]
-        return still_windows(conds)
+        sig, self._a_missing = Signals(), None
+        if XA is not None:
+            A = XA[rows[0] : rows[-1] + m]
+            missing = ~np.isfinite(A).all(axis=1)
+            if missing.any():  # a window holding a sample without a reading is not still
+                A = np.where(missing[:, None], 0.0, A)
+                count = np.concatenate([[0], np.cumsum(missing)])
+                self._a_missing = (count[m:] - count[:-m]) > 0
+            self._a_min_steps = np.minimum(self._a_min_steps, min_steps(A))
+            sig = Signals(A)
+        conds = window_conditions(
+            mean, var, floor, T, m, self.config, sig, accel_floor=self._accel_floor
+        )[0]
+        self._evidence = evidence_of(conds, None, None, 0, 0)
+        still = still_windows(conds)
+        return still if self._a_missing is None else still & ~self._a_missing
 
-    def _steps(self, w: NDArray, t: NDArray) -> NDArray:
+    def _accel_floor(self, a_var: NDArray) -> NDArray:
+        """The accelerometer's floor for each window: the stillest of it and those before it
+        (windows holding a sample without a reading do not count)."""
+        if self._a_missing is not None:
+            a_var = np.where(self._a_missing[:, None], np.inf, a_var)
+        floor = noise_floor_var(a_var, self._a_min_steps, self._a_floor_var, causal=True)
+        if len(floor):
+            self._a_floor_var = float(floor[-1])
+        return floor
+
+    def _steps(self, w: NDArray, t: NDArray, a: NDArray | None = None) -> NDArray:
         """The rule over a batch: windows ending at each sample, then the segments' runs."""
         n, m = len(w), self.win
         X = np.concatenate([self._tail_w, w])
         T = np.concatenate([self._tail_t, t])
+        XA = None if a is None else np.concatenate([self._tail_a, a])
         base = self._k + 1 - len(self._tail_w)  # index of X[0]
         k0 = self._k + 1  # index of w[0]
         still = np.zeros(n, dtype=bool)
         first_full = max(0, m - 1 - k0)  # the first sample whose window is full
         if first_full < n:
             rows = np.arange(first_full, n) + (k0 - base) - m + 1  # window ending at sample j
-            still[first_full:] = self._still(X, T, rows)
+            still[first_full:] = self._still(X, T, rows, XA)
         out = np.full((n, 3), np.nan)
         before = self.bias_rad_s
         for p, q in runs(still):
@@ -180,6 +242,8 @@ class CausalRestBias:
             filled = np.tile(before, (n, 1))
         self._k += n
         self._tail_w, self._tail_t = X[-m:], T[-m:]
+        if XA is not None:
+            self._tail_a = XA[-m:]
         return filled
 
     def _run(self, X, T, base: int, k0: int, p: int, q: int, out: NDArray) -> None:
@@ -246,7 +310,7 @@ class CausalRestBias:
         elif hi > lo:
             self.bias_rad_s = tuple((self._acc / (hi - lo)).tolist())
         seg = RestSegment(
-            a, b, self._seg_t0, self._seg_end_t, self.bias_rad_s, lo, hi, ("gyro floor",)
+            a, b, self._seg_t0, self._seg_end_t, self.bias_rad_s, lo, hi, self._evidence
         )
         self.segments.append(seg)
         if self.agreement.add(seg, var, hi - lo, step_var(self._min_steps)) is None:

@@ -213,7 +213,9 @@ def std_limit(floor_var, m: int, cfg: RestConfig):
     return np.sqrt(floor_var) * floor_factor(m, cfg.floor_spreads)
 
 
-def window_conditions(mean, var, floor_var, t, m: int, cfg: RestConfig, sig: Signals):
+def window_conditions(
+    mean, var, floor_var, t, m: int, cfg: RestConfig, sig: Signals, accel_floor=None
+):
     """Each condition of the rule over windows of ``m`` samples (the module docstring).
 
     Parameters
@@ -229,6 +231,10 @@ def window_conditions(mean, var, floor_var, t, m: int, cfg: RestConfig, sig: Sig
     cfg : RestConfig
     sig : Signals
         The other signals on the same ``k + m - 1`` rows (none: the gyro judges alone).
+    accel_floor : callable, optional
+        Given the accelerometer's per-axis window variances (k, 3), its noise floor each
+        window is judged against (m²/s⁴, scalar or (k,)). None (offline): the stillest window
+        of these rows (:func:`noise_floor_var`); live passes the causal floor.
 
     Returns ``(conds, limit, truth)``: ``conds`` a list of (signal, name, value, limit, unit),
     a window passing a condition when its value is at most the limit (NaN: undecided, passes);
@@ -244,7 +250,10 @@ def window_conditions(mean, var, floor_var, t, m: int, cfg: RestConfig, sig: Sig
     if sig.accel_b is not None:
         a_mean, a_var = windowed_mean_var(sig.accel_b, m)
         a_spread = np.sqrt(row_max(a_var))
-        a_floor = math.sqrt(noise_floor_var(a_var, min_steps(sig.accel_b)))
+        if accel_floor is None:
+            a_floor = np.sqrt(noise_floor_var(a_var, min_steps(sig.accel_b)))
+        else:
+            a_floor = np.sqrt(accel_floor(a_var))
         a_limit = cfg.max_accel_std_m_s2 if cfg.max_accel_std_m_s2 is not None else a_floor * z
         g_err = np.abs(row_norm(a_mean) - GRAVITY_M_S2)
         conds += [

@@ -55,6 +55,8 @@ class Received:
     arrival_ns : int64 (n,) — ``time.perf_counter_ns()`` when each sample arrived.
     wall_ns : int64 (n,) — wall clock (Unix ns) at arrival (the recording's log time).
     raw : list of bytes or None — the CDR payloads as received (WebSocket), aligned with t_ns.
+    accel : float64 (n, 3) or None — IMU: the specific force on the same rows, m/s², in the
+        rates' axes (NaN rows where a message has none); None where the source has none.
     """
 
     kind: str
@@ -63,6 +65,7 @@ class Received:
     arrival_ns: NDArray[np.int64]
     wall_ns: NDArray[np.int64]
     raw: list[bytes] | None = None
+    accel: NDArray[np.float64] | None = None
 
 
 @dataclass(slots=True, frozen=True)

@@ -57,6 +57,11 @@ def _joined(recs: list[Received]) -> Received:
     if len(recs) == 1:
         return recs[0]
     raw = None if any(r.raw is None for r in recs) else [p for r in recs for p in r.raw]
+    accel = None
+    if any(r.accel is not None for r in recs):  # batches without one: NaN rows
+        accel = np.concatenate(
+            [np.full((len(r.t_ns), 3), np.nan) if r.accel is None else r.accel for r in recs]
+        )
     return Received(
         recs[0].kind,
         np.concatenate([r.t_ns for r in recs]),
@@ -64,6 +69,7 @@ def _joined(recs: list[Received]) -> Received:
         np.concatenate([r.arrival_ns for r in recs]),
         np.concatenate([r.wall_ns for r in recs]),
         raw,
+        accel,
     )
 
 

@@ -7,9 +7,9 @@ feeds it) as arrays, in stamp order:
    samples, duplicate stamps and non-finite rates are dropped and counted; when the source has
    been quiet for longer than the window (wall time), the held samples are released;
 2. reports gaps with replay's rule (:func:`imu_dcm.integrator.batch.find_gaps`) over the recent
-steps
-   and the new ones;
+   steps and the new ones;
 3. subtracts the bias (``auto``: :class:`imu_dcm.gyro.rest_causal.CausalRestBias` over the batch,
+   with the accelerometer where the source's first IMU batch carries one (else the gyro alone),
    each rest said as it closes: its bias, or why it is not used; ``none``; a vector);
 4. integrates the batch with :meth:`imu_dcm.DcmIntegrator.update_many` (the compiled kernel's
    feed), starting — as replay does — at the first sample inside the truth's coverage, from the
@@ -114,6 +114,7 @@ class Pipeline:
             tuple(float(v) for v in bias) if self.bias_mode == "fixed" else (0.0, 0.0, 0.0)
         )
         self.rest = CausalRestBias() if self.bias_mode == "auto" else None
+        self.accel: bool | None = None  # whether the rest rule gets the accelerometer
         self.init_q_w_b = init_q_w_b
         self.reorder = ReorderBuffer(window_ns)
         self.truth_wait_ns = int(truth_wait_s * 1e9)
@@ -164,7 +165,13 @@ class Pipeline:
 
     # -- input -----------------------------------------------------------------------------
     def on_imu(self, rec: Received) -> None:
-        t_ns, w, arrival = self.reorder.push(rec.t_ns, rec.values, rec.arrival_ns)
+        values = rec.values
+        if self.accel is None:  # the first batch decides: with the accelerometer or without
+            self.accel = self.rest is not None and rec.accel is not None
+        if self.accel:  # it rides along with the rates through the reorder window
+            acc = rec.accel if rec.accel is not None else np.full((len(values), 3), np.nan)
+            values = np.concatenate([values, acc], axis=1)
+        t_ns, w, arrival = self.reorder.push(rec.t_ns, values, rec.arrival_ns)
         if len(t_ns):
             self._process(t_ns, w, arrival)
 
@@ -202,13 +209,14 @@ class Pipeline:
     def _process(self, t_ns: NDArray, w: NDArray, arrival: NDArray) -> None:
         if self.t0_ns is None:
             self.t0_ns = int(t_ns[0])
+        acc, w = (w[:, 3:], np.ascontiguousarray(w[:, :3])) if w.shape[1] > 3 else (None, w)
         t_s = (t_ns - self.t0_ns) * 1e-9
         self._check_steps(t_s)
         if self.units_probe is not None:
             self._probe_units(t_ns, t_s, w)
         if self.rest is not None:
             n_seg = len(self.rest.segments)
-            b = self.rest.update_many(w, t_s)
+            b = self.rest.update_many(w, t_s, acc)
             for i in range(n_seg, len(self.rest.segments)):
                 self.say(rest_line(self.rest, i))
             wc = w - b

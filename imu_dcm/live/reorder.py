@@ -30,7 +30,8 @@ _EMPTY_T = np.zeros(0, np.int64)
 
 
 class ReorderBuffer:
-    """Reorder window over samples ``(t_ns, omega_b, arrival_ns)``.
+    """Reorder window over samples ``(t_ns, omega_b, arrival_ns)``; columns of ``omega_b``
+    after its first three (the accelerometer, where the source has one) ride along.
 
     Parameters
     ----------
@@ -64,15 +65,19 @@ class ReorderBuffer:
         Parameters
         ----------
         t_ns : int64 (n,) — stamps, ns.
-        omega_b : float64 (n, 3) — rates, rad/s (judged finite and plausible).
+        omega_b : float64 (n, 3) — rates, rad/s (judged finite and plausible); (n, 3 + k):
+            the rates and k columns carried along (as many in every batch).
         arrival_ns : int64 (n,) — carried along with each sample.
 
         Returns
         -------
         t_ns, omega_b, arrival_ns of the released samples, stamps strictly increasing.
         """
-        finite = np.isfinite(omega_b).all(axis=1)
-        ok = finite & ~implausible_rates(omega_b)
+        if not len(self._t):  # the columns of the batches to come
+            self._w = self._w.reshape(0, omega_b.shape[1])
+        rates = omega_b[:, :3]
+        finite = np.isfinite(rates).all(axis=1)
+        ok = finite & ~implausible_rates(rates)
         if not ok.all():
             n_bad = len(ok) - int(finite.sum())
             self.dropped_nonfinite += n_bad
@@ -128,11 +133,12 @@ class ReorderBuffer:
                 self.last_released_ns = held_t[k - 1]
                 del held_t[:k]
         self._t = np.array(held_t, np.int64)
-        self._w = np.array([rows[s][0] for s in held_t], float).reshape(-1, 3)
+        cols = self._w.shape[1]
+        self._w = np.array([rows[s][0] for s in held_t], float).reshape(-1, cols)
         self._a = np.array([rows[s][1] for s in held_t], np.int64)
         return (
             np.array(out_t, np.int64),
-            np.array([r[0] for r in out_rows], float).reshape(-1, 3),
+            np.array([r[0] for r in out_rows], float).reshape(-1, cols),
             np.array([r[1] for r in out_rows], np.int64),
         )
 

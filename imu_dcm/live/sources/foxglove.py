@@ -360,5 +360,5 @@ class WsSource(Source):
             arrival = np.fromiter((items[i][1] for i in g), np.int64, len(g))
             wall = np.fromiter((items[i][2] for i in g), np.int64, len(g))
             raw = [payloads[i] for i in g]
-            out.append(Received(kind, dec.t_ns, dec.values, arrival, wall, raw))
+            out.append(Received(kind, dec.t_ns, dec.values, arrival, wall, raw, dec.accel))
         return out

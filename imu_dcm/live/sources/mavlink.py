@@ -16,10 +16,14 @@ Gyro, the first of these to arrive, or the one ``imu_topic`` names; said in one 
   count: ``mavlink:udpin:HOST:PORT?raw_gyro_scale=0.001``; without one the source stops with a
   line saying so.
 
+Accelerometer, from the gyro's message, to the rest rule: ``HIGHRES_IMU``'s ``xacc..zacc`` in
+m/s², ``SCALED_IMU``'s in mG (milli g: x 9.80665e-3 m/s²); ``RAW_IMU``'s counts have no known
+unit and are not taken (the gyro judges rest alone).
+
 Truth: ``ATTITUDE_QUATERNION`` (``q1..q4`` = w, x, y, z), stamped ``time_boot_ms``; the
-autopilot's own estimate. Frames: MAVLink states body rates in FRD and attitude FRD to NED;
-both are converted to body FLU and world ENU, ``[x, y, z, w]``, as the log readers do
-(:mod:`imu_dcm.logio.ned`).
+autopilot's own estimate. Frames: MAVLink states body rates and accelerations in FRD and
+attitude FRD to NED; all are converted to body FLU and world ENU, ``[x, y, z, w]``, as the log
+readers do (:mod:`imu_dcm.logio.ned`).
 
 One bad message costs itself: a frame pymavlink cannot take, a frame cut off at the end of
 its datagram (over UDP a datagram holds whole frames: the next one starts afresh, never as the
@@ -55,6 +59,13 @@ GYRO = {
     "SCALED_IMU2": (1e-3, "time_boot_ms", 1_000_000),
     "SCALED_IMU3": (1e-3, "time_boot_ms", 1_000_000),
     "RAW_IMU": (None, "time_usec", 1000),
+}
+#: gyro message -> m/s² per unit of its accelerations (RAW_IMU's counts: no known unit)
+ACCEL = {
+    "HIGHRES_IMU": 1.0,
+    "SCALED_IMU": 9.80665e-3,
+    "SCALED_IMU2": 9.80665e-3,
+    "SCALED_IMU3": 9.80665e-3,
 }
 TRUTH = "ATTITUDE_QUATERNION"
 RAW_WAIT_S = 1.0
@@ -212,7 +223,9 @@ class MavlinkSource(Source):
         if gyro:
             a = np.array(gyro, dtype=np.float64)
             t = np.array([r[0] for r in gyro], dtype=np.int64)
-            self._put("imu", t, a[:, 1:4] * FLU_FROM_FRD, arrival, wall)
+            unit = ACCEL.get(self.gyro_type or "")
+            accel = None if unit is None else a[:, 4:7] * (unit * FLU_FROM_FRD)
+            self._put("imu", t, a[:, 1:4] * FLU_FROM_FRD, arrival, wall, accel)
 
     def _take(self, m, gyro: list, truth: list) -> bool:
         """One parsed message into ``gyro`` or ``truth`` rows; False for a malformed one (a bad
@@ -232,13 +245,15 @@ class MavlinkSource(Source):
             t = getattr(m, stamp) * ns
             if not 0 <= t < _STAMP_END_NS:
                 return False
-            gyro.append((t, m.xgyro * scale, m.ygyro * scale, m.zgyro * scale))
+            gyro.append(
+                (t, m.xgyro * scale, m.ygyro * scale, m.zgyro * scale, m.xacc, m.yacc, m.zacc)
+            )
         return True
 
-    def _put(self, kind: str, t_ns, values, arrival: int, wall: int) -> None:
+    def _put(self, kind: str, t_ns, values, arrival: int, wall: int, accel=None) -> None:
         n = len(t_ns)
         arrival_ns, wall_ns = np.full(n, arrival, np.int64), np.full(n, wall, np.int64)
-        self.events.put(Received(kind, t_ns, values, arrival_ns, wall_ns))
+        self.events.put(Received(kind, t_ns, values, arrival_ns, wall_ns, accel=accel))
 
     def _use(self, name: str) -> bool:
         """Whether ``name`` is the gyro: the one named, else the first scaled message to

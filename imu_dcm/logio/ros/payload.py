@@ -7,7 +7,8 @@ a type holding one, or a ``geometry_msgs/Vector3Stamped`` gyro) or a truth type,
 same bulk decoder, so a live sample decodes exactly as the same message read from a bag.
 
 Conventions: stamps int64 ns (``header.stamp``); ``omega_b`` (N, 3) body rate as the message
-stores it (rad/s in ROS); truth ``q_w_b`` (M, 4) ``[x, y, z, w]``, body to world.
+stores it (rad/s in ROS); ``accel_b`` (N, 3) its ``linear_acceleration`` (m/s², NaN rows where
+the message flags none: covariance[0] = -1); truth ``q_w_b`` (M, 4) ``[x, y, z, w]``, body to world.
 """
 
 from __future__ import annotations
@@ -29,11 +30,13 @@ __all__ = ["IMU_TYPE", "TRUTH_TYPES", "Decoded", "classify_schema", "decode_cdr_
 class Decoded:
     """A decoded batch: ``t_ns`` int64 (n,), ``values`` float64 (n, 3) rates or (n, 4)
     quaternions ``[x, y, z, w]``, ``good`` bool (len(payloads),) — which payloads decoded (only
-    those are in ``t_ns`` / ``values``)."""
+    those are in ``t_ns`` / ``values``), ``accel`` float64 (n, 3) an IMU's linear acceleration,
+    m/s², or None (a type without one, or every message of the batch flags none)."""
 
     t_ns: NDArray[np.int64]
     values: NDArray[np.float64]
     good: NDArray[np.bool_]
+    accel: NDArray[np.float64] | None = None
 
 
 def classify_schema(name: str, encoding: str, text: str) -> tuple[str, str] | None:
@@ -89,7 +92,8 @@ def decode_cdr_batch(
     Returns
     -------
     Decoded
-        IMU: ``values`` = the angular velocity (n, 3); truth: the quaternion (n, 4).
+        IMU: ``values`` = the angular velocity (n, 3), ``accel`` its linear acceleration
+        (decoded in bulk with it); truth: the quaternion (n, 4).
 
     Raises
     ------
@@ -116,4 +120,7 @@ def decode_cdr_batch(
     if values is None:
         values = np.zeros((0, 3 if what == "imu" else 4))
     t_ns = cols.fields.get("t_ns", np.zeros(0, np.int64))
-    return Decoded(np.asarray(t_ns, np.int64), np.asarray(values, np.float64), good)
+    accel = cols.fields.get("accel") if what == "imu" else None
+    if accel is not None:
+        accel = np.asarray(accel, np.float64)
+    return Decoded(np.asarray(t_ns, np.int64), np.asarray(values, np.float64), good, accel)
