@@ -37,6 +37,8 @@ import zlib
 from collections.abc import Callable
 from pathlib import Path
 
+from loopback import free_udp_port
+
 MAGIC = b"\x89MCAP0\r\n"
 OP = {
     "header": 0x01,
@@ -762,14 +764,6 @@ class Pool:
                 w.close()
 
 
-def _free_udp_port() -> int:
-    import socket
-
-    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as sock:
-        sock.bind(("127.0.0.1", 0))
-        return sock.getsockname()[1]
-
-
 def run_one(w: Worker, case: Case, kind: str, d: Path, base: Base | None) -> Verdict:
     (d / "in").mkdir(parents=True)
     (d / "out").mkdir()
@@ -784,7 +778,7 @@ def run_one(w: Worker, case: Case, kind: str, d: Path, base: Base | None) -> Ver
             argv += ["--summary-json", str(summary)]
         op = {"kind": "cli", "argv": argv}
     elif kind == "live":  # a source that never sends: every refusal comes before it opens
-        argv = [f"udp://127.0.0.1:{_free_udp_port()}", "--rerun", "off", "--no-status"]
+        argv = [f"udp://127.0.0.1:{free_udp_port()}", "--rerun", "off", "--no-status"]
         op = {"kind": kind, "argv": [*argv, "--idle-stop", "0.5", "--quiet", *extra]}
     elif kind == "batch":
         op = {"kind": kind, "argv": ["batch", str(log), "--jobs", "1", "--quiet", *extra]}

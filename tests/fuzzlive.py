@@ -278,25 +278,6 @@ def start(argv: list[str], stdin: bool = False) -> subprocess.Popen:
     )
 
 
-def free_udp_port() -> int:
-    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
-
-
-def wait_bound(port: int, proc: subprocess.Popen, timeout_s: float = 20.0) -> bool:
-    """Wait until ``proc`` has bound UDP ``port`` on 127.0.0.1 (our own bind then fails)."""
-    end = time.monotonic() + timeout_s
-    while time.monotonic() < end and proc.poll() is None:
-        with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
-            try:
-                s.bind(("127.0.0.1", port))
-            except OSError:
-                return True
-        time.sleep(0.02)
-    return False
-
-
 def send_datagrams(
     port: int, datagrams: list[bytes], pause_every: int = 20, pause_s: float = 0.004
 ) -> None:

@@ -18,6 +18,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from conftest import REPO_ROOT, assert_names, own_stderr, raises_naming
+from loopback import free_udp_port, wait_bound
 
 from imu_dcm.logio.writers import StampedSeries, write_bag
 from imu_dcm.outputs import OutputError, atomic_path, write_json, write_text_atomic
@@ -269,36 +270,13 @@ def test_live_exit_codes(tmp_path):
     _one_error_line(r, "imu-dcm-live")
 
 
-def _free_udp_port() -> int:
-    import socket
-
-    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
-
-
-def _wait_until_bound(port: int, proc, timeout_s: float = 60.0) -> None:
-    import socket
-    import time
-
-    deadline = time.monotonic() + timeout_s
-    while True:
-        assert proc.poll() is None and time.monotonic() < deadline
-        with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
-            try:
-                s.bind(("127.0.0.1", port))
-            except OSError:
-                return
-        time.sleep(0.1)
-
-
 def test_live_sigint_and_sigterm_exit_130_and_143(tmp_path):
     import signal
     import time
 
     env = dict(os.environ, PYTHONPATH=str(REPO_ROOT), CI="true")
     for sig, code in ((signal.SIGINT, 130), (signal.SIGTERM, 143)):
-        port = _free_udp_port()
+        port = free_udp_port()
         proc = subprocess.Popen(
             [sys.executable, "-m", "imu_dcm.live", f"udp://127.0.0.1:{port}"]
             + ["--rerun", "off", "--no-status"],
@@ -309,7 +287,7 @@ def test_live_sigint_and_sigterm_exit_130_and_143(tmp_path):
             cwd=tmp_path,
         )
         try:
-            _wait_until_bound(port, proc)  # the run is up (nothing is ever sent)
+            assert wait_bound(port, proc, 60.0)  # the run is up (nothing is ever sent)
             time.sleep(1.0)
             proc.send_signal(sig)
             out, err = proc.communicate(timeout=30)

@@ -25,6 +25,7 @@ import threading
 from concurrent.futures import ThreadPoolExecutor
 
 import fuzzlive
+import loopback
 import numpy as np
 import pytest
 
@@ -68,9 +69,9 @@ def test_bad_datagrams_on_udp(tmp_path):
 
     def one(c):
         summary = tmp_path / f"{c.name}.json"
-        port = fuzzlive.free_udp_port()
+        port = loopback.free_udp_port()
         proc = fuzzlive.start(fuzzlive.live_argv(f"udp://127.0.0.1:{port}", summary))
-        if fuzzlive.wait_bound(port, proc):
+        if loopback.wait_bound(port, proc):
             fuzzlive.send_datagrams(port, c.lines())
         run = fuzzlive.finish(proc, summary)
         v = fuzzlive.violations(run, expect_samples=True)
@@ -268,7 +269,7 @@ def test_bad_messages_over_mavlink(tmp_path):
         i, kind = args
         datagrams, n_good, n_value, n_bad = _mav_stream(np.random.default_rng([SEED, 4, i]), kind)
         summary = tmp_path / f"mav-{i}.json"
-        port = fuzzlive.free_udp_port()
+        port = loopback.free_udp_port()
         url = f"mavlink:udpin:127.0.0.1:{port}" + (
             "?raw_gyro_scale=0.0005" if kind == "raw" else ""
         )
@@ -277,7 +278,7 @@ def test_bad_messages_over_mavlink(tmp_path):
         if kind == "raw":  # no sample while RAW_IMU waits 1 s for a scaled one: no idle stop
             argv[argv.index("--idle-stop") + 1] = "1.5"
         proc = fuzzlive.start(argv)
-        if fuzzlive.wait_bound(port, proc):
+        if loopback.wait_bound(port, proc):
             # RAW_IMU is taken after 1 s of wall time without a scaled message: 1.2 s of it
             fuzzlive.send_datagrams(port, datagrams, *((1, 0.006) if kind == "raw" else ()))
         run = fuzzlive.finish(proc, summary)

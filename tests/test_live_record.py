@@ -7,7 +7,6 @@ from __future__ import annotations
 import json
 import os
 import signal
-import socket
 import subprocess
 import sys
 import time
@@ -15,6 +14,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from loopback import free_udp_port
 from test_live_udp import sample_lines, send
 from test_live_ws import IMU, SLICE, TRIAL, TRUTH, Publisher, decode_slice, read_slice, start_live
 
@@ -92,17 +92,11 @@ def test_record_after_a_normal_stop_websocket(trial, tmp_path):
     assert got == [p for topic, _, p in msgs if topic == IMU]
 
 
-def _free_udp_port() -> int:
-    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
-
-
 def test_record_after_sigterm_to_the_command(trial, tmp_path):
     msgs = trial["messages"]
     bag = tmp_path / "sigterm_bag"
     summary = tmp_path / "summary.json"
-    port = _free_udp_port()
+    port = free_udp_port()
     env = {**os.environ, "PYTHONPATH": str(REPO)}
     proc = subprocess.Popen(
         [
