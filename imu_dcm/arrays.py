@@ -1,7 +1,9 @@
-"""Fast numpy reductions over the last axis, and order statistics without numpy's slow paths.
+"""Fast numpy reductions over the last axis, order statistics without numpy's slow paths, and
+whole-log work in blocks of rows.
 
 Each function gives what its numpy counterpart gives (named in its docstring), measured faster on
-the ``(N, 3)`` and ``(N, 4)`` arrays of a log, or without an import that costs start-up time.
+the ``(N, 3)`` and ``(N, 4)`` arrays of a log, or without an import that costs start-up time, or
+without a whole-log temporary (:data:`BLOCK_ROWS` rows at a time, the same result bit for bit).
 """
 
 from __future__ import annotations
@@ -11,7 +13,36 @@ import math
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-__all__ = ["median", "percentile", "row_finite", "row_max", "row_norm"]
+__all__ = [
+    "BLOCK_ROWS",
+    "cumsum_rows",
+    "median",
+    "percentile",
+    "row_finite",
+    "row_max",
+    "row_norm",
+]
+
+#: Rows a whole-log step works on at a time where each row's result depends on that row alone
+#: (or on a running sum carried from block to block): the whole-log result exactly, with the
+#: temporaries of one block (a few MB) instead of ~100-200 B a sample of the log.
+BLOCK_ROWS = 1 << 17
+
+
+def cumsum_rows(x: NDArray, out: NDArray) -> NDArray:
+    """``np.cumsum(x, axis=0, out=out)`` in blocks, bit for bit (each row added to the sum of
+    the rows before, in order); ``out`` may be ``x`` itself, the sum then taking no memory of
+    its own (numpy would copy the whole input when the two overlap)."""
+    carry, in_place = None, out is x
+    for a in range(0, len(x), BLOCK_ROWS):
+        dst = out[a : a + BLOCK_ROWS]
+        if not in_place:
+            dst[...] = x[a : a + BLOCK_ROWS]
+        if carry is not None:
+            dst[0] += carry
+        np.cumsum(dst, axis=0, out=dst)
+        carry = dst[-1].copy()
+    return out
 
 
 def row_norm(a: ArrayLike) -> NDArray[np.float64]:

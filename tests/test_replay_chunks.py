@@ -1,15 +1,15 @@
 """A replay whose long-log steps run in small pieces (chunks read in batches of one chunk, truth
-resampled and errors scored a few samples at a time) gives the whole-log results: RMS errors
-to 1e-9 deg, the bias to 1e-12 rad/s, every array equal."""
+resampled, rests judged, errors scored and evaluated a few samples at a time) gives the
+whole-log results: RMS errors to 1e-9 deg, the bias to 1e-12 rad/s, every array and the
+evaluation equal."""
 
 from __future__ import annotations
 
 import io
 
 import numpy as np
+from conftest import small_blocks
 
-import imu_dcm.gyro.resample as resample
-import imu_dcm.replay.core as core
 from data_synth.scenes import simulate
 from imu_dcm.logio.containers import chunks
 from imu_dcm.logio.writers import StampedSeries
@@ -55,8 +55,9 @@ def test_replay_in_small_pieces_equals_whole_log(tmp_path, monkeypatch):
     # the bias came from the rest: the constant written, to the noise's mean over the rest
     np.testing.assert_allclose(whole.summary.bias_rad_s, BIAS_RAD_S, atol=2e-5)
     monkeypatch.setattr(chunks, "BATCH_BYTES", 1)  # every chunk its own batch
-    monkeypatch.setattr(resample, "BLOCK", 97)
-    monkeypatch.setattr(core, "SCORE_BLOCK", 89)
+    patched = small_blocks(monkeypatch, 89)
+    for mod in ("gyro.resample", "gyro.windows", "gyro.rest_evidence", "replay.core"):
+        assert f"imu_dcm.{mod}" in patched
     pieces = replay(path)
     for field in ("rms_error_deg", "rms_inclination_deg", "rms_heading_deg"):
         a, b = getattr(whole.summary, field), getattr(pieces.summary, field)
@@ -67,3 +68,5 @@ def test_replay_in_small_pieces_equals_whole_log(tmp_path, monkeypatch):
     for name in ("t_ns", "q_est", "q_truth", "bias_b"):
         np.testing.assert_array_equal(getattr(pieces, name), getattr(whole, name))
     np.testing.assert_array_equal(pieces.error.total_deg, whole.error.total_deg)
+    assert pieces.summary.evaluation == whole.summary.evaluation
+    assert pieces.summary.sampling_error_deg == whole.summary.sampling_error_deg

@@ -6,6 +6,7 @@ Oracle: scipy's Slerp on the same samples; and gaps counted in truth steps by ha
 from __future__ import annotations
 
 import numpy as np
+from conftest import small_blocks
 from scipy.spatial.transform import Rotation, Slerp
 
 from imu_dcm.gyro.resample import slerp_truth
@@ -56,8 +57,6 @@ def test_slerp_truth_halfway_to_90_deg_about_z_is_45_deg_about_z():
 def test_slerp_truth_in_blocks_equals_one_block(monkeypatch):
     """Queries resampled block by block (7 at a time, across a gap and both ends) give the
     one-block result bit for bit: each query depends on its own stamp only."""
-    import imu_dcm.gyro.resample as resample
-
     rng = np.random.default_rng(5)
     tt = np.cumsum(rng.integers(9_000_000, 11_000_000, 300)).astype(np.int64)
     tt[150:] += 500_000_000  # a gap that is never bridged
@@ -65,7 +64,7 @@ def test_slerp_truth_in_blocks_equals_one_block(monkeypatch):
     t = np.sort(rng.integers(tt[0] - 10**8, tt[-1] + 10**8, 1000)).astype(np.int64)
     t = np.sort(np.concatenate([t, tt[::30]]))  # some queries exactly on truth samples
     whole = slerp_truth(tt, q, t)
-    monkeypatch.setattr(resample, "BLOCK", 7)
+    assert "imu_dcm.gyro.resample" in small_blocks(monkeypatch, 7)
     blocks = slerp_truth(tt, q, t)
     assert np.isnan(whole).any() and np.isfinite(whole).any()
     np.testing.assert_array_equal(blocks, whole)

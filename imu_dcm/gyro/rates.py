@@ -19,7 +19,7 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from imu_dcm.arrays import median, percentile, row_finite, row_max, row_norm
+from imu_dcm.arrays import BLOCK_ROWS, median, percentile, row_finite, row_max, row_norm
 from imu_dcm.so3 import quat_angle_rad
 
 __all__ = [
@@ -64,13 +64,15 @@ def truth_rate_ratio(omega_b: NDArray, t_s: NDArray, q_truth: NDArray) -> float 
     pair = ok[:-1] & ok[1:]
     if pair.sum() <= 10:
         return None
-    # pairs (i, i + 1) as views when all are covered (the usual case), else gathered
-    every = bool(pair.all())
-    i = slice(None, -1) if every else np.flatnonzero(pair)
-    j = slice(1, None) if every else i + 1
-    ang = quat_angle_rad(q_truth[i], q_truth[j])
-    truth_rate = ang / np.diff(t_s)[slice(None) if every else i]
-    gyro_rate = row_norm(0.5 * (omega_b[i] + omega_b[j]))
+    # the covered pairs (i, i + 1), a block of them at a time (each pair's rates its own)
+    pairs = np.flatnonzero(pair)
+    truth_rate, gyro_rate = np.empty(len(pairs)), np.empty(len(pairs))
+    for a in range(0, len(pairs), BLOCK_ROWS):
+        k = slice(a, a + BLOCK_ROWS)
+        i = pairs[k]
+        ang = quat_angle_rad(q_truth[i], q_truth[i + 1])
+        truth_rate[k] = ang / (t_s[i + 1] - t_s[i])
+        gyro_rate[k] = row_norm(0.5 * (omega_b[i] + omega_b[i + 1]))
     moving = truth_rate > _MOVING_RAD_S
     if moving.sum() <= 10:
         return None

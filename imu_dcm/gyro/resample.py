@@ -12,16 +12,13 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from imu_dcm.arrays import median, row_norm
+from imu_dcm.arrays import BLOCK_ROWS, median, row_norm
 from imu_dcm.so3 import exp_quat, log_quat, quat_conjugate, quat_multiply
 
 __all__ = ["TRUTH_BRIDGE_STEPS", "slerp_truth"]
 
 #: Gaps between truth samples longer than this many median truth steps are not bridged.
 TRUTH_BRIDGE_STEPS = 2.0
-#: Query stamps resampled at a time: each query's result depends on it alone, so blocks give
-#: the whole-log result exactly, with ~100 MB less of temporaries per million queries.
-BLOCK = 1 << 17
 
 
 def slerp_truth(truth_t_ns: ArrayLike, q_w_b: ArrayLike, t_ns: ArrayLike) -> NDArray[np.float64]:
@@ -47,16 +44,14 @@ def slerp_truth(truth_t_ns: ArrayLike, q_w_b: ArrayLike, t_ns: ArrayLike) -> NDA
     t = np.asarray(t_ns, dtype=np.int64)
     norm = row_norm(q)
     ok = np.isfinite(norm) & (norm > 0.5)
-    if ok.all():  # the usual case: no copies of the stamps
-        q = q / norm[:, None]
-    else:
-        tt, q = tt[ok], q[ok] / norm[ok, None]
+    if not ok.all():  # the usual case keeps q and its stamps (rows are normalised as read)
+        tt, q, norm = tt[ok], q[ok], norm[ok]
     steps = np.diff(tt)
     if len(tt) > 1 and not np.all(steps > 0):  # recorded truth is usually in order
         order = np.argsort(tt, kind="stable")
-        tt, q = tt[order], q[order]
+        tt, q, norm = tt[order], q[order], norm[order]
         uniq = np.concatenate([[True], np.diff(tt) > 0])
-        tt, q = tt[uniq], q[uniq]
+        tt, q, norm = tt[uniq], q[uniq], norm[uniq]
         steps = np.diff(tt)
     out = np.full((len(t), 4), np.nan)
     if len(tt) == 0:
@@ -64,16 +59,18 @@ def slerp_truth(truth_t_ns: ArrayLike, q_w_b: ArrayLike, t_ns: ArrayLike) -> NDA
     bridged = None
     if len(tt) > 1:  # each truth step is bridged or not, once; a query takes its step's verdict
         bridged = steps <= TRUTH_BRIDGE_STEPS * median(steps) * (1 + 1e-6)
-    for a in range(0, len(t), BLOCK):  # the temporaries of one block, not of the whole log
-        _slerp_block(tt, q, steps, bridged, t[a : a + BLOCK], out[a : a + BLOCK])
+    for a in range(0, len(t), BLOCK_ROWS):  # each query its own: one block's temporaries
+        _slerp_block(tt, q, norm, steps, bridged, t[a : a + BLOCK_ROWS], out[a : a + BLOCK_ROWS])
     return out
 
 
-def _slerp_block(tt, q, steps, bridged, t, out) -> None:
-    """:func:`slerp_truth` for the queries ``t``, written into ``out`` (rows of ``t``)."""
+def _slerp_block(tt, q, norm, steps, bridged, t, out) -> None:
+    """:func:`slerp_truth` for the queries ``t``, written into ``out`` (rows of ``t``); row
+    ``j`` of the truth is ``q[j] / norm[j]``."""
     j = np.searchsorted(tt, t, side="right") - 1  # tt[j] <= t < tt[j+1]
     exact = (j >= 0) & (tt[np.clip(j, 0, None)] == t)
-    out[exact] = q[j[exact]]
+    je = j[exact]
+    out[exact] = q[je] / norm[je, None]
     if bridged is None:
         return
     inner = ~exact & (j >= 0) & (j < len(tt) - 1)
@@ -81,7 +78,7 @@ def _slerp_block(tt, q, steps, bridged, t, out) -> None:
     idx = np.flatnonzero(inner)
     jj = j[idx]
     u = (t[idx] - tt[jj]).astype(float) / steps[jj].astype(float)
-    q0 = q[jj]
-    rel = quat_multiply(quat_conjugate(q0), q[jj + 1])
+    q0 = q[jj] / norm[jj, None]
+    rel = quat_multiply(quat_conjugate(q0), q[jj + 1] / norm[jj + 1, None])
     rel = np.where(rel[:, 3:4] < 0, -rel, rel)  # shortest arc
     out[idx] = quat_multiply(q0, exp_quat(u[:, None] * log_quat(rel)))

@@ -15,7 +15,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from imu_dcm.arrays import row_norm
+from imu_dcm.arrays import BLOCK_ROWS, cumsum_rows, row_finite, row_norm
 from imu_dcm.errors import InputError
 from imu_dcm.gyro.windows import min_steps, step_var, windowed_mean_var
 from imu_dcm.so3 import log_quat, quat_conjugate, quat_multiply
@@ -30,6 +30,7 @@ __all__ = [
     "motion_windows",
     "position_noise_m",
     "segment_doubt",
+    "step_rotvecs",
     "truth_noise_rad",
     "truth_rates",
     "twist_noise_rad_s",
@@ -105,17 +106,30 @@ def truth_noise_rad(q_w_b: ArrayLike, step_ok: ArrayLike | None = None) -> float
     jump of the truth's own is not its noise).
     """
     q = np.asarray(q_w_b, dtype=float)
-    ok = np.all(np.isfinite(q), axis=1)
+    ok = row_finite(q)
     step = ok[:-1] & ok[1:]
     if step_ok is not None:
         step &= np.asarray(step_ok, dtype=bool)
     pair = step[:-1] & step[1:]
     if not pair.any():
         return 0.0
-    qq = np.where(ok[:, None], q, [0.0, 0.0, 0.0, 1.0])
-    d = log_quat(quat_multiply(quat_conjugate(qq[:-1]), qq[1:]))
-    dd = np.abs(np.diff(d, axis=0))[pair]
-    return float(1.4826 * np.median(dd, axis=0).max() / math.sqrt(6.0))
+    d = step_rotvecs(q, ok)
+    spread = max(float(np.median(np.abs(np.diff(d[:, k]))[pair])) for k in range(3))
+    return 1.4826 * spread / math.sqrt(6.0)
+
+
+def step_rotvecs(q: NDArray, ok: NDArray, out: NDArray | None = None) -> NDArray[np.float64]:
+    """Each step's rotation ``log(q_k⁻¹ q_{k+1})`` (M - 1, 3), rad, a row without a finite
+    attitude (``ok`` False) taken as the identity; in blocks (no whole-log temporaries), into
+    ``out`` when given."""
+    n = len(q)
+    d = np.empty((max(n - 1, 0), 3)) if out is None else out
+    unit = np.array([0.0, 0.0, 0.0, 1.0])
+    for a in range(0, n - 1, BLOCK_ROWS):
+        b = min(n - 1, a + BLOCK_ROWS)
+        qq = np.where(ok[a : b + 1, None], q[a : b + 1], unit)
+        d[a:b] = log_quat(quat_multiply(quat_conjugate(qq[:-1]), qq[1:]))
+    return d
 
 
 def truth_rates(q: NDArray, t: NDArray, m: int) -> NDArray:
@@ -125,14 +139,20 @@ def truth_rates(q: NDArray, t: NDArray, m: int) -> NDArray:
     over the window's ``m - 1`` steps: the rate the gyro would read without bias (a rotation
     of many turns over the window is not folded into ±π).
     """
-    ok = np.all(np.isfinite(q), axis=1)
-    qq = np.where(ok[:, None], q, [0.0, 0.0, 0.0, 1.0])
-    d = log_quat(quat_multiply(quat_conjugate(qq[:-1]), qq[1:])) / np.diff(t)[:, None]
+    ok = row_finite(q)
+    sums = np.zeros((len(q), 3))  # the running sum of the steps' rates, in place
+    rates = sums[1:]
+    step_rotvecs(q, ok, out=rates)
+    rates /= np.diff(t)[:, None]
     valid = ok[:-1] & ok[1:]
-    d[~valid] = 0.0
-    sums = np.concatenate([np.zeros((1, 3)), np.cumsum(d, axis=0)])
+    rates[~valid] = 0.0
+    cumsum_rows(rates, rates)
     count = np.concatenate([[0], np.cumsum(valid)])
-    rate = row_norm(sums[m - 1 :] - sums[: len(sums) - m + 1]) / (m - 1)
+    k = len(sums) - m + 1
+    rate = np.empty(k)
+    for a in range(0, k, BLOCK_ROWS):
+        b = min(k, a + BLOCK_ROWS)
+        rate[a:b] = row_norm(sums[a + m - 1 : b + m - 1] - sums[a:b]) / (m - 1)
     rate[count[m - 1 :] - count[: len(count) - m + 1] < m - 1] = np.nan
     return rate
 

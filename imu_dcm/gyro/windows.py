@@ -6,6 +6,8 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import NDArray
 
+from imu_dcm.arrays import BLOCK_ROWS, cumsum_rows
+
 __all__ = ["min_steps", "step_var", "windowed_mean_var"]
 
 
@@ -23,17 +25,28 @@ def windowed_mean_var(x: NDArray, m: int) -> tuple[NDArray, NDArray]:
     -------
     mean, var : ndarray, shape (N - m + 1, k)
         Row ``i`` describes the window of samples ``[i, i + m)`` (variance in the unit squared,
-        clipped at 0 against cancellation in the running sums).
+        clipped at 0 against cancellation in the running sums). Both are views of one buffer
+        of the running sums, which are turned into the windows' figures in place (the memory
+        of two copies of ``x``, not six).
     """
-    sums = np.empty((2, len(x) + 1) + x.shape[1:])  # running sums of x and x², in place
+    n = len(x)
+    sums = np.empty((2, n + 1) + x.shape[1:])  # running sums of x and x², then the windows'
     sums[:, 0] = 0.0
-    np.cumsum(x, axis=0, out=sums[0, 1:])
-    np.cumsum(np.square(x), axis=0, out=sums[1, 1:])
-    mean, var = sums[:, m:] - sums[:, :-m]
-    mean /= m
-    var /= m
-    var -= mean * mean
-    return mean, np.maximum(var, 0.0, out=var)
+    cumsum_rows(x, sums[0, 1:])
+    squares = sums[1, 1:]
+    for a in range(0, n, BLOCK_ROWS):
+        np.square(x[a : a + BLOCK_ROWS], out=squares[a : a + BLOCK_ROWS])
+    cumsum_rows(squares, squares)
+    k = n - m + 1
+    for a in range(0, k, BLOCK_ROWS):  # in place, block by block: a window's sums are read
+        b = min(k, a + BLOCK_ROWS)  # before a block at or after them is written
+        np.subtract(sums[:, a + m : b + m], sums[:, a:b], out=sums[:, a:b])
+        mean, var = sums[0, a:b], sums[1, a:b]
+        mean /= m
+        var /= m
+        var -= mean * mean
+        np.maximum(var, 0.0, out=var)
+    return sums[0, :k], sums[1, :k]
 
 
 def min_steps(x: NDArray) -> NDArray:

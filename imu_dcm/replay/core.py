@@ -27,7 +27,7 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from imu_dcm.arrays import row_finite
+from imu_dcm.arrays import BLOCK_ROWS, row_finite
 from imu_dcm.errors import Diagnostics, GapWarning, LogError
 from imu_dcm.gyro.rest_evidence import Motion, position_noise_m, truth_noise_rad, twist_noise_rad_s
 from imu_dcm.integrator.batch import integrate_quat
@@ -176,6 +176,8 @@ def _remove_bias(
         g.omega, g.t_s, s.bias, s.rest_config, g.accel, truth_q_w_b=q, truth_noise=noise,
         r_t_g=r_t_g, vehicle=g.vehicle, motion=motion,
     )  # fmt: skip
+    if bias_est.mode == "none" or (bias_est.mode == "auto" and not bias_est.segments):
+        return bias_est, g.omega  # no bias: the rates themselves (x - 0 is x), no copy
     return bias_est, g.omega - bias_est.bias_b
 
 
@@ -219,13 +221,16 @@ def _integrate(s: ReplaySettings, omega, t_s, q_truth, anchors, topic, notes=Non
     integrator's warnings go to ``notes`` once each, but gaps (said once, by clean_imu)."""
     said = Diagnostics()
     n = len(t_s)
-    q_est = np.full((n, 4), np.nan)
     ends = [*anchors[1:], n]
+    whole = anchors[0] == 0 and len(anchors) == 1 and n >= 2  # the integrator's array is it
+    q_est = None if whole else np.full((n, 4), np.nan)
     for a, b in zip(anchors, ends, strict=True):
         q0 = q_truth[a] if np.all(np.isfinite(q_truth[a])) else s.init_q_w_b
         if q0 is None:
             q0 = np.array([0.0, 0.0, 0.0, 1.0])
-        if b - a >= 2:
+        if whole:
+            q_est = integrate_quat(omega, t_s, q0, s.method, diagnostics=said)
+        elif b - a >= 2:
             q_est[a:b] = integrate_quat(omega[a:b], t_s[a:b], q0, s.method, diagnostics=said)
         else:
             q_est[a:b] = q0
@@ -242,17 +247,12 @@ def _integrate(s: ReplaySettings, omega, t_s, q_truth, anchors, topic, notes=Non
     return q_est
 
 
-#: Samples scored at a time: each error depends on its own sample, so blocks give the
-#: whole-log result exactly, without whole-log temporaries (~170 B a sample).
-SCORE_BLOCK = 1 << 17
-
-
 def _score(q_est: NDArray, q_truth: NDArray) -> tuple[AttitudeError, NDArray]:
     both = row_finite(q_truth) & row_finite(q_est)
     unit = np.array([0, 0, 0, 1.0])
     out = [np.full(len(both), np.nan) for _ in range(3)]
-    for a in range(0, len(both), SCORE_BLOCK):
-        k = slice(a, a + SCORE_BLOCK)
+    for a in range(0, len(both), BLOCK_ROWS):
+        k = slice(a, a + BLOCK_ROWS)
         ok = both[k]
         err = attitude_error_deg(
             np.where(ok[:, None], q_est[k], unit), np.where(ok[:, None], q_truth[k], unit)
@@ -274,6 +274,7 @@ def _replay(path, s: ReplaySettings, report, notes: Diagnostics) -> ReplayResult
     log, convention = apply_convention(log, s, g, omega, notes)
     judged = judge_truth(log, s, g, omega, notes)
     if judged.aligned.truth is not None and isinstance(s.bias, str):  # its motion judges rest
+        bias_est = omega = None  # the first estimate's arrays go before the second's come
         bias_est, omega = _remove_bias(s, g, judged)
     if bias_est.conflict:
         log = _rest_conflict(log, notes, bias_est.conflict)
@@ -345,8 +346,8 @@ def _rms_angle_deg(q_est: NDArray, q_truth: NDArray, mask: NDArray, heading: boo
     ``total_deg`` (``heading_deg``) gives, without the other two angles; in blocks."""
     rows = np.flatnonzero(mask)
     out = np.empty(len(rows))
-    for a in range(0, len(rows), SCORE_BLOCK):
-        k = rows[a : a + SCORE_BLOCK]
+    for a in range(0, len(rows), BLOCK_ROWS):
+        k = rows[a : a + BLOCK_ROWS]
         ex, ey, ez, ew = np.abs(product_planes(q_est[k], q_truth[k], conj_q=True))
         if heading:
             half = np.arctan2(ez, ew)

@@ -19,6 +19,7 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import NDArray
 
+from imu_dcm.arrays import BLOCK_ROWS
 from imu_dcm.errors import Diagnostics
 from imu_dcm.integrator.batch import integrate_quat
 from imu_dcm.metrics import rms
@@ -56,5 +57,8 @@ def sampling_error_deg(
         return None
     said = Diagnostics()  # the record's gaps and method were said once, by the replay
     half = integrate_quat(omega_b[::2], t_s[::2], q_est[0], method, diagnostics=said)
-    diff = quat_angle_rad(q_est[::2], half)
+    diff = np.empty(len(half))
+    for a in range(0, len(half), BLOCK_ROWS):  # each angle its own: the temporaries of a block
+        k = slice(a, a + BLOCK_ROWS)
+        diff[k] = quat_angle_rad(q_est[2 * a : 2 * (a + BLOCK_ROWS) : 2], half[k])
     return float(np.degrees(rms(diff)) / (2**p - 1))

@@ -26,6 +26,7 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import NDArray
 
+from imu_dcm.arrays import BLOCK_ROWS
 from imu_dcm.metrics import (
     S_PER_H,
     AttitudeError,
@@ -149,11 +150,14 @@ def evaluate(
     seg = None
     if len(anchors) > 1:
         seg = np.searchsorted(np.asarray(anchors), pick, side="right")
-    # the components as contiguous planes once, handed on as (N, 4) views of them
     qe, qt = q_est[idx], q_truth[idx]
     total = error.total_deg[idx]
-    # world rows, then body rows; their angle is the total error, already computed
-    e = error_vector_planes(qe, qt, np.radians(total))
+    # world rows, then body rows; their angle is the total error, already computed. Block by
+    # block: each sample's vector is its own, and a block's temporaries are a few MB
+    e = np.empty((6, len(total)))
+    for a in range(0, len(total), BLOCK_ROWS):
+        k = slice(a, a + BLOCK_ROWS)
+        e[:, k] = error_vector_planes(qe[k], qt[k], np.radians(total[k]))
     t = t_s[idx]
     drift = _drift(t, e, seg)
     return {

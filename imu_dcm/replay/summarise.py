@@ -11,7 +11,7 @@ import dataclasses
 import numpy as np
 from numpy.typing import NDArray
 
-from imu_dcm.arrays import median, row_finite
+from imu_dcm.arrays import BLOCK_ROWS, median, row_finite
 from imu_dcm.logio.ned import in_log_axes
 from imu_dcm.metrics import rms
 from imu_dcm.replay.bias import BIAS_RULE
@@ -39,10 +39,14 @@ def heading_only(q_truth: NDArray) -> bool:
     """The truth turns (its heading spans more than a truth jump's :data:`JUMP_DEG`) yet every
     sample turns about the world's vertical only (x and y components zero): planar by
     construction. A still, level truth is not: it is scored whole."""
-    q = q_truth[row_finite(q_truth)]
-    if not len(q) or float(np.max(np.abs(q[:, :2]))) > PLANAR_TOL:
+    ok = row_finite(q_truth)
+    if not ok.any():
         return False
-    heading = np.unwrap(2.0 * np.arctan2(q[:, 2], q[:, 3]))
+    for a in range(0, len(ok), BLOCK_ROWS):  # the tilt first, a block at a time: no copy
+        q = q_truth[a : a + BLOCK_ROWS][ok[a : a + BLOCK_ROWS], :2]
+        if len(q) and float(np.max(np.abs(q))) > PLANAR_TOL:
+            return False
+    heading = np.unwrap(2.0 * np.arctan2(q_truth[ok, 2], q_truth[ok, 3]))
     return float(np.degrees(np.ptp(heading))) > JUMP_DEG
 
 

@@ -23,7 +23,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from imu_dcm.arrays import row_norm
+from imu_dcm.arrays import BLOCK_ROWS, row_norm
 from imu_dcm.errors import LogError
 from imu_dcm.gyro.resample import TRUTH_BRIDGE_STEPS, slerp_truth
 from imu_dcm.replay.rate_check import TruthCheck, check_truth, integrated_rate
@@ -146,10 +146,8 @@ def align_truth(
     LogError
         The truth never overlaps the gyro.
     """
-    n = len(t_ns)
-    none = np.full((n, 4), np.nan)
     if truth is None:
-        return AlignedTruth(none, None, None, 0.0, None)
+        return AlignedTruth(np.full((len(t_ns), 4), np.nan), None, None, 0.0, None)
     applied = 0.0 if offset == "auto" else float(offset)
     tt = (truth.t_ns if base == "header" else truth.log_t_ns) + np.int64(round(applied * 1e9))
     q_truth = slerp_truth(tt, truth.q_w_b, t_ns)
@@ -192,7 +190,8 @@ def align_truth(
             f"{what} does not follow the gyro ({check.describe()}): replaying without truth; "
             f"name it with --truth-topic to score it anyway"
         )
-        return AlignedTruth(none, None, check, applied, truth.topic)
+        q_truth[...] = np.nan  # refused: no row has a truth
+        return AlignedTruth(q_truth, None, check, applied, truth.topic)
     if not check.follows:
         warn(f"{what} does not follow the gyro ({check.describe()}); scored anyway, as asked")
     return AlignedTruth(q_truth, truth, check, applied, None)
@@ -289,24 +288,31 @@ def find_jumps(
     tt = np.asarray(truth_t_ns, dtype=np.int64)
     q = np.asarray(q_w_b, dtype=float)
     norm = row_norm(q)
-    ok = np.isfinite(norm) & (norm > 0.5)
-    tt, q = tt[ok], q[ok] / norm[ok, None]
+    rows = np.flatnonzero(np.isfinite(norm) & (norm > 0.5))  # the truth's rows used, in order
+    tt = tt[rows]
     if not np.all(tt[1:] >= tt[:-1]):  # a stable sort leaves sorted stamps as they are
         order = np.argsort(tt, kind="stable")
-        tt, q = tt[order], q[order]
+        tt, rows = tt[order], rows[order]
     inside = (tt >= t_ns[0]) & (tt <= t_ns[-1])
-    tt, q = tt[inside], q[inside]
+    tt, rows = tt[inside], rows[inside]
     if len(tt) < 2 or len(t_ns) < 2:
         return ()
+
+    def unit(r):  # the truth's rows r, normalised (gathered a block at a time: no copy of all)
+        return q[r] / norm[r, None]
+
     # Only a step turning more than JUMP_DEG can be one: |q_i · q_i+1| = cos(θ/2) screens the
     # steps at 0.9 JUMP_DEG (its rounding moves θ by ~1e-14 rad there, far inside the margin);
     # the exact angles and the gyro's path are computed for the few steps left, the same
     # numbers as over every step.
-    cos_half = np.abs(np.einsum("ij,ij->i", q[:-1], q[1:]))
+    cos_half = np.empty(len(rows) - 1)
+    for a in range(0, len(cos_half), BLOCK_ROWS):
+        qb = unit(rows[a : a + BLOCK_ROWS + 1])
+        cos_half[a : a + BLOCK_ROWS] = np.abs(np.einsum("ij,ij->i", qb[:-1], qb[1:]))
     i = np.flatnonzero(cos_half < np.cos(np.radians(0.9 * JUMP_DEG) / 2))
     if not len(i):
         return ()
-    truth_deg = np.degrees(quat_angle_rad(q[i], q[i + 1]))
+    truth_deg = np.degrees(quat_angle_rad(unit(rows[i]), unit(rows[i + 1])))
     # the gyro's path length over each truth step bounds any rotation it can have made
     speed = row_norm(omega_b)[:, None]
     path = integrated_rate(t_ns, speed, np.stack([tt[i], tt[i + 1]], axis=1).ravel())
