@@ -29,6 +29,7 @@ from imu_dcm.so3 import product_planes, quat_checked_norm
 __all__ = [
     "AttitudeError",
     "DriftFit",
+    "DriftSums",
     "ErrorStats",
     "attitude_error_deg",
     "body_error_rad",
@@ -291,28 +292,64 @@ def drift_fit(t_s: ArrayLike, e: ArrayLike, segment: ArrayLike | None = None) ->
     DriftFit
         NaN slopes when fewer than 3 samples or no spread in time.
     """
-    t = np.asarray(t_s, dtype=float)
     e2 = np.atleast_2d(np.asarray(e, dtype=float))
-    n = len(t)
-    if segment is None or n == 0:
-        starts = np.zeros(1 if n else 0, dtype=np.int64)
-    else:
-        seg = np.asarray(segment)
-        starts = np.flatnonzero(np.r_[True, seg[1:] != seg[:-1]])
-    counts = np.diff(np.r_[starts, n])
-    dof = n - len(starts) - 1
-    nan = np.full(len(e2), np.nan)
-    if dof < 1:
-        return DriftFit(nan, nan, nan, nan, n)
-    tc = _centred(t, starts, counts)
-    stt = _dot(tc, tc)
-    if stt <= 0.0:
-        return DriftFit(nan, nan, nan, nan, n)
-    # Σ tc = 0 in every segment, so the slope needs no centred copy of e; and the sum of
-    # squares about the segment means is Σ e² − Σ_seg (Σ_seg e)² / n_seg (no copy either)
-    slope = np.einsum("ij,j->i", e2, tc) / stt
-    seg_sums = np.add.reduceat(e2, starts, axis=-1) if len(starts) > 1 else e2.sum(-1)[:, None]
-    ss_tot = np.einsum("ij,ij->i", e2, e2) - np.sum(seg_sums**2 / counts, axis=-1)
-    ss_tot = np.maximum(ss_tot, 0.0)
-    ss_res = np.maximum(ss_tot - slope * slope * stt, 0.0)
-    return DriftFit(slope, np.sqrt(ss_res / dof / stt), ss_res, ss_tot, n)
+    fit = DriftSums(t_s, len(e2), segment)
+    fit.add(0, e2)
+    return fit.fit()
+
+
+class DriftSums:
+    """:func:`drift_fit` from the series handed over a block of samples at a time: the sums
+    the fit needs, so that no whole-log copy of the series is held.
+
+    Parameters
+    ----------
+    t_s : array_like, shape (N,)
+        Sample times, s.
+    series : int
+        How many series (rows of each block).
+    segment : array_like of int, shape (N,), optional
+        Segment label of each sample, non-decreasing (default: one segment).
+    """
+
+    def __init__(self, t_s: ArrayLike, series: int, segment: ArrayLike | None = None) -> None:
+        t = np.asarray(t_s, dtype=float)
+        self.n = n = len(t)
+        if segment is None or n == 0:
+            self.starts = np.zeros(1 if n else 0, dtype=np.int64)
+        else:
+            seg = np.asarray(segment)
+            self.starts = np.flatnonzero(np.r_[True, seg[1:] != seg[:-1]])
+        self.counts = np.diff(np.r_[self.starts, n])
+        self.tc = _centred(t, self.starts, self.counts) if n else t
+        self.stt = _dot(self.tc, self.tc)
+        # Σ tc = 0 in every segment, so the slope needs no centred copy of e; and the sum of
+        # squares about the segment means is Σ e² − Σ_seg (Σ_seg e)² / n_seg (no copy either)
+        self.e_tc = np.zeros(series)
+        self.e_e = np.zeros(series)
+        self.seg_sums = np.zeros((series, max(len(self.starts), 1)))
+
+    def add(self, a: int, e: NDArray) -> None:
+        """The series' values ``e`` (series, m) at samples ``[a, a + m)``."""
+        m = e.shape[-1]
+        self.e_tc += np.einsum("ij,j->i", e, self.tc[a : a + m])
+        self.e_e += np.einsum("ij,ij->i", e, e)
+        if len(self.starts) <= 1:
+            self.seg_sums[:, 0] += e.sum(-1)
+            return
+        first = int(np.searchsorted(self.starts, a, side="right")) - 1
+        cut = self.starts[(self.starts > a) & (self.starts < a + m)] - a  # segments in the block
+        k = np.r_[0, cut]
+        self.seg_sums[:, first : first + len(k)] += np.add.reduceat(e, k, axis=-1)
+
+    def fit(self) -> DriftFit:
+        n, stt = self.n, self.stt
+        dof = n - len(self.starts) - 1
+        nan = np.full(len(self.e_tc), np.nan)
+        if dof < 1 or stt <= 0.0:
+            return DriftFit(nan, nan, nan, nan, n)
+        slope = self.e_tc / stt
+        ss_tot = self.e_e - np.sum(self.seg_sums**2 / self.counts, axis=-1)
+        ss_tot = np.maximum(ss_tot, 0.0)
+        ss_res = np.maximum(ss_tot - slope * slope * stt, 0.0)
+        return DriftFit(slope, np.sqrt(ss_res / dof / stt), ss_res, ss_tot, n)

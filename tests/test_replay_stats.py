@@ -14,7 +14,13 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from imu_dcm.metrics import body_error_rad, drift_fit, error_stats, world_error_rad
+from imu_dcm.metrics import (
+    DriftSums,
+    body_error_rad,
+    drift_fit,
+    error_stats,
+    world_error_rad,
+)
 from imu_dcm.replay import replay
 from imu_dcm.replay.stats import DOUBT_RATIO
 from imu_dcm.replay.summary import format_summary
@@ -64,6 +70,23 @@ def test_drift_fit_equals_least_squares_with_an_intercept_per_segment():
     one = drift_fit(t, e[:, 0])
     np.testing.assert_allclose(one.slope[0], np.polyfit(t, e[:, 0], 1)[0], rtol=1e-10)
     assert np.isnan(drift_fit(t[:2], e[:2, 0]).slope[0])  # no degree of freedom left
+
+
+def test_drift_sums_in_blocks_equal_the_whole_fit():
+    # blocks of 7 samples across the segments' starts (100 mid-block, 203 = 7 * 29 a block's
+    # first sample) give the fit of the whole series: the same sums, taken in pieces
+    rng = np.random.default_rng(8)
+    t = np.sort(rng.uniform(0, 100, 300))
+    seg = np.searchsorted([100, 203], np.arange(300), side="right")  # 203 = 7 * 29
+    e = np.stack([0.3 * t, -0.1 * t]) + rng.normal(0, 1, (2, 300)) + seg
+    whole = drift_fit(t, e, seg)
+    sums = DriftSums(t, 2, seg)
+    for a in range(0, 300, 7):
+        sums.add(a, e[:, a : a + 7])
+    pieces = sums.fit()
+    for name in ("slope", "stderr", "ss_res", "ss_tot"):
+        np.testing.assert_allclose(getattr(pieces, name), getattr(whole, name), rtol=1e-12)
+    assert pieces.samples == whole.samples == 300
 
 
 def test_world_and_body_error_vectors_match_scipy():

@@ -31,7 +31,7 @@ from imu_dcm.metrics import (
     S_PER_H,
     AttitudeError,
     DriftFit,
-    drift_fit,
+    DriftSums,
     error_stats,
     error_vector_planes,
 )
@@ -68,9 +68,8 @@ def _norm_fit(fit: DriftFit, rows: list[int]) -> dict:
     return {"rate_deg_h": n * _DEG_H, "stderr_deg_h": err * _DEG_H, "r2": fit.r2(rows)}
 
 
-def _drift(t: NDArray, e: NDArray, seg: NDArray | None) -> dict:
+def _drift(fit: DriftFit, t: NDArray, seg: NDArray | None) -> dict:
     """Drift rates from one joint fit of the world (rows 0-2) and body (rows 3-5) errors."""
-    fit = drift_fit(t, e, seg)
     return {
         "total": _norm_fit(fit, [0, 1, 2]),
         "inclination": _norm_fit(fit, [0, 1]),
@@ -106,17 +105,31 @@ def _bias_check(drift: dict, bias_rad_s) -> dict:
     }
 
 
-def _body_stats(e_b: NDArray) -> dict:
-    """Per body axis (rows of ``e_b``, rad): RMS, signed mean and largest magnitude, deg."""
-    out = {}
-    for i, a in enumerate(_AXES):
-        x = e_b[i]
-        out[a] = {
-            "rms": float(np.degrees(np.sqrt(np.einsum("i,i->", x, x) / len(x)))),
-            "mean_signed": float(np.degrees(np.mean(x))),
-            "max_abs": float(np.degrees(max(np.max(x), -np.min(x)))),
+class _BodySums:
+    """Per body axis (rows of the blocks of ``e_b`` handed to :meth:`add`, rad): RMS, signed
+    mean and largest magnitude, deg."""
+
+    def __init__(self) -> None:
+        self.n, self.sq, self.sum = 0, np.zeros(3), np.zeros(3)
+        self.hi, self.lo = np.full(3, -np.inf), np.full(3, np.inf)
+
+    def add(self, e_b: NDArray) -> None:
+        self.n += e_b.shape[1]
+        self.sq += np.einsum("ij,ij->i", e_b, e_b)
+        self.sum += e_b.sum(axis=1)
+        self.hi = np.maximum(self.hi, e_b.max(axis=1))
+        self.lo = np.minimum(self.lo, e_b.min(axis=1))
+
+    def stats(self) -> dict:
+        n = self.n
+        return {
+            a: {
+                "rms": float(np.degrees(np.sqrt(self.sq[i] / n))),
+                "mean_signed": float(np.degrees(self.sum[i] / n)),
+                "max_abs": float(np.degrees(max(self.hi[i], -self.lo[i]))),
+            }
+            for i, a in enumerate(_AXES)
         }
-    return out
 
 
 def evaluate(
@@ -152,19 +165,22 @@ def evaluate(
         seg = np.searchsorted(np.asarray(anchors), pick, side="right")
     qe, qt = q_est[idx], q_truth[idx]
     total = error.total_deg[idx]
-    # world rows, then body rows; their angle is the total error, already computed. Block by
-    # block: each sample's vector is its own, and a block's temporaries are a few MB
-    e = np.empty((6, len(total)))
+    # world rows, then body rows (their angle is the total error, already computed), a block
+    # at a time: each sample's vector is its own, and the fit and the body statistics are sums
+    t = t_s[idx]
+    sums = DriftSums(t, 6, seg)
+    body = _BodySums()
     for a in range(0, len(total), BLOCK_ROWS):
         k = slice(a, a + BLOCK_ROWS)
-        e[:, k] = error_vector_planes(qe[k], qt[k], np.radians(total[k]))
-    t = t_s[idx]
-    drift = _drift(t, e, seg)
+        e = error_vector_planes(qe[k], qt[k], np.radians(total[k]))
+        sums.add(a, e)
+        body.add(e[3:])
+    drift = _drift(sums.fit(), t, seg)
     return {
         "total_deg": _stats(total),
         "inclination_deg": _stats(error.inclination_deg[idx]),
         "heading_deg": _stats(error.heading_deg[idx]),
-        "body_axes_deg": _body_stats(e[3:]),
+        "body_axes_deg": body.stats(),
         "drift": drift,
         "bias_check": _bias_check(drift, bias_rad_s),
     }
