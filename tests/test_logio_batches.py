@@ -83,3 +83,46 @@ def test_a_damaged_chunk_inside_a_batch_costs_only_itself(tmp_path, monkeypatch)
     assert lost.sum() > 0 and damage.offset == bad.chunk_start_offset
     assert np.array_equal(log.imu.t_ns, imu.t_ns[~lost])
     assert np.array_equal(log.imu.omega_b, imu.values[~lost])
+
+
+def _batches(rng, sizes, missing_in=None):
+    """Decoded batches of one channel: file-order keys that go back once, two fields."""
+    from imu_dcm.logio.ros.collect import Columns
+
+    out, key = [], 0
+    for k, n in enumerate(sizes):
+        order = key + np.arange(n, dtype=np.int64)
+        key += n
+        if k == 1:
+            order = order - 5  # a batch whose first keys come before the last batch's
+        fields = {"t_ns": rng.integers(0, 10**9, n), "omega": rng.normal(size=(n, 3))}
+        if k == missing_in:
+            del fields["omega"]
+        out.append(Columns(order, order * 10, fields, {"frame_id": f"f{k}"}, None, k))
+    return out
+
+
+@pytest.mark.parametrize(
+    ("count", "missing_in"),
+    [(60, None), (40, None), (None, None), (0, None), (60, 2), (10**15, None)],
+    ids=["exact", "count-too-small", "no-count", "zero-count", "field-missing", "count-absurd"],
+)
+def test_batches_written_into_the_channels_arrays_equal_their_join(count, missing_in):
+    # written into arrays of the channel's count as they come, or kept and joined where the
+    # count is absent, too small or absurd, or the batches are unlike: the join's result
+    from imu_dcm.logio.ros.collect import ColumnsBuilder, join_columns
+
+    make = lambda: _batches(np.random.default_rng(4), [10, 20, 15, 15], missing_in)  # noqa: E731
+    built = ColumnsBuilder(count)
+    for p in make():
+        built.add(p)
+    got, want = built.result(), join_columns(make())
+    assert np.all(np.diff(got.order) >= 0)  # file order
+    for name in ("order", "log_time"):
+        np.testing.assert_array_equal(getattr(got, name), getattr(want, name))
+    assert got.fields.keys() == want.fields.keys()
+    for k, v in want.fields.items():
+        assert got.fields[k].dtype == v.dtype
+        np.testing.assert_array_equal(got.fields[k], v)
+    assert (got.frames, got.dropped) == (want.frames, want.dropped) == ({"frame_id": "f0"}, 6)
+    assert ColumnsBuilder(count).result() is None

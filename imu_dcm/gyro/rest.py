@@ -32,6 +32,7 @@ from imu_dcm.gyro.rest_evidence import (
     gyro_path,
     gyro_path_noise,
     segment_doubt,
+    truth_rates,
     vehicle_windows,
 )
 from imu_dcm.gyro.rest_rule import (
@@ -85,8 +86,12 @@ def _checked(omega_b: ArrayLike, t_s: ArrayLike, accel_b: ArrayLike | None, trut
 def _conditions(w, t, m: int, cfg: RestConfig, sig: Signals):
     """The rule's conditions over every window of the whole log, judged against one floor: the
     stillest window of the whole log (offline looks both ways)."""
+    steps = min_steps(w)
+    # the truth's window rates first: their temporaries come and go before the gyro's windows
+    truth = None if sig.truth_q_w_b is None else truth_rates(sig.truth_q_w_b, t, m)
     mean, var = windowed_mean_var(w, m)
-    return window_conditions(mean, var, noise_floor_var(var, min_steps(w)), t, m, cfg, sig)
+    floor = noise_floor_var(var, steps)
+    return window_conditions(mean, var, floor, t, m, cfg, sig, truth_rate=truth)
 
 
 def rest_segments(

@@ -214,8 +214,9 @@ def std_limit(floor_var, m: int, cfg: RestConfig):
 
 
 def window_conditions(
-    mean, var, floor_var, t, m: int, cfg: RestConfig, sig: Signals, accel_floor=None
-):
+    mean, var, floor_var, t, m: int, cfg: RestConfig, sig: Signals, accel_floor=None,
+    truth_rate=None,
+):  # fmt: skip
     """Each condition of the rule over windows of ``m`` samples (the module docstring).
 
     Parameters
@@ -235,6 +236,9 @@ def window_conditions(
         Given the accelerometer's per-axis window variances (k, 3), its noise floor each
         window is judged against (m²/s⁴, scalar or (k,)). None (offline): the stillest window
         of these rows (:func:`noise_floor_var`); live passes the causal floor.
+    truth_rate : ndarray, shape (k,), optional
+        :func:`~imu_dcm.gyro.rest_evidence.truth_rates` of ``sig``'s truth, when the caller
+        has it already (computed here otherwise).
 
     Returns ``(conds, limit, truth)``: ``conds`` a list of (signal, name, value, limit, unit),
     a window passing a condition when its value is at most the limit (NaN: undecided, passes);
@@ -272,7 +276,7 @@ def window_conditions(
     if sig.truth_q_w_b is not None:
         # the truth's rate is nearer to none than to the gyro's mean, or within its own noise:
         # the mean is bias, whatever its size
-        truth = truth_rates(sig.truth_q_w_b, t, m)
+        truth = truth_rates(sig.truth_q_w_b, t, m) if truth_rate is None else truth_rate
         n_t = cfg.floor_spreads * math.sqrt(6.0) * sig.truth_noise_rad / (t[m - 1] - t[0])
         mean_limit[truth <= np.maximum(n_t, 0.5 * rate)] = np.inf
     name = "mean |omega|" if sig.accel_b is not None else "mean |omega| (no accelerometer)"

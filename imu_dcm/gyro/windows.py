@@ -50,9 +50,13 @@ def windowed_mean_var(x: NDArray, m: int) -> tuple[NDArray, NDArray]:
 
 
 def min_steps(x: NDArray) -> NDArray:
-    """The smallest positive step of each column (inf where none)."""
-    d = np.abs(np.diff(x, axis=0))
-    return np.where(d > 0, d, np.inf).min(axis=0) if len(d) else np.full(x.shape[1], np.inf)
+    """The smallest positive step of each column (inf where none), a block of rows at a time."""
+    out = np.full(x.shape[1], np.inf)
+    for a in range(0, len(x) - 1, BLOCK_ROWS):
+        d = np.abs(np.diff(x[a : a + BLOCK_ROWS + 1], axis=0))
+        d[~(d > 0)] = np.inf  # no step, or a NaN one
+        np.minimum(out, d.min(axis=0), out=out)
+    return out
 
 
 def step_var(steps: NDArray) -> float:

@@ -17,6 +17,7 @@ from imu_dcm.logio.types import Damage
 __all__ = [
     "Collected",
     "Columns",
+    "ColumnsBuilder",
     "Conn",
     "Payloads",
     "Sink",
@@ -158,6 +159,100 @@ def join_any(parts: list) -> Payloads | Columns:
     return join_payloads(parts)
 
 
+class ColumnsBuilder:
+    """One channel's decoded batches written into arrays of its message count as they come
+    (internal): the whole channel's columns without its batches held beside them and joined
+    at the end (a second copy, and heap that the batches leave behind).
+
+    Without a count, or when the batches are not alike (a field in some only, another dtype)
+    or outnumber the count (a file that says less than it holds), the rest are kept as
+    batches and joined as :func:`join_columns` does; the result is the same either way.
+    """
+
+    def __init__(self, count: int | None) -> None:
+        self.capacity = count if count is not None and count > 0 else 0
+        self.n = 0
+        self.arrays: dict[str, NDArray] | None = None  # "order", "log_time" and the fields
+        self.first: Columns | None = None  # shape and dtype of each field, frames, error
+        self.frames: dict[str, str] = {}
+        self.error: Exception | None = None
+        self.dropped = 0
+        self.rest: list[Columns] = []  # batches past the count, or unlike the first
+
+    def add(self, p: Columns) -> None:
+        self.dropped += p.dropped
+        p.dropped = 0
+        if not self.rest and self._fits(p):
+            self._write(p)
+        else:
+            self.rest.append(p)
+
+    def _fits(self, p: Columns) -> bool:
+        if self.n + len(p) > self.capacity:
+            return False
+        if self.first is None:
+            return self._allocate(p)
+        f = self.first.fields
+        return p.fields.keys() == f.keys() and all(
+            v.dtype == f[k].dtype and v.shape[1:] == f[k].shape[1:] for k, v in p.fields.items()
+        )
+
+    def _allocate(self, p: Columns) -> bool:
+        cap = self.capacity
+        try:  # pages are taken as rows are written: a count too large costs address space
+            self.arrays = {
+                "order": np.empty(cap, p.order.dtype),
+                "log_time": np.empty(cap, p.log_time.dtype),
+                **{k: np.empty((cap,) + v.shape[1:], v.dtype) for k, v in p.fields.items()},
+            }
+        except (MemoryError, ValueError):
+            self.capacity = 0
+            return False
+        self.first = p
+        return True
+
+    def _write(self, p: Columns) -> None:
+        a, b = self.n, self.n + len(p)
+        arrays = self.arrays
+        arrays["order"][a:b] = p.order
+        arrays["log_time"][a:b] = p.log_time
+        for k, v in p.fields.items():
+            arrays[k][a:b] = v
+        for k, v in p.frames.items():
+            if v and k not in self.frames:
+                self.frames[k] = v
+        if self.error is None:
+            self.error = p.error
+        self.n = b
+
+    def result(self) -> Columns | None:
+        """The channel's columns (None when no batch came)."""
+        parts = list(self.rest)
+        if self.arrays is not None:
+            n, arrays = self.n, self.arrays
+            fields = {k: v[:n] for k, v in arrays.items() if k not in ("order", "log_time")}
+            built = Columns(
+                arrays["order"][:n], arrays["log_time"][:n], fields, self.frames, self.error
+            )
+            parts.insert(0, built)
+        if not parts:
+            return None
+        out = join_columns(parts) if len(parts) > 1 else _in_order(parts[0])
+        out.dropped = self.dropped
+        return out
+
+
+def _in_order(c: Columns) -> Columns:
+    """``c`` in file order (stable), as :func:`join_columns` leaves several batches."""
+    if np.all(c.order[1:] >= c.order[:-1]):
+        return c
+    idx = np.argsort(c.order, kind="stable")
+    return Columns(
+        c.order[idx], c.log_time[idx], {k: v[idx] for k, v in c.fields.items()}, c.frames,
+        c.error, c.dropped,
+    )  # fmt: skip
+
+
 class Sink:
     """Where a container puts the payloads of kept channels (internal).
 
@@ -178,10 +273,13 @@ class Sink:
         self._pending: dict[int, list[Payloads]] = {}
         self._bytes: dict[int, int] = {}
         self._done: dict[int, list] = {}
+        self._counts: dict[int, int | None] = {}
+        self._built: dict[int, ColumnsBuilder] = {}
 
     def wants(self, conn: Conn) -> bool:
         if conn.id not in self._plans:
             self._plans[conn.id] = self.plan(conn)
+            self._counts[conn.id] = conn.count
         return self._plans[conn.id] is not None
 
     def add(self, cid: int, p: Payloads) -> None:
@@ -205,13 +303,24 @@ class Sink:
                 batch = join_payloads(group)
                 if self.transform is not None:
                     batch = self.transform(batch)
-                self._done.setdefault(cid, []).append(self._plans[cid](batch))
+                got = self._plans[cid](batch)
+                if isinstance(got, Columns):  # into the channel's arrays as it comes
+                    if cid not in self._built:
+                        self._built[cid] = ColumnsBuilder(self._counts.get(cid))
+                    self._built[cid].add(got)
+                else:
+                    self._done.setdefault(cid, []).append(got)
                 group, size = [], 0
 
     def finish(self) -> dict[int, Payloads | Columns]:
         for cid in list(self._pending):
             self._flush(cid)
-        return {cid: join_any(parts) for cid, parts in self._done.items()}
+        out = {cid: join_any(parts) for cid, parts in self._done.items()}
+        for cid, built in self._built.items():
+            got = built.result()
+            if got is not None:
+                out[cid] = got
+        return out
 
 
 @dataclass(slots=True, eq=False)
