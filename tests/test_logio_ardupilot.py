@@ -413,3 +413,26 @@ def test_the_command_line_on_damaged_and_old_logs(tmp_path, small_log, capsys):
     lines = [x for x in capsys.readouterr().err.splitlines() if x.strip()]
     assert len(lines) == 1
     assert_names(lines[0], "IMU[0].GyrX", "string")
+
+
+def test_the_bias_is_said_in_the_logs_frd_axes_too(tmp_path):
+    """An ArduPilot log at rest, gyro FRD = b + white noise (float32 columns): the bias is the
+    mean over the rest, so within 5 sigma/sqrt(N) (and the float32 rounding of b) of b in the
+    log's axes (FRD) and of (b_x, -b_y, -b_z) in FLU, as for a PX4 log."""
+    from imu_dcm.replay import replay
+
+    n, sigma = 2000, 1e-3
+    b_frd = np.array([0.01, 0.02, -0.03])
+    rng = np.random.default_rng(27)
+    g = b_frd + rng.normal(scale=sigma, size=(n, 3))
+    a = np.array([0.0, 0.0, -9.81]) + rng.normal(scale=0.01, size=(n, 3))
+    rows = [(1000 + 2500 * i, 0, *g[i], *a[i]) for i in range(n)]
+    cols = ["TimeUS", "I", "GyrX", "GyrY", "GyrZ", "AccX", "AccY", "AccZ"]
+    p = write_dataflash(tmp_path / "rest.bin", [DFMessage("IMU", "QB" + "f" * 6, cols, rows)])
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        s = replay(p, bias="auto").summary
+    tol = 5 * sigma / np.sqrt(n) + 2.0**-24 * np.abs(b_frd).max()
+    assert s.bias_segments and s.log_axes == "FRD"
+    assert np.allclose(s.bias_log_rad_s, b_frd, atol=tol, rtol=0)
+    assert np.allclose(s.bias_rad_s, b_frd * [1, -1, -1], atol=tol, rtol=0)
