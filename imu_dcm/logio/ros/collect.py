@@ -173,14 +173,14 @@ class ColumnsBuilder:
         self.capacity = count if count is not None and count > 0 else 0
         self.n = 0
         self.arrays: dict[str, NDArray] | None = None  # "order", "log_time" and the fields
-        self.first: Columns | None = None  # shape and dtype of each field, frames, error
+        self.layout: dict[str, tuple] = {}  # each field's dtype and row shape, from the first
         self.frames: dict[str, str] = {}
         self.error: Exception | None = None
         self.dropped = 0
         self.rest: list[Columns] = []  # batches past the count, or unlike the first
 
     def add(self, p: Columns) -> None:
-        self.dropped += p.dropped
+        self.dropped += p.dropped  # counted here once, whichever way the batch goes
         p.dropped = 0
         if not self.rest and self._fits(p):
             self._write(p)
@@ -190,12 +190,9 @@ class ColumnsBuilder:
     def _fits(self, p: Columns) -> bool:
         if self.n + len(p) > self.capacity:
             return False
-        if self.first is None:
+        if self.arrays is None:
             return self._allocate(p)
-        f = self.first.fields
-        return p.fields.keys() == f.keys() and all(
-            v.dtype == f[k].dtype and v.shape[1:] == f[k].shape[1:] for k, v in p.fields.items()
-        )
+        return {k: (v.dtype, v.shape[1:]) for k, v in p.fields.items()} == self.layout
 
     def _allocate(self, p: Columns) -> bool:
         cap = self.capacity
@@ -208,7 +205,7 @@ class ColumnsBuilder:
         except (MemoryError, ValueError):
             self.capacity = 0
             return False
-        self.first = p
+        self.layout = {k: (v.dtype, v.shape[1:]) for k, v in p.fields.items()}
         return True
 
     def _write(self, p: Columns) -> None:

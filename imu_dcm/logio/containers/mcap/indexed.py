@@ -168,6 +168,7 @@ class IndexedReader(McapReader):
         for k, (start, clen, t0, t1, offsets, _ilen, _c, _cs, _us) in enumerate(index):
             if offsets and not (wanted & offsets.keys()):
                 continue
+            entries = self._message_index(f, offsets, set(offsets))
             try:
                 if start + clen > self.size or clen < 9:
                     raise BadRecord(
@@ -179,20 +180,17 @@ class IndexedReader(McapReader):
                     raise BadRecord("its index does not point at a chunk record")
                 at, n, usize, comp, crc = chunk_head(f, start, length, self.size)
             except BadRecord as exc:
-                entries = self._message_index(f, offsets, set(offsets))
                 self._lost_chunk(k, len(index), start, t0, t1, entries, wanted, str(exc))
                 continue
-            jobs.append(Job((k, start, t0, t1, offsets), at, n, usize, comp, crc))
+            jobs.append(Job((k, start, t0, t1, entries), at, n, usize, comp, crc))
         done = 0
         for buf, group in Decompressor(f.fileno(), decompress_into).run(batches(jobs)):
             if self.progress is not None:
                 self.progress(done / max(len(jobs), 1))
             done += len(group)
             good = []
-            for j in group:  # its message indexes read now, not all of them before the first
-                k, start, t0, t1, offsets = j.key
-                entries = self._message_index(f, offsets, set(offsets))
-                j.key = (k, start, t0, t1, entries)
+            for j in group:
+                k, start, t0, t1, entries = j.key
                 if j.out is None:
                     self._lost_chunk(k, len(index), start, t0, t1, entries, wanted, j.why)
                 else:
