@@ -256,10 +256,9 @@ def _shift_line(s: ReplaySummary, check: dict) -> str:
     verdict = "follows the gyro" if check["follows"] else "does NOT follow the gyro"
     hint = ""
     if s.offset_auto_rms_deg is not None and s.rms_error_deg is not None:
-        hint = (
-            f" (--truth-offset auto applies it: RMS {_fmt(s.offset_auto_rms_deg)} instead "
-            f"of {_fmt(s.rms_error_deg)})"
-        )
+        auto, now = _fmt(s.offset_auto_rms_deg), _fmt(s.rms_error_deg)
+        change = f"instead of {now}" if auto != now else "either way, to the digits shown"
+        hint = f" (--truth-offset auto applies it: RMS {auto} {change})"
     return (
         f"truth rate {verdict}: correlation {check['correlation']:.2f}, best shift "
         f"{shift_ms(check['shift_s'])}{hint}, residual {check['residual_rad_s']:.3f} rad/s"
