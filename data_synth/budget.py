@@ -1,44 +1,57 @@
 """What a data_synth job will cost, estimated before it runs, so an absurd job is refused up front.
 
-Two costs grow with the options:
+Three costs grow with the options:
 
 * the samples: ``N = floor(duration_s · rate_hz) + 1`` gyro samples and as many truth samples
-  are held in memory while the bag is written (``BYTES_PER_SAMPLE``, ``SECONDS_PER_SAMPLE``);
+  are made and written a block of ``BLOCK_ROWS`` at a time, so their memory is one block's
+  (``BYTES_PER_BLOCK_ROW``), their time grows with N (``SECONDS_PER_SAMPLE``) and so does the
+  bag on disk (``DISK_BYTES_PER_SAMPLE``, checked against the free space where it goes);
+  the reference scheme keeps its whole run (``BYTES_PER_REFERENCE_STEP``);
 * the ODE solve of ``heavy-top`` and ``free-body``: DOP853 at 1e-12 takes a number of steps
   proportional to the duration times the fastest motion (spin, |omega|); each step keeps its
   dense-output interpolant (``BYTES_PER_STEP``, ``SECONDS_PER_STEP``). The steps are estimated by
   :func:`estimate_ode_steps`, which takes the solver's first ``PROBE_STEPS`` steps and
   extrapolates them to the whole duration (the motions are periodic or nearly so).
 
-The per-unit figures are measured peak-RSS and wall-clock slopes on a 2-core x86-64 machine
-(coning 1e5 → 4e5 samples: 285 B and 2.7 µs per sample, the bag written chunk by chunk;
-heavy top and free box at 1e-12: 1.2-1.4 kB and 130-260 µs per step), rounded up. They are
+The per-unit figures are measured peak-RSS, wall-clock and file-size slopes on a 2-core x86-64
+machine (coning at 1 kHz, 0.5 s → 1 h: 565 B per row of a full block above the interpreter,
+2.9 µs per sample; 88 B per sample on disk ideal, 141 B with noise, walk and jitter; the
+reference scheme 1e4 → 6e4 steps: 362 B per step; heavy top and free box at 1e-12: 1.2-1.4 kB
+and 130-260 µs per step), rounded up. They are
 estimates for refusing jobs that cannot finish (hundreds of GiB, days), not promises.
 """
 
 from __future__ import annotations
 
 import math
+import shutil
 from collections.abc import Callable
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 
 from imu_dcm.errors import InputError
 
 __all__ = [
-    "BYTES_PER_SAMPLE",
+    "BYTES_PER_BLOCK_ROW",
+    "DISK_BYTES_PER_SAMPLE",
     "BYTES_PER_STEP",
     "JobEstimate",
     "JobTooLarge",
     "estimate_ode_steps",
+    "free_bytes",
     "format_bytes",
     "format_seconds",
 ]
 
-#: Peak memory per gyro sample of a written bag (the gyro and truth series; the CDR rows and
-#: records of one chunk at a time).
-BYTES_PER_SAMPLE = 400
+#: Peak memory per row of the block being written (its gyro and truth series, the CDR rows
+#: and records of its chunks); a job holds one block of at most ``BLOCK_ROWS`` rows.
+BYTES_PER_BLOCK_ROW = 600
+#: Bag size on disk per gyro sample (the Imu, truth quaternion and truth rate messages, zstd).
+DISK_BYTES_PER_SAMPLE = 160
+#: Memory per step of the reference scheme's run (kept whole, sampled at the end).
+BYTES_PER_REFERENCE_STEP = 400
 #: Wall-clock time per gyro sample (sampling, CDR encoding, zstd), s.
 SECONDS_PER_SAMPLE = 5e-6
 #: Memory per DOP853 step kept for the dense output (interpolant + its Python objects).
@@ -115,3 +128,15 @@ def estimate_ode_steps(
     if not solver.t > 0:
         return math.inf
     return probe_steps * float(duration_s) / solver.t
+
+
+def free_bytes(out: Path) -> int | None:
+    """Free space on the file system where ``out`` will be made (its nearest existing parent),
+    bytes; None when it cannot be told."""
+    p = Path(out).absolute()
+    while not p.exists() and p != p.parent:
+        p = p.parent
+    try:
+        return shutil.disk_usage(p).free
+    except OSError:
+        return None

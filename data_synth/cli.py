@@ -28,22 +28,34 @@ import json
 import math
 import shlex
 import sys
+import time
+from collections.abc import Iterator
 from pathlib import Path
 
 import numpy as np
 
 from data_synth import budget
-from data_synth.gyro import DEFAULT_EPOCH_NS, MAX_STAMP_NS, OUTPUTS, GyroModel, synthetic_gyro
+from data_synth.gyro import (
+    DEFAULT_EPOCH_NS,
+    MAX_STAMP_NS,
+    OUTPUTS,
+    GyroModel,
+    sample_count,
+    synthetic_gyro_blocks,
+)
 from data_synth.scenes import BRANCHES, FREE_BODY_CASES, MOTIONS, simulate
 from imu_dcm.app.options import OneLineArgumentParser, prog_name
 from imu_dcm.app.run import run_main
+from imu_dcm.arrays import BLOCK_ROWS
 from imu_dcm.errors import InputError
-from imu_dcm.logio.writers import StampedSeries, write_bag
+from imu_dcm.logio.writers import BagBlock, StampedSeries, write_bag_blocks
 from imu_dcm.outputs import check_output_dir
 
 __all__ = ["build_parser", "main", "make_log"]
 
 PROG = prog_name("data-synth", "python -m data_synth")
+#: A long job says how far it is on stderr at most this often, s.
+PROGRESS_EVERY_S = 5.0
 
 
 def _number(bound: str):
@@ -288,16 +300,29 @@ def _budget_steps(args: argparse.Namespace, est: budget.JobEstimate, per_step_s:
 
 
 def _sample_cost(args: argparse.Namespace) -> budget.JobEstimate:
-    """Cost of the samples alone (refused before anything is simulated)."""
-    n = math.floor(args.duration * args.rate * (1.0 + 1e-12)) + 1
-    est = budget.JobEstimate(n, 0.0, n * budget.BYTES_PER_SAMPLE, n * budget.SECONDS_PER_SAMPLE)
+    """Cost of the samples alone (refused before anything is simulated): one block's memory,
+    time and disk space that grow with the samples (the reference scheme also keeps its run)."""
+    n = sample_count(args.rate, args.duration)
+    memory = min(n, BLOCK_ROWS) * budget.BYTES_PER_BLOCK_ROW
+    est = budget.JobEstimate(n, 0.0, memory, n * budget.SECONDS_PER_SAMPLE)
     if getattr(args, "scheme", "exact") == "reference":  # a Python RK4 step per sample
         est = budget.JobEstimate(
-            n, n, est.memory_bytes, est.seconds + n * budget.SECONDS_PER_REFERENCE_STEP
+            n,
+            n,
+            est.memory_bytes + n * budget.BYTES_PER_REFERENCE_STEP,
+            est.seconds + n * budget.SECONDS_PER_REFERENCE_STEP,
         )
     if est.memory_bytes > args.max_memory_gib * 2.0**30 or est.seconds > args.max_minutes * 60:
         raise _refuse(
             args, est, f"{n:.3g} samples (--rate {args.rate:g} Hz x --duration {args.duration:g} s)"
+        )
+    disk = n * budget.DISK_BYTES_PER_SAMPLE
+    free = budget.free_bytes(Path(args.out))
+    if free is not None and disk > free:
+        raise budget.JobTooLarge(
+            f"Expected room for the bag on disk, got an estimated {budget.format_bytes(disk)} "
+            f"for {n:.3g} samples and {budget.format_bytes(free)} free where --out "
+            f"{str(args.out)!r} goes"
         )
     return est
 
@@ -380,8 +405,10 @@ def _custom_data(args: argparse.Namespace, argv: list[str], traj, model, scheme:
 def make_log(args: argparse.Namespace, argv: list[str]) -> Path:
     """Simulate, sample and write the bag described by parsed ``args``; return its folder.
 
-    Every check runs before the simulation (options, output, estimated memory and time), and
-    nothing is written before the bag is complete.
+    Every check runs before the simulation (options, output, estimated memory and time). The
+    bag is written a block of samples at a time under a temporary name and appears when it is
+    complete (:func:`imu_dcm.logio.writers.write_bag_blocks`): memory holds one block and the
+    motion's solution, not the log.
     """
     out = Path(args.out)
     _check_values(args)
@@ -398,7 +425,14 @@ def make_log(args: argparse.Namespace, argv: list[str]) -> Path:
     params = _scene_params(args)
     scheme = getattr(args, "scheme", "exact")
     traj = _trajectory(args, est, params, scheme)
-    rec = synthetic_gyro(
+    custom = _custom_data(args, argv, traj, model, scheme)
+    return write_bag_blocks(out, _blocks(args, traj, model), custom_data=custom, force=args.force)
+
+
+def _blocks(args: argparse.Namespace, traj, model: GyroModel) -> Iterator[BagBlock]:
+    """The bag a block of samples at a time (:func:`data_synth.gyro.synthetic_gyro_blocks`):
+    the gyro, and the truth sampled at the same instants (for delta angles also at ``t_0``)."""
+    blocks = synthetic_gyro_blocks(
         traj,
         args.rate,
         args.duration,
@@ -407,23 +441,23 @@ def make_log(args: argparse.Namespace, argv: list[str]) -> Path:
         seed=args.seed,
         epoch_ns=args.epoch_ns,
     )
-    if args.gyro_output == "rate":
+    n = sample_count(args.rate, args.duration)
+    done, shown = 0, time.monotonic()
+    for k, rec in enumerate(blocks):
         t_truth_s, t_truth_ns = rec.t_s, rec.t_ns
-        rates = rec.values
-    else:
-        t_truth_s = np.concatenate([[0.0], rec.t_s])
-        t_truth_ns = np.concatenate([[args.epoch_ns], rec.t_ns])
-        rates = rec.rate_rad_s(0.0)
-    q_true, w_true = traj.at(t_truth_s)
-    custom = _custom_data(args, argv, traj, model, scheme)
-    return write_bag(
-        out,
-        imu=StampedSeries(rec.t_ns, rates, "imu"),
-        quaternions={"/ground_truth/orientation": StampedSeries(t_truth_ns, q_true, "world")},
-        vectors={"/ground_truth/angular_velocity": StampedSeries(t_truth_ns, w_true, "imu")},
-        custom_data=custom,
-        force=args.force,
-    )
+        if args.gyro_output == "delta-angle" and k == 0:  # the first interval's start
+            t_truth_s = np.concatenate([[0.0], rec.t_s])
+            t_truth_ns = np.concatenate([[args.epoch_ns], rec.t_ns])
+        q_true, w_true = traj.at(t_truth_s)
+        yield BagBlock(
+            imu=StampedSeries(rec.t_ns, rec.rate_rad_s(), "imu"),
+            quaternions={"/ground_truth/orientation": StampedSeries(t_truth_ns, q_true, "world")},
+            vectors={"/ground_truth/angular_velocity": StampedSeries(t_truth_ns, w_true, "imu")},
+        )
+        done += len(rec.t_s)
+        if time.monotonic() - shown > PROGRESS_EVERY_S and done < n:
+            shown = time.monotonic()
+            print(f"{PROG}: {done / n:.0%} of {n} samples written", file=sys.stderr, flush=True)
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -12,8 +12,11 @@ jitter, white noise, bias walk), so the same seed gives the same samples, bit fo
 
 from __future__ import annotations
 
+import copy
+import dataclasses
 import math
 import sys
+from collections.abc import Iterator
 from dataclasses import asdict, dataclass
 from typing import Any
 
@@ -21,6 +24,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from data_synth.rigid_body import Trajectory
+from imu_dcm.arrays import BLOCK_ROWS
 from imu_dcm.errors import InputError
 
 __all__ = [
@@ -29,7 +33,9 @@ __all__ = [
     "OUTPUTS",
     "GyroModel",
     "GyroRecord",
+    "sample_count",
     "synthetic_gyro",
+    "synthetic_gyro_blocks",
 ]
 
 #: Default stamp of ``t_s = 0``: 2023-11-14T22:13:20Z, the epoch of the BROAD bags.
@@ -129,6 +135,9 @@ class GyroRecord:
         Seed of the random draws.
     bias_b_rad_s : ndarray, shape (N, 3)
         The total bias (constant + random walk) in each sample, rad/s (diagnostic).
+    t_start_s : float
+        Start of the first interval, s (delta-angle output; 0 for the whole log, the last
+        sample before it for a block of :func:`synthetic_gyro_blocks`).
     """
 
     t_s: NDArray[np.float64]
@@ -140,44 +149,62 @@ class GyroRecord:
     model: GyroModel
     seed: int
     bias_b_rad_s: NDArray[np.float64]
+    t_start_s: float = 0.0
 
-    def rate_rad_s(self, t_start_s: float = 0.0) -> NDArray[np.float64]:
+    def rate_rad_s(self, t_start_s: float | None = None) -> NDArray[np.float64]:
         """The samples as rates, rad/s, shape (N, 3).
 
         For ``delta-angle`` output, the mean rate over each interval, ``Δθ_k / (t_k − t_{k−1})``
         (what an IMU that integrates internally publishes as ``angular_velocity``);
-        ``t_start_s`` is the start of the first interval.
+        ``t_start_s`` is the start of the first interval (default: the record's own).
         """
         if self.output == "rate":
             return self.values
-        dt = np.diff(np.concatenate([[t_start_s], self.t_s]))
+        start = self.t_start_s if t_start_s is None else t_start_s
+        dt = np.diff(np.concatenate([[start], self.t_s]))
         return self.values / dt[:, None]
 
 
-def _sample_times(
-    rate_hz: float,
-    duration_s: float,
-    jitter_s: float | None,
-    rng: np.random.Generator,
-    epoch_ns: int,
-) -> tuple[NDArray, NDArray]:
-    n = math.floor(duration_s * rate_hz * (1.0 + 1e-12)) + 1
-    k = np.arange(n)
+def sample_count(rate_hz: float, duration_s: float) -> int:
+    """Samples at ``k / rate_hz`` for ``0 <= k / rate_hz <= duration_s``."""
+    return math.floor(duration_s * rate_hz * (1.0 + 1e-12)) + 1
+
+
+class _Draws:
+    """The random draws of one seed in blocks: stamp jitter (one per sample), white noise (three
+    per output sample), bias walk (three per output interval), each term reading its own copy of
+    the one ``default_rng(seed)`` stream from where the whole-log draws of the terms before it
+    end. So a block's draws are those of the whole log's, bit for bit, at any block size."""
+
+    def __init__(self, seed: int, model: GyroModel, n: int, n_out: int) -> None:
+        rng = np.random.default_rng(seed)
+        self.jitter = copy.deepcopy(rng) if model.stamp_jitter_s else None
+        if model.stamp_jitter_s:
+            _skip(rng, n)
+        self.noise = copy.deepcopy(rng) if model.noise_density_rad_s_sqrt_hz else None
+        if model.noise_density_rad_s_sqrt_hz:
+            _skip(rng, 3 * n_out)
+        self.walk = rng if model.bias_walk_rad_s2_sqrt_hz else None
+
+
+def _skip(rng: np.random.Generator, count: int) -> None:
+    """Advance ``rng`` past ``count`` normal draws (one block at a time: no whole-log array)."""
+    for a in range(0, count, 3 * BLOCK_ROWS):
+        rng.standard_normal(min(3 * BLOCK_ROWS, count - a))
+
+
+def _block_times(
+    rate_hz: float, duration_s: float, jitter_s: float | None, rng, k: NDArray
+) -> NDArray[np.int64]:
+    """Sample instants of the sample indices ``k`` (a run of consecutive ones), ns from t = 0."""
     t_nom_ns = np.round(k * (1e9 / rate_hz)).astype(np.int64)
-    if jitter_s:
-        period_ns = 1e9 / rate_hz
-        j = np.clip(rng.normal(scale=jitter_s * 1e9, size=n), -0.4 * period_ns, 0.4 * period_ns)
+    if not jitter_s:
+        return t_nom_ns
+    period_ns = 1e9 / rate_hz
+    j = np.clip(rng.normal(scale=jitter_s * 1e9, size=k.size), -0.4 * period_ns, 0.4 * period_ns)
+    if k[0] == 0:
         j[0] = 0.0  # keep the first sample at t = 0 (inside the trajectory)
-        t_rel_ns = t_nom_ns + np.round(j).astype(np.int64)
-        t_rel_ns = np.clip(t_rel_ns, 0, round(duration_s * 1e9))
-        if np.any(np.diff(t_rel_ns) <= 0):  # only possible at ns resolution for huge rates
-            raise InputError(
-                f"Expected stamp jitter to keep the order at {rate_hz} Hz, got "
-                f"repeated stamps with stamp_jitter_s = {jitter_s}"
-            )
-    else:
-        t_rel_ns = t_nom_ns
-    return t_rel_ns * 1e-9, epoch_ns + t_rel_ns
+    return np.clip(t_nom_ns + np.round(j).astype(np.int64), 0, round(duration_s * 1e9))
 
 
 def synthetic_gyro(
@@ -213,37 +240,110 @@ def synthetic_gyro(
     Returns
     -------
     GyroRecord
+        The blocks of :func:`synthetic_gyro_blocks` joined.
+    """
+    blocks = list(synthetic_gyro_blocks(traj, rate_hz, duration_s, model, output, seed, epoch_ns))
+    return dataclasses.replace(
+        blocks[0],
+        **{
+            name: np.concatenate([getattr(b, name) for b in blocks])
+            for name in ("t_s", "t_ns", "values", "bias_b_rad_s")
+        },
+    )
+
+
+def synthetic_gyro_blocks(
+    traj: Trajectory,
+    rate_hz: float,
+    duration_s: float | None = None,
+    model: GyroModel | None = None,
+    output: str = "rate",
+    seed: int = 0,
+    epoch_ns: int = DEFAULT_EPOCH_NS,
+) -> Iterator[GyroRecord]:
+    """:func:`synthetic_gyro` (same arguments) one block of ``BLOCK_ROWS`` samples at a time.
+
+    The blocks joined are the whole record bit for bit, whatever the block size: the random
+    draws (:class:`_Draws`), the bias walk and the delta-angle quantization carry over from block
+    to block in the order the whole log adds them. Each block's ``t_start_s`` is the start of
+    its first interval (delta-angle output), so ``block.rate_rad_s()`` gives its rates. Memory
+    holds one block, not the log.
     """
     model = model or GyroModel()
     duration_s = _check_request(traj, rate_hz, duration_s, output, seed, epoch_ns)
-    rng = np.random.default_rng(seed)
-    t_s, t_ns = _sample_times(rate_hz, duration_s, model.stamp_jitter_s, rng, int(epoch_ns))
-    if output == "rate":
-        _, y = traj.at(t_s)
-        dt = None
-    else:
-        y = traj.delta_angles(t_s)
-        dt = np.diff(t_s)[:, None]
-        t_s, t_ns = t_s[1:], t_ns[1:]
-    bias, noise = _random_terms(model, t_s, rng)
-    values = _measure(y, bias, noise, model, rate_hz, dt)
-    if not np.all(np.isfinite(values)):
-        raise InputError(
-            "Expected a finite gyro output, got "
-            f"{np.count_nonzero(~np.isfinite(values))}"
-            f" non-finite values from the model {model.as_dict()}"
+    n = sample_count(rate_hz, duration_s)
+    delta = output == "delta-angle"
+    draws = _Draws(seed, model, n, n - 1 if delta else n)
+    walk = np.zeros(3)  # the bias walk so far, and the accumulated angle and its counts so far
+    acc = np.zeros(3) if delta and model.quantization_rad_s is not None else None
+    counts = np.zeros(3)
+    prev_ns = prev_s = None  # the last sample of the block before
+    for a in range(0, n, BLOCK_ROWS):
+        t_rel_ns = _block_times(rate_hz, duration_s, model.stamp_jitter_s, draws.jitter,
+                                np.arange(a, min(n, a + BLOCK_ROWS)))  # fmt: skip
+        if prev_ns is not None:
+            t_rel_ns = np.concatenate([[prev_ns], t_rel_ns])
+        if np.any(np.diff(t_rel_ns) <= 0):  # only possible at ns resolution for huge rates
+            raise InputError(
+                f"Expected stamp jitter to keep the order at {rate_hz} Hz, got "
+                f"repeated stamps with stamp_jitter_s = {model.stamp_jitter_s}"
+            )
+        t_all = t_rel_ns * 1e-9  # with the block before's last sample, when there is one
+        first = 0 if prev_ns is None else 1  # this block's own samples start here
+        prev_ns = int(t_rel_ns[-1])
+        if delta:
+            y = traj.delta_angles(t_all)
+            dt = np.diff(t_all)[:, None]
+            rows = slice(1, None)
+            start = t_all[0]
+        else:
+            y = traj.at(t_all[first:])[1]
+            dt = None
+            rows = slice(first, None)
+            start = 0.0
+        t_s, t_ns = t_all[rows], epoch_ns + t_rel_ns[rows]
+        if len(t_s) == 0:
+            continue
+        bias, walk = _bias(model, draws.walk, t_s, prev_s, walk)
+        prev_s = float(t_s[-1])
+        noise = None if draws.noise is None else draws.noise.standard_normal((len(t_s), 3))
+        values, acc, counts = _measure(y, bias, noise, model, rate_hz, dt, acc, counts)
+        if not np.all(np.isfinite(values)):
+            raise InputError(
+                "Expected a finite gyro output, got "
+                f"{np.count_nonzero(~np.isfinite(values))}"
+                f" non-finite values from the model {model.as_dict()}"
+            )
+        yield GyroRecord(
+            t_s=t_s,
+            t_ns=t_ns,
+            values=values,
+            output=output,
+            rate_hz=float(rate_hz),
+            epoch_ns=int(epoch_ns),
+            model=model,
+            seed=int(seed),
+            bias_b_rad_s=bias,
+            t_start_s=float(start),
         )
-    return GyroRecord(
-        t_s=t_s,
-        t_ns=t_ns,
-        values=values,
-        output=output,
-        rate_hz=float(rate_hz),
-        epoch_ns=int(epoch_ns),
-        model=model,
-        seed=int(seed),
-        bias_b_rad_s=bias,
-    )
+
+
+def _bias(model: GyroModel, rng, t_s: NDArray, prev_s: float | None, walk: NDArray):
+    """The bias of the output samples ``t_s`` (constant plus random walk), rad/s, (n, 3), and
+    the walk at the last of them. ``b_k = b_0 + Σ_{j<k} K √(t_{j+1} − t_j) ν_j``: one step per
+    sample interval, those ending in ``t_s`` (``prev_s`` the sample before, None at the start;
+    ``walk`` the walk there), summed in the whole log's order."""
+    bias = np.zeros((len(t_s), 3))
+    if model.bias_rad_s is not None:
+        bias += np.asarray(model.bias_rad_s)
+    if rng is None:
+        return bias, walk
+    t_w = t_s if prev_s is None else np.concatenate([[prev_s], t_s])
+    steps = rng.standard_normal((len(t_w) - 1, 3)) * model.bias_walk_rad_s2_sqrt_hz
+    w = np.cumsum(np.concatenate([walk[None], steps * np.sqrt(np.diff(t_w))[:, None]]), axis=0)
+    lead = len(t_s) - (len(w) - 1)  # 1 for the log's first output sample: no walk yet
+    bias[lead:] += w[1:]
+    return bias, w[-1].copy()
 
 
 def _check_request(
@@ -281,26 +381,6 @@ def _check_request(
     return duration_s
 
 
-def _random_terms(
-    model: GyroModel, t_s: NDArray, rng: np.random.Generator
-) -> tuple[NDArray, NDArray | None]:
-    """The bias at each sample (constant plus random walk), rad/s, (N, 3); and unit white noise
-    (N, 3), or None without a noise term. The noise is drawn before the walk (same seed, same
-    bytes)."""
-    n = len(t_s)
-    bias = np.zeros((n, 3))
-    if model.bias_rad_s is not None:
-        bias += np.asarray(model.bias_rad_s)
-    noise = None
-    if model.noise_density_rad_s_sqrt_hz:
-        noise = rng.standard_normal((n, 3))
-    if model.bias_walk_rad_s2_sqrt_hz:
-        steps = rng.standard_normal((n - 1, 3)) * model.bias_walk_rad_s2_sqrt_hz
-        # b_k = b_0 + Σ_{j<k} K √(t_{j+1} − t_j) ν_j: one step per sample interval.
-        bias[1:] += np.cumsum(steps * np.sqrt(np.diff(t_s))[:, None], axis=0)
-    return bias, noise
-
-
 def _measure(
     y: NDArray,
     bias: NDArray,
@@ -308,9 +388,13 @@ def _measure(
     model: GyroModel,
     rate_hz: float,
     dt: NDArray | None,
-) -> NDArray:
+    acc: NDArray | None,
+    counts: NDArray,
+) -> tuple[NDArray, NDArray | None, NDArray]:
     """The gyro's output from the true rates (``dt`` None) or true delta-angles over intervals
-    ``dt`` (N, 1), s: bias, noise, saturation, then quantization."""
+    ``dt`` (N, 1), s: bias, noise, saturation, then quantization. ``acc`` and ``counts`` are the
+    accumulated delta angle and its rounded step count before these rows (delta-angle
+    quantization); returned with the output, updated."""
     if dt is None:
         values = y + bias
         if noise is not None:
@@ -325,24 +409,27 @@ def _measure(
         step = None if model.quantization_rad_s is None else model.quantization_rad_s / rate_hz
     if lim is not None:
         values = np.clip(values, -lim, lim)
-    if step is not None:
-        values = _quantize(values, step, model.quantization_rad_s, accumulate=dt is not None)
-    return values
+    if step is None:
+        return values, acc, counts
+    if acc is None:
+        return _step_counts(values, values, step, model.quantization_rad_s) * step, acc, counts
+    # delta angles: round the accumulated angle, as a delta-angle IMU does, so the residual is
+    # carried to the next sample instead of accumulating (the sum carried from the rows before,
+    # added in the same order as over the whole log)
+    total = np.cumsum(np.concatenate([acc[None], values]), axis=0)[1:]
+    whole = _step_counts(total, values, step, model.quantization_rad_s)
+    out = np.diff(np.concatenate([counts[None], whole]), axis=0) * step
+    return out, total[-1].copy(), whole[-1].copy()
 
 
-def _quantize(values: NDArray, step: float, step_rad_s: float, accumulate: bool) -> NDArray:
-    """Round to multiples of ``step``; with ``accumulate`` (delta-angles) round the accumulated
-    angle instead, as a delta-angle IMU does, so the residual is carried to the next sample
-    instead of accumulating."""
+def _step_counts(x: NDArray, values: NDArray, step: float, step_rad_s: float) -> NDArray:
+    """``x / step`` rounded to whole steps (``values``: the output, for the message)."""
     with np.errstate(over="ignore"):  # a step far below the rates: refused just below
-        counts = (np.cumsum(values, axis=0) if accumulate else values) / step
+        counts = x / step
     if not np.all(np.isfinite(counts)):
         raise InputError(
             f"Expected `quantization_rad_s` large enough that rate / step is "
             f"finite, got {step_rad_s!r} for rates up to "
             f"{float(np.max(np.abs(values))):.3g}"
         )
-    if not accumulate:
-        return np.round(counts) * step
-    total = np.round(counts)
-    return np.diff(np.concatenate([np.zeros((1, 3)), total]), axis=0) * step
+    return np.round(counts)

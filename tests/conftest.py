@@ -122,14 +122,15 @@ def raises_naming(exc_type: type[BaseException], *facts: object):
 
 def small_blocks(monkeypatch, rows: int) -> list[str]:
     """Make every whole-log step that works in blocks (``imu_dcm.arrays.BLOCK_ROWS``, bound by
-    name in each module that uses it) take ``rows`` rows at a time; the modules patched."""
+    name in each module that uses it, data_synth's included) take ``rows`` rows at a time; the
+    modules patched."""
     import sys
 
     import imu_dcm.arrays  # noqa: F401  (the constant's home, patched with its users)
 
     patched = []
     for name, mod in list(sys.modules.items()):
-        if name.startswith("imu_dcm") and hasattr(mod, "BLOCK_ROWS"):
+        if name.startswith(("imu_dcm", "data_synth")) and hasattr(mod, "BLOCK_ROWS"):
             monkeypatch.setattr(mod, "BLOCK_ROWS", rows)
             patched.append(name)
     return patched

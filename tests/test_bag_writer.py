@@ -389,7 +389,7 @@ def test_chunk_by_chunk_encoding_equals_one_shot(tmp_path):
     files = []
     for topics in (chunked, whole):
         f = io.BytesIO()
-        writer.write_mcap(f, topics, {"k": "v"}, chunk_size=4096)
+        writer.write_mcap(f, [topics], lambda w: {"k": "v"}, chunk_size=4096)
         files.append(f.getvalue())
     assert files[0] == files[1]
     n_chunks = len(make_reader(io.BytesIO(files[0])).get_summary().chunk_indexes)

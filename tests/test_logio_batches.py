@@ -45,7 +45,7 @@ def _log(tmp_path, n: int = 3000):
         ),
     ]
     f = io.BytesIO()
-    writer.write_mcap(f, topics, {"k": "v"}, chunk_size=4096)
+    writer.write_mcap(f, [topics], lambda w: {"k": "v"}, chunk_size=4096)
     path = tmp_path / "log.mcap"
     path.write_bytes(f.getvalue())
     return path, imu, truth

@@ -42,7 +42,7 @@ def _coning_log(tmp_path):
         ),
     ]
     f = io.BytesIO()
-    writer.write_mcap(f, topics, {}, chunk_size=4096)
+    writer.write_mcap(f, [topics], lambda w: {}, chunk_size=4096)
     path = tmp_path / "coning.mcap"
     path.write_bytes(f.getvalue())
     return path

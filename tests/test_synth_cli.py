@@ -318,9 +318,10 @@ def test_python_dash_m_entry_point(tmp_path):
 @pytest.mark.parametrize(
     "argv, needles",
     [
-        # 1e10 samples: 400 B each while the bag is written (data_synth.budget) -> TiB
-        (["coning", "--rate", "1e10", "--duration", "1"], ["1e+10 samples", "TiB"]),
-        (["coning", "--rate", "1e6", "--duration", "100"], ["1e+08 samples", "GiB"]),
+        # 1e10 and 1e9 samples at 5 µs each (data_synth.budget): 14 h and 83 min; the memory is
+        # one block's, whatever the length
+        (["coning", "--rate", "1e10", "--duration", "1"], ["1e+10 samples", "MiB and 13.9 h"]),
+        (["coning", "--rate", "1e7", "--duration", "100"], ["1e+09 samples", "83.3 min"]),
         (["heavy-top", "--scheme", "reference", "--rate", "1e6", "--duration", "100"], ["h for"]),
         # the ODE would need ~1e10 (spin) and ~1e30 (|omega|) steps: measured by a 200-step probe
         (

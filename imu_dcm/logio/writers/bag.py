@@ -25,7 +25,7 @@ import os
 import shutil
 import uuid
 from collections.abc import Callable, Iterable, Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -33,18 +33,20 @@ from numpy.typing import ArrayLike, NDArray
 
 from imu_dcm.errors import InputError
 from imu_dcm.logio.meta import TYPE_HASHES, metadata_body, metadata_document
-from imu_dcm.logio.writers.mcap import OWN_LIBRARY, Encoded, write_mcap
+from imu_dcm.logio.writers.mcap import OWN_LIBRARY, Encoded, Written, write_mcap
 from imu_dcm.logio.writers.messages import MSG_DEFINITIONS, cdr_messages, imu_doubles
 from imu_dcm.outputs import OutputError, check_output_dir, ensure_parent
 
 __all__ = [
     "MSG_DEFINITIONS",
+    "BagBlock",
     "OWN_LIBRARY",
     "TYPE_HASHES",
     "StampedSeries",
     "cdr_messages",
     "imu_doubles",
     "write_bag",
+    "write_bag_blocks",
 ]
 
 _MAX_T_NS = (2**31) * 10**9  # header.stamp.sec is an int32
@@ -175,16 +177,26 @@ def _encoded(topic: str, msgtype: str, s: StampedSeries, doubles) -> Encoded:
     return Encoded(topic, msgtype, s.file_t_ns, size, payloads)
 
 
-def _write_into(folder: Path, name: str, topics: list[_Topic], custom: dict[str, str]) -> None:
-    """``<name>.mcap`` and ``metadata.yaml`` of the bag, written into ``folder``."""
+def _write_into(
+    folder: Path, name: str, blocks: Iterable[list[_Topic]], custom: dict[str, str]
+) -> None:
+    """``<name>.mcap`` and ``metadata.yaml`` of the bag, written into ``folder`` a block of
+    topics at a time."""
     mcap_name = f"{name}.mcap"
-    stamps = np.concatenate([t[2].file_t_ns for t in topics])
-    counts = [(t[0], t[1], int(t[2].t_ns.size)) for t in topics]
-    body = metadata_body(mcap_name, counts, int(stamps.min()), int(stamps.max()), custom)
-    encoded = [_encoded(*t) for t in topics]
+    names: list[tuple[str, str]] = []
+
+    def encoded():
+        for topics in blocks:
+            names[:] = [(t[0], t[1]) for t in topics]
+            yield [_encoded(*t) for t in topics]
+
+    def body(w: Written) -> str:
+        counts = [(n, ty, c) for (n, ty), c in zip(names, w.counts, strict=True)]
+        return metadata_body(mcap_name, counts, w.t_min_ns, w.t_max_ns, custom)
+
     with open(folder / mcap_name, "wb") as f:
-        write_mcap(f, encoded, {"serialized_metadata": body})
-    (folder / "metadata.yaml").write_text(metadata_document(body), encoding="utf-8")
+        w = write_mcap(f, encoded(), lambda w: {"serialized_metadata": body(w)})
+    (folder / "metadata.yaml").write_text(metadata_document(body(w)), encoding="utf-8")
 
 
 def _swap_in(tmp: Path, out: Path) -> None:
@@ -198,7 +210,9 @@ def _swap_in(tmp: Path, out: Path) -> None:
         os.rename(tmp, out)
 
 
-def _write_atomic(out: Path, topics: list[_Topic], custom: dict, inputs: tuple, force: bool):
+def _write_atomic(
+    out: Path, blocks: Iterable[list[_Topic]], custom: dict, inputs: tuple, force: bool
+) -> None:
     """Write the bag under a temporary sibling name, then swap it in (whole or not at all)."""
     tmp = out.parent / f".{out.name}.tmp-{os.getpid()}-{uuid.uuid4().hex[:8]}"
     try:
@@ -210,7 +224,7 @@ def _write_atomic(out: Path, topics: list[_Topic], custom: dict, inputs: tuple, 
             f"{type(exc).__name__}: {exc.strerror}"
         ) from None
     try:
-        _write_into(tmp, out.name, topics, custom)
+        _write_into(tmp, out.name, blocks, custom)
         check_output_dir(out, inputs, force=force, what="output bag")  # unchanged meanwhile
         _swap_in(tmp, out)
     except OSError as exc:
@@ -282,22 +296,71 @@ def write_bag(
         a duplicated topic, or a non-string ``custom_data`` entry.
     """
     inputs = tuple(inputs)
+    out, custom = _checked_out(out_dir, inputs, force, custom_data)
+    block = BagBlock(imu, quaternions or {}, vectors or {}, imu_linear_acceleration)
+    topics = _block_topics(block, imu_topic, imu_angular_velocity_covariance)
+    _write_atomic(out, [topics], custom, inputs, force)
+    return out
+
+
+def _checked_out(out_dir, inputs: tuple, force: bool, custom_data) -> tuple[Path, dict]:
+    """The output folder (:func:`imu_dcm.outputs.check_output_dir`) and the custom data,
+    checked."""
     out = check_output_dir(out_dir, inputs, force=force, what="output bag")
     custom = dict(custom_data or {})
     for k, v in custom.items():
         if not isinstance(k, str) or not isinstance(v, str):
             raise InputError(f"Expected custom_data str -> str, got {k!r}: {type(v).__name__}")
+    return out, custom
+
+
+@dataclass(frozen=True)
+class BagBlock:
+    """One block of a bag written by :func:`write_bag_blocks`: the arguments of
+    :func:`write_bag` of the same names, for a stretch of the log."""
+
+    imu: StampedSeries | None = None
+    quaternions: Mapping[str, StampedSeries] = field(default_factory=dict)
+    vectors: Mapping[str, StampedSeries] = field(default_factory=dict)
+    imu_linear_acceleration: ArrayLike | None = None
+
+
+def _block_topics(block: BagBlock, imu_topic: str, cov: ArrayLike | None) -> list[_Topic]:
+    """The topics of one block, each series checked."""
     topics: list[_Topic] = []
-    if imu is not None:
-        topics.append(
-            _imu_topic(imu, imu_topic, imu_linear_acceleration, imu_angular_velocity_covariance)
-        )
-    for name, s in dict(quaternions or {}).items():
+    if block.imu is not None:
+        topics.append(_imu_topic(block.imu, imu_topic, block.imu_linear_acceleration, cov))
+    for name, s in dict(block.quaternions).items():
         _check_series(f"quaternions[{name!r}]", s, 4)
         topics.append((name, "geometry_msgs/msg/QuaternionStamped", s, s.values.__getitem__))
-    for name, s in dict(vectors or {}).items():
+    for name, s in dict(block.vectors).items():
         _check_series(f"vectors[{name!r}]", s, 3)
         topics.append((name, "geometry_msgs/msg/Vector3Stamped", s, s.values.__getitem__))
     _check_topic_names(topics)
-    _write_atomic(out, topics, custom, inputs, force)
+    return topics
+
+
+def write_bag_blocks(
+    out_dir: str | os.PathLike,
+    blocks: Iterable[BagBlock],
+    *,
+    imu_topic: str = "/imu/data",
+    imu_angular_velocity_covariance: ArrayLike | None = None,
+    custom_data: Mapping[str, str] | None = None,
+    force: bool = False,
+    inputs: Iterable[str | os.PathLike] = (),
+) -> Path:
+    """:func:`write_bag`, a block of the log at a time: a log of any length in the memory of
+    one block.
+
+    ``blocks`` yields :class:`BagBlock` s in log-time order (each block's stamps at or after
+    the block before's), every block with the same topics; each is encoded, compressed and
+    written before the next is asked for. The other arguments are :func:`write_bag`'s. The bag
+    appears whole or not at all: a block that fails its checks (:func:`write_bag`'s, plus
+    order and topics) removes what was written and raises :class:`InputError`.
+    """
+    inputs = tuple(inputs)
+    out, custom = _checked_out(out_dir, inputs, force, custom_data)
+    cov = imu_angular_velocity_covariance
+    _write_atomic(out, (_block_topics(b, imu_topic, cov) for b in blocks), custom, inputs, force)
     return out

@@ -5,7 +5,9 @@ and chunk); each chunk is built, compressed and written before the next (memory 
 input series and one chunk, never every payload), and only the few summary records go through
 ``mcap.records``. The layout is the mcap library's own writer's: schemas and channels in the
 data section and again in the summary, message indexes after every chunk, the rosbag2 metadata
-record, statistics, chunk and metadata indexes, summary offsets. Measured here: 150 000 messages
+record, statistics, chunk and metadata indexes, summary offsets. A file can be written a block
+of messages at a time (each block's chunks written before the next block is made), so a long
+log never needs to be in memory whole. Measured here: 150 000 messages
 (50 000 each of Imu, QuaternionStamped, Vector3Stamped) in ~0.3 s, against ~1.5 s through
 ``mcap.writer.Writer`` with the same payloads and 44 µs per Imu message through
 ``mcap_ros2.writer``.
@@ -15,7 +17,7 @@ from __future__ import annotations
 
 import struct
 import zlib
-from collections.abc import Callable
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 from itertools import pairwise
 
@@ -37,11 +39,12 @@ from mcap.records import (
 )
 from numpy.typing import NDArray
 
+from imu_dcm.errors import InputError
 from imu_dcm.logio.meta import QOS_YAML
 from imu_dcm.logio.paths import MCAP_MAGIC as MAGIC
 from imu_dcm.logio.writers.messages import MSG_DEFINITIONS
 
-__all__ = ["OWN_LIBRARY", "Encoded", "write_mcap"]
+__all__ = ["OWN_LIBRARY", "Encoded", "Written", "write_mcap"]
 
 #: The library named in the MCAP header of the bags written here (see :mod:`.bag`: a bag
 #: naming it is one ``force`` may replace).
@@ -187,7 +190,8 @@ def _message_indexes(m: _Messages, a: int, b: int, lo: int, pos: int, index) -> 
 
 
 def _write_chunks(f, out, topics: list[Encoded], m: _Messages, chunk_size: int) -> list:
-    """Write the zstd chunks, each followed by its message indexes; returns the chunk indexes.
+    """Write the zstd chunks of one block's messages, each followed by its message indexes;
+    returns the chunk indexes.
 
     Each chunk's records are built, compressed and written before the next one's: memory
     holds one chunk, not the file.
@@ -230,6 +234,23 @@ def _write_chunks(f, out, topics: list[Encoded], m: _Messages, chunk_size: int) 
     return chunk_indexes
 
 
+@dataclass
+class Written:
+    """What :func:`write_mcap` wrote: messages per channel (in the order of the topics), and
+    the first and last log time, ns."""
+
+    counts: list[int]
+    t_min_ns: int
+    t_max_ns: int
+
+
+def _same_channels(first: list[Encoded], block: list[Encoded], k: int) -> None:
+    got = [(t.topic, t.msgtype) for t in block]
+    want = [(t.topic, t.msgtype) for t in first]
+    if got != want:
+        raise InputError(f"Expected block {k} to hold the channels {want} of block 0, got {got}")
+
+
 def _write_summary(f, out, summary_groups: list[tuple[int, list]]) -> None:
     """The summary section (record groups, then their summary offsets) and the footer."""
     summary_start = f.tell()
@@ -260,40 +281,70 @@ def _write_summary(f, out, summary_groups: list[tuple[int, list]]) -> None:
 
 
 def write_mcap(
-    f, topics: list[Encoded], metadata: dict[str, str], chunk_size: int = 1 << 20
-) -> None:
+    f,
+    blocks: Iterable[list[Encoded]],
+    metadata: Callable[[Written], dict[str, str]],
+    chunk_size: int = 1 << 20,
+) -> Written:
     """Write an indexed MCAP file (profile ros2, zstd chunks) with all records built in bulk.
 
-    ``topics`` holds one :class:`Encoded` per channel; each chunk's payloads are built when it
-    is written (the bytes do not depend on how the payloads are produced). Schemas and channels
-    are written in the data section and repeated in the summary; every chunk is followed by
-    its message indexes; the summary has statistics, chunk and metadata indexes and summary
-    offsets (the layout of the mcap library's own writer).
+    ``blocks`` yields the messages a block at a time, each block one :class:`Encoded` per
+    channel (the same channels, in the same order, in every block), each block's log times at
+    or after the block before's; a block's chunks are built and written before the next block
+    is asked for, so memory holds one block, not the file. ``metadata(written)`` gives the
+    rosbag2 metadata record once every message is written. Schemas and channels are written in
+    the data section and repeated in the summary; every chunk is followed by its message
+    indexes; the summary has statistics, chunk and metadata indexes and summary offsets (the
+    layout of the mcap library's own writer). Raises :class:`InputError` for a block out of
+    log-time order or with other channels, and when there is no message at all.
     """
-    schemas, channels = _schemas_and_channels(topics)
-    m = _message_order(topics)
     out = RecordBuilder()
-    Header(profile="ros2", library=OWN_LIBRARY).write(out)
-    for record in (*schemas.values(), *channels):
-        record.write(out)
-    f.write(MAGIC + out.end())
-    chunk_indexes = _write_chunks(f, out, topics, m, chunk_size)
-    Metadata(name="rosbag2", metadata=metadata).write(out)
+    chunk_indexes: list[ChunkIndex] = []
+    first: list[Encoded] | None = None
+    written = Written([], 0, 0)
+    for k, block in enumerate(blocks):
+        if first is None:
+            first = block
+            schemas, channels = _schemas_and_channels(block)
+            Header(profile="ros2", library=OWN_LIBRARY).write(out)
+            for record in (*schemas.values(), *channels):
+                record.write(out)
+            f.write(MAGIC + out.end())
+            written.counts = [0] * len(block)
+        else:
+            _same_channels(first, block, k)
+        m = _message_order(block)
+        if m.stamps.size == 0:
+            continue
+        if any(written.counts) and int(m.stamps[0]) < written.t_max_ns:
+            raise InputError(
+                f"Expected block {k} to start at or after the last log time before it "
+                f"({written.t_max_ns} ns), got {int(m.stamps[0])} ns"
+            )
+        if not any(written.counts):
+            written.t_min_ns = int(m.stamps[0])
+        written.t_max_ns = int(m.stamps[-1])
+        written.counts = [c + int(t.t_ns.size) for c, t in zip(written.counts, block, strict=True)]
+        chunk_indexes += _write_chunks(f, out, block, m, chunk_size)
+        del m
+    if first is None or not any(written.counts):
+        raise InputError("Expected at least one message to write, got none")
+    Metadata(name="rosbag2", metadata=metadata(written)).write(out)
     meta_bytes = out.end()
     meta_index = MetadataIndex(offset=f.tell(), length=len(meta_bytes), name="rosbag2")
     f.write(meta_bytes)
     DataEnd(data_section_crc=0).write(out)
     f.write(out.end())
     stats = Statistics(
-        message_count=int(m.stamps.size),
+        message_count=sum(written.counts),
         schema_count=len(schemas),
         channel_count=len(channels),
         attachment_count=0,
         metadata_count=1,
         chunk_count=len(chunk_indexes),
-        message_start_time=int(m.stamps[0]),
-        message_end_time=int(m.stamps[-1]),
-        channel_message_counts={i + 1: int(t.t_ns.size) for i, t in enumerate(topics)},
+        message_start_time=written.t_min_ns,
+        message_end_time=written.t_max_ns,
+        channel_message_counts={i + 1: c for i, c in enumerate(written.counts)},
     )
     groups = [
         (0x03, list(schemas.values())),
@@ -303,3 +354,4 @@ def write_mcap(
         (0x0D, [meta_index]),
     ]
     _write_summary(f, out, groups)
+    return written
