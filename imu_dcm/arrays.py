@@ -17,6 +17,7 @@ __all__ = [
     "BLOCK_ROWS",
     "cumsum_rows",
     "median",
+    "median_diff",
     "percentile",
     "row_finite",
     "row_max",
@@ -87,6 +88,21 @@ def median(values: ArrayLike) -> float:
         return float(np.partition(a, k)[k])
     part = np.partition(a, (k - 1, k))
     return float((part[k - 1] + part[k]) / 2.0)
+
+
+def median_diff(values: ArrayLike) -> float:
+    """``median(np.diff(values))`` (the median step of a series of stamps, say) with one
+    temporary: the differences, partially sorted in place."""
+    d = np.diff(np.asarray(values)).astype(np.float64, copy=False)
+    n = d.size
+    if n == 0 or np.isnan(d).any():
+        return math.nan
+    k = n // 2
+    if n % 2:
+        d.partition(k)
+        return float(d[k])
+    d.partition((k - 1, k))
+    return float((d[k - 1] + d[k]) / 2.0)
 
 
 def percentile(values: ArrayLike, q: float) -> float:

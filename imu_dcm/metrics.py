@@ -24,6 +24,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from imu_dcm.arrays import BLOCK_ROWS
 from imu_dcm.so3 import product_planes, quat_checked_norm
 
 __all__ = [
@@ -219,15 +220,20 @@ def error_stats(x: ArrayLike) -> ErrorStats:
     hi = np.minimum(lo + 1, n - 1)
     part = np.partition(x, np.unique(np.r_[lo, hi, n - 1]))
     q = part[lo] + (part[hi] - part[lo]) * (pos - lo)
+    top = float(part[n - 1])
+    del part  # the sorted copy goes before the deviations' blocks come
     mean = float(np.mean(x))
-    d = x - mean
+    ss = 0.0  # Σ (x - mean)², a block at a time
+    for a in range(0, n, BLOCK_ROWS):
+        d = x[a : a + BLOCK_ROWS] - mean
+        ss += _dot(d, d)
     return ErrorStats(
         rms=rms(x),
         mean=mean,
         median=float(q[0]),
-        std=float(np.sqrt(_dot(d, d) / n)),
+        std=float(np.sqrt(ss / n)),
         p95=float(q[1]),
-        max=float(part[n - 1]),
+        max=top,
         samples=int(n),
     )
 

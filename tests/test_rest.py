@@ -7,15 +7,17 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from conftest import raises_naming
+import pytest
+from conftest import raises_naming, small_blocks
 
+from imu_dcm.arrays import row_max, row_norm
 from imu_dcm.errors import InputError
 from imu_dcm.gyro.rest import (
     detect_rest,
     quietest_std,
 )
 from imu_dcm.gyro.rest_rule import RestConfig, longest_run, runs, window_samples
-from imu_dcm.gyro.windows import windowed_mean_var
+from imu_dcm.gyro.windows import window_norms, windowed_mean_var
 
 
 def test_windowed_mean_var_equals_direct_windows():
@@ -31,6 +33,20 @@ def test_windowed_mean_var_equals_direct_windows():
     np.testing.assert_allclose(mean, direct.mean(axis=1), rtol=0, atol=len(x) * eps * 10)
     np.testing.assert_allclose(var, direct.var(axis=1), rtol=0, atol=len(x) * eps * 100)
     assert np.all(var >= 0.0)
+
+
+@pytest.mark.parametrize("rows", [7, 64, 1 << 17])
+@pytest.mark.parametrize("m", [1, 25, 700])
+def test_window_norms_are_the_norms_of_the_windows_bit_for_bit(monkeypatch, rows, m):
+    # Block by block, each window's sums are the running sums of the whole log (each row added
+    # to the sum before it, in order): the same bytes as row_norm / row_max of the whole-log
+    # mean and variance, whatever the block size, windows longer than a block included.
+    x = np.random.default_rng(m).normal(0.3, 0.2, size=(3000, 3))
+    mean, var = windowed_mean_var(x, m)
+    small_blocks(monkeypatch, rows)
+    norm, max_var = window_norms(x, m)
+    assert norm.tobytes() == row_norm(mean).tobytes()
+    assert max_var.tobytes() == row_max(var).tobytes()
 
 
 def test_runs_and_longest_run():

@@ -161,3 +161,18 @@ def test_median_and_percentile_equal_numpy_bit_for_bit(n):
             assert percentile(a, q) == float(np.percentile(a, q)), q
     assert np.isnan(median([1.0, np.nan, 2.0])) and np.isnan(percentile([np.nan], 50))
     assert np.isnan(median([])) and np.isnan(percentile([], 50))
+
+
+@pytest.mark.parametrize("n", [1, 2, 3, 4, 7, 10, 101, 1000])
+def test_median_diff_is_numpys_median_of_the_steps(n):
+    # The median step, partially sorted in place: numpy's median of np.diff exactly, for int64
+    # stamps (ns) and float times, and the input left as it was.
+    from imu_dcm.arrays import median_diff
+
+    rng = np.random.default_rng(n)
+    for t in (np.cumsum(rng.integers(1, 9, n)), np.cumsum(rng.uniform(0, 1, n))):
+        before = t.copy()
+        want = float(np.median(np.diff(t))) if n > 1 else np.nan
+        got = median_diff(t)
+        assert got == want or (np.isnan(got) and np.isnan(want))
+        assert np.array_equal(t, before)

@@ -15,13 +15,20 @@ from conftest import small_blocks
 
 import data_synth
 from data_synth import budget
-from data_synth.cli import main
 from data_synth.gyro import GyroModel, synthetic_gyro
 from imu_dcm.errors import InputError
 from imu_dcm.logio import read_log
 from imu_dcm.logio.writers import BagBlock, StampedSeries, write_bag, write_bag_blocks
 
 REPO = Path(__file__).resolve().parents[1]
+
+
+def main(argv: list[str]) -> int:
+    """data_synth's entry point, from the module as imported now (a test elsewhere re-imports
+    it: patches go to the module in ``sys.modules``, which this calls)."""
+    import data_synth.cli
+
+    return data_synth.cli.main(argv)
 EVERY_TERM = GyroModel(
     noise_density_rad_s_sqrt_hz=1e-3,
     bias_rad_s=(0.01, -0.02, 0.003),
@@ -149,7 +156,7 @@ def test_no_disk_room_is_refused_up_front(tmp_path, monkeypatch, capsys):
 def test_a_long_job_says_how_far_it_is(tmp_path, monkeypatch, capsys):
     import data_synth.cli as cli
 
-    monkeypatch.setattr(cli, "PROGRESS_EVERY_S", 0.0)
+    monkeypatch.setattr(cli, "PROGRESS_EVERY_S", 0.0)  # the module main() calls
     small_blocks(monkeypatch, 1000)
     argv = ["coning", "--rate", "1000", "--duration", "4.5", "--out", str(tmp_path / "b")]
     assert main(argv) == 0

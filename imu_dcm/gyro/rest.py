@@ -12,6 +12,8 @@ joins the rests either side of it. :func:`rest_segments` is the rule over a whol
 :class:`imu_dcm.gyro.rest_causal.CausalRestBias` runs it as samples arrive (live).
 :func:`detect_rest` marks the samples a still window covers (the pre-filter's rest), and
 :func:`explain_no_rest` names the condition that failed where no window passed.
+:func:`judge_rest` gives the segments, the conflict line and that reason from one pass over the
+windows (a replay's bias estimate needs all three).
 
 Conventions: ``omega_b`` (N, 3) body rate relative to the world in body axes, rad/s; ``t_s``
 (N,) seconds, increasing; ``q_w_b`` Hamilton ``[x, y, z, w]``, body to world.
@@ -19,10 +21,12 @@ Conventions: ``omega_b`` (N, 3) body rate relative to the world in body axes, ra
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from imu_dcm.arrays import median, row_max, row_norm
+from imu_dcm.arrays import BLOCK_ROWS, median_diff, row_norm
 from imu_dcm.errors import InputError
 from imu_dcm.gyro.rest_evidence import (
     Motion,
@@ -47,9 +51,16 @@ from imu_dcm.gyro.rest_rule import (
     window_conditions,
     window_samples,
 )
-from imu_dcm.gyro.windows import min_steps, windowed_mean_var
+from imu_dcm.gyro.windows import min_steps, window_norms
 
-__all__ = ["detect_rest", "explain_no_rest", "quietest_std", "rest_segments"]
+__all__ = [
+    "RestFinding",
+    "detect_rest",
+    "explain_no_rest",
+    "judge_rest",
+    "quietest_std",
+    "rest_segments",
+]
 
 
 def quietest_std(omega_b: NDArray, t_s: NDArray, window_s: float) -> float:
@@ -64,9 +75,8 @@ def quietest_std(omega_b: NDArray, t_s: NDArray, window_s: float) -> float:
     window_s : float
         Window length, s (at least 3 samples, at most the whole log).
     """
-    m = max(3, min(len(t_s), round(window_s / median(np.diff(t_s)))))
-    _mean, var = windowed_mean_var(omega_b, m)
-    return float(np.sqrt(row_max(var).min()))
+    m = max(3, min(len(t_s), round(window_s / median_diff(t_s))))
+    return float(np.sqrt(window_norms(omega_b, m)[1].min()))
 
 
 def _checked(omega_b: ArrayLike, t_s: ArrayLike, accel_b: ArrayLike | None, truth=None):
@@ -89,9 +99,9 @@ def _conditions(w, t, m: int, cfg: RestConfig, sig: Signals):
     steps = min_steps(w)
     # the truth's window rates first: their temporaries come and go before the gyro's windows
     truth = None if sig.truth_q_w_b is None else truth_rates(sig.truth_q_w_b, t, m)
-    mean, var = windowed_mean_var(w, m)
-    floor = noise_floor_var(var, steps)
-    return window_conditions(mean, var, floor, t, m, cfg, sig, truth_rate=truth)
+    rate, max_var = window_norms(w, m)
+    floor = noise_floor_var(max_var, steps)
+    return window_conditions(rate, max_var, floor, t, m, cfg, sig, truth_rate=truth)
 
 
 def rest_segments(
@@ -105,7 +115,36 @@ def rest_segments(
     vehicle: tuple[ArrayLike, ArrayLike] | None = None,
     motion: Motion | None = None,
 ) -> tuple[list[RestSegment], str]:
-    """The rest segments of a log, and one line on conflicting evidence ("" when none).
+    """The rest segments of a log, and one line on conflicting evidence ("" when none):
+    :func:`judge_rest` (the same arguments) without the reason for finding none."""
+    found = judge_rest(
+        omega_b, t_s, config, accel_b, truth_q_w_b, truth_noise, r_t_g, vehicle, motion
+    )
+    return found.segments, found.conflict
+
+
+class RestFinding(NamedTuple):
+    """What :func:`judge_rest` found: the rest segments, one line on conflicting evidence ("" for
+    none) and, when no window passed, why ("" otherwise)."""
+
+    segments: list[RestSegment]
+    conflict: str
+    why: str
+
+
+def judge_rest(
+    omega_b: ArrayLike,
+    t_s: ArrayLike,
+    config: RestConfig | None = None,
+    accel_b: ArrayLike | None = None,
+    truth_q_w_b: ArrayLike | None = None,
+    truth_noise: float = 0.0,
+    r_t_g: ArrayLike | None = None,
+    vehicle: tuple[ArrayLike, ArrayLike] | None = None,
+    motion: Motion | None = None,
+) -> RestFinding:
+    """The rest segments of a log, one line on conflicting evidence ("" when none), and, when
+    no window passed, why (:func:`explain_no_rest`'s clause, from the same windows).
 
     Parameters
     ----------
@@ -133,13 +172,16 @@ def rest_segments(
     w, t, acc, q = _checked(omega_b, t_s, accel_b, truth_q_w_b)
     n, m = len(w), window_samples(t, cfg.min_duration_s)
     if n < m:
-        return [], ""
+        return RestFinding([], "", _too_short(t, cfg))
     rg = None if r_t_g is None else np.asarray(r_t_g, float)
     sig = Signals(acc, q, truth_noise, rg, checked_vehicle(vehicle, n), motion)
     conds, std_limit, truth = _conditions(w, t, m, cfg, sig)
+    still = still_windows(conds)
+    if not still.any():
+        return RestFinding([], "", _explain(conds, t, cfg))
     grounded = None if sig.vehicle is None else vehicle_windows(sig.vehicle, m)[1]
     segs, doubts = [], []
-    for p, q_ in touching(runs(still_windows(conds)), m):
+    for p, q_ in touching(runs(still), m):
         a, b = p, q_ - 1 + m
         lo, hi = bias_span(a, b, n, m)
         doubt = segment_doubt(w, t, lo, hi, m, std_limit, cfg, sig)
@@ -164,7 +206,7 @@ def rest_segments(
         bias = tuple(w[lo:hi].mean(axis=0).tolist())
         evidence = evidence_of(conds, truth, grounded, p, q_)
         out.append(RestSegment(a, b, float(t[a]), float(t[b - 1]), bias, lo, hi, evidence))
-    return out, _conflict(conds, doubts)
+    return RestFinding(out, _conflict(conds, doubts), "")
 
 
 def _conflict(conds, doubts: list[str]) -> str:
@@ -232,23 +274,46 @@ def explain_no_rest(
     w, t, acc, q = _checked(omega_b, t_s, accel_b, truth_q_w_b)
     win = window_samples(t, cfg.min_duration_s)
     if len(w) < win:
-        return f"the log ({t[-1] - t[0]:.2f} s) is shorter than a {cfg.min_duration_s:.2f} s window"
+        return _too_short(t, cfg)
     sig = Signals(acc, q, truth_noise, None, checked_vehicle(vehicle, len(w)), motion)
-    conds = _conditions(w, t, win, cfg, sig)[0]
-    with np.errstate(invalid="ignore", divide="ignore"):
-        ratios = [np.nan_to_num(v / np.broadcast_to(lim, v.shape)) for _s, _n, v, lim, _u in conds]
-    worst = np.max(ratios, axis=0)
-    i = int(np.argmin(worst))
-    if worst[i] <= 1.0:
+    return _explain(_conditions(w, t, win, cfg, sig)[0], t, cfg)
+
+
+def _too_short(t: NDArray, cfg: RestConfig) -> str:
+    return f"the log ({t[-1] - t[0]:.2f} s) is shorter than a {cfg.min_duration_s:.2f} s window"
+
+
+def _explain(conds, t: NDArray, cfg: RestConfig) -> str:
+    """Why no window passed: the conditions that failed in the window closest to passing (the
+    one whose worst value over limit is smallest, the first of equals), a block of windows at
+    a time."""
+    k = len(conds[0][2])
+    best, i, ratios = np.inf, 0, None
+    for a in range(0, k, BLOCK_ROWS):
+        r = _ratios(conds, slice(a, a + BLOCK_ROWS))
+        worst = np.max(r, axis=0)
+        j = int(np.argmin(worst))
+        if worst[j] < best:
+            best, i, ratios = float(worst[j]), a + j, r[:, j]
+    if best <= 1.0:
         return "every stretch the windows call still was found not to be rest"
     failed = [
         f"the vehicle airborne on {value[i]:.0%} of it (landed state)"
         if sig_name == "landed state"
         else f"{name} {value[i]:.4g} {unit} > {np.broadcast_to(limit, value.shape)[i]:.4g} "
-        f"({ratio[i]:.1f}x)"
+        f"({ratio:.1f}x)"
         for (sig_name, name, value, limit, unit), ratio in zip(conds, ratios, strict=True)
-        if ratio[i] > 1.0
+        if ratio > 1.0
     ]
     return f"the stillest {cfg.min_duration_s:.2f} s, at {t[i] - t[0]:.2f} s, has " + ", ".join(
         failed
     )
+
+
+def _ratios(conds, k: slice) -> NDArray:
+    """Each condition's value over its limit in the windows ``k``, (conditions, windows); 0
+    where undecided (NaN)."""
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return np.array(
+            [np.nan_to_num(v[k] / np.broadcast_to(lim, v.shape)[k]) for _s, _n, v, lim, _u in conds]
+        )

@@ -26,7 +26,7 @@ from imu_dcm.gyro.rest_rule import (
     window_conditions,
     window_samples,
 )
-from imu_dcm.gyro.windows import min_steps, step_var, windowed_mean_var
+from imu_dcm.gyro.windows import min_steps, step_var, window_norms
 
 __all__ = ["CausalRestBias"]
 
@@ -178,10 +178,10 @@ class CausalRestBias:
         accelerometer's ``XA``), each judged against the floor of the windows up to it
         (:func:`~imu_dcm.gyro.rest_rule.noise_floor_var`, causal), the accelerometer's too."""
         m = self.win
-        mean, var = windowed_mean_var(X, m)
-        mean, var = mean[rows], var[rows]
+        rate, max_var = window_norms(X, m)
+        rate, max_var = rate[rows], max_var[rows]
         self._min_steps = np.minimum(self._min_steps, min_steps(X))
-        floor = noise_floor_var(var, self._min_steps, self._floor_var, causal=True)
+        floor = noise_floor_var(max_var, self._min_steps, self._floor_var, causal=True)
         if len(floor):
             self._floor_var = float(floor[-1])
         sig, self._a_missing = Signals(), None
@@ -195,17 +195,18 @@ class CausalRestBias:
             self._a_min_steps = np.minimum(self._a_min_steps, min_steps(A))
             sig = Signals(A)
         conds = window_conditions(
-            mean, var, floor, T, m, self.config, sig, accel_floor=self._accel_floor
+            rate, max_var, floor, T, m, self.config, sig, accel_floor=self._accel_floor
         )[0]
         self._evidence = evidence_of(conds, None, None, 0, 0)
         still = still_windows(conds)
         return still if self._a_missing is None else still & ~self._a_missing
 
     def _accel_floor(self, a_var: NDArray) -> NDArray:
-        """The accelerometer's floor for each window: the stillest of it and those before it
-        (windows holding a sample without a reading do not count)."""
+        """The accelerometer's floor for each window (``a_var`` its largest per-axis variance,
+        (k,)): the stillest of it and those before it (windows holding a sample without a
+        reading do not count)."""
         if self._a_missing is not None:
-            a_var = np.where(self._a_missing[:, None], np.inf, a_var)
+            a_var = np.where(self._a_missing, np.inf, a_var)
         floor = noise_floor_var(a_var, self._a_min_steps, self._a_floor_var, causal=True)
         if len(floor):
             self._a_floor_var = float(floor[-1])

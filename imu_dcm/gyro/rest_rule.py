@@ -70,9 +70,9 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from imu_dcm.arrays import median, row_max, row_norm
+from imu_dcm.arrays import median_diff
 from imu_dcm.gyro.rest_evidence import Signals, motion_windows, truth_rates, vehicle_windows
-from imu_dcm.gyro.windows import min_steps, step_var, windowed_mean_var
+from imu_dcm.gyro.windows import min_steps, step_var, window_norms
 
 #: Standard gravity, m/s² (a still accelerometer reads about this much).
 GRAVITY_M_S2 = 9.80665
@@ -159,7 +159,7 @@ def window_samples(t_s: NDArray, duration_s: float) -> int:
     A window of a whole number of steps is that many samples, whatever the rounding of the
     stamps' differences (a relative 1e-9 of slack: 0.5 s at 5 ms is 100 samples, not 101).
     """
-    dt = median(np.diff(t_s)) if len(t_s) > 1 else 1.0
+    dt = median_diff(t_s) if len(t_s) > 1 else 1.0
     return max(2, math.ceil(duration_s / dt * (1.0 - 1e-9)))
 
 
@@ -186,13 +186,16 @@ def floor_factor(m: int, spreads: float = 4.0) -> float:
     return math.exp(2.0 * spreads / math.sqrt(2.0 * max(m - 1, 1)))
 
 
-def noise_floor_var(var: NDArray, steps: NDArray, before: float = math.inf, causal: bool = False):
+def noise_floor_var(
+    max_var: NDArray, steps: NDArray, before: float = math.inf, causal: bool = False
+):
     """A sensor's noise floor (variance, its unit²): its stillest window's, at least step²/12.
 
     Parameters
     ----------
-    var : ndarray, shape (k, 3)
-        Per-axis variance of each window, in time order.
+    max_var : ndarray, shape (k,)
+        The largest per-axis variance of each window, in time order
+        (:func:`imu_dcm.gyro.windows.window_norms`).
     steps : ndarray, shape (3,)
         The smallest output step of each axis (:func:`imu_dcm.gyro.windows.min_steps`).
     before : float
@@ -201,7 +204,7 @@ def noise_floor_var(var: NDArray, steps: NDArray, before: float = math.inf, caus
         False (offline): one floor, the stillest of all ``k`` windows. True (live): the floor
         each window is judged against, the stillest of it and those before it, shape (k,).
     """
-    v = row_max(var)
+    v = max_var
     floor = np.minimum.accumulate(np.minimum(v, before)) if causal else v.min()
     return np.maximum(floor, step_var(steps))
 
@@ -214,15 +217,16 @@ def std_limit(floor_var, m: int, cfg: RestConfig):
 
 
 def window_conditions(
-    mean, var, floor_var, t, m: int, cfg: RestConfig, sig: Signals, accel_floor=None,
+    rate, max_var, floor_var, t, m: int, cfg: RestConfig, sig: Signals, accel_floor=None,
     truth_rate=None,
 ):  # fmt: skip
     """Each condition of the rule over windows of ``m`` samples (the module docstring).
 
     Parameters
     ----------
-    mean, var : ndarray, shape (k, 3)
-        Each window's gyro mean (rad/s) and per-axis variance (rad²/s²).
+    rate, max_var : ndarray, shape (k,)
+        Each window's ``|mean|`` of the gyro (rad/s) and its largest per-axis variance
+        (rad²/s²) (:func:`imu_dcm.gyro.windows.window_norms`).
     floor_var : float or ndarray (k,)
         The gyro's noise floor each window is judged against (:func:`noise_floor_var`).
     t : ndarray, shape (N,)
@@ -233,7 +237,7 @@ def window_conditions(
     sig : Signals
         The other signals on the same ``k + m - 1`` rows (none: the gyro judges alone).
     accel_floor : callable, optional
-        Given the accelerometer's per-axis window variances (k, 3), its noise floor each
+        Given the accelerometer's largest per-axis window variances (k,), its noise floor each
         window is judged against (m²/s⁴, scalar or (k,)). None (offline): the stillest window
         of these rows (:func:`noise_floor_var`); live passes the causal floor.
     truth_rate : ndarray, shape (k,), optional
@@ -246,20 +250,19 @@ def window_conditions(
     ``|omega_T|`` (rad/s, NaN without truth) or None.
     """
     z = floor_factor(m, cfg.floor_spreads)
-    spread = np.sqrt(row_max(var))
-    rate = row_norm(mean)
+    spread = np.sqrt(max_var)
     limit = std_limit(floor_var, m, cfg)
     conds = [("gyro floor", "rate std", spread, limit, "rad/s")]
     mean_limit = np.full(len(rate), cfg.max_rate_rad_s)
     if sig.accel_b is not None:
-        a_mean, a_var = windowed_mean_var(sig.accel_b, m)
-        a_spread = np.sqrt(row_max(a_var))
+        a_norm, a_var = window_norms(sig.accel_b, m)
+        a_spread = np.sqrt(a_var)
         if accel_floor is None:
             a_floor = np.sqrt(noise_floor_var(a_var, min_steps(sig.accel_b)))
         else:
             a_floor = np.sqrt(accel_floor(a_var))
         a_limit = cfg.max_accel_std_m_s2 if cfg.max_accel_std_m_s2 is not None else a_floor * z
-        g_err = np.abs(row_norm(a_mean) - GRAVITY_M_S2)
+        g_err = np.abs(a_norm - GRAVITY_M_S2)
         conds += [
             ("accelerometer", "accel std", a_spread, a_limit, "m/s²"),
             ("accelerometer", "| |a| - g |", g_err, cfg.max_gravity_error_m_s2, "m/s²"),

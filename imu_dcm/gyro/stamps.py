@@ -18,7 +18,7 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import ArrayLike
 
-from imu_dcm.arrays import median
+from imu_dcm.arrays import median, median_diff
 
 __all__ = ["NS_PER_UNIT", "timing_doubt"]
 
@@ -79,7 +79,7 @@ def timing_doubt(
     t = np.asarray(t_ns, dtype=np.int64)
     if len(t) < 3:
         return None
-    step_s = median(np.diff(t)) * 1e-9
+    step_s = median_diff(t) * 1e-9
     span_s = float(t[-1] - t[0]) * 1e-9
     if step_s <= 0:
         return None

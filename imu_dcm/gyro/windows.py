@@ -6,9 +6,9 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import NDArray
 
-from imu_dcm.arrays import BLOCK_ROWS, cumsum_rows
+from imu_dcm.arrays import BLOCK_ROWS, cumsum_rows, row_max, row_norm
 
-__all__ = ["min_steps", "step_var", "windowed_mean_var"]
+__all__ = ["min_steps", "step_var", "window_norms", "windowed_mean_var"]
 
 
 def windowed_mean_var(x: NDArray, m: int) -> tuple[NDArray, NDArray]:
@@ -47,6 +47,45 @@ def windowed_mean_var(x: NDArray, m: int) -> tuple[NDArray, NDArray]:
         var -= mean * mean
         np.maximum(var, 0.0, out=var)
     return sums[0, :k], sums[1, :k]
+
+
+def window_norms(x: NDArray, m: int) -> tuple[NDArray, NDArray]:
+    """The norm of the mean and the largest axis's variance of every window of ``m`` rows:
+    ``row_norm(mean)`` and ``row_max(var)`` of :func:`windowed_mean_var`, bit for bit, a block
+    of windows at a time (the memory of the two results and one block, not of two copies of
+    ``x``).
+
+    Parameters
+    ----------
+    x : ndarray, shape (N, k)
+    m : int
+        Window length in samples, ``1 <= m <= N``.
+
+    Returns
+    -------
+    norm, max_var : ndarray, shape (N - m + 1,)
+    """
+    k = len(x) - m + 1
+    norm, max_var = np.empty(k), np.empty(k)
+    carry = np.zeros((2,) + x.shape[1:])  # the running sums of x and x² before the block
+    for a in range(0, k, BLOCK_ROWS):
+        b = min(k, a + BLOCK_ROWS)
+        rows = x[a : b + m - 1]
+        sums = np.empty((2, len(rows) + 1) + x.shape[1:])
+        sums[:, 0] = carry
+        sums[0, 1:] = rows
+        np.square(rows, out=sums[1, 1:])
+        sums[:, 1] += carry  # each row added to the sum before it, in order, as over all rows
+        np.cumsum(sums[:, 1:], axis=1, out=sums[:, 1:])
+        carry = sums[:, b - a].copy()
+        win = sums[:, m : m + b - a] - sums[:, : b - a]
+        mean, var = win[0], win[1]
+        mean /= m
+        var /= m
+        var -= mean * mean
+        np.maximum(var, 0.0, out=var)
+        norm[a:b], max_var[a:b] = row_norm(mean), row_max(var)
+    return norm, max_var
 
 
 def min_steps(x: NDArray) -> NDArray:

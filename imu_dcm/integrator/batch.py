@@ -301,7 +301,8 @@ def _integrate_rows(omega_b, t_s, q0, method: str, diagnostics=None) -> NDArray[
     """Check, then run the kernel: the body of :func:`integrate` and :func:`integrate_quat`
     (their warnings name their caller: three frames up from here)."""
     check_method(method, METHODS)
-    omega, t, _dt = check_samples(omega_b, t_s, stacklevel=4, diagnostics=diagnostics)
+    omega, t, dt = check_samples(omega_b, t_s, stacklevel=4, diagnostics=diagnostics)
+    del dt  # the steps are the checks', not the kernel's: their memory goes before its output's
     q_first = as_quat_xyzw(q0)
     if method == "rotvec_sum":
         warn_rotvec_sum(stacklevel=4, diagnostics=diagnostics)

@@ -29,7 +29,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from imu_dcm.app.checks import check_bias
 from imu_dcm.errors import InputError
-from imu_dcm.gyro.rest import detect_rest, explain_no_rest, rest_segments
+from imu_dcm.gyro.rest import detect_rest, judge_rest
 from imu_dcm.gyro.rest_agreement import rests_agree
 from imu_dcm.gyro.rest_rule import RestConfig, RestSegment
 
@@ -53,7 +53,8 @@ class BiasEstimate:
 
     Attributes
     ----------
-    bias_b : float64 (N, 3) — bias subtracted from each sample, body axes, rad/s.
+    bias_b : float64 (N, 3) — bias subtracted from each sample, body axes, rad/s (a read-only
+        view of one vector when the bias is the same on every row: none, fixed, no rest).
     segments : the rest segments found (empty when none), each with its evidence.
     mode : "auto", "none" or "fixed".
     confirmed : True when a signal besides the gyro (accelerometer, truth) judged every rest.
@@ -122,28 +123,32 @@ def estimate_bias(
     t = np.asarray(t_s, dtype=float)
     n = len(w)
     if isinstance(mode, str) and mode == "none":
-        return BiasEstimate(np.zeros((n, 3)), (), "none")
+        return BiasEstimate(_every_row(np.zeros(3), n), (), "none")
     mode = check_bias(mode)
     if not isinstance(mode, str):
-        return BiasEstimate(np.broadcast_to(mode, (n, 3)).copy(), (), "fixed")
+        return BiasEstimate(_every_row(mode, n), (), "fixed")
     rule = rule or BIAS_RULE
     if rule not in BIAS_RULES:
         raise InputError(f"Expected a bias rule in {BIAS_RULES}, got {rule!r}")
     cfg = config or RestConfig()
-    segs, conflict = rest_segments(
+    segs, conflict, why = judge_rest(
         w, t, cfg, accel_b, truth_q_w_b, truth_noise, r_t_g, vehicle, motion
     )
     if not segs:
-        why = explain_no_rest(w, t, cfg, accel_b, truth_q_w_b, truth_noise, vehicle, motion)
         if conflict:  # windows passed, and their stretches were found not to be rest
             why = conflict.split(": ", 1)[1]
-        return BiasEstimate(np.zeros((n, 3)), (), "auto", False, why, conflict)
+        return BiasEstimate(_every_row(np.zeros(3), n), (), "auto", False, why, conflict)
     agree = rests_agree(w, segs, cfg.floor_spreads)  # the outliers are not used
     judged = agree.as_dict(segs) if len(segs) > 1 else None
     segs = list(agree.kept)
     confirmed = all(any(e != "gyro floor" for e in s.evidence) for s in segs)
     bias_b = _bias_at(segs, t, rule)
     return BiasEstimate(bias_b, tuple(segs), "auto", confirmed, "", conflict, judged)
+
+
+def _every_row(bias, n: int) -> NDArray[np.float64]:
+    """One bias on every row, (n, 3): a read-only view of the one vector, no memory per row."""
+    return np.broadcast_to(np.asarray(bias, dtype=float), (n, 3))
 
 
 def _bias_at(segs: list[RestSegment], t: NDArray, rule: str) -> NDArray[np.float64]:

@@ -61,15 +61,16 @@ class CleanedImu:
     """Gyro samples after cleaning, sorted by stamp, with the counts of what was dropped.
 
     ``t_ns`` int64 (N,) strictly increasing; ``omega_b`` float64 (N, 3) finite, rad/s;
-    ``index`` int64 (N,) position of each kept sample in the input; gaps as (time s since the
-    first kept sample, length s); ``implausible_t_s`` the times of the implausible samples (s
-    since the first kept sample); ``messages`` its warnings, one line each (said as they were
-    found, or added to the caller's diagnostics).
+    ``index`` int64 (N,) position of each kept sample in the input, or ``slice(0, N)`` when
+    every sample was kept in its place (indexing with it then gives a view); gaps as (time s
+    since the first kept sample, length s); ``implausible_t_s`` the times of the implausible
+    samples (s since the first kept sample); ``messages`` its warnings, one line each (said as
+    they were found, or added to the caller's diagnostics).
     """
 
     t_ns: NDArray[np.int64]
     omega_b: NDArray[np.float64]
-    index: NDArray[np.int64]
+    index: NDArray[np.int64] | slice
     dropped_nonfinite: int
     dropped_implausible: int
     dropped_wild_stamp: int
@@ -172,7 +173,7 @@ def clean_imu(
         The gaps, with their times.
     """
     t = np.asarray(t_ns, dtype=np.int64)
-    w = np.asarray(omega_b, dtype=float)
+    w = w_in = np.asarray(omega_b, dtype=float)
     index = np.arange(len(t), dtype=np.int64)
 
     def drop(mask: NDArray[np.bool_]) -> None:  # copies only when something goes
@@ -202,6 +203,8 @@ def clean_imu(
 
     counts = (n_bad, bad, n_dup, n_conf, n_wild, wild_t, n_sorted)
     messages, gaps = _report(topic, t, t0, counts, diagnostics)
+    if len(index) == len(w_in) and not n_sorted:  # every sample kept, in place
+        index = slice(0, len(index))
     return CleanedImu(
         t,
         w,

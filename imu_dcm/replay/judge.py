@@ -90,9 +90,9 @@ def judge_truth(
         return Judged(
             aligned, None, (), MountingChoice(given, given, "given" if given else "", None, "")
         )
-    tt = (truth.t_ns if g.base == "header" else truth.log_t_ns) + np.int64(
-        round(aligned.offset_s * 1e9)
-    )
+    tt = truth.t_ns if g.base == "header" else truth.log_t_ns
+    if round(aligned.offset_s * 1e9):  # shifted (a copy); else the truth's own stamps
+        tt = tt + np.int64(round(aligned.offset_s * 1e9))
     residual = 0.0  # the measured truth lag, not applied to the scoring with a fixed offset
     if s.truth_offset_s != "auto" and aligned.check and aligned.check.shift_s is not None:
         residual = aligned.check.shift_s
@@ -130,13 +130,13 @@ def _unseen_gaps(g: Gyro, omega: NDArray, q_truth: NDArray, notes: Diagnostics) 
     the integrator's bridge of it (the mean of the rates at its ends times its length) would,
     more than a truth jump's :data:`JUMP_DEG`. The estimate re-anchors after each."""
     out = []
-    speed = row_norm(omega)
     for t_gap, length in g.clean.gaps:
         k = int(np.searchsorted(g.t_s, t_gap))
         if k + 1 >= len(g.t_s) or not (row_finite(q_truth[k : k + 2]).all()):
             continue
         truth_deg = float(np.degrees(quat_angle_rad(q_truth[k], q_truth[k + 1])))
-        bridge_deg = float(np.degrees(0.5 * (speed[k] + speed[k + 1]) * length))
+        speed = row_norm(omega[k : k + 2])  # the rates at the gap's ends
+        bridge_deg = float(np.degrees(0.5 * (speed[0] + speed[1]) * length))
         if max(truth_deg, bridge_deg) > JUMP_DEG:
             out.append(TruthJump(float(g.t_s[k]), float(g.t_s[k + 1]), truth_deg, bridge_deg))
     if out:

@@ -17,7 +17,7 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import NDArray
 
-from imu_dcm.arrays import median, row_finite
+from imu_dcm.arrays import median_diff, row_finite
 from imu_dcm.gyro.resample import slerp_truth
 from imu_dcm.metrics import rms
 from imu_dcm.so3 import angle_between_deg, quat_conjugate, quat_multiply
@@ -39,7 +39,7 @@ def auto_offset_rms_deg(
         return None
     if len(anchors) != 1 or len(t_ns) < 2 or not scored.any():
         return None
-    if abs(check.shift_s) * 1e9 < 0.5 * median(np.diff(t_ns)):
+    if abs(check.shift_s) * 1e9 < 0.5 * median_diff(t_ns):
         return None
     tt = (truth.t_ns if base == "header" else truth.log_t_ns) + np.int64(round(check.shift_s * 1e9))
     shifted = slerp_truth(tt, truth.q_w_b, t_ns)

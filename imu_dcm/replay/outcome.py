@@ -13,7 +13,7 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import NDArray
 
-from imu_dcm.arrays import row_finite, row_norm
+from imu_dcm.arrays import BLOCK_ROWS, row_finite, row_norm
 from imu_dcm.so3 import angle_between_deg
 
 
@@ -35,18 +35,40 @@ def outcome(
         The three fields of :class:`~imu_dcm.replay.summary.ReplaySummary`; None each when no
         sample was estimated.
     """
-    rows = np.flatnonzero(row_finite(q_est[start:])) + start
-    if not len(rows):
+    first_row, last_row = _estimated_span(q_est, start)
+    if first_row is None:
         return {"final_q_w_b": None, "rotation_deg": None, "turned_deg": None}
-    first, last = q_est[rows[0]], q_est[rows[-1]]
-    speed = row_norm(omega_b[rows[0] : rows[-1] + 1])
-    dt = np.diff(t_s[rows[0] : rows[-1] + 1])
-    turned = float(np.sum(0.5 * (speed[1:] + speed[:-1]) * dt))
+    first, last = q_est[first_row], q_est[last_row]
+    turned = 0.0
+    for a in range(first_row, last_row, BLOCK_ROWS):  # trapezoids of a block, with its next row
+        b = min(last_row, a + BLOCK_ROWS) + 1
+        speed = row_norm(omega_b[a:b])
+        turned += float(np.sum(0.5 * (speed[1:] + speed[:-1]) * np.diff(t_s[a:b])))
     return {
         "final_q_w_b": tuple(float(v) for v in last),
         "rotation_deg": float(angle_between_deg(first, last)),
         "turned_deg": float(np.degrees(turned)),
     }
+
+
+def _estimated_span(q_est: NDArray, start: int) -> tuple[int | None, int | None]:
+    """The first and last estimated rows at or after ``start`` (None, None: none), found a
+    block at a time from each end."""
+    first = last = None
+    for a in range(start, len(q_est), BLOCK_ROWS):
+        ok = np.flatnonzero(row_finite(q_est[a : a + BLOCK_ROWS]))
+        if len(ok):
+            first = a + int(ok[0])
+            break
+    if first is None:
+        return None, None
+    for b in range(len(q_est), first, -BLOCK_ROWS):
+        a = max(first, b - BLOCK_ROWS)
+        ok = np.flatnonzero(row_finite(q_est[a:b]))
+        if len(ok):
+            last = a + int(ok[-1])
+            break
+    return first, last
 
 
 def outcome_lines(final_q_w_b, rotation_deg, turned_deg, written) -> list[str]:

@@ -20,7 +20,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from imu_dcm.arrays import median, row_finite, row_norm
+from imu_dcm.arrays import BLOCK_ROWS, median_diff, row_finite, row_norm
 from imu_dcm.gyro.resample import slerp_truth
 from imu_dcm.so3 import log_quat, quat_conjugate, quat_multiply
 
@@ -117,16 +117,34 @@ def integrated_rate(
 ) -> NDArray[np.float64]:
     """The trapezoid integral of the rate from the first gyro sample to each of ``at_ns``
     (linear between samples), rad (K, 3); differences give the turn over short intervals.
-    Any number of columns: ``omega_b`` (N, C) gives (K, C)."""
-    ts = (t_ns - t_ns[0]) * 1e-9
-    cum = np.concatenate(
-        [
-            np.zeros((1, omega_b.shape[1])),
-            np.cumsum(0.5 * (omega_b[1:] + omega_b[:-1]) * np.diff(ts)[:, None], axis=0),
-        ]
-    )
+    Any number of columns: ``omega_b`` (N, C) gives (K, C).
+
+    A block of samples at a time: the running integral carried from block to block (each step
+    added to the sum before it, in order) and each point interpolated in the block holding
+    it, the same numbers as over the whole log without its (N, C) temporaries."""
+    n, c = len(t_ns), omega_b.shape[1]
     te = (np.asarray(at_ns) - t_ns[0]) * 1e-9
-    return np.stack([np.interp(te, ts, cum[:, k]) for k in range(cum.shape[1])], axis=1)
+    out = np.empty((len(te), c))
+    starts = np.arange(0, max(n - 1, 1), BLOCK_ROWS)
+    which = np.searchsorted((t_ns[starts] - t_ns[0]) * 1e-9, te, side="right") - 1
+    which = np.clip(which, 0, len(starts) - 1)
+    carry = np.zeros(c)
+    for k, a in enumerate(starts.tolist()):
+        b = min(n - 1, a + BLOCK_ROWS)  # samples a..b: the block's steps and its last sample
+        ts = (t_ns[a : b + 1] - t_ns[0]) * 1e-9
+        w = omega_b[a : b + 1]
+        cum = np.empty((b - a + 1, c))
+        cum[0] = carry
+        steps = 0.5 * (w[1:] + w[:-1]) * np.diff(ts)[:, None]
+        if len(steps):
+            steps[0] += carry
+        np.cumsum(steps, axis=0, out=cum[1:])
+        carry = cum[-1].copy()
+        sel = np.flatnonzero(which == k)
+        if len(sel):
+            for j in range(c):
+                out[sel, j] = np.interp(te[sel], ts, cum[:, j])
+    return out
 
 
 @dataclass(slots=True, frozen=True)
@@ -161,8 +179,8 @@ def rate_grid(
     lo, hi = max(int(t_ns[0]), int(tt.min())), min(int(t_ns[-1]), int(tt.max()))
     if hi <= lo:
         return None
-    dt_g = median(np.diff(t_ns)) * 1e-9
-    dt_t = median(np.diff(tt if np.all(tt[1:] >= tt[:-1]) else np.sort(tt))) * 1e-9
+    dt_g = median_diff(t_ns) * 1e-9
+    dt_t = median_diff(tt if np.all(tt[1:] >= tt[:-1]) else np.sort(tt)) * 1e-9
     span_s = (hi - lo) * 1e-9
     dt = max(min_step_s, 2 * dt_t, dt_g, span_s / 100_000)
     edges = lo + np.round(np.arange(0.0, span_s, dt) * 1e9).astype(np.int64)

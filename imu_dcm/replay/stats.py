@@ -132,6 +132,23 @@ class _BodySums:
         }
 
 
+def _scored_rows(scored: NDArray) -> slice | NDArray | None:
+    """The scored rows: a slice when they are one stretch (the usual case: views, no copies),
+    else their indices; None when none is (counted a block at a time)."""
+    first = last = None
+    count = 0
+    for a in range(0, len(scored), BLOCK_ROWS):
+        rows = np.flatnonzero(scored[a : a + BLOCK_ROWS])
+        if len(rows):
+            first = a + int(rows[0]) if first is None else first
+            last, count = a + int(rows[-1]), count + len(rows)
+    if first is None:
+        return None
+    if last - first + 1 == count:
+        return slice(first, last + 1)
+    return np.flatnonzero(scored)
+
+
 def evaluate(
     t_s: NDArray,
     q_est: NDArray,
@@ -154,15 +171,12 @@ def evaluate(
     dict or None
         JSON-ready (angles deg, rates °/h); None when nothing was scored.
     """
-    idx = np.flatnonzero(scored)
-    if len(idx) < 1:
+    idx = _scored_rows(scored)
+    if idx is None:
         return None
-    if idx[-1] - idx[0] + 1 == len(idx):  # one stretch (the usual case): views, no copies
-        idx = slice(int(idx[0]), int(idx[-1]) + 1)
-    pick = np.arange(len(t_s))[idx]
     seg = None
     if len(anchors) > 1:
-        seg = np.searchsorted(np.asarray(anchors), pick, side="right")
+        seg = np.searchsorted(np.asarray(anchors), np.arange(len(t_s))[idx], side="right")
     qe, qt = q_est[idx], q_truth[idx]
     total = error.total_deg[idx]
     # world rows, then body rows (their angle is the total error, already computed), a block
@@ -176,6 +190,7 @@ def evaluate(
         sums.add(a, e)
         body.add(e[3:])
     drift = _drift(sums.fit(), t, seg)
+    del sums  # its centred stamps go before the statistics' sorted copies come
     return {
         "total_deg": _stats(total),
         "inclination_deg": _stats(error.inclination_deg[idx]),

@@ -11,7 +11,7 @@ import dataclasses
 import numpy as np
 from numpy.typing import NDArray
 
-from imu_dcm.arrays import BLOCK_ROWS, median, row_finite
+from imu_dcm.arrays import BLOCK_ROWS, median_diff, row_finite
 from imu_dcm.logio.ned import in_log_axes
 from imu_dcm.metrics import rms
 from imu_dcm.replay.bias import BIAS_RULE
@@ -74,8 +74,10 @@ def summarise(log, s, g: Gyro, bias_est, judged: Judged, pf_summary, anchors, er
     q0 = np.asarray(judged.aligned.q_truth[start]) if both.any() else s.init_q_w_b
     q0 = np.array([0.0, 0.0, 0.0, 1.0]) if q0 is None or not np.all(np.isfinite(q0)) else q0
 
-    def stat_(a: NDArray, f) -> float | None:
-        return float(f(a[both])) if both.any() else None
+    every = bool(both.all())
+
+    def stat_(a: NDArray, f) -> float | None:  # over the scored rows (all: no copy)
+        return float(f(a if every else a[both])) if both.any() else None
 
     # a truth that carries only heading (2D odometry, a planar pose) is scored on heading only
     planar = heading_only(judged.aligned.q_truth)
@@ -88,7 +90,7 @@ def summarise(log, s, g: Gyro, bias_est, judged: Judged, pf_summary, anchors, er
         samples=int(n),
         samples_estimated=int(n - start),
         duration_s=float(t_s[-1]),
-        rate_hz=1.0 / median(np.diff(t_s)),
+        rate_hz=1.0 / median_diff(t_s),
         imu_topic=imu.topic,
         imu_type=imu.type,
         truth_topic=truth.topic if truth is not None else None,
