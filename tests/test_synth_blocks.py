@@ -29,6 +29,8 @@ def main(argv: list[str]) -> int:
     import data_synth.cli
 
     return data_synth.cli.main(argv)
+
+
 EVERY_TERM = GyroModel(
     noise_density_rad_s_sqrt_hz=1e-3,
     bias_rad_s=(0.01, -0.02, 0.003),
