@@ -13,6 +13,7 @@ import zlib
 from dataclasses import dataclass
 
 import numpy as np
+from numpy.typing import NDArray
 
 from imu_dcm.logio.containers.chunks import Decompressor, Job, batches
 from imu_dcm.logio.containers.mcap.reader import McapReader
@@ -272,9 +273,8 @@ class IndexedReader(McapReader):
         del head
         self.n_kept = 0
         # schema and channel records between the indexed messages: walked chunk by chunk
-        gap_a = np.sort(np.concatenate([ends, bases]))
-        gap_b = np.sort(np.concatenate([offs, bases + sizes]))
-        for a, b in zip(gap_a[gap_b > gap_a].tolist(), gap_b[gap_b > gap_a].tolist(), strict=True):
+        gap_a, gap_b = _gaps(offs, ends, chunk, bases, sizes)
+        for a, b in zip(gap_a.tolist(), gap_b.tolist(), strict=True):
             g = int(np.searchsorted(bases, a, side="right")) - 1
             seq, pos, t0, t1, _ = group[g].key
             base = int(bases[g])
@@ -283,3 +283,27 @@ class IndexedReader(McapReader):
         order = (seqs[chunk] << 32) + (offs - start)
         self.keep_spans(buf, offs, length, icid, lt, order, int(group[0].key[1]))
         return True
+
+
+def _gaps(offs, ends, chunk, bases, sizes) -> tuple[NDArray, NDArray]:
+    """The byte ranges ``[a, b)`` of a batch not covered by its indexed messages, in file
+    order: before each chunk's first message, between messages, after its last (a chunk
+    without one is all gap). ``offs`` and ``ends`` are the messages' starts and ends in file
+    order, ``chunk`` the chunk of each, ``bases`` and ``sizes`` the chunks' (checked: the
+    messages do not overlap and lie inside their chunks)."""
+    k = len(bases)
+    # each chunk's range split at its messages: starts = chunk start and every message end,
+    # stops = every message start and chunk end; pair them in order within each chunk
+    first = np.searchsorted(chunk, np.arange(k), side="left")
+    last = np.searchsorted(chunk, np.arange(k), side="right")
+    starts = np.empty(len(offs) + k, np.int64)
+    stops = np.empty(len(offs) + k, np.int64)
+    # slot of each message's end (after its chunk's start and the messages before it)
+    at = np.arange(len(offs)) + chunk + 1
+    starts[at] = ends
+    stops[at - 1] = offs
+    head = first + np.arange(k)  # the chunk's start slot
+    starts[head] = bases
+    stops[last + np.arange(k)] = bases + sizes
+    keep = stops > starts
+    return starts[keep], stops[keep]
