@@ -16,7 +16,7 @@ temporary folder (removed at the end): 1 min, 10 min and 1 h (``--long`` adds 4 
   (``read_log``), clean (``clean_imu``), truth check (``align_truth`` and the judgement around
   it, less its resampling), resample (``slerp_truth``), bias (``estimate_bias``), integrate
   (``integrate_quat``), score (``attitude_error_deg``), write (the estimate bag). ``arrays``
-  is the bytes the replay must hold: its result's arrays.
+  is the bytes the replay must hold: its result's arrays, each buffer once.
 
 The machine is shared: absolute figures move with the load, ratios within a run much less.
 """
@@ -179,12 +179,23 @@ def _phase_child(bag: str) -> None:
         t1 = time.perf_counter()
         _write_out(Path(tmp) / "estimate", result, force=False, inputs=(bag,))
         spent["write"] = time.perf_counter() - t1
-    arrays = sum(
-        a.nbytes for a in vars(result).values() if hasattr(a, "nbytes") and hasattr(a, "shape")
-    )
-    arrays += sum(a.nbytes for a in vars(result.error).values() if hasattr(a, "nbytes"))
+    arrays = _held_bytes([*vars(result).values(), *vars(result.error).values()])
     n = len(result.t_ns)
     print(json.dumps({"n": n, "total_s": time.perf_counter() - t0, "arrays": arrays, **spent}))
+
+
+def _held_bytes(values) -> int:
+    """The bytes the result's arrays hold: each buffer once (the rates as read and as
+    integrated are one array when no bias is removed), a view of one row repeated (one bias
+    vector on every row) as nothing."""
+    import numpy as np
+
+    held: list = []
+    for a in values:
+        fresh = isinstance(a, np.ndarray) and 0 not in a.strides
+        if fresh and not any(np.shares_memory(a, b) for b in held):
+            held.append(a)
+    return sum(a.nbytes for a in held)
 
 
 def replay_figures(bag: Path) -> dict:
