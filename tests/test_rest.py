@@ -88,3 +88,21 @@ def test_detect_rest_marks_the_still_segment_only():
     assert rest[:990].all() and not rest[1000:].any()
     with raises_naming(InputError, "omega_b", "(N, 3)", "(2000, 2)"):
         detect_rest(w[:, :2], t)
+
+
+def test_gyro_windows_kept_for_a_second_judgement_are_those_of_the_rates_asked_for():
+    # A replay judges rest twice on the same rates (the gyro alone, then with its truth): the
+    # kept windows give that judgement exactly, and other rates or windows are made anew.
+    from imu_dcm.gyro.rest import GyroWindows, judge_rest
+
+    rng = np.random.default_rng(4)
+    t = np.arange(4000) * 0.005
+    w = rng.normal(0.0, 0.002, size=(4000, 3))
+    w[1500:2500] += [0.3, -0.2, 0.1]  # motion between two rests
+    kept = GyroWindows()
+    first = judge_rest(w, t, windows=kept)
+    assert first == judge_rest(w, t, windows=kept) == judge_rest(w, t)
+    assert len(first.segments) == 2
+    moved = w + [0.0, 0.0, 0.5]  # other rates: no rest at 0.5 rad/s, whatever was kept
+    assert judge_rest(moved, t, windows=kept) == judge_rest(moved, t)
+    assert judge_rest(moved, t, windows=kept).segments == []

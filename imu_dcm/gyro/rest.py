@@ -54,6 +54,7 @@ from imu_dcm.gyro.rest_rule import (
 from imu_dcm.gyro.windows import min_steps, window_norms
 
 __all__ = [
+    "GyroWindows",
     "RestFinding",
     "detect_rest",
     "explain_no_rest",
@@ -93,14 +94,32 @@ def _checked(omega_b: ArrayLike, t_s: ArrayLike, accel_b: ArrayLike | None, trut
     return w, t, acc, q
 
 
-def _conditions(w, t, m: int, cfg: RestConfig, sig: Signals):
+class GyroWindows:
+    """The gyro's windows of the rest rule, made once for rates judged more than once (a replay
+    judges rest from the gyro alone, then again with its truth): each window's ``|mean|`` and
+    largest variance (:func:`~imu_dcm.gyro.windows.window_norms`) and the floor they give, for
+    the rates and window last asked for."""
+
+    def __init__(self) -> None:
+        self._for: tuple | None = None
+        self._value: tuple | None = None
+
+    def of(self, w: NDArray, m: int) -> tuple[NDArray, NDArray, float]:
+        """``(rate, max_var, floor_var)`` of the windows of ``m`` rows of ``w``."""
+        if self._for is None or self._for[0] is not w or self._for[1] != m:
+            self._value = None  # the old windows go before the new ones come
+            rate, max_var = window_norms(w, m)
+            self._value = (rate, max_var, noise_floor_var(max_var, min_steps(w)))
+            self._for = (w, m)
+        return self._value
+
+
+def _conditions(w, t, m: int, cfg: RestConfig, sig: Signals, windows: GyroWindows | None = None):
     """The rule's conditions over every window of the whole log, judged against one floor: the
     stillest window of the whole log (offline looks both ways)."""
-    steps = min_steps(w)
     # the truth's window rates first: their temporaries come and go before the gyro's windows
     truth = None if sig.truth_q_w_b is None else truth_rates(sig.truth_q_w_b, t, m)
-    rate, max_var = window_norms(w, m)
-    floor = noise_floor_var(max_var, steps)
+    rate, max_var, floor = (windows or GyroWindows()).of(w, m)
     return window_conditions(rate, max_var, floor, t, m, cfg, sig, truth_rate=truth)
 
 
@@ -142,6 +161,7 @@ def judge_rest(
     r_t_g: ArrayLike | None = None,
     vehicle: tuple[ArrayLike, ArrayLike] | None = None,
     motion: Motion | None = None,
+    windows: GyroWindows | None = None,
 ) -> RestFinding:
     """The rest segments of a log, one line on conflicting evidence ("" when none), and, when
     no window passed, why (:func:`explain_no_rest`'s clause, from the same windows).
@@ -167,6 +187,9 @@ def judge_rest(
         (:meth:`imu_dcm.logio.types.VehicleState.at`).
     motion : Motion, optional
         The truth's position and odometry twist on the same rows.
+    windows : GyroWindows, optional
+        The gyro's windows kept from an earlier judgement of the same rates (made here, and
+        kept in it, when it has none).
     """
     cfg = config or RestConfig()
     w, t, acc, q = _checked(omega_b, t_s, accel_b, truth_q_w_b)
@@ -175,7 +198,7 @@ def judge_rest(
         return RestFinding([], "", _too_short(t, cfg))
     rg = None if r_t_g is None else np.asarray(r_t_g, float)
     sig = Signals(acc, q, truth_noise, rg, checked_vehicle(vehicle, n), motion)
-    conds, std_limit, truth = _conditions(w, t, m, cfg, sig)
+    conds, std_limit, truth = _conditions(w, t, m, cfg, sig, windows)
     still = still_windows(conds)
     if not still.any():
         return RestFinding([], "", _explain(conds, t, cfg))

@@ -29,7 +29,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from imu_dcm.app.checks import check_bias
 from imu_dcm.errors import InputError
-from imu_dcm.gyro.rest import detect_rest, judge_rest
+from imu_dcm.gyro.rest import GyroWindows, detect_rest, judge_rest
 from imu_dcm.gyro.rest_agreement import rests_agree
 from imu_dcm.gyro.rest_rule import RestConfig, RestSegment
 
@@ -85,6 +85,7 @@ def estimate_bias(
     r_t_g: ArrayLike | None = None,
     vehicle: tuple[ArrayLike, ArrayLike] | None = None,
     motion=None,
+    windows: GyroWindows | None = None,
 ) -> BiasEstimate:
     """The gyro bias to subtract at each sample.
 
@@ -114,6 +115,8 @@ def estimate_bias(
         :func:`imu_dcm.gyro.rest.rest_segments`).
     motion : imu_dcm.gyro.rest_evidence.Motion, optional
         The truth's position and odometry twist on the same rows (auto only).
+    windows : imu_dcm.gyro.rest.GyroWindows, optional
+        The gyro's rest windows, kept from an earlier estimate of the same rates (auto only).
 
     Returns
     -------
@@ -132,7 +135,7 @@ def estimate_bias(
         raise InputError(f"Expected a bias rule in {BIAS_RULES}, got {rule!r}")
     cfg = config or RestConfig()
     segs, conflict, why = judge_rest(
-        w, t, cfg, accel_b, truth_q_w_b, truth_noise, r_t_g, vehicle, motion
+        w, t, cfg, accel_b, truth_q_w_b, truth_noise, r_t_g, vehicle, motion, windows
     )
     if not segs:
         if conflict:  # windows passed, and their stretches were found not to be rest

@@ -29,6 +29,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from imu_dcm.arrays import BLOCK_ROWS, row_finite
 from imu_dcm.errors import Diagnostics, GapWarning, LogError
+from imu_dcm.gyro.rest import GyroWindows
 from imu_dcm.gyro.rest_evidence import Motion, position_noise_m, truth_noise_rad, twist_noise_rad_s
 from imu_dcm.integrator.batch import integrate_quat
 from imu_dcm.logio import LogData, read_log
@@ -157,10 +158,11 @@ def _read(path, s: ReplaySettings, report, notes: Diagnostics) -> LogData:
 
 
 def _remove_bias(
-    s: ReplaySettings, g: Gyro, judged: Judged | None = None
+    s: ReplaySettings, g: Gyro, judged: Judged | None = None, windows: GyroWindows | None = None
 ) -> tuple[BiasEstimate, NDArray]:
     """The bias from rest (judged by the truth's motion too, when ``judged`` has a truth; its
-    jumps, the truth's own, judge nothing)."""
+    jumps, the truth's own, judge nothing); ``windows`` keeps the gyro's rest windows from one
+    estimate to the next."""
     q, noise, r_t_g, motion = None, 0.0, None, None
     if judged is not None and judged.mounting.applied is not None:
         r_t_g = quat_as_matrix(judged.mounting.applied.q_t_g)
@@ -174,7 +176,7 @@ def _remove_bias(
         motion = _motion(judged.aligned.truth, tt, g.t_s, q)
     bias_est = estimate_bias(
         g.omega, g.t_s, s.bias, s.rest_config, g.accel, truth_q_w_b=q, truth_noise=noise,
-        r_t_g=r_t_g, vehicle=g.vehicle, motion=motion,
+        r_t_g=r_t_g, vehicle=g.vehicle, motion=motion, windows=windows,
     )  # fmt: skip
     if bias_est.mode == "none" or (bias_est.mode == "auto" and not bias_est.segments):
         return bias_est, g.omega  # no bias: the rates themselves (x - 0 is x), no copy
@@ -269,13 +271,15 @@ def _replay(path, s: ReplaySettings, report, notes: Diagnostics) -> ReplayResult
     own = len(notes.said)  # the summary's warnings: the replay's own, after the reader's
     g = prepare_gyro(log, s, notes)
     report("bias", 0.0)
-    bias_est, omega = _remove_bias(s, g)
+    windows = GyroWindows()  # the gyro's rest windows, for both estimates
+    bias_est, omega = _remove_bias(s, g, windows=windows)
     log, candidates = pick_truth(log, g, omega)
     log, convention = apply_convention(log, s, g, omega, notes)
     judged = judge_truth(log, s, g, omega, notes)
     if judged.aligned.truth is not None and isinstance(s.bias, str):  # its motion judges rest
         bias_est = omega = None  # the first estimate's arrays go before the second's come
-        bias_est, omega = _remove_bias(s, g, judged)
+        bias_est, omega = _remove_bias(s, g, judged, windows)
+    del windows
     if bias_est.conflict:
         log = _rest_conflict(log, notes, bias_est.conflict)
     if judged.mounting.applied is not None:  # omega_T = R(q_t_g) omega_G, row by row
