@@ -325,6 +325,52 @@ def test_numba_compiles_each_entry_point_for_one_signature():
         assert len(entries.compiled(name).signatures) == 1
 
 
+def _records(rng, n: int):
+    """``n`` MCAP message records laid end to end in one chunk, with their index entries."""
+    lens = rng.integers(22, 80, n)  # record length field: 22 header bytes and a payload
+    offs = np.concatenate([[0], np.cumsum(9 + lens)[:-1]]).astype(np.int64) + 5
+    buf = np.zeros(int(offs[-1] + 9 + lens[-1]) + 3, np.uint8)
+    cid = rng.integers(1, 4, n)
+    lt = rng.integers(0, 2**62, n)
+    for o, ln, c, t in zip(offs, lens, cid, lt, strict=True):
+        buf[o] = 0x05
+        buf[o + 1 : o + 9] = np.frombuffer(int(ln).to_bytes(8, "little"), np.uint8)
+        buf[o + 9 : o + 11] = np.frombuffer(int(c).to_bytes(2, "little"), np.uint8)
+        buf[o + 15 : o + 23] = np.frombuffer(int(t).to_bytes(8, "little"), np.uint8)
+    start, end = np.zeros(n, np.int64), np.full(n, len(buf), np.int64)
+    return buf, offs, start, end, cid.astype(np.int64), lens, lt
+
+
+@pytest.mark.parametrize(
+    "fault", ["none", "opcode", "short length", "past the next", "past the chunk", "channel"]
+)
+def test_located_records_reads_good_records_and_names_the_first_bad_one(fault):
+    # The compiled check of a batch's indexed message records (MCAP): lengths and log times
+    # read from the bytes; the first record that fails a check named, as the numpy checks did.
+    rng = np.random.default_rng(7)
+    buf, offs, start, end, cid, lens, lt = _records(rng, 200)
+    k = 117
+    if fault == "opcode":
+        buf[offs[k]] = 0x06
+    elif fault == "short length":
+        buf[offs[k] + 1 : offs[k] + 9] = np.frombuffer((21).to_bytes(8, "little"), np.uint8)
+    elif fault == "past the next":
+        longer = int(lens[k]) + 1
+        buf[offs[k] + 1 : offs[k] + 9] = np.frombuffer(longer.to_bytes(8, "little"), np.uint8)
+    elif fault == "past the chunk":
+        end[k:] = offs[k] + 20
+    elif fault == "channel":
+        cid[k] += 1
+    length, log_time, bad = kernel.located_records(buf, offs, start, end, cid)
+    if fault == "none":
+        assert bad == -1
+        np.testing.assert_array_equal(length, lens)
+        np.testing.assert_array_equal(log_time, lt)
+    else:
+        assert bad == k
+        np.testing.assert_array_equal(length[:k], lens[:k])
+
+
 def test_an_out_of_date_built_kernel_is_not_used(monkeypatch):
     # A module built from other sources than these (an edited kernel) is left alone: numba
     # compiles instead, and the compile line says why.
@@ -342,7 +388,7 @@ def test_the_digest_covers_every_file_the_entry_points_are_compiled_from():
     # A kernel file the digest left out could be edited without the built module going stale.
     modules = {fn.__module__ for fn, _ in entries.ENTRIES.values()}
     files = {Path(sys.modules[m].__file__).name for m in modules}
-    assert files == {"integrator.py", "ulog_scan.py", "csv_scan.py"}
+    assert files == {"integrator.py", "ulog_scan.py", "mcap_scan.py", "csv_scan.py"}
     assert files | {"state.py", "entries.py", "jit.py"} == set(loader.KERNEL_SOURCES)
 
 

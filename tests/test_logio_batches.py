@@ -126,3 +126,26 @@ def test_batches_written_into_the_channels_arrays_equal_their_join(count, missin
         np.testing.assert_array_equal(got.fields[k], v)
     assert (got.frames, got.dropped) == (want.frames, want.dropped) == ({"frame_id": "f0"}, 6)
     assert ColumnsBuilder(count).result() is None
+
+
+def test_the_read_heap_thresholds_are_set_once_and_not_over_the_environments(monkeypatch):
+    # glibc's mmap and trim thresholds: set before the first read of a process (a batch's
+    # temporaries then come from reused heap, not fresh pages), once, and never over a value
+    # the environment sets.
+    from imu_dcm.logio import heap
+
+    calls = []
+    monkeypatch.setattr(heap, "_MALLOPT", lambda what, value: calls.append((what, value)))
+    monkeypatch.setattr(heap, "_set", [])
+    heap.reuse_freed_heap()
+    heap.reuse_freed_heap()
+    assert calls == [(-3, 4 << 20), (-1, 64 << 20)]
+    for env in ("MALLOC_MMAP_THRESHOLD_", "MALLOC_TRIM_THRESHOLD_"):
+        monkeypatch.setattr(heap, "_set", [])
+        monkeypatch.setenv(env, "131072")
+        heap.reuse_freed_heap()
+        monkeypatch.delenv(env)
+    monkeypatch.setattr(heap, "_set", [])
+    monkeypatch.setenv("GLIBC_TUNABLES", "glibc.malloc.mmap_threshold=131072")
+    heap.reuse_freed_heap()
+    assert len(calls) == 2

@@ -1,4 +1,4 @@
-"""The compiled kernels (private): the attitude update, the ULog scan and the CSV scan.
+"""The compiled kernels (private): the attitude update, the ULog and MCAP scans and the CSV scan.
 
 What the rest of the package uses is here (:data:`__all__`): the state layout and the codes of
 a push (:mod:`~imu_dcm._kernels.state`), the checked entry points
@@ -9,7 +9,8 @@ package imports neither numba nor the kernels' sources.
 One kernel a file, each written for numba with its entry points:
 :mod:`~imu_dcm._kernels.integrator` (the DCM recursion, the per-sample push, the end step, the
 input check, the delta-angle rules), :mod:`~imu_dcm._kernels.ulog_scan` (PX4 ULog's record
-chain) and :mod:`~imu_dcm._kernels.csv_scan` (live CSV lines). :mod:`~imu_dcm._kernels.entries`
+chain), :mod:`~imu_dcm._kernels.mcap_scan` (a batch's MCAP message records) and
+:mod:`~imu_dcm._kernels.csv_scan` (live CSV lines). :mod:`~imu_dcm._kernels.entries`
 lists their entry points, :mod:`~imu_dcm._kernels.jit` compiles them with numba, and
 :mod:`~imu_dcm._kernels.build` builds them ahead of time into ``imu_dcm._kernels._aot``
 (``python -m imu_dcm._kernels.build``).
@@ -20,6 +21,7 @@ from imu_dcm._kernels.calls import (
     close,
     feed,
     feed_delta,
+    located_records,
     push,
     push_for,
     record_chain,
@@ -74,6 +76,7 @@ __all__ = [
     "feed",
     "feed_delta",
     "feed_entry",
+    "located_records",
     "new_state",
     "push",
     "push_entry",

@@ -31,6 +31,7 @@ __all__ = [
     "close",
     "feed",
     "feed_delta",
+    "located_records",
     "push",
     "push_for",
     "record_chain",
@@ -116,6 +117,22 @@ def record_chain(b, pos: int) -> tuple[np.ndarray, np.ndarray, int]:
     if backend() == "jit" and not b.flags.writeable:
         b = b.copy()  # numba's signature is of a writable array (the built one reads any)
     return entry("record_chain")(b, int(pos))
+
+
+def located_records(buf, offs, start, end, channel) -> tuple[np.ndarray, np.ndarray, int]:
+    """The MCAP message records at ``offs`` of the uint8 array ``buf`` checked and read in one
+    compiled pass (:func:`imu_dcm._kernels.mcap_scan.located_records`): ``(length, log_time,
+    bad)``, each record's length and log time and the first record that does not check out
+    (-1: none). ``start``, ``end`` bound each record's chunk; ``channel`` is the channel id its
+    index names."""
+    if not (isinstance(buf, np.ndarray) and buf.dtype == np.uint8 and buf.ndim == 1):
+        raise TypeError(f"Expected `buf` a 1-D uint8 array, got {type(buf).__name__}")
+    ints = [np.ascontiguousarray(a, dtype=np.int64) for a in (offs, start, end, channel)]
+    buf = np.ascontiguousarray(buf)
+    if backend() == "jit" and not buf.flags.writeable:
+        buf = buf.copy()  # numba's signature is of a writable array (the built one reads any)
+    length, log_time, bad = entry("located_records")(buf, *ints)
+    return length, log_time, int(bad)
 
 
 def scan_csv(blob: bytes, scale: int, digits: int) -> tuple[np.ndarray, bytes, int]:

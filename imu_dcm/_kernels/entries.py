@@ -2,15 +2,16 @@
 compiles from.
 
 The kernels are :mod:`~imu_dcm._kernels.integrator` (the attitude update),
-:mod:`~imu_dcm._kernels.ulog_scan` (the ULog record chain) and
-:mod:`~imu_dcm._kernels.csv_scan` (the live CSV lines); each lists its own entry points. A new
+:mod:`~imu_dcm._kernels.ulog_scan` (the ULog record chain), :mod:`~imu_dcm._kernels.mcap_scan`
+(the MCAP message records of a batch) and :mod:`~imu_dcm._kernels.csv_scan` (the live CSV
+lines); each lists its own entry points. A new
 kernel is one module with its ``ENTRIES``, one line here, and its file in
 :data:`imu_dcm._kernels.loader.KERNEL_SOURCES`.
 """
 
 from __future__ import annotations
 
-from imu_dcm._kernels import csv_scan, integrator, ulog_scan
+from imu_dcm._kernels import csv_scan, integrator, mcap_scan, ulog_scan
 from imu_dcm._kernels.jit import compile_entry
 
 __all__ = ["ENTRIES", "compiled"]
@@ -19,6 +20,7 @@ __all__ = ["ENTRIES", "compiled"]
 ENTRIES: dict[str, tuple[object, str]] = {
     **integrator.ENTRIES,
     **ulog_scan.ENTRIES,
+    **mcap_scan.ENTRIES,
     **csv_scan.ENTRIES,
 }
 

@@ -40,6 +40,7 @@ AOT_MODULE = "imu_dcm._kernels._aot"
 KERNEL_SOURCES = (
     "integrator.py",
     "ulog_scan.py",
+    "mcap_scan.py",
     "csv_scan.py",
     "state.py",
     "entries.py",

@@ -19,7 +19,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from imu_dcm.errors import Diagnostics
-from imu_dcm.logio.heap import release_freed_memory
+from imu_dcm.logio.heap import release_freed_memory, reuse_freed_heap
 from imu_dcm.logio.meta import read_custom_data
 from imu_dcm.logio.registry import READERS, find_logs, open_log, resolve_mcap_path
 from imu_dcm.logio.ros.channels import TRUTH_TYPES
@@ -110,6 +110,7 @@ def read_log(
         Damaged parts were skipped (one warning naming the first file offset and the messages
         lost), or messages did not decode.
     """
+    reuse_freed_heap()  # the batches' temporaries from the heap (glibc; once per process)
     source = open_log(path, progress)
     log = source.read(ReadRequest(imu_topic, truth_topic, truth_frame, progress, diagnostics))
     release_freed_memory()  # the decoding's freed batches: ~400 MB after a 1 h log

@@ -15,17 +15,16 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
+from imu_dcm._kernels import located_records
 from imu_dcm.logio.containers.chunks import Decompressor, Job, batches
 from imu_dcm.logio.containers.mcap.reader import McapReader
 from imu_dcm.logio.containers.mcap.records import (
     MAGIC,
     MAX_META_RECORD,
-    MSG_HEADER,
     OP_CHANNEL,
     OP_CHUNK,
     OP_CHUNK_INDEX,
     OP_FOOTER,
-    OP_MESSAGE,
     OP_METADATA,
     OP_METADATA_INDEX,
     OP_MSG_INDEX,
@@ -39,7 +38,6 @@ from imu_dcm.logio.containers.mcap.records import (
     parse_schema,
     read_string,
 )
-from imu_dcm.logio.ros.cdr import gather
 from imu_dcm.logio.types import Damage
 
 __all__ = ["IndexedReader", "Summary", "read_summary"]
@@ -253,24 +251,13 @@ class IndexedReader(McapReader):
         k = np.argsort(offs, kind="stable")
         offs, icid = offs[k], icid[k]
         chunk = np.searchsorted(bases, offs, side="right") - 1
-        start, end = bases[chunk], bases[chunk] + sizes[chunk]
-        if not ((offs >= start) & (offs + MSG_HEADER <= end)).all():
+        start = bases[chunk]
+        # opcode, length inside the chunk and before the next record, channel: one compiled
+        # pass over the records, which reads their lengths and log times too
+        length, lt, bad = located_records(buf, offs, start, start + sizes[chunk], icid)
+        if bad >= 0 or not all(c in self.channels for j in group for c in j.key[4]):
             return False
-        # opcode, length, channel id, sequence, log time: one run of bytes per record
-        head = gather(buf, offs, "u1", 23).reshape(len(offs), 23)
-        length_u = head[:, 1:9].view("<u8")[:, 0]
-        room = (end - offs - 9).astype(np.uint64)
-        ok = (head[:, 0] == OP_MESSAGE) & (length_u >= 22) & (length_u <= room)
-        if not ok.all():
-            return False
-        length = length_u.astype(np.int64)
         ends = offs + 9 + length
-        ok = ends <= np.minimum(np.concatenate([offs[1:], [end[-1]]]), end)
-        ok &= head[:, 9:11].view("<u2")[:, 0] == icid
-        if not ok.all() or not all(c in self.channels for j in group for c in j.key[4]):
-            return False
-        lt = head[:, 15:23].view("<u8")[:, 0].astype(np.int64)
-        del head
         self.n_kept = 0
         # schema and channel records between the indexed messages: walked chunk by chunk
         gap_a, gap_b = _gaps(offs, ends, chunk, bases, sizes)
