@@ -207,7 +207,60 @@ def _block_times(
     return np.clip(t_nom_ns + np.round(j).astype(np.int64), 0, round(duration_s * 1e9))
 
 
-def synthetic_gyro(
+def _ordered_times(rate_hz, duration_s, jitter_s, rng, k: NDArray, prev_ns: int | None):
+    """:func:`_block_times` of the samples ``k``, after the block before's last stamp
+    ``prev_ns`` (None for the first block), refused when jitter breaks their order."""
+    t_rel_ns = _block_times(rate_hz, duration_s, jitter_s, rng, k)
+    if prev_ns is not None:
+        t_rel_ns = np.concatenate([[prev_ns], t_rel_ns])
+    if np.any(np.diff(t_rel_ns) <= 0):  # only possible at ns resolution for huge rates
+        raise InputError(
+            f"Expected stamp jitter to keep the order at {rate_hz} Hz, got "
+            f"repeated stamps with stamp_jitter_s = {jitter_s}"
+        )
+    return t_rel_ns
+
+
+def _truth_of(traj: Trajectory, t_all: NDArray, first: int, delta: bool):
+    """What the gyro measures over a block's instants ``t_all`` (the block before's last one
+    first, when ``first`` is 1): ``(y, dt, rows, start)``, the true rates at its own samples, or
+    the true delta angles over every interval with their lengths (N, 1); the rows of
+    ``t_all`` they are output at, and the start of the first interval."""
+    if delta:
+        return traj.delta_angles(t_all), np.diff(t_all)[:, None], slice(1, None), t_all[0]
+    return traj.at(t_all[first:])[1], None, slice(first, None), 0.0
+
+
+def _check_finite(values: NDArray, model: GyroModel) -> None:
+    if not np.all(np.isfinite(values)):
+        raise InputError(
+            "Expected a finite gyro output, got "
+            f"{np.count_nonzero(~np.isfinite(values))}"
+            f" non-finite values from the model {model.as_dict()}"
+        )
+
+
+def synthetic_gyro(*args, **kwargs) -> GyroRecord:
+    """Sample a trajectory with a gyro: stamps and rate (or delta-angle) samples, the whole
+    record (the blocks of :func:`synthetic_gyro_blocks`, whose arguments it takes, joined).
+
+    Examples
+    --------
+    >>> import data_synth
+    >>> traj = data_synth.simulate("coning", duration_s=1.0)
+    >>> rec = synthetic_gyro(traj, 400.0, model=GyroModel(noise_density_rad_s_sqrt_hz=1e-4))
+    """
+    blocks = list(synthetic_gyro_blocks(*args, **kwargs))
+    return dataclasses.replace(
+        blocks[0],
+        **{
+            name: np.concatenate([getattr(b, name) for b in blocks])
+            for name in ("t_s", "t_ns", "values", "bias_b_rad_s")
+        },
+    )
+
+
+def synthetic_gyro_blocks(
     traj: Trajectory,
     rate_hz: float,
     duration_s: float | None = None,
@@ -215,8 +268,14 @@ def synthetic_gyro(
     output: str = "rate",
     seed: int = 0,
     epoch_ns: int = DEFAULT_EPOCH_NS,
-) -> GyroRecord:
-    """Sample a trajectory with a gyro: stamps and rate (or delta-angle) samples.
+) -> Iterator[GyroRecord]:
+    """Sample a trajectory with a gyro, one block of ``BLOCK_ROWS`` samples at a time.
+
+    The blocks joined are the whole record bit for bit, whatever the block size: the random
+    draws (:class:`_Draws`), the bias walk and the delta-angle quantization carry over from block
+    to block in the order the whole log adds them. Each block's ``t_start_s`` is the start of
+    its first interval (delta-angle output), so ``block.rate_rad_s()`` gives its rates. Memory
+    holds one block, not the log.
 
     Parameters
     ----------
@@ -237,37 +296,10 @@ def synthetic_gyro(
     epoch_ns : int
         Stamp of ``t_s = 0``, ns since the Unix epoch.
 
-    Returns
-    -------
+    Yields
+    ------
     GyroRecord
-        The blocks of :func:`synthetic_gyro_blocks` joined.
-    """
-    blocks = list(synthetic_gyro_blocks(traj, rate_hz, duration_s, model, output, seed, epoch_ns))
-    return dataclasses.replace(
-        blocks[0],
-        **{
-            name: np.concatenate([getattr(b, name) for b in blocks])
-            for name in ("t_s", "t_ns", "values", "bias_b_rad_s")
-        },
-    )
-
-
-def synthetic_gyro_blocks(
-    traj: Trajectory,
-    rate_hz: float,
-    duration_s: float | None = None,
-    model: GyroModel | None = None,
-    output: str = "rate",
-    seed: int = 0,
-    epoch_ns: int = DEFAULT_EPOCH_NS,
-) -> Iterator[GyroRecord]:
-    """:func:`synthetic_gyro` (same arguments) one block of ``BLOCK_ROWS`` samples at a time.
-
-    The blocks joined are the whole record bit for bit, whatever the block size: the random
-    draws (:class:`_Draws`), the bias walk and the delta-angle quantization carry over from block
-    to block in the order the whole log adds them. Each block's ``t_start_s`` is the start of
-    its first interval (delta-angle output), so ``block.rate_rad_s()`` gives its rates. Memory
-    holds one block, not the log.
+        A block of the record.
     """
     model = model or GyroModel()
     duration_s = _check_request(traj, rate_hz, duration_s, output, seed, epoch_ns)
@@ -279,28 +311,13 @@ def synthetic_gyro_blocks(
     counts = np.zeros(3)
     prev_ns = prev_s = None  # the last sample of the block before
     for a in range(0, n, BLOCK_ROWS):
-        t_rel_ns = _block_times(rate_hz, duration_s, model.stamp_jitter_s, draws.jitter,
-                                np.arange(a, min(n, a + BLOCK_ROWS)))  # fmt: skip
-        if prev_ns is not None:
-            t_rel_ns = np.concatenate([[prev_ns], t_rel_ns])
-        if np.any(np.diff(t_rel_ns) <= 0):  # only possible at ns resolution for huge rates
-            raise InputError(
-                f"Expected stamp jitter to keep the order at {rate_hz} Hz, got "
-                f"repeated stamps with stamp_jitter_s = {model.stamp_jitter_s}"
-            )
+        k = np.arange(a, min(n, a + BLOCK_ROWS))
+        t_rel_ns = _ordered_times(rate_hz, duration_s, model.stamp_jitter_s, draws.jitter, k,
+                                  prev_ns)  # fmt: skip
         t_all = t_rel_ns * 1e-9  # with the block before's last sample, when there is one
         first = 0 if prev_ns is None else 1  # this block's own samples start here
         prev_ns = int(t_rel_ns[-1])
-        if delta:
-            y = traj.delta_angles(t_all)
-            dt = np.diff(t_all)[:, None]
-            rows = slice(1, None)
-            start = t_all[0]
-        else:
-            y = traj.at(t_all[first:])[1]
-            dt = None
-            rows = slice(first, None)
-            start = 0.0
+        y, dt, rows, start = _truth_of(traj, t_all, first, delta)
         t_s, t_ns = t_all[rows], epoch_ns + t_rel_ns[rows]
         if len(t_s) == 0:
             continue
@@ -308,12 +325,7 @@ def synthetic_gyro_blocks(
         prev_s = float(t_s[-1])
         noise = None if draws.noise is None else draws.noise.standard_normal((len(t_s), 3))
         values, acc, counts = _measure(y, bias, noise, model, rate_hz, dt, acc, counts)
-        if not np.all(np.isfinite(values)):
-            raise InputError(
-                "Expected a finite gyro output, got "
-                f"{np.count_nonzero(~np.isfinite(values))}"
-                f" non-finite values from the model {model.as_dict()}"
-            )
+        _check_finite(values, model)
         yield GyroRecord(
             t_s=t_s,
             t_ns=t_ns,

@@ -123,22 +123,10 @@ def _conditions(w, t, m: int, cfg: RestConfig, sig: Signals, windows: GyroWindow
     return window_conditions(rate, max_var, floor, t, m, cfg, sig, truth_rate=truth)
 
 
-def rest_segments(
-    omega_b: ArrayLike,
-    t_s: ArrayLike,
-    config: RestConfig | None = None,
-    accel_b: ArrayLike | None = None,
-    truth_q_w_b: ArrayLike | None = None,
-    truth_noise: float = 0.0,
-    r_t_g: ArrayLike | None = None,
-    vehicle: tuple[ArrayLike, ArrayLike] | None = None,
-    motion: Motion | None = None,
-) -> tuple[list[RestSegment], str]:
+def rest_segments(*args, **kwargs) -> tuple[list[RestSegment], str]:
     """The rest segments of a log, and one line on conflicting evidence ("" when none):
     :func:`judge_rest` (the same arguments) without the reason for finding none."""
-    found = judge_rest(
-        omega_b, t_s, config, accel_b, truth_q_w_b, truth_noise, r_t_g, vehicle, motion
-    )
+    found = judge_rest(*args, **kwargs)
     return found.segments, found.conflict
 
 
