@@ -121,24 +121,32 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def _write_out(out: Path, result, force: bool, inputs: tuple) -> Path:
-    from imu_dcm.logio.writers import StampedSeries, write_bag
+    """The estimate as a bag, a block of rows at a time (the file order of one block's
+    messages in memory, not of the log's)."""
+    from imu_dcm.arrays import BLOCK_ROWS
+    from imu_dcm.logio.writers import BagBlock, StampedSeries, write_bag_blocks
 
-    k = slice(result.start_index, None)
-    quats = {"/estimate/orientation": StampedSeries(result.t_ns[k], result.q_est[k], "world")}
-    vectors = {}
-    if result.summary.prefilter is not None:
-        vectors["/estimate/angular_velocity"] = StampedSeries(
-            result.t_ns[k], result.omega_b[k], "imu"
-        )
+    filtered = result.summary.prefilter is not None
+
+    def blocks():
+        for a in range(result.start_index, len(result.t_ns), BLOCK_ROWS):
+            k = slice(a, a + BLOCK_ROWS)
+            t = result.t_ns[k]
+            vectors = {}
+            if filtered:
+                vectors["/estimate/angular_velocity"] = StampedSeries(t, result.omega_b[k], "imu")
+            yield BagBlock(
+                quaternions={"/estimate/orientation": StampedSeries(t, result.q_est[k], "world")},
+                vectors=vectors,
+            )
+
     custom = {
         "imu_dcm.source_log": str(result.summary.path),
         "imu_dcm.method": result.summary.method,
         "imu_dcm.bias_mode": result.summary.bias_mode,
         "imu_dcm.gyro.prefilter": result.summary.prefilter or "none",
     }
-    return write_bag(
-        out, quaternions=quats, vectors=vectors, custom_data=custom, force=force, inputs=inputs
-    )
+    return write_bag_blocks(out, blocks(), custom_data=custom, force=force, inputs=inputs)
 
 
 def _show(result, mode: str | None, realtime: bool, keep: bool, claim=None) -> tuple[str, int]:
