@@ -15,7 +15,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from imu_dcm.arrays import BLOCK_ROWS, row_finite, row_norm
+from imu_dcm.arrays import BLOCK_ROWS, median, row_finite, row_norm
 from imu_dcm.errors import InputError
 from imu_dcm.gyro.windows import min_steps, step_var, windowed_mean_var
 from imu_dcm.so3 import log_quat, quat_conjugate, quat_multiply
@@ -113,8 +113,18 @@ def truth_noise_rad(q_w_b: ArrayLike, step_ok: ArrayLike | None = None) -> float
     pair = step[:-1] & step[1:]
     if not pair.any():
         return 0.0
-    d = step_rotvecs(q, ok)
-    spread = max(float(np.median(np.abs(np.diff(d[:, k]))[pair])) for k in range(3))
+    # |second differences| of the steps' rotations at the pairs, a block of steps at a time
+    # (no whole-log array of the rotations), each axis's values then taken for its median
+    vals = np.empty((3, int(pair.sum())))
+    filled = 0
+    for a in range(0, len(pair), BLOCK_ROWS):
+        b = min(len(pair), a + BLOCK_ROWS)
+        d = step_rotvecs(q[a : b + 2], ok[a : b + 2])  # steps a .. b: pairs a .. b - 1
+        sel = pair[a:b]
+        got = np.abs(np.diff(d, axis=0))[sel]
+        vals[:, filled : filled + len(got)] = got.T
+        filled += len(got)
+    spread = max(median(vals[k]) for k in range(3))
     return 1.4826 * spread / math.sqrt(6.0)
 
 
