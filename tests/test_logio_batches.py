@@ -139,7 +139,7 @@ def test_the_read_heap_thresholds_are_set_once_and_not_over_the_environments(mon
     monkeypatch.setattr(heap, "_set", [])
     heap.reuse_freed_heap()
     heap.reuse_freed_heap()
-    assert calls == [(-3, 4 << 20), (-1, 64 << 20)]
+    assert calls == [(-3, 4 << 20), (-1, 16 << 20)]
     for env in ("MALLOC_MMAP_THRESHOLD_", "MALLOC_TRIM_THRESHOLD_"):
         monkeypatch.setattr(heap, "_set", [])
         monkeypatch.setenv(env, "131072")
