@@ -134,3 +134,22 @@ def small_blocks(monkeypatch, rows: int) -> list[str]:
             monkeypatch.setattr(mod, "BLOCK_ROWS", rows)
             patched.append(name)
     return patched
+
+
+def estimate_bag(out) -> tuple:
+    """A replay's ``--out`` bag read back with the mcap library's own decoder: the estimate's
+    quaternions ``[x, y, z, w]`` (n, 4) and header stamps (ns), in file order."""
+    import numpy as np
+    from mcap.reader import make_reader
+    from mcap_ros2.decoder import DecoderFactory
+
+    from imu_dcm.logio import resolve_mcap_path
+
+    q, t = [], []
+    with open(resolve_mcap_path(out), "rb") as f:
+        reader = make_reader(f, decoder_factories=[DecoderFactory()])
+        for _, ch, _, m in reader.iter_decoded_messages():
+            assert ch.topic == "/estimate/orientation"
+            q.append([m.quaternion.x, m.quaternion.y, m.quaternion.z, m.quaternion.w])
+            t.append(m.header.stamp.sec * 10**9 + m.header.stamp.nanosec)
+    return np.array(q), np.array(t, np.int64)

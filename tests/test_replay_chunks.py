@@ -8,7 +8,7 @@ from __future__ import annotations
 import io
 
 import numpy as np
-from conftest import small_blocks
+from conftest import estimate_bag, small_blocks
 
 from data_synth.scenes import simulate
 from imu_dcm.logio.containers import chunks
@@ -77,27 +77,10 @@ def test_replay_in_small_pieces_equals_whole_log(tmp_path, monkeypatch):
     from imu_dcm.replay.__main__ import _write_out
 
     out = _write_out(tmp_path / "estimate", pieces, force=False, inputs=(path,))
-    q_bag, t_bag = _estimate_bag(out)
+    q_bag, t_bag = estimate_bag(out)
     k = slice(pieces.start_index, None)
     np.testing.assert_array_equal(t_bag, pieces.t_ns[k])
     np.testing.assert_array_equal(q_bag, pieces.q_est[k])
-
-
-def _estimate_bag(out):
-    """The estimate bag's stamps and quaternions, read back with the mcap library's decoder."""
-    from mcap.reader import make_reader
-    from mcap_ros2.decoder import DecoderFactory
-
-    from imu_dcm.logio import resolve_mcap_path
-
-    q, t = [], []
-    with open(resolve_mcap_path(out), "rb") as f:
-        reader = make_reader(f, decoder_factories=[DecoderFactory()])
-        for _, ch, _, m in reader.iter_decoded_messages():
-            assert ch.topic == "/estimate/orientation"
-            q.append([m.quaternion.x, m.quaternion.y, m.quaternion.z, m.quaternion.w])
-            t.append(m.header.stamp.sec * 10**9 + m.header.stamp.nanosec)
-    return np.array(q), np.array(t, np.int64)
 
 
 def _assert_close(a, b, path: str) -> None:

@@ -12,7 +12,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import assert_quiet
+from conftest import assert_quiet, estimate_bag
 from mcap.reader import make_reader
 from mcap.writer import Writer as McapWriter
 from mcap_ros2.decoder import DecoderFactory
@@ -110,13 +110,7 @@ def test_replay_writes_summary_json_and_estimate_bag(coning_log, tmp_path, capsy
     assert s["max_error_deg"] < 1e-4
     assert "error      total RMS" in text and "heading RMS" in text
     # the estimate bag, read back with the reference decoder
-    q_bag, t_bag = [], []
-    with open(resolve_mcap_path(out), "rb") as f:
-        reader = make_reader(f, decoder_factories=[DecoderFactory()])
-        for _, ch, _, m in reader.iter_decoded_messages():
-            assert ch.topic == "/estimate/orientation"
-            q_bag.append([m.quaternion.x, m.quaternion.y, m.quaternion.z, m.quaternion.w])
-            t_bag.append(m.header.stamp.sec * 10**9 + m.header.stamp.nanosec)
+    q_bag, t_bag = estimate_bag(out)
     assert len(q_bag) == 800
     np.testing.assert_array_equal(np.diff(t_bag), 2_500_000)  # the gyro stamps, 400 Hz
     assert (Rotation.from_quat(q_bag[-1]).magnitude()) > 0  # a real attitude, not identity
