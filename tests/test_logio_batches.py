@@ -128,24 +128,17 @@ def test_batches_written_into_the_channels_arrays_equal_their_join(count, missin
     assert ColumnsBuilder(count).result() is None
 
 
-def test_the_read_heap_thresholds_are_set_once_and_not_over_the_environments(monkeypatch):
-    # glibc's mmap and trim thresholds: set before the first read of a process (a batch's
-    # temporaries then come from reused heap, not fresh pages), once, and never over a value
-    # the environment sets.
-    from imu_dcm.logio import heap
+def test_the_read_heap_thresholds_are_not_set_over_the_environments():
+    # glibc's mmap and trim thresholds, set before the first read of a process (a batch's
+    # temporaries then come from reused heap, not fresh pages), are never set over a value the
+    # environment gives (glibc reads those at start-up).
+    from imu_dcm.logio.heap import heap_settings
 
-    calls = []
-    monkeypatch.setattr(heap, "_MALLOPT", lambda what, value: calls.append((what, value)))
-    monkeypatch.setattr(heap, "_set", [])
-    heap.reuse_freed_heap()
-    heap.reuse_freed_heap()
-    assert calls == [(-3, 4 << 20), (-1, 16 << 20)]
-    for env in ("MALLOC_MMAP_THRESHOLD_", "MALLOC_TRIM_THRESHOLD_"):
-        monkeypatch.setattr(heap, "_set", [])
-        monkeypatch.setenv(env, "131072")
-        heap.reuse_freed_heap()
-        monkeypatch.delenv(env)
-    monkeypatch.setattr(heap, "_set", [])
-    monkeypatch.setenv("GLIBC_TUNABLES", "glibc.malloc.mmap_threshold=131072")
-    heap.reuse_freed_heap()
-    assert len(calls) == 2
+    assert heap_settings({}) == [(-3, 4 << 20), (-1, 16 << 20)]  # malloc.h's parameter numbers
+    assert heap_settings({"GLIBC_TUNABLES": "glibc.pthread.rseq=0"}) == heap_settings({})
+    for env in (
+        {"MALLOC_MMAP_THRESHOLD_": "131072"},
+        {"MALLOC_TRIM_THRESHOLD_": "131072"},
+        {"GLIBC_TUNABLES": "glibc.malloc.mmap_threshold=131072"},
+    ):
+        assert heap_settings(env) == [], env

@@ -24,7 +24,7 @@ import ctypes
 import os
 import sys
 
-__all__ = ["release_freed_memory", "reuse_freed_heap"]
+__all__ = ["heap_settings", "release_freed_memory", "reuse_freed_heap"]
 
 #: Blocks under this many bytes come from the heap while reading (glibc's ``M_MMAP_THRESHOLD``).
 MMAP_THRESHOLD = 4 << 20
@@ -44,17 +44,23 @@ if sys.platform.startswith("linux"):
 _set = []
 
 
+def heap_settings(environ) -> list[tuple[int, int]]:
+    """The ``mallopt`` calls :func:`reuse_freed_heap` makes, ``(parameter, value)``: none when
+    ``environ`` sets either threshold itself (glibc reads those at start-up)."""
+    own = ("MALLOC_MMAP_THRESHOLD_", "MALLOC_TRIM_THRESHOLD_")
+    if any(k in environ for k in own) or "malloc" in environ.get("GLIBC_TUNABLES", ""):
+        return []
+    return [(_M_MMAP_THRESHOLD, MMAP_THRESHOLD), (_M_TRIM_THRESHOLD, TRIM_THRESHOLD)]
+
+
 def reuse_freed_heap() -> None:
     """Keep a read's temporaries in the heap and reuse them (the module docstring): set glibc's
-    mmap and trim thresholds, once per process, unless the environment sets them."""
+    mmap and trim thresholds (:func:`heap_settings`), once per process."""
     if _set or _MALLOPT is None:
         return
     _set.append(True)
-    env = ("MALLOC_MMAP_THRESHOLD_", "MALLOC_TRIM_THRESHOLD_")
-    if any(k in os.environ for k in env) or "malloc" in os.environ.get("GLIBC_TUNABLES", ""):
-        return
-    _MALLOPT(_M_MMAP_THRESHOLD, MMAP_THRESHOLD)
-    _MALLOPT(_M_TRIM_THRESHOLD, TRIM_THRESHOLD)
+    for what, value in heap_settings(os.environ):
+        _MALLOPT(what, value)
 
 
 def release_freed_memory() -> None:
