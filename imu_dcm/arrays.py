@@ -22,6 +22,7 @@ __all__ = [
     "row_finite",
     "row_max",
     "row_norm",
+    "true_span",
 ]
 
 #: Rows a whole-log step works on at a time where each row's result depends on that row alone
@@ -103,6 +104,16 @@ def median_diff(values: ArrayLike) -> float:
         return float(d[k])
     d.partition((k - 1, k))
     return float((d[k - 1] + d[k]) / 2.0)
+
+
+def true_span(mask: ArrayLike) -> tuple[int, int, int] | None:
+    """The first and last True of a boolean mask and how many there are (None: none), without
+    an index of every True (``np.flatnonzero`` makes 8 bytes a row)."""
+    m = np.asarray(mask, dtype=bool)
+    count = int(np.count_nonzero(m))
+    if not count:
+        return None
+    return int(np.argmax(m)), len(m) - 1 - int(np.argmax(m[::-1])), count
 
 
 def percentile(values: ArrayLike, q: float) -> float:

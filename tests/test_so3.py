@@ -176,3 +176,16 @@ def test_median_diff_is_numpys_median_of_the_steps(n):
         got = median_diff(t)
         assert got == want or (np.isnan(got) and np.isnan(want))
         assert np.array_equal(t, before)
+
+
+def test_true_span_is_the_first_last_and_count_of_the_trues():
+    # One stretch or several, at the ends or inside, none: what np.flatnonzero's ends and
+    # length give, without its index of every row.
+    from imu_dcm.arrays import true_span
+
+    rng = np.random.default_rng(9)
+    for mask in (rng.random(1000) < 0.3, np.r_[np.zeros(5), np.ones(7), np.zeros(3)] > 0,
+                 np.ones(4, bool), np.array([True])):  # fmt: skip
+        idx = np.flatnonzero(mask)
+        assert true_span(mask) == (idx[0], idx[-1], len(idx))
+    assert true_span(np.zeros(6, bool)) is None and true_span([]) is None

@@ -13,7 +13,7 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import NDArray
 
-from imu_dcm.arrays import BLOCK_ROWS, row_finite, row_norm
+from imu_dcm.arrays import BLOCK_ROWS, row_finite, row_norm, true_span
 from imu_dcm.so3 import angle_between_deg
 
 
@@ -35,9 +35,10 @@ def outcome(
         The three fields of :class:`~imu_dcm.replay.summary.ReplaySummary`; None each when no
         sample was estimated.
     """
-    first_row, last_row = _estimated_span(q_est, start)
-    if first_row is None:
+    span = true_span(row_finite(q_est[start:]))
+    if span is None:
         return {"final_q_w_b": None, "rotation_deg": None, "turned_deg": None}
+    first_row, last_row = start + span[0], start + span[1]
     first, last = q_est[first_row], q_est[last_row]
     turned = 0.0
     for a in range(first_row, last_row, BLOCK_ROWS):  # trapezoids of a block, with its next row
@@ -49,26 +50,6 @@ def outcome(
         "rotation_deg": float(angle_between_deg(first, last)),
         "turned_deg": float(np.degrees(turned)),
     }
-
-
-def _estimated_span(q_est: NDArray, start: int) -> tuple[int | None, int | None]:
-    """The first and last estimated rows at or after ``start`` (None, None: none), found a
-    block at a time from each end."""
-    first = last = None
-    for a in range(start, len(q_est), BLOCK_ROWS):
-        ok = np.flatnonzero(row_finite(q_est[a : a + BLOCK_ROWS]))
-        if len(ok):
-            first = a + int(ok[0])
-            break
-    if first is None:
-        return None, None
-    for b in range(len(q_est), first, -BLOCK_ROWS):
-        a = max(first, b - BLOCK_ROWS)
-        ok = np.flatnonzero(row_finite(q_est[a:b]))
-        if len(ok):
-            last = a + int(ok[-1])
-            break
-    return first, last
 
 
 def outcome_lines(final_q_w_b, rotation_deg, turned_deg, written) -> list[str]:

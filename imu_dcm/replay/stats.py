@@ -26,7 +26,7 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import NDArray
 
-from imu_dcm.arrays import BLOCK_ROWS
+from imu_dcm.arrays import BLOCK_ROWS, true_span
 from imu_dcm.metrics import (
     S_PER_H,
     AttitudeError,
@@ -134,19 +134,12 @@ class _BodySums:
 
 def _scored_rows(scored: NDArray) -> slice | NDArray | None:
     """The scored rows: a slice when they are one stretch (the usual case: views, no copies),
-    else their indices; None when none is (counted a block at a time)."""
-    first = last = None
-    count = 0
-    for a in range(0, len(scored), BLOCK_ROWS):
-        rows = np.flatnonzero(scored[a : a + BLOCK_ROWS])
-        if len(rows):
-            first = a + int(rows[0]) if first is None else first
-            last, count = a + int(rows[-1]), count + len(rows)
-    if first is None:
+    else their indices; None when none is."""
+    span = true_span(scored)
+    if span is None:
         return None
-    if last - first + 1 == count:
-        return slice(first, last + 1)
-    return np.flatnonzero(scored)
+    first, last, count = span
+    return slice(first, last + 1) if last - first + 1 == count else np.flatnonzero(scored)
 
 
 def evaluate(
