@@ -7,7 +7,8 @@ streaming :class:`imu_dcm.DcmIntegrator`: every sample goes through :func:`push`
 complete. Batch is "feed every sample, then :func:`close`"; streaming feeds them as they come,
 so the two are the same arithmetic. The code itself is :mod:`imu_dcm._kernels.integrator`;
 :func:`record_chain` and :func:`scan_csv` run the ULog and CSV scans
-(:mod:`~imu_dcm._kernels.ulog_scan`, :mod:`~imu_dcm._kernels.csv_scan`).
+(:mod:`~imu_dcm._kernels.ulog_scan`, :mod:`~imu_dcm._kernels.csv_scan`), :func:`step_rotvecs`
+the rotation of each step of an attitude series (:mod:`~imu_dcm._kernels.quat_steps`).
 
 Conventions: quaternions Hamilton ``[x, y, z, w]``, ``q_w_b`` body to world; rates ``ω`` rad/s
 in body axes; stamps ``t`` s; increments multiply on the right.
@@ -36,6 +37,7 @@ __all__ = [
     "push_for",
     "record_chain",
     "scan_csv",
+    "step_rotvecs",
 ]
 
 
@@ -145,3 +147,17 @@ def scan_csv(blob: bytes, scale: int, digits: int) -> tuple[np.ndarray, bytes, i
         b = b.copy()  # numba's signature is of a writable array (the built one reads any)
     t, text, rows = entry("csv_scan")(b, int(scale), int(digits))
     return t, text.tobytes(), int(rows)
+
+
+def step_rotvecs(q, ok, out) -> int:
+    """``out[k] = log(q_k⁻¹ ⊗ q_{k+1})`` for the rows of ``q`` (n, 4), NaN where ``ok[k]`` or
+    ``ok[k + 1]`` is False (:func:`imu_dcm._kernels.quat_steps.step_rotvecs`); the first pair
+    with a zero or non-finite norm (-1: none)."""
+    _arrays(q=(q, 2), out=(out, 2))
+    if not (isinstance(ok, np.ndarray) and ok.dtype == np.bool_ and ok.ndim == 1):
+        raise TypeError(f"Expected `ok` a 1-D bool array, got {type(ok).__name__}")
+    if q.shape[1:] != (4,) or out.shape != (max(len(q) - 1, 0), 3) or len(ok) != len(q):
+        raise TypeError(
+            f"Expected q (n, 4), ok (n,) and out (n - 1, 3), got {q.shape}, {ok.shape}, {out.shape}"
+        )
+    return int(entry("step_rotvecs")(q, np.ascontiguousarray(ok), out))

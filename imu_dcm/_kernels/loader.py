@@ -20,7 +20,7 @@ import zlib
 from pathlib import Path
 
 from imu_dcm.integrator.methods import GAP_FACTOR, DeltaMethod, Method
-from imu_dcm.so3 import COS_HALF_SERIES, SERIES_THETA2, SINC_HALF_SERIES
+from imu_dcm.so3 import COS_HALF_SERIES, SERIES_THETA2, SINC_HALF_SERIES, SMALL_ANGLE_RAD
 
 __all__ = [
     "AOT_MODULE",
@@ -42,6 +42,7 @@ KERNEL_SOURCES = (
     "ulog_scan.py",
     "mcap_scan.py",
     "csv_scan.py",
+    "quat_steps.py",
     "state.py",
     "entries.py",
     "jit.py",
@@ -52,9 +53,9 @@ ENV = "IMU_DCM_KERNEL"
 
 def _constants() -> str:
     """The values the compiled code folds in from other modules: the series of the
-    exponential, the gap factor, the method codes."""
+    exponential, the small-angle bound of the logarithm, the gap factor, the method codes."""
     codes = [(m.name, int(m)) for m in (*Method, *DeltaMethod)]
-    series = (SINC_HALF_SERIES, COS_HALF_SERIES, SERIES_THETA2)
+    series = (SINC_HALF_SERIES, COS_HALF_SERIES, SERIES_THETA2, SMALL_ANGLE_RAD)
     return repr((series, GAP_FACTOR, codes))
 
 

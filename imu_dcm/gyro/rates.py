@@ -20,7 +20,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from imu_dcm.arrays import BLOCK_ROWS, median, percentile, row_finite, row_max, row_norm
-from imu_dcm.so3 import quat_angle_rad
+from imu_dcm.so3 import step_rotvecs
 
 __all__ = [
     "FULL_SCALE_RAD_S",
@@ -64,16 +64,15 @@ def truth_rate_ratio(omega_b: NDArray, t_s: NDArray, q_truth: NDArray) -> float 
     pair = ok[:-1] & ok[1:]
     if pair.sum() <= 10:
         return None
-    # the covered pairs (i, i + 1), a block of them at a time (each pair's rates its own)
-    pairs = np.flatnonzero(pair)
-    truth_rate, gyro_rate = np.empty(len(pairs)), np.empty(len(pairs))
-    for a in range(0, len(pairs), BLOCK_ROWS):
-        k = slice(a, a + BLOCK_ROWS)
-        i = pairs[k]
-        ang = quat_angle_rad(q_truth[i], q_truth[i + 1])
-        truth_rate[k] = ang / (t_s[i + 1] - t_s[i])
-        gyro_rate[k] = row_norm(0.5 * (omega_b[i] + omega_b[i + 1]))
-    moving = truth_rate > _MOVING_RAD_S
+    # every step's rates, a block of steps at a time (NaN where the truth does not cover it)
+    n = len(pair)
+    truth_rate, gyro_rate = np.empty(n), np.empty(n)
+    for a in range(0, n, BLOCK_ROWS):
+        b = min(n, a + BLOCK_ROWS)
+        step = step_rotvecs(q_truth[a : b + 1], ok[a : b + 1])
+        truth_rate[a:b] = row_norm(step) / np.diff(t_s[a : b + 1])
+        gyro_rate[a:b] = row_norm(0.5 * (omega_b[a:b] + omega_b[a + 1 : b + 1]))
+    moving = pair & (truth_rate > _MOVING_RAD_S)
     if moving.sum() <= 10:
         return None
     return median(gyro_rate[moving] / truth_rate[moving])

@@ -18,7 +18,7 @@ from numpy.typing import ArrayLike, NDArray
 from imu_dcm.arrays import BLOCK_ROWS, median, row_finite, row_norm
 from imu_dcm.errors import InputError
 from imu_dcm.gyro.windows import min_steps, step_var, windowed_mean_var
-from imu_dcm.so3 import log_quat, quat_conjugate, quat_multiply
+from imu_dcm.so3 import log_quat, quat_conjugate, quat_multiply, step_rotvecs
 
 __all__ = [
     "Motion",
@@ -126,20 +126,6 @@ def truth_noise_rad(q_w_b: ArrayLike, step_ok: ArrayLike | None = None) -> float
         filled += len(got)
     spread = max(median(vals[k]) for k in range(3))
     return 1.4826 * spread / math.sqrt(6.0)
-
-
-def step_rotvecs(q: NDArray, ok: NDArray, out: NDArray | None = None) -> NDArray[np.float64]:
-    """Each step's rotation ``log(q_k⁻¹ q_{k+1})`` (M - 1, 3), rad, a row without a finite
-    attitude (``ok`` False) taken as the identity; in blocks (no whole-log temporaries), into
-    ``out`` when given."""
-    n = len(q)
-    d = np.empty((max(n - 1, 0), 3)) if out is None else out
-    unit = np.array([0.0, 0.0, 0.0, 1.0])
-    for a in range(0, n - 1, BLOCK_ROWS):
-        b = min(n - 1, a + BLOCK_ROWS)
-        qq = np.where(ok[a : b + 1, None], q[a : b + 1], unit)
-        d[a:b] = log_quat(quat_multiply(quat_conjugate(qq[:-1]), qq[1:]))
-    return d
 
 
 def truth_rates(q: NDArray, t: NDArray, m: int) -> NDArray:

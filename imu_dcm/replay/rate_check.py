@@ -22,7 +22,7 @@ from numpy.typing import NDArray
 
 from imu_dcm.arrays import BLOCK_ROWS, median_diff, row_finite, row_norm
 from imu_dcm.gyro.resample import slerp_truth
-from imu_dcm.so3 import log_quat, quat_conjugate, quat_multiply
+from imu_dcm.so3 import step_rotvecs
 
 __all__ = [
     "MAX_SHIFT_S",
@@ -189,12 +189,7 @@ def rate_grid(
     te = (edges - t_ns[0]) * 1e-9
     angle = integrated_rate(t_ns, omega_b, edges)
     q = slerp_truth(tt, q_w_b, edges)
-    has = row_finite(q)
-    both = has[:-1] & has[1:]
-    rot = np.full((len(q) - 1, 3), np.nan)
-    rel = quat_multiply(quat_conjugate(q[:-1][both]), q[1:][both])
-    rel = np.where(rel[:, 3:4] < 0, -rel, rel)  # shortest arc
-    rot[both] = log_quat(rel)
+    rot = step_rotvecs(q, row_finite(q))  # the shortest arcs; NaN where uncovered
     return RateGrid(edges, np.diff(te), np.diff(angle, axis=0), rot, dt)
 
 
