@@ -318,13 +318,19 @@ def test_series_rejects_float_stamps_and_nul_frames():
         StampedSeries(np.array([0.5, 1.5]), np.zeros((2, 3)), "imu")
     with pytest.raises(InputError, match="frame_id"):
         StampedSeries(np.array([1]), np.zeros((1, 3)), "im\0u")
+    with pytest.raises(InputError, match="UTF-8"):  # a lone surrogate (a str, not text)
+        StampedSeries(np.array([1]), np.zeros((1, 3)), "imu\ud800")
 
 
 @settings(
     max_examples=25, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture]
 )
 @given(
-    frame=st.text(st.characters(blacklist_characters="\0"), min_size=0, max_size=12),
+    frame=st.text(
+        st.characters(blacklist_characters="\0", blacklist_categories=("Cs",)),
+        min_size=0,
+        max_size=12,
+    ),
     rows=st.lists(
         st.tuples(*[st.floats(allow_nan=False, allow_infinity=False)] * 4), min_size=1, max_size=6
     ),

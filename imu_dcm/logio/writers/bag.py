@@ -86,6 +86,12 @@ class StampedSeries:
             raise InputError(f"Expected `values` of shape (N={t.shape[0]}, k), got {v.shape}")
         if not isinstance(self.frame_id, str) or "\0" in self.frame_id:
             raise InputError(f"Expected `frame_id` a str without NUL, got {self.frame_id!r}")
+        try:  # a ROS string is UTF-8: a lone surrogate has no encoding
+            self.frame_id.encode("utf-8")
+        except UnicodeEncodeError:
+            raise InputError(
+                f"Expected `frame_id` text that UTF-8 can encode, got {self.frame_id!r}"
+            ) from None
         object.__setattr__(self, "t_ns", t.astype(np.int64, copy=False))
         object.__setattr__(self, "values", v)
         if self.log_t_ns is not None:
