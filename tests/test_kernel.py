@@ -388,7 +388,13 @@ def test_the_digest_covers_every_file_the_entry_points_are_compiled_from():
     # A kernel file the digest left out could be edited without the built module going stale.
     modules = {fn.__module__ for fn, _ in entries.ENTRIES.values()}
     files = {Path(sys.modules[m].__file__).name for m in modules}
-    assert files == {"integrator.py", "ulog_scan.py", "mcap_scan.py", "csv_scan.py", "quat_steps.py"}
+    assert files == {
+        "integrator.py",
+        "ulog_scan.py",
+        "mcap_scan.py",
+        "csv_scan.py",
+        "quat_steps.py",
+    }
     assert files | {"state.py", "entries.py", "jit.py"} == set(loader.KERNEL_SOURCES)
 
 

@@ -6,7 +6,6 @@ Oracle: scipy's Slerp on the same samples; and gaps counted in truth steps by ha
 from __future__ import annotations
 
 import numpy as np
-from conftest import small_blocks
 from scipy.spatial.transform import Rotation, Slerp
 
 from imu_dcm.gyro.resample import slerp_truth
@@ -54,17 +53,21 @@ def test_slerp_truth_halfway_to_90_deg_about_z_is_45_deg_about_z():
     np.testing.assert_allclose(out[0], want, rtol=0, atol=2e-15)
 
 
-def test_slerp_truth_in_blocks_equals_one_block(monkeypatch):
-    """Queries resampled block by block (7 at a time, across a gap and both ends) give the
-    one-block result bit for bit: each query depends on its own stamp only."""
+def test_slerp_truth_of_queries_in_any_order_or_in_pieces_is_the_same(monkeypatch):
+    """Queries resampled shuffled, in pieces of 7, or far apart (found by bisection rather than
+    by walking from the last one's step) give the sorted result bit for bit, across a gap and
+    both ends: each query depends on its own stamp only."""
     rng = np.random.default_rng(5)
-    tt = np.cumsum(rng.integers(9_000_000, 11_000_000, 300)).astype(np.int64)
-    tt[150:] += 500_000_000  # a gap that is never bridged
-    q = Rotation.random(300, random_state=6).as_quat()
-    t = np.sort(rng.integers(tt[0] - 10**8, tt[-1] + 10**8, 1000)).astype(np.int64)
+    tt = np.cumsum(rng.integers(9_000_000, 11_000_000, 3000)).astype(np.int64)
+    tt[1500:] += 500_000_000  # a gap that is never bridged
+    q = Rotation.random(3000, random_state=6).as_quat()
+    t = np.sort(rng.integers(tt[0] - 10**8, tt[-1] + 10**8, 10000)).astype(np.int64)
     t = np.sort(np.concatenate([t, tt[::30]]))  # some queries exactly on truth samples
     whole = slerp_truth(tt, q, t)
-    assert "imu_dcm.gyro.resample" in small_blocks(monkeypatch, 7)
-    blocks = slerp_truth(tt, q, t)
     assert np.isnan(whole).any() and np.isfinite(whole).any()
-    np.testing.assert_array_equal(blocks, whole)
+    k = rng.permutation(len(t))
+    np.testing.assert_array_equal(slerp_truth(tt, q, t[k]), whole[k])
+    pieces = [slerp_truth(tt, q, t[a : a + 7]) for a in range(0, len(t), 7)]
+    np.testing.assert_array_equal(np.concatenate(pieces), whole)
+    sparse = slice(0, None, 97)  # ~300 truth steps apart
+    np.testing.assert_array_equal(slerp_truth(tt, q, t[sparse]), whole[sparse])

@@ -8,7 +8,8 @@ complete. Batch is "feed every sample, then :func:`close`"; streaming feeds them
 so the two are the same arithmetic. The code itself is :mod:`imu_dcm._kernels.integrator`;
 :func:`record_chain` and :func:`scan_csv` run the ULog and CSV scans
 (:mod:`~imu_dcm._kernels.ulog_scan`, :mod:`~imu_dcm._kernels.csv_scan`), :func:`step_rotvecs`
-the rotation of each step of an attitude series (:mod:`~imu_dcm._kernels.quat_steps`).
+and :func:`slerp_rows` the rotation of each step of an attitude series and the series at other
+stamps (:mod:`~imu_dcm._kernels.quat_steps`).
 
 Conventions: quaternions Hamilton ``[x, y, z, w]``, ``q_w_b`` body to world; rates ``ω`` rad/s
 in body axes; stamps ``t`` s; increments multiply on the right.
@@ -37,6 +38,7 @@ __all__ = [
     "push_for",
     "record_chain",
     "scan_csv",
+    "slerp_rows",
     "step_rotvecs",
 ]
 
@@ -161,3 +163,21 @@ def step_rotvecs(q, ok, out) -> int:
             f"Expected q (n, 4), ok (n,) and out (n - 1, 3), got {q.shape}, {ok.shape}, {out.shape}"
         )
     return int(entry("step_rotvecs")(q, np.ascontiguousarray(ok), out))
+
+
+def slerp_rows(tt, q, norm, bridged, t, out) -> None:
+    """The attitudes ``q[j] / norm[j]`` at stamps ``tt`` (int64, strictly increasing) slerped
+    at the stamps ``t`` into ``out`` (len(t), 4), NaN outside them and across a step that
+    ``bridged`` (len(tt) - 1,) does not bridge
+    (:func:`imu_dcm._kernels.quat_steps.slerp_rows`)."""
+    _arrays(q=(q, 2), norm=(norm, 1), out=(out, 2))
+    ints = [np.ascontiguousarray(a, dtype=np.int64) for a in (tt, t)]
+    bridged = np.ascontiguousarray(bridged, dtype=bool)
+    if q.shape != (len(ints[0]), 4) or len(norm) != len(q) or out.shape != (len(ints[1]), 4):
+        raise TypeError(
+            f"Expected tt (m,), q (m, 4), norm (m,), t (n,) and out (n, 4), got "
+            f"{ints[0].shape}, {q.shape}, {norm.shape}, {ints[1].shape}, {out.shape}"
+        )
+    if len(bridged) != max(len(q) - 1, 0):
+        raise TypeError(f"Expected `bridged` of {max(len(q) - 1, 0)} steps, got {len(bridged)}")
+    entry("slerp_rows")(ints[0], q, norm, bridged, ints[1], out)

@@ -1,6 +1,7 @@
-"""The rotation of each step of an attitude series, written for numba: ``log(q_k⁻¹ q_{k+1})``
-for every pair of consecutive rows in one pass (the truth checks and the rest judgement of a
-replay run it over every truth row), and its entry point (:data:`ENTRIES`).
+"""Attitude series, written for numba: the rotation of each step, ``log(q_k⁻¹ q_{k+1})`` for
+every pair of consecutive rows in one pass (the truth checks and the rest judgement of a replay
+run it over every truth row), and the series slerped at other stamps (the truth on the gyro's
+rows); their entry points (:data:`ENTRIES`).
 
 Imported only to compile, like :mod:`imu_dcm._kernels.integrator`.
 """
@@ -11,11 +12,35 @@ import math
 
 import numpy as np
 
+from imu_dcm._kernels.integrator import exp_quat, quat_mul
+from imu_dcm._kernels.jit import inline
 from imu_dcm.so3 import SMALL_ANGLE_RAD
 
-__all__ = ["ENTRIES", "SIGNATURE", "step_rotvecs"]
+__all__ = ["ENTRIES", "SIGNATURE", "SLERP_SIGNATURE", "slerp_rows", "step_rotvecs"]
 
 SIGNATURE = "int64(float64[:, ::1], boolean[::1], float64[:, ::1])"
+SLERP_SIGNATURE = (
+    "void(int64[::1], float64[:, ::1], float64[::1], boolean[::1], int64[::1], float64[:, ::1])"
+)
+#: A query this many truth steps past the last one's is found by bisection, not by walking.
+_WALK = 32
+
+
+@inline
+def _log(x: float, y: float, z: float, w: float) -> tuple:
+    """:func:`imu_dcm.so3.log_quat` of ``[x, y, z, w]`` (normalised here, shortest arc), for a
+    finite non-zero quaternion."""
+    norm = math.sqrt(x * x + y * y + z * z + w * w)
+    if w < 0.0:
+        norm = -norm
+    x, y, z, w = x / norm, y / norm, z / norm, w / norm
+    s = math.sqrt(x * x + y * y + z * z)
+    if s < 0.5 * SMALL_ANGLE_RAD:
+        r2 = s * s / (w * w)
+        scale = 2.0 / w * (1.0 - r2 / 3.0 + r2 * r2 / 5.0)
+    else:
+        scale = 2.0 * math.atan2(s, w) / s
+    return x * scale, y * scale, z * scale
 
 
 def step_rotvecs(q, ok, out):
@@ -46,18 +71,66 @@ def step_rotvecs(q, ok, out):
             if bad < 0:
                 bad = k
             continue
-        if w < 0.0:
-            norm = -norm
-        x, y, z, w = x / norm, y / norm, z / norm, w / norm
-        s = math.sqrt(x * x + y * y + z * z)
-        if s < 0.5 * SMALL_ANGLE_RAD:
-            r2 = s * s / (w * w)
-            scale = 2.0 / w * (1.0 - r2 / 3.0 + r2 * r2 / 5.0)
-        else:
-            scale = 2.0 * math.atan2(s, w) / s
-        out[k, 0], out[k, 1], out[k, 2] = x * scale, y * scale, z * scale
+        out[k, 0], out[k, 1], out[k, 2] = _log(x, y, z, w)
     return bad
 
 
-#: ``name -> (function, signature)`` of this kernel's entry point.
-ENTRIES = {"step_rotvecs": (step_rotvecs, SIGNATURE)}
+def slerp_rows(tt, q, norm, bridged, t, out):
+    """The attitudes ``q`` (rows ``q[j] / norm[j]`` at stamps ``tt``, strictly increasing) at
+    the stamps ``t`` (any order) into ``out``: row ``j`` itself at ``tt[j]``, the slerp from
+    ``j`` to ``j + 1`` (the shortest arc) between them where ``bridged[j]``, NaN before the
+    first stamp, after the last and across a step not bridged.
+
+    The same formulas as :func:`imu_dcm.gyro.resample.slerp_truth` in numpy: ``u`` the
+    fraction of the step, ``q_j ⊗ exp(u log(q_j⁻¹ q_{j+1}))``; each step's logarithm is taken
+    once for the run of queries inside it. Sorted queries walk forward from the last one's
+    step; others (and long jumps ahead) are found by bisection.
+    """
+    m = len(tt)
+    j = np.int64(-1)  # the step of the last query: tt[j] <= t < tt[j + 1]
+    done = np.int64(-1)  # the step whose logarithm (px, py, pz) is held
+    px = py = pz = 0.0
+    for i in range(len(t)):
+        ti = t[i]
+        if m == 0 or ti < tt[0]:
+            j = np.int64(-1)
+        else:
+            if j < 0 or ti < tt[j]:
+                j = np.int64(-1)
+            walk = 0
+            while j + 1 < m and tt[j + 1] <= ti and walk < _WALK:
+                j += 1
+                walk += 1
+            if j + 1 < m and tt[j + 1] <= ti:  # far ahead: the largest j with tt[j] <= ti
+                lo, hi = j + 1, m - 1
+                while lo < hi:
+                    mid = (lo + hi + 1) // 2
+                    if tt[mid] <= ti:
+                        lo = mid
+                    else:
+                        hi = mid - 1
+                j = lo
+        if j < 0 or (tt[j] != ti and (j >= m - 1 or not bridged[j])):
+            out[i, 0] = out[i, 1] = out[i, 2] = out[i, 3] = np.nan
+            continue
+        r = norm[j]
+        q0 = (q[j, 0] / r, q[j, 1] / r, q[j, 2] / r, q[j, 3] / r)
+        if tt[j] == ti:
+            out[i, 0], out[i, 1], out[i, 2], out[i, 3] = q0
+            continue
+        if done != j:
+            r1 = norm[j + 1]
+            q1 = (q[j + 1, 0] / r1, q[j + 1, 1] / r1, q[j + 1, 2] / r1, q[j + 1, 3] / r1)
+            rel = quat_mul((-q0[0], -q0[1], -q0[2], q0[3]), q1)
+            px, py, pz = _log(rel[0], rel[1], rel[2], rel[3])
+            done = j
+        u = np.float64(ti - tt[j]) / np.float64(tt[j + 1] - tt[j])
+        e = exp_quat(u * px, u * py, u * pz)
+        out[i, 0], out[i, 1], out[i, 2], out[i, 3] = quat_mul(q0, e)
+
+
+#: ``name -> (function, signature)`` of this kernel's entry points.
+ENTRIES = {
+    "step_rotvecs": (step_rotvecs, SIGNATURE),
+    "slerp_rows": (slerp_rows, SLERP_SIGNATURE),
+}

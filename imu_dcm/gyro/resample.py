@@ -12,8 +12,8 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from imu_dcm.arrays import BLOCK_ROWS, median, row_norm
-from imu_dcm.so3 import exp_quat, log_quat, quat_conjugate, quat_multiply
+from imu_dcm._kernels.calls import slerp_rows
+from imu_dcm.arrays import median, row_norm
 
 __all__ = ["TRUTH_BRIDGE_STEPS", "slerp_truth"]
 
@@ -53,32 +53,10 @@ def slerp_truth(truth_t_ns: ArrayLike, q_w_b: ArrayLike, t_ns: ArrayLike) -> NDA
         uniq = np.concatenate([[True], np.diff(tt) > 0])
         tt, q, norm = tt[uniq], q[uniq], norm[uniq]
         steps = np.diff(tt)
-    out = np.full((len(t), 4), np.nan)
-    if len(tt) == 0:
-        return out
-    bridged = None
+    out = np.empty((len(t), 4))
+    bridged = np.zeros(0, bool)
     if len(tt) > 1:  # each truth step is bridged or not, once; a query takes its step's verdict
         bridged = steps <= TRUTH_BRIDGE_STEPS * median(steps) * (1 + 1e-6)
-    for a in range(0, len(t), BLOCK_ROWS):  # each query its own: one block's temporaries
-        _slerp_block(tt, q, norm, steps, bridged, t[a : a + BLOCK_ROWS], out[a : a + BLOCK_ROWS])
+    q = np.ascontiguousarray(q, dtype=float)
+    slerp_rows(tt, q, np.ascontiguousarray(norm, dtype=float), bridged, t, out)  # one pass
     return out
-
-
-def _slerp_block(tt, q, norm, steps, bridged, t, out) -> None:
-    """:func:`slerp_truth` for the queries ``t``, written into ``out`` (rows of ``t``); row
-    ``j`` of the truth is ``q[j] / norm[j]``."""
-    j = np.searchsorted(tt, t, side="right") - 1  # tt[j] <= t < tt[j+1]
-    exact = (j >= 0) & (tt[np.clip(j, 0, None)] == t)
-    je = j[exact]
-    out[exact] = q[je] / norm[je, None]
-    if bridged is None:
-        return
-    inner = ~exact & (j >= 0) & (j < len(tt) - 1)
-    inner &= bridged[np.clip(j, 0, len(tt) - 2)]
-    idx = np.flatnonzero(inner)
-    jj = j[idx]
-    u = (t[idx] - tt[jj]).astype(float) / steps[jj].astype(float)
-    q0 = q[jj] / norm[jj, None]
-    rel = quat_multiply(quat_conjugate(q0), q[jj + 1] / norm[jj + 1, None])
-    rel = np.where(rel[:, 3:4] < 0, -rel, rel)  # shortest arc
-    out[idx] = quat_multiply(q0, exp_quat(u[:, None] * log_quat(rel)))
