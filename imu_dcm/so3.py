@@ -45,12 +45,11 @@ __all__ = [
     "quat_multiply",
     "quat_normalize",
     "quat_rotate",
-    "step_rotvecs",
 ]
 
 #: Below this angle (rad) the Taylor branches of exp_matrix and log_quat (here and in the compiled
-#: step rotations) are used: their truncation error (theta^6/5040 for sin(x)/x) is far below
-#: double precision there, and they avoid 0/0.
+#: kernels of attitude series) are used: their truncation error (theta^6/5040 for sin(x)/x) is
+#: far below double precision there, and they avoid 0/0.
 SMALL_ANGLE_RAD = 1e-3
 #: exp(φ) as a quaternion (here and in the compiled kernel): up to this θ² (θ <= 0.5 rad), seven
 #: Taylor terms of sin(θ/2)/θ and cos(θ/2) in θ²; the first terms left out, θ¹⁴/(2¹⁵ 15!) < 2e-21
@@ -206,40 +205,6 @@ def log_quat(q: ArrayLike) -> NDArray[np.float64]:
     r2 = s * s / (w_small * w_small)
     scale = np.where(small, 2.0 / w_small * (1.0 - r2 / 3.0 + r2 * r2 / 5.0), theta / safe)
     return _rows(Q[:3] * scale)
-
-
-def step_rotvecs(q: ArrayLike, ok: ArrayLike, out: NDArray | None = None) -> NDArray[np.float64]:
-    """Each step's rotation ``log(q_k⁻¹ ⊗ q_{k+1})`` of a series of attitudes, rad.
-
-    The same numbers as :func:`log_quat` of :func:`quat_multiply` of the conjugate, in one
-    compiled pass with no temporaries (:func:`imu_dcm._kernels.calls.step_rotvecs`).
-
-    Parameters
-    ----------
-    q : array_like, shape (M, 4)
-        ``[x, y, z, w]`` quaternions (normalised here).
-    ok : array_like, bool (M,)
-        The rows to use: a step with a row not ok is NaN.
-    out : float64 C-contiguous (M - 1, 3), optional
-        Written and returned instead of a new array.
-
-    Returns
-    -------
-    ndarray, shape (M - 1, 3)
-        Rotation vectors, angle in ``[0, π]``.
-
-    Raises
-    ------
-    InputError
-        If a step's quaternions have a zero norm.
-    """
-    from imu_dcm._kernels.calls import step_rotvecs as kernel  # it imports this module
-
-    q = np.ascontiguousarray(q, dtype=float)
-    d = np.empty((max(len(q) - 1, 0), 3)) if out is None else out
-    if kernel(q, np.asarray(ok, dtype=bool), d) >= 0:
-        raise InputError("Expected quaternions with finite non-zero norm, got a zero or NaN one")
-    return d
 
 
 def quat_multiply(p: ArrayLike, q: ArrayLike) -> NDArray[np.float64]:

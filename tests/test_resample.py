@@ -6,11 +6,15 @@ Oracle: scipy's Slerp on the same samples; and gaps counted in truth steps by ha
 from __future__ import annotations
 
 import numpy as np
+import pytest
 from scipy.spatial.transform import Rotation, Slerp
 
-from imu_dcm.gyro.resample import slerp_truth
+from imu_dcm.errors import InputError
+from imu_dcm.gyro.resample import slerp_truth, step_rotvecs
+from imu_dcm.so3 import log_quat, quat_multiply
 
 T0_NS = 1_700_000_000_000_000_000
+EPS = np.finfo(float).eps
 
 
 def test_slerp_truth_matches_scipy_slerp_inside_coverage():
@@ -71,3 +75,43 @@ def test_slerp_truth_of_queries_in_any_order_or_in_pieces_is_the_same(monkeypatc
     np.testing.assert_array_equal(np.concatenate(pieces), whole)
     sparse = slice(0, None, 97)  # ~300 truth steps apart
     np.testing.assert_array_equal(slerp_truth(tt, q, t[sparse]), whole[sparse])
+
+
+def test_step_rotvecs_are_scipys_relative_rotations_of_consecutive_rows():
+    # steps of every size: none, below the series bound, ordinary, near a half turn; the rows'
+    # signs and norms are arbitrary (both are the same attitude)
+    rng = np.random.default_rng(21)
+    n = 400
+    axes = rng.normal(size=(n - 1, 3))
+    axes /= np.linalg.norm(axes, axis=1, keepdims=True)
+    angles = np.concatenate(
+        [np.zeros(20), 1e-7 * rng.random(100), rng.random(200), np.pi - 1e-3 * rng.random(79)]
+    )
+    rng.shuffle(angles)
+    steps = Rotation.from_rotvec(axes * angles[:, None])
+    r = [Rotation.random(random_state=rng)]
+    for s in steps:
+        r.append(r[-1] * s)
+    r = Rotation.concatenate(r)
+    q = r.as_quat() * rng.choice([-1.0, 1.0], size=(n, 1)) * rng.uniform(0.5, 2.0, size=(n, 1))
+    ok = np.ones(n, bool)
+    got = step_rotvecs(q, ok)
+    want = (r[:-1].inv() * r[1:]).as_rotvec()
+    # each product component is four products of unit-size numbers (a few ulps), and the
+    # logarithm's gain is at most 2 per unit of the vector part (theta/sin(theta/2) <= pi)
+    np.testing.assert_allclose(got, want, rtol=0, atol=32 * EPS)
+    # the numpy path (log of the product of the conjugate) gives the same numbers
+    np.testing.assert_allclose(
+        got, log_quat(quat_multiply(q[:-1] * [-1, -1, -1, 1], q[1:])), rtol=0, atol=8 * EPS
+    )
+    # a row not to be used makes both its steps NaN; the others are untouched
+    ok[7] = False
+    got2 = step_rotvecs(q, ok)
+    assert np.isnan(got2[6:8]).all()
+    np.testing.assert_array_equal(np.delete(got2, [6, 7], axis=0), np.delete(got, [6, 7], axis=0))
+    # into a given array, and a zero quaternion refused
+    out = np.empty((n - 1, 3))
+    assert step_rotvecs(q, np.ones(n, bool), out=out) is out
+    q[3] = 0.0
+    with pytest.raises(InputError, match="non-zero norm"):
+        step_rotvecs(q, np.ones(n, bool))

@@ -20,7 +20,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from imu_dcm.arrays import BLOCK_ROWS, median, percentile, row_finite, row_max, row_norm
-from imu_dcm.so3 import step_rotvecs
+from imu_dcm.gyro.resample import step_rotvecs
 
 __all__ = [
     "FULL_SCALE_RAD_S",

@@ -1,4 +1,5 @@
-"""Attitude series at other stamps: a recorded ``q_w_b`` series slerped to query times.
+"""Attitude series: a recorded ``q_w_b`` series slerped to query times, and the rotation of each
+of its steps (:func:`step_rotvecs`).
 
 :func:`slerp_truth` is the one resampler of a truth (or any attitude) series: the replay judges
 its estimate with it, and live compares against a truth topic with it. It slerps between the
@@ -13,9 +14,11 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from imu_dcm._kernels.calls import slerp_rows
+from imu_dcm._kernels.calls import step_rotvecs as kernel_step_rotvecs
 from imu_dcm.arrays import median, row_norm
+from imu_dcm.errors import InputError
 
-__all__ = ["TRUTH_BRIDGE_STEPS", "slerp_truth"]
+__all__ = ["TRUTH_BRIDGE_STEPS", "slerp_truth", "step_rotvecs"]
 
 #: Gaps between truth samples longer than this many median truth steps are not bridged.
 TRUTH_BRIDGE_STEPS = 2.0
@@ -60,3 +63,36 @@ def slerp_truth(truth_t_ns: ArrayLike, q_w_b: ArrayLike, t_ns: ArrayLike) -> NDA
     q = np.ascontiguousarray(q, dtype=float)
     slerp_rows(tt, q, np.ascontiguousarray(norm, dtype=float), bridged, t, out)  # one pass
     return out
+
+
+def step_rotvecs(q: ArrayLike, ok: ArrayLike, out: NDArray | None = None) -> NDArray[np.float64]:
+    """Each step's rotation ``log(q_k⁻¹ ⊗ q_{k+1})`` of a series of attitudes, rad.
+
+    The same numbers as :func:`~imu_dcm.so3.log_quat` of :func:`~imu_dcm.so3.quat_multiply` of
+    the conjugate, in one
+    compiled pass with no temporaries (:func:`imu_dcm._kernels.calls.step_rotvecs`).
+
+    Parameters
+    ----------
+    q : array_like, shape (M, 4)
+        ``[x, y, z, w]`` quaternions (normalised here).
+    ok : array_like, bool (M,)
+        The rows to use: a step with a row not ok is NaN.
+    out : float64 C-contiguous (M - 1, 3), optional
+        Written and returned instead of a new array.
+
+    Returns
+    -------
+    ndarray, shape (M - 1, 3)
+        Rotation vectors, angle in ``[0, π]``.
+
+    Raises
+    ------
+    InputError
+        If a step's quaternions have a zero norm.
+    """
+    q = np.ascontiguousarray(q, dtype=float)
+    d = np.empty((max(len(q) - 1, 0), 3)) if out is None else out
+    if kernel_step_rotvecs(q, np.asarray(ok, dtype=bool), d) >= 0:
+        raise InputError("Expected quaternions with finite non-zero norm, got a zero or NaN one")
+    return d

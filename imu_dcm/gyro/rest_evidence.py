@@ -17,8 +17,9 @@ from numpy.typing import ArrayLike, NDArray
 
 from imu_dcm.arrays import BLOCK_ROWS, median, row_finite, row_norm
 from imu_dcm.errors import InputError
+from imu_dcm.gyro.resample import step_rotvecs
 from imu_dcm.gyro.windows import min_steps, step_var, windowed_mean_var
-from imu_dcm.so3 import log_quat, quat_conjugate, quat_multiply, step_rotvecs
+from imu_dcm.so3 import log_quat, quat_conjugate, quat_multiply
 
 __all__ = [
     "Motion",

@@ -21,8 +21,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from imu_dcm.arrays import BLOCK_ROWS, median_diff, row_finite, row_norm
-from imu_dcm.gyro.resample import slerp_truth
-from imu_dcm.so3 import step_rotvecs
+from imu_dcm.gyro.resample import slerp_truth, step_rotvecs
 
 __all__ = [
     "MAX_SHIFT_S",
