@@ -325,50 +325,87 @@ def test_numba_compiles_each_entry_point_for_one_signature():
         assert len(entries.compiled(name).signatures) == 1
 
 
-def _records(rng, n: int):
-    """``n`` MCAP message records laid end to end in one chunk, with their index entries."""
-    lens = rng.integers(22, 80, n)  # record length field: 22 header bytes and a payload
-    offs = np.concatenate([[0], np.cumsum(9 + lens)[:-1]]).astype(np.int64) + 5
-    buf = np.zeros(int(offs[-1] + 9 + lens[-1]) + 3, np.uint8)
-    cid = rng.integers(1, 4, n)
-    lt = rng.integers(0, 2**62, n)
-    for o, ln, c, t in zip(offs, lens, cid, lt, strict=True):
-        buf[o] = 0x05
-        buf[o + 1 : o + 9] = np.frombuffer(int(ln).to_bytes(8, "little"), np.uint8)
-        buf[o + 9 : o + 11] = np.frombuffer(int(c).to_bytes(2, "little"), np.uint8)
-        buf[o + 15 : o + 23] = np.frombuffer(int(t).to_bytes(8, "little"), np.uint8)
-    start, end = np.zeros(n, np.int64), np.full(n, len(buf), np.int64)
-    return buf, offs, start, end, cid.astype(np.int64), lens, lt
+def _batch(rng, n: int):
+    """Two MCAP chunks of ``n`` message records each in one buffer (channels 1, 2, 3 in
+    random turns, a 7-byte hole before the first record, 3 bytes after the last, and a hole
+    between the chunks), with each chunk's message index per channel (offsets in the chunk)."""
+    chunks, want, buf = [], {1: [], 2: [], 3: []}, np.zeros(0, np.uint8)
+    for seq in (4, 9):
+        buf = np.concatenate([buf, np.zeros(11, np.uint8)])  # the hole between chunks
+        base = len(buf)
+        lens = rng.integers(22, 80, n)  # record length field: 22 header bytes and a payload
+        offs = np.concatenate([[0], np.cumsum(9 + lens)[:-1]]).astype(np.int64) + 7
+        data = np.zeros(int(offs[-1] + 9 + lens[-1]) + 3, np.uint8)
+        cid = rng.integers(1, 4, n)
+        lt = rng.integers(0, 2**62, n)
+        for o, ln, c, t in zip(offs, lens, cid, lt, strict=True):
+            data[o] = 0x05
+            data[o + 1 : o + 9] = np.frombuffer(int(ln).to_bytes(8, "little"), np.uint8)
+            data[o + 9 : o + 11] = np.frombuffer(int(c).to_bytes(2, "little"), np.uint8)
+            data[o + 15 : o + 23] = np.frombuffer(int(t).to_bytes(8, "little"), np.uint8)
+            want[int(c)].append((base + o + 31, ln - 22, t, (seq << 32) + o))
+        buf = np.concatenate([buf, data])
+        index = {int(c): offs[cid == c] for c in (1, 2, 3)}
+        chunks.append((base, len(data), seq, index, offs, lens))
+    return buf, chunks, want
+
+
+def _segments(chunks, cids=(1, 2, 3)):
+    offs, seg, seg_chunk, seg_slot = [], [0], [], []
+    for k, (_, _, _, index, _, _) in enumerate(chunks):
+        for c, o in index.items():
+            offs.append(o)
+            seg.append(seg[-1] + len(o))
+            seg_chunk.append(k)
+            seg_slot.append(cids.index(c))
+    bases, sizes, seqs = (np.array([ch[i] for ch in chunks], np.int64) for i in (0, 1, 2))
+    return np.concatenate(offs), seg, seg_chunk, seg_slot, bases, sizes, seqs, list(cids)
+
+
+@pytest.mark.parametrize("order", ["indexed", "an index out of order"])
+def test_locate_batch_groups_every_record_by_channel_in_file_order(order):
+    # The compiled location of a batch's indexed MCAP records: each channel's payloads (start,
+    # length), log times and file-order keys, in file order, and the bytes no record covers
+    rng = np.random.default_rng(7)
+    buf, chunks, want = _batch(rng, 200)
+    if order != "indexed":  # a writer that indexes in another order: sorted, the same result
+        index = chunks[1][3]
+        index[2] = index[2][::-1].copy()
+    start, length, lt, key, bounds, gaps, bad = kernel.locate_batch(buf, *_segments(chunks))
+    assert bad == -1
+    for slot, c in enumerate((1, 2, 3)):
+        got = np.stack([a[bounds[slot] : bounds[slot + 1]] for a in (start, length, lt, key)], 1)
+        np.testing.assert_array_equal(got, np.array(want[c]))
+    holes = [(b, b + 7) for b, *_ in chunks] + [(b + n - 3, b + n) for b, n, *_ in chunks]
+    assert sorted(map(tuple, gaps.reshape(-1, 2).tolist())) == sorted(holes)
 
 
 @pytest.mark.parametrize(
-    "fault", ["none", "opcode", "short length", "past the next", "past the chunk", "channel"]
+    "fault", ["opcode", "short length", "past the next", "past the chunk", "channel", "twice"]
 )
-def test_located_records_reads_good_records_and_names_the_first_bad_one(fault):
-    # The compiled check of a batch's indexed message records (MCAP): lengths and log times
-    # read from the bytes; the first record that fails a check named, as the numpy checks did.
-    rng = np.random.default_rng(7)
-    buf, offs, start, end, cid, lens, lt = _records(rng, 200)
+def test_locate_batch_names_a_record_that_does_not_check_out(fault):
+    # Any record that fails a check (its opcode, a length under the 22 header bytes or running
+    # into the next record or out of its chunk, another channel than its index's, indexed twice)
+    # is named, and the batch is then read chunk by chunk
+    rng = np.random.default_rng(8)
+    buf, chunks, _ = _batch(rng, 200)
+    base, size, _, index, offs, lens = chunks[1]
     k = 117
+    o = base + int(offs[k])
     if fault == "opcode":
-        buf[offs[k]] = 0x06
+        buf[o] = 0x06
     elif fault == "short length":
-        buf[offs[k] + 1 : offs[k] + 9] = np.frombuffer((21).to_bytes(8, "little"), np.uint8)
+        buf[o + 1 : o + 9] = np.frombuffer((21).to_bytes(8, "little"), np.uint8)
     elif fault == "past the next":
         longer = int(lens[k]) + 1
-        buf[offs[k] + 1 : offs[k] + 9] = np.frombuffer(longer.to_bytes(8, "little"), np.uint8)
+        buf[o + 1 : o + 9] = np.frombuffer(longer.to_bytes(8, "little"), np.uint8)
     elif fault == "past the chunk":
-        end[k:] = offs[k] + 20
+        chunks[1] = (base, int(offs[k]) + 20, *chunks[1][2:])
     elif fault == "channel":
-        cid[k] += 1
-    length, log_time, bad = kernel.located_records(buf, offs, start, end, cid)
-    if fault == "none":
-        assert bad == -1
-        np.testing.assert_array_equal(length, lens)
-        np.testing.assert_array_equal(log_time, lt)
+        buf[o + 9] = 1 + buf[o + 9] % 3
     else:
-        assert bad == k
-        np.testing.assert_array_equal(length[:k], lens[:k])
+        index[1] = np.sort(np.concatenate([index[1], index[1][5:6]]))  # one record, twice
+    assert kernel.locate_batch(buf, *_segments(chunks))[-1] >= 0
 
 
 def test_an_out_of_date_built_kernel_is_not_used(monkeypatch):

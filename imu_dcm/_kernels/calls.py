@@ -33,7 +33,7 @@ __all__ = [
     "close",
     "feed",
     "feed_delta",
-    "located_records",
+    "locate_batch",
     "push",
     "push_for",
     "record_chain",
@@ -123,20 +123,39 @@ def record_chain(b, pos: int) -> tuple[np.ndarray, np.ndarray, int]:
     return entry("record_chain")(b, int(pos))
 
 
-def located_records(buf, offs, start, end, channel) -> tuple[np.ndarray, np.ndarray, int]:
-    """The MCAP message records at ``offs`` of the uint8 array ``buf`` checked and read in one
-    compiled pass (:func:`imu_dcm._kernels.mcap_scan.located_records`): ``(length, log_time,
-    bad)``, each record's length and log time and the first record that does not check out
-    (-1: none). ``start``, ``end`` bound each record's chunk; ``channel`` is the channel id its
-    index names."""
+def locate_batch(buf, offs, seg, seg_chunk, seg_slot, bases, sizes, seqs, slot_cid) -> tuple:
+    """The MCAP message records a batch's message indexes point at, located, checked and
+    grouped by channel slot in one compiled pass
+    (:func:`imu_dcm._kernels.mcap_scan.locate_batch`): ``(start, length, log_time, order,
+    bounds, gaps, bad)``, ``bad`` -1 when every record checks out."""
     if not (isinstance(buf, np.ndarray) and buf.dtype == np.uint8 and buf.ndim == 1):
         raise TypeError(f"Expected `buf` a 1-D uint8 array, got {type(buf).__name__}")
-    ints = [np.ascontiguousarray(a, dtype=np.int64) for a in (offs, start, end, channel)]
+    ints = [
+        np.ascontiguousarray(a, dtype=np.int64)
+        for a in (offs, seg, seg_chunk, seg_slot, bases, sizes, seqs, slot_cid)
+    ]
+    offs, seg, seg_chunk, seg_slot, bases, sizes, seqs, slot_cid = ints
+    n_seg = len(seg) - 1
+    fits = (
+        n_seg >= 0
+        and seg[0] == 0
+        and seg[-1] == len(offs)
+        and np.all(np.diff(seg) >= 0)
+        and len(seg_chunk) == len(seg_slot) == n_seg
+        and len(sizes) == len(seqs) == len(bases)
+        and (not len(bases) or (bases.min() >= 0 and (bases + sizes).max() <= len(buf)))
+    )
+    if fits and n_seg:  # each segment's chunk (in order) and slot exist
+        fits = np.all(np.diff(seg_chunk) >= 0) and seg_chunk[0] >= 0
+        fits = fits and seg_chunk[-1] < len(bases) and seg_slot.min() >= 0
+        fits = fits and seg_slot.max() < len(slot_cid)
+    if not fits:
+        raise TypeError("Expected segments that match their entries, chunks and slots")
     buf = np.ascontiguousarray(buf)
     if backend() == "jit" and not buf.flags.writeable:
         buf = buf.copy()  # numba's signature is of a writable array (the built one reads any)
-    length, log_time, bad = entry("located_records")(buf, *ints)
-    return length, log_time, int(bad)
+    *arrays, bad = entry("locate_batch")(buf, *ints)
+    return (*arrays, int(bad))
 
 
 def scan_csv(blob: bytes, scale: int, digits: int) -> tuple[np.ndarray, bytes, int]:

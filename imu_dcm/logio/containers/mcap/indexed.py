@@ -13,9 +13,8 @@ import zlib
 from dataclasses import dataclass
 
 import numpy as np
-from numpy.typing import NDArray
 
-from imu_dcm._kernels import located_records
+from imu_dcm._kernels import locate_batch
 from imu_dcm.logio.containers.chunks import Decompressor, Job, batches
 from imu_dcm.logio.containers.mcap.reader import McapReader
 from imu_dcm.logio.containers.mcap.records import (
@@ -237,60 +236,38 @@ class IndexedReader(McapReader):
             self.take_chunk(j.out, start, k, entries, (t0, t1))
 
     def _take_located(self, buf: np.ndarray, group: list[Job]) -> bool:
-        """The batch's messages from their indexes, checked together (opcode, length, channel,
-        no overlap, inside their chunk) with one numpy pass per field; False, with nothing
-        kept, when any record does not check out."""
-        sizes = np.array([j.usize for j in group], np.int64)
-        bases = np.array([j.start for j in group], np.int64)  # damaged chunks leave holes
-        offs, icid = [], []
-        for j, base in zip(group, bases.tolist(), strict=True):
-            for c, e in j.key[4].items():
-                offs.append(e[0] + base)
-                icid.append(np.full(len(e[0]), c, np.int64))
-        offs, icid = np.concatenate(offs), np.concatenate(icid)
-        k = np.argsort(offs, kind="stable")
-        offs, icid = offs[k], icid[k]
-        chunk = np.searchsorted(bases, offs, side="right") - 1
-        start = bases[chunk]
-        # opcode, length inside the chunk and before the next record, channel: one compiled
-        # pass over the records, which reads their lengths and log times too
-        length, lt, bad = located_records(buf, offs, start, start + sizes[chunk], icid)
-        if bad >= 0 or not all(c in self.channels for j in group for c in j.key[4]):
+        """The batch's messages from their indexes, located, checked (opcode, length, channel,
+        no overlap, inside their chunk) and grouped by channel in one compiled pass; False,
+        with nothing kept, when any record does not check out."""
+        cids = sorted({c for j in group for c in j.key[4]})
+        if not all(c in self.channels for c in cids):
             return False
-        ends = offs + 9 + length
+        slot = {c: i for i, c in enumerate(cids)}
+        offs, seg, seg_chunk, seg_slot = [], [0], [], []
+        for k, j in enumerate(group):
+            for c, e in j.key[4].items():
+                offs.append(e[0])
+                seg.append(seg[-1] + len(e[0]))
+                seg_chunk.append(k)
+                seg_slot.append(slot[c])
+        bases = np.array([j.start for j in group], np.int64)  # damaged chunks leave holes
+        sizes = np.array([j.usize for j in group], np.int64)
+        seqs = np.array([j.key[0] for j in group], np.int64)
+        start, length, lt, order, bounds, gaps, bad = locate_batch(
+            buf, np.concatenate(offs), seg, seg_chunk, seg_slot, bases, sizes, seqs, cids
+        )
+        if bad >= 0:
+            return False
         self.n_kept = 0
         # schema and channel records between the indexed messages: walked chunk by chunk
-        gap_a, gap_b = _gaps(offs, ends, chunk, bases, sizes)
-        for a, b in zip(gap_a.tolist(), gap_b.tolist(), strict=True):
+        for a, b in gaps.reshape(-1, 2).tolist():
             g = int(np.searchsorted(bases, a, side="right")) - 1
             seq, pos, t0, t1, _ = group[g].key
             base = int(bases[g])
             self.walk(group[g].out, a - base, b - base, pos, seq, span=(t0, t1))
-        seqs = np.array([j.key[0] for j in group], np.int64)
-        order = (seqs[chunk] << 32) + (offs - start)
-        self.keep_spans(buf, offs, length, icid, lt, order, int(group[0].key[1]))
+        spans = [
+            (c, start[a:b], length[a:b], lt[a:b], order[a:b])
+            for c, a, b in zip(cids, bounds[:-1].tolist(), bounds[1:].tolist(), strict=True)
+        ]
+        self.hand_on(buf, spans)
         return True
-
-
-def _gaps(offs, ends, chunk, bases, sizes) -> tuple[NDArray, NDArray]:
-    """The byte ranges ``[a, b)`` of a batch not covered by its indexed messages, in file
-    order: before each chunk's first message, between messages, after its last (a chunk
-    without one is all gap). ``offs`` and ``ends`` are the messages' starts and ends in file
-    order, ``chunk`` the chunk of each, ``bases`` and ``sizes`` the chunks' (checked: the
-    messages do not overlap and lie inside their chunks)."""
-    k = len(bases)
-    # each chunk's range split at its messages: starts = chunk start and every message end,
-    # stops = every message start and chunk end; pair them in order within each chunk
-    first = np.searchsorted(chunk, np.arange(k), side="left")
-    last = np.searchsorted(chunk, np.arange(k), side="right")
-    starts = np.empty(len(offs) + k, np.int64)
-    stops = np.empty(len(offs) + k, np.int64)
-    # slot of each message's end (after its chunk's start and the messages before it)
-    at = np.arange(len(offs)) + chunk + 1
-    starts[at] = ends
-    stops[at - 1] = offs
-    head = first + np.arange(k)  # the chunk's start slot
-    starts[head] = bases
-    stops[last + np.arange(k)] = bases + sizes
-    keep = stops > starts
-    return starts[keep], stops[keep]

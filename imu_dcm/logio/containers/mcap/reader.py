@@ -189,24 +189,35 @@ class McapReader:
     ) -> None:
         """Hand the kept channels' payloads (message records at ``offs`` of ``d``) to the sink;
         ``order`` is each message's file-order key."""
-        kept = []
+        spans = []
         for c in np.flatnonzero(np.bincount(cid)).tolist():  # the ids present, ascending
             m = cid == c
             if c not in self.channels:
                 if note_unknown:
                     self.unknown[pos] = self.unknown.get(pos, 0) + int(m.sum())
                 continue
-            self.counts_seen[c] = self.counts_seen.get(c, 0) + int(m.sum())
+            spans.append((c, offs[m] + MSG_HEADER, length[m] - 22, log_time[m], order[m]))
+        self.hand_on(d, spans)
+
+    def hand_on(self, d, spans: list) -> None:
+        """Count each channel's messages of ``d`` and hand the kept ones' payloads to the sink:
+        ``spans`` holds ``(channel, payload starts, lengths, log times, file-order keys)``
+        of defined channels."""
+        kept = []
+        for c, s, n, lt, order in spans:
+            if not len(s):
+                continue
+            self.counts_seen[c] = self.counts_seen.get(c, 0) + len(s)
             if self.is_kept(c):
-                kept.append((c, m, offs[m] + MSG_HEADER, length[m] - 22))
+                kept.append((c, s, n, lt, order))
         # Kept channels that together fill most of the chunk keep the chunk as is, shared (no
         # copy: IMU and truth interleaved); small ones (IMU beside a camera) copy out their
         # payloads, so the chunk can go.
-        share = 2 * sum(int(n.sum()) for *_, n in kept) >= len(d)
-        for c, m, s, n in kept:
+        share = 2 * sum(int(n.sum()) for _, _, n, _, _ in kept) >= len(d)
+        for c, s, n, lt, order in kept:
             self.n_kept += len(s)
             buf = (d, s, n) if share else compact(d, s, n)
-            self.sink.add(c, Payloads(*buf, log_time[m], order[m]))
+            self.sink.add(c, Payloads(*buf, lt, order))
 
     def walk(
         self,
