@@ -430,7 +430,7 @@ def test_the_digest_covers_every_file_the_entry_points_are_compiled_from():
         "ulog_scan.py",
         "mcap_scan.py",
         "csv_scan.py",
-        "quat_steps.py",
+        "series.py",
     }
     assert files | {"state.py", "entries.py", "jit.py"} == set(loader.KERNEL_SOURCES)
 

@@ -323,6 +323,27 @@ def test_lagged_correlation_equals_numpy_corrcoef_per_lag():
     assert int(np.argmax(corr)) - lags == -7
 
 
+def test_integrated_rate_is_scipys_cumulative_trapezoid_interpolated():
+    from scipy.integrate import cumulative_trapezoid
+
+    from imu_dcm.replay.rate_check import integrated_rate
+
+    rng = np.random.default_rng(6)
+    n = 20_000
+    t = np.cumsum(rng.integers(900_000, 1_100_000, n)).astype(np.int64)  # ~1 kHz, jittered
+    w = rng.normal(size=(n, 3))
+    ts = (t - t[0]) * 1e-9
+    cum = cumulative_trapezoid(w, ts, axis=0, initial=0.0)
+    # in order, out of order, on the samples, before the first and after the last
+    at = np.concatenate([rng.integers(t[0] - 10**8, t[-1] + 10**8, 3000), t[::97]])
+    for stamps in (np.sort(at), at):
+        got = integrated_rate(t, w, stamps)
+        te = (stamps - t[0]) * 1e-9
+        want = np.stack([np.interp(te, ts, cum[:, k]) for k in range(3)], axis=1)
+        # sums of n steps in another order: n·eps of the largest partial sum (~sqrt(n) rad)
+        np.testing.assert_allclose(got, want, rtol=0, atol=n * np.finfo(float).eps * 200)
+
+
 def test_find_jumps_equals_every_step_judged_in_full():
     """The jump search screens steps by |q_i . q_i+1| before computing exact angles: the jumps
     it finds are those of judging every truth step against the gyro's path (brute force)."""

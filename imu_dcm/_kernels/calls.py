@@ -9,7 +9,7 @@ so the two are the same arithmetic. The code itself is :mod:`imu_dcm._kernels.in
 :func:`record_chain` and :func:`scan_csv` run the ULog and CSV scans
 (:mod:`~imu_dcm._kernels.ulog_scan`, :mod:`~imu_dcm._kernels.csv_scan`), :func:`step_rotvecs`
 and :func:`slerp_rows` the rotation of each step of an attitude series and the series at other
-stamps (:mod:`~imu_dcm._kernels.quat_steps`).
+stamps (:mod:`~imu_dcm._kernels.series`).
 
 Conventions: quaternions Hamilton ``[x, y, z, w]``, ``q_w_b`` body to world; rates ``ω`` rad/s
 in body axes; stamps ``t`` s; increments multiply on the right.
@@ -33,6 +33,7 @@ __all__ = [
     "close",
     "feed",
     "feed_delta",
+    "integrated_rate",
     "locate_batch",
     "push",
     "push_for",
@@ -172,7 +173,7 @@ def scan_csv(blob: bytes, scale: int, digits: int) -> tuple[np.ndarray, bytes, i
 
 def step_rotvecs(q, ok, out) -> int:
     """``out[k] = log(q_k⁻¹ ⊗ q_{k+1})`` for the rows of ``q`` (n, 4), NaN where ``ok[k]`` or
-    ``ok[k + 1]`` is False (:func:`imu_dcm._kernels.quat_steps.step_rotvecs`); the first pair
+    ``ok[k + 1]`` is False (:func:`imu_dcm._kernels.series.step_rotvecs`); the first pair
     with a zero or non-finite norm (-1: none)."""
     _arrays(q=(q, 2), out=(out, 2))
     if not (isinstance(ok, np.ndarray) and ok.dtype == np.bool_ and ok.ndim == 1):
@@ -188,7 +189,7 @@ def slerp_rows(tt, q, norm, bridged, t, out) -> None:
     """The attitudes ``q[j] / norm[j]`` at stamps ``tt`` (int64, strictly increasing) slerped
     at the stamps ``t`` into ``out`` (len(t), 4), NaN outside them and across a step that
     ``bridged`` (len(tt) - 1,) does not bridge
-    (:func:`imu_dcm._kernels.quat_steps.slerp_rows`)."""
+    (:func:`imu_dcm._kernels.series.slerp_rows`)."""
     _arrays(q=(q, 2), norm=(norm, 1), out=(out, 2))
     ints = [np.ascontiguousarray(a, dtype=np.int64) for a in (tt, t)]
     bridged = np.ascontiguousarray(bridged, dtype=bool)
@@ -200,3 +201,17 @@ def slerp_rows(tt, q, norm, bridged, t, out) -> None:
     if len(bridged) != max(len(q) - 1, 0):
         raise TypeError(f"Expected `bridged` of {max(len(q) - 1, 0)} steps, got {len(bridged)}")
     entry("slerp_rows")(ints[0], q, norm, bridged, ints[1], out)
+
+
+def integrated_rate(t_ns, w, at_ns, out) -> None:
+    """The trapezoid integral of ``w`` (N, C) over ``t_ns`` (N >= 1, increasing) at the
+    stamps ``at_ns`` (non-decreasing) into ``out`` (K, C)
+    (:func:`imu_dcm._kernels.series.integrated_rate`)."""
+    _arrays(w=(w, 2), out=(out, 2))
+    t, at = (np.ascontiguousarray(a, dtype=np.int64) for a in (t_ns, at_ns))
+    if len(t) < 1 or len(w) != len(t) or out.shape != (len(at), w.shape[1]):
+        raise TypeError(
+            f"Expected t_ns (N >= 1,), w (N, C) and out (K, C), got {t.shape}, {w.shape}, "
+            f"{out.shape} for {at.shape} stamps"
+        )
+    entry("integrated_rate")(t, w, at, out)

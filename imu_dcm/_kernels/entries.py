@@ -4,7 +4,7 @@ compiles from.
 The kernels are :mod:`~imu_dcm._kernels.integrator` (the attitude update),
 :mod:`~imu_dcm._kernels.ulog_scan` (the ULog record chain), :mod:`~imu_dcm._kernels.mcap_scan`
 (the MCAP message records of a batch) and :mod:`~imu_dcm._kernels.csv_scan` (the live CSV
-lines) and :mod:`~imu_dcm._kernels.quat_steps` (the rotation of each step of an attitude
+lines) and :mod:`~imu_dcm._kernels.series` (the rotation of each step of an attitude
 series); each lists its own entry points. A new
 kernel is one module with its ``ENTRIES``, one line here, and its file in
 :data:`imu_dcm._kernels.loader.KERNEL_SOURCES`.
@@ -12,7 +12,7 @@ kernel is one module with its ``ENTRIES``, one line here, and its file in
 
 from __future__ import annotations
 
-from imu_dcm._kernels import csv_scan, integrator, mcap_scan, quat_steps, ulog_scan
+from imu_dcm._kernels import csv_scan, integrator, mcap_scan, series, ulog_scan
 from imu_dcm._kernels.jit import compile_entry
 
 __all__ = ["ENTRIES", "compiled"]
@@ -23,7 +23,7 @@ ENTRIES: dict[str, tuple[object, str]] = {
     **ulog_scan.ENTRIES,
     **mcap_scan.ENTRIES,
     **csv_scan.ENTRIES,
-    **quat_steps.ENTRIES,
+    **series.ENTRIES,
 }
 
 

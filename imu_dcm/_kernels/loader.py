@@ -42,7 +42,7 @@ KERNEL_SOURCES = (
     "ulog_scan.py",
     "mcap_scan.py",
     "csv_scan.py",
-    "quat_steps.py",
+    "series.py",
     "state.py",
     "entries.py",
     "jit.py",

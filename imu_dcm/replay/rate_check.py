@@ -20,7 +20,8 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from imu_dcm.arrays import BLOCK_ROWS, median_diff, row_finite, row_norm
+from imu_dcm._kernels.calls import integrated_rate as kernel_integrated_rate
+from imu_dcm.arrays import median_diff, row_finite, row_norm
 from imu_dcm.gyro.resample import slerp_truth, step_rotvecs
 
 __all__ = [
@@ -118,32 +119,19 @@ def integrated_rate(
     (linear between samples), rad (K, 3); differences give the turn over short intervals.
     Any number of columns: ``omega_b`` (N, C) gives (K, C).
 
-    A block of samples at a time: the running integral carried from block to block (each step
-    added to the sum before it, in order) and each point interpolated in the block holding
-    it, the same numbers as over the whole log without its (N, C) temporaries."""
-    n, c = len(t_ns), omega_b.shape[1]
-    te = (np.asarray(at_ns) - t_ns[0]) * 1e-9
-    out = np.empty((len(te), c))
-    starts = np.arange(0, max(n - 1, 1), BLOCK_ROWS)
-    which = np.searchsorted((t_ns[starts] - t_ns[0]) * 1e-9, te, side="right") - 1
-    which = np.clip(which, 0, len(starts) - 1)
-    carry = np.zeros(c)
-    for k, a in enumerate(starts.tolist()):
-        b = min(n - 1, a + BLOCK_ROWS)  # samples a..b: the block's steps and its last sample
-        ts = (t_ns[a : b + 1] - t_ns[0]) * 1e-9
-        w = omega_b[a : b + 1]
-        cum = np.empty((b - a + 1, c))
-        cum[0] = carry
-        steps = 0.5 * (w[1:] + w[:-1]) * np.diff(ts)[:, None]
-        if len(steps):
-            steps[0] += carry
-        np.cumsum(steps, axis=0, out=cum[1:])
-        carry = cum[-1].copy()
-        sel = np.flatnonzero(which == k)
-        if len(sel):
-            for j in range(c):
-                out[sel, j] = np.interp(te[sel], ts, cum[:, j])
-    return out
+    One compiled pass over the samples up to the last stamp asked for
+    (:func:`imu_dcm._kernels.calls.integrated_rate`), the stamps taken in order."""
+    at = np.asarray(at_ns, dtype=np.int64)
+    w = np.ascontiguousarray(omega_b, dtype=float)
+    out = np.empty((len(at), w.shape[1]))
+    if np.all(at[1:] >= at[:-1]):
+        kernel_integrated_rate(t_ns, w, at, out)
+        return out
+    order = np.argsort(at, kind="stable")
+    kernel_integrated_rate(t_ns, w, at[order], out)
+    back = np.empty_like(out)
+    back[order] = out
+    return back
 
 
 @dataclass(slots=True, frozen=True)

@@ -1,7 +1,8 @@
-"""Attitude series, written for numba: the rotation of each step, ``log(q_k⁻¹ q_{k+1})`` for
-every pair of consecutive rows in one pass (the truth checks and the rest judgement of a replay
-run it over every truth row), and the series slerped at other stamps (the truth on the gyro's
-rows); their entry points (:data:`ENTRIES`).
+"""Attitude and rate series, written for numba: the rotation of each step of an attitude
+series, ``log(q_k⁻¹ q_{k+1})`` for every pair of consecutive rows in one pass (the truth checks
+and the rest judgement of a replay run it over every truth row), the series slerped at other
+stamps (the truth on the gyro's rows), and a rate's running integral at given stamps (the
+gyro's turn over the truth's steps); their entry points (:data:`ENTRIES`).
 
 Imported only to compile, like :mod:`imu_dcm._kernels.integrator`.
 """
@@ -16,12 +17,21 @@ from imu_dcm._kernels.integrator import exp_quat, quat_mul
 from imu_dcm._kernels.jit import inline
 from imu_dcm.so3 import SMALL_ANGLE_RAD
 
-__all__ = ["ENTRIES", "SIGNATURE", "SLERP_SIGNATURE", "slerp_rows", "step_rotvecs"]
+__all__ = [
+    "ENTRIES",
+    "INTEGRAL_SIGNATURE",
+    "SIGNATURE",
+    "SLERP_SIGNATURE",
+    "integrated_rate",
+    "slerp_rows",
+    "step_rotvecs",
+]
 
 SIGNATURE = "int64(float64[:, ::1], boolean[::1], float64[:, ::1])"
 SLERP_SIGNATURE = (
     "void(int64[::1], float64[:, ::1], float64[::1], boolean[::1], int64[::1], float64[:, ::1])"
 )
+INTEGRAL_SIGNATURE = "void(int64[::1], float64[:, ::1], int64[::1], float64[:, ::1])"
 #: A query this many truth steps past the last one's is found by bisection, not by walking.
 _WALK = 32
 
@@ -129,8 +139,45 @@ def slerp_rows(tt, q, norm, bridged, t, out):
         out[i, 0], out[i, 1], out[i, 2], out[i, 3] = quat_mul(q0, e)
 
 
+def integrated_rate(t_ns, w, at_ns, out):
+    """The trapezoid integral of the rate ``w`` (N, C) over the stamps ``t_ns`` (N,
+    increasing, ns) from the first sample to each of ``at_ns`` (non-decreasing), into ``out``
+    (K, C): the running sum of ``(w_k + w_{k+1}) / 2 · (t_{k+1} - t_k)`` (times in s from the
+    first stamp, each step added to the sum before it, in order), linear between samples as
+    ``np.interp`` takes it (the first value before the first stamp, the last after the last).
+    One pass up to the last query."""
+    n, c = w.shape
+    t0 = t_ns[0]
+    sums = np.zeros(c)  # the integral up to sample j
+    nxt = np.zeros(c)  # ... and up to j + 1
+    j = 0
+    t_j = 0.0
+    t_next = (t_ns[1] - t0) * 1e-9 if n > 1 else 0.0
+    if n > 1:
+        for k in range(c):
+            nxt[k] = 0.5 * (w[1, k] + w[0, k]) * t_next
+    for i in range(len(at_ns)):
+        te = (at_ns[i] - t0) * 1e-9
+        while j + 1 < n - 1 and te >= t_next:  # the step j .. j + 1 holding te
+            j += 1
+            t_j = t_next
+            t_next = (t_ns[j + 1] - t0) * 1e-9
+            for k in range(c):
+                sums[k] = nxt[k]
+                nxt[k] = nxt[k] + 0.5 * (w[j + 1, k] + w[j, k]) * (t_next - t_j)
+        for k in range(c):
+            if te <= t_j:  # at the sample (or before the first)
+                out[i, k] = sums[k]
+            elif te >= t_next:  # at the next (or after the last)
+                out[i, k] = nxt[k]
+            else:
+                slope = (nxt[k] - sums[k]) / (t_next - t_j)
+                out[i, k] = slope * (te - t_j) + sums[k]
+
+
 #: ``name -> (function, signature)`` of this kernel's entry points.
 ENTRIES = {
     "step_rotvecs": (step_rotvecs, SIGNATURE),
     "slerp_rows": (slerp_rows, SLERP_SIGNATURE),
+    "integrated_rate": (integrated_rate, INTEGRAL_SIGNATURE),
 }
