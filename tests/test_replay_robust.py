@@ -344,9 +344,11 @@ def test_integrated_rate_is_scipys_cumulative_trapezoid_interpolated():
         np.testing.assert_allclose(got, want, rtol=0, atol=n * np.finfo(float).eps * 200)
 
 
-def test_find_jumps_equals_every_step_judged_in_full():
+@pytest.mark.parametrize("rows", ["every row, in order", "a row without attitude"])
+def test_find_jumps_equals_every_step_judged_in_full(rows):
     """The jump search screens steps by |q_i . q_i+1| before computing exact angles: the jumps
-    it finds are those of judging every truth step against the gyro's path (brute force)."""
+    it finds are those of judging every truth step against the gyro's path (brute force),
+    whether the truth's rows are read in place or gathered (a row left out)."""
     from scipy.spatial.transform import Rotation
 
     from imu_dcm.replay.truth import JUMP_DEG, JUMP_RATIO, find_jumps
@@ -365,7 +367,11 @@ def test_find_jumps_equals_every_step_judged_in_full():
             turn = Rotation.from_rotvec(np.radians(jump) * axis / np.linalg.norm(axis))
             rots[-1] = turn * rots[-1]
     q = Rotation.concatenate(rots).as_quat() * rng.choice([-1.0, 1.0], size=(len(rots), 1))
+    if rows != "every row, in order":
+        q[50] = np.nan  # far from the jumps: the steps 49 and 50 become one
     got = find_jumps(t_ns, omega, tt, q)
+    kept = np.isfinite(q[:, 0])
+    tt, q = tt[kept], q[kept]
     # brute force: every step's angle (scipy) and the gyro's path length over it (trapezoid of
     # |omega|, linear between samples), the rule of JUMP_DEG and JUMP_RATIO
     ts = (t_ns - t_ns[0]) * 1e-9

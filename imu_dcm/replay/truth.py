@@ -290,7 +290,8 @@ def find_jumps(
     norm = row_norm(q)
     rows = np.flatnonzero(np.isfinite(norm) & (norm > 0.5))  # the truth's rows used, in order
     tt = tt[rows]
-    if not np.all(tt[1:] >= tt[:-1]):  # a stable sort leaves sorted stamps as they are
+    in_order = bool(np.all(tt[1:] >= tt[:-1]))
+    if not in_order:  # a stable sort leaves sorted stamps as they are
         order = np.argsort(tt, kind="stable")
         tt, rows = tt[order], rows[order]
     inside = (tt >= t_ns[0]) & (tt <= t_ns[-1])
@@ -305,10 +306,18 @@ def find_jumps(
     # steps at 0.9 JUMP_DEG (its rounding moves θ by ~1e-14 rad there, far inside the margin);
     # the exact angles and the gyro's path are computed for the few steps left, the same
     # numbers as over every step.
+    # the usual truth, every row used in file order, is read in place (no gathered copy)
+    r0 = int(rows[0]) if in_order and rows[-1] - rows[0] == len(rows) - 1 else -1
     cos_half = np.empty(len(rows) - 1)
     for a in range(0, len(cos_half), BLOCK_ROWS):
-        qb = unit(rows[a : a + BLOCK_ROWS + 1])
-        cos_half[a : a + BLOCK_ROWS] = np.abs(np.einsum("ij,ij->i", qb[:-1], qb[1:]))
+        if r0 >= 0:
+            k = slice(r0 + a, r0 + min(a + BLOCK_ROWS, len(cos_half)) + 1)
+            qb, nb = q[k], norm[k]
+            dot = np.einsum("ij,ij->i", qb[:-1], qb[1:]) / (nb[:-1] * nb[1:])
+        else:
+            qb = unit(rows[a : a + BLOCK_ROWS + 1])
+            dot = np.einsum("ij,ij->i", qb[:-1], qb[1:])
+        cos_half[a : a + BLOCK_ROWS] = np.abs(dot)
     i = np.flatnonzero(cos_half < np.cos(np.radians(0.9 * JUMP_DEG) / 2))
     if not len(i):
         return ()
