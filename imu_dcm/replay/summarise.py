@@ -84,6 +84,8 @@ def summarise(log, s, g: Gyro, bias_est, judged: Judged, pf_summary, anchors, er
     total = error.heading_deg if planar else error.total_deg
 
     mount = judged.mounting
+    bias = bias_est.bias_b[start:]  # one vector on every row (a view of it) is that vector
+    bias_mean = bias[0] if len(bias) and bias.strides[0] == 0 else bias.mean(axis=0)
     return ReplaySummary(
         path=str(log.path),
         container=getattr(log, "container", "ros2 mcap"),
@@ -99,11 +101,9 @@ def summarise(log, s, g: Gyro, bias_est, judged: Judged, pf_summary, anchors, er
         method=s.method,
         gyro_units=s.gyro_units,
         bias_mode=bias_est.mode,
-        bias_rad_s=tuple(float(x) for x in bias_est.bias_b[start:].mean(axis=0)),
+        bias_rad_s=tuple(float(x) for x in bias_mean),
         log_axes=getattr(imu, "log_axes", ""),
-        bias_log_rad_s=in_log_axes(
-            bias_est.bias_b[start:].mean(axis=0), getattr(imu, "log_axes", "")
-        ),
+        bias_log_rad_s=in_log_axes(bias_mean, getattr(imu, "log_axes", "")),
         bias_segments=tuple(x.as_dict() for x in bias_est.segments),
         prefilter=s.prefilter,
         prefilter_summary=pf_summary,
