@@ -142,3 +142,21 @@ def test_the_read_heap_thresholds_are_not_set_over_the_environments():
         {"GLIBC_TUNABLES": "glibc.malloc.mmap_threshold=131072"},
     ):
         assert heap_settings(env) == [], env
+
+
+def test_the_read_threads_are_daemons_that_end_with_the_read(tmp_path, monkeypatch):
+    # A signal that raises in the main thread while it starts a thread or waits on a future can
+    # leave one of their locks held: the read's threads must then not keep the process from
+    # exiting (daemons), and a read that finishes leaves none behind (a fork stays safe).
+    import threading
+
+    path, _imu, _truth = _log(tmp_path)
+    monkeypatch.setattr(chunks, "BATCH_BYTES", 1 << 14)  # several batches, one report each
+    seen: list = []
+
+    def during(_frac: float) -> None:
+        seen.append([t.daemon for t in threading.enumerate() if t.name.startswith("imu_dcm-read")])
+
+    read_log(path, progress=during)
+    assert len(seen) > 3 and all(len(s) == chunks.WORKERS and all(s) for s in seen[1:-1])
+    assert not [t for t in threading.enumerate() if t.name.startswith("imu_dcm-read")]

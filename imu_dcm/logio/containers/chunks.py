@@ -5,15 +5,23 @@ their messages costs about the same per call whatever the size, so it runs once 
 chunks (:data:`BATCH_BYTES` decompressed), not once per chunk. The chunks of a batch are
 decompressed side by side into one buffer, each into its own slice, by a small thread pool
 (zstd, lz4 and CRC-32 release the GIL), while the caller decodes the batch before.
+
+The pool's threads are daemons, one set per read: a signal handler that raises in the main
+thread (SIGTERM's :class:`~imu_dcm.app.run.Terminated`, Ctrl-C) can do so inside
+``Thread.start`` or a future's wait and leave one of their locks held, and the threads of an
+executor would then keep the process from exiting (it waits for them). A read that finishes
+waits for its threads to end, so none outlives it.
 """
 
 from __future__ import annotations
 
 import os
+import queue
 import sys
+import threading
 import zlib
 from collections.abc import Callable, Iterator
-from concurrent.futures import ThreadPoolExecutor
+from concurrent.futures import Future
 from dataclasses import dataclass
 
 import numpy as np
@@ -78,6 +86,45 @@ def _decompress_into(fd: int, job: Job, out: memoryview, decompress: Callable) -
         job.out = out
 
 
+class _Workers:
+    """:data:`WORKERS` daemon threads running submitted calls, each call's :class:`Future`
+    given back, for one read (see the module doc). :meth:`stop` ends them once their calls
+    are done: waited for after a read that finished, not after one given up."""
+
+    def __init__(self) -> None:
+        self._jobs: queue.SimpleQueue = queue.SimpleQueue()
+        self._threads = [
+            threading.Thread(target=self._work, args=(self._jobs,), name=f"imu_dcm-read-{k}")
+            for k in range(WORKERS)
+        ]
+        for t in self._threads:
+            t.daemon = True
+            t.start()
+
+    def submit(self, fn: Callable, *args) -> Future:
+        fut: Future = Future()
+        self._jobs.put((fut, fn, args))
+        return fut
+
+    def stop(self, wait: bool) -> None:
+        for _ in self._threads:
+            self._jobs.put(None)
+        if wait:
+            for t in self._threads:
+                t.join()
+
+    @staticmethod
+    def _work(jobs: queue.SimpleQueue) -> None:
+        while (job := jobs.get()) is not None:
+            fut, fn, args = job
+            if not fut.set_running_or_notify_cancel():
+                continue  # cancelled: its read was given up
+            try:
+                fut.set_result(fn(*args))
+            except BaseException as exc:  # handed to the caller, as an executor does
+                fut.set_exception(exc)
+
+
 class Decompressor:
     """Decompresses batches of :class:`Job` into one buffer each, on worker threads, one batch
     ahead of the caller. ``decompress(comp, data, out)`` fills ``out`` exactly or returns why
@@ -98,7 +145,7 @@ class Decompressor:
                 return self._free.pop(k)
         return np.empty(max(size, BATCH_BYTES), np.uint8)
 
-    def _start(self, pool: ThreadPoolExecutor, group: list[Job]):
+    def _start(self, pool: _Workers, group: list[Job]):
         size = sum(j.usize for j in group)
         whole = self._buffer(size)
         mv = memoryview(whole)
@@ -111,9 +158,11 @@ class Decompressor:
 
     def run(self, groups: Iterator[list[Job]]) -> Iterator[tuple[np.ndarray, list[Job]]]:
         """(buffer, jobs) per batch, in order; each job's ``out`` is its slice of the buffer
-        (None when damaged), valid until the next batch is asked for."""
-        with ThreadPoolExecutor(WORKERS) as pool:
-            ahead = None
+        (None when damaged), valid until the next batch is asked for. A read given up (an
+        error, a signal) cancels the batch started ahead that no worker has begun."""
+        pool, finished = _Workers(), False
+        ahead = started = None
+        try:
             for group in groups:
                 started = self._start(pool, group)
                 if ahead is not None:
@@ -121,6 +170,12 @@ class Decompressor:
                 ahead = started
             if ahead is not None:
                 yield from self._hand_over(ahead)
+            finished = True
+        finally:  # a batch handed over is emptied: only those still ahead have futures
+            for batch in (ahead, started):
+                for fut in batch[3] if batch else ():
+                    fut.cancel()
+            pool.stop(wait=finished)
 
     def _hand_over(self, started) -> Iterator[tuple[np.ndarray, list[Job]]]:
         whole, size, group, futures = started
