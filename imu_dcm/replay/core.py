@@ -256,13 +256,18 @@ def _score(q_est: NDArray, q_truth: NDArray) -> tuple[AttitudeError, NDArray]:
     for a in range(0, len(both), BLOCK_ROWS):
         k = slice(a, a + BLOCK_ROWS)
         ok = both[k]
+        every = bool(ok.all())  # the usual block: scored as it is, no masked copies
         err = attitude_error_deg(
-            np.where(ok[:, None], q_est[k], unit), np.where(ok[:, None], q_truth[k], unit)
+            q_est[k] if every else np.where(ok[:, None], q_est[k], unit),
+            q_truth[k] if every else np.where(ok[:, None], q_truth[k], unit),
         )
         for dst, got in zip(
             out, (err.total_deg, err.inclination_deg, err.heading_deg), strict=True
         ):
-            dst[k][ok] = got[ok]
+            if every:
+                dst[k] = got
+            else:
+                dst[k][ok] = got[ok]
     return AttitudeError(*out), both
 
 
