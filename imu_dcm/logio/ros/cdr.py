@@ -216,21 +216,22 @@ def decode(
                 return decode_slow(conn, raw, want)  # big-endian CDR
             good &= enc == 1  # mixed endianness: keep the little-endian ones
         base_all = raw.start + 4
-    idx = np.flatnonzero(good)
-    base = base_all[idx]
-    end = raw.start[idx] + raw.length[idx]
+    every = bool(good.all())  # the usual batch: its offsets as they are, no gathered copy
+    idx = None if every else np.flatnonzero(good)
+    base = base_all if every else base_all[idx]
+    end = raw.start + raw.length if every else raw.start[idx] + raw.length[idx]
     plan = _plan(defs, root, want)
     if isinstance(plan, Unsupported):
         return decode_slow(conn, raw, want)
     out: dict[str, NDArray] = {}
-    if not len(idx):
+    if not len(base):
         out = {k: np.zeros((0, c) if c > 1 else 0, dtype=d) for k, (d, c) in want.items()}
     else:
         try:
             _run(plan, raw.buf, base, end, out, align=not ros1)
         except _Short:
             return decode_slow(conn, raw, want)
-    if len(idx) == n:
+    if every:
         return out, good  # every message decoded: no row to fill
     full = {}
     for k, v in out.items():
