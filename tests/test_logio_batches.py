@@ -13,6 +13,7 @@ import pytest
 from imu_dcm.errors import ImuDcmWarning
 from imu_dcm.logio import read_log
 from imu_dcm.logio.containers import chunks
+from imu_dcm.logio.workers import WORKERS
 from imu_dcm.logio.writers import StampedSeries
 from imu_dcm.logio.writers import bag as writer
 
@@ -158,5 +159,5 @@ def test_the_read_threads_are_daemons_that_end_with_the_read(tmp_path, monkeypat
         seen.append([t.daemon for t in threading.enumerate() if t.name.startswith("imu_dcm-read")])
 
     read_log(path, progress=during)
-    assert len(seen) > 3 and all(len(s) == chunks.WORKERS and all(s) for s in seen[1:-1])
+    assert len(seen) > 3 and all(len(s) == WORKERS and all(s) for s in seen[1:-1])
     assert not [t for t in threading.enumerate() if t.name.startswith("imu_dcm-read")]

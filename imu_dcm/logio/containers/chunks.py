@@ -6,34 +6,27 @@ chunks (:data:`BATCH_BYTES` decompressed), not once per chunk. The chunks of a b
 decompressed side by side into one buffer, each into its own slice, by a small thread pool
 (zstd, lz4 and CRC-32 release the GIL), while the caller decodes the batch before.
 
-The pool's threads are daemons, one set per read: a signal handler that raises in the main
-thread (SIGTERM's :class:`~imu_dcm.app.run.Terminated`, Ctrl-C) can do so inside
-``Thread.start`` or a future's wait and leave one of their locks held, and the threads of an
-executor would then keep the process from exiting (it waits for them). A read that finishes
-waits for its threads to end, so none outlives it.
+The pool is :class:`imu_dcm.logio.workers.Workers` (daemon threads, one set per read).
 """
 
 from __future__ import annotations
 
 import os
-import queue
 import sys
-import threading
 import zlib
 from collections.abc import Callable, Iterator
-from concurrent.futures import Future
 from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["BATCH_BYTES", "WORKERS", "Decompressor", "Job", "batches"]
+from imu_dcm.logio.workers import Workers
+
+__all__ = ["BATCH_BYTES", "Decompressor", "Job", "batches"]
 
 
 #: Decompressed bytes per batch: ~16 chunks of rosbag2's 768 KiB, few enough numpy calls per
 #: message, a small multiple of a chunk held at once.
 BATCH_BYTES = 16 << 20
-#: Worker threads (decompression and CRC release the GIL); batches decompressed ahead.
-WORKERS = min(2, os.cpu_count() or 1)
 
 
 @dataclass(slots=True, eq=False)
@@ -86,45 +79,6 @@ def _decompress_into(fd: int, job: Job, out: memoryview, decompress: Callable) -
         job.out = out
 
 
-class _Workers:
-    """:data:`WORKERS` daemon threads running submitted calls, each call's :class:`Future`
-    given back, for one read (see the module doc). :meth:`stop` ends them once their calls
-    are done: waited for after a read that finished, not after one given up."""
-
-    def __init__(self) -> None:
-        self._jobs: queue.SimpleQueue = queue.SimpleQueue()
-        self._threads = [
-            threading.Thread(target=self._work, args=(self._jobs,), name=f"imu_dcm-read-{k}")
-            for k in range(WORKERS)
-        ]
-        for t in self._threads:
-            t.daemon = True
-            t.start()
-
-    def submit(self, fn: Callable, *args) -> Future:
-        fut: Future = Future()
-        self._jobs.put((fut, fn, args))
-        return fut
-
-    def stop(self, wait: bool) -> None:
-        for _ in self._threads:
-            self._jobs.put(None)
-        if wait:
-            for t in self._threads:
-                t.join()
-
-    @staticmethod
-    def _work(jobs: queue.SimpleQueue) -> None:
-        while (job := jobs.get()) is not None:
-            fut, fn, args = job
-            if not fut.set_running_or_notify_cancel():
-                continue  # cancelled: its read was given up
-            try:
-                fut.set_result(fn(*args))
-            except BaseException as exc:  # handed to the caller, as an executor does
-                fut.set_exception(exc)
-
-
 class Decompressor:
     """Decompresses batches of :class:`Job` into one buffer each, on worker threads, one batch
     ahead of the caller. ``decompress(comp, data, out)`` fills ``out`` exactly or returns why
@@ -145,7 +99,7 @@ class Decompressor:
                 return self._free.pop(k)
         return np.empty(max(size, BATCH_BYTES), np.uint8)
 
-    def _start(self, pool: _Workers, group: list[Job]):
+    def _start(self, pool: Workers, group: list[Job]):
         size = sum(j.usize for j in group)
         whole = self._buffer(size)
         mv = memoryview(whole)
@@ -160,7 +114,7 @@ class Decompressor:
         """(buffer, jobs) per batch, in order; each job's ``out`` is its slice of the buffer
         (None when damaged), valid until the next batch is asked for. A read given up (an
         error, a signal) cancels the batch started ahead that no worker has begun."""
-        pool, finished = _Workers(), False
+        pool, finished = Workers(), False
         ahead = started = None
         try:
             for group in groups:
