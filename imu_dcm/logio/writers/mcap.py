@@ -1,8 +1,9 @@
 """An indexed MCAP file (profile ``ros2``, zstd chunks) with every record built in bulk.
 
 The MCAP message records and message indexes are built with numpy (one byte array per topic
-and chunk); each chunk is built, compressed and written before the next (memory holds the
-input series and one chunk, never every payload), and only the few summary records go through
+and chunk); each chunk is built, then compressed on a worker thread while the next ones are
+built, and written in order (memory holds the input series and a few chunks, never every
+payload), and only the few summary records go through
 ``mcap.records``. The layout is the mcap library's own writer's: schemas and channels in the
 data section and again in the summary, message indexes after every chunk, the rosbag2 metadata
 record, statistics, chunk and metadata indexes, summary offsets. A file can be written a block
@@ -17,6 +18,7 @@ from __future__ import annotations
 
 import struct
 import zlib
+from collections import deque
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 from itertools import pairwise
@@ -42,6 +44,7 @@ from numpy.typing import NDArray
 from imu_dcm.errors import InputError
 from imu_dcm.logio.meta import QOS_YAML
 from imu_dcm.logio.paths import MCAP_MAGIC as MAGIC
+from imu_dcm.logio.workers import WORKERS, Workers
 from imu_dcm.logio.writers.messages import MSG_DEFINITIONS
 
 __all__ = ["OWN_LIBRARY", "Encoded", "Written", "write_mcap"]
@@ -189,27 +192,36 @@ def _message_indexes(m: _Messages, a: int, b: int, lo: int, pos: int, index) -> 
     return b"".join(parts)
 
 
+def _compressed(raw: bytes) -> tuple[bytes, int]:
+    """A chunk's records zstd-compressed (level 3, zstd's default) and their CRC-32 (both
+    release the GIL: run on a worker thread)."""
+    return zstandard.ZstdCompressor().compress(raw), zlib.crc32(raw)
+
+
 def _write_chunks(f, out, topics: list[Encoded], m: _Messages, chunk_size: int) -> list:
     """Write the zstd chunks of one block's messages, each followed by its message indexes;
     returns the chunk indexes.
 
-    Each chunk's records are built, compressed and written before the next one's: memory
-    holds one chunk, not the file.
+    Each chunk's records are built on this thread, compressed on a worker
+    (:class:`imu_dcm.logio.workers.Workers`) while the next ones are built, and written in
+    order: memory holds a few chunks, not the file.
     """
     pos = f.tell()
-    compressor = zstandard.ZstdCompressor()
     chunk_indexes: list[ChunkIndex] = []
-    for a, b in pairwise(_chunk_bounds(m, chunk_size)):
+    pending: deque = deque()  # (a, b, raw, future) of the chunks built, in order
+
+    def write_next() -> None:
+        nonlocal pos
+        a, b, raw, fut = pending.popleft()
+        data, crc = fut.result()
         lo = int(m.ends[a]) - int(m.sizes[m.chan[a]])
-        raw = _chunk_body(topics, m, a, b)
-        data = compressor.compress(raw)
         t0, t1 = int(m.stamps[a:b].min()), int(m.stamps[a:b].max())
         Chunk(
             compression="zstd",
             data=data,
             message_start_time=t0,
             message_end_time=t1,
-            uncompressed_crc=zlib.crc32(raw),
+            uncompressed_crc=crc,
             uncompressed_size=len(raw),
         ).write(out)
         chunk_bytes = out.end()
@@ -231,6 +243,21 @@ def _write_chunks(f, out, topics: list[Encoded], m: _Messages, chunk_size: int) 
         f.write(idx)
         pos += len(idx)
         chunk_indexes.append(index)
+
+    pool, finished = Workers(), False
+    try:
+        for a, b in pairwise(_chunk_bounds(m, chunk_size)):
+            raw = _chunk_body(topics, m, a, b)
+            pending.append((a, b, raw, pool.submit(_compressed, raw)))
+            if len(pending) > WORKERS:  # the workers busy: write the oldest
+                write_next()
+        while pending:
+            write_next()
+        finished = True
+    finally:
+        for *_, fut in pending:
+            fut.cancel()
+        pool.stop(wait=finished)
     return chunk_indexes
 
 
