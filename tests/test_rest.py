@@ -8,7 +8,7 @@ import math
 
 import numpy as np
 import pytest
-from conftest import raises_naming, small_blocks
+from conftest import raises_naming
 
 from imu_dcm.arrays import row_max, row_norm
 from imu_dcm.errors import InputError
@@ -17,7 +17,7 @@ from imu_dcm.gyro.rest import (
     quietest_std,
 )
 from imu_dcm.gyro.rest_rule import RestConfig, longest_run, runs, window_samples
-from imu_dcm.gyro.windows import window_norms, windowed_mean_var
+from imu_dcm.gyro.windows import min_steps, window_norms, windowed_mean_var
 
 
 def test_windowed_mean_var_equals_direct_windows():
@@ -35,18 +35,23 @@ def test_windowed_mean_var_equals_direct_windows():
     assert np.all(var >= 0.0)
 
 
-@pytest.mark.parametrize("rows", [7, 64, 1 << 17])
-@pytest.mark.parametrize("m", [1, 25, 700])
-def test_window_norms_are_the_norms_of_the_windows_bit_for_bit(monkeypatch, rows, m):
-    # Block by block, each window's sums are the running sums of the whole log (each row added
-    # to the sum before it, in order): the same bytes as row_norm / row_max of the whole-log
-    # mean and variance, whatever the block size, windows longer than a block included.
+@pytest.mark.parametrize("m", [1, 25, 700, 3000])
+def test_window_norms_are_the_norms_of_the_windows(m):
+    # One compiled pass with the running sums of windowed_mean_var (each row added to the sum
+    # before it, in order): the largest variance is its bytes; the norm adds the mean's three
+    # squares in order, numpy's einsum in its own, so the two are a rounding or two apart
     x = np.random.default_rng(m).normal(0.3, 0.2, size=(3000, 3))
+    x[2900] = np.nan  # from there on every window is NaN, as in numpy's sums
     mean, var = windowed_mean_var(x, m)
-    small_blocks(monkeypatch, rows)
     norm, max_var = window_norms(x, m)
-    assert norm.tobytes() == row_norm(mean).tobytes()
     assert max_var.tobytes() == row_max(var).tobytes()
+    np.testing.assert_allclose(norm, row_norm(mean), rtol=2 * np.finfo(float).eps, atol=0)
+    assert np.array_equal(np.isnan(norm), np.isnan(row_norm(mean)))
+    # the smallest positive step of each column, NaN steps none
+    d = np.abs(np.diff(x, axis=0))
+    want = np.where(d > 0, d, np.inf).min(axis=0)
+    np.testing.assert_array_equal(min_steps(x), want)
+    assert np.isinf(min_steps(np.ones((5, 2)))).all()
 
 
 def test_runs_and_longest_run():

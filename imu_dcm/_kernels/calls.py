@@ -35,12 +35,14 @@ __all__ = [
     "feed_delta",
     "integrated_rate",
     "locate_batch",
+    "min_steps",
     "push",
     "push_for",
     "record_chain",
     "scan_csv",
     "slerp_rows",
     "step_rotvecs",
+    "window_norms",
 ]
 
 
@@ -215,3 +217,25 @@ def integrated_rate(t_ns, w, at_ns, out) -> None:
             f"{out.shape} for {at.shape} stamps"
         )
     entry("integrated_rate")(t, w, at, out)
+
+
+def window_norms(x, m: int, norm, max_var) -> None:
+    """The norm of the mean and the largest column's variance of every window of ``m`` rows of
+    ``x`` (N, k), ``1 <= m <= N``, into ``norm`` and ``max_var`` (N - m + 1,)
+    (:func:`imu_dcm._kernels.series.window_norms`)."""
+    _arrays(x=(x, 2), norm=(norm, 1), max_var=(max_var, 1))
+    if not 1 <= m <= len(x) or len(norm) != len(x) - m + 1 or len(max_var) != len(norm):
+        raise TypeError(
+            f"Expected 1 <= m <= N and outputs of N - m + 1, got m={m}, x {x.shape}, "
+            f"{norm.shape}, {max_var.shape}"
+        )
+    entry("window_norms")(x, int(m), norm, max_var)
+
+
+def min_steps(x, out) -> None:
+    """The smallest positive step of each column of ``x`` (N, k) into ``out`` (k,)
+    (:func:`imu_dcm._kernels.series.min_steps`)."""
+    _arrays(x=(x, 2), out=(out, 1))
+    if out.shape != x.shape[1:]:
+        raise TypeError(f"Expected `out` of {x.shape[1:]}, got {out.shape}")
+    entry("min_steps")(x, out)

@@ -1,8 +1,9 @@
 """Attitude and rate series, written for numba: the rotation of each step of an attitude
 series, ``log(q_k⁻¹ q_{k+1})`` for every pair of consecutive rows in one pass (the truth checks
 and the rest judgement of a replay run it over every truth row), the series slerped at other
-stamps (the truth on the gyro's rows), and a rate's running integral at given stamps (the
-gyro's turn over the truth's steps); their entry points (:data:`ENTRIES`).
+stamps (the truth on the gyro's rows), a rate's running integral at given stamps (the
+gyro's turn over the truth's steps), and the statistics of every window of a series and its
+smallest steps (the rest rule's); their entry points (:data:`ENTRIES`).
 
 Imported only to compile, like :mod:`imu_dcm._kernels.integrator`.
 """
@@ -22,9 +23,12 @@ __all__ = [
     "INTEGRAL_SIGNATURE",
     "SIGNATURE",
     "SLERP_SIGNATURE",
+    "WINDOW_SIGNATURE",
     "integrated_rate",
+    "min_steps",
     "slerp_rows",
     "step_rotvecs",
+    "window_norms",
 ]
 
 SIGNATURE = "int64(float64[:, ::1], boolean[::1], float64[:, ::1])"
@@ -32,6 +36,8 @@ SLERP_SIGNATURE = (
     "void(int64[::1], float64[:, ::1], float64[::1], boolean[::1], int64[::1], float64[:, ::1])"
 )
 INTEGRAL_SIGNATURE = "void(int64[::1], float64[:, ::1], int64[::1], float64[:, ::1])"
+WINDOW_SIGNATURE = "void(float64[:, ::1], int64, float64[::1], float64[::1])"
+STEPS_SIGNATURE = "void(float64[:, ::1], float64[::1])"
 #: A query this many truth steps past the last one's is found by bisection, not by walking.
 _WALK = 32
 
@@ -175,9 +181,62 @@ def integrated_rate(t_ns, w, at_ns, out):
                 out[i, k] = slope * (te - t_j) + sums[k]
 
 
+def window_norms(x, m, norm, max_var):
+    """The norm of the mean and the largest column's variance of every window of ``m`` rows of
+    ``x`` (N, k) into ``norm`` and ``max_var`` (N - m + 1,).
+
+    The same arithmetic as :func:`imu_dcm.gyro.windows.windowed_mean_var` in numpy: running
+    sums of the rows and of their squares from the first row, each row added to the sum
+    before it; a window's mean ``(S[i + m] - S[i]) / m`` and variance ``(Q[i + m] - Q[i]) / m
+    - mean²``, at least 0; NaN taken through as ``np.maximum`` takes it. The sums of the last
+    ``m + 1`` rows are kept in a ring, so a window needs no array of the whole log's sums.
+    """
+    n, k = x.shape
+    s, q = np.zeros(k), np.zeros(k)  # the running sums before row j
+    ring_s, ring_q = np.zeros((m + 1, k)), np.zeros((m + 1, k))  # ... of the last m + 1 rows
+    for j in range(n + 1):
+        slot = j % (m + 1)
+        for c in range(k):
+            ring_s[slot, c], ring_q[slot, c] = s[c], q[c]
+        i = j - m  # the window of rows i .. j - 1 is complete
+        if i >= 0:
+            first = i % (m + 1)
+            acc, top = 0.0, 0.0
+            for c in range(k):
+                mean = (s[c] - ring_s[first, c]) / m
+                var = (q[c] - ring_q[first, c]) / m
+                var -= mean * mean
+                if var < 0.0:
+                    var = 0.0
+                acc += mean * mean
+                if top == top and (c == 0 or var > top or var != var):  # a NaN stays
+                    top = var
+            norm[i], max_var[i] = math.sqrt(acc), top
+        if j < n:
+            for c in range(k):
+                v = x[j, c]
+                s[c] += v
+                q[c] += v * v
+
+
+def min_steps(x, out):
+    """The smallest positive step ``|x[j + 1] - x[j]|`` of each column of ``x`` into ``out``
+    (inf where none; a NaN step is none)."""
+    n, k = x.shape
+    for c in range(k):
+        out[c] = math.inf
+    for j in range(n - 1):
+        for c in range(k):
+            d = abs(x[j + 1, c] - x[j, c])
+            if d > 0.0 and d < out[c]:
+                out[c] = d
+
+
 #: ``name -> (function, signature)`` of this kernel's entry points.
 ENTRIES = {
     "step_rotvecs": (step_rotvecs, SIGNATURE),
     "slerp_rows": (slerp_rows, SLERP_SIGNATURE),
     "integrated_rate": (integrated_rate, INTEGRAL_SIGNATURE),
+    "window_norms": (window_norms, WINDOW_SIGNATURE),
+    "min_steps": (min_steps, STEPS_SIGNATURE),
 }

@@ -6,7 +6,9 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import NDArray
 
-from imu_dcm.arrays import BLOCK_ROWS, cumsum_rows, row_max, row_norm
+from imu_dcm._kernels.calls import min_steps as kernel_min_steps
+from imu_dcm._kernels.calls import window_norms as kernel_window_norms
+from imu_dcm.arrays import BLOCK_ROWS, cumsum_rows
 
 __all__ = ["min_steps", "step_var", "window_norms", "windowed_mean_var"]
 
@@ -51,9 +53,9 @@ def windowed_mean_var(x: NDArray, m: int) -> tuple[NDArray, NDArray]:
 
 def window_norms(x: NDArray, m: int) -> tuple[NDArray, NDArray]:
     """The norm of the mean and the largest axis's variance of every window of ``m`` rows:
-    ``row_norm(mean)`` and ``row_max(var)`` of :func:`windowed_mean_var`, bit for bit, a block
-    of windows at a time (the memory of the two results and one block, not of two copies of
-    ``x``).
+    ``row_norm(mean)`` and ``row_max(var)`` of :func:`windowed_mean_var` (the same sums; the
+    norm's three squares added in order, a rounding apart from numpy's), in one compiled pass
+    (:func:`imu_dcm._kernels.calls.window_norms`) with the memory of the two results only.
 
     Parameters
     ----------
@@ -67,34 +69,15 @@ def window_norms(x: NDArray, m: int) -> tuple[NDArray, NDArray]:
     """
     k = len(x) - m + 1
     norm, max_var = np.empty(k), np.empty(k)
-    carry = np.zeros((2,) + x.shape[1:])  # the running sums of x and x² before the block
-    for a in range(0, k, BLOCK_ROWS):
-        b = min(k, a + BLOCK_ROWS)
-        rows = x[a : b + m - 1]
-        sums = np.empty((2, len(rows) + 1) + x.shape[1:])
-        sums[:, 0] = carry
-        sums[0, 1:] = rows
-        np.square(rows, out=sums[1, 1:])
-        sums[:, 1] += carry  # each row added to the sum before it, in order, as over all rows
-        np.cumsum(sums[:, 1:], axis=1, out=sums[:, 1:])
-        carry = sums[:, b - a].copy()
-        win = sums[:, m : m + b - a] - sums[:, : b - a]
-        mean, var = win[0], win[1]
-        mean /= m
-        var /= m
-        var -= mean * mean
-        np.maximum(var, 0.0, out=var)
-        norm[a:b], max_var[a:b] = row_norm(mean), row_max(var)
+    kernel_window_norms(np.ascontiguousarray(x, dtype=float), int(m), norm, max_var)
     return norm, max_var
 
 
 def min_steps(x: NDArray) -> NDArray:
-    """The smallest positive step of each column (inf where none), a block of rows at a time."""
-    out = np.full(x.shape[1], np.inf)
-    for a in range(0, len(x) - 1, BLOCK_ROWS):
-        d = np.abs(np.diff(x[a : a + BLOCK_ROWS + 1], axis=0))
-        d[~(d > 0)] = np.inf  # no step, or a NaN one
-        np.minimum(out, d.min(axis=0), out=out)
+    """The smallest positive step of each column (inf where none), in one compiled pass."""
+    x = np.ascontiguousarray(x, dtype=float)
+    out = np.empty(x.shape[1])
+    kernel_min_steps(x, out)
     return out
 
 
