@@ -26,11 +26,14 @@ _MERGE_MAX = 8  # a chunk of more indexed channels than this is sorted, not merg
 
 @inline
 def _u64(b, at: int) -> int:
-    """The little-endian 64-bit integer at ``b[at]`` (as int64: a top bit set is negative)."""
-    v = np.int64(0)
+    """The little-endian 64-bit integer at ``b[at]``, ``at >= 0`` (as int64: a top bit set is
+    negative). Indexed unsigned: with no negative index to wrap around, the compiler reads
+    the eight bytes as one load."""
+    p = np.uint64(at)
+    v = np.uint64(0)
     for k in range(8):
-        v |= np.int64(b[at + k]) << np.int64(8 * k)
-    return v
+        v |= np.uint64(b[p + np.uint64(k)]) << np.uint64(8 * k)
+    return np.int64(v)
 
 
 @inline

@@ -273,9 +273,10 @@ def _frame_id(c: Conn, p: Payloads, good: NDArray[np.bool_]) -> str:
 
 
 def _stamp(out: dict, prefix: str) -> NDArray[np.int64]:
-    sec = out[prefix + "stamp.sec"].astype(np.int64)
-    nsec = out[prefix + "stamp.nanosec"].astype(np.int64)
-    return sec * 1_000_000_000 + nsec
+    sec = out[prefix + "stamp.sec"].astype(np.int64, copy=False)  # decoded as int64 already
+    t = sec * 1_000_000_000
+    t += out[prefix + "stamp.nanosec"]
+    return t
 
 
 def _field_names(defs: Defs, root: str, path: str) -> set[str]:
