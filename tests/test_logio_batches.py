@@ -156,8 +156,34 @@ def test_the_read_threads_are_daemons_that_end_with_the_read(tmp_path, monkeypat
     seen: list = []
 
     def during(_frac: float) -> None:
-        seen.append([t.daemon for t in threading.enumerate() if t.name.startswith("imu_dcm-read")])
+        seen.append(
+            [t.daemon for t in threading.enumerate() if t.name.startswith("imu_dcm-worker")]
+        )
 
     read_log(path, progress=during)
     assert len(seen) > 3 and all(len(s) == WORKERS and all(s) for s in seen[1:-1])
-    assert not [t for t in threading.enumerate() if t.name.startswith("imu_dcm-read")]
+    assert not [t for t in threading.enumerate() if t.name.startswith("imu_dcm-worker")]
+
+
+@pytest.mark.parametrize("offset", [(1 << 63) - 10, (1 << 64) - 1, 1 << 40])
+@pytest.mark.parametrize("batch_bytes", [8 * 4096, 1])
+def test_an_index_offset_far_past_its_chunk_costs_nothing(
+    tmp_path, monkeypatch, offset, batch_bytes
+):
+    # A message index entry damaged to point far out of its chunk (near 2^63, where an added
+    # header size wraps an int64 negative; 2^64 - 1, read as -1): the batch is read chunk by
+    # chunk, the record is found by walking the chunk, and every message is kept.
+    from mcap.reader import make_reader
+
+    path, imu, truth = _log(tmp_path)
+    buf = bytearray(path.read_bytes())
+    chunk = make_reader(io.BytesIO(bytes(buf))).get_summary().chunk_indexes[3]
+    at = min(chunk.message_index_offsets.values())  # a message index record of that chunk
+    buf[at + 15 + 16 + 8 : at + 15 + 16 + 16] = offset.to_bytes(8, "little")  # entry 1's offset
+    path.write_bytes(bytes(buf))
+    monkeypatch.setattr(chunks, "BATCH_BYTES", batch_bytes)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", ImuDcmWarning)
+        log = read_log(path)
+    assert np.array_equal(log.imu.t_ns, imu.t_ns)
+    assert np.array_equal(log.truth.t_ns, truth.t_ns)

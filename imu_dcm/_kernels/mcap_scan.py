@@ -109,8 +109,10 @@ def locate_batch(buf, offs, seg, seg_chunk, seg_slot, bases, sizes, seqs, slot_c
         done = base  # the end of the record before
         for r in range(m):
             i = idx[r]
+            if offs[i] < 0 or offs[i] > sizes[c] - _HEADER:  # no sum that can overflow
+                return start, length, log_time, order, bounds, gaps[:g], np.int64(i)
             o = base + offs[i]
-            if offs[i] < 0 or o < done or o + _HEADER > end or buf[o] != _OP_MESSAGE:
+            if o < done or buf[o] != _OP_MESSAGE:
                 return start, length, log_time, order, bounds, gaps[:g], np.int64(i)
             size = _u64(buf, o + 1)
             cid = np.int64(buf[o + 9]) | (np.int64(buf[o + 10]) << np.int64(8))

@@ -150,7 +150,9 @@ def integrated_rate(t_ns, w, at_ns, out):
     increasing, ns) from the first sample to each of ``at_ns`` (non-decreasing), into ``out``
     (K, C): the running sum of ``(w_k + w_{k+1}) / 2 · (t_{k+1} - t_k)`` (times in s from the
     first stamp, each step added to the sum before it, in order), linear between samples as
-    ``np.interp`` takes it (the first value before the first stamp, the last after the last).
+    ``np.interp`` takes it (the first value before the first stamp, the last after the last;
+    the same numbers for finite rates: between two infinite sums ``np.interp`` keeps inf where
+    this gives NaN).
     One pass up to the last query."""
     n, c = w.shape
     t0 = t_ns[0]

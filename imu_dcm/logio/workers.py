@@ -30,7 +30,7 @@ class Workers:
     def __init__(self) -> None:
         self._jobs: queue.SimpleQueue = queue.SimpleQueue()
         self._threads = [
-            threading.Thread(target=self._work, args=(self._jobs,), name=f"imu_dcm-read-{k}")
+            threading.Thread(target=self._work, args=(self._jobs,), name=f"imu_dcm-worker-{k}")
             for k in range(WORKERS)
         ]
         for t in self._threads:

@@ -140,7 +140,7 @@ class McapReader:
             icid = np.concatenate([np.full(len(e[0]), c) for c, e in entries.items()])
             k = np.argsort(offs, kind="stable")
             offs, icid = offs[k], icid[k]
-            inside = (offs >= 0) & (offs + MSG_HEADER <= size)
+            inside = (offs >= 0) & (offs <= size - MSG_HEADER)  # an offset near 2^63 cannot wrap
             o = np.where(inside, offs, 0)
             length_u = gather(d, o + 1, "u8")
             valid = inside & (d[o] == OP_MESSAGE) & (length_u >= 22) & (length_u <= size)
