@@ -7,9 +7,10 @@ streaming :class:`imu_dcm.DcmIntegrator`: every sample goes through :func:`push`
 complete. Batch is "feed every sample, then :func:`close`"; streaming feeds them as they come,
 so the two are the same arithmetic. The code itself is :mod:`imu_dcm._kernels.integrator`;
 :func:`record_chain` and :func:`scan_csv` run the ULog and CSV scans
-(:mod:`~imu_dcm._kernels.ulog_scan`, :mod:`~imu_dcm._kernels.csv_scan`), :func:`step_rotvecs`
-and :func:`slerp_rows` the rotation of each step of an attitude series and the series at other
-stamps (:mod:`~imu_dcm._kernels.series`).
+(:mod:`~imu_dcm._kernels.ulog_scan`, :mod:`~imu_dcm._kernels.csv_scan`), :func:`locate_batch`
+the MCAP records of a batch (:mod:`~imu_dcm._kernels.mcap_scan`), and :func:`step_rotvecs`,
+:func:`slerp_rows`, :func:`integrated_rate`, :func:`window_norms` and :func:`min_steps` the
+passes over whole series (:mod:`~imu_dcm._kernels.series`).
 
 Conventions: quaternions Hamilton ``[x, y, z, w]``, ``q_w_b`` body to world; rates ``ω`` rad/s
 in body axes; stamps ``t`` s; increments multiply on the right.

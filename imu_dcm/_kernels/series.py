@@ -75,12 +75,8 @@ def step_rotvecs(q, ok, out):
         if not (ok[k] and ok[k + 1]):
             out[k, 0] = out[k, 1] = out[k, 2] = np.nan
             continue
-        ax, ay, az, aw = q[k, 0], q[k, 1], q[k, 2], q[k, 3]
-        bx, by, bz, bw = q[k + 1, 0], q[k + 1, 1], q[k + 1, 2], q[k + 1, 3]
-        x = aw * bx - ax * bw - ay * bz + az * by
-        y = aw * by + ax * bz - ay * bw - az * bx
-        z = aw * bz - ax * by + ay * bx - az * bw
-        w = aw * bw + ax * bx + ay * by + az * bz
+        a_conj = (-q[k, 0], -q[k, 1], -q[k, 2], q[k, 3])
+        x, y, z, w = quat_mul(a_conj, (q[k + 1, 0], q[k + 1, 1], q[k + 1, 2], q[k + 1, 3]))
         norm = math.sqrt(x * x + y * y + z * z + w * w)
         if not (norm > 0.0 and norm < math.inf):
             out[k, 0] = out[k, 1] = out[k, 2] = np.nan

@@ -69,8 +69,8 @@ def step_rotvecs(q: ArrayLike, ok: ArrayLike, out: NDArray | None = None) -> NDA
     """Each step's rotation ``log(q_k⁻¹ ⊗ q_{k+1})`` of a series of attitudes, rad.
 
     The same numbers as :func:`~imu_dcm.so3.log_quat` of :func:`~imu_dcm.so3.quat_multiply` of
-    the conjugate, in one
-    compiled pass with no temporaries (:func:`imu_dcm._kernels.calls.step_rotvecs`).
+    the conjugate, in one compiled pass with no temporaries
+    (:func:`imu_dcm._kernels.calls.step_rotvecs`).
 
     Parameters
     ----------
