@@ -1,4 +1,4 @@
-"""The compiled kernels (private): the attitude update, the ULog and MCAP scans and the CSV scan.
+"""The compiled kernels (private): the attitude update, log scans, series passes, ROS fields.
 
 What the rest of the package uses is here (:data:`__all__`): the state layout and the codes of
 a push (:mod:`~imu_dcm._kernels.state`), the checked entry points
@@ -9,8 +9,10 @@ package imports neither numba nor the kernels' sources.
 One kernel a file, each written for numba with its entry points:
 :mod:`~imu_dcm._kernels.integrator` (the DCM recursion, the per-sample push, the end step, the
 input check, the delta-angle rules), :mod:`~imu_dcm._kernels.ulog_scan` (PX4 ULog's record
-chain), :mod:`~imu_dcm._kernels.mcap_scan` (a batch's MCAP message records) and
-:mod:`~imu_dcm._kernels.csv_scan` (live CSV lines). :mod:`~imu_dcm._kernels.entries`
+chain), :mod:`~imu_dcm._kernels.mcap_scan` (a batch's MCAP message records),
+:mod:`~imu_dcm._kernels.csv_scan` (live CSV lines), :mod:`~imu_dcm._kernels.series` (passes
+over whole series) and :mod:`~imu_dcm._kernels.ros_fields` (the wanted fields of a batch of ROS
+messages). :mod:`~imu_dcm._kernels.entries`
 lists their entry points, :mod:`~imu_dcm._kernels.jit` compiles them with numba, and
 :mod:`~imu_dcm._kernels.build` builds them ahead of time into ``imu_dcm._kernels._aot``
 (``python -m imu_dcm._kernels.build``).

@@ -10,7 +10,8 @@ so the two are the same arithmetic. The code itself is :mod:`imu_dcm._kernels.in
 (:mod:`~imu_dcm._kernels.ulog_scan`, :mod:`~imu_dcm._kernels.csv_scan`), :func:`locate_batch`
 the MCAP records of a batch (:mod:`~imu_dcm._kernels.mcap_scan`), and :func:`step_rotvecs`,
 :func:`slerp_rows`, :func:`integrated_rate`, :func:`window_norms` and :func:`min_steps` the
-passes over whole series (:mod:`~imu_dcm._kernels.series`).
+passes over whole series (:mod:`~imu_dcm._kernels.series`), and :func:`walk_fields` the wanted
+fields of a batch of ROS messages (:mod:`~imu_dcm._kernels.ros_fields`).
 
 Conventions: quaternions Hamilton ``[x, y, z, w]``, ``q_w_b`` body to world; rates ``ω`` rad/s
 in body axes; stamps ``t`` s; increments multiply on the right.
@@ -43,6 +44,7 @@ __all__ = [
     "scan_csv",
     "slerp_rows",
     "step_rotvecs",
+    "walk_fields",
     "window_norms",
 ]
 
@@ -160,6 +162,42 @@ def locate_batch(buf, offs, seg, seg_chunk, seg_slot, bases, sizes, seqs, slot_c
         buf = buf.copy()  # numba's signature is of a writable array (the built one reads any)
     *arrays, bad = entry("locate_batch")(buf, *ints)
     return (*arrays, int(bad))
+
+
+def walk_fields(buf, start, length, cdr: bool, steps, out, good) -> int:
+    """The wanted values of the messages ``buf[start[i] : start[i] + length[i]]`` (CDR, else
+    ROS 1) into the rows of ``out`` (n, W) uint64, following the layout ``steps`` (k, 6) int64
+    (:mod:`~imu_dcm._kernels.field_steps`); ``good[i]`` whether message ``i`` lies inside
+    ``buf`` and holds them all (:func:`imu_dcm._kernels.ros_fields.walk_fields`). Returns how
+    many do not."""
+    if not (isinstance(buf, np.ndarray) and buf.dtype == np.uint8 and buf.ndim == 1):
+        raise TypeError(f"Expected `buf` a 1-D uint8 array, got {type(buf).__name__}")
+    start, length = (np.ascontiguousarray(a, dtype=np.int64) for a in (start, length))
+    n = len(start)
+    if not (
+        len(length) == n
+        and isinstance(steps, np.ndarray) and steps.dtype == np.int64
+        and steps.ndim == 2 and steps.shape[1] == 6 and steps.flags.c_contiguous
+        and isinstance(out, np.ndarray) and out.dtype == np.uint64
+        and out.ndim == 2 and len(out) == n and out.flags.c_contiguous
+        and isinstance(good, np.ndarray) and good.dtype == np.bool_ and good.shape == (n,)
+    ):  # fmt: skip
+        raise TypeError(
+            "Expected start and length (n,), steps (k, 6) int64, out (n, W) uint64, good (n,) bool"
+        )
+    kind, size, count, col, want = steps[:, 0], steps[:, 1], steps[:, 2], steps[:, 4], steps[:, 5]
+    if len(steps) and not (
+        np.isin(size, (1, 2, 4, 8)).all()
+        and (count >= 0).all()
+        and (col >= -1).all()
+        and (col + want <= out.shape[1]).all()
+        and (want <= np.where((kind == 0) & (col >= 0), count, 0)).all()
+    ):
+        raise TypeError("Expected steps of 1, 2, 4 or 8 bytes whose wanted values fit `out`")
+    buf = np.ascontiguousarray(buf)
+    if backend() == "jit" and not buf.flags.writeable:
+        buf = buf.copy()  # numba's signature is of a writable array (the built one reads any)
+    return int(entry("walk_fields")(buf, start, length, bool(cdr), steps, out, good))
 
 
 def scan_csv(blob: bytes, scale: int, digits: int) -> tuple[np.ndarray, bytes, int]:

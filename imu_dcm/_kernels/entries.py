@@ -3,16 +3,16 @@ compiles from.
 
 The kernels are :mod:`~imu_dcm._kernels.integrator` (the attitude update),
 :mod:`~imu_dcm._kernels.ulog_scan` (the ULog record chain), :mod:`~imu_dcm._kernels.mcap_scan`
-(the MCAP message records of a batch) and :mod:`~imu_dcm._kernels.csv_scan` (the live CSV
-lines) and :mod:`~imu_dcm._kernels.series` (the rotation of each step of an attitude
-series); each lists its own entry points. A new
-kernel is one module with its ``ENTRIES``, one line here, and its file in
-:data:`imu_dcm._kernels.loader.KERNEL_SOURCES`.
+(the MCAP message records of a batch), :mod:`~imu_dcm._kernels.csv_scan` (the live CSV
+lines), :mod:`~imu_dcm._kernels.series` (passes over whole attitude and rate series) and
+:mod:`~imu_dcm._kernels.ros_fields` (the wanted fields of a batch of ROS messages); each lists
+its own entry points. A new kernel is one module with its ``ENTRIES``, one line here, and its
+file in :data:`imu_dcm._kernels.loader.KERNEL_SOURCES`.
 """
 
 from __future__ import annotations
 
-from imu_dcm._kernels import csv_scan, integrator, mcap_scan, series, ulog_scan
+from imu_dcm._kernels import csv_scan, integrator, mcap_scan, ros_fields, series, ulog_scan
 from imu_dcm._kernels.jit import compile_entry
 
 __all__ = ["ENTRIES", "compiled"]
@@ -24,6 +24,7 @@ ENTRIES: dict[str, tuple[object, str]] = {
     **mcap_scan.ENTRIES,
     **csv_scan.ENTRIES,
     **series.ENTRIES,
+    **ros_fields.ENTRIES,
 }
 
 

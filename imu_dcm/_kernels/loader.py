@@ -43,6 +43,8 @@ KERNEL_SOURCES = (
     "mcap_scan.py",
     "csv_scan.py",
     "series.py",
+    "ros_fields.py",
+    "field_steps.py",
     "state.py",
     "entries.py",
     "jit.py",

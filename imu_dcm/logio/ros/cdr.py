@@ -1,24 +1,30 @@
-"""Bulk numpy decoding of ROS 2 CDR and ROS 1 payloads: one pass per field, all messages at once.
+"""Bulk decoding of ROS 2 CDR and ROS 1 payloads: the wanted fields of every message at once.
 
-A vectorised walker follows the fields of a message definition in order, keeping one byte
-offset per message (strings and sequences make offsets differ between messages, e.g. a
-``frame_id`` of varying length) and gathers the wanted leaves (``header.stamp``,
-``angular_velocity`` ...) with one fancy index each. ROS 2 CDR aligns each primitive to its
-size relative to the payload after the 4-byte encapsulation header; ROS 1 packs fields little
-endian without alignment or header. Layouts the walker cannot follow (sequences of strings or
-of messages before a wanted field, big-endian CDR) fall back to rosbags' deserialiser, message
-by message.
+A message definition is flattened once into steps (:func:`_compile`): primitives, string
+lengths and sequence counts, in field order up to the last wanted leaf (``header.stamp``,
+``angular_velocity`` ...). One compiled pass (:func:`imu_dcm._kernels.calls.walk_fields`)
+follows them through every message with its own byte offset (strings and sequences make offsets
+differ between messages, e.g. a ``frame_id`` of varying length) and copies each wanted value
+into a row of 64-bit words, which are then seen as the leaves' types. ROS 2 CDR aligns each
+primitive to its size relative to the payload after the 4-byte encapsulation header; ROS 1
+packs fields little endian without alignment or header. Layouts the walk cannot follow
+(sequences of strings or of messages before a wanted field, big-endian CDR), and any message
+too short for it, are decoded by rosbags' deserialiser, message by message.
 """
 
 from __future__ import annotations
 
+import threading
+
 import numpy as np
 from numpy.typing import NDArray
 
+from imu_dcm._kernels.calls import walk_fields
+from imu_dcm._kernels.field_steps import KIND_PRIM, KIND_SEQ, KIND_STRING
 from imu_dcm.logio.ros.collect import Conn, Payloads
 from imu_dcm.logio.ros.schema import PRIM, Defs, typestore_for
 
-__all__ = ["BLOCK", "Unsupported", "Want", "decode", "decode_slow", "gather"]
+__all__ = ["Scratch", "Unsupported", "Want", "decode", "decode_slow", "gather"]
 
 
 Want = dict[str, tuple[str, int]]  # field path -> (output dtype, element count)
@@ -26,10 +32,6 @@ Want = dict[str, tuple[str, int]]  # field path -> (output dtype, element count)
 
 class Unsupported(Exception):
     """The vectorised walker cannot follow this layout; use the per-message decoder."""
-
-
-class _Short(Exception):
-    """Some message is shorter than the layout."""
 
 
 def gather(buf: NDArray[np.uint8], pos: NDArray[np.int64], dtype: str, n: int = 1) -> NDArray:
@@ -89,10 +91,47 @@ def _compile(defs: Defs, type_name: str, want: Want, found: set, steps: list, pa
             _compile(defs, f.base, want, found, steps, path + ".", depth + 1)
 
 
+_KINDS = {"prim": KIND_PRIM, "seq": KIND_SEQ, "string": KIND_STRING}
+
+
+class _Walk:
+    """A compiled walk as the kernel reads it: ``steps`` (k, 6) int64 (the columns of
+    :mod:`imu_dcm._kernels.field_steps`), ``width`` words a message, and each wanted leaf's
+    ``(path, first word, count, primitive, output dtype)``."""
+
+    __slots__ = ("leaves", "steps", "width")
+
+    def __init__(self, steps: list[_Step]) -> None:
+        rows, leaves, width = [], [], 0
+        for kind, size, n, path, prim, count, dtype in steps:
+            col = -1
+            if dtype:
+                col, width = width, width + count
+                leaves.append((path, col, count, prim, dtype))
+            row = [_KINDS[kind], size, n, int(prim[:1] == "i"), col, count if dtype else 0]
+            last = rows[-1] if rows else None
+            # the next values of a run (x, y, z of a vector), all wanted or none: one step
+            if (
+                last is not None and row[0] == last[0] == KIND_PRIM
+                and (row[1], row[3]) == (last[1], last[3])
+                and (
+                    (col >= 0 and row[5] == n and last[5] == last[2] and col == last[4] + last[5])
+                    or col == last[4] == -1
+                )
+            ):  # fmt: skip
+                last[2] += n
+                last[5] += row[5]
+            else:
+                rows.append(row)
+        self.steps = np.array(rows, np.int64).reshape(-1, 6)
+        self.width = width
+        self.leaves = tuple(leaves)
+
+
 _PLANS: dict = {}
 
 
-def _plan(defs: Defs, root: str, want: Want) -> tuple[_Step, ...] | Unsupported:
+def _plan(defs: Defs, root: str, want: Want) -> _Walk | Unsupported:
     """The compiled walk of ``root`` for ``want``, computed once per layout and reused (a live
     source decodes a batch every few ms). Holds ``defs`` so that its ``id`` stays its own."""
     key = (id(defs), root, tuple(want.items()))
@@ -105,7 +144,7 @@ def _plan(defs: Defs, root: str, want: Want) -> tuple[_Step, ...] | Unsupported:
         _compile(defs, root, want, found, steps, "", 0)
         if len(found) != len(want):
             raise Unsupported(f"fields {sorted(set(want) - found)} not found")
-        plan: tuple | Unsupported = tuple(steps)
+        plan: _Walk | Unsupported = _Walk(steps)
     except Unsupported as exc:
         plan = exc
     if len(_PLANS) >= 64:
@@ -114,131 +153,77 @@ def _plan(defs: Defs, root: str, want: Want) -> tuple[_Step, ...] | Unsupported:
     return plan
 
 
-def _skip(buf, base, off, room, room_min, align: bool):
-    """Offsets after a u4 count or length at ``off``, and the count (int if all equal)."""
-    if align:
-        off = (off + 3) & ~3
-    if (off + 4 > room_min) if isinstance(off, int) else np.any(off + 4 > room):
-        raise _Short
-    n = gather(buf, base + off, "u4").astype(np.int64)
-    lo, hi = n.min(), n.max()
-    return off + 4, (int(lo) if lo == hi else n)
+class Scratch:
+    """The walk's words, reused from batch to batch by one decoder: fresh memory costs more
+    to touch than the walk that fills it. The leaves :func:`decode` returns are views of it,
+    valid until its next use in the same thread (each thread has its own)."""
+
+    __slots__ = ("_local",)
+
+    def __init__(self) -> None:
+        self._local = threading.local()
+
+    def words(self, n: int, width: int) -> NDArray[np.uint64]:
+        buf = getattr(self._local, "buf", None)
+        if buf is None or len(buf) < n * width:
+            buf = self._local.buf = np.empty(n * width + (n * width >> 2), np.uint64)
+        return buf[: n * width].reshape(n, width)
 
 
-def _run(plan, buf, base, end, out: dict, align: bool) -> None:
-    """Follow a compiled walk over every message at once; gather the wanted leaves into ``out``.
-
-    The offset stays a Python int while it is the same in every message (the usual case: one
-    ``frame_id`` per channel), an array once strings or sequences make messages differ. Leaves
-    at an int offset are gathered together, one fancy index per primitive type.
-    """
-    room = end - base
-    room_min = int(room.min())
-    off: int | NDArray[np.int64] = 0
-    fixed: dict[str, list] = {}  # primitive -> [(path, offset, count, dtype)]
-    for kind, size, n, path, prim, count, dtype in plan:
-        if kind == "string":
-            off, length = _skip(buf, base, off, room, room_min, align)
-            off = off + length
-            continue
-        if kind == "seq":
-            off, n = _skip(buf, base, off, room, room_min, align)
-        if align and size > 1:
-            off = (off + size - 1) & ~(size - 1)
-        if dtype:
-            need = off + size * count
-            if (need > room_min) if isinstance(need, int) else np.any(need > room):
-                raise _Short
-            if isinstance(off, int):
-                fixed.setdefault(prim, []).append((path, off, count, dtype))
-            else:
-                out[path] = gather(buf, base + off, prim, count).astype(dtype)
-        off = off + size * n
-    if fixed:
-        _gather_fixed(buf, base, fixed, out)
+def _words_as(words: NDArray[np.uint64], col: int, count: int, prim: str, dtype: str) -> NDArray:
+    """The leaf at ``words[:, col : col + count]`` as ``dtype``: a view where the types allow
+    (a float64, an integer into int64), else converted."""
+    block = words[:, col] if count == 1 else words[:, col : col + count]
+    if prim == "f4":
+        values = block.astype(np.uint32).view(np.float32)
+    elif prim in ("f8", "u8"):
+        values = block.view("<" + prim)
+    else:  # an integer of 1-4 bytes, or int64: extended to 64 bits by the walk
+        values = block.view(np.int64)
+    return values.astype(dtype, copy=False)
 
 
-#: Messages whose runs are copied at once (~1 MiB of runs: they stay in cache, and the same
-#: allocation is reused from block to block instead of touching fresh memory, which costs
-#: more here than the copy).
-BLOCK = 4096
-
-
-def _gather_fixed(buf, base, fixed: dict[str, list], out: dict) -> None:
-    """Leaves at the same offset in every message: the bytes from the first to the last copied
-    once per message (one run, :data:`BLOCK` messages at a time), each leaf then seen in it at
-    its offset and copied into its output."""
-    spans = [(o, o + np.dtype(p).itemsize * c) for p, ls in fixed.items() for _, o, c, _ in ls]
-    lo = min(a for a, _ in spans) & ~7  # CDR aligns each value to its size: the run keeps that
-    width = max(b for _, b in spans) - lo  # inside every message (checked by the walk)
-    n = len(base)
-    if n and int(base.max()) + lo + (-width % 8) + width <= len(buf):
-        width += -width % 8  # a whole number of float64: the leaves stay aligned in the run
-    runs = np.ndarray((len(buf) - width + 1,), np.dtype((np.void, width)), buf, strides=(1,))
-    views = []
-    for prim, leaves in fixed.items():
-        size = np.dtype(prim).itemsize
-        for path, off, count, dtype in leaves:
-            dst = out[path] = np.empty((n, count) if count > 1 else n, dtype)
-            views.append((dst, off - lo, size * count, "<" + prim, count))
-    for a in range(0, n, BLOCK):
-        b = min(n, a + BLOCK)
-        rows = runs[base[a:b] + lo].view(np.uint8).reshape(b - a, width)
-        for dst, at, nbytes, prim, count in views:
-            v = rows[:, at : at + nbytes].view(prim)
-            dst[a:b] = v[:, 0] if count == 1 else v
+def _walk(
+    conn: Conn, plan: _Walk, raw: Payloads, want: Want, scratch: Scratch | None
+) -> tuple[dict[str, NDArray], NDArray[np.bool_]]:
+    """The wanted leaves of every message of ``raw`` by the compiled walk; a message it cannot
+    follow to the end (too short, big-endian) is given to rosbags' deserialiser. Returns the
+    leaves (views of the words: of ``scratch`` when given) and which messages decoded."""
+    n, width = len(raw), plan.width
+    words = np.empty((n, width), np.uint64) if scratch is None else scratch.words(n, width)
+    ok = np.empty(n, bool)
+    cdr = conn.encoding != "ros1"
+    bad = walk_fields(raw.buf, raw.start, raw.length, cdr, plan.steps, words, ok)
+    out = {path: _words_as(words, *rest) for path, *rest in plan.leaves}
+    if bad:  # whatever rosbags makes of them (those inside the buffer)
+        rows = np.flatnonzero(~ok)
+        rows = rows[(raw.start[rows] >= 0) & (raw.start[rows] + raw.length[rows] <= len(raw.buf))]
+        sub = Payloads(raw.buf, raw.start[rows], raw.length[rows], raw.log_time[rows], rows)
+        slow, ok[rows] = decode_slow(conn, sub, want)
+        for k, v in out.items():
+            v[rows] = slow[k]
+    return out, ok
 
 
 def decode(
-    conn: Conn, defs: Defs, root: str, raw: Payloads, want: Want
+    conn: Conn, defs: Defs, root: str, raw: Payloads, want: Want, scratch: Scratch | None = None
 ) -> tuple[dict[str, NDArray], NDArray[np.bool_]]:
-    """Decode the wanted leaves of every message of ``raw``.
+    """Decode the wanted leaves of every message of ``raw``; with ``scratch``, the leaves may
+    be views of it (valid until its next use).
 
     Returns
     -------
     out : dict field path -> array (N,) or (N, count); rows of undecodable messages are NaN / 0.
     good : bool (N,) — messages that decoded.
     """
-    n = len(raw)
-    if n == 0:
-        return {
-            k: np.zeros((0, c) if c > 1 else 0, dtype=d) for k, (d, c) in want.items()
-        }, np.zeros(0, bool)
-    ros1 = conn.encoding == "ros1"
-    if ros1:
-        good = np.ones(n, bool)
-        base_all = raw.start
-    else:
-        good = raw.length >= 4
-        enc = np.where(good, raw.buf[np.minimum(raw.start + 1, max(len(raw.buf) - 1, 0))], 1)
-        if np.any(enc[good] != 1):
-            if np.all(enc[good] == 0):
-                return decode_slow(conn, raw, want)  # big-endian CDR
-            good &= enc == 1  # mixed endianness: keep the little-endian ones
-        base_all = raw.start + 4
-    every = bool(good.all())  # the usual batch: its offsets as they are, no gathered copy
-    idx = None if every else np.flatnonzero(good)
-    base = base_all if every else base_all[idx]
-    end = raw.start + raw.length if every else raw.start[idx] + raw.length[idx]
     plan = _plan(defs, root, want)
     if isinstance(plan, Unsupported):
         return decode_slow(conn, raw, want)
-    out: dict[str, NDArray] = {}
-    if not len(base):
-        out = {k: np.zeros((0, c) if c > 1 else 0, dtype=d) for k, (d, c) in want.items()}
-    else:
-        try:
-            _run(plan, raw.buf, base, end, out, align=not ros1)
-        except _Short:
-            return decode_slow(conn, raw, want)
-    if every:
-        return out, good  # every message decoded: no row to fill
-    full = {}
-    for k, v in out.items():
-        arr = np.full((n,) + v.shape[1:], np.nan if v.dtype.kind == "f" else 0, dtype=v.dtype)
-        arr[idx] = v
-        full[k] = arr
-    return full, good
+    out, good = _walk(conn, plan, raw, want, scratch)
+    if not good.all():
+        for v in out.values():
+            v[~good] = np.nan if v.dtype.kind == "f" else 0
+    return out, good
 
 
 def _leaf(msg, path: str):

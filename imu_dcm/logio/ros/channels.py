@@ -21,7 +21,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from imu_dcm.errors import LogError
-from imu_dcm.logio.ros.cdr import decode
+from imu_dcm.logio.ros.cdr import Scratch, decode
 from imu_dcm.logio.ros.collect import Collected, Columns, Conn, Payloads
 from imu_dcm.logio.ros.schema import Defs, definitions, norm_type
 from imu_dcm.logio.ros.tf import TF_TYPE, child_frame, is_static_tf
@@ -118,6 +118,7 @@ class ChannelDecoder:
         self.conn, self.role, self.path = conn, role, path
         self.ready: tuple | None = None
         self.error: LogError | None = None
+        self.scratch = Scratch()  # every field below is a new array: none is a view of it
 
     def _setup(self) -> tuple:
         defs, root = definitions(self.conn)
@@ -144,7 +145,7 @@ class ChannelDecoder:
             z = np.zeros(0, np.int64)
             return Columns(z, z, {}, {}, self.error, len(p))
         defs, root, want = self.ready
-        out, good = decode(self.conn, defs, root, p, want)
+        out, good = decode(self.conn, defs, root, p, want, self.scratch)
         frames = {"type": root}
         if good.any() and (self.role == "truth" or self.path in ("", "vec3")):
             # only a bare message has its header's frame_id at a fixed place
