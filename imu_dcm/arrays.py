@@ -79,22 +79,33 @@ def row_max(a: ArrayLike) -> NDArray[np.float64]:
 def median(values: ArrayLike) -> float:
     """The median of all the values, as ``np.median`` gives it (the middle one, or the mean of
     the two middle ones; NaN when any value is NaN or there is none), without the masked-array
-    module ``np.median`` imports on its first call (~13 ms of a replay's start-up)."""
-    a = np.asarray(values, dtype=np.float64).ravel()
+    module ``np.median`` imports on its first call (~13 ms of a replay's start-up). One copy,
+    partially sorted in place (``np.partition`` would copy a second time)."""
+    a = _own_copy(values)
     n = a.size
-    if n == 0 or np.isnan(a).any():
+    if n == 0 or math.isnan(a.max()):  # max is NaN when any value is
         return math.nan
     k = n // 2
     if n % 2:
-        return float(np.partition(a, k)[k])
-    part = np.partition(a, (k - 1, k))
-    return float((part[k - 1] + part[k]) / 2.0)
+        a.partition(k)
+        return float(a[k])
+    a.partition((k - 1, k))
+    return float((a[k - 1] + a[k]) / 2.0)
+
+
+def _own_copy(values: ArrayLike) -> NDArray[np.float64]:
+    """All the values as a new flat float64 array (one copy, even of a strided view)."""
+    a = np.array(values, dtype=np.float64, copy=True, order="C")
+    return a.reshape(-1)
 
 
 def median_diff(values: ArrayLike) -> float:
     """``median(np.diff(values))`` (the median step of a series of stamps, say) with one
-    temporary: the differences, partially sorted in place."""
-    d = np.diff(np.asarray(values)).astype(np.float64, copy=False)
+    temporary: the differences (taken in the values' own type, so that int64 stamps differ
+    exactly, then stored as float64), partially sorted in place."""
+    a = np.asarray(values).reshape(-1)
+    d = np.empty(max(a.size - 1, 0), np.float64)
+    np.subtract(a[1:], a[:-1], out=d, casting="unsafe")
     n = d.size
     if n == 0 or np.isnan(d).any():
         return math.nan
@@ -120,15 +131,15 @@ def percentile(values: ArrayLike, q: float) -> float:
     """The ``q``-th percentile (0-100) of all the values, as ``np.percentile`` gives it by its
     default linear rule (NaN when any value is NaN or there is none), without the masked-array
     module that ``np.percentile`` imports on its first call."""
-    a = np.asarray(values, dtype=np.float64).ravel()
+    a = _own_copy(values)
     n = a.size
-    if n == 0 or np.isnan(a).any():
+    if n == 0 or math.isnan(a.max()):
         return math.nan
     v = (q / 100.0) * (n - 1)
     lo = math.floor(v)
     hi = min(lo + 1, n - 1)
     t = v - lo
-    part = np.partition(a, (lo, hi))
-    x, y = float(part[lo]), float(part[hi])
+    a.partition((lo, hi))
+    x, y = float(a[lo]), float(a[hi])
     d = y - x
     return y - d * (1.0 - t) if t >= 0.5 else x + d * t  # numpy's two-sided interpolation
