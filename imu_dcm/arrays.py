@@ -76,12 +76,14 @@ def row_max(a: ArrayLike) -> NDArray[np.float64]:
     return out
 
 
-def median(values: ArrayLike) -> float:
+def median(values: ArrayLike, overwrite_input: bool = False) -> float:
     """The median of all the values, as ``np.median`` gives it (the middle one, or the mean of
     the two middle ones; NaN when any value is NaN or there is none), without the masked-array
     module ``np.median`` imports on its first call (~13 ms of a replay's start-up). One copy,
-    partially sorted in place (``np.partition`` would copy a second time)."""
-    a = _own_copy(values)
+    partially sorted in place (``np.partition`` would copy a second time); with
+    ``overwrite_input``, a contiguous float64 array is partially sorted itself, as numpy's
+    option of that name does (its order is then undefined)."""
+    a = values if overwrite_input and _is_own(values) else _own_copy(values)
     n = a.size
     if n == 0 or math.isnan(a.max()):  # max is NaN when any value is
         return math.nan
@@ -91,6 +93,16 @@ def median(values: ArrayLike) -> float:
         return float(a[k])
     a.partition((k - 1, k))
     return float((a[k - 1] + a[k]) / 2.0)
+
+
+def _is_own(values) -> bool:
+    return (
+        isinstance(values, np.ndarray)
+        and values.dtype == np.float64
+        and values.ndim == 1
+        and values.flags.c_contiguous
+        and values.flags.writeable
+    )
 
 
 def _own_copy(values: ArrayLike) -> NDArray[np.float64]:

@@ -163,6 +163,8 @@ def test_median_and_percentile_equal_numpy_bit_for_bit(n):
         for q in (0, 1, 25, 50, 75, 99, 99.9, 100, *rng.uniform(0, 100, 5)):
             assert percentile(a, q) == float(np.percentile(a, q)), q
         assert np.array_equal(a, before)  # partially sorted on a copy of its own
+        own = np.array(a, dtype=np.float64)  # partially sorted itself, when asked
+        assert median(own.copy(), overwrite_input=True) == float(np.median(a))
     assert np.isnan(median([1.0, np.nan, 2.0])) and np.isnan(percentile([np.nan], 50))
     assert np.isnan(median([])) and np.isnan(percentile([], 50))
 

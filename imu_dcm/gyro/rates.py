@@ -75,7 +75,7 @@ def truth_rate_ratio(omega_b: NDArray, t_s: NDArray, q_truth: NDArray) -> float 
     moving = pair & (truth_rate > _MOVING_RAD_S)
     if moving.sum() <= 10:
         return None
-    return median(gyro_rate[moving] / truth_rate[moving])
+    return median(gyro_rate[moving] / truth_rate[moving], overwrite_input=True)
 
 
 def deg_evidence(omega_b: NDArray, t_s: NDArray, q_truth: NDArray) -> str | None:

@@ -83,7 +83,8 @@ def position_noise_m(p_w: ArrayLike) -> float:
     p = p[np.all(np.isfinite(p), axis=1)]
     if len(p) < 3:
         return 0.0
-    return float(1.4826 * np.median(np.abs(np.diff(p, 2, axis=0)), axis=0).max() / math.sqrt(6))
+    d2 = np.abs(np.diff(p, 2, axis=0))
+    return float(1.4826 * np.median(d2, axis=0, overwrite_input=True).max() / math.sqrt(6))
 
 
 def twist_noise_rad_s(omega_b: ArrayLike) -> float:
@@ -93,7 +94,8 @@ def twist_noise_rad_s(omega_b: ArrayLike) -> float:
     w = w[np.all(np.isfinite(w), axis=1)]
     if len(w) < 2:
         return 0.0
-    mad = float(1.4826 * np.median(np.abs(np.diff(w, axis=0)), axis=0).max() / math.sqrt(2))
+    d1 = np.abs(np.diff(w, axis=0))
+    mad = float(1.4826 * np.median(d1, axis=0, overwrite_input=True).max() / math.sqrt(2))
     return math.sqrt(max(mad * mad, step_var(min_steps(w))))
 
 
@@ -125,7 +127,7 @@ def truth_noise_rad(q_w_b: ArrayLike, step_ok: ArrayLike | None = None) -> float
         got = np.abs(np.diff(d, axis=0))[sel]
         vals[:, filled : filled + len(got)] = got.T
         filled += len(got)
-    spread = max(median(vals[k]) for k in range(3))
+    spread = max(median(vals[k], overwrite_input=True) for k in range(3))
     return 1.4826 * spread / math.sqrt(6.0)
 
 
