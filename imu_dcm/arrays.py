@@ -56,8 +56,20 @@ def row_norm(a: ArrayLike) -> NDArray[np.float64]:
 
 def row_finite(a: ArrayLike) -> NDArray[np.bool_]:
     """Whether every element along the last axis is finite, shape ``(...)``:
-    ``np.all(np.isfinite(a), axis=-1)``, column by column (many times faster for ``(N, 4)``)."""
-    f = np.isfinite(a)
+    ``np.all(np.isfinite(a), axis=-1)``, column by column (many times faster for ``(N, 4)``);
+    a 2-D array :data:`BLOCK_ROWS` rows at a time, with no whole-log temporary."""
+    a = np.asarray(a)
+    if a.ndim == 2 and a.shape[1] and len(a) > BLOCK_ROWS:
+        out = np.empty(len(a), bool)
+        scratch = np.empty((BLOCK_ROWS, a.shape[1]), bool)
+        for lo in range(0, len(a), BLOCK_ROWS):
+            hi = min(len(a), lo + BLOCK_ROWS)
+            out[lo:hi] = _all_finite(np.isfinite(a[lo:hi], out=scratch[: hi - lo]))
+        return out
+    return _all_finite(np.isfinite(a))
+
+
+def _all_finite(f: NDArray[np.bool_]) -> NDArray[np.bool_]:
     if f.ndim == 0 or f.shape[-1] == 0:
         return np.all(f, axis=-1)
     out = f[..., 0].copy()

@@ -69,6 +69,13 @@ def _run_stdin(lines: list[bytes], tmp_path, gyro_units_given: str = "deg/s", **
 def test_the_rule_is_replays():
     w = np.array([[0, 0, MAX_RATE_RAD_S], [0, -1.0001 * MAX_RATE_RAD_S, 0], [np.nan, 0, 0]])
     assert implausible_rates(w).tolist() == [False, True, False]
+    from imu_dcm.arrays import BLOCK_ROWS  # a long log: block by block, the same rows
+
+    long = np.zeros((2 * BLOCK_ROWS + 5, 3))
+    rows = [0, BLOCK_ROWS - 1, BLOCK_ROWS, 2 * BLOCK_ROWS + 4]
+    long[rows, [0, 1, 2, 1]] = [2 * MAX_RATE_RAD_S, -np.inf, -3 * MAX_RATE_RAD_S, np.inf]
+    long[7] = np.nan
+    assert np.flatnonzero(implausible_rates(long)).tolist() == rows
 
 
 @pytest.mark.parametrize("text", ["1e30", "1.7e308", "-3e38"])

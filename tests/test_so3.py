@@ -112,14 +112,23 @@ def test_log_quat_of_half_turns_matches_scipy_without_warnings():
 
 
 def test_row_helpers_equal_numpy_reductions_over_the_last_axis():
-    from imu_dcm.arrays import row_finite, row_max, row_norm
+    from imu_dcm.arrays import BLOCK_ROWS, row_finite, row_max, row_norm
 
     rng = np.random.default_rng(11)
-    for shape in [(4,), (50, 4), (7, 3), (3, 5, 2), (0, 4)]:
+    # the last two are taken BLOCK_ROWS rows at a time (a partial block at the end)
+    for shape in [
+        (4,),
+        (50, 4),
+        (7, 3),
+        (3, 5, 2),
+        (0, 4),
+        (2 * BLOCK_ROWS + 3, 4),
+        (BLOCK_ROWS + 1, 3),
+    ]:
         a = rng.normal(size=shape) * 10.0 ** rng.integers(-8, 8, size=shape)
         if a.size > 4:
-            a.flat[[1, 5]] = np.nan
-            a.flat[3] = np.inf
+            a.flat[[1, 5, a.size - 1]] = np.nan
+            a.flat[[3, a.size // 2]] = np.inf
         want = np.linalg.norm(a, axis=-1)
         # a sum of at most four squares in another order: a few ulps apart
         np.testing.assert_allclose(row_norm(a), want, rtol=4 * EPS, atol=0)

@@ -51,7 +51,12 @@ def implausible_rates(omega_b: ArrayLike) -> NDArray[np.bool_]:
     bool (N,)
     """
     w = np.asarray(omega_b, dtype=float).reshape(-1, 3)
-    return row_max(np.abs(w)) > MAX_RATE_RAD_S
+    out = np.empty(len(w), bool)
+    scratch = np.empty((min(len(w), BLOCK_ROWS), 3))  # reused: no whole-log |w|
+    for a in range(0, len(w), BLOCK_ROWS):
+        b = min(len(w), a + BLOCK_ROWS)
+        out[a:b] = row_max(np.abs(w[a:b], out=scratch[: b - a])) > MAX_RATE_RAD_S
+    return out
 
 
 def truth_rate_ratio(omega_b: NDArray, t_s: NDArray, q_truth: NDArray) -> float | None:

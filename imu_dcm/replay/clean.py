@@ -98,7 +98,8 @@ def _wild_stamps(t: NDArray[np.int64]) -> NDArray[np.bool_]:
     if n < w:
         return np.zeros(n, dtype=bool)
     step = np.diff(t)
-    positive = step[step > 0]
+    up = step > 0
+    positive = step if up.all() else step[up]  # the usual log: no copy
     if len(positive) == 0:
         return np.zeros(n, dtype=bool)
     limit = WILD_STAMP_STEPS * median(positive)
@@ -174,12 +175,14 @@ def clean_imu(
     """
     t = np.asarray(t_ns, dtype=np.int64)
     w = w_in = np.asarray(omega_b, dtype=float)
-    index = np.arange(len(t), dtype=np.int64)
+    index = None  # each kept row's place in the input; None while every row is kept, in order
 
     def drop(mask: NDArray[np.bool_]) -> None:  # copies only when something goes
         nonlocal t, w, index
         if mask.any():
-            t, w, index = t[~mask], w[~mask], index[~mask]
+            keep = ~mask
+            t, w = t[keep], w[keep]
+            index = np.flatnonzero(keep) if index is None else index[keep]
 
     nonfinite = ~row_finite(w)
     n_bad = int(nonfinite.sum())
@@ -203,8 +206,8 @@ def clean_imu(
 
     counts = (n_bad, bad, n_dup, n_conf, n_wild, wild_t, n_sorted)
     messages, gaps = _report(topic, t, t0, counts, diagnostics)
-    if len(index) == len(w_in) and not n_sorted:  # every sample kept, in place
-        index = slice(0, len(index))
+    if index is None:  # every sample kept, in place
+        index = slice(0, len(w_in))
     return CleanedImu(
         t,
         w,
@@ -232,7 +235,8 @@ def _sort_and_dedupe(t, w, index):
         before = np.maximum.accumulate(np.concatenate([t[:1], t[:-1]]))
         n_sorted = int(np.count_nonzero(t < before))  # stamps earlier than one already seen
         order = np.argsort(t, kind="stable")
-        t, w, index = t[order], w[order], index[order]
+        t, w = t[order], w[order]
+        index = order if index is None else index[order]
         step = np.diff(t)
     same = np.concatenate([[False], step == 0])
     if not same.any():
@@ -242,7 +246,8 @@ def _sort_and_dedupe(t, w, index):
     dup = same & np.all(w == w[first], axis=1)
     n_dup = int(dup.sum())
     keep = ~same
-    return t[keep], w[keep], index[keep], n_sorted, n_dup, int(same.sum()) - n_dup
+    index = np.flatnonzero(keep) if index is None else index[keep]
+    return t[keep], w[keep], index, n_sorted, n_dup, int(same.sum()) - n_dup
 
 
 def _report(topic, t, t0, counts, diagnostics: Diagnostics | None):

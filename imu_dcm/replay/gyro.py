@@ -74,7 +74,9 @@ def prepare_gyro(log: LogData, s: ReplaySettings, notes: Diagnostics) -> Gyro:
             f"s: convert-csv --time-units {fix})?"
         )
         notes.add(f"{imu.topic}: stamps no IMU produces: {clause}{hint if fix else ''}")
-    t_s = (clean.t_ns - clean.t_ns[0]).astype(np.float64) * 1e-9
+    t_s = np.empty(n)  # (t - t0) * 1e-9: the difference exact in int64, one array
+    np.subtract(clean.t_ns, clean.t_ns[0], out=t_s, casting="unsafe")
+    t_s *= 1e-9
     vehicle = None if log.vehicle_state is None else log.vehicle_state.at(clean.t_ns)
     accel = _accel(imu, clean, notes)
     return Gyro(base, clean, clean.t_ns, t_s, clean.omega_b, accel, vehicle)
@@ -85,8 +87,9 @@ def _accel(imu, clean: CleanedImu, notes: Diagnostics) -> NDArray | None:
     if imu.accel_b is None:
         return None
     acc = np.asarray(imu.accel_b, dtype=float)[clean.index]
-    if not np.all(np.isfinite(acc)):
-        bad = int(np.count_nonzero(~row_finite(acc)))
+    finite = row_finite(acc)
+    if not finite.all():
+        bad = int(np.count_nonzero(~finite))
         notes.add(
             f"{imu.topic}: accelerometer missing on {bad} of {len(acc)} samples; rest judged "
             f"from the gyro alone",
