@@ -344,7 +344,9 @@ def test_integrated_rate_is_scipys_cumulative_trapezoid_interpolated():
         np.testing.assert_allclose(got, want, rtol=0, atol=n * np.finfo(float).eps * 200)
 
 
-@pytest.mark.parametrize("rows", ["every row, in order", "a row without attitude"])
+@pytest.mark.parametrize(
+    "rows", ["every row, in order", "every row, from before the gyro", "a row without attitude"]
+)
 def test_find_jumps_equals_every_step_judged_in_full(rows):
     """The jump search screens steps by |q_i . q_i+1| before computing exact angles: the jumps
     it finds are those of judging every truth step against the gyro's path (brute force),
@@ -357,6 +359,8 @@ def test_find_jumps_equals_every_step_judged_in_full(rows):
     t_ns = np.arange(2001, dtype=np.int64) * 5_000_000  # 200 Hz, 10 s
     omega = 0.3 * np.sin(np.outer(t_ns * 1e-9, [0.7, 1.1, 1.9]) + rng.random(3))
     tt = t_ns[::2] + 1_000_000  # 100 Hz truth, between gyro stamps
+    if rows == "every row, from before the gyro":
+        tt = tt - 50_000_000  # its first five rows before the gyro's first sample
     steps = Rotation.from_rotvec(omega[::2][:-1] * 0.01)
     rots = [Rotation.identity()]
     for k, step in enumerate(steps):

@@ -288,16 +288,29 @@ def find_jumps(
     tt = np.asarray(truth_t_ns, dtype=np.int64)
     q = np.asarray(q_w_b, dtype=float)
     norm = row_norm(q)
-    rows = np.flatnonzero(np.isfinite(norm) & (norm > 0.5))  # the truth's rows used, in order
-    tt = tt[rows]
-    in_order = bool(np.all(tt[1:] >= tt[:-1]))
-    if not in_order:  # a stable sort leaves sorted stamps as they are
-        order = np.argsort(tt, kind="stable")
-        tt, rows = tt[order], rows[order]
-    inside = (tt >= t_ns[0]) & (tt <= t_ns[-1])
-    tt, rows = tt[inside], rows[inside]
+    used = np.isfinite(norm) & (norm > 0.5)
+    if len(t_ns) and used.all() and np.all(tt[1:] >= tt[:-1]):
+        # the usual truth, every row used in file order: those inside the gyro's span are one
+        # run of rows, taken in place (no index of them, no gathered stamps)
+        lo = int(np.searchsorted(tt, t_ns[0], side="left"))
+        hi = int(np.searchsorted(tt, t_ns[-1], side="right"))
+        tt, rows, r0 = tt[lo:hi], None, lo
+    else:
+        rows = np.flatnonzero(used)  # the truth's rows used, in order
+        tt = tt[rows]
+        in_order = bool(np.all(tt[1:] >= tt[:-1]))
+        if not in_order:  # a stable sort leaves sorted stamps as they are
+            order = np.argsort(tt, kind="stable")
+            tt, rows = tt[order], rows[order]
+        inside = (tt >= t_ns[0]) & (tt <= t_ns[-1])
+        tt, rows = tt[inside], rows[inside]
+        contiguous = in_order and len(rows) > 0 and rows[-1] - rows[0] == len(rows) - 1
+        r0 = int(rows[0]) if contiguous else -1
     if len(tt) < 2 or len(t_ns) < 2:
         return ()
+
+    def row(k):  # the truth's rows of steps k (their first rows)
+        return r0 + k if rows is None else rows[k]
 
     def unit(r):  # the truth's rows r, normalised (gathered a block at a time: no copy of all)
         return q[r] / norm[r, None]
@@ -307,8 +320,7 @@ def find_jumps(
     # the exact angles and the gyro's path are computed for the few steps left, the same
     # numbers as over every step.
     # the usual truth, every row used in file order, is read in place (no gathered copy)
-    r0 = int(rows[0]) if in_order and rows[-1] - rows[0] == len(rows) - 1 else -1
-    cos_half = np.empty(len(rows) - 1)
+    cos_half = np.empty(len(tt) - 1)
     for a in range(0, len(cos_half), BLOCK_ROWS):
         if r0 >= 0:
             k = slice(r0 + a, r0 + min(a + BLOCK_ROWS, len(cos_half)) + 1)
@@ -321,14 +333,17 @@ def find_jumps(
     i = np.flatnonzero(cos_half < np.cos(np.radians(0.9 * JUMP_DEG) / 2))
     if not len(i):
         return ()
-    truth_deg = np.degrees(quat_angle_rad(unit(rows[i]), unit(rows[i + 1])))
+    truth_deg = np.degrees(quat_angle_rad(unit(row(i)), unit(row(i + 1))))
     # the gyro's path length over each truth step bounds any rotation it can have made
     speed = row_norm(omega_b)[:, None]
     path = integrated_rate(t_ns, speed, np.stack([tt[i], tt[i + 1]], axis=1).ravel())
     gyro_deg = np.degrees(np.diff(path[:, 0].reshape(-1, 2), axis=1)[:, 0])
-    te = (tt - t_ns[0]) * 1e-9
     jump = (truth_deg - gyro_deg > JUMP_DEG) & (truth_deg > JUMP_RATIO * gyro_deg)
+
+    def te(k):  # s since the first gyro sample
+        return float((tt[k] - t_ns[0]) * 1e-9)
+
     return tuple(
-        TruthJump(float(te[k]), float(te[k + 1]), float(truth_deg[m]), float(gyro_deg[m]))
+        TruthJump(te(k), te(k + 1), float(truth_deg[m]), float(gyro_deg[m]))
         for m, k in zip(np.flatnonzero(jump).tolist(), i[jump].tolist(), strict=True)
     )
