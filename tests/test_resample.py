@@ -47,6 +47,21 @@ def test_slerp_truth_never_bridges_gaps_longer_than_two_samples():
     assert np.all(ok[t_ms >= 90])
 
 
+@pytest.mark.parametrize(
+    ("steps_ms", "bridged"),
+    [
+        ([10, 20, 10, 10], [True] * 4),  # none over twice the shortest: every step, at once
+        ([10, 21, 15, 15, 15], [True] * 5),  # over twice the shortest, within twice the median
+        ([10, 31, 15, 15, 15], [True, False, True, True, True]),  # over twice the median
+    ],
+)
+def test_slerp_truth_bridges_each_step_by_twice_the_median(steps_ms, bridged):
+    tt = T0_NS + np.cumsum([0, *steps_ms]).astype(np.int64) * 1_000_000
+    q = Rotation.from_rotvec(np.outer(np.arange(len(tt)), [0, 0, 0.1])).as_quat()
+    mid = (tt[:-1] + tt[1:]) // 2  # one query inside each step
+    np.testing.assert_array_equal(np.isfinite(slerp_truth(tt, q, mid)[:, 3]), bridged)
+
+
 def test_slerp_truth_halfway_to_90_deg_about_z_is_45_deg_about_z():
     # the convention at the boundary: [x, y, z, w], scalar last; halfway is half the angle
     tt = T0_NS + np.array([0, 10_000_000], dtype=np.int64)

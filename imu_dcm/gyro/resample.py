@@ -59,7 +59,10 @@ def slerp_truth(truth_t_ns: ArrayLike, q_w_b: ArrayLike, t_ns: ArrayLike) -> NDA
     out = np.empty((len(t), 4))
     bridged = np.zeros(0, bool)
     if len(tt) > 1:  # each truth step is bridged or not, once; a query takes its step's verdict
-        bridged = steps <= TRUTH_BRIDGE_STEPS * median(steps) * (1 + 1e-6)
+        if steps.max() <= TRUTH_BRIDGE_STEPS * steps.min() * (1 + 1e-6):
+            bridged = np.ones(len(steps), bool)  # none over 2x the shortest, so the median
+        else:
+            bridged = steps <= TRUTH_BRIDGE_STEPS * median(steps) * (1 + 1e-6)
     q = np.ascontiguousarray(q, dtype=float)
     slerp_rows(tt, q, np.ascontiguousarray(norm, dtype=float), bridged, t, out)  # one pass
     return out

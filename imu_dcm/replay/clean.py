@@ -181,8 +181,7 @@ def clean_imu(
         nonlocal t, w, index
         if mask.any():
             keep = ~mask
-            t, w = t[keep], w[keep]
-            index = np.flatnonzero(keep) if index is None else index[keep]
+            t, w, index = t[keep], w[keep], np.flatnonzero(keep) if index is None else index[keep]
 
     nonfinite = ~row_finite(w)
     n_bad = int(nonfinite.sum())
