@@ -69,18 +69,22 @@ def truth_rate_ratio(omega_b: NDArray, t_s: NDArray, q_truth: NDArray) -> float 
     pair = ok[:-1] & ok[1:]
     if pair.sum() <= 10:
         return None
-    # every step's rates, a block of steps at a time (NaN where the truth does not cover it)
+    # every step's rates, a block of steps at a time (NaN where the truth does not cover it),
+    # and the ratio of those where the truth moves, gathered as they come (one array)
     n = len(pair)
-    truth_rate, gyro_rate = np.empty(n), np.empty(n)
+    ratio, filled = np.empty(n), 0
     for a in range(0, n, BLOCK_ROWS):
         b = min(n, a + BLOCK_ROWS)
         step = step_rotvecs(q_truth[a : b + 1], ok[a : b + 1])
-        truth_rate[a:b] = row_norm(step) / np.diff(t_s[a : b + 1])
-        gyro_rate[a:b] = row_norm(0.5 * (omega_b[a:b] + omega_b[a + 1 : b + 1]))
-    moving = pair & (truth_rate > _MOVING_RAD_S)
-    if moving.sum() <= 10:
+        truth_rate = row_norm(step) / np.diff(t_s[a : b + 1])
+        moving = pair[a:b] & (truth_rate > _MOVING_RAD_S)
+        gyro = 0.5 * (omega_b[a:b][moving] + omega_b[a + 1 : b + 1][moving])
+        got = row_norm(gyro) / truth_rate[moving]
+        ratio[filled : filled + len(got)] = got
+        filled += len(got)
+    if filled <= 10:
         return None
-    return median(gyro_rate[moving] / truth_rate[moving], overwrite_input=True)
+    return median(ratio[:filled], overwrite_input=True)
 
 
 def deg_evidence(omega_b: NDArray, t_s: NDArray, q_truth: NDArray) -> str | None:
