@@ -187,3 +187,73 @@ def test_an_index_offset_far_past_its_chunk_costs_nothing(
         log = read_log(path)
     assert np.array_equal(log.imu.t_ns, imu.t_ns)
     assert np.array_equal(log.truth.t_ns, truth.t_ns)
+
+
+def _imu_payloads(store, rng, n: int):
+    """``n`` Imu messages serialised by rosbags (CDR), frame ids of varying length."""
+    from imu_dcm.logio.ros.collect import Payloads
+
+    t = store.types
+    raw, omega = [], rng.normal(size=(n, 3))
+    for i in range(n):
+        msg = t["sensor_msgs/msg/Imu"](
+            header=t["std_msgs/msg/Header"](
+                stamp=t["builtin_interfaces/msg/Time"](sec=1000 + i, nanosec=i),
+                frame_id="imu" + "x" * (i % 5),
+            ),
+            orientation=t["geometry_msgs/msg/Quaternion"](x=0.0, y=0.0, z=0.0, w=1.0),
+            orientation_covariance=np.full(9, -1.0),
+            angular_velocity=t["geometry_msgs/msg/Vector3"](*omega[i]),
+            angular_velocity_covariance=np.zeros(9),
+            linear_acceleration=t["geometry_msgs/msg/Vector3"](0.0, 0.0, 9.8),
+            linear_acceleration_covariance=np.zeros(9),
+        )
+        raw.append(bytes(store.serialize_cdr(msg, "sensor_msgs/msg/Imu")))
+    start = np.cumsum([0] + [len(r) for r in raw[:-1]]).astype(np.int64)
+    length = np.array([len(r) for r in raw], np.int64)
+    buf = np.frombuffer(b"".join(raw), np.uint8)
+    keys = np.arange(n, dtype=np.int64)
+    return Payloads(buf, start, length, keys, keys), omega
+
+
+@pytest.mark.parametrize("count", [None, 35], ids=["kept-as-batches", "written-into-arrays"])
+def test_lent_vectors_outlive_the_decoders_next_batch(count):
+    # a decoder that lends its words (the vectors are views of them, no second copy) and the
+    # next batch decoded into the same words: the channel's columns still hold what rosbags
+    # wrote, whether the builder copied the first batch into its arrays or kept it as it came
+    from rosbags.typesys import Stores, get_typestore
+
+    from imu_dcm.logio.ros.channels import ChannelDecoder
+    from imu_dcm.logio.ros.collect import ColumnsBuilder, Conn
+
+    store = get_typestore(Stores.ROS2_HUMBLE)
+    rng = np.random.default_rng(5)
+    (a, wa), (b, wb) = _imu_payloads(store, rng, 20), _imu_payloads(store, rng, 15)  # words reused
+    b.order = b.order + 20
+    conn = Conn(1, "/imu/data", "sensor_msgs/msg/Imu", "cdr")
+    lender, owner = ChannelDecoder(conn, "imu", lend=True), ChannelDecoder(conn, "imu")
+    first = lender(a)
+    assert np.shares_memory(first.fields["omega"], lender.scratch._local.buf)  # a view indeed
+    assert not np.shares_memory(owner(a).fields["omega"], owner.scratch._local.buf)
+    built = ColumnsBuilder(count)
+    built.add(first)
+    built.add(lender(b))
+    got = built.result()
+    np.testing.assert_array_equal(got.fields["omega"], np.concatenate([wa, wb]))
+    want = 10**9 * (1000 + np.r_[0:20, 0:15]) + np.r_[0:20, 0:15]
+    np.testing.assert_array_equal(got.fields["t_ns"], want)
+
+
+def test_the_chunk_checksum_is_zlibs_crc32():
+    # the fast CRC-32 that checks every chunk is the standard library's, on any length, running
+    # value and buffer kind (a chunk's slice of a batch is a memoryview of a numpy array)
+    import zlib
+
+    from imu_dcm.logio.checksum import crc32
+
+    rng = np.random.default_rng(8)
+    for n in (0, 1, 7, 64, 4099, 1 << 20):
+        data = rng.integers(0, 256, n, dtype=np.uint8)
+        seed = int(rng.integers(0, 2**32))
+        assert crc32(memoryview(data)) == zlib.crc32(data.tobytes())
+        assert crc32(data.tobytes(), seed) == zlib.crc32(data.tobytes(), seed)

@@ -13,12 +13,12 @@ from __future__ import annotations
 
 import os
 import sys
-import zlib
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 
 import numpy as np
 
+from imu_dcm.logio.checksum import crc32
 from imu_dcm.logio.workers import Workers
 
 __all__ = ["BATCH_BYTES", "Decompressor", "Job", "batches"]
@@ -72,7 +72,7 @@ def _decompress_into(fd: int, job: Job, out: memoryview, decompress: Callable) -
         job.why = f"the file ends inside it ({len(data)} of {job.n} bytes)"
         return
     why = decompress(job.comp, data, out)
-    if why is None and job.crc != 0 and zlib.crc32(out) != job.crc:
+    if why is None and job.crc != 0 and crc32(out) != job.crc:
         why = "it fails its CRC check"
     job.why = why
     if why is None:

@@ -112,13 +112,20 @@ def _raw(p: Payloads) -> Payloads:
 
 
 class ChannelDecoder:
-    """Decodes batches of one channel's payloads into the columns its role needs."""
+    """Decodes batches of one channel's payloads into the columns its role needs.
 
-    def __init__(self, conn: Conn, role: str, path: str = ""):
+    With ``lend``, a vector field (``omega``, ``q`` ...) may be a view of the decoder's words,
+    valid until its next batch: for a caller that copies each batch at once (a
+    :class:`~imu_dcm.logio.ros.collect.Sink` into its channel's arrays), which saves copying
+    every vector twice. Without it, every field is an array of its own.
+    """
+
+    def __init__(self, conn: Conn, role: str, path: str = "", lend: bool = False):
         self.conn, self.role, self.path = conn, role, path
+        self.lend = lend
         self.ready: tuple | None = None
         self.error: LogError | None = None
-        self.scratch = Scratch()  # every field below is a new array: none is a view of it
+        self.scratch = Scratch()
 
     def _setup(self) -> tuple:
         defs, root = definitions(self.conn)
@@ -157,39 +164,40 @@ class ChannelDecoder:
         def rows(a: NDArray) -> NDArray:
             return a if every else a[good]
 
+        def vector(names: list[str]) -> NDArray:
+            return _vector([out[k] for k in names], self.lend)
+
         if self.role == "truth":
             q = TRUTH_TYPES[root]
             fields = {
                 "t_ns": rows(_stamp(out, "header.")),
-                "q": rows(np.stack([out[f"{q}.{a}"] for a in "xyzw"], axis=1)),
+                "q": rows(vector([f"{q}.{a}" for a in "xyzw"])),
             }
             for key, path in zip(("p", "w"), TRUTH_MOTION.get(root, ("", "")), strict=True):
                 if path:
-                    fields[key] = rows(np.stack([out[f"{path}.{a}"] for a in "xyz"], axis=1))
+                    fields[key] = rows(vector([f"{path}.{a}" for a in "xyz"]))
         elif self.path == "vec3":
             fields = {
                 "t_ns": rows(_stamp(out, "header.")),
-                "omega": rows(np.stack([out["vector." + a] for a in "xyz"], axis=1)),
+                "omega": rows(vector(["vector." + a for a in "xyz"])),
             }
         else:
             pre = self.path + "." if self.path else ""
             fields = {
                 "t_ns": rows(_stamp(out, pre + "header.")),
-                "omega": rows(
-                    np.stack([out[pre + "angular_velocity." + a] for a in "xyz"], axis=1)
-                ),
+                "omega": rows(vector([pre + "angular_velocity." + a for a in "xyz"])),
             }
             # a batch whose messages all flag no acceleration holds none (its rows join as NaN)
             no_acc = out.get(pre + "linear_acceleration_covariance")
             if no_acc is not None and not (no_acc := no_acc == -1.0).all():
-                accel = np.stack([out[pre + "linear_acceleration." + a] for a in "xyz"], axis=1)
+                accel = vector([pre + "linear_acceleration." + a for a in "xyz"])
                 accel[no_acc] = np.nan
                 fields["accel"] = rows(accel)
             if pre + "angular_velocity_covariance" in out:  # -1 marks no gyro: 1 byte a row
                 fields["gyro_flagged"] = rows(out[pre + "angular_velocity_covariance"] == -1.0)
             flagged = out[pre + "orientation_covariance"] == -1.0
             if not flagged.all():
-                quat = np.stack([out[pre + "orientation." + a] for a in "xyzw"], axis=1)
+                quat = vector([pre + "orientation." + a for a in "xyzw"])
                 quat[flagged] = np.nan
                 fields["quat"] = rows(quat)
         return Columns(
@@ -215,11 +223,11 @@ def plan(imu_topic: str | None, truth_topic: str | None) -> Callable[[Conn], obj
         if imu_ok:
             path = imu_path(c)
             if path is not None and (path != "vec3" or imu_topic is not None or gyro_name(c.topic)):
-                return ChannelDecoder(c, "imu", path)
+                return ChannelDecoder(c, "imu", path, lend=True)
         if truth_ok and is_truth(c):
             if norm_type(c.msgtype) == TF_TYPE:
                 return _raw
-            return ChannelDecoder(c, "truth")
+            return ChannelDecoder(c, "truth", lend=True)
         if c.topic in (imu_topic, truth_topic):
             return _raw  # named but of an unexpected type: kept to say so
         if is_static_tf(c):
@@ -271,6 +279,25 @@ def _frame_id(c: Conn, p: Payloads, good: NDArray[np.bool_]) -> str:
         return ""
     raw = raw if ros1 else raw.rstrip(b"\x00")
     return raw.decode("utf-8", errors="replace")
+
+
+def _vector(leaves: list[NDArray], lend: bool) -> NDArray:
+    """The leaves (N,) side by side as one (N, k) array: with ``lend``, a view where they are
+    adjacent columns of one array of words (the decoder's); else (or where they are not) a
+    copy."""
+    first = leaves[0]
+    step = first.itemsize
+    adjacent = lend and first.ndim == 1 and all(
+        v.dtype == first.dtype and v.shape == first.shape and v.strides == first.strides
+        and v.base is not None and v.base is first.base
+        and v.__array_interface__["data"][0] == first.__array_interface__["data"][0] + k * step
+        for k, v in enumerate(leaves)
+    )  # fmt: skip
+    if not adjacent:
+        return np.stack(leaves, axis=1)
+    return np.lib.stride_tricks.as_strided(
+        first, (len(first), len(leaves)), (first.strides[0], step), writeable=True
+    )
 
 
 def _stamp(out: dict, prefix: str) -> NDArray[np.int64]:

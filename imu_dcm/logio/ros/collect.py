@@ -184,7 +184,8 @@ class ColumnsBuilder:
         p.dropped = 0
         if not self.rest and self._fits(p):
             self._write(p)
-        else:
+        else:  # kept as it is: its own copy of any field lent by its decoder
+            p.fields = {k: v if v.base is None else v.copy() for k, v in p.fields.items()}
             self.rest.append(p)
 
     def _fits(self, p: Columns) -> bool:
@@ -255,7 +256,8 @@ class Sink:
 
     ``plan(conn)`` says what to do with a channel: None (skip it), or a callable turning a
     batch of :class:`Payloads` into :class:`Columns` (decoded now, so raw bytes never pile
-    up) or returning the Payloads themselves (kept raw: JSON, /tf). ``transform(p)`` runs on
+    up; its fields may be views valid until its next batch, copied into the channel's arrays
+    at once) or returning the Payloads themselves (kept raw: JSON, /tf). ``transform(p)`` runs on
     each batch first (message decompression). Payloads are decoded every :data:`BATCH_BYTES`.
     """
 

@@ -17,7 +17,6 @@ log never needs to be in memory whole. Measured here: 150 000 messages
 from __future__ import annotations
 
 import struct
-import zlib
 from collections import deque
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass
@@ -42,6 +41,7 @@ from mcap.records import (
 from numpy.typing import NDArray
 
 from imu_dcm.errors import InputError
+from imu_dcm.logio.checksum import crc32
 from imu_dcm.logio.meta import QOS_YAML
 from imu_dcm.logio.paths import MCAP_MAGIC as MAGIC
 from imu_dcm.logio.workers import WORKERS, Workers
@@ -195,7 +195,7 @@ def _message_indexes(m: _Messages, a: int, b: int, lo: int, pos: int, index) -> 
 def _compressed(raw: bytes) -> tuple[bytes, int]:
     """A chunk's records zstd-compressed (level 3, zstd's default) and their CRC-32 (both
     release the GIL: run on a worker thread)."""
-    return zstandard.ZstdCompressor().compress(raw), zlib.crc32(raw)
+    return zstandard.ZstdCompressor().compress(raw), crc32(raw)
 
 
 def _write_chunks(f, out, topics: list[Encoded], m: _Messages, chunk_size: int) -> list:
@@ -298,8 +298,8 @@ def _write_summary(f, out, summary_groups: list[tuple[int, list]]) -> None:
     for g in groups:
         g.write(summary)
     summary_bytes = summary.end()
-    crc = zlib.crc32(summary_bytes)
-    crc = zlib.crc32(struct.pack("<BQQQ", 0x02, 20, summary_start, summary_offset_start), crc)
+    crc = crc32(summary_bytes)
+    crc = crc32(struct.pack("<BQQQ", 0x02, 20, summary_start, summary_offset_start), crc)
     f.write(summary_bytes)
     Footer(
         summary_start=summary_start, summary_offset_start=summary_offset_start, summary_crc=crc

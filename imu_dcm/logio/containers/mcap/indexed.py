@@ -9,12 +9,12 @@ damaged chunk costs only itself (from the index, the next chunk is known).
 from __future__ import annotations
 
 import struct
-import zlib
 from dataclasses import dataclass
 
 import numpy as np
 
 from imu_dcm._kernels import locate_batch
+from imu_dcm.logio.checksum import crc32
 from imu_dcm.logio.containers.chunks import Decompressor, Job, batches
 from imu_dcm.logio.containers.mcap.reader import McapReader
 from imu_dcm.logio.containers.mcap.records import (
@@ -73,7 +73,7 @@ def _summary_section(f, size: int) -> bytes | None:
         return None
     f.seek(summary_start)
     buf = f.read(end - summary_start)
-    if summary_crc != 0 and zlib.crc32(tail[:25], zlib.crc32(buf)) != summary_crc:
+    if summary_crc != 0 and crc32(tail[:25], crc32(buf)) != summary_crc:
         return None  # a damaged summary: the data section is walked instead
     return buf
 

@@ -9,10 +9,10 @@ plausible chunk; a file that ends without its data-end record is noted too.
 from __future__ import annotations
 
 import struct
-import zlib
 
 import numpy as np
 
+from imu_dcm.logio.checksum import crc32
 from imu_dcm.logio.containers.mcap.reader import McapReader
 from imu_dcm.logio.containers.mcap.records import (
     MAGIC,
@@ -136,7 +136,7 @@ class StreamingReader(McapReader):
         _t0, _t1 = struct.unpack("<QQ", f.read(16))
         f.seek(at)
         data = decompress(comp, f.read(n), usize)
-        if crc != 0 and zlib.crc32(data) != crc:
+        if crc != 0 and crc32(data) != crc:
             raise BadRecord("it fails its CRC check")
         self.take_chunk(data, pos, seq, entries, (_t0, _t1))
 
