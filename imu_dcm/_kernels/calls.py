@@ -9,9 +9,10 @@ so the two are the same arithmetic. The code itself is :mod:`imu_dcm._kernels.in
 :func:`record_chain` and :func:`scan_csv` run the ULog and CSV scans
 (:mod:`~imu_dcm._kernels.ulog_scan`, :mod:`~imu_dcm._kernels.csv_scan`), :func:`locate_batch`
 the MCAP records of a batch (:mod:`~imu_dcm._kernels.mcap_scan`), and :func:`step_rotvecs`,
-:func:`slerp_rows`, :func:`integrated_rate`, :func:`window_norms` and :func:`min_steps` the
-passes over whole series (:mod:`~imu_dcm._kernels.series`), and :func:`walk_fields` the wanted
-fields of a batch of ROS messages (:mod:`~imu_dcm._kernels.ros_fields`).
+:func:`slerp_rows`, :func:`integrated_rate`, :func:`window_norms`, :func:`min_steps`,
+:func:`attitude_errors` and :func:`error_vectors` the passes over whole series
+(:mod:`~imu_dcm._kernels.series`), and :func:`walk_fields` the wanted fields of a batch of ROS
+messages (:mod:`~imu_dcm._kernels.ros_fields`).
 
 Conventions: quaternions Hamilton ``[x, y, z, w]``, ``q_w_b`` body to world; rates ``ω`` rad/s
 in body axes; stamps ``t`` s; increments multiply on the right.
@@ -31,8 +32,10 @@ from imu_dcm._kernels.state import CLOSED, METHOD, N, feed_entry, push_entry
 from imu_dcm.integrator.methods import Method
 
 __all__ = [
+    "attitude_errors",
     "check_record",
     "close",
+    "error_vectors",
     "feed",
     "feed_delta",
     "integrated_rate",
@@ -278,3 +281,36 @@ def min_steps(x, out) -> None:
     if out.shape != x.shape[1:]:
         raise TypeError(f"Expected `out` of {x.shape[1:]}, got {out.shape}")
     entry("min_steps")(x, out)
+
+
+def attitude_errors(q_est, q_true, out) -> int:
+    """The total, inclination and heading error, deg, of each row of ``q_est`` against
+    ``q_true`` (n, 4) into the rows of ``out`` (3, n)
+    (:func:`imu_dcm._kernels.series.attitude_errors`);
+    the first row with a zero or non-finite norm (-1: none)."""
+    _arrays(q_est=(q_est, 2), q_true=(q_true, 2), out=(out, 2))
+    if q_est.shape[1:] != (4,) or q_true.shape != q_est.shape or out.shape != (3, len(q_est)):
+        raise TypeError(
+            f"Expected q_est and q_true (n, 4) and out (3, n), got {q_est.shape}, "
+            f"{q_true.shape}, {out.shape}"
+        )
+    return int(entry("attitude_errors")(q_est, q_true, out))
+
+
+def error_vectors(q_est, q_true, angle, out) -> None:
+    """The world and body error vectors, rad, of each row of ``q_est`` against ``q_true``
+    (n, 4), of known angles ``angle`` (n,) rad, into the rows of ``out`` (6, n)
+    (:func:`imu_dcm._kernels.series.error_vectors`)."""
+    _arrays(q_est=(q_est, 2), q_true=(q_true, 2), angle=(angle, 1), out=(out, 2))
+    n = len(q_est)
+    if (
+        q_est.shape[1:] != (4,)
+        or q_true.shape != q_est.shape
+        or angle.shape != (n,)
+        or (out.shape != (6, n))
+    ):
+        raise TypeError(
+            f"Expected q_est and q_true (n, 4), angle (n,) and out (6, n), got {q_est.shape}, "
+            f"{q_true.shape}, {angle.shape}, {out.shape}"
+        )
+    entry("error_vectors")(q_est, q_true, angle, out)

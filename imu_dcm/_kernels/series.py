@@ -3,7 +3,9 @@ series, ``log(q_k⁻¹ q_{k+1})`` for every pair of consecutive rows in one pass
 and the rest judgement of a replay run it over every truth row), the series slerped at other
 stamps (the truth on the gyro's rows), a rate's running integral at given stamps (the
 gyro's turn over the truth's steps), and the statistics of every window of a series and its
-smallest steps (the rest rule's); their entry points (:data:`ENTRIES`).
+smallest steps (the rest rule's), and the attitude error of an estimate against a truth, row by
+row (the replay's score: its angles and its world and body vectors); their entry points
+(:data:`ENTRIES`).
 
 Imported only to compile, like :mod:`imu_dcm._kernels.integrator`.
 """
@@ -20,10 +22,14 @@ from imu_dcm.so3 import SMALL_ANGLE_RAD
 
 __all__ = [
     "ENTRIES",
+    "ERROR_SIGNATURE",
+    "VECTOR_SIGNATURE",
     "INTEGRAL_SIGNATURE",
     "SIGNATURE",
     "SLERP_SIGNATURE",
     "WINDOW_SIGNATURE",
+    "attitude_errors",
+    "error_vectors",
     "integrated_rate",
     "min_steps",
     "slerp_rows",
@@ -38,6 +44,8 @@ SLERP_SIGNATURE = (
 INTEGRAL_SIGNATURE = "void(int64[::1], float64[:, ::1], int64[::1], float64[:, ::1])"
 WINDOW_SIGNATURE = "void(float64[:, ::1], int64, float64[::1], float64[::1])"
 STEPS_SIGNATURE = "void(float64[:, ::1], float64[::1])"
+ERROR_SIGNATURE = "int64(float64[:, ::1], float64[:, ::1], float64[:, ::1])"
+VECTOR_SIGNATURE = "void(float64[:, ::1], float64[:, ::1], float64[::1], float64[:, ::1])"
 #: A query this many truth steps past the last one's is found by bisection, not by walking.
 _WALK = 32
 
@@ -230,6 +238,58 @@ def min_steps(x, out):
                 out[c] = d
 
 
+def attitude_errors(q_est, q_true, out):
+    """The total, inclination and heading error of each row of ``q_est`` against ``q_true``
+    (n, 4) ``[x, y, z, w]``, deg, into the rows of ``out`` (3, n); returns the first row where
+    either quaternion has a zero or non-finite norm (-1: none), that row and those after it
+    left unwritten.
+
+    The formulas of :func:`imu_dcm.metrics.attitude_error_deg`, row by row: the components of
+    ``q_est ⊗ q_true*`` (the Hamilton product of the conjugate, summed in the same order),
+    taken by magnitude; the total ``2 atan2(|v|, w)``, the heading ``2 atan2(z, w)`` and the
+    inclination ``2 atan2(|(x, y)|, |(w, z)|)``, ratios of components, so that the norms are
+    only checked.
+    """
+    to_deg = 180.0 / math.pi
+    for k in range(q_est.shape[0]):
+        ex, ey, ez, ew = q_est[k, 0], q_est[k, 1], q_est[k, 2], q_est[k, 3]
+        tx, ty, tz, tw = q_true[k, 0], q_true[k, 1], q_true[k, 2], q_true[k, 3]
+        ne = math.sqrt(ex * ex + ey * ey + ez * ez + ew * ew)
+        nt = math.sqrt(tx * tx + ty * ty + tz * tz + tw * tw)
+        if not (0.0 < ne < math.inf and 0.0 < nt < math.inf):
+            return np.int64(k)
+        x, y, z, w = quat_mul((ex, ey, ez, ew), (-tx, -ty, -tz, tw))
+        x, y, z, w = abs(x), abs(y), abs(z), abs(w)
+        out[0, k] = 2.0 * math.atan2(math.sqrt(x * x + y * y + z * z), w) * to_deg
+        out[1, k] = 2.0 * math.atan2(math.sqrt(x * x + y * y), math.sqrt(w * w + z * z)) * to_deg
+        out[2, k] = 2.0 * math.atan2(z, w) * to_deg
+    return np.int64(-1)
+
+
+def error_vectors(q_est, q_true, angle, out):
+    """The world and body error vectors of each row of ``q_est`` against ``q_true`` (n, 4)
+    ``[x, y, z, w]``, rad, whose angles ``angle`` (n,) rad are known, into the rows of ``out``
+    (6, n): rows 0-2 ``e_w``, the rotation vector of ``q_est ⊗ q_true*``, rows 3-5 ``e_b``, of
+    ``q_true* ⊗ q_est``.
+
+    The formulas of :func:`imu_dcm.metrics.error_vector_planes`, row by row: the two products
+    share their scalar part and differ in the sign of ``v_est × v_true``; each vector part is
+    scaled by ``angle / |v|`` (``2 / |w|`` where ``|v|`` is 0), signed by ``w``.
+    """
+    for k in range(q_est.shape[0]):
+        ex, ey, ez, ew = q_est[k, 0], q_est[k, 1], q_est[k, 2], q_est[k, 3]
+        tx, ty, tz, tw = q_true[k, 0], q_true[k, 1], q_true[k, 2], q_true[k, 3]
+        lx, ly, lz = tw * ex - ew * tx, tw * ey - ew * ty, tw * ez - ew * tz
+        cx, cy, cz = ey * tz - ez * ty, ez * tx - ex * tz, ex * ty - ey * tx
+        wx, wy, wz = lx - cx, ly - cy, lz - cz
+        w = ex * tx + ey * ty + ez * tz + ew * tw
+        s = math.sqrt(wx * wx + wy * wy + wz * wz)
+        scale = angle[k] / s if s > 0.0 else 2.0 / abs(w)
+        scale = math.copysign(scale, w)
+        out[0, k], out[1, k], out[2, k] = wx * scale, wy * scale, wz * scale
+        out[3, k], out[4, k], out[5, k] = (lx + cx) * scale, (ly + cy) * scale, (lz + cz) * scale
+
+
 #: ``name -> (function, signature)`` of this kernel's entry points.
 ENTRIES = {
     "step_rotvecs": (step_rotvecs, SIGNATURE),
@@ -237,4 +297,6 @@ ENTRIES = {
     "integrated_rate": (integrated_rate, INTEGRAL_SIGNATURE),
     "window_norms": (window_norms, WINDOW_SIGNATURE),
     "min_steps": (min_steps, STEPS_SIGNATURE),
+    "attitude_errors": (attitude_errors, ERROR_SIGNATURE),
+    "error_vectors": (error_vectors, VECTOR_SIGNATURE),
 }
