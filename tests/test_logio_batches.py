@@ -257,3 +257,37 @@ def test_the_chunk_checksum_is_zlibs_crc32():
         seed = int(rng.integers(0, 2**32))
         assert crc32(memoryview(data)) == zlib.crc32(data.tobytes())
         assert crc32(data.tobytes(), seed) == zlib.crc32(data.tobytes(), seed)
+
+
+def _huge_kb(addr: int) -> int:
+    """AnonHugePages (kB) of the mapping of this process that holds ``addr``."""
+    inside = False
+    with open("/proc/self/smaps") as f:
+        for line in f:
+            head = line.split()[0]
+            if "-" in head and not head.endswith(":"):
+                lo, hi = (int(x, 16) for x in head.split("-"))
+                inside = lo <= addr < hi
+            elif inside and head == "AnonHugePages:":
+                return int(line.split()[1])
+    raise AssertionError("no mapping holds the array")
+
+
+def test_a_channels_columns_are_written_into_small_pages():
+    # written once in order, the columns are asked for ordinary pages before their first touch
+    # (no wait for the kernel to compact memory into huge ones); their values are untouched
+    import sys
+    from pathlib import Path
+
+    from imu_dcm.logio.heap import small_pages
+
+    thp = Path("/sys/kernel/mm/transparent_hugepage/enabled")
+    if not sys.platform.startswith("linux") or not thp.exists() or "[never]" in thp.read_text():
+        pytest.skip("no transparent huge pages on this system: nothing to ask for")
+    a = np.arange(8 << 20, dtype=np.float64)  # 64 MB, touched: its pages are there
+    small_pages(a)
+    np.testing.assert_array_equal(a, np.arange(8 << 20, dtype=np.float64))
+    b = np.empty(8 << 20)
+    small_pages(b)
+    b[:] = 1.0
+    assert _huge_kb(b.__array_interface__["data"][0] + (32 << 20)) == 0

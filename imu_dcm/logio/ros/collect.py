@@ -12,6 +12,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import NDArray
 
+from imu_dcm.logio.heap import small_pages
 from imu_dcm.logio.types import Damage
 
 __all__ = [
@@ -206,6 +207,8 @@ class ColumnsBuilder:
         except (MemoryError, ValueError):
             self.capacity = 0
             return False
+        for a in self.arrays.values():
+            small_pages(a)  # written once in order: no wait for huge pages (logio.heap)
         self.layout = {k: (v.dtype, v.shape[1:]) for k, v in p.fields.items()}
         return True
 
