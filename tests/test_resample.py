@@ -130,3 +130,61 @@ def test_step_rotvecs_are_scipys_relative_rotations_of_consecutive_rows():
     q[3] = 0.0
     with pytest.raises(InputError, match="non-zero norm"):
         step_rotvecs(q, np.ones(n, bool))
+
+
+def _turning(rng, n: int):
+    """A truth that turns by steps of every size (signs and norms of its rows arbitrary), its
+    scipy rotations, and stamps of uneven steps, s."""
+    axes = rng.normal(size=(n - 1, 3))
+    axes /= np.linalg.norm(axes, axis=1, keepdims=True)
+    angles = np.concatenate([np.zeros(10), 1e-7 * rng.random(90), 0.01 * rng.random(n - 101)])
+    rng.shuffle(angles)
+    r = [Rotation.random(random_state=rng)]
+    for s in Rotation.from_rotvec(axes * angles[:, None]):
+        r.append(r[-1] * s)
+    r = Rotation.concatenate(r)
+    q = r.as_quat() * rng.choice([-1.0, 1.0], size=(n, 1)) * rng.uniform(0.5, 2.0, size=(n, 1))
+    return q, r, np.cumsum(rng.uniform(0.8e-3, 1.2e-3, n))
+
+
+def test_second_steps_are_the_changes_between_scipys_consecutive_step_rotations():
+    # the truth's noise reads |d_{k+1} - d_k| of consecutive usable steps: those of a row that
+    # is missing, or of a step marked unusable (a jump), are skipped, the rest kept in order
+    from imu_dcm._kernels.calls import second_steps
+
+    rng = np.random.default_rng(22)
+    n = 600
+    q, r, _ = _turning(rng, n)
+    ok = np.ones(n, bool)
+    ok[[50, 51, 300]] = False
+    q[[50, 51, 300]] = np.nan
+    step_ok = rng.random(n - 1) > 0.05
+    d = (r[:-1].inv() * r[1:]).as_rotvec()
+    usable = ok[:-1] & ok[1:] & step_ok
+    pairs = np.flatnonzero(usable[:-1] & usable[1:])
+    want = np.abs(d[pairs + 1] - d[pairs]).T
+    out = np.full((3, n - 2), -1.0)
+    assert second_steps(q, ok, step_ok, out) == len(pairs)
+    np.testing.assert_allclose(out[:, : len(pairs)], want, rtol=0, atol=64 * EPS)
+
+
+def test_rate_ratios_are_the_gyros_mean_rate_over_scipys_step_rate_where_the_truth_moves():
+    from imu_dcm._kernels.calls import rate_ratios
+
+    rng = np.random.default_rng(23)
+    n = 600
+    q, r, t = _turning(rng, n)
+    ok = np.ones(n, bool)
+    ok[[10, 400]] = False
+    w = rng.normal(size=(n, 3))
+    d = (r[:-1].inv() * r[1:]).as_rotvec()
+    rate = np.linalg.norm(d, axis=1) / np.diff(t)
+    moving = 2.0
+    keep = np.flatnonzero(ok[:-1] & ok[1:] & (rate > moving))
+    assert 100 < len(keep) < n - 100  # some steps turn faster than that, some slower
+    want = np.linalg.norm(0.5 * (w[keep] + w[keep + 1]), axis=1) / rate[keep]
+    out = np.full(n - 1, -1.0)
+    assert rate_ratios(w, t, q, ok, moving, out) == len(keep)
+    # a step's rotation is within 32 ulp of 1 of scipy's (see above), and a moving step turns
+    # at least moving * 0.8 ms = 1.6e-3 rad: its rate within 32 EPS / 1.6e-3 = 4.4e-12 relative
+    np.testing.assert_allclose(out[: len(keep)], want, rtol=32 * EPS / 1.6e-3 + 8 * EPS)

@@ -10,7 +10,8 @@ so the two are the same arithmetic. The code itself is :mod:`imu_dcm._kernels.in
 (:mod:`~imu_dcm._kernels.ulog_scan`, :mod:`~imu_dcm._kernels.csv_scan`), :func:`locate_batch`
 the MCAP records of a batch (:mod:`~imu_dcm._kernels.mcap_scan`), and :func:`step_rotvecs`,
 :func:`slerp_rows`, :func:`integrated_rate`, :func:`window_norms`, :func:`min_steps`,
-:func:`attitude_errors` and :func:`error_vectors` the passes over whole series
+:func:`attitude_errors`, :func:`error_vectors`, :func:`second_steps` and :func:`rate_ratios`
+the passes over whole series
 (:mod:`~imu_dcm._kernels.series`), and :func:`walk_fields` the wanted fields of a batch of ROS
 messages (:mod:`~imu_dcm._kernels.ros_fields`).
 
@@ -43,8 +44,10 @@ __all__ = [
     "min_steps",
     "push",
     "push_for",
+    "rate_ratios",
     "record_chain",
     "scan_csv",
+    "second_steps",
     "slerp_rows",
     "step_rotvecs",
     "walk_fields",
@@ -314,3 +317,50 @@ def error_vectors(q_est, q_true, angle, out) -> None:
             f"{q_true.shape}, {angle.shape}, {out.shape}"
         )
     entry("error_vectors")(q_est, q_true, angle, out)
+
+
+def _flags(**flags) -> None:
+    for name, a in flags.items():
+        if not (isinstance(a, np.ndarray) and a.dtype == np.bool_ and a.ndim == 1):
+            raise TypeError(f"Expected `{name}` a 1-D bool array, got {type(a).__name__}")
+
+
+def second_steps(q, ok, step_ok, out) -> int:
+    """``|d_{k+1} - d_k|`` of the consecutive usable steps of ``q`` (n, 4) into the columns of
+    ``out`` (3, >= n - 2); how many (:func:`imu_dcm._kernels.series.second_steps`)."""
+    _arrays(q=(q, 2), out=(out, 2))
+    _flags(ok=ok, step_ok=step_ok)
+    n = len(q)
+    if (
+        q.shape[1:] != (4,)
+        or len(ok) != n
+        or len(step_ok) != max(n - 1, 0)
+        or (out.shape[0] != 3 or out.shape[1] < max(n - 2, 0))
+    ):
+        raise TypeError(
+            f"Expected q (n, 4), ok (n,), step_ok (n - 1,) and out (3, >= n - 2), got "
+            f"{q.shape}, {ok.shape}, {step_ok.shape}, {out.shape}"
+        )
+    ok, step_ok = np.ascontiguousarray(ok), np.ascontiguousarray(step_ok)
+    return int(entry("second_steps")(q, ok, step_ok, out))
+
+
+def rate_ratios(w, t, q, ok, moving: float, out) -> int:
+    """The gyro's rate over the truth's on each step of ``q`` (n, 4) where both ends are ``ok``
+    and the truth turns faster than ``moving`` rad/s, into ``out`` (>= n - 1); how many
+    (:func:`imu_dcm._kernels.series.rate_ratios`)."""
+    _arrays(w=(w, 2), t=(t, 1), q=(q, 2), out=(out, 1))
+    _flags(ok=ok)
+    n = len(q)
+    if (
+        w.shape != (n, 3)
+        or q.shape[1:] != (4,)
+        or len(t) != n
+        or len(ok) != n
+        or (len(out) < max(n - 1, 0))
+    ):
+        raise TypeError(
+            f"Expected w (n, 3), t (n,), q (n, 4), ok (n,) and out (>= n - 1,), got {w.shape}, "
+            f"{t.shape}, {q.shape}, {ok.shape}, {out.shape}"
+        )
+    return int(entry("rate_ratios")(w, t, q, np.ascontiguousarray(ok), float(moving), out))

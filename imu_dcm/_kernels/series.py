@@ -4,8 +4,9 @@ and the rest judgement of a replay run it over every truth row), the series sler
 stamps (the truth on the gyro's rows), a rate's running integral at given stamps (the
 gyro's turn over the truth's steps), and the statistics of every window of a series and its
 smallest steps (the rest rule's), and the attitude error of an estimate against a truth, row by
-row (the replay's score: its angles and its world and body vectors); their entry points
-(:data:`ENTRIES`).
+row (the replay's score: its angles and its world and body vectors), the truth's own noise (the
+changes between its steps) and the gyro's rate against the truth's (the units' evidence);
+their entry points (:data:`ENTRIES`).
 
 Imported only to compile, like :mod:`imu_dcm._kernels.integrator`.
 """
@@ -23,6 +24,8 @@ from imu_dcm.so3 import SMALL_ANGLE_RAD
 __all__ = [
     "ENTRIES",
     "ERROR_SIGNATURE",
+    "RATIO_SIGNATURE",
+    "SECOND_SIGNATURE",
     "VECTOR_SIGNATURE",
     "INTEGRAL_SIGNATURE",
     "SIGNATURE",
@@ -31,6 +34,8 @@ __all__ = [
     "attitude_errors",
     "error_vectors",
     "integrated_rate",
+    "rate_ratios",
+    "second_steps",
     "min_steps",
     "slerp_rows",
     "step_rotvecs",
@@ -46,6 +51,10 @@ WINDOW_SIGNATURE = "void(float64[:, ::1], int64, float64[::1], float64[::1])"
 STEPS_SIGNATURE = "void(float64[:, ::1], float64[::1])"
 ERROR_SIGNATURE = "int64(float64[:, ::1], float64[:, ::1], float64[:, ::1])"
 VECTOR_SIGNATURE = "void(float64[:, ::1], float64[:, ::1], float64[::1], float64[:, ::1])"
+SECOND_SIGNATURE = "int64(float64[:, ::1], boolean[::1], boolean[::1], float64[:, ::1])"
+RATIO_SIGNATURE = (
+    "int64(float64[:, ::1], float64[::1], float64[:, ::1], boolean[::1], float64, float64[::1])"
+)
 #: A query this many truth steps past the last one's is found by bisection, not by walking.
 _WALK = 32
 
@@ -290,6 +299,65 @@ def error_vectors(q_est, q_true, angle, out):
         out[3, k], out[4, k], out[5, k] = (lx + cx) * scale, (ly + cy) * scale, (lz + cz) * scale
 
 
+@inline
+def _step(q, k: int) -> tuple:
+    """``log(q_k⁻¹ ⊗ q_{k+1})`` as :func:`step_rotvecs` takes it, and whether the product had a
+    finite non-zero norm (else the vector is NaN)."""
+    a_conj = (-q[k, 0], -q[k, 1], -q[k, 2], q[k, 3])
+    x, y, z, w = quat_mul(a_conj, (q[k + 1, 0], q[k + 1, 1], q[k + 1, 2], q[k + 1, 3]))
+    norm = math.sqrt(x * x + y * y + z * z + w * w)
+    if not (norm > 0.0 and norm < math.inf):
+        return np.nan, np.nan, np.nan
+    return _log(x, y, z, w)
+
+
+def second_steps(q, ok, step_ok, out):
+    """``|d_{k+1} - d_k|`` per axis, ``d_k`` the rotation of step ``k`` of ``q`` (n, 4), for
+    each pair of consecutive usable steps, written in order into the columns of ``out``
+    (3, >= n - 2); returns how many. Step ``k`` is usable where ``ok[k]``, ``ok[k + 1]`` and
+    ``step_ok[k]`` (n - 1,) hold. Each step's rotation is taken once, as :func:`step_rotvecs`
+    takes it (NaN where its product has a zero or non-finite norm)."""
+    n = q.shape[0]
+    filled = 0
+    have = False  # whether (px, py, pz) holds step k - 1, usable
+    px = py = pz = 0.0
+    for k in range(n - 1):
+        if not (ok[k] and ok[k + 1] and step_ok[k]):
+            have = False
+            continue
+        x, y, z = _step(q, k)
+        if have:
+            out[0, filled] = abs(x - px)
+            out[1, filled] = abs(y - py)
+            out[2, filled] = abs(z - pz)
+            filled += 1
+        px, py, pz, have = x, y, z, True
+    return np.int64(filled)
+
+
+def rate_ratios(w, t, q, ok, moving, out):
+    """The ratio of the gyro's rate to the truth's over each step where the truth moves, in
+    order into ``out`` (>= n - 1); returns how many.
+
+    Step ``k`` of ``q`` (n, 4), the truth at the gyro's stamps ``t`` (n,) s, counts where
+    ``ok[k]`` and ``ok[k + 1]`` hold and the truth's rate ``|log(q_k⁻¹ q_{k+1})| / (t_{k+1} -
+    t_k)`` is above ``moving`` rad/s; its ratio is ``|(w_k + w_{k+1}) / 2|`` over that rate."""
+    filled = 0
+    for k in range(q.shape[0] - 1):
+        if not (ok[k] and ok[k + 1]):
+            continue
+        x, y, z = _step(q, k)
+        rate = math.sqrt(x * x + y * y + z * z) / (t[k + 1] - t[k])
+        if not rate > moving:
+            continue
+        gx = 0.5 * (w[k, 0] + w[k + 1, 0])
+        gy = 0.5 * (w[k, 1] + w[k + 1, 1])
+        gz = 0.5 * (w[k, 2] + w[k + 1, 2])
+        out[filled] = math.sqrt(gx * gx + gy * gy + gz * gz) / rate
+        filled += 1
+    return np.int64(filled)
+
+
 #: ``name -> (function, signature)`` of this kernel's entry points.
 ENTRIES = {
     "step_rotvecs": (step_rotvecs, SIGNATURE),
@@ -299,4 +367,6 @@ ENTRIES = {
     "min_steps": (min_steps, STEPS_SIGNATURE),
     "attitude_errors": (attitude_errors, ERROR_SIGNATURE),
     "error_vectors": (error_vectors, VECTOR_SIGNATURE),
+    "second_steps": (second_steps, SECOND_SIGNATURE),
+    "rate_ratios": (rate_ratios, RATIO_SIGNATURE),
 }

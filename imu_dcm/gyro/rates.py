@@ -19,8 +19,8 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from imu_dcm._kernels.calls import rate_ratios
 from imu_dcm.arrays import BLOCK_ROWS, median, percentile, row_finite, row_max, row_norm
-from imu_dcm.gyro.resample import step_rotvecs
 
 __all__ = [
     "FULL_SCALE_RAD_S",
@@ -66,22 +66,18 @@ def truth_rate_ratio(omega_b: NDArray, t_s: NDArray, q_truth: NDArray) -> float 
     ``omega_b`` float64 (N, 3) rad/s as declared; ``t_s`` (N,) s; ``q_truth`` (N, 4) ``q_w_b``
     ``[x, y, z, w]`` (NaN rows where none covers the stamp)."""
     ok = row_finite(q_truth)
-    pair = ok[:-1] & ok[1:]
-    if pair.sum() <= 10:
+    if len(ok) < 2 or np.count_nonzero(ok[:-1] & ok[1:]) <= 10:
         return None
-    # every step's rates, a block of steps at a time (NaN where the truth does not cover it),
-    # and the ratio of those where the truth moves, gathered as they come (one array)
-    n = len(pair)
-    ratio, filled = np.empty(n), 0
-    for a in range(0, n, BLOCK_ROWS):
-        b = min(n, a + BLOCK_ROWS)
-        step = step_rotvecs(q_truth[a : b + 1], ok[a : b + 1])
-        truth_rate = row_norm(step) / np.diff(t_s[a : b + 1])
-        moving = pair[a:b] & (truth_rate > _MOVING_RAD_S)
-        gyro = 0.5 * (omega_b[a:b][moving] + omega_b[a + 1 : b + 1][moving])
-        got = row_norm(gyro) / truth_rate[moving]
-        ratio[filled : filled + len(got)] = got
-        filled += len(got)
+    # the ratio on every step where the truth moves, in one compiled pass (one array)
+    ratio = np.empty(len(ok) - 1)
+    filled = rate_ratios(
+        np.ascontiguousarray(omega_b, dtype=float),
+        np.ascontiguousarray(t_s, dtype=float),
+        np.ascontiguousarray(q_truth, dtype=float),
+        ok,
+        _MOVING_RAD_S,
+        ratio,
+    )
     if filled <= 10:
         return None
     return median(ratio[:filled], overwrite_input=True)

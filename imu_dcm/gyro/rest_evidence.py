@@ -15,6 +15,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from imu_dcm._kernels.calls import second_steps
 from imu_dcm.arrays import BLOCK_ROWS, median, row_finite, row_norm
 from imu_dcm.errors import InputError
 from imu_dcm.gyro.resample import step_rotvecs
@@ -108,26 +109,19 @@ def truth_noise_rad(q_w_b: ArrayLike, step_ok: ArrayLike | None = None) -> float
     fewer than 3 finite samples. ``step_ok`` (M - 1,) marks the steps to use (default all; a
     jump of the truth's own is not its noise).
     """
-    q = np.asarray(q_w_b, dtype=float)
-    ok = row_finite(q)
-    step = ok[:-1] & ok[1:]
-    if step_ok is not None:
-        step &= np.asarray(step_ok, dtype=bool)
-    pair = step[:-1] & step[1:]
-    if not pair.any():
+    q = np.ascontiguousarray(q_w_b, dtype=float)
+    n = len(q)
+    if n < 3:
         return 0.0
-    # |second differences| of the steps' rotations at the pairs, a block of steps at a time
-    # (no whole-log array of the rotations), each axis's values then taken for its median
-    vals = np.empty((3, int(pair.sum())))
-    filled = 0
-    for a in range(0, len(pair), BLOCK_ROWS):
-        b = min(len(pair), a + BLOCK_ROWS)
-        d = step_rotvecs(q[a : b + 2], ok[a : b + 2])  # steps a .. b: pairs a .. b - 1
-        sel = pair[a:b]
-        got = np.abs(np.diff(d, axis=0))[sel]
-        vals[:, filled : filled + len(got)] = got.T
-        filled += len(got)
-    spread = max(median(vals[k], overwrite_input=True) for k in range(3))
+    usable = np.ones(n - 1, bool) if step_ok is None else np.asarray(step_ok, dtype=bool)
+    # |second differences| of the steps' rotations at the pairs of usable steps, in one
+    # compiled pass (no whole-log array of the rotations), each axis's values then taken for
+    # its median
+    vals = np.empty((3, n - 2))
+    filled = second_steps(q, row_finite(q), usable, vals)
+    if not filled:
+        return 0.0
+    spread = max(median(vals[k, :filled], overwrite_input=True) for k in range(3))
     return 1.4826 * spread / math.sqrt(6.0)
 
 
