@@ -135,6 +135,11 @@ def test_row_helpers_equal_numpy_reductions_over_the_last_axis():
         np.testing.assert_array_equal(row_finite(a), np.all(np.isfinite(a), axis=-1))
         if a.shape[0]:
             np.testing.assert_array_equal(row_max(a), np.max(a, axis=-1))  # NaN where NaN
+    # rows as they lie: every other column of a wider array, columns reversed, a transpose
+    wide = rng.normal(size=(1000, 8))
+    for view in (wide[:, 1::2], wide[:, ::-1][:, :3], wide[:4].T, wide[::3, :4]):
+        want = np.linalg.norm(view, axis=-1)
+        np.testing.assert_allclose(row_norm(view), want, rtol=4 * EPS, atol=0)
 
 
 def test_product_planes_of_conjugates_and_the_angle_between_attitudes():

@@ -10,8 +10,8 @@ so the two are the same arithmetic. The code itself is :mod:`imu_dcm._kernels.in
 (:mod:`~imu_dcm._kernels.ulog_scan`, :mod:`~imu_dcm._kernels.csv_scan`), :func:`locate_batch`
 the MCAP records of a batch (:mod:`~imu_dcm._kernels.mcap_scan`), and :func:`step_rotvecs`,
 :func:`slerp_rows`, :func:`integrated_rate`, :func:`window_norms`, :func:`min_steps`,
-:func:`attitude_errors`, :func:`error_vectors`, :func:`second_steps` and :func:`rate_ratios`
-the passes over whole series
+:func:`attitude_errors`, :func:`error_vectors`, :func:`second_steps`, :func:`rate_ratios` and
+:func:`row_norms` the passes over whole series
 (:mod:`~imu_dcm._kernels.series`), and :func:`walk_fields` the wanted fields of a batch of ROS
 messages (:mod:`~imu_dcm._kernels.ros_fields`).
 
@@ -46,6 +46,7 @@ __all__ = [
     "push_for",
     "rate_ratios",
     "record_chain",
+    "row_norms",
     "scan_csv",
     "second_steps",
     "slerp_rows",
@@ -364,3 +365,16 @@ def rate_ratios(w, t, q, ok, moving: float, out) -> int:
             f"{t.shape}, {q.shape}, {ok.shape}, {out.shape}"
         )
     return int(entry("rate_ratios")(w, t, q, np.ascontiguousarray(ok), float(moving), out))
+
+
+def row_norms(x, out) -> None:
+    """The norm of each row of ``x`` (n, k) float64, any strides, into ``out`` (n,)
+    (:func:`imu_dcm._kernels.series.row_norms`)."""
+    _arrays(out=(out, 1))
+    if not (isinstance(x, np.ndarray) and x.dtype == np.float64 and x.ndim == 2):
+        raise TypeError(f"Expected `x` a 2-D float64 array, got {type(x).__name__}")
+    if len(out) != len(x):
+        raise TypeError(f"Expected `out` of {len(x)} rows, got {out.shape}")
+    if backend() == "jit" and not x.flags.writeable:
+        x = x.copy()  # numba's signature is of a writable array (the built one reads any)
+    entry("row_norms")(x, out)

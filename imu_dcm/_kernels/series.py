@@ -5,8 +5,8 @@ stamps (the truth on the gyro's rows), a rate's running integral at given stamps
 gyro's turn over the truth's steps), and the statistics of every window of a series and its
 smallest steps (the rest rule's), and the attitude error of an estimate against a truth, row by
 row (the replay's score: its angles and its world and body vectors), the truth's own noise (the
-changes between its steps) and the gyro's rate against the truth's (the units' evidence);
-their entry points (:data:`ENTRIES`).
+changes between its steps), the gyro's rate against the truth's (the units' evidence) and
+the norms of rows; their entry points (:data:`ENTRIES`).
 
 Imported only to compile, like :mod:`imu_dcm._kernels.integrator`.
 """
@@ -24,6 +24,7 @@ from imu_dcm.so3 import SMALL_ANGLE_RAD
 __all__ = [
     "ENTRIES",
     "ERROR_SIGNATURE",
+    "NORM_SIGNATURE",
     "RATIO_SIGNATURE",
     "SECOND_SIGNATURE",
     "VECTOR_SIGNATURE",
@@ -35,6 +36,7 @@ __all__ = [
     "error_vectors",
     "integrated_rate",
     "rate_ratios",
+    "row_norms",
     "second_steps",
     "min_steps",
     "slerp_rows",
@@ -51,6 +53,7 @@ WINDOW_SIGNATURE = "void(float64[:, ::1], int64, float64[::1], float64[::1])"
 STEPS_SIGNATURE = "void(float64[:, ::1], float64[::1])"
 ERROR_SIGNATURE = "int64(float64[:, ::1], float64[:, ::1], float64[:, ::1])"
 VECTOR_SIGNATURE = "void(float64[:, ::1], float64[:, ::1], float64[::1], float64[:, ::1])"
+NORM_SIGNATURE = "void(float64[:, :], float64[::1])"
 SECOND_SIGNATURE = "int64(float64[:, ::1], boolean[::1], boolean[::1], float64[:, ::1])"
 RATIO_SIGNATURE = (
     "int64(float64[:, ::1], float64[::1], float64[:, ::1], boolean[::1], float64, float64[::1])"
@@ -358,6 +361,24 @@ def rate_ratios(w, t, q, ok, moving, out):
     return np.int64(filled)
 
 
+def row_norms(x, out):
+    """The Euclidean norm of each row of ``x`` (n, k), any strides, into ``out`` (n,).
+
+    The squares of the even and of the odd columns are summed apart, then added (for three
+    columns ``(x0² + x2²) + x1²``, for four ``(x0² + x2²) + (x1² + x3²)``): the order of
+    numpy's ``einsum`` over a short last axis, which :func:`imu_dcm.arrays.row_norm` used."""
+    k = x.shape[1]
+    for i in range(x.shape[0]):
+        even = 0.0
+        odd = 0.0
+        for j in range(0, k - 1, 2):
+            even += x[i, j] * x[i, j]
+            odd += x[i, j + 1] * x[i, j + 1]
+        if k % 2:
+            even += x[i, k - 1] * x[i, k - 1]
+        out[i] = math.sqrt(even + odd)
+
+
 #: ``name -> (function, signature)`` of this kernel's entry points.
 ENTRIES = {
     "step_rotvecs": (step_rotvecs, SIGNATURE),
@@ -369,4 +390,5 @@ ENTRIES = {
     "error_vectors": (error_vectors, VECTOR_SIGNATURE),
     "second_steps": (second_steps, SECOND_SIGNATURE),
     "rate_ratios": (rate_ratios, RATIO_SIGNATURE),
+    "row_norms": (row_norms, NORM_SIGNATURE),
 }

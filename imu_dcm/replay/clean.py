@@ -30,7 +30,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from imu_dcm.arrays import median, percentile, row_finite
+from imu_dcm.arrays import median, percentile, row_finite, row_norm
 from imu_dcm.errors import Diagnostics, GapWarning, ImuDcmWarning, say
 from imu_dcm.gyro.rates import MAX_RATE_RAD_S, implausible_rates
 from imu_dcm.gyro.rates import deg_evidence as _deg_evidence  # noqa: F401 - replay.core's
@@ -125,7 +125,7 @@ def _spikes(w: NDArray[np.float64]) -> NDArray[np.bool_]:
     spike = np.zeros(n, dtype=bool)
     if n < 2 * k + 1:
         return spike
-    norm = np.sqrt(np.einsum("ij,ij->i", w, w))
+    norm = row_norm(w)
     level = max(SPIKE_RATIO * percentile(norm, 99.9), SPIKE_FLOOR_RAD_S)
     cand = np.flatnonzero(norm > level)  # rare: a good log has none
     if len(cand):
