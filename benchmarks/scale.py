@@ -10,8 +10,9 @@ temporary folder (removed at the end): 1 min, 10 min and 1 h (``--long`` adds 4 
   decompression of every chunk on one thread (what no MCAP reader can skip), ``read_log``, and
   rosbags' ``AnyReader`` + ``deserialize`` loop over the IMU and truth topics (the reference,
   skipped above 10 min: it takes minutes an hour). Ratios are to figures of the same run.
-* **The replay**, in a fresh process (``replay()`` without a viewer, then the estimate written
-  as a bag, as ``--out`` does): wall, CPU and peak RSS of that process (``os.wait4``'s rusage),
+* **The replay**, in a fresh process set up as the command sets itself up (numpy's pages,
+  :mod:`imu_dcm.app.pages`), ``replay()`` without a viewer, then the estimate written as a bag,
+  as ``--out`` does: wall, CPU and peak RSS of that process (``os.wait4``'s rusage),
   and the time per sample of each phase, timed by wrapping the functions that do it: read
   (``read_log``), clean (``clean_imu``), truth check (``align_truth`` and the judgement around
   it, less its resampling), resample (``slerp_truth``), bias (``estimate_bias``), integrate
@@ -136,7 +137,11 @@ def floors(bag: Path, rounds: int, rosbags: bool) -> dict:
 
 # ------------------------------------------------------------------------------ replay
 def _phase_child(bag: str) -> None:
-    """In a fresh process: replay ``bag`` with every phase timed; print the figures as JSON."""
+    """In a fresh process: replay ``bag`` with every phase timed; print the figures as JSON.
+    The process sets numpy's pages as the replay command does (:mod:`imu_dcm.app.pages`)."""
+    from imu_dcm.app.pages import numpy_small_pages
+
+    numpy_small_pages()
     import imu_dcm.replay.core as core
     import imu_dcm.replay.gyro as gyro
     import imu_dcm.replay.rate_check as rate_check

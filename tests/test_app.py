@@ -109,3 +109,30 @@ def test_run_figures_are_a_frozen_record_and_json_ready():
     d = json.loads(json.dumps(f.to_dict(), allow_nan=False))
     assert d["gaps"] == [{"t_s": 1.5, "length_s": 0.25}] and d["rate_hz"] is None
     assert set(d) == set(fields)
+
+
+@pytest.mark.parametrize(
+    ("env", "numpy_first", "huge"),
+    [(None, False, False), (None, True, False), ("1", False, True), ("1", True, True)],
+    ids=["before-numpy", "after-numpy", "env-obeyed-before", "env-obeyed-after"],
+)
+def test_a_commands_arrays_ask_for_ordinary_pages_unless_the_environment_says(
+    env, numpy_first, huge
+):
+    # whether numpy still asks for huge pages, read back from its own switch in a fresh process
+    import os
+    import subprocess
+    import sys
+
+    code = (
+        ("import numpy\n" if numpy_first else "")
+        + "from imu_dcm.app.pages import numpy_small_pages\nnumpy_small_pages()\n"
+        + "import numpy as np\ncore = getattr(np, '_core', None) or np.core\n"
+        + "print(core.multiarray._set_madvise_hugepage(True))\n"
+    )
+    environ = {k: v for k, v in os.environ.items() if k != "NUMPY_MADVISE_HUGEPAGE"}
+    if env is not None:
+        environ["NUMPY_MADVISE_HUGEPAGE"] = env
+    got = subprocess.run([sys.executable, "-c", code], env=environ, capture_output=True, text=True)
+    assert got.returncode == 0, got.stderr
+    assert got.stdout.strip() == str(huge)

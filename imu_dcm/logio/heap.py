@@ -26,6 +26,8 @@ Written in order, the columns gain nothing from huge pages, so :func:`small_page
 ordinary pages on them (``MADV_NOHUGEPAGE``) before they are touched: ``read_log`` of a 1 h log
 at 1 kHz took 2.0-2.7 s against 3.2-3.9 s, five fresh processes each, interleaved, on the
 2-core machine after an hour of benchmarks (docs/benchmarks.md "Reading logs").
+
+The commands go further, for all their arrays (:mod:`imu_dcm.app.pages`).
 """
 
 from __future__ import annotations
@@ -34,7 +36,12 @@ import ctypes
 import os
 import sys
 
-__all__ = ["heap_settings", "release_freed_memory", "reuse_freed_heap", "small_pages"]
+__all__ = [
+    "heap_settings",
+    "release_freed_memory",
+    "reuse_freed_heap",
+    "small_pages",
+]
 
 #: Blocks under this many bytes come from the heap while reading (glibc's ``M_MMAP_THRESHOLD``).
 MMAP_THRESHOLD = 4 << 20
