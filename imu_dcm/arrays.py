@@ -65,16 +65,17 @@ def row_norm(a: ArrayLike) -> NDArray[np.float64]:
 
 def row_finite(a: ArrayLike) -> NDArray[np.bool_]:
     """Whether every element along the last axis is finite, shape ``(...)``:
-    ``np.all(np.isfinite(a), axis=-1)``, column by column (many times faster for ``(N, 4)``);
-    a 2-D array :data:`BLOCK_ROWS` rows at a time, with no whole-log temporary."""
+    ``np.all(np.isfinite(a), axis=-1)``; of float64 values in one compiled pass over the rows as
+    they lie (:func:`imu_dcm._kernels.calls.row_finites`: no whole-log temporary), of others
+    column by column."""
     a = np.asarray(a)
-    if a.ndim == 2 and a.shape[1] and len(a) > BLOCK_ROWS:
-        out = np.empty(len(a), bool)
-        scratch = np.empty((BLOCK_ROWS, a.shape[1]), bool)
-        for lo in range(0, len(a), BLOCK_ROWS):
-            hi = min(len(a), lo + BLOCK_ROWS)
-            out[lo:hi] = _all_finite(np.isfinite(a[lo:hi], out=scratch[: hi - lo]))
-        return out
+    if a.dtype == np.float64 and a.ndim >= 1:
+        from imu_dcm._kernels.calls import row_finites  # here: the kernels' loader imports this
+
+        rows = a.reshape(-1, a.shape[-1]) if a.ndim != 2 else a  # a view where strides allow
+        out = np.empty(len(rows), bool)
+        row_finites(rows, out)
+        return out.reshape(a.shape[:-1])
     return _all_finite(np.isfinite(a))
 
 

@@ -137,9 +137,16 @@ def test_row_helpers_equal_numpy_reductions_over_the_last_axis():
             np.testing.assert_array_equal(row_max(a), np.max(a, axis=-1))  # NaN where NaN
     # rows as they lie: every other column of a wider array, columns reversed, a transpose
     wide = rng.normal(size=(1000, 8))
+    wide.flat[rng.integers(0, wide.size, 40)] = np.nan
+    wide.flat[rng.integers(0, wide.size, 40)] = -np.inf
     for view in (wide[:, 1::2], wide[:, ::-1][:, :3], wide[:4].T, wide[::3, :4]):
         want = np.linalg.norm(view, axis=-1)
         np.testing.assert_allclose(row_norm(view), want, rtol=4 * EPS, atol=0)
+        np.testing.assert_array_equal(row_finite(view), np.all(np.isfinite(view), axis=-1))
+    # of integers and float32 too (by numpy, column by column)
+    np.testing.assert_array_equal(row_finite(np.arange(12).reshape(3, 4)), [True] * 3)
+    f4 = np.array([[1, np.nan], [2, 3]], np.float32)
+    np.testing.assert_array_equal(row_finite(f4), [False, True])
 
 
 def test_product_planes_of_conjugates_and_the_angle_between_attitudes():

@@ -10,8 +10,8 @@ so the two are the same arithmetic. The code itself is :mod:`imu_dcm._kernels.in
 (:mod:`~imu_dcm._kernels.ulog_scan`, :mod:`~imu_dcm._kernels.csv_scan`), :func:`locate_batch`
 the MCAP records of a batch (:mod:`~imu_dcm._kernels.mcap_scan`), and :func:`step_rotvecs`,
 :func:`slerp_rows`, :func:`integrated_rate`, :func:`window_norms`, :func:`min_steps`,
-:func:`attitude_errors`, :func:`error_vectors`, :func:`second_steps`, :func:`rate_ratios` and
-:func:`row_norms` the passes over whole series
+:func:`attitude_errors`, :func:`error_vectors`, :func:`second_steps`, :func:`rate_ratios`,
+:func:`row_norms` and :func:`row_finites` the passes over whole series
 (:mod:`~imu_dcm._kernels.series`), and :func:`walk_fields` the wanted fields of a batch of ROS
 messages (:mod:`~imu_dcm._kernels.ros_fields`).
 
@@ -46,6 +46,7 @@ __all__ = [
     "push_for",
     "rate_ratios",
     "record_chain",
+    "row_finites",
     "row_norms",
     "scan_csv",
     "second_steps",
@@ -367,14 +368,27 @@ def rate_ratios(w, t, q, ok, moving: float, out) -> int:
     return int(entry("rate_ratios")(w, t, q, np.ascontiguousarray(ok), float(moving), out))
 
 
+def _rows_of(x, out, dtype) -> np.ndarray:
+    """``x`` checked as a 2-D float64 array of any strides, and ``out`` as (len(x),) ``dtype``;
+    ``x`` as the entry point can take it."""
+    if not (isinstance(out, np.ndarray) and out.dtype == dtype and out.ndim == 1):
+        raise TypeError(f"Expected `out` a 1-D {np.dtype(dtype)} array, got {type(out).__name__}")
+    if not (isinstance(x, np.ndarray) and x.dtype == np.float64 and x.ndim == 2):
+        raise TypeError(f"Expected `x` a 2-D float64 array, got {type(x).__name__}")
+    if len(out) != len(x) or not out.flags.c_contiguous:
+        raise TypeError(f"Expected a contiguous `out` of {len(x)} rows, got {out.shape}")
+    if backend() == "jit" and not x.flags.writeable:
+        x = x.copy()  # numba's signature is of a writable array (the built one reads any)
+    return x
+
+
 def row_norms(x, out) -> None:
     """The norm of each row of ``x`` (n, k) float64, any strides, into ``out`` (n,)
     (:func:`imu_dcm._kernels.series.row_norms`)."""
-    _arrays(out=(out, 1))
-    if not (isinstance(x, np.ndarray) and x.dtype == np.float64 and x.ndim == 2):
-        raise TypeError(f"Expected `x` a 2-D float64 array, got {type(x).__name__}")
-    if len(out) != len(x):
-        raise TypeError(f"Expected `out` of {len(x)} rows, got {out.shape}")
-    if backend() == "jit" and not x.flags.writeable:
-        x = x.copy()  # numba's signature is of a writable array (the built one reads any)
-    entry("row_norms")(x, out)
+    entry("row_norms")(_rows_of(x, out, np.float64), out)
+
+
+def row_finites(x, out) -> None:
+    """Whether each row of ``x`` (n, k) float64, any strides, is finite, into ``out`` (n,)
+    bool (:func:`imu_dcm._kernels.series.row_finites`)."""
+    entry("row_finites")(_rows_of(x, out, np.bool_), out)

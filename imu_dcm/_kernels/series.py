@@ -6,7 +6,7 @@ gyro's turn over the truth's steps), and the statistics of every window of a ser
 smallest steps (the rest rule's), and the attitude error of an estimate against a truth, row by
 row (the replay's score: its angles and its world and body vectors), the truth's own noise (the
 changes between its steps), the gyro's rate against the truth's (the units' evidence) and
-the norms of rows; their entry points (:data:`ENTRIES`).
+the norms and finiteness of rows; their entry points (:data:`ENTRIES`).
 
 Imported only to compile, like :mod:`imu_dcm._kernels.integrator`.
 """
@@ -24,6 +24,7 @@ from imu_dcm.so3 import SMALL_ANGLE_RAD
 __all__ = [
     "ENTRIES",
     "ERROR_SIGNATURE",
+    "FINITE_SIGNATURE",
     "NORM_SIGNATURE",
     "RATIO_SIGNATURE",
     "SECOND_SIGNATURE",
@@ -36,6 +37,7 @@ __all__ = [
     "error_vectors",
     "integrated_rate",
     "rate_ratios",
+    "row_finites",
     "row_norms",
     "second_steps",
     "min_steps",
@@ -54,6 +56,7 @@ STEPS_SIGNATURE = "void(float64[:, ::1], float64[::1])"
 ERROR_SIGNATURE = "int64(float64[:, ::1], float64[:, ::1], float64[:, ::1])"
 VECTOR_SIGNATURE = "void(float64[:, ::1], float64[:, ::1], float64[::1], float64[:, ::1])"
 NORM_SIGNATURE = "void(float64[:, :], float64[::1])"
+FINITE_SIGNATURE = "void(float64[:, :], boolean[::1])"
 SECOND_SIGNATURE = "int64(float64[:, ::1], boolean[::1], boolean[::1], float64[:, ::1])"
 RATIO_SIGNATURE = (
     "int64(float64[:, ::1], float64[::1], float64[:, ::1], boolean[::1], float64, float64[::1])"
@@ -379,6 +382,18 @@ def row_norms(x, out):
         out[i] = math.sqrt(even + odd)
 
 
+def row_finites(x, out):
+    """Whether every value of each row of ``x`` (n, k), any strides, is finite, into ``out``
+    (n,)."""
+    for i in range(x.shape[0]):
+        ok = True
+        for j in range(x.shape[1]):
+            if not math.isfinite(x[i, j]):
+                ok = False
+                break
+        out[i] = ok
+
+
 #: ``name -> (function, signature)`` of this kernel's entry points.
 ENTRIES = {
     "step_rotvecs": (step_rotvecs, SIGNATURE),
@@ -391,4 +406,5 @@ ENTRIES = {
     "second_steps": (second_steps, SECOND_SIGNATURE),
     "rate_ratios": (rate_ratios, RATIO_SIGNATURE),
     "row_norms": (row_norms, NORM_SIGNATURE),
+    "row_finites": (row_finites, FINITE_SIGNATURE),
 }

@@ -166,10 +166,13 @@ def rate_grid(
     lo, hi = max(int(t_ns[0]), int(tt.min())), min(int(t_ns[-1]), int(tt.max()))
     if hi <= lo:
         return None
-    dt_g = median_diff(t_ns) * 1e-9
-    dt_t = median_diff(tt if np.all(tt[1:] >= tt[:-1]) else np.sort(tt)) * 1e-9
+    sorted_tt = tt if np.all(tt[1:] >= tt[:-1]) else np.sort(tt)
     span_s = (hi - lo) * 1e-9
-    dt = max(min_step_s, 2 * dt_t, dt_g, span_s / 100_000)
+    dt = max(min_step_s, span_s / 100_000)
+    # the median steps count only above that floor; where the longest steps stay under it,
+    # so do the medians (no partition of every step)
+    if 2 * float(np.diff(sorted_tt).max()) * 1e-9 > dt or float(np.diff(t_ns).max()) * 1e-9 > dt:
+        dt = max(dt, 2 * median_diff(sorted_tt) * 1e-9, median_diff(t_ns) * 1e-9)
     edges = lo + np.round(np.arange(0.0, span_s, dt) * 1e9).astype(np.int64)
     if len(edges) < 24:
         return None
