@@ -267,3 +267,28 @@ def test_attitude_errors_row_by_row_are_scipys_swing_and_twist():
         c[n // 2] = bad
         with pytest.raises(InputError, match="finite non-zero norm"):
             attitude_error_deg(a, c)
+
+
+def test_the_angle_between_attitudes_row_by_row_is_scipys_relative_rotation():
+    # rows against rows (one compiled pass) and any other shape (numpy's planes): scipy's
+    # magnitude of q_a⁻¹ q_b at any sign and scale, angles from 1e-9 rad to π, a zero or NaN
+    # quaternion refused whichever row it is in
+    from imu_dcm.so3 import quat_angle_rad
+
+    rng = np.random.default_rng(14)
+    n = 4000
+    a = Rotation.random(n, random_state=4)
+    rv = rng.normal(size=(n, 3))
+    rv *= (np.logspace(-9, np.log10(np.pi), n) / np.linalg.norm(rv, axis=1))[:, None]
+    b = a * Rotation.from_rotvec(rv)
+    qa, qb = a.as_quat() * rng.choice([-3.0, 0.5], (n, 1)), b.as_quat()
+    want = (a.inv() * b).magnitude()
+    got = quat_angle_rad(qa, qb)
+    np.testing.assert_allclose(got, want, rtol=1e-8, atol=8 * EPS)
+    # the rows' pass and numpy's planes: the same formula (arctangents an ulp or two apart)
+    np.testing.assert_allclose(got, quat_angle_rad(qa[None], qb[None])[0], rtol=1e-15, atol=0)
+    for bad in (np.zeros(4), np.full(4, np.nan)):
+        c = qb.copy()
+        c[n - 1] = bad
+        with pytest.raises(InputError, match="finite non-zero norm"):
+            quat_angle_rad(qa, c)

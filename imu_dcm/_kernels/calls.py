@@ -10,7 +10,8 @@ so the two are the same arithmetic. The code itself is :mod:`imu_dcm._kernels.in
 (:mod:`~imu_dcm._kernels.ulog_scan`, :mod:`~imu_dcm._kernels.csv_scan`), :func:`locate_batch`
 the MCAP records of a batch (:mod:`~imu_dcm._kernels.mcap_scan`), and :func:`step_rotvecs`,
 :func:`slerp_rows`, :func:`integrated_rate`, :func:`window_norms`, :func:`min_steps`,
-:func:`attitude_errors`, :func:`error_vectors`, :func:`second_steps`, :func:`rate_ratios`,
+:func:`attitude_errors`, :func:`error_vectors`, :func:`quat_angles`, :func:`second_steps`,
+:func:`rate_ratios`,
 :func:`row_norms` and :func:`row_finites` the passes over whole series
 (:mod:`~imu_dcm._kernels.series`), and :func:`walk_fields` the wanted fields of a batch of ROS
 messages (:mod:`~imu_dcm._kernels.ros_fields`).
@@ -44,6 +45,7 @@ __all__ = [
     "min_steps",
     "push",
     "push_for",
+    "quat_angles",
     "rate_ratios",
     "record_chain",
     "row_finites",
@@ -392,3 +394,15 @@ def row_finites(x, out) -> None:
     """Whether each row of ``x`` (n, k) float64, any strides, is finite, into ``out`` (n,)
     bool (:func:`imu_dcm._kernels.series.row_finites`)."""
     entry("row_finites")(_rows_of(x, out, np.bool_), out)
+
+
+def quat_angles(q_a, q_b, out) -> int:
+    """The angle, rad, of ``q_a* ⊗ q_b`` for each row of ``q_a`` and ``q_b`` (n, 4) into ``out``
+    (n,) (:func:`imu_dcm._kernels.series.quat_angles`); the first row with a zero or
+    non-finite norm (-1: none)."""
+    _arrays(q_a=(q_a, 2), q_b=(q_b, 2), out=(out, 1))
+    if q_a.shape[1:] != (4,) or q_b.shape != q_a.shape or out.shape != (len(q_a),):
+        raise TypeError(
+            f"Expected q_a and q_b (n, 4) and out (n,), got {q_a.shape}, {q_b.shape}, {out.shape}"
+        )
+    return int(entry("quat_angles")(q_a, q_b, out))

@@ -4,7 +4,8 @@ and the rest judgement of a replay run it over every truth row), the series sler
 stamps (the truth on the gyro's rows), a rate's running integral at given stamps (the
 gyro's turn over the truth's steps), and the statistics of every window of a series and its
 smallest steps (the rest rule's), and the attitude error of an estimate against a truth, row by
-row (the replay's score: its angles and its world and body vectors), the truth's own noise (the
+row (the replay's score: its angles and its world and body vectors), the angle between two
+attitudes row by row, the truth's own noise (the
 changes between its steps), the gyro's rate against the truth's (the units' evidence) and
 the norms and finiteness of rows; their entry points (:data:`ENTRIES`).
 
@@ -22,6 +23,7 @@ from imu_dcm._kernels.jit import inline
 from imu_dcm.so3 import SMALL_ANGLE_RAD
 
 __all__ = [
+    "ANGLE_SIGNATURE",
     "ENTRIES",
     "ERROR_SIGNATURE",
     "FINITE_SIGNATURE",
@@ -35,6 +37,7 @@ __all__ = [
     "WINDOW_SIGNATURE",
     "attitude_errors",
     "error_vectors",
+    "quat_angles",
     "integrated_rate",
     "rate_ratios",
     "row_finites",
@@ -54,6 +57,7 @@ INTEGRAL_SIGNATURE = "void(int64[::1], float64[:, ::1], int64[::1], float64[:, :
 WINDOW_SIGNATURE = "void(float64[:, ::1], int64, float64[::1], float64[::1])"
 STEPS_SIGNATURE = "void(float64[:, ::1], float64[::1])"
 ERROR_SIGNATURE = "int64(float64[:, ::1], float64[:, ::1], float64[:, ::1])"
+ANGLE_SIGNATURE = "int64(float64[:, ::1], float64[:, ::1], float64[::1])"
 VECTOR_SIGNATURE = "void(float64[:, ::1], float64[:, ::1], float64[::1], float64[:, ::1])"
 NORM_SIGNATURE = "void(float64[:, :], float64[::1])"
 FINITE_SIGNATURE = "void(float64[:, :], boolean[::1])"
@@ -394,6 +398,25 @@ def row_finites(x, out):
         out[i] = ok
 
 
+def quat_angles(q_a, q_b, out):
+    """The angle, rad in ``[0, π]``, of ``q_a* ⊗ q_b`` for each row of ``q_a`` and ``q_b``
+    (n, 4) ``[x, y, z, w]``, into ``out`` (n,); returns the first row where either quaternion
+    has a zero or non-finite norm (-1: none), that row and those after it left unwritten.
+
+    The formula of :func:`imu_dcm.so3.quat_angle_rad`, row by row: ``2 atan2(|v|, |w|)`` of the
+    Hamilton product of the conjugate (summed in the same order), a ratio of components."""
+    for k in range(q_a.shape[0]):
+        ax, ay, az, aw = q_a[k, 0], q_a[k, 1], q_a[k, 2], q_a[k, 3]
+        bx, by, bz, bw = q_b[k, 0], q_b[k, 1], q_b[k, 2], q_b[k, 3]
+        na = math.sqrt(ax * ax + ay * ay + az * az + aw * aw)
+        nb = math.sqrt(bx * bx + by * by + bz * bz + bw * bw)
+        if not (0.0 < na < math.inf and 0.0 < nb < math.inf):
+            return np.int64(k)
+        x, y, z, w = quat_mul((-ax, -ay, -az, aw), (bx, by, bz, bw))
+        out[k] = 2.0 * math.atan2(math.sqrt(x * x + y * y + z * z), abs(w))
+    return np.int64(-1)
+
+
 #: ``name -> (function, signature)`` of this kernel's entry points.
 ENTRIES = {
     "step_rotvecs": (step_rotvecs, SIGNATURE),
@@ -402,6 +425,7 @@ ENTRIES = {
     "window_norms": (window_norms, WINDOW_SIGNATURE),
     "min_steps": (min_steps, STEPS_SIGNATURE),
     "attitude_errors": (attitude_errors, ERROR_SIGNATURE),
+    "quat_angles": (quat_angles, ANGLE_SIGNATURE),
     "error_vectors": (error_vectors, VECTOR_SIGNATURE),
     "second_steps": (second_steps, SECOND_SIGNATURE),
     "rate_ratios": (rate_ratios, RATIO_SIGNATURE),
