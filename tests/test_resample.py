@@ -188,3 +188,32 @@ def test_rate_ratios_are_the_gyros_mean_rate_over_scipys_step_rate_where_the_tru
     # a step's rotation is within 32 ulp of 1 of scipy's (see above), and a moving step turns
     # at least moving * 0.8 ms = 1.6e-3 rad: its rate within 32 EPS / 1.6e-3 = 4.4e-12 relative
     np.testing.assert_allclose(out[: len(keep)], want, rtol=32 * EPS / 1.6e-3 + 8 * EPS)
+
+
+@pytest.mark.parametrize("m", [2, 3, 50, 599])
+def test_window_rates_are_the_norms_of_scipys_mean_step_rates(m):
+    # the rest rule's |omega_T| of every window of m rows: the norm of the mean of the steps'
+    # rates over its m - 1 steps (scipy's relative rotations over the stamps' steps), NaN for
+    # a window with a step next to a missing row
+    from imu_dcm.gyro.rest_evidence import truth_rates
+
+    rng = np.random.default_rng(24)
+    n = 600
+    q, r, t = _turning(rng, n)
+    q[[100, 101, 450]] = np.nan
+    rate = (r[:-1].inv() * r[1:]).as_rotvec() / np.diff(t)[:, None]
+    bad = np.zeros(n - 1, bool)
+    bad[[99, 100, 101, 449, 450]] = True  # the steps touching a missing row
+    want = np.array(
+        [
+            np.nan if bad[a : a + m - 1].any() else np.linalg.norm(rate[a : a + m - 1].mean(axis=0))
+            for a in range(n - m + 1)
+        ]
+    )
+    got = truth_rates(q, t, m)
+    assert np.array_equal(np.isnan(got), np.isnan(want))
+    # each step's rate within 32 EPS / 0.8 ms of scipy's; each running sum, of up to n rates
+    # below 0.01 rad / 0.8 ms = 12.5 rad/s, within n ulp of its largest value, n * 12.5: a
+    # window's mean, their difference over m - 1, within 2 n EPS n 12.5 / (m - 1)
+    tol = 32 * EPS / 0.8e-3 + 2 * n * EPS * n * 12.5 / (m - 1)
+    np.testing.assert_allclose(got, want, rtol=0, atol=tol)

@@ -12,7 +12,7 @@ the MCAP records of a batch (:mod:`~imu_dcm._kernels.mcap_scan`), and :func:`ste
 :func:`slerp_rows`, :func:`integrated_rate`, :func:`window_norms`, :func:`min_steps`,
 :func:`attitude_errors`, :func:`error_vectors`, :func:`quat_angles`, :func:`second_steps`,
 :func:`rate_ratios`,
-:func:`row_norms` and :func:`row_finites` the passes over whole series
+:func:`window_rates`, :func:`row_norms` and :func:`row_finites` the passes over whole series
 (:mod:`~imu_dcm._kernels.series`), and :func:`walk_fields` the wanted fields of a batch of ROS
 messages (:mod:`~imu_dcm._kernels.ros_fields`).
 
@@ -56,6 +56,7 @@ __all__ = [
     "step_rotvecs",
     "walk_fields",
     "window_norms",
+    "window_rates",
 ]
 
 
@@ -406,3 +407,24 @@ def quat_angles(q_a, q_b, out) -> int:
             f"Expected q_a and q_b (n, 4) and out (n,), got {q_a.shape}, {q_b.shape}, {out.shape}"
         )
     return int(entry("quat_angles")(q_a, q_b, out))
+
+
+def window_rates(q, t, ok, m: int, out) -> None:
+    """``|omega_T|`` of every window of ``m >= 2`` rows of ``q`` (n, 4) at ``t`` (n,) s into
+    ``out`` (n - m + 1,), NaN where a step is not between two ``ok`` rows
+    (:func:`imu_dcm._kernels.series.window_rates`)."""
+    _arrays(q=(q, 2), t=(t, 1), out=(out, 1))
+    _flags(ok=ok)
+    n = len(q)
+    if (
+        q.shape[1:] != (4,)
+        or len(t) != n
+        or len(ok) != n
+        or not 2 <= m <= max(n, 2)
+        or (out.shape != (max(n - m + 1, 0),))
+    ):
+        raise TypeError(
+            f"Expected q (n, 4), t (n,), ok (n,), 2 <= m and out (n - m + 1,), got {q.shape}, "
+            f"{t.shape}, {ok.shape}, m={m}, {out.shape}"
+        )
+    entry("window_rates")(q, t, np.ascontiguousarray(ok), int(m), out)

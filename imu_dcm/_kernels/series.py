@@ -6,7 +6,8 @@ gyro's turn over the truth's steps), and the statistics of every window of a ser
 smallest steps (the rest rule's), and the attitude error of an estimate against a truth, row by
 row (the replay's score: its angles and its world and body vectors), the angle between two
 attitudes row by row, the truth's own noise (the
-changes between its steps), the gyro's rate against the truth's (the units' evidence) and
+changes between its steps), its mean rate over every window (the rest rule's), the gyro's rate
+against the truth's (the units' evidence) and
 the norms and finiteness of rows; their entry points (:data:`ENTRIES`).
 
 Imported only to compile, like :mod:`imu_dcm._kernels.integrator`.
@@ -31,6 +32,7 @@ __all__ = [
     "RATIO_SIGNATURE",
     "SECOND_SIGNATURE",
     "VECTOR_SIGNATURE",
+    "WINDOW_RATE_SIGNATURE",
     "INTEGRAL_SIGNATURE",
     "SIGNATURE",
     "SLERP_SIGNATURE",
@@ -43,6 +45,7 @@ __all__ = [
     "row_finites",
     "row_norms",
     "second_steps",
+    "window_rates",
     "min_steps",
     "slerp_rows",
     "step_rotvecs",
@@ -61,6 +64,7 @@ ANGLE_SIGNATURE = "int64(float64[:, ::1], float64[:, ::1], float64[::1])"
 VECTOR_SIGNATURE = "void(float64[:, ::1], float64[:, ::1], float64[::1], float64[:, ::1])"
 NORM_SIGNATURE = "void(float64[:, :], float64[::1])"
 FINITE_SIGNATURE = "void(float64[:, :], boolean[::1])"
+WINDOW_RATE_SIGNATURE = "void(float64[:, ::1], float64[::1], boolean[::1], int64, float64[::1])"
 SECOND_SIGNATURE = "int64(float64[:, ::1], boolean[::1], boolean[::1], float64[:, ::1])"
 RATIO_SIGNATURE = (
     "int64(float64[:, ::1], float64[::1], float64[:, ::1], boolean[::1], float64, float64[::1])"
@@ -417,6 +421,42 @@ def quat_angles(q_a, q_b, out):
     return np.int64(-1)
 
 
+def window_rates(q, t, ok, m, out):
+    """``|omega_T|`` of every window of ``m >= 2`` rows of the attitudes ``q`` (n, 4) at ``t``
+    (n,) s, rad/s, into ``out`` (n - m + 1,): the norm of the mean of the steps' rates
+    ``log(q_k⁻¹ q_{k+1}) / (t_{k+1} - t_k)`` over its ``m - 1`` steps, NaN where one of them
+    is not between two ``ok`` rows.
+
+    The window's sum is the difference of the running sums of the steps' rates (each step added
+    to the sum before it, in order; a step not between two ``ok`` rows adds 0), as
+    :func:`imu_dcm.gyro.rest_evidence.truth_rates` took it, the running sums of the last ``m``
+    steps held in a ring."""
+    n = q.shape[0]
+    ring = np.zeros((m, 3))
+    count = np.zeros(m, np.int64)
+    sx = sy = sz = 0.0
+    c = 0
+    for j in range(1, n):  # the running sum after step j - 1
+        i = j - 1
+        if ok[i] and ok[i + 1]:
+            x, y, z = _step(q, i)
+            dt = t[i + 1] - t[i]
+            sx += x / dt
+            sy += y / dt
+            sz += z / dt
+            c += 1
+        r = j % m
+        ring[r, 0], ring[r, 1], ring[r, 2], count[r] = sx, sy, sz, c
+        a = j - (m - 1)
+        if a >= 0:  # window a: the steps a .. j - 1
+            s0 = a % m
+            dx, dy, dz = sx - ring[s0, 0], sy - ring[s0, 1], sz - ring[s0, 2]
+            if c - count[s0] < m - 1:
+                out[a] = np.nan
+            else:
+                out[a] = math.sqrt((dx * dx + dz * dz) + dy * dy) / (m - 1)
+
+
 #: ``name -> (function, signature)`` of this kernel's entry points.
 ENTRIES = {
     "step_rotvecs": (step_rotvecs, SIGNATURE),
@@ -431,4 +471,5 @@ ENTRIES = {
     "rate_ratios": (rate_ratios, RATIO_SIGNATURE),
     "row_norms": (row_norms, NORM_SIGNATURE),
     "row_finites": (row_finites, FINITE_SIGNATURE),
+    "window_rates": (window_rates, WINDOW_RATE_SIGNATURE),
 }

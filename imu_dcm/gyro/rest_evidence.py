@@ -15,8 +15,8 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from imu_dcm._kernels.calls import second_steps
-from imu_dcm.arrays import BLOCK_ROWS, median, row_finite, row_norm
+from imu_dcm._kernels.calls import second_steps, window_rates
+from imu_dcm.arrays import median, row_finite, row_norm
 from imu_dcm.errors import InputError
 from imu_dcm.gyro.resample import step_rotvecs
 from imu_dcm.gyro.windows import min_steps, step_var, windowed_mean_var
@@ -130,30 +130,17 @@ def truth_rates(q: NDArray, t: NDArray, m: int) -> NDArray:
 
     ``omega_T`` is the mean of the truth's body rate step by step, ``log(q_k⁻¹ q_{k+1}) / dt``
     over the window's ``m - 1`` steps: the rate the gyro would read without bias (a rotation
-    of many turns over the window is not folded into ±π). A block of windows at a time, each
-    window's sum the difference of the running sums of the steps' rates (each step added to
-    the sum before it, in order: the same bytes at any block size).
+    of many turns over the window is not folded into ±π). Each window's sum is the
+    difference of the running sums of the steps' rates (each step added to the sum before it,
+    in order), in one compiled pass that holds the last ``m`` running sums
+    (:func:`imu_dcm._kernels.calls.window_rates`).
     """
-    ok = row_finite(q)
-    k = len(q) - m + 1
-    rate = np.empty(max(k, 0))
-    carry, count0 = np.zeros(3), 0  # the sum of the steps' rates, and of the valid steps, before
-    for a in range(0, k, BLOCK_ROWS):
-        b = min(k, a + BLOCK_ROWS)
-        steps = b + m - 2 - a  # the steps of windows [a, b): a .. b + m - 3
-        sums = np.empty((steps + 1, 3))
-        sums[0] = carry
-        rates = sums[1:]
-        step_rotvecs(q[a : a + steps + 1], ok[a : a + steps + 1], out=rates)
-        rates /= np.diff(t[a : a + steps + 1])[:, None]
-        valid = ok[a : a + steps] & ok[a + 1 : a + steps + 1]
-        rates[~valid] = 0.0
-        rates[0] += carry
-        np.cumsum(rates, axis=0, out=rates)
-        count = np.concatenate([[count0], count0 + np.cumsum(valid)])
-        carry, count0 = sums[b - a].copy(), int(count[b - a])
-        rate[a:b] = row_norm(sums[m - 1 : m - 1 + b - a] - sums[: b - a]) / (m - 1)
-        rate[a:b][count[m - 1 : m - 1 + b - a] - count[: b - a] < m - 1] = np.nan
+    q = np.ascontiguousarray(q, dtype=float)
+    rate = np.empty(max(len(q) - m + 1, 0))
+    if len(rate) and m >= 2:
+        window_rates(q, np.ascontiguousarray(t, dtype=float), row_finite(q), int(m), rate)
+    else:  # windows of one sample hold no step
+        rate[:] = np.nan
     return rate
 
 
