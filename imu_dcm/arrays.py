@@ -49,33 +49,23 @@ def cumsum_rows(x: NDArray, out: NDArray) -> NDArray:
 
 def row_norm(a: ArrayLike) -> NDArray[np.float64]:
     """Euclidean norm over the last axis, shape ``(...)``: ``np.linalg.norm(a, axis=-1)``
-    without numpy's slow reduction over a short axis, in one compiled pass over the rows as
-    they lie (:func:`imu_dcm._kernels.calls.row_norms`: 4x numpy's ``einsum`` on ``(N, 4)``,
-    whose order of sums it keeps, and no array of squares)."""
-    from imu_dcm._kernels.calls import row_norms  # here: the kernels' loader imports this module
-
+    without numpy's slow reduction over a short axis (a few times faster for ``(N, 4)``)."""
     a = np.asarray(a, dtype=float)
-    if a.ndim == 0:
-        raise ValueError("Expected an array with a last axis, got a scalar")
-    rows = a.reshape(-1, a.shape[-1]) if a.ndim != 2 else a  # a view where the strides allow
-    out = np.empty(len(rows))
-    row_norms(rows, out)  # one compiled pass, no squares held (numpy's einsum order)
-    return out.reshape(a.shape[:-1])
+    return np.sqrt(np.einsum("...i,...i->...", a, a))
 
 
 def row_finite(a: ArrayLike) -> NDArray[np.bool_]:
     """Whether every element along the last axis is finite, shape ``(...)``:
-    ``np.all(np.isfinite(a), axis=-1)``; of float64 values in one compiled pass over the rows as
-    they lie (:func:`imu_dcm._kernels.calls.row_finites`: no whole-log temporary), of others
-    column by column."""
+    ``np.all(np.isfinite(a), axis=-1)``, column by column (many times faster for ``(N, 4)``);
+    a 2-D array :data:`BLOCK_ROWS` rows at a time, with no whole-log temporary."""
     a = np.asarray(a)
-    if a.dtype == np.float64 and a.ndim >= 1:
-        from imu_dcm._kernels.calls import row_finites  # here: the kernels' loader imports this
-
-        rows = a.reshape(-1, a.shape[-1]) if a.ndim != 2 else a  # a view where strides allow
-        out = np.empty(len(rows), bool)
-        row_finites(rows, out)
-        return out.reshape(a.shape[:-1])
+    if a.ndim == 2 and a.shape[1] and len(a) > BLOCK_ROWS:
+        out = np.empty(len(a), bool)
+        scratch = np.empty((BLOCK_ROWS, a.shape[1]), bool)
+        for lo in range(0, len(a), BLOCK_ROWS):
+            hi = min(len(a), lo + BLOCK_ROWS)
+            out[lo:hi] = _all_finite(np.isfinite(a[lo:hi], out=scratch[: hi - lo]))
+        return out
     return _all_finite(np.isfinite(a))
 
 

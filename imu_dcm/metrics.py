@@ -24,7 +24,6 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from imu_dcm._kernels.calls import attitude_errors, error_vectors
 from imu_dcm.arrays import BLOCK_ROWS
 from imu_dcm.so3 import product_planes, quat_checked_norm
 
@@ -78,11 +77,6 @@ def attitude_error_deg(q_est: ArrayLike, q_true: ArrayLike) -> AttitudeError:
     # Each angle below is a ratio of components, the same for scaled quaternions: the norms
     # are only checked (zero or NaN refused), not divided out.
     q_est, q_true = np.asarray(q_est, dtype=float), np.asarray(q_true, dtype=float)
-    if q_est.ndim == 2 and q_est.shape == q_true.shape and q_est.shape[1] == 4:
-        # rows against rows (a replay's series): the same formulas in one compiled pass
-        out = np.empty((3, len(q_est)))
-        if attitude_errors(np.ascontiguousarray(q_est), np.ascontiguousarray(q_true), out) < 0:
-            return AttitudeError(out[0], out[1], out[2])
     quat_checked_norm(q_est)
     quat_checked_norm(q_true)
     ex, ey, ez, ew = np.abs(product_planes(q_est, q_true, conj_q=True))
@@ -113,15 +107,7 @@ def error_vector_planes(
     ``angle_rad``, optional: the error angle when already known (the total error of
     :func:`attitude_error_deg`, in rad), saving its computation.
     """
-    est, true = np.asarray(q_est, dtype=float), np.asarray(q_true, dtype=float)
-    if angle_rad is not None and est.ndim == 2 and est.shape == true.shape and est.shape[1] == 4:
-        # rows against rows of known angles (a replay's score): one compiled pass
-        out = np.empty((6, len(est)))
-        angle = np.ascontiguousarray(np.asarray(angle_rad, dtype=float).reshape(-1))
-        if angle.shape == (len(est),):
-            error_vectors(np.ascontiguousarray(est), np.ascontiguousarray(true), angle, out)
-            return out
-    E, T = np.broadcast_arrays(_planes4(est), _planes4(true))
+    E, T = np.broadcast_arrays(_planes4(q_est), _planes4(q_true))
     shape = E.shape[1:]
     (ex, ey, ez, ew), (tx, ty, tz, tw) = E.reshape(4, -1), T.reshape(4, -1)  # 0-d: 1-D
     out = np.empty((6, ex.size))

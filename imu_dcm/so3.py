@@ -395,12 +395,6 @@ def quat_angle_rad(q_a: ArrayLike, q_b: ArrayLike) -> NDArray[np.float64]:
     """
     q_a = np.asarray(q_a, dtype=float)
     q_b = np.asarray(q_b, dtype=float)
-    if q_a.ndim == 2 and q_a.shape == q_b.shape and q_a.shape[1] == 4:
-        from imu_dcm._kernels.calls import quat_angles  # here: the kernels' loader imports so3
-
-        out = np.empty(len(q_a))  # rows against rows: the same formula in one compiled pass
-        if quat_angles(np.ascontiguousarray(q_a), np.ascontiguousarray(q_b), out) < 0:
-            return out
     quat_checked_norm(q_a)  # the ratio below does not depend on the norms: only checked
     quat_checked_norm(q_b)
     x, y, z, w = product_planes(q_a, q_b, conj_p=True)

@@ -228,7 +228,13 @@ def test_attitude_errors_row_by_row_are_scipys_swing_and_twist():
     # the magnitude of q_est ⊗ q_true*; the inclination the angle of its swing s (the shortest
     # rotation taking world z where it goes), the heading that of its twist s⁻¹ ⊗ e about z.
     # Any sign and scale of either quaternion, and angles from 1e-9 rad to π.
-    from imu_dcm.metrics import attitude_error_deg
+    from imu_dcm._kernels.calls import attitude_errors
+    from imu_dcm.metrics import AttitudeError, attitude_error_deg
+
+    def compiled(q_est, q_true):
+        out = np.empty((3, len(q_est)))
+        assert attitude_errors(q_est, q_true, out) == -1
+        return AttitudeError(*out)
 
     rng = np.random.default_rng(12)
     n = 5000
@@ -240,7 +246,7 @@ def test_attitude_errors_row_by_row_are_scipys_swing_and_twist():
     a, b = q_est.as_quat(), q_true.as_quat()
     a[::3] *= -2.5
     b[1::4] *= -0.5
-    got = attitude_error_deg(a, b)
+    got = compiled(a, b)
     np.testing.assert_allclose(got.total_deg, np.degrees(e.magnitude()), rtol=1e-8, atol=1e-12)
     z = np.array([0.0, 0.0, 1.0])
     v = e.apply(z)
@@ -258,21 +264,25 @@ def test_attitude_errors_row_by_row_are_scipys_swing_and_twist():
     np.testing.assert_allclose(got.heading_deg, np.degrees(twist.magnitude()), rtol=1e-7, atol=1e-9)
     # the compiled rows and numpy's planes (the same formulas; libm's arctangent and numpy's
     # SIMD one may differ by an ulp or two) agree to a few ulp
-    planes = attitude_error_deg(a[None], b[None])
+    planes = attitude_error_deg(a, b)
     for f in ("total_deg", "inclination_deg", "heading_deg"):
-        np.testing.assert_allclose(getattr(got, f), getattr(planes, f)[0], rtol=1e-15, atol=0)
-    # a zero or NaN quaternion is refused whichever row it is in
+        np.testing.assert_allclose(getattr(got, f), getattr(planes, f), rtol=1e-15, atol=0)
+    # a zero or NaN quaternion: its row is named, and the replay's score refuses it by name
+    from imu_dcm.replay.core import _row_errors
+
     for bad in (np.zeros(4), np.full(4, np.nan)):
         c = b.copy()
         c[n // 2] = bad
+        assert attitude_errors(a, c, np.empty((3, n))) == n // 2
         with pytest.raises(InputError, match="finite non-zero norm"):
-            attitude_error_deg(a, c)
+            _row_errors(a, c)
 
 
 def test_the_angle_between_attitudes_row_by_row_is_scipys_relative_rotation():
-    # rows against rows (one compiled pass) and any other shape (numpy's planes): scipy's
-    # magnitude of q_a⁻¹ q_b at any sign and scale, angles from 1e-9 rad to π, a zero or NaN
-    # quaternion refused whichever row it is in
+    # the compiled rows (the sampling check's) and numpy's planes: scipy's magnitude of
+    # q_a⁻¹ q_b at any sign and scale, angles from 1e-9 rad to π, a zero or NaN quaternion
+    # named or refused whichever row it is in
+    from imu_dcm._kernels.calls import quat_angles
     from imu_dcm.so3 import quat_angle_rad
 
     rng = np.random.default_rng(14)
@@ -283,12 +293,15 @@ def test_the_angle_between_attitudes_row_by_row_is_scipys_relative_rotation():
     b = a * Rotation.from_rotvec(rv)
     qa, qb = a.as_quat() * rng.choice([-3.0, 0.5], (n, 1)), b.as_quat()
     want = (a.inv() * b).magnitude()
-    got = quat_angle_rad(qa, qb)
+    got = np.empty(n)
+    assert quat_angles(qa, qb, got) == -1
     np.testing.assert_allclose(got, want, rtol=1e-8, atol=8 * EPS)
+    np.testing.assert_allclose(quat_angle_rad(qa, qb), want, rtol=1e-8, atol=8 * EPS)
     # the rows' pass and numpy's planes: the same formula (arctangents an ulp or two apart)
-    np.testing.assert_allclose(got, quat_angle_rad(qa[None], qb[None])[0], rtol=1e-15, atol=0)
+    np.testing.assert_allclose(got, quat_angle_rad(qa, qb), rtol=1e-15, atol=0)
     for bad in (np.zeros(4), np.full(4, np.nan)):
         c = qb.copy()
         c[n - 1] = bad
+        assert quat_angles(qa, c, np.empty(n)) == n - 1
         with pytest.raises(InputError, match="finite non-zero norm"):
             quat_angle_rad(qa, c)

@@ -12,7 +12,7 @@ the MCAP records of a batch (:mod:`~imu_dcm._kernels.mcap_scan`), and :func:`ste
 :func:`slerp_rows`, :func:`integrated_rate`, :func:`window_norms`, :func:`min_steps`,
 :func:`attitude_errors`, :func:`error_vectors`, :func:`quat_angles`, :func:`second_steps`,
 :func:`rate_ratios`,
-:func:`window_rates`, :func:`row_norms` and :func:`row_finites` the passes over whole series
+:func:`window_rates` and :func:`row_norms` the passes over whole series
 (:mod:`~imu_dcm._kernels.series`), and :func:`walk_fields` the wanted fields of a batch of ROS
 messages (:mod:`~imu_dcm._kernels.ros_fields`).
 
@@ -48,7 +48,6 @@ __all__ = [
     "quat_angles",
     "rate_ratios",
     "record_chain",
-    "row_finites",
     "row_norms",
     "scan_csv",
     "second_steps",
@@ -389,12 +388,6 @@ def row_norms(x, out) -> None:
     """The norm of each row of ``x`` (n, k) float64, any strides, into ``out`` (n,)
     (:func:`imu_dcm._kernels.series.row_norms`)."""
     entry("row_norms")(_rows_of(x, out, np.float64), out)
-
-
-def row_finites(x, out) -> None:
-    """Whether each row of ``x`` (n, k) float64, any strides, is finite, into ``out`` (n,)
-    bool (:func:`imu_dcm._kernels.series.row_finites`)."""
-    entry("row_finites")(_rows_of(x, out, np.bool_), out)
 
 
 def quat_angles(q_a, q_b, out) -> int:

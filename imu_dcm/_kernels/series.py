@@ -8,7 +8,7 @@ row (the replay's score: its angles and its world and body vectors), the angle b
 attitudes row by row, the truth's own noise (the
 changes between its steps), its mean rate over every window (the rest rule's), the gyro's rate
 against the truth's (the units' evidence) and
-the norms and finiteness of rows; their entry points (:data:`ENTRIES`).
+the norms of rows; their entry points (:data:`ENTRIES`).
 
 Imported only to compile, like :mod:`imu_dcm._kernels.integrator`.
 """
@@ -27,7 +27,6 @@ __all__ = [
     "ANGLE_SIGNATURE",
     "ENTRIES",
     "ERROR_SIGNATURE",
-    "FINITE_SIGNATURE",
     "NORM_SIGNATURE",
     "RATIO_SIGNATURE",
     "SECOND_SIGNATURE",
@@ -42,7 +41,6 @@ __all__ = [
     "quat_angles",
     "integrated_rate",
     "rate_ratios",
-    "row_finites",
     "row_norms",
     "second_steps",
     "window_rates",
@@ -63,7 +61,6 @@ ERROR_SIGNATURE = "int64(float64[:, ::1], float64[:, ::1], float64[:, ::1])"
 ANGLE_SIGNATURE = "int64(float64[:, ::1], float64[:, ::1], float64[::1])"
 VECTOR_SIGNATURE = "void(float64[:, ::1], float64[:, ::1], float64[::1], float64[:, ::1])"
 NORM_SIGNATURE = "void(float64[:, :], float64[::1])"
-FINITE_SIGNATURE = "void(float64[:, :], boolean[::1])"
 WINDOW_RATE_SIGNATURE = "void(float64[:, ::1], float64[::1], boolean[::1], int64, float64[::1])"
 SECOND_SIGNATURE = "int64(float64[:, ::1], boolean[::1], boolean[::1], float64[:, ::1])"
 RATIO_SIGNATURE = (
@@ -377,7 +374,7 @@ def row_norms(x, out):
 
     The squares of the even and of the odd columns are summed apart, then added (for three
     columns ``(x0² + x2²) + x1²``, for four ``(x0² + x2²) + (x1² + x3²)``): the order of
-    numpy's ``einsum`` over a short last axis, which :func:`imu_dcm.arrays.row_norm` used."""
+    numpy's ``einsum`` over a short last axis, which :func:`imu_dcm.arrays.row_norm` uses."""
     k = x.shape[1]
     for i in range(x.shape[0]):
         even = 0.0
@@ -388,18 +385,6 @@ def row_norms(x, out):
         if k % 2:
             even += x[i, k - 1] * x[i, k - 1]
         out[i] = math.sqrt(even + odd)
-
-
-def row_finites(x, out):
-    """Whether every value of each row of ``x`` (n, k), any strides, is finite, into ``out``
-    (n,)."""
-    for i in range(x.shape[0]):
-        ok = True
-        for j in range(x.shape[1]):
-            if not math.isfinite(x[i, j]):
-                ok = False
-                break
-        out[i] = ok
 
 
 def quat_angles(q_a, q_b, out):
@@ -470,6 +455,5 @@ ENTRIES = {
     "second_steps": (second_steps, SECOND_SIGNATURE),
     "rate_ratios": (rate_ratios, RATIO_SIGNATURE),
     "row_norms": (row_norms, NORM_SIGNATURE),
-    "row_finites": (row_finites, FINITE_SIGNATURE),
     "window_rates": (window_rates, WINDOW_RATE_SIGNATURE),
 }

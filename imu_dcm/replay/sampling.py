@@ -21,6 +21,7 @@ import warnings
 import numpy as np
 from numpy.typing import NDArray
 
+from imu_dcm._kernels.calls import quat_angles
 from imu_dcm.arrays import BLOCK_ROWS
 from imu_dcm.errors import Diagnostics
 from imu_dcm.integrator.batch import integrate_quat
@@ -96,4 +97,11 @@ def _half_rate_angles(omega_b, t_s, q_est, method: str) -> NDArray[np.float64]:
 def _angles(diff: NDArray, rows: NDArray, q: NDArray, q_est: NDArray) -> None:
     """``diff[rows]``: the angle between ``q`` and the estimate at the half-rate ``rows``."""
     if len(rows):
-        diff[rows] = quat_angle_rad(q_est[2 * rows], q)
+        q_a, q_b, out = (
+            np.ascontiguousarray(q_est[2 * rows]),
+            np.ascontiguousarray(q),
+            np.empty(len(rows)),
+        )
+        if quat_angles(q_a, q_b, out) >= 0:  # the same formula in one compiled pass
+            out = quat_angle_rad(q_a, q_b)  # which names the quaternion it refuses
+        diff[rows] = out

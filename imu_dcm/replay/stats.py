@@ -26,6 +26,7 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import NDArray
 
+from imu_dcm._kernels.calls import error_vectors
 from imu_dcm.arrays import BLOCK_ROWS, true_span
 from imu_dcm.metrics import (
     S_PER_H,
@@ -33,7 +34,6 @@ from imu_dcm.metrics import (
     DriftFit,
     DriftSums,
     error_stats,
-    error_vector_planes,
 )
 
 __all__ = ["DOUBT_RATIO", "LINE_R2", "evaluate", "evaluation_lines"]
@@ -179,7 +179,10 @@ def evaluate(
     body = _BodySums()
     for a in range(0, len(total), BLOCK_ROWS):
         k = slice(a, a + BLOCK_ROWS)
-        e = error_vector_planes(qe[k], qt[k], np.radians(total[k]))
+        e = np.empty((6, len(total[k])))  # the same formulas in one compiled pass
+        error_vectors(
+            np.ascontiguousarray(qe[k]), np.ascontiguousarray(qt[k]), np.radians(total[k]), e
+        )
         sums.add(a, e)
         body.add(e[3:])
     drift = _drift(sums.fit(), t, seg)
