@@ -16,7 +16,7 @@ temporary folder (removed at the end): 1 min, 10 min and 1 h (``--long`` adds 4 
   and the time per sample of each phase, timed by wrapping the functions that do it: read
   (``read_log``), clean (``clean_imu``), truth check (``align_truth`` and the judgement around
   it, less its resampling), resample (``slerp_truth``), bias (``estimate_bias``), integrate
-  (``integrate_quat``), score (``attitude_error_deg``), write (the estimate bag). ``arrays``
+  (``integrate_quat``), score (``attitude_errors``), write (the estimate bag). ``arrays``
   is the bytes the replay must hold: its result's arrays, each buffer once.
 
 The machine is shared: absolute figures move with the load, ratios within a run much less.
@@ -175,6 +175,7 @@ def _phase_child(bag: str) -> None:
     timed(rate_check, "slerp_truth", "resample")
     timed(core, "estimate_bias", "bias")
     timed(core, "integrate_quat", "integrate")
+    timed(core, "attitude_errors", "score")  # the compiled rows (the numpy path on refusal)
     timed(core, "attitude_error_deg", "score")
     from imu_dcm.replay.__main__ import _write_out
 
