@@ -258,6 +258,21 @@ def min_steps(x, out):
                 out[c] = d
 
 
+@inline
+def _rows_product(p, q, k: int, conj_p: bool) -> tuple:
+    """Whether rows ``p[k]`` and ``q[k]`` both have a finite non-zero norm, and their Hamilton
+    product with one of them conjugated: ``p[k]* ⊗ q[k]`` with ``conj_p``, else
+    ``p[k] ⊗ q[k]*``."""
+    px, py, pz, pw = p[k, 0], p[k, 1], p[k, 2], p[k, 3]
+    qx, qy, qz, qw = q[k, 0], q[k, 1], q[k, 2], q[k, 3]
+    np_ = math.sqrt(px * px + py * py + pz * pz + pw * pw)
+    nq = math.sqrt(qx * qx + qy * qy + qz * qz + qw * qw)
+    ok = 0.0 < np_ < math.inf and 0.0 < nq < math.inf
+    if conj_p:
+        return ok, quat_mul((-px, -py, -pz, pw), (qx, qy, qz, qw))
+    return ok, quat_mul((px, py, pz, pw), (-qx, -qy, -qz, qw))
+
+
 def attitude_errors(q_est, q_true, out):
     """The total, inclination and heading error of each row of ``q_est`` against ``q_true``
     (n, 4) ``[x, y, z, w]``, deg, into the rows of ``out`` (3, n); returns the first row where
@@ -272,13 +287,9 @@ def attitude_errors(q_est, q_true, out):
     """
     to_deg = 180.0 / math.pi
     for k in range(q_est.shape[0]):
-        ex, ey, ez, ew = q_est[k, 0], q_est[k, 1], q_est[k, 2], q_est[k, 3]
-        tx, ty, tz, tw = q_true[k, 0], q_true[k, 1], q_true[k, 2], q_true[k, 3]
-        ne = math.sqrt(ex * ex + ey * ey + ez * ez + ew * ew)
-        nt = math.sqrt(tx * tx + ty * ty + tz * tz + tw * tw)
-        if not (0.0 < ne < math.inf and 0.0 < nt < math.inf):
+        ok, (x, y, z, w) = _rows_product(q_est, q_true, k, False)
+        if not ok:
             return np.int64(k)
-        x, y, z, w = quat_mul((ex, ey, ez, ew), (-tx, -ty, -tz, tw))
         x, y, z, w = abs(x), abs(y), abs(z), abs(w)
         out[0, k] = 2.0 * math.atan2(math.sqrt(x * x + y * y + z * z), w) * to_deg
         out[1, k] = 2.0 * math.atan2(math.sqrt(x * x + y * y), math.sqrt(w * w + z * z)) * to_deg
@@ -395,13 +406,9 @@ def quat_angles(q_a, q_b, out):
     The formula of :func:`imu_dcm.so3.quat_angle_rad`, row by row: ``2 atan2(|v|, |w|)`` of the
     Hamilton product of the conjugate (summed in the same order), a ratio of components."""
     for k in range(q_a.shape[0]):
-        ax, ay, az, aw = q_a[k, 0], q_a[k, 1], q_a[k, 2], q_a[k, 3]
-        bx, by, bz, bw = q_b[k, 0], q_b[k, 1], q_b[k, 2], q_b[k, 3]
-        na = math.sqrt(ax * ax + ay * ay + az * az + aw * aw)
-        nb = math.sqrt(bx * bx + by * by + bz * bz + bw * bw)
-        if not (0.0 < na < math.inf and 0.0 < nb < math.inf):
+        ok, (x, y, z, w) = _rows_product(q_a, q_b, k, True)
+        if not ok:
             return np.int64(k)
-        x, y, z, w = quat_mul((-ax, -ay, -az, aw), (bx, by, bz, bw))
         out[k] = 2.0 * math.atan2(math.sqrt(x * x + y * y + z * z), abs(w))
     return np.int64(-1)
 
