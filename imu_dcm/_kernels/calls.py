@@ -370,24 +370,17 @@ def rate_ratios(w, t, q, ok, moving: float, out) -> int:
     return int(entry("rate_ratios")(w, t, q, np.ascontiguousarray(ok), float(moving), out))
 
 
-def _rows_of(x, out, dtype) -> np.ndarray:
-    """``x`` checked as a 2-D float64 array of any strides, and ``out`` as (len(x),) ``dtype``;
-    ``x`` as the entry point can take it."""
-    if not (isinstance(out, np.ndarray) and out.dtype == dtype and out.ndim == 1):
-        raise TypeError(f"Expected `out` a 1-D {np.dtype(dtype)} array, got {type(out).__name__}")
-    if not (isinstance(x, np.ndarray) and x.dtype == np.float64 and x.ndim == 2):
-        raise TypeError(f"Expected `x` a 2-D float64 array, got {type(x).__name__}")
-    if len(out) != len(x) or not out.flags.c_contiguous:
-        raise TypeError(f"Expected a contiguous `out` of {len(x)} rows, got {out.shape}")
-    if backend() == "jit" and not x.flags.writeable:
-        x = x.copy()  # numba's signature is of a writable array (the built one reads any)
-    return x
-
-
 def row_norms(x, out) -> None:
     """The norm of each row of ``x`` (n, k) float64, any strides, into ``out`` (n,)
     (:func:`imu_dcm._kernels.series.row_norms`)."""
-    entry("row_norms")(_rows_of(x, out, np.float64), out)
+    _arrays(out=(out, 1))
+    if not (isinstance(x, np.ndarray) and x.dtype == np.float64 and x.ndim == 2):
+        raise TypeError(f"Expected `x` a 2-D float64 array, got {type(x).__name__}")
+    if len(out) != len(x):
+        raise TypeError(f"Expected `out` of {len(x)} rows, got {out.shape}")
+    if backend() == "jit" and not x.flags.writeable:
+        x = x.copy()  # numba's signature is of a writable array (the built one reads any)
+    entry("row_norms")(x, out)
 
 
 def quat_angles(q_a, q_b, out) -> int:

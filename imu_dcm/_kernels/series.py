@@ -87,6 +87,18 @@ def _log(x: float, y: float, z: float, w: float) -> tuple:
     return x * scale, y * scale, z * scale
 
 
+@inline
+def _step(q, k: int) -> tuple:
+    """``log(q_k⁻¹ ⊗ q_{k+1})`` of rows ``k`` and ``k + 1`` of ``q`` (each step's rotation, as
+    every pass here takes it): NaN where their product has a zero or non-finite norm."""
+    a_conj = (-q[k, 0], -q[k, 1], -q[k, 2], q[k, 3])
+    x, y, z, w = quat_mul(a_conj, (q[k + 1, 0], q[k + 1, 1], q[k + 1, 2], q[k + 1, 3]))
+    norm = math.sqrt(x * x + y * y + z * z + w * w)
+    if not (norm > 0.0 and norm < math.inf):
+        return np.nan, np.nan, np.nan
+    return _log(x, y, z, w)
+
+
 def step_rotvecs(q, ok, out):
     """``out[k] = log(q_k⁻¹ ⊗ q_{k+1})`` (rad, angle in ``[0, π]``) for ``k < len(q) - 1``,
     ``q`` ``[x, y, z, w]`` rows normalised here; NaN where ``ok[k]`` or ``ok[k + 1]`` is False.
@@ -103,15 +115,10 @@ def step_rotvecs(q, ok, out):
         if not (ok[k] and ok[k + 1]):
             out[k, 0] = out[k, 1] = out[k, 2] = np.nan
             continue
-        a_conj = (-q[k, 0], -q[k, 1], -q[k, 2], q[k, 3])
-        x, y, z, w = quat_mul(a_conj, (q[k + 1, 0], q[k + 1, 1], q[k + 1, 2], q[k + 1, 3]))
-        norm = math.sqrt(x * x + y * y + z * z + w * w)
-        if not (norm > 0.0 and norm < math.inf):
-            out[k, 0] = out[k, 1] = out[k, 2] = np.nan
-            if bad < 0:
-                bad = k
-            continue
-        out[k, 0], out[k, 1], out[k, 2] = _log(x, y, z, w)
+        x, y, z = _step(q, k)
+        if x != x and bad < 0:  # NaN: the product's norm is zero or not finite
+            bad = k
+        out[k, 0], out[k, 1], out[k, 2] = x, y, z
     return bad
 
 
@@ -319,18 +326,6 @@ def error_vectors(q_est, q_true, angle, out):
         scale = math.copysign(scale, w)
         out[0, k], out[1, k], out[2, k] = wx * scale, wy * scale, wz * scale
         out[3, k], out[4, k], out[5, k] = (lx + cx) * scale, (ly + cy) * scale, (lz + cz) * scale
-
-
-@inline
-def _step(q, k: int) -> tuple:
-    """``log(q_k⁻¹ ⊗ q_{k+1})`` as :func:`step_rotvecs` takes it, and whether the product had a
-    finite non-zero norm (else the vector is NaN)."""
-    a_conj = (-q[k, 0], -q[k, 1], -q[k, 2], q[k, 3])
-    x, y, z, w = quat_mul(a_conj, (q[k + 1, 0], q[k + 1, 1], q[k + 1, 2], q[k + 1, 3]))
-    norm = math.sqrt(x * x + y * y + z * z + w * w)
-    if not (norm > 0.0 and norm < math.inf):
-        return np.nan, np.nan, np.nan
-    return _log(x, y, z, w)
 
 
 def second_steps(q, ok, step_ok, out):
