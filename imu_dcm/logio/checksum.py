@@ -1,4 +1,4 @@
-"""The CRC-32 of MCAP chunks, summaries and ROS 1 bag records (the zlib polynomial).
+"""The CRC-32 of MCAP chunks and summaries (the zlib polynomial), read and written.
 
 zlib-ng computes it with carry-less multiplication where the CPU has it: about 12x the speed of
 the system zlib that Python's :mod:`zlib` links (23 against 1.9 GB/s on one core of the
