@@ -7,11 +7,13 @@ from __future__ import annotations
 import dataclasses
 import json
 import math
+import threading
 import warnings
 
 import numpy as np
 import pytest
 
+from imu_dcm.app.beside import Beside
 from imu_dcm.app.checks import check_bias, check_init_q_w_b
 from imu_dcm.app.options import parse_init_q_w_b
 from imu_dcm.app.rerun_mode import check_rerun_mode, rerun_save_path
@@ -136,3 +138,25 @@ def test_a_commands_arrays_ask_for_ordinary_pages_unless_the_environment_says(
     got = subprocess.run([sys.executable, "-c", code], env=environ, capture_output=True, text=True)
     assert got.returncode == 0, got.stderr
     assert got.stdout.strip() == str(huge)
+
+
+def test_a_pass_beside_gives_its_value_and_ends_its_thread():
+    before = threading.active_count()
+    side = Beside(sorted, [3, 1, 2])
+    assert side.then(max, 4, 5) == ([1, 2, 3], 5)
+    assert threading.active_count() == before  # joined: a batch may fork after it
+
+
+def test_two_passes_side_by_side_raise_as_they_would_in_order():
+    def fails(what):
+        raise ValueError(what)
+
+    with pytest.raises(ValueError, match="first"):  # both fail: the first pass's error
+        Beside(fails, "first").then(fails, "second")
+    with pytest.raises(ValueError, match="second"):  # only the second fails
+        Beside(sorted, [1]).then(fails, "second")
+    with pytest.raises(ValueError, match="first"):  # only the first fails
+        Beside(fails, "first").then(max, 1, 2)
+    side = Beside(fails, "again")
+    with pytest.raises(ValueError, match="again"):
+        side.result()

@@ -9,6 +9,7 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from imu_dcm import GapWarning, ImuDcmWarning, InputError
+from imu_dcm.errors import Diagnostics
 from imu_dcm.integrator.batch import METHODS, integrate
 from imu_dcm.integrator.streaming import DcmIntegrator
 
@@ -169,6 +170,24 @@ def test_gap_warns_in_streaming():
         integ.update([0.0, 0.0, 1.0], 0.5)
     with pytest.warns(GapWarning, match="gap"):
         integ.update_many(np.zeros((3, 3)), [0.51, 0.52, 1.5])
+
+
+def test_gaps_go_to_diagnostics_when_given_and_no_warning_is_raised():
+    # a pass on a thread of its own must leave the process's warning filters alone: its gaps
+    # (and rotvec_sum's caution) go to the diagnostics it was given, in the words a warning has
+    said = Diagnostics()
+    integ = DcmIntegrator(Q0, "trapezoid", diagnostics=said)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # any warning would raise here
+        for k in range(10):
+            integ.update([0.0, 0.0, 1.0], 0.01 * k)
+        integ.update([0.0, 0.0, 1.0], 0.5)
+        integ.update_many(np.zeros((3, 3)), [0.51, 0.52, 1.5])
+        DcmIntegrator(Q0, "rotvec_sum", diagnostics=said)
+    lines = [(m, c) for m, c in said.said]
+    assert [c for _m, c in lines] == [GapWarning, GapWarning, ImuDcmWarning]
+    assert "at 0.090 s (+0.410 s)" in lines[0][0] and "gap" in lines[1][0]
+    assert "rotvec_sum" in lines[2][0]
 
 
 def test_readme_usage_example_runs(repo_root, capsys):

@@ -14,7 +14,9 @@ names:
 * :mod:`imu_dcm.app.run`: the exit codes and :func:`~imu_dcm.app.run.run_main`, the wrapper
   every command's ``main`` runs in;
 * :mod:`imu_dcm.app.progress`: the terminal progress line;
-* :mod:`imu_dcm.app.summary`: the figures a replay's and a live run's summaries share.
+* :mod:`imu_dcm.app.summary`: the figures a replay's and a live run's summaries share;
+* :mod:`imu_dcm.app.pages`: numpy's arrays in ordinary pages, for a command's process;
+* :mod:`imu_dcm.app.beside`: two pure passes of one run side by side, on two threads.
 
 It sits with the core: it imports only :mod:`imu_dcm.errors` and the core maths, never log
 I/O, replay, live or the view.

@@ -29,14 +29,13 @@ from __future__ import annotations
 
 import itertools
 import math
-import warnings
 from typing import TYPE_CHECKING
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from imu_dcm import _kernels as kernel
-from imu_dcm.errors import GapWarning, InputError
+from imu_dcm.errors import Diagnostics, GapWarning, InputError, say
 from imu_dcm.integrator.batch import (
     as_float_array,
     check_method,
@@ -72,6 +71,10 @@ class DcmIntegrator:
         Stamp of ``q0``. ``None`` (default): ``q0`` is the attitude at the first sample. A float:
         ``q0`` is the attitude at ``t0_s`` and the first sample's rate is taken to hold from
         ``t0_s`` (as if that sample had also been received at ``t0_s``).
+    diagnostics : Diagnostics, optional
+        Receives the one-line warnings (a gap, ``rotvec_sum``) instead of :mod:`warnings`, as
+        :func:`imu_dcm.integrate`'s do: a pass that runs on a thread of its own then leaves the
+        process's warning filters alone.
 
     Notes
     -----
@@ -91,9 +94,14 @@ class DcmIntegrator:
     """
 
     def __init__(
-        self, q0: ArrayLike | Rotation, method: str = "magnus4", t0_s: float | None = None
+        self,
+        q0: ArrayLike | Rotation,
+        method: str = "magnus4",
+        t0_s: float | None = None,
+        diagnostics: Diagnostics | None = None,
     ) -> None:
         check_method(method, METHODS)
+        self._diagnostics = diagnostics
         try:
             t0 = None if t0_s is None else float(t0_s)
         except (TypeError, ValueError):
@@ -108,7 +116,7 @@ class DcmIntegrator:
         self._finished = False
         self._t0_pending = t0 is not None
         if method == "rotvec_sum":
-            warn_rotvec_sum()
+            warn_rotvec_sum(diagnostics=diagnostics)
 
     # -- read-only state ------------------------------------------------------------------------
 
@@ -247,7 +255,7 @@ class DcmIntegrator:
             )
         gaps = find_gaps(self._state[kernel.T + max(0, 4 - n) : kernel.T + 4])
         if gaps:
-            warnings.warn(gap_message(gaps), GapWarning, stacklevel=3)
+            say(self._diagnostics, gap_message(gaps), GapWarning, stacklevel=3)
 
     def finish(self) -> NDArray[np.float64]:
         """Close the record: for ``magnus4`` commit the last step (one-sided end stencil, as the
@@ -362,5 +370,5 @@ class DcmIntegrator:
         if dt_max > GAP_FACTOR * dt_min:  # else no step can exceed GAP_FACTOR x the median
             gaps = find_gaps(np.concatenate([stamps, t]))
             if gaps:
-                warnings.warn(gap_message(gaps), GapWarning, stacklevel=4)
+                say(self._diagnostics, gap_message(gaps), GapWarning, stacklevel=4)
         return w, t

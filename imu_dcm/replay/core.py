@@ -28,6 +28,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from imu_dcm._kernels.calls import attitude_errors
+from imu_dcm.app.beside import Beside
 from imu_dcm.arrays import BLOCK_ROWS, row_finite
 from imu_dcm.errors import Diagnostics, GapWarning, LogError
 from imu_dcm.gyro.rest import GyroWindows
@@ -306,43 +307,57 @@ def _replay(path, s: ReplaySettings, report, notes: Diagnostics) -> ReplayResult
     report("integrate", 0.0)
     q_est = _integrate(s, omega, g.t_s, q_truth, anchors, log.imu.topic, notes)
     report("integrate", 1.0)
-    error, both = _score(q_est, q_truth)
     if s.init_q_w_b is not None and np.isfinite(q_truth[anchors[0]]).all():
         notes.add(
             "--init-quat not used: the estimate starts from the truth's attitude "
             f"({judged.aligned.truth.topic}); --truth-topic none starts it from --init-quat",
         )
     inside, scored_on = window_mask(s.score_window, g.t_ns, log.custom_data, str(log.path))
-    both = both if inside is None else both & inside
-    auto_rms = auto_offset_rms_deg(judged.aligned, g.base, g.t_ns, q_est, anchors, both)
-    summary = summarise(log, s, g, bias_est, judged, pf_summary, anchors, error, both)
-    unbiased = _score_without_bias(s, g, bias_est, judged, q_truth, anchors, log.imu.topic, inside)
-    end = anchors[1] if len(anchors) > 1 else len(g.t_s)
-    a0 = anchors[0]
-    sampling = sampling_error_deg(omega[a0:end], g.t_s[a0:end], q_est[a0:end], s.method)
+    # what needs the estimate but not its score, on a thread of its own meanwhile (pure passes)
+    side = Beside(
+        _unscored, s, g, bias_est, judged, q_truth, anchors, omega, q_est, inside, log.imu.topic
+    )
+    (sampling, unbiased, ends), (error, both, summary) = side.then(
+        _scored, log, s, g, bias_est, judged, pf_summary, anchors, q_est, q_truth, inside
+    )
     summary = dataclasses.replace(
         summary,
         sampling_error_deg=sampling,
         truth_candidates=candidates,
         rms_error_no_bias_deg=unbiased,
         truth_convention=plain_convention(convention) if log.truth is not None else None,
-    )
-    evaluation = evaluate(g.t_s, q_est, q_truth, both, anchors, error, summary.bias_rad_s)
-    summary = dataclasses.replace(summary, evaluation=evaluation)
-    start = anchors[0]
-    summary = dataclasses.replace(
-        summary,
-        truth_candidates=candidates,
         score_window=scored_on,
         notes=tuple(log.notes),  # the reader's findings (a refused channel, a better one used)
         warnings=notes.lines(own),
-        offset_auto_rms_deg=auto_rms,
-        **outcome(g.t_s, omega, q_est, start),
+        **ends,
     )
+    start = anchors[0]
     return ReplayResult(
         g.t_ns, g.t_s, g.omega, omega, bias_est.bias_b, q_est, q_truth, error, start,
         bias_est, summary,
     )  # fmt: skip
+
+
+def _scored(log, s, g: Gyro, bias_est, judged: Judged, pf_summary, anchors, q_est, q_truth, inside):
+    """The score and the summary of it: the errors, the rows scored (``both``, inside the
+    score window), the automatic offset's RMS and the evaluation."""
+    error, both = _score(q_est, q_truth)
+    both = both if inside is None else both & inside
+    auto_rms = auto_offset_rms_deg(judged.aligned, g.base, g.t_ns, q_est, anchors, both)
+    summary = summarise(log, s, g, bias_est, judged, pf_summary, anchors, error, both)
+    evaluation = evaluate(g.t_s, q_est, q_truth, both, anchors, error, summary.bias_rad_s)
+    summary = dataclasses.replace(summary, evaluation=evaluation, offset_auto_rms_deg=auto_rms)
+    return error, both, summary
+
+
+def _unscored(s, g: Gyro, bias_est, judged: Judged, q_truth, anchors, omega, q_est, inside, topic):
+    """What the estimate gives without its score: the sampling check (first segment), the
+    RMS with no bias removed, and the outcome (final attitude, rotation, angle turned)."""
+    a0 = anchors[0]
+    end = anchors[1] if len(anchors) > 1 else len(g.t_s)
+    sampling = sampling_error_deg(omega[a0:end], g.t_s[a0:end], q_est[a0:end], s.method)
+    unbiased = _score_without_bias(s, g, bias_est, judged, q_truth, anchors, topic, inside)
+    return sampling, unbiased, outcome(g.t_s, omega, q_est, a0)
 
 
 def _score_without_bias(s, g: Gyro, bias_est, judged: Judged, q_truth, anchors, topic, inside):

@@ -16,6 +16,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
+from imu_dcm.app.beside import Beside
 from imu_dcm.arrays import row_finite, row_norm
 from imu_dcm.errors import Diagnostics
 from imu_dcm.gyro.rates import deg_evidence, truth_rate_ratio
@@ -69,39 +70,20 @@ def judge_truth(
         log.truth, g.base, g.t_ns, g.omega, s.truth_offset_s, imu.log_t_ns,
         notes.add,
     )  # fmt: skip
-    if s.gyro_units == "rad/s":
-        evidence = deg_evidence(g.omega, g.t_s, aligned.q_truth)
-        if evidence:
-            notes.add(
-                f"{imu.topic}: the rates look like deg/s: {evidence}; pass "
-                f"--gyro-units deg/s to convert",
-            )
-    else:  # declared deg/s: a rad/s log converted reads 57.3x slower than its truth turns
-        ratio = truth_rate_ratio(g.omega, g.t_s, aligned.q_truth)
-        if ratio is not None and abs(ratio * (180 / np.pi) - 1) < 0.2:
-            notes.add(
-                f"{imu.topic}: the rates look like rad/s: converted from deg/s, the gyro rate "
-                f"is 1/{1 / ratio:.1f} of the truth's rotation rate (1/57.3 for rad/s read as "
-                f"deg/s); drop --gyro-units deg/s",
-            )
+    # the units' evidence on a thread of its own while the jumps and the mounting are judged
+    # (pure passes; its line is said first, as when judged first)
+    units = Beside(_units_line, s.gyro_units, imu.topic, g.omega, g.t_s, aligned.q_truth)
     truth = aligned.truth
     if truth is None:
+        if line := units.result():
+            notes.add(line)
         given = None if isinstance(s.mounting, str) else _given(s.mounting)
         return Judged(
             aligned, None, (), MountingChoice(given, given, "given" if given else "", None, "")
         )
-    tt = truth.t_ns if g.base == "header" else truth.log_t_ns
-    if round(aligned.offset_s * 1e9):  # shifted (a copy); else the truth's own stamps
-        tt = tt + np.int64(round(aligned.offset_s * 1e9))
-    residual = 0.0  # the measured truth lag, not applied to the scoring with a fixed offset
-    if s.truth_offset_s != "auto" and aligned.check and aligned.check.shift_s is not None:
-        residual = aligned.check.shift_s
-    shift = np.int64(round(residual * 1e9))
-    # jumps are judged with the truth aligned to the gyro (a lagging truth would turn after the
-    # gyro and look like a jump), then said and scored on the truth's own stamps
-    on_gyro = find_jumps(g.t_ns, omega, tt + shift, truth.q_w_b)
-    t00 = int(g.t_ns[0])
-    skip = tuple((t00 + round(j.t0_s * 1e9), t00 + round(j.t1_s * 1e9)) for j in on_gyro)
+    line, (on_gyro, residual, tt, est) = units.then(_jumps_and_mounting, s, g, omega, aligned)
+    if line:
+        notes.add(line)
     jumps = tuple(
         dataclasses.replace(j, t0_s=j.t0_s - residual, t1_s=j.t1_s - residual) for j in on_gyro
     )
@@ -114,7 +96,6 @@ def judge_truth(
             f"{len(scored_truth(aligned.q_truth, g.t_s, jumps)[1])} segments between jumps are "
             f"scored",
         )
-    est = estimate_mounting(g.t_ns, omega, tt + shift, truth.q_w_b, skip)
     declared = tf_mounting(log.static_transforms, imu.topic, imu.frame_id, truth)
     frames = f"{imu.frame_id or 'the gyro frame'} -> {truth.child_frame_id or truth.topic}"
     given = None if isinstance(s.mounting, str) else _given(s.mounting)
@@ -123,6 +104,47 @@ def judge_truth(
         notes.add(choice.line)
     gaps = _unseen_gaps(g, omega, aligned.q_truth, notes)
     return Judged(aligned, tt, jumps, choice, gaps)
+
+
+def _units_line(units: str, topic: str, omega: NDArray, t_s: NDArray, q_truth: NDArray):
+    """The line that says the rates look like the other unit than ``units`` declares, or None."""
+    if units == "rad/s":
+        evidence = deg_evidence(omega, t_s, q_truth)
+        if evidence:
+            return (
+                f"{topic}: the rates look like deg/s: {evidence}; pass --gyro-units deg/s to "
+                "convert"
+            )
+        return None
+    # declared deg/s: a rad/s log converted reads 57.3x slower than its truth turns
+    ratio = truth_rate_ratio(omega, t_s, q_truth)
+    if ratio is not None and abs(ratio * (180 / np.pi) - 1) < 0.2:
+        return (
+            f"{topic}: the rates look like rad/s: converted from deg/s, the gyro rate "
+            f"is 1/{1 / ratio:.1f} of the truth's rotation rate (1/57.3 for rad/s read as "
+            f"deg/s); drop --gyro-units deg/s"
+        )
+    return None
+
+
+def _jumps_and_mounting(s: ReplaySettings, g: Gyro, omega: NDArray, aligned: AlignedTruth):
+    """The truth's jumps where the gyro does not jump, on the gyro's clock, and the mounting
+    estimated outside them: ``(jumps, residual lag s, truth stamps, mounting estimate)``."""
+    truth = aligned.truth
+    tt = truth.t_ns if g.base == "header" else truth.log_t_ns
+    if round(aligned.offset_s * 1e9):  # shifted (a copy); else the truth's own stamps
+        tt = tt + np.int64(round(aligned.offset_s * 1e9))
+    residual = 0.0  # the measured truth lag, not applied to the scoring with a fixed offset
+    if s.truth_offset_s != "auto" and aligned.check and aligned.check.shift_s is not None:
+        residual = aligned.check.shift_s
+    shift = np.int64(round(residual * 1e9))
+    # jumps are judged with the truth aligned to the gyro (a lagging truth would turn after the
+    # gyro and look like a jump), then said and scored on the truth's own stamps
+    on_gyro = find_jumps(g.t_ns, omega, tt + shift, truth.q_w_b)
+    t00 = int(g.t_ns[0])
+    skip = tuple((t00 + round(j.t0_s * 1e9), t00 + round(j.t1_s * 1e9)) for j in on_gyro)
+    est = estimate_mounting(g.t_ns, omega, tt + shift, truth.q_w_b, skip)
+    return on_gyro, residual, tt, est
 
 
 def _unseen_gaps(g: Gyro, omega: NDArray, q_truth: NDArray, notes: Diagnostics) -> tuple:

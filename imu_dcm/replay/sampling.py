@@ -16,8 +16,6 @@ Conventions: ``q_w_b`` ``[x, y, z, w]``; rates rad/s; angles in degrees.
 
 from __future__ import annotations
 
-import warnings
-
 import numpy as np
 from numpy.typing import NDArray
 
@@ -77,20 +75,19 @@ def _half_rate_angles(omega_b, t_s, q_est, method: str) -> NDArray[np.float64]:
     n = len(t)
     diff = np.empty(n)
     lag = method == "magnus4"
-    integ = DcmIntegrator(q_est[0], method)
-    with warnings.catch_warnings():  # the record's gaps and method were said once, by replay
-        warnings.simplefilter("ignore")
-        for a in range(0, n, BLOCK_ROWS):
-            b = min(n, a + BLOCK_ROWS)
-            q = integ.update_many_quat(w[a:b], t[a:b])
-            rows = np.arange(a, b) - 1 if lag else np.arange(a, b)
-            keep = rows >= (2 if lag else 0)
-            _angles(diff, rows[keep], q[keep], q_est)
-        if lag:
-            last = integ.finish()
-            diff[n - 1] = quat_angle_rad(q_est[2 * (n - 1)], last)
-            first = integrate_quat(w[:4], t[:4], q_est[0], method, diagnostics=Diagnostics())
-            _angles(diff, np.arange(2), first[:2], q_est)
+    said = Diagnostics()  # the record's gaps and method were said once, by replay
+    integ = DcmIntegrator(q_est[0], method, diagnostics=said)
+    for a in range(0, n, BLOCK_ROWS):
+        b = min(n, a + BLOCK_ROWS)
+        q = integ.update_many_quat(w[a:b], t[a:b])
+        rows = np.arange(a, b) - 1 if lag else np.arange(a, b)
+        keep = rows >= (2 if lag else 0)
+        _angles(diff, rows[keep], q[keep], q_est)
+    if lag:
+        last = integ.finish()
+        diff[n - 1] = quat_angle_rad(q_est[2 * (n - 1)], last)
+        first = integrate_quat(w[:4], t[:4], q_est[0], method, diagnostics=said)
+        _angles(diff, np.arange(2), first[:2], q_est)
     return diff
 
 
