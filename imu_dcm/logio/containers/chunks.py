@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import os
 import sys
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass
 
 import numpy as np
@@ -53,7 +53,7 @@ class Job:
     start: int = 0
 
 
-def batches(jobs: list[Job], limit: int | None = None) -> Iterator[list[Job]]:
+def batches(jobs: Iterable[Job], limit: int | None = None) -> Iterator[list[Job]]:
     """Consecutive jobs grouped into batches of at most ``limit`` (:data:`BATCH_BYTES`)
     decompressed bytes (a chunk larger than that is a batch of its own)."""
     limit = BATCH_BYTES if limit is None else limit

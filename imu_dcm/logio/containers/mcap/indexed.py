@@ -9,6 +9,7 @@ damaged chunk costs only itself (from the index, the next chunk is known).
 from __future__ import annotations
 
 import struct
+from collections.abc import Iterator
 from dataclasses import dataclass
 
 import numpy as np
@@ -159,14 +160,38 @@ class IndexedReader(McapReader):
         return s.chunks
 
     def read(self, f) -> None:
-        """Read the chunks holding kept channels, in batches decompressed on worker threads."""
+        """Read the chunks holding kept channels, in batches decompressed on worker threads;
+        each chunk's place and message indexes are read as its batch comes (the batch before
+        is decompressed meanwhile), so only the batches at hand hold theirs."""
         index = self._apply_summary(f)
         wanted = {c for c in self.channels if self.is_kept(c)}
-        jobs = []
-        for k, (start, clen, t0, t1, offsets, _ilen, _c, _cs, _us) in enumerate(index):
-            if offsets and not (wanted & offsets.keys()):
-                continue
-            entries = self._message_index(f, offsets, set(offsets))
+        chunks = [k for k, c in enumerate(index) if not c[4] or wanted & c[4].keys()]
+        first_damage, done = len(self.damage), 0
+        jobs = self._jobs(f, index, chunks, wanted)
+        for buf, group in Decompressor(f.fileno(), decompress_into).run(batches(jobs)):
+            if self.progress is not None:
+                self.progress(done / max(len(chunks), 1))
+            done += len(group)
+            good = []
+            for j in group:
+                k, start, t0, t1, entries = j.key
+                if j.out is None:
+                    self._lost_chunk(k, len(index), start, t0, t1, entries, wanted, j.why)
+                else:
+                    good.append(j)
+            self._take_batch(buf, good)
+            del buf, good  # the batch's buffer can then be reused for the next batch
+        # a chunk the index misplaces is found when its batch is made, before the batch ahead
+        # is checked: the damage in file order
+        self.damage[first_damage:] = sorted(self.damage[first_damage:], key=lambda d: d.offset)
+
+    def _jobs(self, f, index: list, chunks: list[int], wanted: set) -> Iterator[Job]:
+        """The :class:`Job` of each chunk ``k`` in ``chunks`` (positions in ``index``), with its
+        message index entries; a chunk whose index entry does not point at a chunk record is
+        noted as damaged instead."""
+        for k in chunks:
+            start, clen, t0, t1, offsets, ilen, *_ = index[k]
+            entries = self._message_index(f, offsets, ilen)
             try:
                 if start + clen > self.size or clen < 9:
                     raise BadRecord(
@@ -180,21 +205,7 @@ class IndexedReader(McapReader):
             except BadRecord as exc:
                 self._lost_chunk(k, len(index), start, t0, t1, entries, wanted, str(exc))
                 continue
-            jobs.append(Job((k, start, t0, t1, entries), at, n, usize, comp, crc))
-        done = 0
-        for buf, group in Decompressor(f.fileno(), decompress_into).run(batches(jobs)):
-            if self.progress is not None:
-                self.progress(done / max(len(jobs), 1))
-            done += len(group)
-            good = []
-            for j in group:
-                k, start, t0, t1, entries = j.key
-                if j.out is None:
-                    self._lost_chunk(k, len(index), start, t0, t1, entries, wanted, j.why)
-                else:
-                    good.append(j)
-            self._take_batch(buf, good)
-            del buf, good  # the batch's buffer can then be reused for the next batch
+            yield Job((k, start, t0, t1, entries), at, n, usize, comp, crc)
 
     def _lost_chunk(self, k, n_chunks, start, t0, t1, entries, wanted, why: str) -> None:
         """The chunk ``k`` of ``n_chunks`` is damaged: noted, with the kept messages it held."""
@@ -203,16 +214,29 @@ class IndexedReader(McapReader):
             Damage(start, f"chunk {k + 1} of {n_chunks} is damaged: {why}", t0, t1, lost)
         )
 
-    def _message_index(self, f, offsets: dict[int, int], wanted: set[int]) -> dict:
-        """Message index entries (log times, offsets) of the kept channels of one chunk."""
+    def _message_index(self, f, offsets: dict[int, int], ilen: int) -> dict:
+        """Message index entries (record offsets, log times) of every channel of one chunk.
+
+        A chunk's message indexes stand together after it, ``ilen`` bytes from the first (the
+        chunk index says so): read at once, then each channel's record checked in them (opcode,
+        channel, length); a record outside them is read alone."""
         out = {}
-        for cid in sorted(wanted & offsets.keys()):
+        first = min(offsets.values(), default=0)
+        ilen = ilen if 0 < ilen <= MAX_META_RECORD and first + ilen <= self.size else 0
+        if ilen:
+            f.seek(first)
+            region = f.read(ilen)
+        for cid in sorted(offsets):
             off = offsets[cid]
-            if off + 15 > self.size:
+            at = off - first
+            if ilen and at >= 0 and at + 15 <= len(region):
+                buf, p = region, at
+            elif off + 15 <= self.size:
+                f.seek(off)
+                buf, p = f.read(15), 0
+            else:
                 continue
-            f.seek(off)
-            head = f.read(15)
-            op, length, c, nbytes = struct.unpack("<BQHI", head)
+            op, length, c, nbytes = struct.unpack_from("<BQHI", buf, p)
             if (
                 op != OP_MSG_INDEX
                 or c != cid
@@ -221,7 +245,13 @@ class IndexedReader(McapReader):
                 or (off + 9 + length > self.size)
             ):
                 continue
-            pairs = np.frombuffer(f.read(nbytes), "<u8").reshape(-1, 2).astype(np.int64)
+            if buf is region and p + 15 + nbytes <= len(region):
+                pairs = np.frombuffer(region, "<i8", nbytes // 8, p + 15)
+            else:
+                pairs = np.frombuffer(f.read(nbytes), "<i8")
+            # (log time, offset) pairs; a log time or offset past 2**63 reads negative and the
+            # record location refuses it
+            pairs = pairs.reshape(-1, 2)
             out[cid] = (pairs[:, 1], pairs[:, 0])
         return out
 
