@@ -139,9 +139,9 @@ def floors(bag: Path, rounds: int, rosbags: bool) -> dict:
 def _phase_child(bag: str) -> None:
     """In a fresh process: replay ``bag`` with every phase timed; print the figures as JSON.
     The process sets numpy's pages as the replay command does (:mod:`imu_dcm.app.pages`)."""
-    from imu_dcm.app.pages import numpy_small_pages
+    from imu_dcm.app.pages import command_memory
 
-    numpy_small_pages()
+    command_memory()
     import imu_dcm.replay.core as core
     import imu_dcm.replay.gyro as gyro
     import imu_dcm.replay.rate_check as rate_check

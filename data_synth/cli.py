@@ -45,7 +45,7 @@ from data_synth.gyro import (
 )
 from data_synth.scenes import BRANCHES, FREE_BODY_CASES, MOTIONS, simulate
 from imu_dcm.app.options import OneLineArgumentParser, prog_name
-from imu_dcm.app.pages import numpy_small_pages
+from imu_dcm.app.pages import command_memory
 from imu_dcm.app.run import run_main
 from imu_dcm.arrays import BLOCK_ROWS
 from imu_dcm.errors import InputError
@@ -467,7 +467,7 @@ def main(argv: list[str] | None = None) -> int:
     ends in ``SystemExit`` (argparse's, status 2), before the work starts."""
     argv = list(sys.argv[1:] if argv is None else argv)
     args = build_parser().parse_args(argv)
-    numpy_small_pages()  # its blocks written in order: no wait for huge pages (imu_dcm.app.pages)
+    command_memory()  # ordinary pages, freed memory reused (imu_dcm.app.pages)
 
     def work(_: list[str]) -> int:
         print(make_log(args, argv))

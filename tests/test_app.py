@@ -7,6 +7,7 @@ from __future__ import annotations
 import dataclasses
 import json
 import math
+import sys
 import threading
 import warnings
 
@@ -160,3 +161,39 @@ def test_two_passes_side_by_side_raise_as_they_would_in_order():
     side = Beside(fails, "again")
     with pytest.raises(ValueError, match="again"):
         side.result()
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="glibc's malloc settings")
+@pytest.mark.parametrize("reuse", [False, True])
+def test_a_commands_freed_arrays_are_reused_without_touching_fresh_pages(reuse):
+    # an array of 64 MB made, freed and made again: with the command's setting the second
+    # comes from the pages the first touched (few page faults), without it from fresh ones
+    # (one fault a page at least); counted by the kernel, in a fresh process
+    import os
+    import subprocess
+
+    code = (
+        "import resource, numpy as np\n"
+        + (
+            "from imu_dcm.app.pages import reuse_freed_memory\nassert reuse_freed_memory()\n"
+            if reuse
+            else ""
+        )
+        + "n = 8 << 20\na = np.ones(n); del a\n"
+        + "f0 = resource.getrusage(resource.RUSAGE_SELF).ru_minflt\n"
+        + "b = np.ones(n)\n"
+        + "print(resource.getrusage(resource.RUSAGE_SELF).ru_minflt - f0)\n"
+    )
+    environ = {
+        k: v
+        for k, v in os.environ.items()
+        if k not in ("MALLOC_MMAP_MAX_", "MALLOC_TRIM_THRESHOLD_")
+    }
+    environ["NUMPY_MADVISE_HUGEPAGE"] = "0"  # 4 KiB pages: 16384 of them in 64 MB
+    got = subprocess.run([sys.executable, "-c", code], env=environ, capture_output=True, text=True)
+    assert got.returncode == 0, got.stderr
+    faults, pages = int(got.stdout), (8 << 20) * 8 // 4096
+    if reuse:
+        assert faults < pages // 10
+    else:
+        assert faults >= pages

@@ -27,7 +27,7 @@ import warnings
 from pathlib import Path
 
 from imu_dcm.app.options import OneLineArgumentParser
-from imu_dcm.app.pages import numpy_small_pages
+from imu_dcm.app.pages import command_memory
 from imu_dcm.app.progress import Progress
 from imu_dcm.app.rerun_mode import check_rerun_mode, rerun_save_path
 from imu_dcm.app.run import run_main
@@ -456,7 +456,7 @@ def main(argv: list[str] | None = None) -> int:
     """Run the command; returns the exit code (:mod:`imu_dcm.app.run`: 0 done, 2 bad input or
     options, 130 interrupted; ``batch`` adds 1 for failed logs)."""
     argv = list(sys.argv[1:] if argv is None else argv)
-    numpy_small_pages()  # arrays used in order: no wait for huge pages (imu_dcm.app.pages)
+    command_memory()  # ordinary pages, freed memory reused (imu_dcm.app.pages)
     if argv and argv[0] == "batch":
         from imu_dcm.replay import batch_cli
 
