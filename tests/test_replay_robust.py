@@ -303,14 +303,18 @@ def test_header_stamps_that_do_not_increase_use_log_time(trial, tmp_path):
     assert abs(r.summary.rms_error_deg - ref.summary.rms_error_deg) < 1e-6
 
 
-def test_lagged_correlation_equals_numpy_corrcoef_per_lag():
+@pytest.mark.parametrize("holes", [True, False])
+@pytest.mark.parametrize("offset", [0.0, 50.0])
+def test_lagged_correlation_equals_numpy_corrcoef_per_lag(holes, offset):
+    # with and without invalid rows (the two ways the sums are taken), and on a steady spin's
+    # rate norm (a large mean, small changes: the sums are of the centred series)
     from imu_dcm.replay.rate_check import lagged_correlation
 
     rng = np.random.default_rng(5)
     n, lags = 500, 40
-    g = np.cumsum(rng.normal(size=n))
+    g = offset + np.cumsum(rng.normal(size=n))
     h = np.roll(g, 7) + rng.normal(0, 0.5, n)  # h[i] ≈ g[i - 7]: the best lag is k = -7
-    valid = rng.random(n) > 0.1
+    valid = rng.random(n) > 0.1 if holes else np.ones(n, dtype=bool)
     corr, count = lagged_correlation(g, h, valid, lags)
     for k in range(-lags, lags + 1):
         m = valid[max(-k, 0) : n - max(k, 0)]
@@ -423,3 +427,23 @@ def test_the_rate_grids_step_is_the_floor_or_the_median_steps(gyro_hz, truth_hz,
     want = max(want, (min(t[-1], tt[-1]) - max(t[0], tt[0])) * 1e-9 / 100_000)
     assert grid.step_s == want
     assert abs(grid.step_s - want_s) < 0.01 * want_s
+
+
+def test_the_rate_grid_is_as_fine_for_a_long_log_as_for_a_short_one():
+    # the grid step comes from the stamps (2 truth steps, the gyro step, 10 ms at least), not
+    # from the log's length: 50 min at 100 Hz is judged on the 20 ms steps of 5 min
+    from scipy.spatial.transform import Rotation
+
+    from imu_dcm.replay.rate_check import rate_grid
+
+    for minutes in (5, 50):
+        n = minutes * 60 * 100 + 1
+        t = np.arange(n, dtype=np.int64) * 10_000_000
+        w = np.tile([0.0, 0.0, 0.3], (n, 1))
+        q = Rotation.from_rotvec(np.outer(t * 1e-9, [0.0, 0.0, 0.3])).as_quat()
+        grid = rate_grid(t, w, t, q)
+        assert grid.step_s == pytest.approx(0.02, abs=1e-12)
+        # each step turns 0.3 rad/s x 20 ms about z, in the gyro's integral and the truth's
+        ok = np.isfinite(grid.truth_rotvec[:, 2])
+        np.testing.assert_allclose(grid.gyro_rotvec[:, 2], 0.3 * grid.dt_s, rtol=1e-9)
+        np.testing.assert_allclose(grid.truth_rotvec[ok, 2], 0.3 * grid.dt_s[ok], rtol=1e-6)
