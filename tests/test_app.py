@@ -175,7 +175,7 @@ def test_a_commands_freed_arrays_are_reused_without_touching_fresh_pages(reuse):
     code = (
         "import resource, numpy as np\n"
         + (
-            "from imu_dcm.app.pages import reuse_freed_memory\nassert reuse_freed_memory()\n"
+            "from imu_dcm.memory import keep_freed_memory\nassert keep_freed_memory()\n"
             if reuse
             else ""
         )

@@ -40,8 +40,9 @@ PACKAGE = REPO / "imu_dcm"
 
 #: The layers of ``imu_dcm``, inner to outer: (name, the module prefixes that make it up).
 LAYERS = (
-    # the base every layer shares: errors, arrays, rotations, metrics, the one output rule, and
-    # the package's own __init__ / __main__ (its lazy names load from the integrator on first use)
+    # the base every layer shares: errors, arrays, rotations, metrics, the allocator's settings,
+    # the one output rule, and the package's own __init__ / __main__ (its lazy names load from
+    # the integrator on first use)
     (
         "base",
         (
@@ -51,6 +52,7 @@ LAYERS = (
             "imu_dcm.arrays",
             "imu_dcm.so3",
             "imu_dcm.metrics",
+            "imu_dcm.memory",
             "imu_dcm.outputs",
         ),
     ),

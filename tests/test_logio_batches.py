@@ -133,7 +133,7 @@ def test_the_read_heap_thresholds_are_not_set_over_the_environments():
     # glibc's mmap and trim thresholds, set before the first read of a process (a batch's
     # temporaries then come from reused heap, not fresh pages), are never set over a value the
     # environment gives (glibc reads those at start-up).
-    from imu_dcm.logio.heap import heap_settings
+    from imu_dcm.memory import heap_settings
 
     assert heap_settings({}) == [(-3, 4 << 20), (-1, 16 << 20)]  # malloc.h's parameter numbers
     assert heap_settings({"GLIBC_TUNABLES": "glibc.pthread.rseq=0"}) == heap_settings({})
@@ -279,7 +279,7 @@ def test_a_channels_columns_are_written_into_small_pages():
     import sys
     from pathlib import Path
 
-    from imu_dcm.logio.heap import small_pages
+    from imu_dcm.memory import small_pages
 
     thp = Path("/sys/kernel/mm/transparent_hugepage/enabled")
     if not sys.platform.startswith("linux") or not thp.exists() or "[never]" in thp.read_text():

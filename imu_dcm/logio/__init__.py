@@ -19,7 +19,6 @@ from __future__ import annotations
 from pathlib import Path
 
 from imu_dcm.errors import Diagnostics
-from imu_dcm.logio.heap import release_freed_memory, reuse_freed_heap
 from imu_dcm.logio.meta import read_custom_data
 from imu_dcm.logio.registry import READERS, find_logs, open_log, resolve_mcap_path
 from imu_dcm.logio.ros.channels import TRUTH_TYPES
@@ -32,6 +31,7 @@ from imu_dcm.logio.types import (
     StaticTransform,
     TruthSeries,
 )
+from imu_dcm.memory import release_freed_memory, reuse_freed_heap
 
 __all__ = [
     "READERS",

@@ -18,9 +18,9 @@ from collections.abc import Callable, Iterator, Mapping
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from typing import Any
 
-from imu_dcm.app.pages import reuse_freed_memory
 from imu_dcm.app.run import one_line
 from imu_dcm.errors import ImuDcmWarning, InputError
+from imu_dcm.memory import keep_freed_memory
 from imu_dcm.replay.table import Curve, LogRow
 
 __all__ = ["DASK_HINT", "LOST", "run_dask", "run_local"]
@@ -56,7 +56,7 @@ def _worker_init() -> None:
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # the parent handles Ctrl-C
     signal.signal(signal.SIGTERM, signal.SIG_DFL)  # die when the parent terminates us
     pin_threads()
-    reuse_freed_memory()  # as the command's own process (imu_dcm.app.pages)
+    keep_freed_memory()  # as the command's own process (imu_dcm.memory)
 
 
 def _pool_context() -> multiprocessing.context.BaseContext:

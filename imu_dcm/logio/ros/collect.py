@@ -12,8 +12,8 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import NDArray
 
-from imu_dcm.logio.heap import small_pages
 from imu_dcm.logio.types import Damage
+from imu_dcm.memory import small_pages
 
 __all__ = [
     "Collected",
@@ -208,7 +208,7 @@ class ColumnsBuilder:
             self.capacity = 0
             return False
         for a in self.arrays.values():
-            small_pages(a)  # written once in order: no wait for huge pages (logio.heap)
+            small_pages(a)  # written once in order: no wait for huge pages (imu_dcm.memory)
         self.layout = {k: (v.dtype, v.shape[1:]) for k, v in p.fields.items()}
         return True
 

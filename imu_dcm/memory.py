@@ -1,5 +1,6 @@
-"""How a long read uses memory: reuse freed heap blocks while reading, give them back after
-(glibc), and write a log's columns into small pages (Linux; elsewhere nothing is done).
+"""How the allocator serves long logs (standard library only): a read reuses freed heap blocks
+and gives them back after, a command keeps every freed block for its next arrays (glibc), and a
+log's columns go into small pages (Linux; elsewhere nothing is done).
 
 Reading a long log decodes it batch by batch: every batch makes and frees temporaries of a few
 hundred KB to a few MB (the records' offsets, lengths, log times, decoded fields). glibc hands
@@ -27,7 +28,18 @@ ordinary pages on them (``MADV_NOHUGEPAGE``) before they are touched: ``read_log
 at 1 kHz took 2.0-2.7 s against 3.2-3.9 s, five fresh processes each, interleaved, on the
 2-core machine after an hour of benchmarks (docs/benchmarks.md "Reading logs").
 
-The commands go further, for all their arrays (:mod:`imu_dcm.app.pages`).
+The commands go further, for all their arrays (:func:`keep_freed_memory`, called by
+:func:`imu_dcm.app.pages.command_memory`): every block from the heap, freed memory kept there
+for the next. glibc gives every block above 32 MB (the most its threshold takes: a whole-log
+column of 4 M samples) its own fresh mapping and returns it to the kernel when freed, so each
+such array pays for its first touch again (the kernel zeroes every page); a replay makes and
+frees dozens of them, one pass after the other. From the heap, freed and kept, the next array
+reuses pages already touched: the replay of a 10 h log at 1 kHz took 48 s against 67 s with
+glibc's defaults (one round each, interleaved, on the 2-core machine), for a peak of 7.0 GB
+against 6.6 GB; of a 1 h log 4.7-4.8 s against 5.8-6.3 s in one set of three rounds, and no
+difference in another (this machine's speed drifts between sets by as much), for 785 MB
+against 736 MB (docs/benchmarks.md "Long logs"). The read then keeps its freed batches
+too (no trim after it): the judgement's arrays take their pages.
 """
 
 from __future__ import annotations
@@ -38,6 +50,7 @@ import sys
 
 __all__ = [
     "heap_settings",
+    "keep_freed_memory",
     "release_freed_memory",
     "reuse_freed_heap",
     "small_pages",
@@ -47,7 +60,10 @@ __all__ = [
 MMAP_THRESHOLD = 4 << 20
 #: Freed heap up to this many bytes is kept for reuse (glibc's ``M_TRIM_THRESHOLD``).
 TRIM_THRESHOLD = 16 << 20
-_M_TRIM_THRESHOLD, _M_MMAP_THRESHOLD = -1, -3  # mallopt's parameter numbers (malloc.h)
+_M_TRIM_THRESHOLD, _M_MMAP_THRESHOLD, _M_MMAP_MAX = -1, -3, -4  # mallopt's (malloc.h)
+#: Free heap a command keeps before returning any to the kernel (the most mallopt takes).
+KEEP_FREED_BYTES = 2**31 - 1
+_OWN = ("MALLOC_MMAP_THRESHOLD_", "MALLOC_TRIM_THRESHOLD_", "MALLOC_MMAP_MAX_")
 
 _MADV_NOHUGEPAGE = 15  # madvise's advice number (linux/mman.h)
 _PAGE = 4096
@@ -66,16 +82,34 @@ if sys.platform.startswith("linux"):
         _MALLOPT.argtypes, _MALLOPT.restype = [ctypes.c_int, ctypes.c_int], ctypes.c_int
     except (OSError, AttributeError):  # musl and others have no malloc_trim
         _TRIM = _MALLOPT = None
-_set = []
+_set: list[bool] = []  # reuse_freed_heap's settings made
+_kept: list[bool] = []  # keep_freed_memory's made
 
 
 def heap_settings(environ) -> list[tuple[int, int]]:
     """The ``mallopt`` calls :func:`reuse_freed_heap` makes, ``(parameter, value)``: none when
     ``environ`` sets either threshold itself (glibc reads those at start-up)."""
-    own = ("MALLOC_MMAP_THRESHOLD_", "MALLOC_TRIM_THRESHOLD_")
-    if any(k in environ for k in own) or "malloc" in environ.get("GLIBC_TUNABLES", ""):
+    if _environment_sets(environ):
         return []
     return [(_M_MMAP_THRESHOLD, MMAP_THRESHOLD), (_M_TRIM_THRESHOLD, TRIM_THRESHOLD)]
+
+
+def _environment_sets(environ) -> bool:
+    """Whether ``environ`` sets glibc's allocator itself (glibc reads it at start-up)."""
+    return any(k in environ for k in _OWN) or "malloc" in environ.get("GLIBC_TUNABLES", "")
+
+
+def keep_freed_memory() -> bool:
+    """For a command's process: every block from the heap, and freed memory kept there for the
+    next (the module docstring); a read after it keeps its settings and its freed batches.
+    Returns whether it applied (False: not glibc, or the environment sets the allocator)."""
+    if _MALLOPT is None or _environment_sets(os.environ):
+        return False
+    if not (_MALLOPT(_M_MMAP_MAX, 0) and _MALLOPT(_M_TRIM_THRESHOLD, KEEP_FREED_BYTES)):
+        return False
+    _set.append(True)
+    _kept.append(True)
+    return True
 
 
 def reuse_freed_heap() -> None:
@@ -89,8 +123,9 @@ def reuse_freed_heap() -> None:
 
 
 def release_freed_memory() -> None:
-    """Return the allocator's free heap memory to the system, where the C library can."""
-    if _TRIM is not None:
+    """Return the allocator's free heap memory to the system, where the C library can, unless
+    the process keeps it (:func:`keep_freed_memory`)."""
+    if _TRIM is not None and not _kept:
         _TRIM(0)
 
 
