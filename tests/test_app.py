@@ -197,3 +197,21 @@ def test_a_commands_freed_arrays_are_reused_without_touching_fresh_pages(reuse):
         assert faults < pages // 10
     else:
         assert faults >= pages
+
+
+def test_an_interrupt_beside_a_pass_goes_up_at_once():
+    # Ctrl-C (or SIGTERM's Terminated) on the caller's thread does not wait for the other pass
+    import time
+
+    release = threading.Event()
+    side = Beside(release.wait, 30.0)
+
+    def interrupted():
+        raise KeyboardInterrupt
+
+    t0 = time.perf_counter()
+    with pytest.raises(KeyboardInterrupt):
+        side.then(interrupted)
+    assert time.perf_counter() - t0 < 5.0  # not the other pass's 30 s
+    release.set()
+    assert side.result() is True

@@ -9,7 +9,8 @@ about a tenth of its time (docs/benchmarks.md, "Long logs").
 Each pass must be pure: it reads the arrays it is given, writes only arrays of its own and says
 nothing (its lines are returned and said by the caller, in order, so the run says the same
 lines in the same order as one pass after the other). Its errors are those of running the two
-in order: the first pass's error when it fails, else the second's. The thread is a daemon and
+in order: the first pass's error when it fails, else the second's; an interrupt (Ctrl-C,
+SIGTERM) goes up at once. The thread is a daemon and
 ends with its pass (:meth:`Beside.result` joins it), so the process is left with its own
 threads only (a replay's batch forks its workers only from a process of one thread).
 """
@@ -55,10 +56,12 @@ class Beside:
 
     def then(self, fn: Callable, *args: Any) -> tuple[Any, Any]:
         """``(this pass's value, fn(*args))``, ``fn`` run on the caller's thread meanwhile;
-        raises as the two run in order would: this pass's error first."""
+        raises as the two run in order would: this pass's error first (an interrupt in ``fn``
+        at once)."""
         try:
             mine = fn(*args)
-        except BaseException:
+        except Exception:
             self.result()  # raises this pass's error, when it failed too
             raise
+        # an interrupt (Ctrl-C, SIGTERM) goes up at once: the daemon thread ends with the process
         return self.result(), mine
