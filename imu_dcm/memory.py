@@ -60,10 +60,10 @@ __all__ = [
 MMAP_THRESHOLD = 4 << 20
 #: Freed heap up to this many bytes is kept for reuse (glibc's ``M_TRIM_THRESHOLD``).
 TRIM_THRESHOLD = 16 << 20
-_M_TRIM_THRESHOLD, _M_MMAP_THRESHOLD, _M_MMAP_MAX = -1, -3, -4  # mallopt's (malloc.h)
+_M_TRIM_THRESHOLD, _M_MMAP_THRESHOLD, _M_MMAP_MAX, _M_ARENA_MAX = -1, -3, -4, -8  # malloc.h
 #: Free heap a command keeps before returning any to the kernel (the most mallopt takes).
 KEEP_FREED_BYTES = 2**31 - 1
-_OWN = ("MALLOC_MMAP_THRESHOLD_", "MALLOC_TRIM_THRESHOLD_", "MALLOC_MMAP_MAX_")
+_OWN = ("MALLOC_MMAP_THRESHOLD_", "MALLOC_TRIM_THRESHOLD_", "MALLOC_MMAP_MAX_", "MALLOC_ARENA_MAX")
 
 _MADV_NOHUGEPAGE = 15  # madvise's advice number (linux/mman.h)
 _PAGE = 4096
@@ -105,7 +105,9 @@ def keep_freed_memory() -> bool:
     Returns whether it applied (False: not glibc, or the environment sets the allocator)."""
     if _MALLOPT is None or _environment_sets(os.environ):
         return False
-    if not (_MALLOPT(_M_MMAP_MAX, 0) and _MALLOPT(_M_TRIM_THRESHOLD, KEEP_FREED_BYTES)):
+    settings = ((_M_MMAP_MAX, 0), (_M_TRIM_THRESHOLD, KEEP_FREED_BYTES), (_M_ARENA_MAX, 1))
+    made = [_MALLOPT(what, value) for what, value in settings]  # every one, then the check
+    if not all(made):
         return False
     _set.append(True)
     _kept.append(True)
