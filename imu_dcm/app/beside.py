@@ -3,8 +3,9 @@ caller's (standard library only).
 
 A replay's passes over a whole log are compiled kernels and numpy loops, which release the GIL,
 so two that need nothing of each other (the sampling check and the score, say) take the time of
-the longer on two cores instead of the sum of both: the replay of a 1 h log at 1 kHz saves
-about a tenth of its time (docs/benchmarks.md, "Long logs").
+the longer on two cores instead of the sum of both: on a 1 h log at 1 kHz the sampling check,
+the score with no bias and the outcome (0.45-0.57 s) run beside the score and its evaluation
+(0.69-0.77 s) (docs/benchmarks.md, "Long logs").
 
 Each pass must be pure: it reads the arrays it is given, writes only arrays of its own and says
 nothing (its lines are returned and said by the caller, in order, so the run says the same

@@ -1,5 +1,6 @@
-"""The commands' arrays in ordinary pages (standard library only, so that a command's start
-stays free of numpy until its work needs it).
+"""The commands' memory: their arrays in ordinary pages, and the memory they free kept for the
+next (standard library only, so that a command's start stays free of numpy until its work
+needs it).
 
 numpy asks the kernel for transparent huge pages on every array of 4 MB or more, and with
 Linux's default ``defrag`` setting (``madvise``) a first touch of such a page waits while the
