@@ -291,3 +291,37 @@ def test_a_channels_columns_are_written_into_small_pages():
     small_pages(b)
     b[:] = 1.0
     assert _huge_kb(b.__array_interface__["data"][0] + (32 << 20)) == 0
+
+
+def test_message_indexes_read_whole_in_part_or_alone_give_the_same_entries(tmp_path):
+    # a chunk's message indexes are read at once from the region its chunk index gives; a
+    # length that understates it (a record whose entries run past it, one outside it) or none
+    # at all reads the rest from the file: the same entries, whose log times are those of
+    # mcap's own reader, channel by channel
+    from mcap.reader import make_reader
+
+    from imu_dcm.logio.containers.mcap.indexed import IndexedReader, read_summary
+
+    path, _imu, _truth = _log(tmp_path)
+    size = path.stat().st_size
+    times: dict[int, list] = {}
+    for _schema, channel, message in make_reader(io.BytesIO(path.read_bytes())).iter_messages():
+        times.setdefault(channel.id, []).append(message.log_time)
+    with open(path, "rb") as f:
+        summary = read_summary(f, size)
+        reader = IndexedReader(summary, path, size, None)
+        got_times: dict[int, list] = {}
+        for k, chunk in enumerate(summary.chunks):
+            offsets, ilen = chunk[4], chunk[5]
+            whole = reader._message_index(f, offsets, ilen)
+            assert sorted(whole) == sorted(offsets)
+            for cid, (_offs, t) in whole.items():
+                got_times.setdefault(cid, []).extend(t.tolist())
+            if k not in (0, 5, len(summary.chunks) - 1):
+                continue
+            for part in (ilen - 20, 20, 0):  # entries past the region; a header past it; none
+                got = reader._message_index(f, offsets, part)
+                assert sorted(got) == sorted(whole), part
+                for cid, (offs, t) in whole.items():
+                    assert np.array_equal(got[cid][0], offs) and np.array_equal(got[cid][1], t)
+    assert {c: sorted(v) for c, v in got_times.items()} == {c: sorted(v) for c, v in times.items()}

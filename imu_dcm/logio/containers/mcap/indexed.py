@@ -223,13 +223,15 @@ class IndexedReader(McapReader):
         out = {}
         first = min(offsets.values(), default=0)
         ilen = ilen if 0 < ilen <= MAX_META_RECORD and first + ilen <= self.size else 0
+        region = b""
         if ilen:
             f.seek(first)
             region = f.read(ilen)
         for cid in sorted(offsets):
             off = offsets[cid]
             at = off - first
-            if ilen and at >= 0 and at + 15 <= len(region):
+            inside = at >= 0 and at + 15 <= len(region)  # its header read with the region
+            if inside:
                 buf, p = region, at
             elif off + 15 <= self.size:
                 f.seek(off)
@@ -245,10 +247,14 @@ class IndexedReader(McapReader):
                 or (off + 9 + length > self.size)
             ):
                 continue
-            if buf is region and p + 15 + nbytes <= len(region):
+            if inside and p + 15 + nbytes <= len(region):
                 pairs = np.frombuffer(region, "<i8", nbytes // 8, p + 15)
-            else:
-                pairs = np.frombuffer(f.read(nbytes), "<i8")
+            else:  # its entries run past the region (or it was read alone): read from the file
+                f.seek(off + 15)
+                data = f.read(nbytes)
+                if len(data) != nbytes:
+                    continue
+                pairs = np.frombuffer(data, "<i8")
             # (log time, offset) pairs; a log time or offset past 2**63 reads negative and the
             # record location refuses it
             pairs = pairs.reshape(-1, 2)
