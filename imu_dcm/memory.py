@@ -10,8 +10,9 @@ every page of its temporaries again (~1 µs a 4 KiB page on this machine: more t
 them). :func:`reuse_freed_heap` sets both thresholds once per process, before the first read:
 blocks under 4 MiB come from the heap and up to 16 MiB of freed heap is kept for reuse
 (``read_log`` of a 1 h log at 1 kHz 5.2 -> 3.3 s, the whole replay ~10 % faster, its peak
-+11 MB; measured side by side under the same load). A threshold set in the environment
-(``MALLOC_MMAP_THRESHOLD_``, ``MALLOC_TRIM_THRESHOLD_``, ``GLIBC_TUNABLES``) is left as set.
++11 MB; measured side by side under the same load). A setting of glibc's allocator in the
+environment (``MALLOC_MMAP_THRESHOLD_``, ``MALLOC_TRIM_THRESHOLD_``, ``MALLOC_MMAP_MAX_``,
+``MALLOC_ARENA_MAX``, ``GLIBC_TUNABLES``) is left as set.
 
 After the read, glibc keeps the freed mid-sized blocks, and the large arrays that follow never
 reuse them: after reading a 1 h log the process held ~410 MB beyond its 317 MB of arrays,
@@ -35,15 +36,16 @@ column of 4 M samples) its own fresh mapping and returns it to the kernel when f
 such array pays for its first touch again (the kernel zeroes every page); a replay makes and
 frees dozens of them, one pass after the other. From the heap, freed and kept, the next array
 reuses pages already touched: the replay of a 10 h log at 1 kHz took 48 s against 67 s with
-glibc's defaults (one round each, interleaved, on the 2-core machine), for a peak of 7.0 GB
-against 6.6 GB; of a 1 h log 4.7-4.8 s against 5.8-6.3 s in one set of three rounds, and no
-difference in another (this machine's speed drifts between sets by as much), for 785 MB
-against 736 MB (docs/benchmarks.md "Long logs"). The read then keeps its freed batches
-too (no trim after it): the judgement's arrays take their pages. One arena serves every thread
-(the decompression's workers, a pass beside another), so what a worker frees is there for the
-main thread's next array: for the 1 h log 772-800 MB against 804 MB with an arena a thread, as
-fast (three rounds each); for the 10 h log 7.4-7.6 GB against 7.3 GB, 52-62 s against 54 s
-(the 1 h peak is the nearer to its bound).
+glibc's defaults (one round each, interleaved, on the 2-core machine), for a peak of 7.5 GB
+against 7.1 GB; of a 1 h log 4.9-5.2 s against 5.5-6.1 s (three rounds each), for a peak of
+790-819 MB against 766-776 MB (bytes, as docs/benchmarks.md "Long logs" counts them). That is
+the price: the 1 h peak at the 0.8 GB it is held to, and above it in one run of three. The
+read then keeps its freed batches too (no trim after it): the judgement's arrays take their
+pages. One arena serves every thread (the decompression's workers, a pass beside another), so
+what a worker frees is there for the main thread's next array: for the 1 h log 790-819 MB
+against 823 MB with an arena a thread, as fast (three rounds each); for the 10 h log 7.6-7.7
+GB against 7.5 GB, 52-62 s against 54 s. glibc's own variables in the environment
+(``MALLOC_MMAP_MAX_``, ``MALLOC_ARENA_MAX``, ...) turn it off: the allocator is then theirs.
 """
 
 from __future__ import annotations
